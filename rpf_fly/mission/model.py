@@ -1,0 +1,171 @@
+"""Mission dataclasses: what a validated mission file holds.
+
+A :class:`Mission` is only ever built by :func:`rpf_fly.mission.load_mission`, which checks every field; code
+downstream (sim, flight, bench) can trust it. Units: metres, seconds, Hz. Positions in the planning plane are
+``(x, y)`` in the Z-up world frame; the flight height is ``flight.height``.
+
+Keys and their meaning are a contract (docs/mission-format.md): other tools read these files.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Literal, Optional
+
+Vec2 = tuple[float, float]
+
+PLANNER_KINDS = ("apf", "apf-paper", "rpf", "rpf-mean", "ppo")
+"""Planner kinds a mission (or ``--planner``) may name. ``rpf``, ``rpf-mean`` and ``ppo`` need an ONNX policy."""
+
+POLICY_KINDS = ("rpf", "rpf-mean", "ppo")
+
+
+@dataclass(frozen=True)
+class Arena:
+    """The geofence: an axis-aligned box, metres. Setpoints are clamped to it; a drone outside it lands."""
+
+    x: Vec2
+    y: Vec2
+    z: Vec2 = (0.0, 2.0)
+
+
+@dataclass(frozen=True)
+class FlightSettings:
+    """How the drones fly. ``rate_hz`` is the planning rate: the planner and the simulator step at 1/rate_hz."""
+
+    height: float = 0.6
+    speed: float = 0.5
+    rate_hz: float = 10.0
+    goal_tolerance: float = 0.1
+    takeoff_s: float = 2.0
+    land_s: float = 2.0
+    timeout_s: float = 120.0
+
+    @property
+    def dt(self) -> float:
+        """Planning step in seconds."""
+        return 1.0 / self.rate_hz
+
+
+@dataclass(frozen=True)
+class PlannerSettings:
+    """Which planner and its parameters (the paper's defaults: r 0.1, d_r 6, rho 10, F_in_bar 1)."""
+
+    kind: str = "apf"
+    policy: Optional[Path] = None
+    sensing_range: float = 6.0
+    safety_radius: float = 0.1
+    influence_range: float = 10.0
+    wall_following: bool = True
+    wall_threshold: float = 1.0
+    preset: Literal["robust", "paper"] = "robust"
+    neighbour_aggregate: Literal["sum", "mean"] = "sum"
+    eta: float = 0.05
+    lam: float = 2.0
+
+
+@dataclass(frozen=True)
+class MocapSettings:
+    """Where poses come from. ``natnet``: an OptiTrack Motive server; ``sim``: simulated poses."""
+
+    kind: Literal["natnet", "sim"] = "sim"
+    server: str = "127.0.0.1"
+    local_ip: str = "0.0.0.0"
+    multicast: bool = True
+    multicast_group: str = "239.255.42.99"
+    command_port: int = 1510
+    data_port: int = 1511
+    up_axis: Literal["y", "z"] = "z"
+    noise_m: float = 0.0
+    latency_s: float = 0.0
+    rate_hz: float = 100.0
+    dropout: float = 0.0
+    timeout_s: float = 0.5
+
+
+@dataclass(frozen=True)
+class RadioSettings:
+    """How setpoints reach the drones. ``cflib`` uses the URIs as given (``--dry-run`` maps radio:// to fake://)."""
+
+    kind: Literal["cflib"] = "cflib"
+    min_battery_v: float = 3.7
+    extpos: Literal["extpos", "extpose"] = "extpos"
+
+
+@dataclass(frozen=True)
+class CircleObstacle:
+    """A vertical cylinder: centre (x, y) and radius in metres."""
+
+    center: Vec2
+    radius: float
+    shape: Literal["circle"] = "circle"
+
+
+@dataclass(frozen=True)
+class BoxObstacle:
+    """An axis-aligned box (vertical prism): lower and upper corners in metres."""
+
+    min: Vec2
+    max: Vec2
+    shape: Literal["box"] = "box"
+
+
+Obstacle = CircleObstacle | BoxObstacle
+
+
+@dataclass(frozen=True)
+class Drone:
+    """One Crazyflie: its name, radio URI, mocap rigid body name, and planar start and goal (metres)."""
+
+    name: str
+    uri: str
+    rigid_body: str
+    start: Vec2
+    goal: Vec2
+
+
+@dataclass(frozen=True)
+class SimSettings:
+    """Simulation-only settings (ignored in flight): time limit and the seeded randomisation of starts.
+
+    ``start_jitter_m`` moves every start (and, for a circle swap, keeps the goal antipodal) uniformly within a
+    disc of that radius; ``angle_jitter_deg`` perturbs each drone's angle on a ``circle_swap`` formation. Both are
+    drawn from ``--seed``; 0 means the nominal layout.
+    """
+
+    time_limit_s: float = 100.0
+    start_jitter_m: float = 0.0
+    angle_jitter_deg: float = 0.0
+
+
+@dataclass(frozen=True)
+class Formation:
+    """A generated layout. ``circle_swap``: ``count`` drones evenly on a circle, each flying to the antipode."""
+
+    kind: Literal["circle_swap"]
+    count: int
+    radius: float
+    center: Vec2 = (0.0, 0.0)
+    uri_base: str = "radio://0/80/2M/E7E7E7E7"
+    name_prefix: str = "cf"
+    phase_deg: float = 0.0
+
+
+@dataclass(frozen=True)
+class Mission:
+    """A validated mission. ``drones`` is always explicit (a formation is expanded at load time)."""
+
+    name: str
+    arena: Arena
+    flight: FlightSettings
+    planner: PlannerSettings
+    mocap: MocapSettings
+    radio: RadioSettings
+    sim: SimSettings
+    obstacles: tuple[Obstacle, ...]
+    drones: tuple[Drone, ...]
+    formation: Optional[Formation] = None
+    source: Optional[Path] = None
+    text: str = field(default="", repr=False)
+    """The file's text as loaded (logged into flight records as metadata)."""
