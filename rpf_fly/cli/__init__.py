@@ -1,7 +1,8 @@
 """The ``rpf-fly`` command line: one typer app, one module per command group.
 
-Each command module registers itself on :data:`app`; heavy imports (cflib, onnxruntime, matplotlib) happen
-inside the commands so that ``rpf-fly --help`` stays fast and a missing optional extra only affects its command.
+Each command module registers itself on :data:`app` when imported; :func:`get_app` imports them all. Heavy
+imports (cflib, onnxruntime, matplotlib) happen inside the commands so that ``rpf-fly --help`` stays fast and a
+missing optional extra only affects its own command.
 """
 
 from __future__ import annotations
@@ -17,17 +18,13 @@ app = typer.Typer(
 )
 
 
-def _register() -> None:
-    """Import the command modules so they attach their commands to ``app``."""
+def get_app() -> typer.Typer:
+    """The app with every command module imported (idempotent)."""
     from rpf_fly.cli import sim_cmd  # noqa: F401
 
-    try:
-        from rpf_fly.cli import mocap_cmd  # noqa: F401
-    except ImportError:  # the mocap command module lands with the hardware-edges issue
-        pass
+    return app
 
 
 def main() -> None:
     """Console-script entry point."""
-    _register()
-    app()
+    get_app()()

@@ -1,0 +1,110 @@
+"""``rpf-fly sim``: run a mission on the kinematic simulator and print its metrics (table or JSON), plot it."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+from rpf_fly.cli import app
+from rpf_fly.cli.errors import fail
+
+
+@app.command()
+def sim(
+    mission: Path = typer.Argument(..., help="Mission YAML file."),
+    planner: Optional[str] = typer.Option(
+        None, "--planner", help="Override the mission's planner: apf, apf-paper, rpf, rpf-mean, ppo."
+    ),
+    policy: Optional[Path] = typer.Option(None, "--policy", help="ONNX policy for rpf, rpf-mean or ppo."),
+    no_wall_following: bool = typer.Option(
+        False, "--no-wall-following", help="Vanilla APF direction: no wall-following, no soft rule."
+    ),
+    seed: int = typer.Option(0, "--seed", help="Seed of the mission's start jitter (sim section)."),
+    json_output: bool = typer.Option(False, "--json", help="Print the metrics JSON (docs/metrics.md) only."),
+    plot: Optional[Path] = typer.Option(None, "--plot", help="Write XY trajectories with planner modes to a PNG."),
+) -> None:
+    """Simulate MISSION with its planner (no radio, no mocap) and report success, collisions and path quality."""
+    from rpf_fly.mission import MissionError, load_mission, with_planner
+    from rpf_fly.sim import SimParams, compute_metrics, rollout, scenario_from_mission
+    from rpf_fly.sim.planners import UnsupportedPlanner, make_planner
+
+    try:
+        loaded = load_mission(mission)
+        overrides = {"wall_following": False} if no_wall_following else {}
+        if planner is not None or policy is not None or overrides:
+            loaded = with_planner(loaded, planner or loaded.planner.kind, policy, **overrides)
+    except MissionError as err:
+        raise fail(str(err))
+    scenario = scenario_from_mission(loaded, seed)
+    try:
+        chosen = make_planner(loaded.planner, scenario.obstacles)
+    except UnsupportedPlanner as err:
+        raise fail(f"{mission}:0: --planner: {err}")
+    params = SimParams(loaded.flight.speed, loaded.flight.dt, loaded.flight.goal_tolerance, loaded.sim.time_limit_s)
+    result = rollout(scenario, chosen, params)
+    metrics = compute_metrics(
+        result.positions,
+        scenario.goals,
+        params.dt,
+        params.goal_tolerance,
+        loaded.planner.safety_radius,
+        scenario.obstacles,
+        scenario.names,
+        mission=loaded.name,
+        planner=loaded.planner.kind,
+        seed=seed,
+    )
+    if plot is not None:
+        from rpf_fly.sim.plot import plot_rollout
+
+        plot_rollout(result, plot, metrics)
+    if json_output:
+        typer.echo(json.dumps(metrics.to_json_dict()))
+        return
+    _print_table(metrics, result, plot)
+
+
+def _print_table(metrics, result, plot: Optional[Path]) -> None:  # type: ignore[no-untyped-def]
+    from rich.console import Console
+    from rich.table import Table
+
+    console = Console()
+    table = Table(title=f"{metrics.mission}: {metrics.planner}, seed {metrics.seed}")
+    for column in ("drone", "outcome", "collided", "travel [m]", "time to goal [s]", "smoothness"):
+        table.add_column(column, justify="left" if column in ("drone", "outcome") else "right")
+    for row, outcome in zip(metrics.per_drone, result.outcomes):
+        table.add_row(
+            row.name,
+            outcome.value,
+            "yes" if row.collided else "no",
+            f"{row.travel_distance_m:.2f}",
+            "-" if row.time_to_goal_s is None else f"{row.time_to_goal_s:.1f}",
+            f"{row.smoothness:.4f}",
+        )
+    console.print(table)
+
+    def fmt(value, unit="", digits=2):  # type: ignore[no-untyped-def]
+        return "-" if value is None else f"{value:.{digits}f}{unit}"
+
+    verdict = "[green]success[/green]" if metrics.success else "[red]failure[/red]"
+    console.print(
+        f"{verdict}: {metrics.reached}/{metrics.drones} reached, collisions drone-drone "
+        f"{metrics.collisions_drone_drone}, drone-obstacle {metrics.collisions_drone_obstacle}"
+    )
+    console.print(
+        f"travel {fmt(metrics.travel_distance_m, ' m')}, smoothness {fmt(metrics.smoothness, '', 4)}, "
+        f"makespan {fmt(metrics.makespan_s, ' s', 1)}, min separation {fmt(metrics.min_separation_m, ' m', 3)}, "
+        f"min obstacle clearance {fmt(metrics.min_obstacle_clearance_m, ' m', 3)}"
+    )
+    clamped = [f"{name} ({count} steps)" for name, count in zip(metrics_names(metrics), result.geofence_clamps) if count]
+    if clamped:
+        console.print(f"[yellow]geofence: held at the arena boundary: {', '.join(clamped)}[/yellow]")
+    if plot is not None:
+        console.print(f"plot: {plot}")
+
+
+def metrics_names(metrics) -> list[str]:  # type: ignore[no-untyped-def]
+    return [row.name for row in metrics.per_drone]

@@ -1,0 +1,49 @@
+"""Mission files: the YAML format (docs/mission-format.md), its validated dataclasses and the loader.
+
+    from rpf_fly.mission import load_mission
+    mission = load_mission("missions/circle-8-r3.yaml")   # or MissionError: "FILE:LINE: FIELD: problem"
+"""
+
+from .errors import MissionError
+from .load import expand_formation, load_mission, parse_mission, parse_uri, with_planner
+from .model import (
+    PLANNER_KINDS,
+    POLICY_KINDS,
+    Arena,
+    BoxObstacle,
+    CircleObstacle,
+    Drone,
+    FlightSettings,
+    Formation,
+    Mission,
+    MocapSettings,
+    Obstacle,
+    PlannerSettings,
+    RadioSettings,
+    SimSettings,
+    Vec2,
+)
+
+__all__ = [
+    "MissionError",
+    "load_mission",
+    "parse_mission",
+    "with_planner",
+    "expand_formation",
+    "parse_uri",
+    "PLANNER_KINDS",
+    "POLICY_KINDS",
+    "Arena",
+    "BoxObstacle",
+    "CircleObstacle",
+    "Drone",
+    "FlightSettings",
+    "Formation",
+    "Mission",
+    "MocapSettings",
+    "Obstacle",
+    "PlannerSettings",
+    "RadioSettings",
+    "SimSettings",
+    "Vec2",
+]

@@ -1,0 +1,693 @@
+"""Load a mission YAML file into validated :mod:`rpf_fly.mission.model` dataclasses.
+
+Validation is strict: a mission that would arm a drone must be exactly what its author meant. Every problem raises
+:class:`~rpf_fly.mission.errors.MissionError` as ``FILE:LINE: FIELD: message``, where the line is that of the
+offending value (of the mapping when a required key is missing; of the formation for drones it generated). Checks
+run in two stages: each section's shape, types and ranges (in document order; within a mapping, its keys before
+its values), then the layout of the whole mission (starts and goals against the arena, the obstacles and each
+other; the flight height against the arena). The format and every check are described in docs/mission-format.md.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import ipaddress
+import math
+import re
+from pathlib import Path
+from typing import Any, Callable, Iterable, NamedTuple, Optional, Sequence
+
+import numpy as np
+
+from . import model as m
+from .errors import MissionError
+from .yaml_nodes import ROOT, YNode, child_path, compose, describe
+
+STRING_SOURCE = "<string>"
+"""The file name in errors for text parsed without a source path."""
+
+NAME_PATTERN = re.compile(r"[A-Za-z][A-Za-z0-9_-]*")
+"""Drone names (and the formation's name prefix): usable as MCAP topic segments."""
+
+URI_RATES = ("250K", "1M", "2M")
+MAX_CHANNEL = 125
+URI_FORM = ("radio://DONGLE/CHANNEL/RATE/ADDRESS[?key=value] (e.g. radio://0/80/2M/E7E7E7E701, "
+            "or fake:// with the same path)")
+DEFAULT_POLICY = "policies/{kind}.onnx"
+"""Where a policy kind looks for its policy when the mission names none (resolved like ``planner.policy``)."""
+
+TOP_KEYS = ("name", "arena", "flight", "planner", "mocap", "radio", "sim", "obstacles", "drones", "formation")
+DRONE_KEYS = ("name", "uri", "rigid_body", "start", "goal")
+FORMATION_KEYS = ("kind", "count", "radius", "center", "uri_base", "name_prefix", "phase_deg")
+FORMATION_KINDS = ("circle_swap",)
+MAX_FORMATION_COUNT = 255
+OBSTACLE_KEYS = {"circle": ("shape", "center", "radius"), "box": ("shape", "min", "max")}
+
+
+# ---------------------------------------------------------------------------------------------------- radio URIs
+
+class RadioUri(NamedTuple):
+    """A parsed Crazyflie URI. ``address`` is upper-case hex; ``query`` is the text after ``?`` (or empty)."""
+
+    scheme: str
+    dongle: int
+    channel: int
+    rate: str
+    address: str
+    query: str
+
+    @property
+    def link(self) -> tuple[int, str]:
+        """What identifies the Crazyflie on the air: two URIs with the same channel and address reach one drone."""
+        return self.channel, self.address
+
+
+_QUERY = re.compile(r"[A-Za-z_][A-Za-z0-9_]*=[^&=\s]*(?:&[A-Za-z_][A-Za-z0-9_]*=[^&=\s]*)*")
+
+
+def parse_uri(uri: str) -> RadioUri:
+    """Parse ``radio://DONGLE/CHANNEL/RATE/ADDRESS[?key=value&...]`` or ``fake://`` with the same path.
+
+    Stricter than cflib on purpose: cflib silently falls back to 2M for an unknown rate (``2m``) and pads short
+    addresses with zeros. Raises ``ValueError`` with a message that says what form was expected.
+    """
+    scheme, sep, rest = uri.partition("://")
+    if not sep or scheme not in ("radio", "fake"):
+        raise ValueError(f"expected {URI_FORM}, got {uri!r}")
+    path, has_query, query = rest.partition("?")
+    parts = path.split("/")
+    if len(parts) != 4:
+        raise ValueError(f"expected {URI_FORM}, got {uri!r} ({len(parts)} path parts instead of 4)")
+    dongle, channel, rate, address = parts
+    if not re.fullmatch(r"[0-9]+", dongle):
+        raise ValueError(f"dongle {dongle!r} in {uri!r} must be a dongle number (expected {URI_FORM})")
+    if not re.fullmatch(r"[0-9]+", channel) or int(channel) > MAX_CHANNEL:
+        raise ValueError(f"channel {channel!r} in {uri!r} must be an integer 0-{MAX_CHANNEL}")
+    if rate not in URI_RATES:
+        raise ValueError(f"data rate {rate!r} in {uri!r} must be one of {', '.join(URI_RATES)}")
+    if not re.fullmatch(r"[0-9A-Fa-f]{10}", address):
+        raise ValueError(f"address {address!r} in {uri!r} must be 10 hex digits (e.g. E7E7E7E701)")
+    if has_query and not _QUERY.fullmatch(query):
+        raise ValueError(f"query {query!r} in {uri!r} must be key=value pairs joined by '&'")
+    return RadioUri(scheme, int(dongle), int(channel), rate, address.upper(), query)
+
+
+# ---------------------------------------------------------------------------------------------- value checks
+
+class _Bound(NamedTuple):
+    text: str
+    ok: Callable[[float], bool]
+
+
+POSITIVE = _Bound("positive", lambda x: x > 0)
+NON_NEGATIVE = _Bound("non-negative", lambda x: x >= 0)
+FRACTION = _Bound("in [0, 1)", lambda x: 0 <= x < 1)
+
+
+def _g(x: float) -> str:
+    return f"{x:.6g}"
+
+
+def _pt(p: Sequence[float]) -> str:
+    return f"({_g(p[0])}, {_g(p[1])})"
+
+
+def _suggest(word: str, choices: Iterable[str]) -> str:
+    choices = list(choices)
+    for c in choices:
+        if c.lower() == word.lower():
+            return f" (did you mean {c!r}?)"
+    close = difflib.get_close_matches(word, choices, n=1, cutoff=0.6)
+    return f" (did you mean {close[0]!r}?)" if close else ""
+
+
+def _options(choices: Iterable[str]) -> str:
+    return ", ".join(repr(c) for c in choices)
+
+
+def _search_dirs(base_dir: Optional[Path], cwd_first: bool = False) -> list[Path]:
+    dirs = [d for d in (base_dir, Path.cwd()) if d is not None]
+    return dirs[::-1] if cwd_first else dirs
+
+
+def _find_file(raw: str, dirs: Sequence[Path]) -> tuple[Optional[Path], list[Path]]:
+    """The first existing file among ``raw`` (absolute) or ``raw`` under each of ``dirs``; and where it looked."""
+    path = Path(raw).expanduser()
+    candidates = [path] if path.is_absolute() else [d / path for d in dirs]
+    for c in candidates:
+        if c.is_file():
+            return c.resolve(), candidates
+    return None, [c.absolute() for c in candidates]
+
+
+def _looked(candidates: Sequence[Path]) -> str:
+    return "looked in " + ", ".join(str(c) for c in candidates)
+
+
+class _Checker:
+    """Typed reads of :class:`YNode` values that raise a precise :class:`MissionError`."""
+
+    def __init__(self, file: str):
+        self.file = file
+
+    def error(self, where: YNode | int, field: str, message: str) -> MissionError:
+        line = where if isinstance(where, int) else where.line
+        return MissionError(self.file, line, field, message)
+
+    def bad(self, node: YNode, expected: str) -> MissionError:
+        return self.error(node, node.path, f"expected {expected}, got {describe(node)}")
+
+    def mapping(self, node: YNode, keys: Sequence[str], required: Sequence[str] = (),
+                what: str = "a mapping") -> dict[str, YNode]:
+        """The entries of a mapping with only ``keys`` and all of ``required``."""
+        if not node.is_map:
+            raise self.bad(node, what)
+        entries: dict[str, YNode] = node.value  # type: ignore[assignment]
+        for key, value in entries.items():
+            if key not in keys:
+                hint = _suggest(key, keys) or f"; expected one of {_options(keys)}"
+                raise self.error(value.key_line, value.path, f"unknown key{hint}")
+        for key in required:
+            if key not in entries:
+                raise self.error(node.key_line, child_path(node.path, key), "missing required key")
+        return entries
+
+    def number(self, node: YNode, bound: Optional[_Bound] = None) -> float:
+        v = node.value
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            raise self.bad(node, "a number")
+        if not math.isfinite(v):
+            raise self.error(node, node.path, f"expected a finite number, got {node.raw or v}")
+        if bound is not None and not bound.ok(v):
+            raise self.error(node, node.path, f"must be {bound.text}, got {node.raw or _g(v)}")
+        return float(v)
+
+    def integer(self, node: YNode, lo: Optional[int] = None, hi: Optional[int] = None) -> int:
+        v = node.value
+        if isinstance(v, bool) or not isinstance(v, int):
+            raise self.bad(node, "an integer")
+        if lo is not None and v < lo:
+            raise self.error(node, node.path, f"must be at least {lo}, got {v}" if lo != 1
+                             else f"must be positive, got {v}")
+        if hi is not None and v > hi:
+            raise self.error(node, node.path, f"must be at most {hi}, got {v}")
+        return v
+
+    def string(self, node: YNode) -> str:
+        if not isinstance(node.value, str):
+            error = self.bad(node, "a string")
+            if node.raw and not (node.is_map or node.is_seq):  # e.g. `name: no` or `rigid_body: 7`
+                error = self.error(node, node.path, f"{error.message} (quote it to make it text: '{node.raw}')")
+            raise error
+        if not node.value.strip():
+            raise self.error(node, node.path, "must not be empty")
+        if any(ord(ch) < 32 for ch in node.value):
+            raise self.error(node, node.path, f"must be one line of text, got {node.value!r}")
+        return node.value
+
+    def boolean(self, node: YNode) -> bool:
+        if not isinstance(node.value, bool):
+            raise self.bad(node, "true or false")
+        return node.value
+
+    def choice(self, node: YNode, choices: Sequence[str], what: str = "") -> str:
+        if not isinstance(node.value, str):
+            raise self.bad(node, f"one of {_options(choices)}")
+        if node.value not in choices:
+            label = (f"unknown {what} {node.value!r}" if what
+                     else f"expected one of {_options(choices)}, got {node.value!r}")
+            hint = _suggest(node.value, choices)
+            known = f"; known: {', '.join(choices)}" if what else ""
+            raise self.error(node, node.path, f"{label}{hint}{known}")
+        return node.value
+
+    def vec2(self, node: YNode, labels: str = "x, y") -> m.Vec2:
+        if not node.is_seq or len(node.value) != 2:  # type: ignore[arg-type]
+            raise self.bad(node, f"a list of 2 numbers [{labels}]")
+        a, b = node.value  # type: ignore[misc]
+        return self.number(a), self.number(b)
+
+    def span(self, node: YNode) -> m.Vec2:
+        lo, hi = self.vec2(node, "lo, hi")
+        if not lo < hi:
+            raise self.error(node, node.path, f"inverted range [{_g(lo)}, {_g(hi)}]: expected [lo, hi] with lo < hi")
+        return lo, hi
+
+    def host(self, node: YNode) -> str:
+        text = self.string(node)
+        if any(ch.isspace() for ch in text):
+            raise self.error(node, node.path, f"expected a host name or IP address, got {text!r}")
+        return text
+
+    def ip(self, node: YNode, multicast: bool = False) -> str:
+        text = self.string(node)
+        try:
+            address = ipaddress.ip_address(text)
+        except ValueError:
+            raise self.error(node, node.path, f"expected an IP address, got {text!r}") from None
+        if multicast and not address.is_multicast:
+            raise self.error(node, node.path, f"expected a multicast address (224.0.0.0/4), got {text!r}")
+        return text
+
+
+# ------------------------------------------------------------------------------------------- section specs
+
+Reader = Callable[[_Checker, YNode], Any]
+
+
+def _num(bound: Optional[_Bound] = None) -> Reader:
+    return lambda c, n: c.number(n, bound)
+
+
+def _choice(choices: Sequence[str]) -> Reader:
+    return lambda c, n: c.choice(n, choices)
+
+
+def _port(c: _Checker, n: YNode) -> int:
+    return c.integer(n, 1, 65535)
+
+
+def _planner_kind(c: _Checker, n: YNode) -> str:
+    return c.choice(n, m.PLANNER_KINDS, what="planner kind")
+
+
+# YAML key -> (dataclass field, reader)
+FLIGHT_SPEC: dict[str, tuple[str, Reader]] = {
+    k: (k, _num(POSITIVE)) for k in ("height", "speed", "rate_hz", "goal_tolerance", "takeoff_s", "land_s", "timeout_s")
+}
+PLANNER_SPEC: dict[str, tuple[str, Reader]] = {
+    "kind": ("kind", _planner_kind),
+    "policy": ("policy", lambda c, n: c.string(n)),  # resolved to a file afterwards
+    "sensing_range": ("sensing_range", _num(POSITIVE)),
+    "safety_radius": ("safety_radius", _num(POSITIVE)),
+    "influence_range": ("influence_range", _num(POSITIVE)),
+    "wall_following": ("wall_following", lambda c, n: c.boolean(n)),
+    "wall_threshold": ("wall_threshold", _num(NON_NEGATIVE)),
+    "preset": ("preset", _choice(("robust", "paper"))),
+    "neighbour_aggregate": ("neighbour_aggregate", _choice(("sum", "mean"))),
+    "eta": ("eta", _num(NON_NEGATIVE)),
+    "lambda": ("lam", _num(NON_NEGATIVE)),
+}
+MOCAP_SPEC: dict[str, tuple[str, Reader]] = {
+    "kind": ("kind", _choice(("natnet", "sim"))),
+    "server": ("server", lambda c, n: c.host(n)),
+    "local_ip": ("local_ip", lambda c, n: c.ip(n)),
+    "multicast": ("multicast", lambda c, n: c.boolean(n)),
+    "multicast_group": ("multicast_group", lambda c, n: c.ip(n, multicast=True)),
+    "command_port": ("command_port", _port),
+    "data_port": ("data_port", _port),
+    "up_axis": ("up_axis", _choice(("y", "z"))),
+    "noise_m": ("noise_m", _num(NON_NEGATIVE)),
+    "latency_s": ("latency_s", _num(NON_NEGATIVE)),
+    "rate_hz": ("rate_hz", _num(POSITIVE)),
+    "dropout": ("dropout", _num(FRACTION)),
+    "timeout_s": ("timeout_s", _num(POSITIVE)),
+}
+RADIO_SPEC: dict[str, tuple[str, Reader]] = {
+    "kind": ("kind", _choice(("cflib",))),
+    "min_battery_v": ("min_battery_v", _num(POSITIVE)),
+    "extpos": ("extpos", _choice(("extpos", "extpose"))),
+}
+SIM_SPEC: dict[str, tuple[str, Reader]] = {
+    "time_limit_s": ("time_limit_s", _num(POSITIVE)),
+    "start_jitter_m": ("start_jitter_m", _num(NON_NEGATIVE)),
+    "angle_jitter_deg": ("angle_jitter_deg", _num(NON_NEGATIVE)),
+}
+
+
+# ---------------------------------------------------------------------------------------------- the loader
+
+class _MissionParser(_Checker):
+    def __init__(self, file: str, base_dir: Optional[Path]):
+        super().__init__(file)
+        self.base_dir = base_dir
+        self.nodes: dict[str, YNode] = {}
+
+    # -- sections -------------------------------------------------------------------------------------------
+
+    def settings(self, node: YNode, cls: type, spec: dict[str, tuple[str, Reader]]) -> Any:
+        entries = self.mapping(node, tuple(spec))
+        return cls(**{spec[k][0]: spec[k][1](self, v) for k, v in entries.items()})
+
+    def arena(self, node: YNode) -> m.Arena:
+        e = self.mapping(node, ("x", "y", "z"), required=("x", "y"))
+        return m.Arena(**{k: self.span(v) for k, v in e.items()})
+
+    def planner(self, node: YNode) -> m.PlannerSettings:
+        settings: m.PlannerSettings = self.settings(node, m.PlannerSettings, PLANNER_SPEC)
+        entries: dict[str, YNode] = node.value  # type: ignore[assignment]
+        dirs = _search_dirs(self.base_dir)
+        if "policy" in entries:
+            raw = str(settings.policy)
+            found, looked = _find_file(raw, dirs)
+            if found is None:
+                raise self.error(entries["policy"], "planner.policy",
+                                 f"policy file {raw!r} not found ({_looked(looked)})")
+        elif settings.kind in m.POLICY_KINDS:
+            raw = DEFAULT_POLICY.format(kind=settings.kind)
+            found, looked = _find_file(raw, dirs)
+            if found is None:
+                raise self.error(entries["kind"], "planner.policy",
+                                 f"planner kind {settings.kind!r} needs a policy and none is given; the default "
+                                 f"{raw!r} was not found ({_looked(looked)})")
+        else:
+            found = None
+        return dataclasses.replace(settings, policy=found)
+
+    def mocap(self, node: YNode) -> m.MocapSettings:
+        settings: m.MocapSettings = self.settings(node, m.MocapSettings, MOCAP_SPEC)
+        if settings.command_port == settings.data_port:
+            entries: dict[str, YNode] = node.value  # type: ignore[assignment]
+            at = entries.get("data_port") or entries["command_port"]
+            raise self.error(at, at.path, f"command_port and data_port must differ, both are {settings.data_port}")
+        return settings
+
+    def obstacles(self, node: YNode) -> tuple[m.Obstacle, ...]:
+        if not node.is_seq:
+            raise self.bad(node, "a list of obstacles (write [] for none)")
+        out: list[m.Obstacle] = []
+        for item in node.value:  # type: ignore[union-attr]
+            e = self.mapping(item, ("shape", "center", "radius", "min", "max"), required=("shape",),
+                             what="an obstacle mapping {shape: circle|box, ...}")
+            shape = self.choice(e["shape"], tuple(OBSTACLE_KEYS), what="obstacle shape")
+            keys = OBSTACLE_KEYS[shape]
+            e = self.mapping(item, keys, required=keys)
+            if shape == "circle":
+                out.append(m.CircleObstacle(center=self.vec2(e["center"]), radius=self.number(e["radius"], POSITIVE)))
+            else:
+                lo, hi = self.vec2(e["min"]), self.vec2(e["max"])
+                for axis in (0, 1):
+                    if not lo[axis] < hi[axis]:
+                        raise self.error(e["max"], e["max"].path,
+                                         f"inverted box: min {_pt(lo)} must be below max {_pt(hi)} in "
+                                         f"{'xy'[axis]} ({_g(lo[axis])} >= {_g(hi[axis])})")
+                out.append(m.BoxObstacle(min=lo, max=hi))
+        return tuple(out)
+
+    def drone_name(self, node: YNode, what: str = "drone name") -> str:
+        name = self.string(node)
+        if not NAME_PATTERN.fullmatch(name):
+            raise self.error(node, node.path, f"{what} {name!r} must start with a letter and contain only letters, "
+                             "digits, '_' and '-' (it names MCAP topics)")
+        return name
+
+    def uri(self, node: YNode) -> tuple[str, RadioUri]:
+        text = self.string(node)
+        try:
+            return text, parse_uri(text)
+        except ValueError as exc:
+            raise self.error(node, node.path, str(exc)) from None
+
+    def drones(self, node: YNode) -> tuple[m.Drone, ...]:
+        if not node.is_seq:
+            raise self.bad(node, "a list of drones")
+        if not node.value:
+            raise self.error(node, "drones", "empty list: a mission needs at least one drone")
+        drones: list[m.Drone] = []
+        names: dict[str, YNode] = {}
+        links: dict[tuple[int, str], YNode] = {}
+        bodies: dict[str, YNode] = {}
+        for i, item in enumerate(node.value):  # type: ignore[arg-type]
+            e = self.mapping(item, DRONE_KEYS, required=("name", "uri", "start", "goal"),
+                             what="a drone mapping {name, uri, start, goal}")
+            name = self.drone_name(e["name"])
+            if name in names:
+                raise self.error(e["name"], e["name"].path,
+                                 f"duplicate drone name {name!r} (also {names[name].path}, line {names[name].line})")
+            names[name] = e["name"]
+            uri, parsed = self.uri(e["uri"])
+            if parsed.link in links:
+                other = links[parsed.link]
+                raise self.error(e["uri"], e["uri"].path,
+                                 f"duplicate URI {uri!r}: same channel {parsed.channel} and address "
+                                 f"{parsed.address} as {other.path} ({other.value!r}, line {other.line}), "
+                                 "so both would reach the same Crazyflie")
+            links[parsed.link] = e["uri"]
+            body_node = e.get("rigid_body", e["name"])
+            body = self.string(body_node) if "rigid_body" in e else name
+            if body in bodies:
+                other = bodies[body]
+                how = "" if "rigid_body" in e else " (defaulted from the name)"
+                raise self.error(body_node, child_path(item.path, "rigid_body"),
+                                 f"duplicate rigid_body {body!r}{how}: also the rigid body of "
+                                 f"{other.path.rsplit('.', 1)[0]} (line {other.line})")
+            bodies[body] = body_node
+            drones.append(m.Drone(name=name, uri=uri, rigid_body=body,
+                                  start=self.vec2(e["start"]), goal=self.vec2(e["goal"])))
+        return tuple(drones)
+
+    def formation(self, node: YNode) -> tuple[m.Formation, tuple[m.Drone, ...]]:
+        e = self.mapping(node, FORMATION_KEYS, required=("kind", "count", "radius"))
+        kwargs: dict[str, Any] = {
+            "kind": self.choice(e["kind"], FORMATION_KINDS, what="formation kind"),
+            "count": self.integer(e["count"], 1, MAX_FORMATION_COUNT),
+            "radius": self.number(e["radius"], POSITIVE),
+        }
+        if "center" in e:
+            kwargs["center"] = self.vec2(e["center"])
+        if "phase_deg" in e:
+            kwargs["phase_deg"] = self.number(e["phase_deg"])
+        if "name_prefix" in e:
+            kwargs["name_prefix"] = self.drone_name(e["name_prefix"], "name_prefix")
+        if "uri_base" in e:
+            kwargs["uri_base"] = self.string(e["uri_base"])
+        formation = m.Formation(**kwargs)
+        try:
+            parse_uri(formation.uri_base + "01")
+        except ValueError as exc:
+            at = e.get("uri_base", node)
+            raise self.error(at, "formation.uri_base",
+                             f"{formation.uri_base!r} followed by the drone number as 2 hex digits must be a URI: "
+                             f"{exc}") from None
+        return formation, expand_formation(formation)
+
+    # -- the whole file -------------------------------------------------------------------------------------
+
+    def parse(self, root: YNode, text: str, source: Optional[Path]) -> m.Mission:
+        if not root.is_map:
+            raise self.error(root, ROOT, "expected a mapping of mission keys (name, arena, drones, ...) at the top "
+                             f"level, got {describe(root)}")
+        entries = self.mapping(root, TOP_KEYS, required=("arena",))
+        if "drones" in entries and "formation" in entries:
+            second = max(entries["drones"], entries["formation"], key=lambda n: n.key_line)
+            raise self.error(second.key_line, second.path,
+                             "give either `drones` or `formation`, not both")
+        if "drones" not in entries and "formation" not in entries:
+            raise self.error(root.key_line, "drones", "missing: give a `drones` list or a `formation`")
+        self.index(root)
+
+        parts: dict[str, Any] = {"flight": m.FlightSettings(), "planner": m.PlannerSettings(),
+                                 "mocap": m.MocapSettings(), "radio": m.RadioSettings(), "sim": m.SimSettings(),
+                                 "obstacles": (), "formation": None,
+                                 "name": source.stem if source is not None else "mission"}
+        readers: dict[str, Callable[[YNode], Any]] = {
+            "name": self.string, "arena": self.arena, "planner": self.planner, "mocap": self.mocap,
+            "obstacles": self.obstacles, "drones": self.drones, "formation": self.formation,
+            "flight": lambda n: self.settings(n, m.FlightSettings, FLIGHT_SPEC),
+            "radio": lambda n: self.settings(n, m.RadioSettings, RADIO_SPEC),
+            "sim": lambda n: self.settings(n, m.SimSettings, SIM_SPEC),
+        }
+        for key, node in entries.items():  # document order
+            parts[key] = readers[key](node)
+        if "formation" in entries:
+            parts["formation"], parts["drones"] = parts["formation"]
+
+        mission = m.Mission(source=source, text=text, **parts)
+        check_layout(mission, self.layout_error(mission, entries))
+        return mission
+
+    def index(self, node: YNode) -> None:
+        self.nodes[node.path] = node
+        if node.is_map:
+            for child in node.value.values():  # type: ignore[union-attr]
+                self.index(child)
+        elif node.is_seq:
+            for child in node.value:  # type: ignore[union-attr]
+                self.index(child)
+
+    def layout_error(self, mission: m.Mission, entries: dict[str, YNode]) -> "LayoutError":
+        def make(path: str, message: str, at: Sequence[str] = ()) -> MissionError:
+            if path.startswith("drones[") and mission.formation is not None:
+                index = int(path[len("drones["):path.index("]")])
+                line = entries["formation"].key_line
+                return MissionError(self.file, line, "formation",
+                                    f"{path} ({mission.drones[index].name}): {message}")
+            for candidate in (path, *at):
+                if candidate in self.nodes:
+                    return MissionError(self.file, self.nodes[candidate].line, path, message)
+            return MissionError(self.file, 1, path, message)
+        return make
+
+
+# ------------------------------------------------------------------------------------------ layout checks
+
+LayoutError = Callable[..., MissionError]
+"""``(path, message, at=())`` -> the error to raise: ``path`` is the field at fault (``drones[2].start``),
+``at`` other paths whose line to use when ``path`` has no line of its own (a defaulted value)."""
+
+
+def _clearance(p: m.Vec2, obstacle: m.Obstacle) -> float:
+    """Distance from ``p`` to the obstacle's surface, 0 (box) or negative (circle) inside."""
+    if isinstance(obstacle, m.CircleObstacle):
+        return math.hypot(p[0] - obstacle.center[0], p[1] - obstacle.center[1]) - obstacle.radius
+    dx = max(obstacle.min[0] - p[0], 0.0, p[0] - obstacle.max[0])
+    dy = max(obstacle.min[1] - p[1], 0.0, p[1] - obstacle.max[1])
+    return math.hypot(dx, dy)
+
+
+def _describe_obstacle(obstacle: m.Obstacle) -> str:
+    if isinstance(obstacle, m.CircleObstacle):
+        return f"circle at {_pt(obstacle.center)} radius {_g(obstacle.radius)}"
+    return f"box {_pt(obstacle.min)}-{_pt(obstacle.max)}"
+
+
+def check_layout(mission: m.Mission, error: LayoutError) -> None:
+    """The whole-mission checks: flight height in arena.z; every start and goal inside arena.x/y, clear of every
+    obstacle by planner.safety_radius, start and goal at least flight.goal_tolerance apart, starts at least
+    2 safety_radius apart, goals at least 4 safety_radius apart. Raises ``error(path, message)``."""
+    arena, r = mission.arena, mission.planner.safety_radius
+    h = mission.flight.height
+    if not arena.z[0] <= h <= arena.z[1]:
+        raise error("flight.height", f"{_g(h)} is outside arena.z [{_g(arena.z[0])}, {_g(arena.z[1])}]",
+                    at=("arena.z", "flight", "arena"))
+    tolerance = mission.flight.goal_tolerance
+    for i, drone in enumerate(mission.drones):
+        for what, p in (("start", drone.start), ("goal", drone.goal)):
+            path = f"drones[{i}].{what}"
+            for axis, span in (("x", arena.x), ("y", arena.y)):
+                v = p[0] if axis == "x" else p[1]
+                if not span[0] <= v <= span[1]:
+                    raise error(path, f"{_pt(p)} is outside the arena: {axis} {_g(v)} not in arena.{axis} "
+                                f"[{_g(span[0])}, {_g(span[1])}]")
+        d = math.dist(drone.start, drone.goal)
+        if d < tolerance:
+            raise error(f"drones[{i}].start", f"start {_pt(drone.start)} and goal {_pt(drone.goal)} are "
+                        f"{_g(d)} m apart, less than flight.goal_tolerance {_g(tolerance)} m (start equals goal)")
+        for what, p in (("start", drone.start), ("goal", drone.goal)):
+            for k, obstacle in enumerate(mission.obstacles):
+                c = _clearance(p, obstacle)
+                if c <= 0:
+                    raise error(f"drones[{i}].{what}",
+                                f"{_pt(p)} is inside obstacles[{k}] ({_describe_obstacle(obstacle)})")
+                if c < r:
+                    raise error(f"drones[{i}].{what}",
+                                f"{_pt(p)} is {_g(c)} m from the surface of obstacles[{k}] "
+                                f"({_describe_obstacle(obstacle)}), less than planner.safety_radius {_g(r)} m")
+    _check_spacing(mission, "start", 2 * r, "2 x planner.safety_radius", "they would start in collision", error)
+    _check_spacing(mission, "goal", 4 * r, "4 x planner.safety_radius",
+                   f"an arrived drone is held as an obstacle of radius {_g(r)} m", error)
+
+
+def _check_spacing(mission: m.Mission, what: str, minimum: float, label: str, why: str, error: LayoutError) -> None:
+    points = np.array([getattr(d, what) for d in mission.drones], dtype=float).reshape(-1, 2)
+    for i in range(1, len(points)):
+        dist = np.hypot(*(points[:i] - points[i]).T)
+        j = int(np.argmin(dist))
+        if dist[j] < minimum:
+            other = mission.drones[j]
+            raise error(f"drones[{i}].{what}",
+                        f"{what} {_pt(points[i])} is {_g(dist[j])} m from the {what} of drones[{j}] ({other.name}), "
+                        f"less than {label} = {_g(minimum)} m ({why})")
+
+
+# ---------------------------------------------------------------------------------------------- formations
+
+def expand_formation(formation: m.Formation) -> tuple[m.Drone, ...]:
+    """The explicit drones of a formation. ``circle_swap``: drone i (0-based) is ``f"{prefix}{i+1}"`` with URI
+    ``uri_base + f"{i+1:02X}"``, starts at ``center + radius (cos t, sin t)`` with
+    ``t = phase + 2 pi i / count`` and flies to the antipode ``center - radius (cos t, sin t)``."""
+    cx, cy = formation.center
+    drones = []
+    for i in range(formation.count):
+        t = math.radians(formation.phase_deg) + 2.0 * math.pi * i / formation.count
+        dx, dy = formation.radius * math.cos(t), formation.radius * math.sin(t)
+        name = f"{formation.name_prefix}{i + 1}"
+        drones.append(m.Drone(name=name, uri=f"{formation.uri_base}{i + 1:02X}", rigid_body=name,
+                              start=(cx + dx, cy + dy), goal=(cx - dx, cy - dy)))
+    return tuple(drones)
+
+
+# ------------------------------------------------------------------------------------------------- public API
+
+def parse_mission(text: str, source: Path | str | None = None) -> m.Mission:
+    """Validate mission YAML ``text``. ``source`` (the file it came from) names the file in errors, gives the
+    default mission name (its stem) and the directory a relative ``planner.policy`` is looked up in first."""
+    src = Path(source) if source is not None else None
+    file = str(src) if src is not None else STRING_SOURCE
+    root = compose(text, file)
+    if root is None:
+        raise MissionError(file, 1, ROOT, "empty mission file")
+    parser = _MissionParser(file, src.parent if src is not None else None)
+    return parser.parse(root, text, src)
+
+
+def load_mission(path: str | Path) -> m.Mission:
+    """Read and validate the mission file at ``path`` (UTF-8 YAML). Raises :class:`MissionError`."""
+    p = Path(path)
+    try:
+        data = p.read_bytes()
+    except FileNotFoundError:
+        raise MissionError(p, 0, ROOT, "no such file") from None
+    except OSError as exc:
+        raise MissionError(p, 0, ROOT, f"cannot read the file: {exc.strerror or exc}") from None
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = data[:exc.start].count(b"\n") + 1
+        raise MissionError(p, line, ROOT, f"not UTF-8 text (byte 0x{data[exc.start]:02x})") from None
+    return parse_mission(text.removeprefix("\ufeff"), p)
+
+
+def with_planner(mission: m.Mission, kind: str, policy: str | Path | None = None, **overrides: Any) -> m.Mission:
+    """``mission`` flown with another planner: the CLI's ``--planner``, ``--policy`` and planner overrides such as
+    ``wall_following=False`` (``--no-wall-following``). ``overrides`` are PlannerSettings fields (``lam`` for
+    lambda). Everything is re-validated; errors read ``FILE:0: --option: message`` (line 0: the command line).
+
+    ``policy`` is looked up as an absolute path, else relative to the current directory, else to the mission's
+    directory. Without it, the mission's policy is kept when ``kind`` is the mission's kind; a policy kind
+    otherwise looks for ``policies/<kind>.onnx`` (mission directory, then current directory); other kinds drop it.
+    """
+    file = str(mission.source) if mission.source is not None else STRING_SOURCE
+    check = _Checker(file)
+    base_dir = mission.source.parent if mission.source is not None else None
+
+    def cli_error(option: str, message: str) -> MissionError:
+        return MissionError(file, 0, option, message)
+
+    kind = check.choice(YNode(kind, 0, 0, "--planner", str(kind)), m.PLANNER_KINDS, what="planner kind")
+    if policy is not None:
+        found, looked = _find_file(str(policy), _search_dirs(base_dir, cwd_first=True))
+        if found is None:
+            raise cli_error("--policy", f"policy file {str(policy)!r} not found ({_looked(looked)})")
+    elif kind == mission.planner.kind:
+        found = mission.planner.policy
+    elif kind in m.POLICY_KINDS:
+        raw = DEFAULT_POLICY.format(kind=kind)
+        found, looked = _find_file(raw, _search_dirs(base_dir))
+        if found is None:
+            raise cli_error("--planner", f"planner kind {kind!r} needs a policy: give --policy, or provide the "
+                            f"default {raw!r} ({_looked(looked)})")
+    else:
+        found = None
+
+    by_field = {name: (key, reader) for key, (name, reader) in PLANNER_SPEC.items() if name not in ("kind", "policy")}
+    values: dict[str, Any] = {}
+    for name, value in overrides.items():
+        if name not in by_field:
+            raise TypeError(f"with_planner() got an unknown planner override {name!r}; "
+                            f"expected one of {', '.join(sorted(by_field))}")
+        key, reader = by_field[name]
+        option = "--" + key.replace("_", "-")
+        raw_text = str(value).lower() if isinstance(value, bool) else str(value)
+        values[name] = reader(check, YNode(value, 0, 0, option, raw_text))
+    planner = dataclasses.replace(mission.planner, kind=kind, policy=found, **values)
+    updated = dataclasses.replace(mission, planner=planner)
+
+    option = "--safety-radius" if "safety_radius" in overrides else "--planner"
+
+    def layout_error(path: str, message: str, at: Sequence[str] = ()) -> MissionError:
+        return cli_error(option, f"{path}: {message}")
+
+    check_layout(updated, layout_error)
+    return updated

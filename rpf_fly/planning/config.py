@@ -1,0 +1,73 @@
+"""Planner parameters and the two presets: ``paper`` (the formulas as printed) and ``robust`` (the default).
+
+DESIGN.md 4.2 lists what the literal formulas do in practice (side flips, mode-B collisions, livelock on symmetric
+swaps); 4.3 closes each gap with one option. Every option is a field here so the bench can compare them one by one.
+Units: metres, metres per second, radians unless a name says degrees.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from typing import Literal
+
+
+@dataclass(frozen=True)
+class PlannerConfig:
+    """Parameters of the APF with (soft) wall-following. Defaults are the ``robust`` preset with the paper's numbers."""
+
+    safety_radius: float = 0.1
+    """r: a drone-drone collision is ``d < 2r``, a drone-obstacle collision ``d_o < r`` (metres)."""
+    sensing_range: float = 6.0
+    """d_r: neighbours and obstacles farther than this are invisible to the drone (metres)."""
+    influence_range: float = 10.0
+    """rho: the repulsive force is zero beyond this surface distance (metres)."""
+    wall_following: bool = True
+    """Modes A (tangent) and B (soft rule); off gives the vanilla APF direction ``F_a + F_r + F_in``."""
+    wall_threshold: float = 1.0
+    """F_in_bar: above it the inter-robot force, not the current heading, picks the tangent side."""
+    neighbour_aggregate: Literal["sum", "mean"] = "sum"
+    """Sum (the paper's equation) or mean (the predecessor's code) of the pairwise forces. Keep the sum (4.2)."""
+    soft_keeps_inter_robot: bool = True
+    """robust 1: mode B heading is ``F_a + F_r + F_in + 2|F_r| n`` (the paper drops F_in in mode B)."""
+    side_from_tangential_force: bool = True
+    """robust 2: the side test uses ``|n1 . F_in|`` (the tangential part) instead of ``|F_in|``."""
+    bend_near_surface: bool = True
+    """robust 3: in mode A closer than 2r, bend the tangent outward by ``k = (2r - d_o) / r`` times the push."""
+    keep_right_deg: float = 20.0
+    """robust 4: rotate the inter-robot repulsion counter-clockwise by this angle so head-on pairs both veer right."""
+    repulsive_only: bool = True
+    """robust 4: keep only the repulsive part ``min(0, 0.5 - lambda/d)`` of each pairwise term."""
+    static_neighbours_as_obstacles: bool = True
+    """robust 5: a neighbour slower than ``static_speed`` (hovering, arrived) is an obstacle of radius r, not a
+    lambda-neighbour."""
+    static_speed: float = 0.05
+    """m/s: below this speed a neighbour counts as static (arrived or holding)."""
+    min_distance: float = 1.0e-3
+    """Distances are clamped to this (metres) inside the force formulas so overlaps give a finite, outward push."""
+
+    @staticmethod
+    def robust(**overrides: object) -> "PlannerConfig":
+        """The default preset (DESIGN.md 4.3): the paper's method with its gaps closed."""
+        return replace(PlannerConfig(), **overrides)  # type: ignore[arg-type]
+
+    @staticmethod
+    def paper(**overrides: object) -> "PlannerConfig":
+        """The formulas as printed in the paper (DESIGN.md 4.1), kept for reproduction."""
+        base = PlannerConfig(
+            soft_keeps_inter_robot=False,
+            side_from_tangential_force=False,
+            bend_near_surface=False,
+            keep_right_deg=0.0,
+            repulsive_only=False,
+            static_neighbours_as_obstacles=False,
+        )
+        return replace(base, **overrides)  # type: ignore[arg-type]
+
+    @staticmethod
+    def preset(name: str, **overrides: object) -> "PlannerConfig":
+        """``robust`` or ``paper``."""
+        if name == "robust":
+            return PlannerConfig.robust(**overrides)
+        if name == "paper":
+            return PlannerConfig.paper(**overrides)
+        raise ValueError(f"unknown planner preset {name!r} (expected 'robust' or 'paper')")

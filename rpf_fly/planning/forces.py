@@ -1,0 +1,71 @@
+"""The three APF forces of the paper (Section III-B), batched over leading dimensions, planar vectors complex.
+
+- attractive ``F_a = (p_g - p) / d_g``: a unit vector (zero at the goal);
+- repulsive from the nearest obstacle, ``F_r = eta (1/d_o - 1/rho) (p - p_o) / d_o^3`` for ``d_o <= rho`` (and
+  within the sensing range), else 0; as ``|p - p_o| = d_o`` this is ``eta (1/d_o - 1/rho) / d_o^2`` along the
+  outward surface normal;
+- inter-robot, ``F_in = sum_j (0.5 - lambda/d_ji) (p_j - p) / d_ji`` over the visible neighbours (``d_ji < d_r``).
+
+Gains ``eta`` and ``lambda`` broadcast against the leading shape, so a policy can set them per robot.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from rpf_fly.planning.config import PlannerConfig
+from rpf_fly.planning.obstacles import NearestObstacle
+from rpf_fly.planning.vectors import TINY, maximum, per_item, plain
+
+
+def attractive(position: np.ndarray, goal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Unit vector toward the goal (zero at the goal) and the goal distance ``d_g`` (metres)."""
+    delta = goal - position
+    d_g = abs(delta)
+    return delta / (d_g + TINY), d_g
+
+
+def repulsive(nearest: NearestObstacle, eta: np.ndarray | float, config: PlannerConfig) -> np.ndarray:
+    """Repulsion from the nearest visible obstacle surface; zero beyond rho or the sensing range.
+
+    Inside an obstacle or closer than ``min_distance`` the distance is clamped, giving a large finite outward push.
+    """
+    d_raw = nearest.distance
+    d = maximum(d_raw, config.min_distance)
+    rho = config.influence_range
+    visible = d_raw <= min(rho, config.sensing_range)
+    magnitude = eta * (1.0 / d - 1.0 / rho) / (d * d)
+    return (visible * magnitude) * nearest.normal
+
+
+def inter_robot(
+    position: np.ndarray,
+    neighbour_position: np.ndarray,
+    neighbour_mask: np.ndarray,
+    lam: np.ndarray | float,
+    config: PlannerConfig,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Force from the lambda-neighbours ``S + (K,)`` selected by ``neighbour_mask``, and how many contributed.
+
+    ``sum`` aggregates as the paper's equation; ``mean`` divides by the count (the predecessor's code; DESIGN.md 4.2
+    shows it lets crowds collide). The robust preset keeps only the repulsive part of each term and rotates the
+    total counter-clockwise by ``keep_right_deg`` (rotating every term by one angle is rotating their sum).
+    """
+    if neighbour_position.shape[-1] == 0:
+        if isinstance(position, np.ndarray):
+            return np.zeros(position.shape, dtype=complex), np.zeros(position.shape, dtype=int)
+        return 0j, 0
+    delta = neighbour_position - per_item(position)
+    d_true = abs(delta)
+    mask = neighbour_mask & (d_true < config.sensing_range)
+    d = np.maximum(d_true, config.min_distance)
+    coefficient = 0.5 - per_item(lam) / d
+    if config.repulsive_only:
+        coefficient = np.minimum(coefficient, 0.0)
+    force = plain(((mask * coefficient / d) * delta).sum(axis=-1))
+    count = plain(mask.sum(axis=-1))
+    if config.neighbour_aggregate == "mean":
+        force = force / maximum(count, 1)
+    if config.keep_right_deg:
+        force = force * complex(np.exp(1j * np.deg2rad(config.keep_right_deg)))
+    return force, count

@@ -1,0 +1,103 @@
+"""One planning step: local view in, commanded direction and diagnostics out.
+
+This is the only APF in the project: the simulator, the training environment and the flight loop all call
+:meth:`Planner.step`. It is batched (``S`` drones, each from its own view) and pure: no clock, no I/O, no state.
+The caller integrates the motion (constant speed along ``direction``) and keeps each drone's heading.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+
+from rpf_fly.planning.config import PlannerConfig
+from rpf_fly.planning.forces import attractive, inter_robot, repulsive
+from rpf_fly.planning.gains import FixedGains, GainsPolicy
+from rpf_fly.planning.obstacles import NearestObstacle, ObstacleSet, nearest_obstacle
+from rpf_fly.planning.observation import Observation, build_observation
+from rpf_fly.planning.view import LocalView
+from rpf_fly.planning.wall_following import select_heading
+
+
+@dataclass(frozen=True)
+class PlanStep:
+    """Result for drones of leading shape ``S``. ``direction`` (complex) is a unit vector, or zero for a stalled
+    drone (resultant 0).
+
+    Diagnostics for the log: forces ``f_a``, ``f_r``, ``f_in`` (complex); ``mode`` int8 (0 apf, 1 wall, 2 soft);
+    gains ``eta``, ``lam``; ``neighbours``: lambda-neighbours used; ``obstacle_distance``: signed distance to the
+    nearest visible obstacle surface (metres, FAR when none); ``goal_distance`` (metres).
+    """
+
+    direction: np.ndarray
+    mode: np.ndarray
+    f_a: np.ndarray
+    f_r: np.ndarray
+    f_in: np.ndarray
+    eta: np.ndarray
+    lam: np.ndarray
+    neighbours: np.ndarray
+    obstacle_distance: np.ndarray
+    goal_distance: np.ndarray
+    observation: Observation | None = None
+
+
+def sense_obstacles(view: LocalView, obstacles: ObstacleSet, config: PlannerConfig) -> tuple[NearestObstacle, np.ndarray]:
+    """Nearest obstacle for each drone (static neighbours included as circles of radius r when the preset says so)
+    and the mask of the neighbours that remain lambda-neighbours."""
+    mask = view.neighbour_mask
+    if config.static_neighbours_as_obstacles and mask.shape[-1]:
+        static = mask & (abs(view.neighbour_velocity) < config.static_speed)
+        nearest = nearest_obstacle(view.position, obstacles, view.neighbour_position, config.safety_radius, static)
+        return nearest, mask & ~static
+    return nearest_obstacle(view.position, obstacles), mask
+
+
+def apf_step(
+    view: LocalView,
+    nearest: NearestObstacle,
+    lambda_mask: np.ndarray,
+    eta: np.ndarray | float,
+    lam: np.ndarray | float,
+    config: PlannerConfig,
+) -> PlanStep:
+    """The APF with (soft) wall-following for given gains."""
+    f_a, d_g = attractive(view.position, view.goal)
+    f_r = repulsive(nearest, eta, config)
+    f_in, count = inter_robot(view.position, view.neighbour_position, lambda_mask, lam, config)
+    direction, mode = select_heading(f_a, f_r, f_in, view.heading, nearest.distance, config)
+    return PlanStep(
+        direction=direction,
+        mode=mode,
+        f_a=f_a,
+        f_r=f_r,
+        f_in=f_in,
+        eta=eta,
+        lam=lam,
+        neighbours=count,
+        obstacle_distance=nearest.distance,
+        goal_distance=d_g,
+    )
+
+
+class Planner:
+    """APF planner whose gains come from a :class:`GainsPolicy` (fixed gains: vanilla APF; ONNX policy: RPF)."""
+
+    def __init__(self, obstacles: ObstacleSet, config: PlannerConfig | None = None, gains: GainsPolicy | None = None):
+        self.obstacles = obstacles
+        self.config = config or PlannerConfig()
+        self.gains = gains or FixedGains()
+
+    def step(self, view: LocalView) -> PlanStep:
+        """Plan every drone of ``view`` from its own local view."""
+        nearest, lambda_mask = sense_obstacles(view, self.obstacles, self.config)
+        observation = None
+        if self.gains.needs_observation:
+            observation = build_observation(view, nearest, self.config, self.gains.max_neighbours)
+        eta, lam = self.gains.gains(observation)
+        result = apf_step(view, nearest, lambda_mask, eta, lam, self.config)
+        if observation is not None:
+            result = dataclasses.replace(result, observation=observation)
+        return result

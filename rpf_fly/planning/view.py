@@ -1,0 +1,80 @@
+"""What a drone senses: its own state and the neighbours within its sensing range.
+
+Each drone plans from a :class:`LocalView` alone; planners never exchange anything. The simulator and the
+training environment build the views of all drones at once with :func:`views_from_states` (each drone still
+sees only the neighbours within its own range); the flight loop builds one drone's view from a mocap frame with
+:func:`view_of_drone`. Both give the same arrays, so one planner serves both. Planar vectors are complex
+(:mod:`rpf_fly.planning.vectors`); metres and metres per second.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class LocalView:
+    """Arrays with leading shape ``S`` (one entry per drone being planned; ``()`` for a single drone).
+
+    ``position``, ``goal``: ``S``; ``heading``: ``S``, unit vector of the current motion direction;
+    ``neighbour_position``, ``neighbour_velocity``: ``S + (K,)``; ``neighbour_mask``: ``S + (K,)``, true for a
+    real neighbour within sensing range (padding is false).
+    """
+
+    position: np.ndarray
+    goal: np.ndarray
+    heading: np.ndarray
+    neighbour_position: np.ndarray
+    neighbour_velocity: np.ndarray
+    neighbour_mask: np.ndarray
+
+
+@lru_cache(maxsize=64)
+def others_index(n: int) -> np.ndarray:
+    """``(n, n-1)`` indices of every robot but ``i`` in row ``i``."""
+    if n <= 1:
+        return np.zeros((n, 0), dtype=int)
+    full = np.broadcast_to(np.arange(n), (n, n))
+    return full[~np.eye(n, dtype=bool)].reshape(n, n - 1)
+
+
+def views_from_states(
+    positions: np.ndarray,
+    velocities: np.ndarray,
+    goals: np.ndarray,
+    headings: np.ndarray,
+    sensing_range: float,
+) -> LocalView:
+    """Views of all ``N`` robots of one or many arenas (arrays ``(..., N)``): each robot's neighbours are the
+    other robots of its arena strictly closer than ``sensing_range``."""
+    idx = others_index(positions.shape[-1])
+    nbr_pos = positions[..., idx]  # (..., N, N-1)
+    mask = abs(nbr_pos - positions[..., None]) < sensing_range
+    return LocalView(positions, goals, headings, nbr_pos, velocities[..., idx], mask)
+
+
+def view_of_drone(
+    position: complex,
+    goal: complex,
+    heading: complex,
+    others_position: np.ndarray,
+    others_velocity: np.ndarray,
+    sensing_range: float,
+) -> LocalView:
+    """One drone's view (leading shape ``()``) from the others' positions and velocities ``(K,)``: keeps those in
+    range, as its sensors would."""
+    others_position = np.asarray(others_position, dtype=complex).reshape(-1)
+    others_velocity = np.asarray(others_velocity, dtype=complex).reshape(-1)
+    keep = abs(others_position - position) < sensing_range
+    nbr = others_position[keep]
+    return LocalView(
+        complex(position),
+        complex(goal),
+        complex(heading),
+        nbr,
+        others_velocity[keep],
+        np.ones(nbr.shape[0], dtype=bool),
+    )

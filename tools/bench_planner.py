@@ -1,0 +1,167 @@
+"""Planner and simulator benchmark: per-drone plan step, one flight tick, batched simulation throughput.
+
+    python tools/bench_planner.py [--repeats 15] [--json out.json]
+
+1. Per-drone plan step (fixed gains): one drone planned from its own view, as the flight loop does, on views taken
+   mid-flight from the paper missions. Median over repeats of the mean time per call.
+2. One tick for 10 and 100 drones: every drone planned from its own view, (a) one call per drone as the flight
+   loop does, view building included, and (b) all drones in one batched call.
+3. Batched simulation: many arenas stepped together (views, plan, advance), in robot-steps per second.
+
+Runs on one core (numpy here uses no threads for these sizes; OMP/BLAS threads are pinned to 1 anyway). The
+machines are shared and noisy: read medians and ratios, not single runs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import sys
+import time
+from pathlib import Path
+from typing import Callable
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import numpy as np  # noqa: E402
+
+from rpf_fly.mission import load_mission  # noqa: E402
+from rpf_fly.planning import FixedGains, Planner, PlannerConfig, ObstacleSet, view_of_drone  # noqa: E402
+from rpf_fly.sim import SimParams, World, arena_a, circle_swap, rollout, scenario_from_mission  # noqa: E402
+from rpf_fly.sim.planners import make_planner  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def timed(fn: Callable[[], object], inner: int, repeats: int) -> float:
+    """Median over ``repeats`` of the mean seconds per call of ``fn`` over ``inner`` calls."""
+    for _ in range(max(inner // 10, 1)):
+        fn()
+    samples = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        for _ in range(inner):
+            fn()
+        samples.append((time.perf_counter() - t0) / inner)
+    return statistics.median(samples)
+
+
+def midflight_views(mission_name: str):  # type: ignore[no-untyped-def]
+    """Each drone's own view at the middle of a simulated run of the mission, and the planner."""
+    mission = load_mission(ROOT / "missions" / f"{mission_name}.yaml")
+    scenario = scenario_from_mission(mission, 0)
+    planner = make_planner(mission.planner, scenario.obstacles)
+    params = SimParams(mission.flight.speed, mission.flight.dt, mission.flight.goal_tolerance, mission.sim.time_limit_s)
+    run = rollout(scenario, planner, params)
+    k = run.steps // 2
+    pos = run.positions[k]
+    vel = (run.positions[k] - run.positions[k - 1]) / params.dt
+    heading = np.where(abs(vel) > 0, vel / np.maximum(abs(vel), 1e-12), 1.0)
+    views = []
+    for i in range(len(pos)):
+        others = np.delete(np.arange(len(pos)), i)
+        views.append(view_of_drone(pos[i], scenario.goals[i], heading[i], pos[others], vel[others], 6.0))
+    return planner, views
+
+
+def bench_per_drone(repeats: int) -> dict[str, float]:
+    out = {}
+    for name in ("lab-3", "arena-a-6", "circle-8-r3"):
+        planner, views = midflight_views(name)
+        per_view = [timed(lambda v=v: planner.step(v), 300, repeats) for v in views]
+        out[name] = statistics.median(per_view)
+    return out
+
+
+def swarm_state(n: int, rng: np.random.Generator):  # type: ignore[no-untyped-def]
+    """``n`` drones crossing a 20 m circle mid-swap, with a few obstacles: a realistic dense tick."""
+    angles = 2 * np.pi * np.arange(n) / n
+    pos = 10 * np.exp(1j * angles) * rng.uniform(0.3, 1.0, n)
+    goals = -10 * np.exp(1j * angles)
+    vel = 0.5 * (goals - pos) / abs(goals - pos)
+    obstacles = ObstacleSet.from_shapes(circles=[((3.0, 0.0), 0.5), ((-2.0, 4.0), 0.5), ((0.0, -5.0), 0.3)])
+    return pos, goals, vel, obstacles
+
+
+def bench_tick(n: int, repeats: int) -> dict[str, float]:
+    pos, goals, vel, obstacles = swarm_state(n, np.random.default_rng(n))
+    planner = Planner(obstacles, PlannerConfig.robust(), FixedGains())
+    heading = vel / abs(vel)
+    idx = [np.delete(np.arange(n), i) for i in range(n)]
+
+    def per_drone_tick() -> None:
+        for i in range(n):
+            planner.step(view_of_drone(pos[i], goals[i], heading[i], pos[idx[i]], vel[idx[i]], 6.0))
+
+    from rpf_fly.planning import views_from_states
+
+    def batched_tick() -> None:
+        planner.step(views_from_states(pos, vel, goals, heading, 6.0))
+
+    inner = max(2, 200 // n)
+    return {"per_drone_calls": timed(per_drone_tick, inner, repeats), "batched": timed(batched_tick, inner * 5, repeats)}
+
+
+def bench_batched_sim(repeats: int) -> dict[str, float]:
+    out = {}
+    cases = {
+        "arena-b (6 drones x 512 arenas, open)": (circle_swap(6, 2.0), 512),
+        "arena-a (6 drones x 256 arenas, 12 obstacles)": (arena_a(np.random.default_rng(0)), 256),
+    }
+    for label, (scenario, arenas) in cases.items():
+        planner = Planner(scenario.obstacles, PlannerConfig.robust(), FixedGains())
+        starts = np.broadcast_to(scenario.starts, (arenas, scenario.n_drones))
+        goals = np.broadcast_to(scenario.goals, (arenas, scenario.n_drones))
+        world = World(starts, goals, 0.5, 0.1, 0.1, scenario.arena_x, scenario.arena_y)
+
+        def step() -> None:
+            world.advance(planner.step(world.views(6.0)).direction)
+
+        seconds = timed(step, 20, repeats)
+        out[label] = arenas * scenario.n_drones / seconds
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--repeats", type=int, default=15)
+    parser.add_argument("--json", type=Path, default=None, help="also write the figures as JSON")
+    args = parser.parse_args(argv)
+
+    per_drone = bench_per_drone(args.repeats)
+    ticks = {n: bench_tick(n, args.repeats) for n in (10, 100)}
+    sim = bench_batched_sim(args.repeats)
+
+    print("per-drone plan step, fixed gains (median; goal <= 50 us)")
+    for name, s in per_drone.items():
+        print(f"  {name:14s} {s * 1e6:8.1f} us")
+    print("one tick, every drone from its own view (goal: 100 drones <= 5 ms)")
+    for n, t in ticks.items():
+        print(
+            f"  {n:3d} drones: one call per drone {t['per_drone_calls'] * 1e3:7.2f} ms"
+            f" ({t['per_drone_calls'] / n * 1e6:.1f} us/drone), batched {t['batched'] * 1e3:6.2f} ms"
+        )
+    print("batched simulation throughput (goal >= 1M robot-steps/s)")
+    for label, rate in sim.items():
+        print(f"  {label:48s} {rate / 1e6:6.2f} M robot-steps/s")
+    if args.json:
+        args.json.write_text(
+            json.dumps(
+                {
+                    "per_drone_step_s": per_drone,
+                    "tick_s": {str(n): t for n, t in ticks.items()},
+                    "batched_sim_robot_steps_per_s": sim,
+                    "python": sys.version.split()[0],
+                    "numpy": np.__version__,
+                },
+                indent=2,
+            )
+        )
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
