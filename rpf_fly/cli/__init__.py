@@ -18,6 +18,12 @@ app = typer.Typer(
 )
 
 
+@app.callback()
+def _root() -> None:
+    """Fly a Crazyflie swarm with the Reinforced Potential Field planner."""
+    # A callback keeps typer in group mode even when one command is registered, so `rpf-fly sim ...` always works.
+
+
 def get_app() -> typer.Typer:
     """The app with every command module imported (idempotent)."""
     from rpf_fly.cli import sim_cmd  # noqa: F401

@@ -119,3 +119,9 @@ def test_unknown_planner_option_exits_2():
     result = run(ROOT / "missions" / "lab-3.yaml", "--planner", "bogus")
     assert result.exit_code == 2
     assert "unknown planner kind 'bogus'" in result.stderr
+
+
+def test_help_lists_commands_in_a_real_process():
+    proc = subprocess.run([sys.executable, "-m", "rpf_fly", "--help"], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0
+    assert "sim" in proc.stdout
