@@ -29,6 +29,7 @@ def sim(
     """Simulate MISSION with its planner (no radio, no mocap) and report success, collisions and path quality."""
     from rpf_fly.mission import MissionError, load_mission, with_planner
     from rpf_fly.sim import SimParams, compute_metrics, rollout, scenario_from_mission
+    from rpf_fly.planning.onnx_policy import PolicyError
     from rpf_fly.sim.planners import UnsupportedPlanner, make_planner
 
     try:
@@ -41,8 +42,8 @@ def sim(
     scenario = scenario_from_mission(loaded, seed)
     try:
         chosen = make_planner(loaded.planner, scenario.obstacles)
-    except UnsupportedPlanner as err:
-        raise fail(f"{mission}:0: --planner: {err}")
+    except (UnsupportedPlanner, PolicyError) as err:
+        raise fail(f"{mission}:0: planner.policy: {err}")
     params = SimParams(loaded.flight.speed, loaded.flight.dt, loaded.flight.goal_tolerance, loaded.sim.time_limit_s)
     result = rollout(scenario, chosen, params)
     metrics = compute_metrics(

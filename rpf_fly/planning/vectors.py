@@ -11,6 +11,9 @@ Conventions (docs/architecture.md): metres, Z-up world, angles from +x counter-c
 
 from __future__ import annotations
 
+import cmath
+import math
+
 import numpy as np
 
 TINY = 1e-300
@@ -92,3 +95,16 @@ def plain(x):  # type: ignore[no-untyped-def]
 def per_item(x):  # type: ignore[no-untyped-def]
     """Add a trailing axis to an array so it broadcasts against ``S + (K,)``; Python numbers pass through."""
     return x[..., None] if isinstance(x, np.ndarray) and x.ndim else x
+
+
+def phase(z):  # type: ignore[no-untyped-def]
+    """Angle of ``z`` in (-pi, pi]: ``cmath.phase`` for a Python number, ``np.angle`` for arrays.
+
+    The angle of a vector ``v`` seen from a unit heading ``h`` is ``phase(v * conj(h))``.
+    """
+    if isinstance(z, np.ndarray):
+        a = np.angle(z)
+        a[a == -np.pi] = np.pi
+        return a
+    a = cmath.phase(z)
+    return math.pi if a == -math.pi else a

@@ -1,8 +1,9 @@
 """The kinematic world: first-order point-mass drones at constant speed (paper eq. 1), batched over arenas.
 
-Each step every drone that has not arrived moves ``speed * dt`` along its planned direction; a stalled drone (zero
-direction) stays put; an arrived drone (goal distance below the tolerance) stays where it arrived and remains
-visible to the others as a static neighbour. Positions are clamped to the arena (the geofence) and every clamp is
+Each step every drone that has not arrived moves ``speed * |direction| * dt`` along its planned direction (a unit
+vector for the APF planners; shorter for a planner that slows down, like ORCA); a stalled drone (zero direction)
+stays put; an arrived drone (goal distance below the tolerance) stays where it arrived and remains visible to the
+others as a static neighbour; a halted drone (the training environment halts a drone that collided) likewise. Positions are clamped to the arena (the geofence) and every clamp is
 counted. Arrays have shape ``(..., N)`` complex: one leading entry per arena.
 """
 
@@ -42,6 +43,7 @@ class World:
         self.velocity = self.speed * self.heading
         self.arrived = abs(self.goal - self.position) < self.goal_tolerance
         self.velocity = np.where(self.arrived, 0, self.velocity)
+        self.halted = np.zeros(self.position.shape, dtype=bool)
         self.geofence_clamps = np.zeros(self.position.shape, dtype=int)
         self.steps = 0
 
@@ -51,7 +53,7 @@ class World:
 
     def advance(self, direction: np.ndarray) -> None:
         """Move every active drone one step along ``direction`` (unit or zero)."""
-        moving = ~self.arrived & (abs(direction) > 0.0)
+        moving = ~(self.arrived | self.halted) & (abs(direction) > 0.0)
         self.velocity = moving * (self.speed * direction)
         new = self.position + self.velocity * self.dt
         x = np.clip(new.real, self._lo_x, self._hi_x)
@@ -59,7 +61,7 @@ class World:
         clamped = (x != new.real) | (y != new.imag)
         self.geofence_clamps += clamped
         self.position = x + 1j * y
-        self.heading = np.where(moving, direction, self.heading)
+        self.heading = np.where(moving, direction / np.where(moving, abs(direction), 1.0), self.heading)
         self.arrived = self.arrived | (abs(self.goal - self.position) < self.goal_tolerance)
         self.steps += 1
 

@@ -1,0 +1,149 @@
+"""``rpf-fly train``: PPO training with a progress bar, curves, checkpoints, ONNX export and a model card."""
+
+from __future__ import annotations
+
+import shlex
+import sys
+import time
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+from rpf_fly.cli import app
+from rpf_fly.cli.errors import fail
+
+PAPER_MISSIONS = ("arena-a-6", "arena-b-6", "circle-8-r3", "circle-8-r8", "lab-3")
+
+
+@app.command()
+def train(
+    out: Path = typer.Option(..., "--out", help="Where to write the ONNX policy (the run folder sits beside it)."),
+    kind: str = typer.Option("rpf", "--kind", help="rpf (attention), rpf-mean (RPF-2) or ppo (heading baseline)."),
+    no_attention: bool = typer.Option(False, "--no-attention", help="Same as --kind rpf-mean."),
+    arena: str = typer.Option("both", "--arena", help="Training arenas: a, b or both."),
+    episodes: int = typer.Option(4000, "--episodes", help="Stop after this many finished arena episodes."),
+    seed: int = typer.Option(0, "--seed", help="Seed of the weights, the scenes and the sampling."),
+    arenas: int = typer.Option(48, "--arenas", help="Parallel arenas (6 drones each)."),
+    resume: bool = typer.Option(False, "--resume", help="Continue from the run folder's checkpoint."),
+    eval_seeds: int = typer.Option(20, "--eval-seeds", help="Seeds per scene in the model card's evaluation (0: none)."),
+    obstacle_radius: Optional[float] = typer.Option(
+        None, "--obstacle-radius", help="Arena A obstacle radius (default 0.5 m; 0.1 m for the ppo baseline)."
+    ),
+    missions_dir: Path = typer.Option(Path("missions"), "--missions", help="Paper missions for the evaluation."),
+) -> None:
+    """Train a policy with PPO from the paper's reward, export it to ONNX (parity-checked) and write its model card."""
+    try:
+        import torch  # noqa: F401
+    except ImportError:
+        raise fail("rpf-fly train needs torch: pip install -e '.[train]' (torch==2.13.0, CPU build)")
+    from rpf_fly.learn.ppo import PPOConfig, Trainer
+
+    if no_attention:
+        kind = "rpf-mean"
+    if kind not in ("rpf", "rpf-mean", "ppo"):
+        raise fail(f"--kind: expected rpf, rpf-mean or ppo, got {kind!r}")
+    if arena not in ("a", "b", "both"):
+        raise fail(f"--arena: expected a, b or both, got {arena!r}")
+    if out.suffix != ".onnx":
+        raise fail(f"--out: expected a path ending in .onnx, got {str(out)!r}")
+    radius = obstacle_radius if obstacle_radius is not None else (0.1 if kind == "ppo" else 0.5)
+    config = PPOConfig(seed=seed, kind=kind, arena=arena, episodes=episodes, n_arenas=arenas, obstacle_radius=radius)  # type: ignore[arg-type]
+    run_dir = out.with_suffix(".run")
+    command = "rpf-fly train " + " ".join(shlex.quote(a) for a in sys.argv[2:]) if len(sys.argv) > 2 else "rpf-fly train"
+    trainer = Trainer(config, run_dir)
+    if resume:
+        if not trainer.checkpoint_path.exists():
+            raise fail(f"--resume: no checkpoint at {trainer.checkpoint_path}")
+        trainer.load_checkpoint()
+    started = time.time()
+    _train_with_progress(trainer)
+    _finish(trainer, out, command, eval_seeds, missions_dir, time.time() - started)
+
+
+def _train_with_progress(trainer) -> None:  # type: ignore[no-untyped-def]
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    target = trainer.config.episodes
+    with Progress(
+        TextColumn("[bold]train[/bold]"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TextColumn("episodes"),
+        TimeElapsedColumn(),
+        TextColumn("{task.fields[stats]}"),
+        transient=False,
+    ) as progress:
+        task = progress.add_task("train", total=target, completed=len(trainer.episodes), stats="")
+
+        def update(log) -> None:  # type: ignore[no-untyped-def]
+            stats = (
+                f"return {log.mean_return:7.1f}  success {log.success_rate:4.0%}  "
+                f"kl {log.approx_kl:.4f}  {log.steps_per_s:6.0f} steps/s"
+            )
+            progress.update(task, completed=min(log.episodes, target), stats=stats)
+
+        trainer.run(update)
+
+
+def _finish(trainer, out: Path, command: str, eval_seeds: int, missions_dir: Path, wall_s: float) -> None:  # type: ignore[no-untyped-def]
+    import dataclasses
+
+    from rpf_fly.learn.card import git_commit, machine, write_card
+    from rpf_fly.learn.curves import plot_curves
+    from rpf_fly.learn.export import check_parity, export_onnx, file_sha256
+
+    config = trainer.config
+    commit = git_commit()
+    export_onnx(
+        trainer.model,
+        out,
+        {"rpf_fly.kind": config.kind, "rpf_fly.preset": "robust", "rpf_fly.seed": str(config.seed), "rpf_fly.commit": commit},
+    )
+    parity = check_parity(trainer.model, out)
+    curve_csv = out.with_suffix(".curve.csv")
+    curve_csv.write_text((trainer.out_dir / "training_curve.csv").read_text())
+    curve_png = plot_curves(curve_csv, out.with_suffix(".curve.png"), title=f"{config.kind}, seed {config.seed}")
+    card = {
+        "policy": out.name,
+        "kind": config.kind,
+        "sha256": file_sha256(out),
+        "command": command,
+        "seed": config.seed,
+        "commit": commit,
+        "training": {
+            "wall_time_s": round(trainer.wall_s, 1),
+            "this_invocation_s": round(wall_s, 1),
+            "updates": trainer.update,
+            "arena_episodes": len(trainer.episodes),
+            "env_steps": trainer.env_steps,
+            "robot_steps": trainer.env_steps * 6,
+            "final_success_rate_last_200": trainer.history[-1].success_rate if trainer.history else None,
+            "hyperparameters": dataclasses.asdict(config),
+            "machine": machine(),
+        },
+        "export": {"opset": 17, "max_neighbours": config.max_neighbours, "parity_max_abs_diff": parity},
+        "curves": {"csv": curve_csv.name, "png": curve_png.name},
+    }
+    if eval_seeds > 0:
+        card["evaluation"] = _evaluate(out, config.kind, eval_seeds, missions_dir)
+    write_card(out.with_suffix(".yaml"), card)
+    typer.echo(f"policy: {out}  (parity max |ort - torch| = {parity:.2e})")
+    typer.echo(f"model card: {out.with_suffix('.yaml')}  curves: {curve_png}")
+
+
+def _evaluate(policy: Path, kind: str, seeds: int, missions_dir: Path) -> dict:
+    """Success and path metrics on fresh arena-A scenes (seeds never used in training) and the paper missions."""
+    from rpf_fly.mission import load_mission
+    from rpf_fly.sim.evaluate import evaluate_arena_a, evaluate_mission, planner_settings, summarise
+
+    result: dict = {"seeds": seeds}
+    fresh = range(1_000_000, 1_000_000 + seeds)  # training scenes come from the training seed's generator
+    settings = planner_settings(kind, policy.resolve())
+    result["arena-a-fresh"] = summarise(evaluate_arena_a(settings, fresh))
+    result["arena-a-fresh-clear0.5"] = summarise(evaluate_arena_a(settings, fresh, goal_clearance=0.5))
+    for name in PAPER_MISSIONS:
+        path = missions_dir / f"{name}.yaml"
+        if path.exists():
+            result[name] = summarise(evaluate_mission(load_mission(path), kind, policy.resolve(), range(seeds)))
+    return result

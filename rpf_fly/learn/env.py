@@ -1,0 +1,245 @@
+"""Vectorized multi-robot training environment: many arenas stepped at once with the SAME planning functions.
+
+Each of ``n_arenas`` arenas holds ``n_robots`` drones (the paper trains with 6). Every step each active drone
+observes its local view (``build_observation``), the policy answers with gains ``(eta, lambda)`` (RPF) or a
+heading change ``a`` (the vanilla-PPO baseline), the APF of :mod:`rpf_fly.planning` (``sense_obstacles`` and
+``apf_step``, exactly what the simulator and the flight loop call) turns gains into a direction, and the kinematic
+:class:`~rpf_fly.sim.World` moves the drones. No second APF exists.
+
+Reward per robot (paper Section IV-B, DESIGN.md 4.4):
+
+- ``R_m = 300 - 100 d_a/d_s`` on reaching the goal (``d_a`` path flown, ``d_s`` straight distance);
+- ``R_s = -5`` when the heading turns more than 45 degrees in one step;
+- ``R_o = -100`` if ``d_o < r``, ``-20`` if ``r <= d_o < 2r`` (static obstacles);
+- ``-100`` for a drone-drone collision (``d_ji < 2r``);
+- ``R_p``: the paper's ``1 - d_g/d_m`` (``progress_reward="paper"``) or, by default, potential-based shaping with
+  that potential, ``gamma Phi(s') - Phi(s)`` (the per-step form pays a drone for lingering near its goal instead of
+  arriving; docs/learning.md).
+
+A robot is done when it arrives or collides (a collided drone halts where it is and stays visible to the others).
+An arena resets with a freshly generated scene when all its robots are done or after ``max_steps``; the robots
+still flying then end as truncated (treated as terminal).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+
+from rpf_fly.planning.config import PlannerConfig
+from rpf_fly.planning.obstacles import FAR, ObstacleSet, nearest_obstacle
+from rpf_fly.planning.observation import Observation, build_observation
+from rpf_fly.planning.planner import apf_step, sense_obstacles
+from rpf_fly.planning.vectors import dot, unit
+from rpf_fly.sim.collisions import nearest_neighbour_distance
+from rpf_fly.sim.scenario import Scenario, arena_a, arena_b
+from rpf_fly.sim.world import World
+
+ArenaKind = Literal["a", "b", "both"]
+ActionKind = Literal["gains", "heading"]
+
+
+@dataclass(frozen=True)
+class EnvConfig:
+    """Environment settings; defaults are the paper's (dt 0.1 s, v 0.5 m/s, r 0.1 m, d_r 6 m, d_m 10 m, rho 10 m)."""
+
+    n_arenas: int = 64
+    n_robots: int = 6
+    arena: ArenaKind = "both"
+    action: ActionKind = "gains"
+    max_steps: int = 1000
+    dt: float = 0.1
+    speed: float = 0.5
+    safety_radius: float = 0.1
+    sensing_range: float = 6.0
+    influence_range: float = 10.0
+    d_m: float = 10.0
+    gamma: float = 0.999
+    max_neighbours: int = 10
+    obstacle_radius: float = 0.5
+    n_obstacles: int = 12
+    arena_half_size: float = 5.0
+    circle_radius: float = 2.0
+    progress_reward: Literal["potential", "paper"] = "potential"
+    preset: Literal["robust", "paper"] = "robust"
+
+    def planner_config(self) -> PlannerConfig:
+        return PlannerConfig.preset(
+            self.preset,
+            safety_radius=self.safety_radius,
+            sensing_range=self.sensing_range,
+            influence_range=self.influence_range,
+        )
+
+
+@dataclass
+class EpisodeStats:
+    """One finished arena episode: did every drone arrive without a collision, and the mean robot return."""
+
+    arena_kind: str
+    success: bool
+    arrived: int
+    collided: int
+    robots: int
+    mean_return: float
+    steps: int
+
+
+@dataclass
+class StepResult:
+    """What :meth:`SwarmEnv.step` returns. Arrays ``(n_arenas, n_robots)``.
+
+    ``valid`` marks the transitions that belong to a drone that was flying when the action was taken; ``done``
+    marks valid transitions that ended the drone's episode (arrived, collided or truncated)."""
+
+    observation: Observation
+    reward: np.ndarray
+    done: np.ndarray
+    valid: np.ndarray
+    episodes: list[EpisodeStats] = field(default_factory=list)
+
+
+class SwarmEnv:
+    """Batched arenas of drones whose planners are the project's APF with gains set by a policy."""
+
+    def __init__(self, config: EnvConfig, seed: int = 0):
+        self.config = config
+        self.rng = np.random.default_rng(seed)
+        self.planner = config.planner_config()
+        b, n = config.n_arenas, config.n_robots
+        m = config.n_obstacles
+        self.centers = np.full((b, 1, m), FAR + 0j)
+        self.radii = np.full((b, 1, m), 0.1)
+        empty = np.zeros((0,))
+        self.obstacles = ObstacleSet(self.centers, self.radii, empty.astype(complex), empty, empty)
+        self.kinds = ["a"] * b
+        self.world = World(
+            np.zeros((b, n), complex), np.ones((b, n), complex), config.speed, config.dt, 0.0,
+            np.tile([-1.0, 1.0], (b, 1)), np.tile([-1.0, 1.0], (b, 1)),
+        )
+        self.world.goal_tolerance = config.safety_radius  # the paper's arrival test d_g < r
+        self.arena_x = np.zeros((b, 2))
+        self.arena_y = np.zeros((b, 2))
+        self.start = np.zeros((b, n), complex)
+        self.path = np.zeros((b, n))
+        self.done = np.zeros((b, n), dtype=bool)
+        self.collided = np.zeros((b, n), dtype=bool)
+        self.returns = np.zeros((b, n))
+        self.t = np.zeros(b, dtype=int)
+        for arena in range(b):
+            self._reset_arena(arena)
+        self._observe()
+
+    # -------------------------------------------------------------------------------------------- scenes
+
+    def _scene(self) -> tuple[str, Scenario]:
+        c = self.config
+        kind = c.arena if c.arena != "both" else ("a" if self.rng.random() < 0.5 else "b")
+        if kind == "a":
+            scene = arena_a(
+                self.rng, c.n_robots, c.n_obstacles, c.obstacle_radius, c.arena_half_size, c.safety_radius
+            )
+        else:
+            scene = arena_b(self.rng, c.n_robots, c.circle_radius)
+        return kind, scene
+
+    def _reset_arena(self, b: int) -> None:
+        kind, scene = self._scene()
+        self.kinds[b] = kind
+        m = scene.obstacles.n_circles
+        self.centers[b, 0, :] = FAR + 0j
+        self.centers[b, 0, :m] = scene.obstacles.centers
+        self.radii[b, 0, :] = 0.1
+        self.radii[b, 0, :m] = scene.obstacles.radii
+        w = self.world
+        w.position[b] = scene.starts
+        w.goal[b] = scene.goals
+        w.heading[b] = unit(scene.goals - scene.starts)
+        w.velocity[b] = w.speed * w.heading[b]
+        w.arrived[b] = False
+        w.halted[b] = False
+        # The geofence of the world is the scene's arena (clamped per arena).
+        w._lo_x[b], w._hi_x[b] = scene.arena_x
+        w._lo_y[b], w._hi_y[b] = scene.arena_y
+        self.start[b] = scene.starts
+        self.path[b] = 0.0
+        self.done[b] = False
+        self.collided[b] = False
+        self.returns[b] = 0.0
+        self.t[b] = 0
+
+    # ------------------------------------------------------------------------------------------ stepping
+
+    def _observe(self) -> None:
+        self.view = self.world.views(self.config.sensing_range)
+        self.nearest, self.lambda_mask = sense_obstacles(self.view, self.obstacles, self.planner)
+        self.observation = build_observation(self.view, self.nearest, self.planner, self.config.max_neighbours)
+
+    def _potential(self, position: np.ndarray) -> np.ndarray:
+        d_g = abs(self.world.goal - position)
+        return np.maximum(1.0 - d_g / self.config.d_m, 0.0)
+
+    def directions(self, action: np.ndarray) -> np.ndarray:
+        """Planned directions for actions ``(arenas, robots, size)``: gains (eta, lambda) or a heading change ``a``
+        (the vanilla-PPO baseline: ``F = (v + a v_perp)/|...|``, paper Section V)."""
+        if self.config.action == "gains":
+            step = apf_step(self.view, self.nearest, self.lambda_mask, action[..., 0], action[..., 1], self.planner)
+            return step.direction
+        h = self.world.heading
+        return unit(h + action[..., 0] * (1j * h))
+
+    def step(self, action: np.ndarray) -> StepResult:
+        """Apply one action per robot (ignored for robots that are done) and advance every arena by ``dt``."""
+        c = self.config
+        w = self.world
+        valid = ~self.done
+        before = w.position.copy()
+        heading_before = w.heading.copy()
+        potential_before = self._potential(before)
+        w.advance(self.directions(action))
+        moved = w.position - before
+        self.path += abs(moved)
+
+        r = c.safety_radius
+        arrived_now = valid & w.arrived
+        straight = np.maximum(abs(w.goal - self.start), 1e-6)
+        reward = np.where(arrived_now, 300.0 - 100.0 * self.path / straight, 0.0)
+        turned = (abs(moved) > 0) & (dot(heading_before, w.heading) < np.cos(np.pi / 4))
+        reward -= 5.0 * turned
+        clearance = nearest_obstacle(w.position, self.obstacles).distance
+        reward -= np.where(clearance < r, 100.0, np.where(clearance < 2 * r, 20.0, 0.0))
+        hit_robot = nearest_neighbour_distance(w.position) < 2 * r
+        reward -= 100.0 * hit_robot
+        if c.progress_reward == "potential":
+            reward += c.gamma * self._potential(w.position) - potential_before
+        else:
+            d_g = abs(w.goal - w.position)
+            reward += np.where(d_g < c.d_m, 1.0 - d_g / c.d_m, 0.0)
+        reward = reward * valid
+
+        collided_now = valid & ((clearance < r) | hit_robot) & ~arrived_now
+        self.collided |= collided_now
+        w.halted |= collided_now
+        self.returns += reward
+        ended = arrived_now | collided_now
+        self.t += 1
+        truncated = (self.t >= c.max_steps)[:, None] & valid & ~ended
+        done = ended | truncated
+        self.done |= done
+
+        episodes = []
+        finished = np.flatnonzero(self.done.all(axis=1))
+        for b in finished:
+            arrived = int(w.arrived[b].sum())
+            collided = int(self.collided[b].sum())
+            episodes.append(
+                EpisodeStats(
+                    self.kinds[b], arrived == c.n_robots and collided == 0, arrived, collided, c.n_robots,
+                    float(self.returns[b].mean()), int(self.t[b]),
+                )
+            )
+            self._reset_arena(b)
+        self._observe()
+        return StepResult(self.observation, reward, done, valid, episodes)

@@ -1,0 +1,53 @@
+"""The vanilla-PPO baseline planner: a policy turns the heading directly, with no APF (paper Section V).
+
+``F = (v + a v_perp) / |v + a v_perp|`` with ``v`` the current heading, ``v_perp`` it turned 90 degrees
+counter-clockwise and ``a`` in [-2.5, 2.5] from the policy. The observation is the same as RPF's.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from rpf_fly.planning.config import PlannerConfig
+from rpf_fly.planning.forces import attractive
+from rpf_fly.planning.observation import build_observation
+from rpf_fly.planning.obstacles import ObstacleSet
+from rpf_fly.planning.onnx_policy import OnnxPolicy, PolicyError
+from rpf_fly.planning.planner import PlanStep, sense_obstacles
+from rpf_fly.planning.vectors import unit
+from rpf_fly.planning.view import LocalView
+
+
+class HeadingPolicyPlanner:
+    """Same interface as :class:`~rpf_fly.planning.Planner`; forces in the diagnostics are the attraction only."""
+
+    def __init__(self, obstacles: ObstacleSet, config: PlannerConfig, policy: OnnxPolicy):
+        if policy.action != "heading":
+            raise PolicyError(f"{policy.path}: a {policy.action!r} policy cannot steer the heading")
+        self.obstacles = obstacles
+        self.config = config
+        self.policy = policy
+
+    def step(self, view: LocalView) -> PlanStep:
+        nearest, lambda_mask = sense_obstacles(view, self.obstacles, self.config)
+        observation = build_observation(view, nearest, self.config, self.policy.max_neighbours)
+        a = self.policy.act(observation)[..., 0].astype(float)
+        if a.ndim == 0:
+            a = float(a)
+        direction = unit(view.heading + a * (1j * view.heading))
+        f_a, d_g = attractive(view.position, view.goal)
+        zero = f_a * 0
+        count = lambda_mask.sum(axis=-1) if isinstance(lambda_mask, np.ndarray) else 0
+        return PlanStep(
+            direction=direction,
+            mode=zero.real.astype(np.int8) if isinstance(zero, np.ndarray) else 0,
+            f_a=f_a,
+            f_r=zero,
+            f_in=zero,
+            eta=np.nan,
+            lam=np.nan,
+            neighbours=count,
+            obstacle_distance=nearest.distance,
+            goal_distance=d_g,
+            observation=observation,
+        )

@@ -1,0 +1,74 @@
+"""Learned policies at run time: an exported ONNX graph run with onnxruntime (never torch, never pickle).
+
+:class:`OnnxPolicy` wraps one session (one thread: a drone's planner must not fight the flight loop for cores) and
+reads the graph's metadata (action kind, neighbour slots, gain ranges). :class:`OnnxGains` is the RPF gains policy
+for :class:`~rpf_fly.planning.Planner`: observation in, ``(eta, lambda)`` out.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from rpf_fly.planning.observation import Observation
+
+
+class PolicyError(ValueError):
+    """A policy file that cannot be used: unreadable, not one of ours, or of the wrong kind."""
+
+
+class OnnxPolicy:
+    """An exported rpf_fly policy: ``act(observation)`` returns actions of shape ``S + (action_size,)``."""
+
+    def __init__(self, path: str | Path):
+        import onnxruntime as ort
+
+        self.path = Path(path)
+        options = ort.SessionOptions()
+        options.intra_op_num_threads = 1
+        options.inter_op_num_threads = 1
+        try:
+            self.session = ort.InferenceSession(str(self.path), options, providers=["CPUExecutionProvider"])
+        except Exception as err:  # onnxruntime raises several types for unreadable files
+            raise PolicyError(f"{self.path}: cannot load ONNX policy: {err}") from None
+        meta = self.session.get_modelmeta().custom_metadata_map
+        if "rpf_fly.action" not in meta:
+            raise PolicyError(f"{self.path}: not an rpf_fly policy (no rpf_fly.* metadata)")
+        self.metadata = dict(meta)
+        self.action = meta["rpf_fly.action"]
+        self.max_neighbours = int(meta["rpf_fly.max_neighbours"])
+        inputs = {i.name for i in self.session.get_inputs()}
+        if inputs != {"local", "neighbours", "mask"}:
+            raise PolicyError(f"{self.path}: expected inputs local, neighbours, mask; got {sorted(inputs)}")
+
+    def act(self, observation: Observation) -> np.ndarray:
+        """Deterministic actions for every drone of the observation's leading shape."""
+        lead = observation.local.shape[:-1]
+        k = self.max_neighbours
+        feeds = {
+            "local": np.ascontiguousarray(observation.local.reshape(-1, observation.local.shape[-1]), np.float32),
+            "neighbours": np.ascontiguousarray(observation.neighbours.reshape(-1, k, 3), np.float32),
+            "mask": np.ascontiguousarray(observation.mask.reshape(-1, k), np.float32),
+        }
+        out = self.session.run(["action"], feeds)[0]
+        return out.reshape(*lead, out.shape[-1])
+
+
+class OnnxGains:
+    """RPF: gains ``(eta, lambda)`` from an ONNX policy, per drone, every step."""
+
+    needs_observation = True
+
+    def __init__(self, policy: OnnxPolicy):
+        if policy.action != "gains":
+            raise PolicyError(f"{policy.path}: a {policy.action!r} policy cannot set APF gains")
+        self.policy = policy
+        self.max_neighbours = policy.max_neighbours
+
+    def gains(self, observation: Observation | None):  # type: ignore[no-untyped-def]
+        assert observation is not None
+        action = self.policy.act(observation).astype(float)
+        if action.ndim == 1:  # one drone: Python numbers keep the planner on its fast scalar path
+            return float(action[0]), float(action[1])
+        return action[..., 0], action[..., 1]

@@ -1,0 +1,122 @@
+"""``rpf-fly mocap watch`` / ``emulate`` against the emulator over real sockets, every version and transport."""
+
+from __future__ import annotations
+
+import json
+import socket
+import subprocess
+import sys
+
+import pytest
+from natnet_samples import VERSIONS
+from typer.testing import CliRunner
+
+import rpf_fly.cli.mocap_cmd  # noqa: F401 - registers the `mocap` group on the app
+from rpf_fly.cli import app
+from rpf_fly.mocap.natnet_server import NatNetServer
+
+TRANSPORTS = {"unicast": False, "multicast": True}
+POSES = {
+    "cf1": ((1.0, 2.0, 0.5), (0.0, 0.0, 0.0, 1.0), True),
+    "cf2": ((-0.25, 0.75, 1.5), (0.0, 0.0, 0.5**0.5, 0.5**0.5), True),
+    "cf3": ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0), False),
+}
+runner = CliRunner()
+
+
+def watch_args(server: NatNetServer, multicast: bool, *extra: str) -> list[str]:
+    args = ["mocap", "watch", "--natnet", "127.0.0.1", "--command-port", str(server.command_port), "--up-axis", "y"]
+    return args + ([] if multicast else ["--unicast"]) + list(extra)
+
+
+@pytest.mark.parametrize("transport", TRANSPORTS)
+@pytest.mark.parametrize("version", VERSIONS, ids=lambda v: f"{v[0]}.{v[1]}")
+def test_watch_prints_the_emulator_bodies(version, transport):
+    multicast = TRANSPORTS[transport]
+    with NatNetServer(lambda: POSES, version=version, multicast=multicast, rate_hz=200, up_axis="y") as server:
+        result = runner.invoke(app, watch_args(server, multicast, "--frames", "3"))
+    assert result.exit_code == 0, result.output
+    lines = result.stdout.splitlines()
+    assert len(lines) == 3
+    for line in lines:
+        assert line.startswith("frame ")
+        assert "cf1 (+1.000, +2.000, +0.500) ok" in line
+        assert "cf2 (-0.250, +0.750, +1.500) ok" in line
+        assert "cf3" in line and "LOST" in line
+
+
+@pytest.mark.parametrize("transport", TRANSPORTS)
+@pytest.mark.parametrize("version", VERSIONS, ids=lambda v: f"{v[0]}.{v[1]}")
+def test_watch_json_lines(version, transport):
+    multicast = TRANSPORTS[transport]
+    with NatNetServer(lambda: POSES, version=version, multicast=multicast, rate_hz=200, up_axis="y") as server:
+        result = runner.invoke(app, watch_args(server, multicast, "--frames", "4", "--json"))
+    assert result.exit_code == 0, result.output
+    objects = [json.loads(line) for line in result.stdout.splitlines()]
+    assert len(objects) == 4
+    numbers = [o["frame"] for o in objects]
+    assert numbers == sorted(set(numbers))
+    for obj in objects:
+        assert set(obj) == {"frame", "timestamp", "bodies"}
+        assert isinstance(obj["frame"], int) and isinstance(obj["timestamp"], float)
+        assert sorted(obj["bodies"]) == ["cf1", "cf2", "cf3"]
+        for name, body in obj["bodies"].items():
+            assert set(body) == {"position", "quaternion", "valid"}
+            position, quaternion, valid = POSES[name]
+            assert body["valid"] is valid
+            if valid:
+                assert body["position"] == pytest.approx(position, abs=1e-6)
+                assert body["quaternion"] == pytest.approx(quaternion, abs=1e-6)
+
+
+def test_watch_fails_with_one_line_when_no_server_answers():
+    silent = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    silent.bind(("127.0.0.1", 0))
+    with silent:
+        port = silent.getsockname()[1]
+        result = runner.invoke(app, ["mocap", "watch", "--command-port", str(port), "--timeout", "0.5", "--unicast"])
+    assert result.exit_code == 1
+    assert result.stdout == ""
+    assert result.stderr.strip().splitlines() == [
+        f"error: no NatNet server answered at 127.0.0.1:{port} within 0.5 s"
+    ]
+
+
+def test_watch_fails_when_the_server_answers_but_no_frames_come():
+    with NatNetServer(lambda: POSES, rate_hz=0) as server:  # answers commands, never streams
+        result = runner.invoke(app, watch_args(server, False, "--timeout", "0.5"))
+    assert result.exit_code == 1
+    assert len(result.stderr.strip().splitlines()) == 1
+    assert "no frames arrived" in result.stderr
+
+
+def test_emulate_then_watch():
+    command = [sys.executable, "-c", "import rpf_fly.cli.mocap_cmd; from rpf_fly.cli import app; app()"]
+    args = ["mocap", "emulate", "--version", "4.2", "--unicast", "--bodies", "2", "--rate", "100"]
+    args += ["--command-port", "0", "--data-port", "0", "--duration", "20"]
+    emulator = subprocess.Popen(command + args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        banner = emulator.stdout.readline()
+        assert banner.startswith("NatNet emulator: bitstream 4.2, unicast"), banner + emulator.stderr.read()
+        port = banner.split("command port ")[1].split(",")[0]
+        result = runner.invoke(
+            app, ["mocap", "watch", "--command-port", port, "--unicast", "--frames", "5", "--json", "--up-axis", "z"]
+        )
+        assert result.exit_code == 0, result.output
+        objects = [json.loads(line) for line in result.stdout.splitlines()]
+        assert len(objects) == 5
+        for obj in objects:
+            assert sorted(obj["bodies"]) == ["cf1", "cf2"]
+            for body in obj["bodies"].values():
+                x, y, z = body["position"]
+                assert body["valid"] and 0.4 < z < 0.8  # flying circles at 0.5 m and 0.6 m
+                assert 0.9 < (x * x + y * y) ** 0.5 < 1.3
+    finally:
+        emulator.terminate()
+        emulator.wait(timeout=10)
+
+
+def test_emulate_rejects_unknown_versions():
+    result = runner.invoke(app, ["mocap", "emulate", "--version", "2.9", "--duration", "0.1"])
+    assert result.exit_code != 0
+    assert "2.9" in result.output
