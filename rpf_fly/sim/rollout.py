@@ -46,7 +46,8 @@ class SimParams:
 @dataclass(frozen=True)
 class Rollout:
     """A recorded run. ``positions`` ``(T+1, N)`` complex (metres, at every planning step including the start);
-    per step ``(T, N)``: ``modes`` (0 apf, 1 wall, 2 soft, -1 arrived), gains ``eta`` and ``lam``;
+    per step ``(T, N)``: ``modes`` (0 apf, 1 wall, 2 soft, -1 arrived), gains ``eta`` and ``lam``, the planner's
+    diagnostics ``f_a``, ``f_r``, ``f_in`` and ``direction`` (complex) and ``neighbours`` (lambda-neighbours used);
     ``outcomes`` per drone; ``geofence_clamps`` per drone."""
 
     scenario: Scenario
@@ -57,6 +58,11 @@ class Rollout:
     lam: np.ndarray
     outcomes: tuple[DroneOutcome, ...]
     geofence_clamps: np.ndarray
+    f_a: np.ndarray
+    f_r: np.ndarray
+    f_in: np.ndarray
+    direction: np.ndarray
+    neighbours: np.ndarray
 
     @property
     def steps(self) -> int:
@@ -79,6 +85,7 @@ def rollout(scenario: Scenario, planner: Planner, params: SimParams) -> Rollout:
     modes: list[np.ndarray] = []
     etas: list[np.ndarray] = []
     lams: list[np.ndarray] = []
+    diagnostics: dict[str, list[np.ndarray]] = {"f_a": [], "f_r": [], "f_in": [], "direction": [], "neighbours": []}
     sensing = planner.config.sensing_range
     for _ in range(params.max_steps):
         if world.all_arrived:
@@ -90,6 +97,8 @@ def rollout(scenario: Scenario, planner: Planner, params: SimParams) -> Rollout:
         modes.append(np.where(active, np.broadcast_to(step.mode, (n,)), -1).astype(np.int8))
         etas.append(np.broadcast_to(np.asarray(step.eta, dtype=float), (n,)).copy())
         lams.append(np.broadcast_to(np.asarray(step.lam, dtype=float), (n,)).copy())
+        for key, values in diagnostics.items():
+            values.append(np.broadcast_to(getattr(step, key), (n,)).copy())
     track = np.array(positions)
     window = min(int(round(STALL_WINDOW_S / params.dt)), track.shape[0] - 1)
     progress = abs(track[-1] - track[-1 - window])
@@ -99,6 +108,10 @@ def rollout(scenario: Scenario, planner: Planner, params: SimParams) -> Rollout:
         for i in range(n)
     )
     empty = np.zeros((0, n))
+
+    def stacked(key: str, dtype: type) -> np.ndarray:
+        return np.array(diagnostics[key], dtype=dtype) if diagnostics[key] else empty.astype(dtype)
+
     return Rollout(
         scenario=scenario,
         params=params,
@@ -108,4 +121,9 @@ def rollout(scenario: Scenario, planner: Planner, params: SimParams) -> Rollout:
         lam=np.array(lams) if lams else empty,
         outcomes=outcomes,
         geofence_clamps=world.geofence_clamps.copy(),
+        f_a=stacked("f_a", complex),
+        f_r=stacked("f_r", complex),
+        f_in=stacked("f_in", complex),
+        direction=stacked("direction", complex),
+        neighbours=stacked("neighbours", int),
     )
