@@ -1,0 +1,233 @@
+"""The `DroneBackend` protocol: what the flight loop needs from the radio edge.
+
+A backend flies a set of drones addressed by *name* (the mission's drone names). The flight loop calls it from its
+own thread at a fixed rate; the backend reports per-drone problems in return values and in `DroneState`, and never
+raises one drone's failure across the swarm.
+
+Units everywhere: positions in metres in the world frame (right-handed, Z up), durations in seconds, battery in
+volts, yaw in DEGREES for setpoints (as cflib's `send_position_setpoint`) and for `go_to`, link latency in
+milliseconds, link quality in percent (0-100, the share of radio packets acknowledged without retries, as cflib
+computes it).
+
+Implementations: `rpf_fly.radio.cflib_backend.CflibBackend` (cflib over `radio://` or the fake radio `fake://`).
+"""
+
+from __future__ import annotations
+
+import enum
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from typing import Protocol, runtime_checkable
+
+Vec3 = tuple[float, float, float]
+"""x, y, z in metres."""
+
+Quaternion = tuple[float, float, float, float]
+"""qx, qy, qz, qw (unit quaternion, world from body)."""
+
+LinkLostCallback = Callable[[str, str], None]
+"""Called as ``callback(name, reason)`` once when a connected drone's link is lost."""
+
+
+class PmState(enum.IntEnum):
+    """Crazyflie power-management state, the firmware's `pm.state` log variable."""
+
+    BATTERY = 0
+    CHARGING = 1
+    CHARGED = 2
+    LOW_POWER = 3
+    """Battery below `pm.lowVoltage` (3.2 V by default) for more than 5 s: land now."""
+    SHUTDOWN = 4
+
+
+class SupervisorBits(enum.IntFlag):
+    """Bits of the firmware's `supervisor.info` bitfield (protocol 12)."""
+
+    CAN_BE_ARMED = 0x0001
+    ARMED = 0x0002
+    AUTO_ARMED = 0x0004
+    CAN_FLY = 0x0008
+    FLYING = 0x0010
+    TUMBLED = 0x0020
+    LOCKED = 0x0040
+    """Emergency stop or watchdog cut happened: the drone needs a reboot."""
+    CRASHED = 0x0080
+    HL_CONTROL_ACTIVE = 0x0100
+    HL_TRAJ_FINISHED = 0x0200
+    HL_CONTROL_DISABLED = 0x0400
+
+
+@dataclass(frozen=True)
+class SupervisorState:
+    """Decoded `supervisor.info` bitfield."""
+
+    bits: int
+
+    def has(self, flag: SupervisorBits) -> bool:
+        """True if `flag` is set."""
+        return bool(self.bits & flag)
+
+    @property
+    def armed(self) -> bool:
+        return self.has(SupervisorBits.ARMED)
+
+    @property
+    def can_be_armed(self) -> bool:
+        return self.has(SupervisorBits.CAN_BE_ARMED)
+
+    @property
+    def can_fly(self) -> bool:
+        return self.has(SupervisorBits.CAN_FLY)
+
+    @property
+    def flying(self) -> bool:
+        return self.has(SupervisorBits.FLYING)
+
+    @property
+    def tumbled(self) -> bool:
+        return self.has(SupervisorBits.TUMBLED)
+
+    @property
+    def locked(self) -> bool:
+        return self.has(SupervisorBits.LOCKED)
+
+    @property
+    def crashed(self) -> bool:
+        return self.has(SupervisorBits.CRASHED)
+
+
+@dataclass(frozen=True)
+class BatteryState:
+    """Battery as the drone reports it."""
+
+    voltage_v: float
+    """`pm.vbat` in volts (under load while the motors run)."""
+    pm_state: PmState
+
+    @property
+    def low(self) -> bool:
+        """True when the firmware says the battery is low (or shutting down)."""
+        return self.pm_state in (PmState.LOW_POWER, PmState.SHUTDOWN)
+
+
+@dataclass(frozen=True)
+class LinkState:
+    """Radio link of one drone."""
+
+    up: bool
+    """True while the link is connected and configured."""
+    quality_pct: float | None = None
+    """Share of packets acknowledged without retries, 0-100 (cflib's link quality); None before the first report."""
+    latency_ms: float | None = None
+    """95th percentile of the echo round trip in milliseconds (cflib's latency); None before the first report."""
+    error: str | None = None
+    """Why the link is down (connection failed or lost), None when up or closed on purpose."""
+    lost_at_s: float | None = None
+    """`time.monotonic()` when the link was lost, None if it was not."""
+
+
+@dataclass(frozen=True)
+class DroneState:
+    """Everything the preflight check and the flight supervisor need about one drone."""
+
+    name: str
+    uri: str
+    link: LinkState
+    battery: BatteryState | None
+    """None until the first status log packet."""
+    supervisor: SupervisorState | None
+    """None until the first status log packet."""
+    position_m: Vec3 | None
+    """Estimated position (`stateEstimate.x/y/z`) in metres; None until the first status log packet."""
+    telemetry_stamp_s: float | None
+    """`time.monotonic()` when the last status log packet arrived (10 Hz by default); None if none yet."""
+
+
+@runtime_checkable
+class DroneBackend(Protocol):
+    """Per-drone radio operations used by the flight loop.
+
+    Commands return True when the command was handed to a live link and False when the drone is unknown to the
+    link (never connected, lost or closed); they do not wait for the drone. Swarm-wide operations return a mapping
+    name -> error message holding only the drones that failed (empty when all succeeded).
+    """
+
+    def connect(self, drones: Mapping[str, str]) -> dict[str, str]:
+        """Connect to `drones` (name -> URI) in parallel and configure them; blocks until every drone is connected or
+        has failed. Returns name -> error for the drones that failed; the others are usable."""
+        ...
+
+    def close(self) -> None:
+        """Close every link. Only on the ground: closing a cflib link sends a zero-thrust setpoint."""
+        ...
+
+    def names(self) -> tuple[str, ...]:
+        """Names given to `connect`, in order."""
+        ...
+
+    def state(self, name: str) -> DroneState:
+        """Latest known state of one drone (raises KeyError for an unknown name)."""
+        ...
+
+    def states(self) -> dict[str, DroneState]:
+        """`state` for every drone."""
+        ...
+
+    def add_link_lost_callback(self, callback: LinkLostCallback) -> None:
+        """Register ``callback(name, reason)``, called once per drone whose link is lost after connecting.
+
+        It runs on a radio thread: keep it short and thread-safe. `state(name).link` gives the same fact polled."""
+        ...
+
+    def arm(self, name: str, armed: bool = True) -> bool:
+        """Send an arming (or disarming) request to the supervisor."""
+        ...
+
+    def takeoff(self, name: str, height_m: float, duration_s: float) -> bool:
+        """High-level take-off to the absolute height `height_m` in `duration_s`, keeping the current yaw."""
+        ...
+
+    def go_to(self, name: str, position: Vec3, yaw_deg: float, duration_s: float) -> bool:
+        """High-level go-to an absolute position and yaw (degrees) in `duration_s`."""
+        ...
+
+    def send_position_setpoint(self, name: str, x: float, y: float, z: float, yaw_deg: float) -> bool:
+        """Stream one low-level position setpoint (metres, yaw in degrees). Streaming takes priority over the
+        high-level commander; the firmware levels out 0.5 s after the last one and cuts the motors after 2 s."""
+        ...
+
+    def hand_over(self, name: str, hold_duration_s: float = 1.0) -> bool:
+        """Hand a streaming drone back to the high-level commander: notify-setpoint-stop, then a high-level go-to
+        to the last streamed setpoint in `hold_duration_s`, so the drone holds position without a stream."""
+        ...
+
+    def land(self, name: str, height_m: float = 0.0, duration_s: float = 2.0) -> bool:
+        """High-level landing to `height_m` in `duration_s` (hands a streaming drone over first); the motors stop at
+        the end."""
+        ...
+
+    def stop(self, name: str) -> bool:
+        """Stop the motors now (high-level stop, plus a stop setpoint when streaming). Use on the ground."""
+        ...
+
+    def emergency_stop(self, name: str | None = None) -> dict[str, str]:
+        """Supervisor emergency stop of one drone or (None) all of them: motors off, latched until reboot.
+        Returns name -> error for the drones it could not reach."""
+        ...
+
+    def send_extpos(self, name: str, position: Vec3) -> bool:
+        """Forward a motion-capture position (metres) to the drone's estimator."""
+        ...
+
+    def send_extpose(self, name: str, position: Vec3, quaternion: Quaternion) -> bool:
+        """Forward a motion-capture pose (metres, unit quaternion qx, qy, qz, qw) to the drone's estimator."""
+        ...
+
+    def battery(self, name: str) -> BatteryState | None:
+        """Latest battery report, None before the first one."""
+        ...
+
+    def link(self, name: str) -> LinkState:
+        """Link state of one drone."""
+        ...
+

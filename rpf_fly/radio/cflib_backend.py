@@ -1,0 +1,544 @@
+"""`CflibBackend`: the `DroneBackend` on cflib's own API, for ``radio://`` drones and ``fake://`` ones alike.
+
+What it does per drone (cflib 0.1.34, firmware protocol 12):
+- connect: `Swarm` with `CachedCfFactory` builds the `SyncCrazyflie` objects (TOC cache in `cache_dir`); each link
+  is opened on its own thread with a deadline (``cf.open_link`` and cflib's connected / fully-connected /
+  connection-failed / connection-lost callbacks; not `SyncCrazyflie.open_link`, which waits forever when a link
+  drops during the TOC download), so one drone's failure neither blocks nor fails the others;
+- configure: `stabilizer.estimator` = 2 (Kalman), `commander.enHighLevel` = 1 (when the firmware still has it),
+  `locSrv.extQuatStdDev` when streaming poses, `locSrv.extPosStdDev` if given; each write is confirmed by the
+  firmware's echo;
+- telemetry: one `LogConfig` at 10 Hz with `pm.vbat`, `pm.state`, `supervisor.info`, `stateEstimate.x/y/z`; link
+  quality and latency from `cf.link_statistics`;
+- commands: supervisor arming, high-level take-off / go-to / land / stop, streamed position setpoints (yaw in
+  degrees) with `send_notify_setpoint_stop` at every hand-over back to the high-level commander, extpos / extpose,
+  supervisor emergency stop (cflib falls back to the localization emergency stop for firmware older than protocol
+  12);
+- link loss: cflib's connection-lost callback marks the drone down, records why and when, and calls the
+  registered link-lost callbacks.
+
+Thread model: after `connect` returns, every public method may be called from any thread. One lock guards the
+backend's bookkeeping (telemetry, link state); each drone has its own command lock, so a slow link (cflib's radio
+driver blocks up to 2 s when its queue is full) delays only that drone; packets go through `Crazyflie.send_packet`,
+which holds cflib's own send lock. `emergency_stop` takes no command lock. Telemetry and link callbacks run on
+cflib's threads (the link's receive thread, the radio thread on link loss). `connect`, `reset_estimators` and
+`close` block and must not run concurrently with each other. Link-lost callbacks must be short and must not call
+`close`.
+
+Hand-over rule (firmware 2026.08): a streamed setpoint stops the high-level plan; after notify-setpoint-stop the
+high-level commander takes over at its next tick and, with no plan, asks for motors off. So every high-level
+command sent while streaming is preceded by notify-setpoint-stop and sent right after it (`hand_over`, `go_to`,
+`land`, `takeoff` do both).
+
+Safety: `close` must only be called on the ground: cflib's `close_link` sends a zero-thrust setpoint, which cuts the
+motors of a flying drone.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from functools import partial
+from pathlib import Path
+from typing import Any
+
+import cflib.crtp
+from cflib.crazyflie.log import LogConfig
+from cflib.crazyflie.swarm import CachedCfFactory, Swarm
+from cflib.crazyflie.syncCrazyflie import SyncCrazyflie
+from cflib.crtp.radiodriver import RadioDriver
+
+from .backend import (
+    BatteryState,
+    DroneState,
+    LinkLostCallback,
+    LinkState,
+    PmState,
+    Quaternion,
+    SupervisorState,
+    Vec3,
+)
+
+logger = logging.getLogger(__name__)
+
+STATUS_VARIABLES: tuple[tuple[str, str], ...] = (
+    ("pm.vbat", "float"),
+    ("pm.state", "int8_t"),
+    ("supervisor.info", "uint16_t"),
+    ("stateEstimate.x", "float"),
+    ("stateEstimate.y", "float"),
+    ("stateEstimate.z", "float"),
+)
+"""The status log block (19 bytes, fits one log packet)."""
+
+ESTIMATOR_KALMAN = 2
+VARIANCE_THRESHOLD_M2 = 0.001
+"""Spread of the Kalman position variance over 10 samples below which the estimate counts as settled (cflib's)."""
+
+
+@dataclass
+class _Drone:
+    """Bookkeeping of one drone (guarded by the backend lock)."""
+
+    name: str
+    uri: str
+    scf: SyncCrazyflie | None = None
+    up: bool = False
+    configured: bool = False
+    """Connected and configured once (a later loss is reported to the link-lost callbacks)."""
+    closing: bool = False
+    lost_reported: bool = False
+    error: str | None = None
+    lost_at_s: float | None = None
+    quality_pct: float | None = None
+    latency_ms: float | None = None
+    vbat_v: float | None = None
+    pm_state: int | None = None
+    sup_bits: int | None = None
+    position: Vec3 | None = None
+    stamp_s: float | None = None
+    streaming: bool = False
+    last_setpoint: tuple[float, float, float, float] | None = None
+    """x, y, z (m), yaw (deg) of the last streamed setpoint."""
+    first_status: threading.Event = field(default_factory=threading.Event)
+    command_lock: threading.Lock = field(default_factory=threading.Lock)
+    """Serialises this drone's commands and guards `streaming` and `last_setpoint`."""
+    log_config: LogConfig | None = None
+
+
+class CflibBackend:
+    """`DroneBackend` implementation on cflib. See the module docstring for behaviour and thread model."""
+
+    def __init__(
+        self,
+        *,
+        cache_dir: str | Path | None = None,
+        use_extpose: bool = False,
+        ext_quat_std_dev: float = 8.0e-3,
+        ext_pos_std_dev: float | None = None,
+        reset_estimators: bool = False,
+        status_period_ms: int = 100,
+        connect_timeout_s: float = 10.0,
+        param_timeout_s: float = 2.0,
+        init_drivers: bool = True,
+    ) -> None:
+        """
+        Args:
+            cache_dir: directory of cflib's TOC cache (created if missing); None disables the cache.
+            use_extpose: the mocap sends poses (`send_extpose`): sets `locSrv.extQuatStdDev` at connect.
+            ext_quat_std_dev: orientation standard deviation (rad-ish, quaternion units) for extpose.
+            ext_pos_std_dev: position standard deviation (m) to set, None keeps the firmware's (0.01 m).
+            reset_estimators: reset the Kalman estimators at the end of `connect` and wait until they settle.
+            status_period_ms: period of the status log block (10 Hz by default).
+            connect_timeout_s: deadline for one drone's connection (link, TOCs, parameter values, first status).
+            param_timeout_s: deadline for one parameter write to be echoed.
+            init_drivers: call `cflib.crtp.init_drivers()` when the radio drivers are not registered yet.
+        """
+        self._cache_dir = str(cache_dir) if cache_dir is not None else None
+        self._use_extpose = use_extpose
+        self._ext_quat_std_dev = ext_quat_std_dev
+        self._ext_pos_std_dev = ext_pos_std_dev
+        self._reset_on_connect = reset_estimators
+        self._status_period_ms = status_period_ms
+        self._connect_timeout_s = connect_timeout_s
+        self._param_timeout_s = param_timeout_s
+        self._init_drivers = init_drivers
+        self._lock = threading.RLock()
+        self._drones: dict[str, _Drone] = {}
+        self._callbacks: list[LinkLostCallback] = []
+        self._swarm: Swarm | None = None
+
+    # Connection -----------------------------------------------------------------------------------------------
+
+    def connect(self, drones: Mapping[str, str]) -> dict[str, str]:
+        """Connect and configure all `drones` (name -> URI) in parallel; returns name -> error for failures."""
+        if self._drones:
+            raise RuntimeError("connect() was already called on this backend")
+        uris = list(drones.values())
+        if len(set(uris)) != len(uris):
+            raise ValueError("two drones share a URI")
+        if self._init_drivers and not any(isinstance(c, type) and issubclass(c, RadioDriver)
+                                          for c in cflib.crtp.CLASSES):
+            cflib.crtp.init_drivers()
+        with self._lock:
+            self._drones = {name: _Drone(name, uri) for name, uri in drones.items()}
+        self._swarm = Swarm(uris, factory=CachedCfFactory(rw_cache=self._cache_dir))
+        by_uri = {d.uri: d for d in self._drones.values()}
+        self._swarm.sequential(lambda scf, uri: setattr(by_uri[uri], "scf", scf), {u: [u] for u in uris})
+        errors = self._parallel(self._connect_one, list(self._drones.values()), self._connect_timeout_s + 5.0)
+        for name, message in errors.items():
+            if message == "timed out":  # its thread is still running: make sure it never comes up
+                self._give_up(self._drones[name], "connection timed out")
+        if self._reset_on_connect:
+            live = [n for n in self._drones if n not in errors]
+            errors.update(self.reset_estimators(live))
+        for name, message in errors.items():
+            logger.warning("drone %s: %s", name, message)
+        return errors
+
+    def _parallel(self, func: Callable[[_Drone], None], drones: list[_Drone], timeout_s: float) -> dict[str, str]:
+        """Run `func(drone)` on one thread per drone; name -> error for those that raised or overran."""
+        errors: dict[str, str] = {}
+
+        def run(drone: _Drone) -> None:
+            try:
+                func(drone)
+            except Exception as exc:  # per-drone errors are reported, not raised
+                with self._lock:
+                    errors[drone.name] = str(exc) or type(exc).__name__
+
+        threads = [threading.Thread(target=run, args=(d,), name=f"rpf-{d.name}", daemon=True) for d in drones]
+        for thread in threads:
+            thread.start()
+        deadline = time.monotonic() + timeout_s
+        for drone, thread in zip(drones, threads):
+            thread.join(max(deadline - time.monotonic(), 0.0))
+            if thread.is_alive():
+                with self._lock:
+                    errors.setdefault(drone.name, "timed out")
+        return errors
+
+    def _connect_one(self, drone: _Drone) -> None:
+        assert drone.scf is not None
+        cf = drone.scf.cf
+        done = threading.Event()
+        failure: list[str] = []
+
+        def on_fully_connected(uri: str) -> None:
+            done.set()
+
+        def on_failed(uri: str, message: str) -> None:
+            failure.append(f"connection failed: {message}")
+            done.set()
+
+        def on_lost(uri: str, message: str) -> None:
+            failure.append(f"connection lost while connecting: {message}")
+            done.set()
+
+        cf.connection_lost.add_callback(partial(self._on_connection_lost, drone.name))
+        cf.disconnected.add_callback(partial(self._on_disconnected, drone.name))
+        temporary = ((cf.fully_connected, on_fully_connected), (cf.connection_failed, on_failed),
+                     (cf.connection_lost, on_lost))
+        for caller, callback in temporary:
+            caller.add_callback(callback)
+        deadline = time.monotonic() + self._connect_timeout_s
+        try:
+            cf.open_link(drone.uri)
+            if not done.wait(self._connect_timeout_s) or failure:
+                message = failure[0] if failure else "connection timed out"
+                self._give_up(drone, message)
+                raise RuntimeError(message)
+        finally:
+            for caller, callback in temporary:
+                caller.remove_callback(callback)
+        try:
+            self._configure(drone, deadline)
+        except Exception as exc:
+            self._give_up(drone, f"configuration failed: {exc}")
+            raise RuntimeError(f"configuration failed: {exc}") from exc
+
+    def _configure(self, drone: _Drone, deadline: float) -> None:
+        cf = drone.scf.cf  # type: ignore[union-attr]
+        toc = cf.param.toc
+        self._set_param(cf, "stabilizer.estimator", ESTIMATOR_KALMAN)
+        if toc.get_element_by_complete_name("commander.enHighLevel") is not None:
+            self._set_param(cf, "commander.enHighLevel", 1)
+        if self._use_extpose:
+            self._set_param(cf, "locSrv.extQuatStdDev", self._ext_quat_std_dev)
+        if self._ext_pos_std_dev is not None:
+            self._set_param(cf, "locSrv.extPosStdDev", self._ext_pos_std_dev)
+        stats = cf.link_statistics
+        stats.link_quality_updated.add_callback(partial(self._on_quality, drone.name))
+        stats.latency_updated.add_callback(partial(self._on_latency, drone.name))
+        config = LogConfig(name="rpf_status", period_in_ms=self._status_period_ms)
+        for variable, ctype in STATUS_VARIABLES:
+            config.add_variable(variable, ctype)
+        cf.log.add_config(config)
+        config.data_received_cb.add_callback(partial(self._on_status, drone.name))
+        config.error_cb.add_callback(lambda conf, msg: logger.warning("drone %s: status log: %s", drone.name, msg))
+        drone.log_config = config
+        config.start()
+        if not drone.first_status.wait(max(deadline - time.monotonic(), 2.0)):
+            raise RuntimeError("no status log data")
+        with self._lock:
+            if drone.closing:
+                raise RuntimeError("given up while configuring")
+            drone.up, drone.configured, drone.error = True, True, None
+
+    def _set_param(self, cf: Any, name: str, value: float) -> None:
+        """Write one parameter and wait for the firmware's echo; raises on timeout or a different value."""
+        echoed: list[str] = []
+        event = threading.Event()
+        group, short = name.split(".")
+
+        def on_update(_name: str, text: str) -> None:
+            echoed.append(text)
+            event.set()
+
+        cf.param.add_update_callback(group=group, name=short, cb=on_update)
+        try:
+            cf.param.set_value(name, value)
+            if not event.wait(self._param_timeout_s):
+                raise RuntimeError(f"parameter {name} not confirmed")
+            if not math.isclose(float(echoed[-1]), float(value), rel_tol=1e-6, abs_tol=1e-9):
+                raise RuntimeError(f"parameter {name} is {echoed[-1]}, wanted {value}")
+        finally:
+            cf.param.remove_update_callback(group=group, name=short, cb=on_update)
+
+    def _give_up(self, drone: _Drone, message: str) -> None:
+        """Mark the drone failed and close its link (it never comes up afterwards)."""
+        with self._lock:
+            drone.up = False
+            drone.error = message
+            drone.closing = True
+        try:
+            if drone.scf is not None:
+                drone.scf.cf.close_link()  # also stops cflib's receive thread when the link already failed
+        except Exception:
+            logger.exception("drone %s: closing a failed link", drone.name)
+
+    def reset_estimators(self, names: list[str] | None = None, timeout_s: float = 10.0) -> dict[str, str]:
+        """Reset the Kalman estimators (`kalman.resetEstimation`) and wait until the position variance settles
+        (cflib's criterion: spread under 0.001 m^2 over ten samples at 2 Hz, so at least 5 s). Blocks; runs the
+        drones in parallel; returns name -> error. With mocap positioning, stream extpos meanwhile."""
+        targets = [self._drones[n] for n in (names if names is not None else list(self._drones))]
+        return self._parallel(partial(self._reset_one, timeout_s=timeout_s), targets, timeout_s + 2.0)
+
+    def _reset_one(self, drone: _Drone, timeout_s: float) -> None:
+        cf = self._live_cf(drone.name)
+        if cf is None:
+            raise RuntimeError("link is down")
+        samples: list[tuple[float, float, float]] = []
+        settled = threading.Event()
+
+        def on_data(_ts: int, data: dict[str, float], _conf: LogConfig) -> None:
+            samples.append((data["kalman.varPX"], data["kalman.varPY"], data["kalman.varPZ"]))
+            window = ([(1000.0,) * 3] * 10 + samples)[-10:]
+            if all(max(s[i] for s in window) - min(s[i] for s in window) < VARIANCE_THRESHOLD_M2 for i in range(3)):
+                settled.set()
+
+        self._set_param(cf, "kalman.resetEstimation", 1)
+        time.sleep(0.1)
+        self._set_param(cf, "kalman.resetEstimation", 0)
+        config = LogConfig(name="rpf_variance", period_in_ms=500)
+        for axis in ("X", "Y", "Z"):
+            config.add_variable(f"kalman.varP{axis}", "float")
+        cf.log.add_config(config)
+        config.data_received_cb.add_callback(on_data)
+        config.start()
+        try:
+            if not settled.wait(timeout_s):
+                raise RuntimeError("estimator did not settle")
+        finally:
+            config.stop()
+            config.delete()
+
+    def close(self) -> None:
+        """Close every link (on the ground only: cflib sends a zero-thrust setpoint when closing)."""
+        with self._lock:
+            drones = list(self._drones.values())
+            for drone in drones:
+                drone.closing = True
+
+        def close_one(drone: _Drone) -> None:
+            # also for lost links: cflib keeps their receive thread until close_link (which sends nothing then)
+            if drone.scf is not None:
+                drone.scf.cf.close_link()
+
+        self._parallel(close_one, drones, 5.0)
+        with self._lock:
+            for drone in drones:
+                drone.up = False
+
+    def __enter__(self) -> CflibBackend:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # cflib callbacks (cflib threads) --------------------------------------------------------------------------
+
+    def _on_status(self, name: str, _timestamp: int, data: dict[str, float], _config: LogConfig) -> None:
+        drone = self._drones[name]
+        with self._lock:
+            drone.vbat_v = float(data["pm.vbat"])
+            drone.pm_state = int(data["pm.state"])
+            drone.sup_bits = int(data["supervisor.info"])
+            drone.position = (float(data["stateEstimate.x"]), float(data["stateEstimate.y"]),
+                              float(data["stateEstimate.z"]))
+            drone.stamp_s = time.monotonic()
+        drone.first_status.set()
+
+    def _on_quality(self, name: str, quality: float) -> None:
+        with self._lock:
+            self._drones[name].quality_pct = float(quality)
+
+    def _on_latency(self, name: str, latency_ms: float) -> None:
+        with self._lock:
+            self._drones[name].latency_ms = float(latency_ms)
+
+    def _on_connection_lost(self, name: str, uri: str, message: str) -> None:
+        drone = self._drones[name]
+        with self._lock:
+            report = drone.configured and not drone.closing and not drone.lost_reported
+            drone.lost_reported = drone.lost_reported or report
+            drone.up = False
+            drone.error = f"connection lost: {message}"
+            drone.lost_at_s = time.monotonic()
+            callbacks = list(self._callbacks) if report else []
+        logger.warning("drone %s (%s): link lost: %s", name, uri, message)
+        for callback in callbacks:
+            try:
+                callback(name, message)
+            except Exception:  # a user callback must not break cflib's thread
+                logger.exception("link-lost callback failed for %s", name)
+
+    def _on_disconnected(self, name: str, uri: str) -> None:
+        with self._lock:
+            self._drones[name].up = False
+
+    def add_link_lost_callback(self, callback: LinkLostCallback) -> None:
+        with self._lock:
+            self._callbacks.append(callback)
+
+    # State ----------------------------------------------------------------------------------------------------
+
+    def names(self) -> tuple[str, ...]:
+        return tuple(self._drones)
+
+    def state(self, name: str) -> DroneState:
+        with self._lock:
+            d = self._drones[name]
+            battery = None
+            if d.vbat_v is not None and d.pm_state is not None:
+                try:
+                    pm = PmState(d.pm_state)
+                except ValueError:
+                    pm = PmState.BATTERY
+                battery = BatteryState(d.vbat_v, pm)
+            return DroneState(
+                name=d.name,
+                uri=d.uri,
+                link=LinkState(d.up, d.quality_pct, d.latency_ms, d.error, d.lost_at_s),
+                battery=battery,
+                supervisor=SupervisorState(d.sup_bits) if d.sup_bits is not None else None,
+                position_m=d.position,
+                telemetry_stamp_s=d.stamp_s,
+            )
+
+    def states(self) -> dict[str, DroneState]:
+        return {name: self.state(name) for name in self._drones}
+
+    def battery(self, name: str) -> BatteryState | None:
+        return self.state(name).battery
+
+    def link(self, name: str) -> LinkState:
+        return self.state(name).link
+
+    # Commands -------------------------------------------------------------------------------------------------
+
+    def _live_cf(self, name: str) -> Any | None:
+        """The drone's Crazyflie if its link is up, else None (KeyError for an unknown name)."""
+        with self._lock:
+            drone = self._drones[name]
+            if not drone.up or drone.scf is None or drone.scf.cf.link is None:
+                return None
+            return drone.scf.cf
+
+    def _command(self, name: str, action: Callable[[Any, _Drone], None]) -> bool:
+        cf = self._live_cf(name)
+        if cf is None:
+            return False
+        drone = self._drones[name]
+        try:
+            with drone.command_lock:
+                action(cf, drone)
+            return True
+        except Exception:  # one drone's failure must not propagate
+            logger.exception("drone %s: command failed", name)
+            return False
+
+    @staticmethod
+    def _release_stream(cf: Any, drone: _Drone) -> None:
+        if drone.streaming:
+            cf.commander.send_notify_setpoint_stop()
+            drone.streaming = False
+
+    def arm(self, name: str, armed: bool = True) -> bool:
+        return self._command(name, lambda cf, d: cf.supervisor.send_arming_request(armed))
+
+    def takeoff(self, name: str, height_m: float, duration_s: float) -> bool:
+        def action(cf: Any, d: _Drone) -> None:
+            self._release_stream(cf, d)
+            cf.high_level_commander.takeoff(height_m, duration_s, yaw=None)
+
+        return self._command(name, action)
+
+    def go_to(self, name: str, position: Vec3, yaw_deg: float, duration_s: float) -> bool:
+        def action(cf: Any, d: _Drone) -> None:
+            self._release_stream(cf, d)
+            x, y, z = position
+            cf.high_level_commander.go_to(x, y, z, math.radians(yaw_deg), duration_s)
+
+        return self._command(name, action)
+
+    def send_position_setpoint(self, name: str, x: float, y: float, z: float, yaw_deg: float) -> bool:
+        def action(cf: Any, d: _Drone) -> None:
+            cf.commander.send_position_setpoint(x, y, z, yaw_deg)
+            d.streaming = True
+            d.last_setpoint = (x, y, z, yaw_deg)
+
+        return self._command(name, action)
+
+    def hand_over(self, name: str, hold_duration_s: float = 1.0) -> bool:
+        def action(cf: Any, d: _Drone) -> None:
+            if not d.streaming or d.last_setpoint is None:
+                return
+            x, y, z, yaw_deg = d.last_setpoint
+            self._release_stream(cf, d)
+            cf.high_level_commander.go_to(x, y, z, math.radians(yaw_deg), hold_duration_s)
+
+        return self._command(name, action)
+
+    def land(self, name: str, height_m: float = 0.0, duration_s: float = 2.0) -> bool:
+        def action(cf: Any, d: _Drone) -> None:
+            self._release_stream(cf, d)
+            cf.high_level_commander.land(height_m, duration_s, yaw=None)
+
+        return self._command(name, action)
+
+    def stop(self, name: str) -> bool:
+        def action(cf: Any, d: _Drone) -> None:
+            if d.streaming:
+                cf.commander.send_stop_setpoint()
+            d.streaming = False
+            cf.high_level_commander.stop()
+
+        return self._command(name, action)
+
+    def emergency_stop(self, name: str | None = None, repeats: int = 3) -> dict[str, str]:
+        """Emergency stop (latched until reboot), sent `repeats` times (idempotent, safety critical). It does not
+        wait for other commands of the drone (no command lock): cflib's send lock alone orders the packets."""
+        targets = list(self._drones) if name is None else [self._drones[name].name]
+        errors = {}
+        for target in targets:
+            cf = self._live_cf(target)
+            try:
+                if cf is None:
+                    raise RuntimeError("link down")
+                for _ in range(repeats):
+                    cf.supervisor.send_emergency_stop()
+            except Exception as exc:  # report per drone, keep stopping the others
+                errors[target] = f"emergency stop not delivered: {exc}"
+                logger.error("drone %s: emergency stop not delivered: %s", target, exc)
+        return errors
+
+    def send_extpos(self, name: str, position: Vec3) -> bool:
+        return self._command(name, lambda cf, d: cf.extpos.send_extpos(*position))
+
+    def send_extpose(self, name: str, position: Vec3, quaternion: Quaternion) -> bool:
+        return self._command(name, lambda cf, d: cf.extpos.send_extpose(*position, *quaternion))

@@ -1,0 +1,514 @@
+"""A simulated Crazyflie firmware at the CRTP level: packets in, reply packets out, dynamics on `step`.
+
+`FakeFirmware.handle(port, channel, data, now_s)` acts on one uplink packet and returns the reply packets;
+`FakeFirmware.step(now_s)` advances the vehicle (`fake_vehicle.Vehicle`) and returns the log data packets due.
+Time is the caller's clock in seconds (the fake world's clock); nothing here sleeps or starts threads, so tests can
+drive it with synthetic time. All methods are thread-safe (one lock per firmware).
+
+Services answered, as crazyflie-firmware 2026.08 (CRTP protocol version 12) answers cflib 0.1.34:
+- link (15): echo (channel 0) returns the payload; source (channel 1) returns "Bitcraze Crazyflie";
+- platform (13): protocol version 12, firmware version string; legacy arming and crash recovery;
+- log (5): TOC v2 with a stable CRC, reset, block create/append (v1 and v2), start, stop, delete, periodic data;
+- param (2): TOC v2, read (``[id, 0, value]``), write (echo; read-only: no answer), set-by-name, extended types,
+  default values and persistent-state queries;
+- memory (4): zero memories;
+- commander (3, 7), high-level commander (8), localization (6), supervisor (9): decoded and acted on.
+"""
+
+from __future__ import annotations
+
+import errno
+import logging
+import math
+import struct
+import threading
+from collections import Counter
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from types import MappingProxyType
+
+from .fake_setpoint import decode_generic, decode_rpyt
+from .fake_supervisor import Transition
+from .fake_toc import EXTENDED_TYPE_PERSISTENT, LOG_TYPE_NAMES, Toc, make_toc, pack_value, unpack_value, value_size
+from .fake_vehicle import Vehicle, VehicleConfig
+
+logger = logging.getLogger(__name__)
+
+Packet = tuple[int, int, bytes]
+"""(port, channel, payload) of one CRTP packet."""
+
+PROTOCOL_VERSION = 12
+FIRMWARE_VERSION = "rpf-fake-2026.08"
+LOG_MAX_BLOCKS = 16
+LOG_MAX_PAYLOAD = 26
+
+PORT_CONSOLE, PORT_PARAM, PORT_COMMANDER, PORT_MEM, PORT_LOG = 0, 2, 3, 4, 5
+PORT_LOCALIZATION, PORT_COMMANDER_GENERIC, PORT_SETPOINT_HL, PORT_SUPERVISOR = 6, 7, 8, 9
+PORT_PLATFORM, PORT_LINK = 13, 15
+
+_LOG_VARIABLES: tuple[tuple[str, str, Callable[[FakeFirmware], float]], ...] = (
+    ("stateEstimate.x", "float", lambda f: f.vehicle.estimate[0]),
+    ("stateEstimate.y", "float", lambda f: f.vehicle.estimate[1]),
+    ("stateEstimate.z", "float", lambda f: f.vehicle.estimate[2]),
+    ("stateEstimate.vx", "float", lambda f: f.vehicle.vel[0]),
+    ("stateEstimate.vy", "float", lambda f: f.vehicle.vel[1]),
+    ("stateEstimate.vz", "float", lambda f: f.vehicle.vel[2]),
+    ("stateEstimate.roll", "float", lambda f: 0.0),
+    ("stateEstimate.pitch", "float", lambda f: 0.0),
+    ("stateEstimate.yaw", "float", lambda f: math.degrees(f.vehicle.estimate_yaw)),
+    ("pm.vbat", "float", lambda f: f.vehicle.battery.vbat_v),
+    ("pm.state", "int8_t", lambda f: f.vehicle.battery.pm_state),
+    ("pm.batteryLevel", "uint8_t", lambda f: min(max((f.vehicle.battery.vbat_v - 3.0) / 1.2, 0.0), 1.0) * 100.0),
+    ("supervisor.info", "uint16_t", lambda f: f.supervisor_bits()),
+    ("sys.canfly", "uint8_t", lambda f: f.vehicle.supervisor.motors_allowed),
+    ("sys.isFlying", "uint8_t", lambda f: f.vehicle.supervisor.is_flying),
+    ("sys.isTumbled", "uint8_t", lambda f: 0),
+    ("kalman.varPX", "float", lambda f: f.vehicle.variance_m2),
+    ("kalman.varPY", "float", lambda f: f.vehicle.variance_m2),
+    ("kalman.varPZ", "float", lambda f: f.vehicle.variance_m2),
+    ("radio.rssi", "uint8_t", lambda f: f.rssi),
+    ("radio.isConnected", "uint8_t", lambda f: 1),
+    ("ctrltarget.x", "float", lambda f: f.vehicle.control_setpoint.position[0]),
+    ("ctrltarget.y", "float", lambda f: f.vehicle.control_setpoint.position[1]),
+    ("ctrltarget.z", "float", lambda f: f.vehicle.control_setpoint.position[2]),
+    ("ctrltarget.yaw", "float", lambda f: f.vehicle.control_setpoint.yaw_deg),
+    ("stabilizer.roll", "float", lambda f: 0.0),
+    ("stabilizer.pitch", "float", lambda f: 0.0),
+    ("stabilizer.yaw", "float", lambda f: math.degrees(f.vehicle.estimate_yaw)),
+    ("stabilizer.thrust", "float", lambda f: 36000.0 if f.vehicle.motors_on else 0.0),
+)
+
+# (name, ctype, default, read_only, persistent)
+_PARAMS: tuple[tuple[str, str, float, bool, bool], ...] = (
+    ("stabilizer.estimator", "uint8_t", 0, False, False),
+    ("stabilizer.controller", "uint8_t", 0, False, False),
+    ("stabilizer.stop", "uint8_t", 0, False, False),
+    ("commander.enHighLevel", "uint8_t", 0, False, False),
+    ("locSrv.extPosStdDev", "float", 0.01, False, False),
+    ("locSrv.extQuatStdDev", "float", 4.5e-3, False, False),
+    ("kalman.resetEstimation", "uint8_t", 0, False, False),
+    ("kalman.initialX", "float", 0.0, False, False),
+    ("kalman.initialY", "float", 0.0, False, False),
+    ("kalman.initialZ", "float", 0.0, False, False),
+    ("kalman.initialYaw", "float", 0.0, False, False),
+    ("hlCommander.vtoff", "float", 0.5, False, False),
+    ("hlCommander.vland", "float", 0.5, False, False),
+    ("posCtlPid.xVelMax", "float", 1.0, False, True),
+    ("posCtlPid.yVelMax", "float", 1.0, False, True),
+    ("posCtlPid.zVelMax", "float", 1.0, False, True),
+    ("pm.lowVoltage", "float", 3.2, False, True),
+    ("pm.criticalLowVoltage", "float", 3.0, False, True),
+    ("firmware.revision0", "uint32_t", 0x2026_0800, True, False),
+    ("firmware.modified", "uint8_t", 0, True, False),
+)
+
+LOG_TOC: Toc = make_toc([(name, ctype) for name, ctype, _ in _LOG_VARIABLES], is_param=False)
+PARAM_TOC: Toc = make_toc([(n, c, ro, pers) for n, c, _, ro, pers in _PARAMS], is_param=True)
+_LOG_GETTERS = tuple(getter for _, _, getter in _LOG_VARIABLES)
+_PARAM_DEFAULTS: Mapping[str, float] = MappingProxyType({name: float(default) for name, _, default, _, _ in _PARAMS})
+
+
+@dataclass
+class _LogBlock:
+    block_id: int
+    variables: list[tuple[int, str]]
+    """(log TOC id, fetch C type)."""
+    period_s: float = 0.0
+    started: bool = False
+    next_due_s: float = 0.0
+
+
+@dataclass(frozen=True)
+class FirmwareSnapshot:
+    """A consistent copy of one fake Crazyflie's state, for tests and tools. Metres, seconds, degrees, volts."""
+
+    time_s: float
+    powered: bool
+    supervisor_state: str
+    supervisor_bits: int
+    armed: bool
+    locked: bool
+    flying: bool
+    motors_on: bool
+    emergency_stop_latched: bool
+    position: tuple[float, float, float]
+    velocity: tuple[float, float, float]
+    yaw_deg: float
+    estimate: tuple[float, float, float]
+    setpoint_source: str
+    setpoint_position: tuple[float, float, float]
+    control_source: str
+    hl_state: str
+    vbat_v: float
+    pm_state: int
+    variance_m2: float
+    last_crtp_setpoint_s: float | None
+    transitions: tuple[Transition, ...]
+    params: dict[str, float]
+    log_blocks: dict[int, tuple[float, bool]]
+    """block id -> (period in seconds, started)."""
+    packets_received: dict[tuple[int, int], int]
+    toc_item_requests: int
+    hl_commands_rejected: int
+
+    def entered(self, state: str) -> float | None:
+        """Time the supervisor last entered `state` (e.g. "Locked"), None if it never did."""
+        times = [t.time_s for t in self.transitions if t.new.value == state]
+        return times[-1] if times else None
+
+
+class FakeFirmware:
+    """One simulated Crazyflie. See the module docstring for what it answers."""
+
+    vehicle: Vehicle
+    rssi: int
+
+    def __init__(self, config: VehicleConfig | None = None, *, now_s: float = 0.0, rssi: int = 35) -> None:
+        self.config = config or VehicleConfig()
+        self.rssi = rssi
+        self._lock = threading.RLock()
+        self._boot_s = now_s
+        self._now_s = now_s
+        self.vehicle = Vehicle(self.config, now_s)
+        self._params: dict[str, float] = dict(_PARAM_DEFAULTS)
+        self._blocks: dict[int, _LogBlock] = {}
+        self._counts: Counter[tuple[int, int]] = Counter()
+        self._toc_item_requests = 0
+
+    # Public API -----------------------------------------------------------------------------------------------
+
+    @property
+    def powered(self) -> bool:
+        """False once the battery shut the firmware down: it then answers nothing."""
+        return self.vehicle.powered
+
+    def reboot(self, now_s: float) -> None:
+        """Power-cycle: a new flight stack on the floor where the drone is, same battery, default parameters."""
+        with self._lock:
+            vbat = self.vehicle.battery.open_v
+            x, y = self.vehicle.pos[0], self.vehicle.pos[1]
+            floor = self.vehicle.floor_z
+            yaw = math.degrees(self.vehicle.yaw)
+            self.config = VehicleConfig((x, y, floor), yaw, vbat, self.config.auto_arm, self.config.positioning)
+            self.vehicle = Vehicle(self.config, now_s)
+            self._params = dict(_PARAM_DEFAULTS)
+            self._blocks.clear()
+            self._boot_s = self._now_s = now_s
+
+    def supervisor_bits(self) -> int:
+        """Current `supervisor.info`."""
+        return self.vehicle.supervisor.info_bits(self.vehicle.hl.info_bits(self._now_s))
+
+    def step(self, now_s: float) -> list[Packet]:
+        """Advance the vehicle to `now_s` and return the log data packets that fell due."""
+        with self._lock:
+            if now_s <= self._now_s:
+                return []
+            self._now_s = now_s
+            self.vehicle.step(now_s)
+            if not self.powered:
+                return []
+            return self._log_data_due(now_s)
+
+    def handle(self, port: int, channel: int, data: bytes, now_s: float) -> list[Packet]:
+        """Act on one uplink packet received at `now_s`; return the replies (possibly none)."""
+        data = bytes(data)
+        with self._lock:
+            if not self.powered:
+                return []
+            self._counts[(port, channel)] += 1
+            handler = self._HANDLERS.get(port)
+            if handler is None:
+                return []
+            try:
+                return handler(self, channel, data, max(now_s, self._now_s))
+            except (struct.error, IndexError, ValueError) as exc:
+                logger.warning("fake firmware: malformed packet on %d:%d (%s): %s", port, channel, data.hex(), exc)
+                return []
+
+    def snapshot(self) -> FirmwareSnapshot:
+        """A consistent copy of the state."""
+        with self._lock:
+            v = self.vehicle
+            sup = v.supervisor
+            return FirmwareSnapshot(
+                time_s=self._now_s,
+                powered=self.powered,
+                supervisor_state=sup.state.value,
+                supervisor_bits=self.supervisor_bits(),
+                armed=sup.armed,
+                locked=sup.is_locked,
+                flying=sup.is_flying,
+                motors_on=v.motors_on,
+                emergency_stop_latched=sup.emergency_stop_requested,
+                position=(v.pos[0], v.pos[1], v.pos[2]),
+                velocity=(v.vel[0], v.vel[1], v.vel[2]),
+                yaw_deg=math.degrees(v.yaw),
+                estimate=v.estimate,
+                setpoint_source=v.setpoint.source,
+                setpoint_position=v.setpoint.position,
+                control_source=v.control_setpoint.source,
+                hl_state=v.hl.state.name,
+                vbat_v=v.battery.vbat_v,
+                pm_state=v.battery.pm_state,
+                variance_m2=v.variance_m2,
+                last_crtp_setpoint_s=v.last_crtp_setpoint_s,
+                transitions=tuple(sup.transitions),
+                params=dict(self._params),
+                log_blocks={b.block_id: (b.period_s, b.started) for b in self._blocks.values()},
+                packets_received=dict(self._counts),
+                toc_item_requests=self._toc_item_requests,
+                hl_commands_rejected=v.hl.commands_rejected,
+            )
+
+    # Link, platform, memory -----------------------------------------------------------------------------------
+
+    def _link(self, channel: int, data: bytes, now_s: float) -> list[Packet]:
+        if channel == 0:
+            return [(PORT_LINK, 0, data)]
+        if channel == 1:
+            return [(PORT_LINK, 1, b"Bitcraze Crazyflie".ljust(30, b"\0"))]
+        return []
+
+    def _platform(self, channel: int, data: bytes, now_s: float) -> list[Packet]:
+        if channel == 1 and data:
+            if data[0] == 0:
+                return [(PORT_PLATFORM, 1, bytes([0, PROTOCOL_VERSION]))]
+            if data[0] == 1:
+                return [(PORT_PLATFORM, 1, bytes([1]) + FIRMWARE_VERSION.encode("ascii"))]
+        if channel == 0 and len(data) > 1 and data[0] == 1:  # legacy arming request
+            self.vehicle.supervisor.request_arming(bool(data[1]))
+        return []
+
+    def _mem(self, channel: int, data: bytes, now_s: float) -> list[Packet]:
+        if channel == 0 and data and data[0] == 1:
+            return [(PORT_MEM, 0, bytes([1, 0]))]
+        return []
+
+    # Log ------------------------------------------------------------------------------------------------------
+
+    def _log(self, channel: int, data: bytes, now_s: float) -> list[Packet]:
+        if channel == 0:
+            return self._toc(PORT_LOG, LOG_TOC, data)
+        if channel != 1 or not data:
+            return []
+        cmd = data[0]
+        if cmd == 5:  # reset
+            self._blocks.clear()
+            return [(PORT_LOG, 1, bytes([5, 0, 0]))]
+        block_id = data[1]
+        if cmd in (0, 6, 1, 7):  # create / append, v1 and v2
+            result = self._log_add(cmd, block_id, data[2:])
+        elif cmd == 3:  # start
+            block = self._blocks.get(block_id)
+            if block is None:
+                result = errno.ENOENT
+            else:
+                block.period_s = max(data[2], 1) * 0.01
+                block.started = True
+                block.next_due_s = now_s + block.period_s
+                result = 0
+        elif cmd == 4:  # stop
+            block = self._blocks.get(block_id)
+            result = errno.ENOENT if block is None else 0
+            if block is not None:
+                block.started = False
+        elif cmd == 2:  # delete
+            result = 0 if self._blocks.pop(block_id, None) is not None else errno.ENOENT
+        else:
+            result = errno.ENOEXEC
+        return [(PORT_LOG, 1, bytes([cmd, block_id, result]))]
+
+    def _log_add(self, cmd: int, block_id: int, specs: bytes) -> int:
+        create = cmd in (0, 6)
+        step = 3 if cmd in (6, 7) else 2
+        if create and block_id in self._blocks:
+            return errno.EEXIST
+        if not create and block_id not in self._blocks:
+            return errno.ENOENT
+        if create and len(self._blocks) >= LOG_MAX_BLOCKS:
+            return errno.ENOMEM
+        variables = [] if create else list(self._blocks[block_id].variables)
+        for i in range(0, len(specs) - step + 1, step):
+            type_byte = specs[i]
+            ident = struct.unpack("<H", specs[i + 1 : i + 3])[0] if step == 3 else specs[i + 1]
+            fetch = LOG_TYPE_NAMES.get(type_byte & 0x0F)
+            if fetch is None or ident >= len(LOG_TOC):
+                return errno.ENOENT
+            variables.append((ident, fetch))
+        if sum(value_size(ctype) for _, ctype in variables) > LOG_MAX_PAYLOAD:
+            return errno.E2BIG
+        if create:
+            self._blocks[block_id] = _LogBlock(block_id, variables)
+        else:
+            self._blocks[block_id].variables = variables
+        return 0
+
+    def _log_data_due(self, now_s: float) -> list[Packet]:
+        packets = []
+        stamp = round((now_s - self._boot_s) * 1000.0) & 0xFFFFFF
+        for block in self._blocks.values():
+            if not block.started or now_s + 1e-6 < block.next_due_s:
+                continue
+            block.next_due_s += block.period_s
+            if block.next_due_s < now_s:
+                block.next_due_s = now_s + block.period_s
+            payload = bytearray([block.block_id]) + stamp.to_bytes(3, "little")
+            for ident, ctype in block.variables:
+                payload += pack_value(ctype, _LOG_GETTERS[ident](self))
+            packets.append((PORT_LOG, 2, bytes(payload)))
+        return packets
+
+    # Param ----------------------------------------------------------------------------------------------------
+
+    def _toc(self, port: int, toc: Toc, data: bytes) -> list[Packet]:
+        if not data:
+            return []
+        if data[0] == 3:
+            return [(port, 0, toc.info_reply())]
+        if data[0] == 2 and len(data) >= 3:
+            self._toc_item_requests += 1
+            return [(port, 0, toc.item_reply(struct.unpack("<H", data[1:3])[0]))]
+        return []
+
+    def _param(self, channel: int, data: bytes, now_s: float) -> list[Packet]:
+        if channel == 0:
+            return self._toc(PORT_PARAM, PARAM_TOC, data)
+        if channel == 3:
+            return self._param_misc(data)
+        ident = struct.unpack("<H", data[:2])[0]
+        if ident >= len(PARAM_TOC):
+            return [(PORT_PARAM, channel, data[:2] + bytes([errno.ENOENT]))]
+        entry = PARAM_TOC.entries[ident]
+        if channel == 1:
+            return [(PORT_PARAM, 1, data[:2] + b"\0" + pack_value(entry.ctype, self._params[entry.full_name]))]
+        if channel == 2:
+            if entry.read_only:
+                return []
+            self._param_set(entry.full_name, unpack_value(entry.ctype, data[2:]))
+            return [(PORT_PARAM, 2, data)]
+        return []
+
+    def _param_misc(self, data: bytes) -> list[Packet]:
+        cmd = data[0]
+        if cmd == 0:  # set by name: [0, group\0name\0, type, value]
+            group_end = data.index(0, 1)
+            name_end = data.index(0, group_end + 1)
+            full_name = f"{data[1:group_end].decode()}.{data[group_end + 1:name_end].decode()}"
+            entry = PARAM_TOC.by_name.get(full_name)
+            result = errno.ENOENT if entry is None else (errno.EACCES if entry.read_only else 0)
+            if entry is not None and not entry.read_only:
+                self._param_set(full_name, unpack_value(entry.ctype, data[name_end + 2 :]))
+            return [(PORT_PARAM, 3, data[: name_end + 1] + bytes([result]))]
+        ident = struct.unpack("<H", data[1:3])[0]
+        entry = PARAM_TOC.entries[ident] if ident < len(PARAM_TOC) else None
+        head = data[:3]
+        if entry is None:
+            return [(PORT_PARAM, 3, head + bytes([errno.ENOENT]))]
+        default = pack_value(entry.ctype, _PARAM_DEFAULTS[entry.full_name])
+        if cmd in (2, 7):  # extended type (v1, v2)
+            ext = EXTENDED_TYPE_PERSISTENT if entry.persistent else 0
+            return [(PORT_PARAM, 3, head + (bytes([ext]) if cmd == 2 else bytes([0, ext])))]
+        if cmd in (6, 8):  # default value (v1, v2)
+            return [(PORT_PARAM, 3, head + (default if cmd == 6 else b"\0" + default))]
+        if cmd == 4:  # persistent state: never stored
+            return [(PORT_PARAM, 3, head + (b"\0" + default if entry.persistent else bytes([errno.ENOENT])))]
+        if cmd in (3, 5):  # persistent store / clear
+            return [(PORT_PARAM, 3, head + bytes([0 if entry.persistent else errno.ENOENT]))]
+        return []
+
+    def _param_set(self, full_name: str, value: float) -> None:
+        v = self.vehicle
+        self._params[full_name] = float(value)
+        if full_name == "kalman.resetEstimation" and value:
+            v.reset_estimator()
+            self._params[full_name] = 0.0
+        elif full_name == "stabilizer.stop":
+            v.param_emergency_stop = bool(value)
+        elif full_name == "locSrv.extPosStdDev":
+            v.ext_pos_std_dev = float(value)
+        elif full_name.startswith("kalman.initial") and full_name != "kalman.initialYaw":
+            v.initial_estimate = (self._params["kalman.initialX"], self._params["kalman.initialY"],
+                                  self._params["kalman.initialZ"])
+        elif full_name in ("posCtlPid.xVelMax", "posCtlPid.yVelMax"):
+            v.xy_vel_max = min(self._params["posCtlPid.xVelMax"], self._params["posCtlPid.yVelMax"])
+        elif full_name == "posCtlPid.zVelMax":
+            v.z_vel_max = float(value)
+        elif full_name == "pm.lowVoltage":
+            v.low_voltage_v = float(value)
+        elif full_name == "pm.criticalLowVoltage":
+            v.critical_voltage_v = float(value)
+
+    # Flight ---------------------------------------------------------------------------------------------------
+
+    def _commander(self, channel: int, data: bytes, now_s: float) -> list[Packet]:
+        setpoint = decode_rpyt(data, now_s) if channel == 0 else None
+        if setpoint is not None:
+            self.vehicle.crtp_setpoint(setpoint, now_s)
+        return []
+
+    def _commander_generic(self, channel: int, data: bytes, now_s: float) -> list[Packet]:
+        if channel == 0:
+            setpoint = decode_generic(data, now_s, self.vehicle.estimate_yaw)
+            if setpoint is not None:
+                self.vehicle.crtp_setpoint(setpoint, now_s)
+        elif channel == 1 and data and data[0] == 0:
+            remain_ms = struct.unpack("<I", data[1:5])[0] if len(data) >= 5 else 0
+            self.vehicle.notify_setpoint_stop(remain_ms)
+        return []
+
+    def _high_level(self, channel: int, data: bytes, now_s: float) -> list[Packet]:
+        answer = self.vehicle.hl.handle(data, now_s)
+        return [(PORT_SETPOINT_HL, channel, answer)] if answer else []
+
+    def _localization(self, channel: int, data: bytes, now_s: float) -> list[Packet]:
+        v = self.vehicle
+        if channel == 0:
+            v.external_position(struct.unpack("<fff", data[:12]), now_s)
+        elif channel == 1 and data:
+            kind = data[0]
+            if kind == 8:
+                x, y, z, qx, qy, qz, qw = struct.unpack("<fffffff", data[1:29])
+                v.external_pose((x, y, z), (qx, qy, qz, qw), now_s)
+            elif kind == 3:
+                v.supervisor.request_emergency_stop()
+            elif kind == 4:
+                v.supervisor.notify_emergency_stop_watchdog(now_s)
+        return []
+
+    def _supervisor(self, channel: int, data: bytes, now_s: float) -> list[Packet]:
+        if not data:
+            return []
+        sup = self.vehicle.supervisor
+        cmd = data[0]
+        if channel == 0:
+            bits = self.supervisor_bits()
+            if cmd == 0x0C:
+                return [(PORT_SUPERVISOR, 0, bytes([0x80 | cmd]) + struct.pack("<H", bits))]
+            if 0x01 <= cmd <= 0x0B:
+                return [(PORT_SUPERVISOR, 0, bytes([0x80 | cmd, (bits >> (cmd - 1)) & 1]))]
+            return []
+        if channel == 1:
+            if cmd == 0x01:
+                success = sup.request_arming(bool(data[1]) if len(data) > 1 else True)
+                return [(PORT_SUPERVISOR, 1, bytes([0x81, int(success), int(sup.armed)]))]
+            if cmd == 0x02:
+                return [(PORT_SUPERVISOR, 1, bytes([0x82, 1, 1]))]
+            if cmd == 0x03:
+                sup.request_emergency_stop()
+            elif cmd == 0x04:
+                sup.notify_emergency_stop_watchdog(now_s)
+        return []
+
+    _HANDLERS: Mapping[int, Callable[[FakeFirmware, int, bytes, float], list[Packet]]] = MappingProxyType({
+        PORT_LINK: _link,
+        PORT_PLATFORM: _platform,
+        PORT_MEM: _mem,
+        PORT_LOG: _log,
+        PORT_PARAM: _param,
+        PORT_COMMANDER: _commander,
+        PORT_COMMANDER_GENERIC: _commander_generic,
+        PORT_SETPOINT_HL: _high_level,
+        PORT_LOCALIZATION: _localization,
+        PORT_SUPERVISOR: _supervisor,
+    })

@@ -1,0 +1,266 @@
+"""The fake Crazyflie's high-level commander (CRTP port 8): take-off, land, go-to, stop, setpoints and setpoint types.
+
+Mirrors `crtp_commander_high_level.c` and `planner.c` of crazyflie-firmware 2026.08:
+- plan states IDLE (stopped: it asks for motors off), FLYING, LANDING and DISABLED;
+- take-off only from IDLE (else error 1), land from anything but LANDING; go-to from the current plan, or from the
+  last known state when idle; a finished landing returns to IDLE (motors off);
+- while the supervisor forbids flying the commander is blocked: commands answer EBUSY and a running plan stops;
+- while FLYING or LANDING it produces a fresh setpoint every tick, so the commander watchdog never fires under the
+  high-level commander (the firmware documents the same); when IDLE it produces a null setpoint (motors off);
+- every command is answered with ``[command, data0, data1, errno]`` like the firmware.
+
+Trajectories are rest-to-rest: "smooth" is the 7th-order polynomial with zero velocity, acceleration and jerk at
+both ends (the firmware's shape when starting from hover), "linear" is linear interpolation. Unlike the firmware,
+a go-to started while moving ignores the current velocity. Uploaded trajectories and spirals are not supported
+(answer ENOEXEC).
+
+Units: metres, seconds, radians (the high-level protocol uses radians for yaw).
+"""
+
+from __future__ import annotations
+
+import enum
+import errno
+import logging
+import math
+import struct
+from dataclasses import dataclass
+
+from .fake_setpoint import AxisMode, Setpoint, Vec3, null_setpoint, wrap_angle
+
+logger = logging.getLogger(__name__)
+
+COMMAND_SET_GROUP_MASK = 0
+COMMAND_TAKEOFF = 1
+COMMAND_LAND = 2
+COMMAND_STOP = 3
+COMMAND_GO_TO = 4
+COMMAND_START_TRAJECTORY = 5
+COMMAND_DEFINE_TRAJECTORY = 6
+COMMAND_TAKEOFF_2 = 7
+COMMAND_LAND_2 = 8
+COMMAND_TAKEOFF_WITH_VELOCITY = 9
+COMMAND_LAND_WITH_VELOCITY = 10
+COMMAND_SPIRAL = 11
+COMMAND_GO_TO_2 = 12
+COMMAND_START_TRAJECTORY_2 = 13
+
+DEFAULT_TAKEOFF_VELOCITY_M_S = 0.5
+DEFAULT_LANDING_VELOCITY_M_S = 0.5
+
+
+class PlanState(enum.IntEnum):
+    """The planner's state, with the firmware's values."""
+
+    IDLE = 0
+    FLYING = 1
+    LANDING = 3
+    DISABLED = 4
+
+
+@dataclass(frozen=True)
+class Trajectory:
+    """A rest-to-rest segment from `start` to `end` (metres) and `yaw_start` to `yaw_end` (radians)."""
+
+    t0_s: float
+    duration_s: float
+    start: Vec3
+    end: Vec3
+    yaw_start: float
+    yaw_end: float
+    linear: bool = False
+
+    def _shape(self, now_s: float) -> tuple[float, float]:
+        """Progress s in [0, 1] and ds/dt in 1/s."""
+        if self.duration_s <= 0.0:
+            return 1.0, 0.0
+        tau = min(max((now_s - self.t0_s) / self.duration_s, 0.0), 1.0)
+        if self.linear:
+            return tau, (1.0 / self.duration_s if tau < 1.0 else 0.0)
+        s = tau**4 * (35.0 - 84.0 * tau + 70.0 * tau**2 - 20.0 * tau**3)
+        ds = tau**3 * (140.0 - 420.0 * tau + 420.0 * tau**2 - 140.0 * tau**3) / self.duration_s
+        return s, ds
+
+    def evaluate(self, now_s: float) -> tuple[Vec3, Vec3, float]:
+        """Position (m), velocity (m/s) and yaw (rad) at `now_s`."""
+        s, ds = self._shape(now_s)
+        pos = tuple(a + (b - a) * s for a, b in zip(self.start, self.end))
+        vel = tuple((b - a) * ds for a, b in zip(self.start, self.end))
+        yaw = self.yaw_start + (self.yaw_end - self.yaw_start) * s
+        return pos, vel, yaw  # type: ignore[return-value]
+
+    def finished(self, now_s: float) -> bool:
+        return now_s >= self.t0_s + self.duration_s
+
+
+class HighLevelCommander:
+    """One drone's high-level commander. Not thread-safe: the owning vehicle serialises calls."""
+
+    def __init__(self, position: Vec3, yaw_rad: float) -> None:
+        self.state = PlanState.IDLE
+        self.trajectory: Trajectory | None = None
+        self.group_mask = 0
+        self.blocked = False
+        self.pos: Vec3 = position
+        self.vel: Vec3 = (0.0, 0.0, 0.0)
+        self.yaw = yaw_rad
+        self.commands_rejected = 0
+
+    def _in_group(self, mask: int) -> bool:
+        return mask == 0 or (mask & self.group_mask) != 0
+
+    def stop(self) -> None:
+        """Plan to IDLE (the firmware's `plan_stop`): motors off unless a higher priority source flies."""
+        self.state = PlanState.IDLE
+
+    def block(self, do_block: bool) -> None:
+        """Block (while the supervisor forbids flying) or unblock; blocking stops a running plan."""
+        if do_block and not self.blocked and self.state not in (PlanState.DISABLED, PlanState.IDLE):
+            self.stop()
+        self.blocked = do_block
+
+    def tell_state(self, position: Vec3, velocity: Vec3, yaw_rad: float) -> None:
+        """Set the last known state (on notify-setpoint-stop), the start of the next plan."""
+        self.pos, self.vel, self.yaw = position, velocity, yaw_rad
+
+    def _plan(self, now_s: float, end: Vec3, yaw_end: float, duration_s: float, linear: bool = False) -> None:
+        start = self.pos
+        yaw_start = wrap_angle(self.yaw)
+        goal_yaw = yaw_start + wrap_angle(yaw_end - yaw_start)
+        self.trajectory = Trajectory(now_s, max(duration_s, 0.0), start, end, yaw_start, goal_yaw, linear)
+
+    def _current_goal(self, now_s: float) -> tuple[Vec3, Vec3, float] | None:
+        if self.state is PlanState.LANDING and self.trajectory is not None and self.trajectory.finished(now_s):
+            self.state = PlanState.IDLE
+            return self.trajectory.evaluate(now_s)
+        if self.state in (PlanState.FLYING, PlanState.LANDING) and self.trajectory is not None:
+            return self.trajectory.evaluate(now_s)
+        return None
+
+    # CRTP -----------------------------------------------------------------------------------------------------
+
+    def handle(self, data: bytes, now_s: float) -> bytes:
+        """Act on one port-8 packet; return the firmware's answer ``[cmd, data0, data1, errno]``."""
+        if not data:
+            return b""
+        try:
+            result = self._dispatch(data[0], bytes(data[1:]), now_s)
+        except struct.error:
+            logger.warning("malformed high-level command %d (%d bytes)", data[0], len(data))
+            result = errno.EINVAL
+        if result:
+            self.commands_rejected += 1
+        answer = bytearray(data[:3].ljust(3, b"\0"))
+        answer.append(result & 0xFF)
+        return bytes(answer)
+
+    def _dispatch(self, cmd: int, body: bytes, now_s: float) -> int:
+        if cmd == COMMAND_SET_GROUP_MASK:
+            self.group_mask = body[0]
+            return 0
+        if cmd == COMMAND_STOP:
+            if self._in_group(body[0]):
+                self.stop()
+            return 0
+        if cmd == COMMAND_DEFINE_TRAJECTORY:
+            return 0
+        if cmd in (COMMAND_START_TRAJECTORY, COMMAND_START_TRAJECTORY_2, COMMAND_SPIRAL):
+            logger.warning("fake high-level commander: command %d is not supported", cmd)
+            return errno.EBUSY if self.blocked else errno.ENOEXEC
+        if self.blocked:
+            return errno.EBUSY
+        if cmd in (COMMAND_TAKEOFF, COMMAND_TAKEOFF_2, COMMAND_TAKEOFF_WITH_VELOCITY):
+            return self._takeoff(cmd, body, now_s)
+        if cmd in (COMMAND_LAND, COMMAND_LAND_2, COMMAND_LAND_WITH_VELOCITY):
+            return self._land(cmd, body, now_s)
+        if cmd in (COMMAND_GO_TO, COMMAND_GO_TO_2):
+            return self._go_to(cmd, body, now_s)
+        return errno.ENOEXEC
+
+    def _height_yaw_duration(self, cmd: int, body: bytes, *, landing: bool) -> tuple[int, float, float, float]:
+        """Group mask, absolute height (m), hover yaw (rad) and duration (s) of a take-off or land command."""
+        if cmd in (COMMAND_TAKEOFF, COMMAND_LAND):
+            group, height, duration = struct.unpack("<Bff", body[:9])
+            return group, height, 0.0, duration
+        if cmd in (COMMAND_TAKEOFF_2, COMMAND_LAND_2):
+            group, height, yaw, use_current_yaw, duration = struct.unpack("<Bff?f", body[:14])
+            return group, height, (self.yaw if use_current_yaw else yaw), duration
+        group, height, relative, yaw, use_current_yaw, velocity = struct.unpack("<Bf?f?f", body[:15])
+        if relative:
+            height = self.pos[2] - height if landing else self.pos[2] + height
+        default = DEFAULT_LANDING_VELOCITY_M_S if landing else DEFAULT_TAKEOFF_VELOCITY_M_S
+        velocity = velocity if velocity > 0 else default
+        return group, height, (self.yaw if use_current_yaw else yaw), abs(height - self.pos[2]) / velocity
+
+    def _takeoff(self, cmd: int, body: bytes, now_s: float) -> int:
+        group, height, yaw, duration = self._height_yaw_duration(cmd, body, landing=False)
+        if not self._in_group(group):
+            return 0
+        if self.state is not PlanState.IDLE:
+            return 1
+        self._plan(now_s, (self.pos[0], self.pos[1], height), yaw, duration)
+        self.state = PlanState.FLYING
+        return 0
+
+    def _land(self, cmd: int, body: bytes, now_s: float) -> int:
+        group, height, yaw, duration = self._height_yaw_duration(cmd, body, landing=True)
+        if not self._in_group(group):
+            return 0
+        if self.state is PlanState.LANDING:
+            return 1
+        self._plan(now_s, (self.pos[0], self.pos[1], height), yaw, duration)
+        self.state = PlanState.LANDING
+        return 0
+
+    def _go_to(self, cmd: int, body: bytes, now_s: float) -> int:
+        if cmd == COMMAND_GO_TO:
+            group, relative, x, y, z, yaw, duration = struct.unpack("<BBfffff", body[:22])
+            linear = False
+        else:
+            group, relative, linear, x, y, z, yaw, duration = struct.unpack("<BBBfffff", body[:23])
+        if not self._in_group(group):
+            return 0
+        if self.state not in (PlanState.IDLE, PlanState.DISABLED):
+            goal = self._current_goal(now_s)
+            if goal is not None:
+                self.pos, self.vel, self.yaw = goal
+        end = (x, y, z)
+        if relative:
+            end = (self.pos[0] + x, self.pos[1] + y, self.pos[2] + z)
+            yaw += self.yaw
+        self._plan(now_s, end, yaw, duration, linear=bool(linear))
+        self.state = PlanState.FLYING
+        return 0
+
+    # Stabilizer tick ------------------------------------------------------------------------------------------
+
+    def get_setpoint(self, now_s: float, est_pos: Vec3, est_vel: Vec3, est_yaw: float) -> Setpoint | None:
+        """The setpoint this tick (None: leave the commander's setpoint alone). Called only when flying is allowed."""
+        goal = self._current_goal(now_s)
+        if self.state in (PlanState.IDLE, PlanState.DISABLED):
+            self.pos, self.vel, self.yaw = est_pos, est_vel, est_yaw
+            return null_setpoint(now_s, "high-level") if self.state is PlanState.IDLE else None
+        if goal is None:
+            self.state = PlanState.DISABLED
+            return None
+        self.pos, self.vel, self.yaw = goal
+        return Setpoint(
+            modes=(AxisMode.ABS, AxisMode.ABS, AxisMode.ABS),
+            position=goal[0],
+            velocity=goal[1],
+            yaw_mode=AxisMode.ABS,
+            yaw_deg=math.degrees(goal[2]),
+            timestamp_s=now_s,
+            source="high-level",
+        )
+
+    def info_bits(self, now_s: float) -> int:
+        """Bits 8-10 of `supervisor.info`: active, trajectory finished, disabled."""
+        bits = 0
+        if self.state in (PlanState.FLYING, PlanState.LANDING):
+            bits |= 0x0100
+        if self.trajectory is None or self.trajectory.finished(now_s):
+            bits |= 0x0200
+        if self.state is PlanState.DISABLED:
+            bits |= 0x0400
+        return bits

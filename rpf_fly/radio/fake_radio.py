@@ -1,0 +1,321 @@
+"""The fake radio: a cflib link driver for ``fake://`` URIs that reaches the drones of a `FakeWorld`.
+
+``register(world)`` appends a driver class bound to `world` to ``cflib.crtp.CLASSES`` (replacing any fake driver
+registered before); from then on any cflib program opens ``fake://<dongle>/<channel>/<rate>/<address>`` exactly as
+it opens the same ``radio://`` URI. ``unregister()`` removes it. ``cflib.crtp.init_drivers()`` may be called before
+or after: the radio drivers refuse ``fake://`` URIs.
+
+Each link runs a thread that emulates cflib's Crazyradio driver with safelink (so `needs_resending` is False):
+- every transaction carries one uplink packet (or an empty poll every 10 ms when idle, back to back while the drone
+  has data queued) and is acknowledged with at most one downlink packet;
+- a transaction fails when the drone does not answer (unknown address, wrong channel, link dropped, drone powered
+  off) or when each of its 4 attempts is lost (`LinkFaults.packet_loss`); a failed transaction is retried with the
+  same packet after 1 ms, and 100 failures in a row call cflib's link-error callback with "Too many packets lost"
+  (so an unknown address fails to connect after about 0.1 s instead of hanging);
+- successful transactions feed cflib's own `RadioLinkStatistics` with the attempt count as the retry count and the
+  drone's RSSI in empty acks, so link quality, RSSI, rates and congestion reach `cf.link_statistics` as with a
+  Crazyradio; cflib's latency pings are answered by the firmware's echo;
+- `LinkFaults.latency_s` delays both directions;
+- closing a link first transmits the uplink packets already queued, so the zero-thrust setpoint that cflib's
+  `close_link` sends always reaches the drone (with a Crazyradio it is a race): the fake takes the pessimistic side.
+Empty acks are not queued to cflib (the real driver queues them as port-15 channel-3 packets, which cflib ignores).
+"""
+
+from __future__ import annotations
+
+import logging
+import queue
+import random
+import threading
+import time
+from collections import deque
+from dataclasses import dataclass
+from typing import Any, ClassVar
+from urllib.parse import urlparse
+
+import cflib.crtp
+from cflib.crtp.crtpdriver import CRTPDriver
+from cflib.crtp.crtpstack import CRTPPacket
+from cflib.crtp.exceptions import WrongUriType
+from cflib.crtp.radio_link_statistics import RadioLinkStatistics
+
+from .fake_world import FakeWorld, LinkFaults, SimDrone
+
+logger = logging.getLogger(__name__)
+
+SCHEME = "fake://"
+DEFAULT_ADDRESS = 0xE7E7E7E7E7
+DATARATES = ("250K", "1M", "2M")
+
+
+@dataclass(frozen=True)
+class FakeUri:
+    """A parsed ``fake://`` URI (the path of a ``radio://`` URI)."""
+
+    devid: int
+    channel: int
+    datarate: str
+    address: int
+
+
+def parse_fake_uri(uri: str) -> FakeUri:
+    """Parse ``fake://<dongle>/<channel>/<250K|1M|2M>/<hex address>``; missing parts default as for radio URIs
+    (channel 2, 2M, address E7E7E7E7E7). Raises WrongUriType for other schemes, ValueError for malformed ones."""
+    if not isinstance(uri, str) or not uri.startswith(SCHEME):
+        raise WrongUriType("Not a fake radio URI")
+    parsed = urlparse(uri)
+    if not parsed.netloc.isdigit():
+        raise ValueError(f"fake URI {uri!r}: the dongle number must be an integer")
+    parts = [p for p in parsed.path.strip("/").split("/") if p]
+    channel = int(parts[0]) if len(parts) > 0 else 2
+    datarate = parts[1] if len(parts) > 1 else "2M"
+    if datarate not in DATARATES:
+        raise ValueError(f"fake URI {uri!r}: data rate must be one of {DATARATES}")
+    address = int(parts[2], 16) if len(parts) > 2 else DEFAULT_ADDRESS
+    if not 0 <= channel <= 125 or not 0 <= address < 1 << 40:
+        raise ValueError(f"fake URI {uri!r}: channel or address out of range")
+    return FakeUri(int(parsed.netloc), channel, datarate, address)
+
+
+class _Ack:
+    """What `RadioLinkStatistics.update` reads from a Crazyradio ack."""
+
+    __slots__ = ("ack", "data", "retry")
+
+    def __init__(self, ack: bool, retry: int, data: tuple[int, ...]) -> None:
+        self.ack, self.retry, self.data = ack, retry, data
+
+
+class FakeLink:
+    """One open fake radio link and its transaction thread."""
+
+    def __init__(self, world: FakeWorld, uri: FakeUri, stats_callback: Any, error_callback: Any) -> None:
+        self._world = world
+        self._uri = uri
+        self._drone: SimDrone | None = world.drone(uri.address)
+        self._faults = self._drone.config.faults if self._drone else LinkFaults()
+        self._rssi = self._drone.config.rssi_dbm if self._drone else 0
+        self._rng = self._drone.rng if self._drone else random.Random(uri.address)
+        self._timing = world.timing
+        self._dongle = world.dongle_lock(uri.devid)
+        self._stats = RadioLinkStatistics(stats_callback) if stats_callback else None
+        self._error_callback = error_callback
+        self._in: queue.Queue[CRTPPacket | None] = queue.Queue()
+        self._up: deque[tuple[float, int, bytes]] = deque()
+        self._down_delayed: deque[tuple[float, CRTPPacket]] = deque()
+        self._wake = threading.Event()
+        self._closed = threading.Event()
+        self._flush_on_close = False
+        if self._drone is not None:
+            self._drone.attach(self._wake)
+        self._thread = threading.Thread(target=self._run, name=f"FakeLink-{uri.address:010X}", daemon=True)
+        self._thread.start()
+
+    # Called by cflib ------------------------------------------------------------------------------------------
+
+    def send(self, pk: CRTPPacket) -> bool:
+        """Queue one uplink packet (never blocks)."""
+        if self._closed.is_set():
+            return False
+        self._up.append((time.monotonic() + self._faults.latency_s, pk.header, bytes(pk.data)))
+        self._wake.set()
+        return True
+
+    def receive(self, wait: float) -> CRTPPacket | None:
+        """Next downlink packet; `wait` 0 polls, < 0 blocks until one arrives or the link closes, > 0 is a timeout.
+        Returns None at once when the link is closed."""
+        if self._closed.is_set():
+            return None
+        try:
+            packet = self._in.get_nowait() if wait == 0 else self._in.get(timeout=wait if wait > 0 else None)
+        except queue.Empty:
+            return None
+        return packet
+
+    def close(self) -> None:
+        """Stop the thread, after it transmitted the uplink packets already queued (cflib's `close_link` queues a
+        zero-thrust setpoint just before closing; the real driver may or may not send it: the fake always does).
+        Safe from the link's own thread, as cflib closes from the error callback (then nothing is flushed)."""
+        self._flush_on_close = threading.current_thread() is not self._thread
+        self._closed.set()
+        self._wake.set()
+        self._in.put(None)  # wakes a receive() blocked in cflib's receive thread
+        self._error_callback = None
+        if threading.current_thread() is not self._thread:
+            self._thread.join(timeout=1.0)
+        if self._drone is not None:
+            self._drone.detach(self._wake)
+
+    # Transaction thread ---------------------------------------------------------------------------------------
+
+    def _attempt(self) -> tuple[bool, int]:
+        """(acknowledged, retries used) of one transaction."""
+        if self._drone is None or not self._drone.reachable(self._uri.channel):
+            return False, self._timing.arc_retries
+        loss = self._faults.packet_loss
+        for retry in range(self._timing.arc_retries + 1):
+            if loss <= 0.0 or self._rng.random() >= loss:
+                return True, retry
+        return False, self._timing.arc_retries
+
+    def _release_downlink(self, now: float) -> None:
+        while self._down_delayed and self._down_delayed[0][0] <= now:
+            self._in.put(self._down_delayed.popleft()[1])
+
+    def _wait_time(self, now: float, last_tx: float) -> float:
+        timeout = last_tx + self._timing.idle_poll_s - now
+        if self._up:
+            timeout = min(timeout, self._up[0][0] - now)
+        if self._down_delayed:
+            timeout = min(timeout, self._down_delayed[0][0] - now)
+        return max(timeout, 0.0)
+
+    def _flush(self) -> None:
+        """On close: transmit the uplink packets already queued (a few tries each, no latency), drop the rest."""
+        while self._up and self._drone is not None:
+            _, header, payload = self._up.popleft()
+            for _ in range(3):
+                with self._dongle:
+                    ok, _retry = self._attempt()
+                    if ok:
+                        self._drone.exchange((header, payload), self._world.time_s())
+                if ok:
+                    break
+
+    def _run(self) -> None:
+        lost = 0
+        last_tx = -float("inf")
+        timing = self._timing
+        while True:
+            if self._closed.is_set():
+                if self._flush_on_close:
+                    self._flush()
+                return
+            now = time.monotonic()
+            self._release_downlink(now)
+            up_due = bool(self._up) and self._up[0][0] <= now
+            down_waiting = self._drone is not None and self._drone.has_downlink()
+            if not (up_due or down_waiting or now - last_tx >= timing.idle_poll_s):
+                self._wake.wait(self._wait_time(now, last_tx))
+                self._wake.clear()
+                continue
+            item = self._up[0] if up_due else None
+            last_tx = now
+            down = None
+            with self._dongle:
+                ok, retry = self._attempt()
+                if ok and self._drone is not None:
+                    if item is not None:
+                        self._up.popleft()
+                    down = self._drone.exchange((item[1], item[2]) if item else None, self._world.time_s())
+                if timing.transaction_s > 0.0:
+                    time.sleep(timing.transaction_s)
+            if not ok:
+                lost += 1
+                if lost >= timing.max_lost_acks:
+                    self._fail("Too many packets lost")
+                    return
+                self._closed.wait(timing.failed_attempt_s)
+                continue
+            lost = 0
+            self._deliver(down, item is not None, retry)
+
+    def _deliver(self, down: tuple[int, int, bytes] | None, had_uplink: bool, retry: int) -> None:
+        if down is None:
+            ack_data: tuple[int, ...] = (0xF3, 0x01, self._rssi)
+        else:
+            port, channel, payload = down
+            header = ((port & 0x0F) << 4) | 0x0C | (channel & 0x03)
+            ack_data = (header, *payload)
+            packet = CRTPPacket(header, payload)
+            if self._faults.latency_s > 0.0:
+                self._down_delayed.append((time.monotonic() + self._faults.latency_s, packet))
+            else:
+                self._in.put(packet)
+        if self._stats is not None:
+            try:
+                self._stats.update(_Ack(True, retry, ack_data), had_uplink or None)
+            except Exception:  # statistics must not kill the link
+                logger.exception("radio link statistics failed")
+
+    def _fail(self, message: str) -> None:
+        callback = self._error_callback
+        logger.info("fake link %010X: %s", self._uri.address, message)
+        self._closed.set()
+        self._in.put(None)
+        if self._drone is not None:
+            self._drone.detach(self._wake)
+        if callback is not None:
+            callback(message)
+
+
+class FakeRadioDriver(CRTPDriver):
+    """cflib link driver for ``fake://`` URIs. Use `register(world)`, which binds a subclass to a world."""
+
+    world: ClassVar[FakeWorld | None] = None
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.needs_resending = False
+        self.uri = ""
+        self._link: FakeLink | None = None
+
+    def connect(self, uri: str, radio_link_statistics_callback: Any, link_error_callback: Any) -> None:
+        if not isinstance(uri, str) or not uri.startswith(SCHEME):
+            raise WrongUriType("Not a fake radio URI")
+        world = type(self).world
+        if world is None:
+            raise RuntimeError("no FakeWorld registered: call rpf_fly.radio.fake_radio.register(world)")
+        parsed = parse_fake_uri(uri)
+        if self._link is not None:
+            raise RuntimeError("Link already open!")
+        world.start()
+        self.uri = uri
+        self._link = FakeLink(world, parsed, radio_link_statistics_callback, link_error_callback)
+
+    def send_packet(self, pk: CRTPPacket) -> bool:
+        return self._link.send(pk) if self._link is not None else False
+
+    def receive_packet(self, wait: float = 0) -> CRTPPacket | None:
+        if self._link is None:
+            return None
+        return self._link.receive(wait)
+
+    def close(self) -> None:
+        if self._link is not None:
+            self._link.close()
+            self._link = None
+
+    def get_status(self) -> str:
+        world = type(self).world
+        return "No fake world registered" if world is None else f"Fake radio, {len(world.addresses)} drones"
+
+    def get_name(self) -> str:
+        return "fakeradio"
+
+    def get_help(self) -> str:
+        return "fake://<dongle>/<channel>/<250K|1M|2M>/<address>: a drone of the registered FakeWorld"
+
+    def scan_interface(self, address: int | None = None) -> list[list[str]]:
+        world = type(self).world
+        if world is None:
+            return []
+        return [[world.uri(a), ""] for a in world.addresses if address is None or a == address]
+
+    def enum(self) -> list[list[str]]:
+        return self.scan_interface()
+
+
+def register(world: FakeWorld) -> type[FakeRadioDriver]:
+    """Make ``fake://`` URIs reach `world` through cflib (replacing any previously registered fake driver)."""
+    unregister()
+    driver = type("BoundFakeRadioDriver", (FakeRadioDriver,), {"world": world})
+    cflib.crtp.CLASSES.append(driver)
+    return driver
+
+
+def unregister() -> None:
+    """Remove every fake driver from cflib's driver list (open links keep working until closed)."""
+    cflib.crtp.CLASSES[:] = [
+        cls for cls in cflib.crtp.CLASSES if not (isinstance(cls, type) and issubclass(cls, FakeRadioDriver))
+    ]

@@ -1,0 +1,243 @@
+"""The fake Crazyflie's supervisor: arming, flying detection, commander watchdog, emergency stop and locking.
+
+It mirrors the state machine of crazyflie-firmware 2026.08 (`supervisor.c`, `supervisor_state_machine.c`) with the
+conditions this simulation can produce: armed, is-flying, commander watchdog warning (setpoint older than 0.5 s) and
+timeout (older than 2 s), emergency stop, pre-flight timeout (30 s armed without flying) and landing timeout (3 s
+after landing). Not simulated: tumble and crash detection, deck faults, motor RPM checks (arming passes at once).
+
+Key behaviours kept from the firmware:
+- Flying + watchdog warning -> "warning, level out"; flying or levelled out + watchdog timeout -> free fall ->
+  locked. Locked has no way out but a reboot.
+- An emergency stop (supervisor command, legacy localization command, expired emergency-stop watchdog or the
+  `stabilizer.stop` parameter) sends every state but "landed" to free fall -> locked; "landed" gets there through
+  reset.
+- Motors may run only in ready-to-fly, flying, warning-level-out and landed.
+- Disarming in flight resets (motors off). Entering any state outside arming/ready/flying/level-out/landed disarms.
+- Auto-arming (the Crazyflie 2.x default) re-arms whenever pre-flight checks pass.
+
+Times are seconds on the caller's clock.
+"""
+
+from __future__ import annotations
+
+import enum
+import logging
+from collections import deque
+from dataclasses import dataclass
+
+logger = logging.getLogger(__name__)
+
+WDT_WARNING_S = 0.5
+"""Setpoint age after which a flying drone levels out (COMMANDER_WDT_TIMEOUT_STABILIZE)."""
+WDT_TIMEOUT_S = 2.0
+"""Setpoint age after which a flying drone cuts its motors and locks (COMMANDER_WDT_TIMEOUT_SHUTDOWN)."""
+IS_FLYING_HYSTERESIS_S = 2.0
+"""The drone counts as flying until this long after the thrust last exceeded idle."""
+PREFLIGHT_TIMEOUT_S = 30.0
+"""Armed (ready to fly) this long without flying -> disarmed."""
+LANDING_TIMEOUT_S = 3.0
+"""Landed this long -> reset (disarmed)."""
+EMERGENCY_STOP_WATCHDOG_S = 1.0
+"""Once an emergency-stop watchdog notification was received, silence this long triggers an emergency stop."""
+
+
+class SupervisorStateName(enum.Enum):
+    """Supervisor states, named as in the firmware."""
+
+    PRE_FLIGHT_CHECKS_NOT_PASSED = "Pre-flight checks not passed"
+    PRE_FLIGHT_CHECKS_PASSED = "Pre-flight checks passed"
+    ARMING = "Arming"
+    READY_TO_FLY = "Ready to fly"
+    FLYING = "Flying"
+    LANDED = "Landed"
+    RESET = "Reset"
+    WARNING_LEVEL_OUT = "Warning, level out"
+    EXCEPTION_FREE_FALL = "Exception, free fall"
+    LOCKED = "Locked"
+
+
+S = SupervisorStateName
+
+_MOTORS_ALLOWED = frozenset({S.READY_TO_FLY, S.FLYING, S.WARNING_LEVEL_OUT, S.LANDED})
+_KEEPS_ARMING = frozenset({S.ARMING, S.READY_TO_FLY, S.FLYING, S.WARNING_LEVEL_OUT, S.LANDED})
+
+
+@dataclass(frozen=True)
+class Conditions:
+    """Inputs of one supervisor update."""
+
+    armed: bool
+    is_flying: bool
+    wdt_warning: bool
+    wdt_timeout: bool
+    emergency_stop: bool
+    preflight_timeout: bool
+    landing_timeout: bool
+
+
+@dataclass(frozen=True)
+class Transition:
+    """One state change, for logs and test assertions."""
+
+    time_s: float
+    old: SupervisorStateName
+    new: SupervisorStateName
+
+
+class Supervisor:
+    """State machine of one drone's supervisor. Not thread-safe: the owning vehicle serialises calls."""
+
+    def __init__(self, *, auto_arm: bool) -> None:
+        self.auto_arm = auto_arm
+        self.state = S.PRE_FLIGHT_CHECKS_NOT_PASSED
+        self.armed = False
+        self.emergency_stop_requested = False
+        """Latched by an emergency-stop command until reboot."""
+        self._latest_thrust_s: float | None = None
+        self._latest_arming_s = 0.0
+        self._latest_landing_s: float | None = None
+        self._estop_watchdog_s: float | None = None
+        self.transitions: deque[Transition] = deque(maxlen=64)
+
+    # Commands -------------------------------------------------------------------------------------------------
+
+    def request_arming(self, do_arm: bool) -> bool:
+        """Arm or disarm; arming succeeds only when pre-flight checks have passed. Returns success."""
+        if do_arm == self.armed:
+            return True
+        if do_arm and self.state is not S.PRE_FLIGHT_CHECKS_PASSED:
+            return False
+        self.armed = do_arm
+        return True
+
+    def request_emergency_stop(self) -> None:
+        """Latch an emergency stop."""
+        self.emergency_stop_requested = True
+
+    def notify_emergency_stop_watchdog(self, now_s: float) -> None:
+        """Feed (and from the first call on, arm) the emergency-stop watchdog."""
+        self._estop_watchdog_s = now_s
+
+    # Queries --------------------------------------------------------------------------------------------------
+
+    @property
+    def motors_allowed(self) -> bool:
+        """True in the states where the motors may run (the firmware's `supervisorCanFly`)."""
+        return self.state in _MOTORS_ALLOWED
+
+    @property
+    def is_flying(self) -> bool:
+        """True in flying and warning-level-out."""
+        return self.state in (S.FLYING, S.WARNING_LEVEL_OUT)
+
+    @property
+    def is_locked(self) -> bool:
+        return self.state is S.LOCKED
+
+    def info_bits(self, hl_bits: int) -> int:
+        """The `supervisor.info` bitfield; `hl_bits` are the high-level commander's bits 8-10."""
+        bits = 0
+        if self.state is S.PRE_FLIGHT_CHECKS_PASSED:
+            bits |= 0x0001
+        if self.armed:
+            bits |= 0x0002
+        if self.auto_arm:
+            bits |= 0x0004
+        if self.motors_allowed:
+            bits |= 0x0008
+        if self.is_flying:
+            bits |= 0x0010
+        if self.is_locked:
+            bits |= 0x0040
+        return bits | (hl_bits & 0x0700)
+
+    # Update ---------------------------------------------------------------------------------------------------
+
+    def conditions(
+        self, now_s: float, *, thrust_over_idle: bool, setpoint_age_s: float, param_emergency_stop: bool
+    ) -> Conditions:
+        """Evaluate the conditions for one update (records the thrust time as a side effect)."""
+        if thrust_over_idle:
+            self._latest_thrust_s = now_s
+        is_flying = self._latest_thrust_s is not None and now_s - self._latest_thrust_s < IS_FLYING_HYSTERESIS_S
+        estop = self.emergency_stop_requested or param_emergency_stop
+        if self._estop_watchdog_s is not None and now_s > self._estop_watchdog_s + EMERGENCY_STOP_WATCHDOG_S:
+            estop = True
+        return Conditions(
+            armed=self.armed,
+            is_flying=is_flying,
+            wdt_warning=setpoint_age_s > WDT_WARNING_S,
+            wdt_timeout=setpoint_age_s > WDT_TIMEOUT_S,
+            emergency_stop=estop,
+            preflight_timeout=self.state is S.READY_TO_FLY and now_s - self._latest_arming_s > PREFLIGHT_TIMEOUT_S,
+            landing_timeout=self._latest_landing_s is not None
+            and now_s - self._latest_landing_s > LANDING_TIMEOUT_S,
+        )
+
+    def update(
+        self, now_s: float, *, thrust_over_idle: bool, setpoint_age_s: float, param_emergency_stop: bool = False
+    ) -> None:
+        """One supervisor tick: at most one state transition, then its side effects."""
+        c = self.conditions(
+            now_s,
+            thrust_over_idle=thrust_over_idle,
+            setpoint_age_s=setpoint_age_s,
+            param_emergency_stop=param_emergency_stop,
+        )
+        new = _next_state(self.state, c)
+        if new is self.state:
+            return
+        old, self.state = self.state, new
+        self.transitions.append(Transition(now_s, old, new))
+        logger.debug("supervisor %s -> %s at %.3f s", old.value, new.value, now_s)
+        if new is S.READY_TO_FLY:
+            self._latest_arming_s = now_s
+        if new is S.LANDED:
+            self._latest_landing_s = now_s
+        if new is S.LOCKED:
+            logger.info("fake Crazyflie locked at %.3f s: reboot required", now_s)
+        if new not in _KEEPS_ARMING:
+            self.request_arming(False)
+        if self.auto_arm and new is S.PRE_FLIGHT_CHECKS_PASSED:
+            self.request_arming(True)
+
+
+def _next_state(state: SupervisorStateName, c: Conditions) -> SupervisorStateName:
+    """The firmware's transition table, first matching transition wins."""
+    if state is S.PRE_FLIGHT_CHECKS_NOT_PASSED:
+        return S.EXCEPTION_FREE_FALL if c.emergency_stop else S.PRE_FLIGHT_CHECKS_PASSED
+    if state is S.PRE_FLIGHT_CHECKS_PASSED:
+        if c.emergency_stop:
+            return S.EXCEPTION_FREE_FALL
+        return S.ARMING if c.armed else state
+    if state is S.ARMING:
+        if c.emergency_stop:
+            return S.EXCEPTION_FREE_FALL
+        return S.READY_TO_FLY if c.armed else S.PRE_FLIGHT_CHECKS_NOT_PASSED
+    if state is S.READY_TO_FLY:
+        if c.emergency_stop:
+            return S.EXCEPTION_FREE_FALL
+        if c.preflight_timeout or not c.armed:
+            return S.PRE_FLIGHT_CHECKS_NOT_PASSED
+        return S.FLYING if c.is_flying else state
+    if state is S.FLYING:
+        if c.wdt_timeout or c.emergency_stop:
+            return S.EXCEPTION_FREE_FALL
+        if not c.armed:
+            return S.RESET
+        if c.wdt_warning:
+            return S.WARNING_LEVEL_OUT
+        return state if c.is_flying else S.LANDED
+    if state is S.LANDED:
+        if c.landing_timeout or not c.armed:
+            return S.RESET
+        return S.FLYING if c.is_flying else state
+    if state is S.RESET:
+        return S.PRE_FLIGHT_CHECKS_NOT_PASSED
+    if state is S.WARNING_LEVEL_OUT:
+        if c.wdt_timeout or c.emergency_stop:
+            return S.EXCEPTION_FREE_FALL
+        return S.FLYING if not (c.wdt_warning or c.wdt_timeout) else state
+    if state is S.EXCEPTION_FREE_FALL:
+        return S.LOCKED
+    return state  # LOCKED: only a reboot leaves it

@@ -1,0 +1,339 @@
+"""A world of fake Crazyflies: their firmwares, radio-side fault configuration and a real-time dynamics thread.
+
+`FakeWorld` owns one `FakeFirmware` per radio address and a thread that steps them all every `step_s` (10 ms) on
+the world clock (seconds since `start()`), queueing their log packets for the radio links (`fake_radio`). It also
+exposes the true poses of all drones (for a NatNet emulator) and firmware snapshots (for test assertions).
+
+Addresses are the 5-byte radio addresses as integers (0xE7E7E7E701); strings are read as hexadecimal.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import random
+import threading
+import time
+from collections import deque
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+
+from .fake_firmware import FakeFirmware, FirmwareSnapshot, Packet
+from .fake_vehicle import VehicleConfig
+
+logger = logging.getLogger(__name__)
+
+BOOT_S = 1.0
+"""Each firmware runs this long (synthetic time, at `start`) before world time 0, so drones are booted, through
+their pre-flight checks and (auto-)armed when cflib connects, as real drones powered on beforehand are."""
+
+TX_QUEUE_SIZE = 64
+"""Downlink packets a firmware buffers; when full, new packets (log data) are dropped, as the firmware's CRTP queue
+does."""
+
+PacketObserver = Callable[[int, int, bytes, float], None]
+"""``observer(port, channel, payload, monotonic_s)``, called after the firmware handled an uplink packet."""
+
+
+@dataclass(frozen=True)
+class LinkFaults:
+    """Radio faults of one drone."""
+
+    packet_loss: float = 0.0
+    """Probability that one radio transmission attempt is lost (0-1). The radio retries each packet up to 3 times
+    within a transaction (lowering link quality); a transaction whose 4 attempts are all lost is a lost ack, and
+    100 lost acks in a row drop the link, as cflib's radio driver does."""
+    latency_s: float = 0.0
+    """Added one-way delay in seconds, applied to each direction (the round trip grows by twice this)."""
+    drop_link_at_s: float | None = None
+    """World time (seconds since the world started) at which the drone stops answering the radio for good."""
+
+    def __post_init__(self) -> None:
+        if not 0.0 <= self.packet_loss <= 1.0:
+            raise ValueError(f"packet_loss must be in [0, 1], not {self.packet_loss}")
+        if self.latency_s < 0.0:
+            raise ValueError(f"latency_s must be >= 0, not {self.latency_s}")
+
+
+@dataclass(frozen=True)
+class FakeDroneConfig:
+    """One fake drone: initial state (see `VehicleConfig`), radio faults and radio settings."""
+
+    vehicle: VehicleConfig = field(default_factory=VehicleConfig)
+    faults: LinkFaults = field(default_factory=LinkFaults)
+    rssi_dbm: int = 35
+    """Reported RSSI (-dBm, as the firmware's `radio.rssi`)."""
+    channel: int | None = None
+    """Radio channel the drone listens on (None: any), so a URI with another channel gets no answer."""
+
+    @classmethod
+    def at(cls, x: float, y: float, z: float = 0.0, **kwargs: object) -> FakeDroneConfig:
+        """Shorthand: a drone at (x, y, z) metres; keyword arguments go to `VehicleConfig` (yaw_deg, initial_vbat_v,
+        auto_arm, positioning) or to this class (faults, rssi_dbm, channel)."""
+        own = {k: kwargs.pop(k) for k in ("faults", "rssi_dbm", "channel") if k in kwargs}
+        return cls(vehicle=VehicleConfig(position=(x, y, z), **kwargs), **own)  # type: ignore[arg-type]
+
+
+@dataclass(frozen=True)
+class RadioTiming:
+    """Timing of the emulated Crazyradio."""
+
+    idle_poll_s: float = 0.01
+    """Interval of empty polls when nothing is to be sent (cflib's radio thread relaxes to 10 ms)."""
+    failed_attempt_s: float = 0.001
+    """Time a lost ack costs before the next attempt."""
+    max_lost_acks: int = 100
+    """Lost acks in a row before the link error (cflib's radio driver: 100)."""
+    arc_retries: int = 3
+    """Automatic retransmissions within one transaction (cflib sets 3)."""
+    transaction_s: float = 0.0
+    """Air time each transaction holds its dongle (all links on one dongle number share it); 0 = unlimited."""
+
+
+def parse_address(address: int | str) -> int:
+    """A radio address as an integer (hexadecimal strings accepted)."""
+    return int(address, 16) if isinstance(address, str) else int(address)
+
+
+class SimDrone:
+    """World-side state of one drone: its firmware, downlink queue, faults and attached links. Thread-safe."""
+
+    def __init__(self, address: int, config: FakeDroneConfig, now_s: float, seed: int) -> None:
+        self.address = address
+        self.config = config
+        self.firmware = FakeFirmware(config.vehicle, now_s=now_s, rssi=config.rssi_dbm)
+        self.rng = random.Random(seed)
+        self._lock = threading.Lock()
+        self._tx: deque[Packet] = deque()
+        self._wakers: set[threading.Event] = set()
+        self._observers: list[PacketObserver] = []
+        self.link_dropped = False
+        self.drop_fault_applied = False
+        self.tx_dropped = 0
+        """Downlink packets dropped because the queue was full."""
+        self.transactions = 0
+        """Acknowledged radio transactions (packets and empty polls) with this drone."""
+
+    def reachable(self, channel: int) -> bool:
+        """True if the drone answers the radio on `channel` now."""
+        wanted = self.config.channel
+        return self.firmware.powered and not self.link_dropped and (wanted is None or wanted == channel)
+
+    def attach(self, waker: threading.Event) -> None:
+        with self._lock:
+            self._wakers.add(waker)
+
+    def detach(self, waker: threading.Event) -> None:
+        """Detach a link; with no link left the downlink queue is flushed (no stale data for the next one)."""
+        with self._lock:
+            self._wakers.discard(waker)
+            if not self._wakers:
+                self._tx.clear()
+
+    def add_observer(self, observer: PacketObserver) -> None:
+        with self._lock:
+            self._observers.append(observer)
+
+    def remove_observer(self, observer: PacketObserver) -> None:
+        with self._lock:
+            if observer in self._observers:
+                self._observers.remove(observer)
+
+    def enqueue(self, packets: list[Packet]) -> None:
+        """Queue downlink packets and wake the attached links (dropped while no link is attached)."""
+        if not packets:
+            return
+        with self._lock:
+            if not self._wakers:
+                return  # no link attached: nobody polls, the firmware's queue would only fill with stale data
+            for packet in packets:
+                if len(self._tx) >= TX_QUEUE_SIZE:
+                    self.tx_dropped += 1
+                    continue
+                self._tx.append(packet)
+            wakers = list(self._wakers)
+        for waker in wakers:
+            waker.set()
+
+    def has_downlink(self) -> bool:
+        return bool(self._tx)
+
+    def exchange(self, uplink: tuple[int, bytes] | None, now_s: float) -> Packet | None:
+        """One acknowledged radio transaction: deliver `uplink` (header, payload) to the firmware, return at most one
+        queued downlink packet (the ack payload)."""
+        if uplink is not None:
+            header, payload = uplink
+            port, channel = (header >> 4) & 0x0F, header & 0x03
+            replies = self.firmware.handle(port, channel, payload, now_s)
+            self.enqueue(replies)
+            with self._lock:
+                observers = list(self._observers)
+            stamp = time.monotonic()
+            for observer in observers:
+                try:
+                    observer(port, channel, payload, stamp)
+                except Exception:  # an observer must not break the radio
+                    logger.exception("packet observer failed")
+        with self._lock:
+            self.transactions += 1
+            return self._tx.popleft() if self._tx else None
+
+
+class FakeWorld:
+    """Fake Crazyflies keyed by radio address, stepped in real time by one thread.
+
+    Use as a context manager or call `start()` / `close()`; `fake_radio.register(world)` makes cflib reach it
+    through ``fake://`` URIs (the first link to connect starts it). Closing the world powers every drone off:
+    connected cflib links then fail with a link error.
+    """
+
+    def __init__(
+        self,
+        drones: Mapping[int | str, FakeDroneConfig],
+        *,
+        step_s: float = 0.01,
+        timing: RadioTiming | None = None,
+        seed: int = 0,
+    ) -> None:
+        self.step_s = step_s
+        self.timing = timing or RadioTiming()
+        self.seed = seed
+        self._t0 = time.monotonic()
+        self._drones = {
+            parse_address(a): SimDrone(parse_address(a), cfg, -BOOT_S, seed * 1_000_003 + parse_address(a) % 1_000_003)
+            for a, cfg in drones.items()
+        }
+        self._lock = threading.Lock()
+        self._dongles: dict[int, threading.Lock] = {}
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._started = False
+
+    # Life cycle -----------------------------------------------------------------------------------------------
+
+    def start(self) -> FakeWorld:
+        """Boot the firmwares (`BOOT_S`), then start the clock and the dynamics thread (idempotent). World time 0 is
+        the first start."""
+        with self._lock:
+            if self._started:
+                return self
+            self._started = True
+            ticks = round(BOOT_S / self.step_s)
+            for drone in self._drones.values():
+                for tick in range(1, ticks + 1):
+                    drone.firmware.step(-BOOT_S + tick * self.step_s)
+            self._t0 = time.monotonic()
+            self._thread = threading.Thread(target=self._run, name="FakeWorld", daemon=True)
+            self._thread.start()
+        return self
+
+    def close(self) -> None:
+        """Stop the dynamics thread and power every drone off (links fail with a link error)."""
+        self._stop.set()
+        with self._lock:
+            for drone in self._drones.values():
+                drone.link_dropped = True
+        if self._thread is not None and self._thread is not threading.current_thread():
+            self._thread.join(timeout=2.0)
+
+    def __enter__(self) -> FakeWorld:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    @property
+    def running(self) -> bool:
+        return self._started and not self._stop.is_set()
+
+    def time_s(self) -> float:
+        """World time in seconds (0 before `start`)."""
+        return time.monotonic() - self._t0 if self._started else 0.0
+
+    # Drones ---------------------------------------------------------------------------------------------------
+
+    @property
+    def addresses(self) -> tuple[int, ...]:
+        return tuple(self._drones)
+
+    def drone(self, address: int | str) -> SimDrone | None:
+        """The drone at `address`, None if there is none."""
+        return self._drones.get(parse_address(address))
+
+    def firmware(self, address: int | str) -> FakeFirmware:
+        """The firmware at `address` (KeyError if none)."""
+        return self._drones[parse_address(address)].firmware
+
+    def snapshot(self, address: int | str) -> FirmwareSnapshot:
+        return self.firmware(address).snapshot()
+
+    def snapshots(self) -> dict[int, FirmwareSnapshot]:
+        return {address: drone.firmware.snapshot() for address, drone in self._drones.items()}
+
+    def true_poses(self) -> dict[int, tuple[tuple[float, float, float], tuple[float, float, float, float]]]:
+        """address -> (position m, quaternion qx, qy, qz, qw) of every drone's true pose (yaw only)."""
+        poses = {}
+        for address, snap in self.snapshots().items():
+            half = math.radians(snap.yaw_deg) / 2.0
+            poses[address] = (snap.position, (0.0, 0.0, math.sin(half), math.cos(half)))
+        return poses
+
+    def uri(self, address: int | str, *, devid: int = 0, channel: int | None = None, datarate: str = "2M") -> str:
+        """The ``fake://`` URI of a drone."""
+        addr = parse_address(address)
+        drone = self._drones.get(addr)
+        chan = channel if channel is not None else (drone.config.channel if drone and drone.config.channel else 80)
+        return f"fake://{devid}/{chan}/{datarate}/{addr:010X}"
+
+    def drop_link(self, address: int | str) -> None:
+        """The drone stops answering the radio now (it keeps flying on its own)."""
+        self._drones[parse_address(address)].link_dropped = True
+
+    def restore_link(self, address: int | str) -> None:
+        """The drone answers the radio again (a new connection is needed after cflib dropped the link)."""
+        self._drones[parse_address(address)].link_dropped = False
+
+    def reboot(self, address: int | str) -> None:
+        """Power-cycle one drone's firmware (clears a lock), on the floor where it is."""
+        self._drones[parse_address(address)].firmware.reboot(self.time_s())
+
+    def add_packet_observer(self, address: int | str, observer: PacketObserver) -> None:
+        """Call `observer` after the firmware at `address` handled each uplink packet (on the link's thread)."""
+        self._drones[parse_address(address)].add_observer(observer)
+
+    def remove_packet_observer(self, address: int | str, observer: PacketObserver) -> None:
+        self._drones[parse_address(address)].remove_observer(observer)
+
+    def wait_until(
+        self, predicate: Callable[[FakeWorld], bool], timeout_s: float, poll_s: float = 0.01
+    ) -> bool:
+        """Poll `predicate(world)` until it is true (returns True) or `timeout_s` passes (returns False)."""
+        deadline = time.monotonic() + timeout_s
+        while True:
+            if predicate(self):
+                return True
+            if time.monotonic() >= deadline:
+                return False
+            time.sleep(poll_s)
+
+    def dongle_lock(self, devid: int) -> threading.Lock:
+        """The lock that serialises transactions on one dongle number."""
+        with self._lock:
+            return self._dongles.setdefault(devid, threading.Lock())
+
+    # Dynamics thread ------------------------------------------------------------------------------------------
+
+    def _run(self) -> None:
+        next_s = self.step_s
+        while not self._stop.is_set():
+            now = self.time_s()
+            if now < next_s:
+                self._stop.wait(next_s - now)
+                continue
+            next_s = now + self.step_s if now - next_s > 0.1 else next_s + self.step_s
+            for drone in self._drones.values():
+                faults = drone.config.faults
+                if faults.drop_link_at_s is not None and now >= faults.drop_link_at_s and not drone.drop_fault_applied:
+                    logger.info("fake drone %010X: link dropped at %.3f s (fault)", drone.address, now)
+                    drone.drop_fault_applied = drone.link_dropped = True
+                drone.enqueue(drone.firmware.step(now))

@@ -1,0 +1,234 @@
+"""`CflibBackend` over the fake radio (real cflib underneath)."""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import pytest
+
+from rpf_fly.radio.backend import DroneBackend, PmState
+from rpf_fly.radio.cflib_backend import CflibBackend
+from rpf_fly.radio.fake_world import FakeDroneConfig, FakeWorld
+
+MakeWorld = Callable[..., FakeWorld]
+
+
+def address(index: int) -> int:
+    return 0xE7E7E7E700 + index
+
+
+def wait_for(condition: Callable[[], bool], timeout_s: float, poll_s: float = 0.02) -> bool:
+    deadline = time.monotonic() + timeout_s
+    while not condition():
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(poll_s)
+    return True
+
+
+@pytest.fixture
+def backends() -> Iterator[Callable[..., CflibBackend]]:
+    made: list[CflibBackend] = []
+
+    def make(**kwargs: object) -> CflibBackend:
+        backend = CflibBackend(**kwargs)  # type: ignore[arg-type]
+        made.append(backend)
+        return backend
+
+    yield make
+    for backend in made:
+        backend.close()
+
+
+def names_to_uris(world: FakeWorld) -> dict[str, str]:
+    return {f"cf{i}": world.uri(a) for i, a in enumerate(world.addresses)}
+
+
+def test_backend_implements_the_protocol() -> None:
+    assert isinstance(CflibBackend(), DroneBackend)
+
+
+def test_connects_ten_drones_and_reports_preflight_state(make_world: MakeWorld, toc_cache: Path,
+                                                         backends: Callable[..., CflibBackend]) -> None:
+    world = make_world(10)
+    backend = backends(cache_dir=toc_cache)
+    start = time.monotonic()
+    assert backend.connect(names_to_uris(world)) == {}
+    assert time.monotonic() - start < 3.0
+    assert backend.names() == tuple(f"cf{i}" for i in range(10))
+    assert wait_for(lambda: all(s.link.latency_ms is not None for s in backend.states().values()), 2.0)
+    for i, state in enumerate(backend.states().values()):
+        assert state.link.up and state.link.error is None and state.link.quality_pct == pytest.approx(100.0)
+        assert 0.0 < state.link.latency_ms < 50.0
+        assert state.battery.voltage_v == pytest.approx(4.15, abs=0.01) and not state.battery.low
+        assert state.supervisor.armed and state.supervisor.can_fly and not state.supervisor.flying
+        assert not state.supervisor.locked and not state.supervisor.tumbled and not state.supervisor.crashed
+        assert state.position_m == pytest.approx((0.5 * i, 0.0, 0.0))
+        params = world.snapshot(address(i)).params
+        assert params["stabilizer.estimator"] == 2 and params["commander.enHighLevel"] == 1
+    stamp = backend.state("cf4").telemetry_stamp_s
+    assert wait_for(lambda: backend.state("cf4").telemetry_stamp_s > stamp, 0.5)  # 10 Hz status
+
+
+def test_one_drones_failure_does_not_block_the_others(make_world: MakeWorld, toc_cache: Path,
+                                                      backends: Callable[..., CflibBackend]) -> None:
+    world = make_world(3)
+    drones = names_to_uris(world)
+    drones["ghost"] = world.uri(address(9))
+    backend = backends(cache_dir=toc_cache)
+    start = time.monotonic()
+    errors = backend.connect(drones)
+    assert time.monotonic() - start < 3.0
+    assert list(errors) == ["ghost"] and "Too many packets lost" in errors["ghost"]
+    ghost = backend.state("ghost")
+    assert not ghost.link.up and "Too many packets lost" in ghost.link.error and ghost.battery is None
+    assert not backend.takeoff("ghost", 0.5, 1.0) and not backend.send_position_setpoint("ghost", 0, 0, 0.5, 0)
+    assert backend.emergency_stop("ghost") == {"ghost": "emergency stop not delivered: link down"}
+    assert all(backend.state(n).link.up for n in ("cf0", "cf1", "cf2"))
+    assert backend.takeoff("cf1", 0.4, 0.5)
+    assert world.wait_until(lambda w: w.snapshot(address(1)).position[2] > 0.35, 2.0)
+    with pytest.raises(KeyError):
+        backend.state("nobody")
+
+
+def test_flight_cycle_with_arming_streaming_hand_over_and_landing(make_world: MakeWorld, toc_cache: Path,
+                                                                  backends: Callable[..., CflibBackend]) -> None:
+    world = make_world({address(i): FakeDroneConfig.at(0.5 * i, 0.0, auto_arm=False) for i in range(2)})
+    backend = backends(cache_dir=toc_cache)
+    assert backend.connect(names_to_uris(world)) == {}
+    assert not backend.state("cf0").supervisor.armed and backend.state("cf0").supervisor.can_be_armed
+    backend.takeoff("cf0", 0.5, 0.5)  # not armed: the firmware refuses
+    for name in backend.names():
+        assert backend.arm(name)
+    assert wait_for(lambda: all(s.supervisor.armed and s.supervisor.can_fly for s in backend.states().values()), 1.0)
+    assert world.snapshot(address(0)).hl_commands_rejected == 1
+    for name in backend.names():
+        assert backend.takeoff(name, 0.5, 0.8)
+    assert wait_for(lambda: all(s.supervisor.flying and abs(s.position_m[2] - 0.5) < 0.02
+                                for s in backend.states().values()), 2.5)
+    for _ in range(20):  # 1 s at 20 Hz
+        for i, name in enumerate(backend.names()):
+            assert backend.send_position_setpoint(name, 0.5 * i + 0.2, 0.1, 0.6, 30.0)
+        time.sleep(0.05)
+    for i, name in enumerate(backend.names()):
+        assert backend.state(name).position_m == pytest.approx((0.5 * i + 0.2, 0.1, 0.6), abs=0.03)
+    assert world.snapshot(address(0)).yaw_deg == pytest.approx(30.0, abs=2.0)  # yaw in degrees
+    for name in backend.names():
+        assert backend.hand_over(name, hold_duration_s=0.5)
+    time.sleep(2.3)  # past the 2 s watchdog: the high-level commander holds the drones
+    for i in range(2):
+        snap = world.snapshot(address(i))
+        assert snap.supervisor_state == "Flying" and snap.hl_state == "FLYING"
+        assert snap.position == pytest.approx((0.5 * i + 0.2, 0.1, 0.6), abs=0.02)
+        assert snap.packets_received[(7, 1)] == 1  # exactly one notify-setpoint-stop
+    for name in backend.names():
+        assert backend.land(name, 0.0, 0.8)
+    assert wait_for(lambda: all(abs(s.position_m[2]) < 0.01 for s in backend.states().values()), 2.0)
+    assert not any(world.snapshot(address(i)).motors_on for i in range(2))
+    assert backend.stop("cf0") and world.snapshot(address(0)).hl_state == "IDLE"
+
+
+def test_streaming_then_land_hands_over_with_notify(make_world: MakeWorld, toc_cache: Path,
+                                                    backends: Callable[..., CflibBackend]) -> None:
+    world = make_world(1)
+    backend = backends(cache_dir=toc_cache)
+    assert backend.connect(names_to_uris(world)) == {}
+    backend.takeoff("cf0", 0.5, 0.5)
+    assert world.wait_until(lambda w: w.snapshot(address(0)).position[2] > 0.45, 2.0)
+    for _ in range(6):
+        backend.send_position_setpoint("cf0", 0.1, 0.0, 0.5, 0.0)
+        time.sleep(0.05)
+    assert backend.land("cf0", 0.0, 0.6)
+    assert world.wait_until(lambda w: w.snapshot(address(0)).hl_state == "LANDING", 0.5)
+    assert world.wait_until(lambda w: w.snapshot(address(0)).position[2] == 0.0, 1.5)
+    snap = world.snapshot(address(0))
+    assert snap.packets_received[(7, 1)] == 1 and not snap.locked
+    assert snap.position[0] == pytest.approx(0.1, abs=0.05)  # landed where it was, not dropped
+
+
+def test_link_loss_is_surfaced_per_drone(make_world: MakeWorld, toc_cache: Path,
+                                         backends: Callable[..., CflibBackend]) -> None:
+    world = make_world(3)
+    backend = backends(cache_dir=toc_cache)
+    lost: list[tuple[str, str, float]] = []
+    event = threading.Event()
+    backend.add_link_lost_callback(lambda name, reason: (lost.append((name, reason, time.monotonic())),
+                                                         event.set()))
+    assert backend.connect(names_to_uris(world)) == {}
+    for name in backend.names():
+        backend.takeoff(name, 0.5, 0.5)
+    assert world.wait_until(lambda w: all(s.position[2] > 0.45 for s in w.snapshots().values()), 2.0)
+    dropped_at = time.monotonic()
+    world.drop_link(address(1))
+    assert event.wait(2.0)
+    assert [(name, reason) for name, reason, _ in lost] == [("cf1", "Too many packets lost")]
+    assert lost[0][2] - dropped_at < 1.0
+    state = backend.state("cf1")
+    assert not state.link.up and "Too many packets lost" in state.link.error and state.link.lost_at_s is not None
+    assert not backend.send_position_setpoint("cf1", 0.0, 0.0, 0.5, 0.0) and not backend.land("cf1")
+    stamps = {n: backend.state(n).telemetry_stamp_s for n in ("cf0", "cf2")}
+    assert wait_for(lambda: all(backend.state(n).telemetry_stamp_s > stamps[n] for n in stamps), 0.5)
+    assert backend.land("cf0", 0.0, 0.5) and backend.land("cf2", 0.0, 0.5)
+    assert world.wait_until(lambda w: w.snapshot(address(0)).position[2] == 0.0
+                            and w.snapshot(address(2)).position[2] == 0.0, 2.0)
+    assert world.snapshot(address(1)).flying  # the lost drone hovers on under its high-level commander
+    time.sleep(0.2)
+    assert len(lost) == 1
+
+
+def test_emergency_stop_one_then_all(make_world: MakeWorld, toc_cache: Path,
+                                     backends: Callable[..., CflibBackend]) -> None:
+    world = make_world(3)
+    backend = backends(cache_dir=toc_cache)
+    assert backend.connect(names_to_uris(world)) == {}
+    for name in backend.names():
+        backend.takeoff(name, 0.5, 0.5)
+    assert world.wait_until(lambda w: all(s.position[2] > 0.45 for s in w.snapshots().values()), 2.0)
+    assert backend.emergency_stop("cf1") == {}
+    assert wait_for(lambda: backend.state("cf1").supervisor.locked, 1.0)
+    assert world.wait_until(lambda w: w.snapshot(address(1)).position[2] == 0.0, 1.0)
+    assert world.snapshot(address(0)).flying and world.snapshot(address(2)).flying
+    assert backend.emergency_stop() == {}
+    assert wait_for(lambda: all(s.supervisor.locked and not s.supervisor.flying
+                                for s in backend.states().values()), 1.0)
+    backend.takeoff("cf0", 0.5, 0.5)
+    backend.send_position_setpoint("cf2", 0.0, 0.0, 0.5, 0.0)
+    time.sleep(0.3)
+    assert all(s.position[2] == 0.0 and not s.motors_on for s in world.snapshots().values())
+
+
+def test_extpose_configures_and_feeds_the_estimator(make_world: MakeWorld, toc_cache: Path,
+                                                   backends: Callable[..., CflibBackend]) -> None:
+    world = make_world({address(0): FakeDroneConfig.at(1.0, 1.0, positioning="extpos")})
+    backend = backends(cache_dir=toc_cache, use_extpose=True, ext_quat_std_dev=0.01, ext_pos_std_dev=0.002)
+    assert backend.connect(names_to_uris(world)) == {}
+    params = world.snapshot(address(0)).params
+    assert params["locSrv.extQuatStdDev"] == pytest.approx(0.01) and params["locSrv.extPosStdDev"] == pytest.approx(
+        0.002)
+    assert backend.state("cf0").position_m == pytest.approx((0.0, 0.0, 0.0))  # no mocap yet
+    yaw = math.radians(45.0)
+    assert backend.send_extpose("cf0", (1.0, 1.0, 0.0), (0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2)))
+    assert wait_for(lambda: backend.state("cf0").position_m == pytest.approx((1.0, 1.0, 0.0), abs=1e-4), 1.0)
+    assert world.snapshot(address(0)).estimate == pytest.approx((1.0, 1.0, 0.0), abs=1e-4)
+    assert backend.send_extpos("cf0", (1.2, 1.0, 0.0))
+    assert wait_for(lambda: backend.state("cf0").position_m[0] == pytest.approx(1.2, abs=1e-4), 1.0)
+
+
+def test_reset_estimators_and_low_battery(make_world: MakeWorld, toc_cache: Path,
+                                          backends: Callable[..., CflibBackend]) -> None:
+    world = make_world({address(0): FakeDroneConfig(), address(1): FakeDroneConfig.at(0.5, 0.0, initial_vbat_v=3.1)})
+    backend = backends(cache_dir=toc_cache, reset_estimators=True)
+    start = time.monotonic()
+    assert backend.connect(names_to_uris(world)) == {}
+    assert 4.5 < time.monotonic() - start < 9.0  # ten samples at 2 Hz
+    for i in range(2):
+        snap = world.snapshot(address(i))
+        assert snap.variance_m2 < 1e-3 and snap.params["kalman.resetEstimation"] == 0
+    # the low drone has been below 3.2 V for more than 5 s (1 s boot + connect + reset)
+    assert wait_for(lambda: backend.battery("cf1").pm_state is PmState.LOW_POWER, 1.0)
+    assert backend.battery("cf1").low and backend.battery("cf1").voltage_v == pytest.approx(3.1, abs=0.01)
+    assert not backend.battery("cf0").low

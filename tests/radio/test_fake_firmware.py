@@ -1,0 +1,375 @@
+"""The fake firmware at the packet level, on synthetic time (no threads, no radio, exact timings)."""
+
+from __future__ import annotations
+
+import errno
+import math
+import struct
+from collections.abc import Callable
+
+import pytest
+from cflib.crazyflie.log import LogTocElement
+from cflib.crazyflie.param import ParamTocElement
+from cflib.utils.encoding import compress_quaternion
+
+from rpf_fly.radio.fake_firmware import LOG_TOC, PARAM_TOC, PROTOCOL_VERSION, FakeFirmware
+from rpf_fly.radio.fake_planner import Trajectory
+from rpf_fly.radio.fake_vehicle import TRACK_TAU_S, VehicleConfig
+
+DT = 0.01
+
+
+def takeoff(height: float, duration: float) -> bytes:
+    return struct.pack("<BBff?f", 7, 0, height, 0.0, True, duration)
+
+
+def land(height: float, duration: float) -> bytes:
+    return struct.pack("<BBff?f", 8, 0, height, 0.0, True, duration)
+
+
+def go_to(x: float, y: float, z: float, yaw_rad: float, duration: float, linear: bool = False) -> bytes:
+    return struct.pack("<BBBBfffff", 12, 0, 0, linear, x, y, z, yaw_rad, duration)
+
+
+def position(x: float, y: float, z: float, yaw_deg: float = 0.0) -> bytes:
+    return struct.pack("<Bffff", 7, x, y, z, yaw_deg)
+
+
+class Sim:
+    """A firmware on a synthetic clock stepped at 100 Hz."""
+
+    def __init__(self, **config: object) -> None:
+        self.t = 0.0
+        self.fw = FakeFirmware(VehicleConfig(**config))  # type: ignore[arg-type]
+        self.log_packets: list[tuple[float, bytes]] = []
+
+    def send(self, port: int, channel: int, data: bytes) -> list[tuple[int, int, bytes]]:
+        return self.fw.handle(port, channel, data, self.t)
+
+    def run(self, seconds: float, each: Callable[[float], None] | None = None) -> None:
+        end = self.t + seconds
+        while self.t < end - 1e-9:
+            self.t = round(self.t + DT, 6)
+            if each is not None:
+                each(self.t)
+            for _, _, payload in self.fw.step(self.t):
+                self.log_packets.append((self.t, payload))
+
+    def snap(self):
+        return self.fw.snapshot()
+
+    def hover(self, height: float = 0.5) -> None:
+        """Arm (auto) and take off to `height`, then settle."""
+        self.run(0.1)
+        assert self.send(8, 0, takeoff(height, 1.0))[0][2][3] == 0
+        self.run(1.5)
+        assert self.snap().position[2] == pytest.approx(height, abs=0.01)
+
+
+def test_tocs_decode_with_cflib_and_have_stable_distinct_crcs() -> None:
+    for toc, element_class in ((LOG_TOC, LogTocElement), (PARAM_TOC, ParamTocElement)):
+        for entry in toc.entries:
+            item = toc.item_reply(entry.ident)
+            ident = struct.unpack("<H", item[1:3])[0]
+            element = element_class(ident, item[3:])
+            assert (element.ident, element.group, element.name, element.ctype) == (
+                entry.ident, entry.group, entry.name, entry.ctype)
+        count, crc = struct.unpack("<HI", toc.info_reply()[1:])
+        assert count == len(toc.entries) and crc == toc.crc
+    assert LOG_TOC.crc != PARAM_TOC.crc
+    needed = {"stateEstimate.x", "stateEstimate.vz", "pm.vbat", "pm.state", "supervisor.info", "kalman.varPZ",
+              "radio.rssi"}
+    assert needed <= set(LOG_TOC.by_name)
+    assert LOG_TOC.by_name["pm.state"].ctype == "int8_t"
+    assert LOG_TOC.by_name["supervisor.info"].ctype == "uint16_t"
+    assert {"stabilizer.estimator", "commander.enHighLevel", "locSrv.extQuatStdDev", "locSrv.extPosStdDev",
+            "kalman.resetEstimation"} <= set(PARAM_TOC.by_name)
+    # a second firmware has the very same tables (cflib's cache keys on the CRC)
+    fw = FakeFirmware()
+    assert fw.handle(5, 0, bytes([3]), 0.0)[0][2] == LOG_TOC.info_reply()
+
+
+def test_link_platform_and_memory_answers() -> None:
+    fw = FakeFirmware()
+    assert fw.handle(15, 1, bytes([0]), 0.0)[0][2][:18] == b"Bitcraze Crazyflie"
+    ping = struct.pack("<Bd", 0, 123.5)
+    assert fw.handle(15, 0, ping, 0.0) == [(15, 0, ping)]
+    assert fw.handle(13, 1, bytes([0]), 0.0) == [(13, 1, bytes([0, PROTOCOL_VERSION]))]
+    assert fw.handle(4, 0, bytes([1]), 0.0) == [(4, 0, bytes([1, 0]))]
+    assert fw.handle(5, 1, bytes([5]), 0.0) == [(5, 1, bytes([5, 0, 0]))]
+
+
+def test_param_read_write_and_misc() -> None:
+    fw = FakeFirmware()
+    ident = PARAM_TOC.by_name["stabilizer.estimator"].ident
+    head = struct.pack("<H", ident)
+    assert fw.handle(2, 1, head, 0.0) == [(2, 1, head + b"\0" + bytes([0]))]
+    assert fw.handle(2, 2, head + bytes([2]), 0.0) == [(2, 2, head + bytes([2]))]
+    assert fw.handle(2, 1, head, 0.0)[0][2][3] == 2
+    read_only = struct.pack("<H", PARAM_TOC.by_name["firmware.revision0"].ident)
+    assert fw.handle(2, 2, read_only + bytes(4), 0.0) == []
+    unknown = struct.pack("<H", len(PARAM_TOC))
+    assert fw.handle(2, 1, unknown, 0.0) == [(2, 1, unknown + bytes([errno.ENOENT]))]
+    persistent = PARAM_TOC.by_name["pm.lowVoltage"]
+    assert persistent.persistent
+    reply = fw.handle(2, 3, struct.pack("<BH", 7, persistent.ident), 0.0)[0][2]
+    assert reply[3:] == bytes([0, 1])  # extended type v2: status ok, persistent
+    default = fw.handle(2, 3, struct.pack("<BH", 8, persistent.ident), 0.0)[0][2]
+    assert struct.unpack("<f", default[4:])[0] == pytest.approx(3.2)
+    by_name = b"\0stabilizer\0estimator\0" + bytes([0x08, 1])
+    assert fw.handle(2, 3, by_name, 0.0)[0][2][-1] == 0
+    assert fw.snapshot().params["stabilizer.estimator"] == 1
+
+
+def test_log_blocks_create_start_data_stop_delete() -> None:
+    sim = Sim(position=(1.0, 2.0, 0.0))
+    ids = [LOG_TOC.by_name[n].ident for n in ("stateEstimate.x", "pm.state")]
+    create = bytes([6, 1, 0x07, *struct.pack("<H", ids[0]), 0x04, *struct.pack("<H", ids[1])])
+    assert sim.send(5, 1, create) == [(5, 1, bytes([6, 1, 0]))]
+    assert sim.send(5, 1, create)[0][2][2] == errno.EEXIST
+    assert sim.send(5, 1, bytes([3, 9, 10]))[0][2][2] == errno.ENOENT
+    assert sim.send(5, 1, bytes([3, 1, 2]))[0][2] == bytes([3, 1, 0])  # every 20 ms
+    sim.run(1.0)
+    assert 49 <= len(sim.log_packets) <= 51
+    stamp_ms = int.from_bytes(sim.log_packets[-1][1][1:4], "little")
+    assert stamp_ms == pytest.approx(1000, abs=20)
+    x, pm_state = struct.unpack("<fb", sim.log_packets[-1][1][4:])
+    assert (x, pm_state) == (pytest.approx(1.0), 0)
+    assert sim.send(5, 1, bytes([4, 1]))[0][2] == bytes([4, 1, 0])
+    sim.log_packets.clear()
+    sim.run(0.2)
+    assert sim.log_packets == []
+    assert sim.send(5, 1, bytes([2, 1]))[0][2] == bytes([2, 1, 0])
+    too_big = bytes([6, 2]) + b"".join(bytes([0x07, *struct.pack("<H", ids[0])]) for _ in range(7))
+    assert sim.send(5, 1, too_big)[0][2][2] == errno.E2BIG
+
+
+def test_takeoff_reaches_height_in_duration_and_is_refused_when_flying() -> None:
+    sim = Sim(position=(1.0, -1.0, 0.0))
+    sim.run(0.1)
+    assert sim.snap().supervisor_state == "Ready to fly"  # auto-arming
+    command = takeoff(0.8, 2.0)
+    assert sim.send(8, 0, command) == [(8, 0, command[:3] + bytes([0]))]  # firmware answer: 3 bytes + errno
+    sim.run(1.0)
+    assert 0.3 < sim.snap().position[2] < 0.5  # mid-way along the smooth trajectory
+    sim.run(1.2)
+    snap = sim.snap()
+    assert snap.position == pytest.approx((1.0, -1.0, 0.8), abs=0.01)
+    assert snap.flying and snap.supervisor_bits & 0x0310 == 0x0310  # flying, HL active, trajectory finished
+    assert sim.send(8, 0, takeoff(1.0, 1.0))[0][2][3] == 1  # the firmware refuses a take-off when not idle
+
+
+def test_smooth_and_linear_trajectories() -> None:
+    smooth = Trajectory(0.0, 2.0, (0.0, 0.0, 0.0), (2.0, 0.0, 1.0), 0.0, 1.0)
+    assert smooth.evaluate(1.0)[0] == pytest.approx((1.0, 0.0, 0.5))
+    assert smooth.evaluate(0.0)[1] == (0.0, 0.0, 0.0) and smooth.evaluate(2.0)[1] == pytest.approx((0, 0, 0))
+    linear = Trajectory(0.0, 2.0, (0.0, 0.0, 0.0), (2.0, 0.0, 0.0), 0.0, 0.0, linear=True)
+    assert linear.evaluate(0.5)[0][0] == pytest.approx(0.5) and linear.evaluate(0.5)[1][0] == pytest.approx(1.0)
+
+
+def test_go_to_then_land_stops_motors() -> None:
+    sim = Sim()
+    sim.hover(0.5)
+    sim.send(8, 0, go_to(1.0, 0.5, 0.7, math.pi / 2, 1.0))
+    sim.run(1.0)
+    # a 1 m smooth go-to in 1 s peaks at 2.2 m/s in x: the drone is held to the firmware's 1.1 m/s and lags
+    assert 0.5 < sim.snap().position[0] < 0.95
+    sim.run(0.6)
+    snap = sim.snap()
+    assert snap.position == pytest.approx((1.0, 0.5, 0.7), abs=0.02)
+    assert snap.yaw_deg == pytest.approx(90.0, abs=2.0)
+    sim.send(8, 0, land(0.0, 1.0))
+    sim.run(1.1)
+    snap = sim.snap()
+    assert snap.position[2] == pytest.approx(0.0, abs=1e-6) and not snap.motors_on
+    assert snap.hl_state == "IDLE"
+
+
+def test_position_setpoints_track_with_first_order_lag() -> None:
+    sim = Sim()
+    sim.hover(0.5)
+    sim.run(0.5, lambda t: sim.send(7, 0, position(0.1, 0.0, 0.5)))
+    # 0.1 m step, time constant 0.25 s: after 0.5 s, 1 - e^-2 of the way
+    assert sim.snap().position[0] == pytest.approx(0.1 * (1 - math.exp(-0.5 / TRACK_TAU_S)), abs=0.004)
+    assert sim.snap().hl_state == "IDLE"  # streaming stopped the high-level plan
+
+
+def test_watchdog_levels_out_after_half_a_second_and_cuts_after_two() -> None:
+    sim = Sim()
+    sim.hover(0.6)
+    sim.run(0.5, lambda t: sim.send(7, 0, position(t * 0.4, 0.0, 0.6)))  # moving at 0.4 m/s
+    last = sim.snap().last_crtp_setpoint_s
+    sim.run(0.45)
+    assert sim.snap().supervisor_state == "Flying"
+    sim.run(0.1)
+    snap = sim.snap()
+    assert snap.supervisor_state == "Warning, level out" and snap.control_source == "level-out"
+    assert snap.entered("Warning, level out") - last == pytest.approx(0.5, abs=0.015)
+    assert snap.position[2] == pytest.approx(0.6, abs=0.02) and snap.velocity[0] > 0.1  # drifts, keeps height
+    sim.run(1.3)
+    snap = sim.snap()
+    assert snap.motors_on and snap.position[2] == pytest.approx(0.6, abs=0.02)
+    assert abs(snap.velocity[0]) < 0.4 * math.exp(-1.0)  # horizontal speed decays (level attitude)
+    sim.run(0.2)
+    snap = sim.snap()
+    assert snap.entered("Locked") - last == pytest.approx(2.0, abs=0.025)
+    assert snap.locked and not snap.flying and snap.supervisor_bits & 0x0050 == 0x0040
+    sim.run(0.5)
+    assert sim.snap().position[2] == 0.0  # fell to the floor
+    sim.send(7, 0, position(0.0, 0.0, 0.5))
+    sim.run(1.0)
+    assert sim.snap().position[2] == 0.0 and sim.snap().locked
+
+
+def test_high_level_hover_is_not_subject_to_the_watchdog() -> None:
+    sim = Sim()
+    sim.hover(0.5)
+    sim.run(10.0)
+    snap = sim.snap()
+    assert snap.supervisor_state == "Flying" and snap.position[2] == pytest.approx(0.5, abs=0.01)
+
+
+def test_notify_setpoint_stop_hands_over_to_the_high_level_commander() -> None:
+    sim = Sim()
+    sim.hover(0.5)
+    sim.run(0.5, lambda t: sim.send(7, 0, position(0.3, 0.0, 0.5)))
+    sim.send(7, 1, struct.pack("<BI", 0, 100))
+    sim.send(8, 0, go_to(0.3, 0.0, 0.5, 0.0, 0.5))
+    sim.run(3.0)  # well past the watchdog: the high-level commander holds the drone
+    snap = sim.snap()
+    assert snap.supervisor_state == "Flying" and snap.position == pytest.approx((0.3, 0.0, 0.5), abs=0.02)
+
+
+def test_notify_setpoint_stop_without_a_plan_cuts_the_motors() -> None:
+    # firmware 2026.08: remain_valid_ms is ignored; the idle high-level commander asks for motors off
+    sim = Sim()
+    sim.hover(0.5)
+    sim.run(0.3, lambda t: sim.send(7, 0, position(0.0, 0.0, 0.5)))
+    sim.send(7, 1, struct.pack("<BI", 0, 1000))
+    sim.run(0.05)
+    assert not sim.snap().motors_on
+    sim.run(0.5)
+    assert sim.snap().position[2] == 0.0
+
+
+def test_emergency_stop_latches_until_reboot() -> None:
+    sim = Sim()
+    sim.hover(0.5)
+    assert sim.send(9, 1, bytes([0x03])) == []
+    sim.run(0.5)
+    snap = sim.snap()
+    assert snap.locked and snap.emergency_stop_latched and snap.position[2] == 0.0 and not snap.motors_on
+    assert sim.send(9, 1, bytes([0x01, 1]))[0][2] == bytes([0x81, 0, 0])  # arming refused
+    assert sim.send(8, 0, takeoff(0.5, 1.0))[0][2][3] == errno.EBUSY
+    sim.run(1.0, lambda t: sim.send(7, 0, position(0.0, 0.0, 0.5)))
+    assert sim.snap().position[2] == 0.0 and sim.snap().locked
+    sim.fw.reboot(sim.t)
+    sim.hover(0.4)
+
+
+def test_legacy_localization_emergency_stop_and_rpyt_zero_thrust() -> None:
+    sim = Sim()
+    sim.hover(0.5)
+    sim.send(3, 0, struct.pack("<fffH", 0.0, 0.0, 0.0, 0))  # what cflib's close_link sends
+    sim.run(0.05)
+    assert not sim.snap().motors_on
+    other = Sim()
+    other.hover(0.5)
+    other.send(6, 1, bytes([3]))
+    other.run(0.1)
+    assert other.snap().locked
+
+
+def test_supervisor_state_query_and_arming_when_required() -> None:
+    sim = Sim(auto_arm=False)
+    sim.run(0.1)
+    bits = struct.unpack("<H", sim.send(9, 0, bytes([0x0C]))[0][2][1:])[0]
+    assert bits & 0x0F == 0x01  # can be armed, not armed, not auto-armed, cannot fly
+    assert sim.send(8, 0, takeoff(0.5, 1.0))[0][2][3] == errno.EBUSY
+    assert sim.send(9, 1, bytes([0x01, 1]))[0][2] == bytes([0x81, 1, 1])
+    sim.run(0.1)
+    assert sim.send(9, 0, bytes([0x02]))[0][2] == bytes([0x82, 1])  # "is armed" query
+    assert sim.snap().supervisor_state == "Ready to fly"
+    assert sim.send(8, 0, takeoff(0.5, 1.0))[0][2][3] == 0
+    sim.run(1.2)
+    sim.send(8, 0, land(0.0, 1.0))
+    sim.run(1.1 + 2.0 + 3.2)  # landing, flying hysteresis, landing timeout
+    snap = sim.snap()
+    assert not snap.armed and snap.supervisor_state == "Pre-flight checks passed"
+
+
+def test_external_position_moves_the_estimate_and_the_controller_follows_it() -> None:
+    sim = Sim(position=(1.0, 1.0, 0.0), positioning="extpos")
+    sim.run(0.1)
+    assert sim.snap().estimate == pytest.approx((0.0, 0.0, 0.0))  # kalman.initialX/Y/Z until mocap arrives
+    assert sim.snap().variance_m2 > 1e-3
+    sim.send(6, 0, struct.pack("<fff", 1.0, 1.0, 0.0))
+    assert sim.snap().estimate == pytest.approx((1.0, 1.0, 0.0))
+    sim.hover(0.5)
+    # the mocap says the drone is 0.1 m further in x than it is: the true drone settles 0.1 m short
+    sim.run(1.0, lambda t: sim.send(6, 0, struct.pack("<fff", sim.fw.vehicle.pos[0] + 0.1, 1.0,
+                                                        sim.fw.vehicle.pos[2])))
+    assert sim.snap().position[0] == pytest.approx(0.9, abs=0.01)
+    assert sim.snap().variance_m2 < 1e-3
+    quat = (0.0, 0.0, math.sin(math.pi / 8), math.cos(math.pi / 8))  # yaw 45 degrees
+    sim.send(6, 1, struct.pack("<Bfffffff", 8, 0.9, 1.0, 0.5, *quat))
+    assert math.degrees(sim.fw.vehicle.estimate_yaw) == pytest.approx(45.0, abs=1e-3)
+
+
+def test_kalman_reset_raises_then_settles_the_variance() -> None:
+    sim = Sim()
+    sim.run(0.1)
+    ident = struct.pack("<H", PARAM_TOC.by_name["kalman.resetEstimation"].ident)
+    sim.send(2, 2, ident + bytes([1]))
+    assert sim.snap().variance_m2 == pytest.approx(1.0, abs=0.01)
+    assert sim.snap().params["kalman.resetEstimation"] == 0
+    sim.run(0.5)
+    assert sim.snap().variance_m2 < 2e-4
+
+
+def test_low_battery_state_and_critical_shutdown() -> None:
+    sim = Sim(initial_vbat_v=3.40)
+    sim.hover(0.5)  # 0.25 V sag under load: 3.15 V < 3.2 V
+    assert sim.snap().vbat_v == pytest.approx(3.15, abs=0.01) and sim.snap().pm_state == 0
+    sim.run(5.0)
+    assert sim.snap().pm_state == 3
+    other = Sim(initial_vbat_v=3.20)
+    other.hover(0.5)  # 2.95 V under load, below both thresholds since the take-off
+    other.run(3.0)
+    assert other.snap().pm_state == 0 and other.snap().powered
+    other.run(1.0)  # both 5 s timers expire together: low power and, at once, critical shutdown
+    snap = other.snap()
+    assert not snap.powered and snap.pm_state == 4
+    other.run(0.5)
+    assert other.snap().position[2] == 0.0
+    assert other.send(15, 1, bytes([0])) == []  # a dead drone answers nothing
+
+
+def test_battery_drains_faster_in_flight() -> None:
+    idle, flying = Sim(), Sim()
+    flying.hover(0.5)
+    idle.run(flying.t)
+    start_idle, start_flying = idle.fw.vehicle.battery.open_v, flying.fw.vehicle.battery.open_v
+    idle.run(10.0)
+    flying.run(10.0)
+    assert start_idle - idle.fw.vehicle.battery.open_v == pytest.approx(0.002, rel=0.01)
+    assert start_flying - flying.fw.vehicle.battery.open_v == pytest.approx(0.017, rel=0.01)
+
+
+def test_other_setpoint_types() -> None:
+    sim = Sim()
+    sim.hover(0.5)
+    sim.run(1.0, lambda t: sim.send(7, 0, struct.pack("<Bffff", 8, 0.2, 0.0, 0.0, 0.0)))  # velocity world
+    assert sim.snap().velocity[0] == pytest.approx(0.2, abs=0.01)
+    x = sim.snap().position[0]
+    sim.run(1.0, lambda t: sim.send(7, 0, struct.pack("<Bffff", 10, 0.0, 0.0, 0.0, 0.7)))  # hover: vx, vy, z
+    assert sim.snap().position[2] == pytest.approx(0.7, abs=0.02) and sim.snap().position[0] - x < 0.1
+    full = struct.pack("<BhhhhhhhhhIhhh", 6, 300, -200, 600, 0, 0, 0, 0, 0, 0,
+                       compress_quaternion([0.0, 0.0, 0.0, 1.0]), 0, 0, 0)
+    sim.run(1.5, lambda t: sim.send(7, 0, full))
+    assert sim.snap().position == pytest.approx((0.3, -0.2, 0.6), abs=0.01)
+    sim.send(7, 0, bytes([0]))  # stop setpoint: motors off; nothing refreshes it, so the watchdog locks
+    sim.run(0.6)
+    assert sim.snap().position[2] == 0.0 and not sim.snap().motors_on
+    sim.run(1.5)
+    assert sim.snap().locked
