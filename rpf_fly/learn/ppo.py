@@ -64,6 +64,8 @@ class PPOConfig:
     obstacle_radius: float = 0.5
     """Arena A obstacles; the vanilla-PPO baseline trains with 0.1 m (the paper could not train it at 0.5 m)."""
     progress_reward: Literal["potential", "paper"] = "potential"
+    collision_penalty: float = 500.0
+    """The paper's -100 lets the policy trade collisions for shorter paths (docs/learning.md); 500 does not."""
     threads: int = 2
     checkpoint_every: int = 10
     eval_every: int = 10
@@ -88,6 +90,7 @@ class PPOConfig:
             max_neighbours=self.max_neighbours,
             obstacle_radius=self.obstacle_radius,
             progress_reward=self.progress_reward,
+            collision_penalty=self.collision_penalty,
         )
 
 

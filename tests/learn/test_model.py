@@ -1,0 +1,79 @@
+"""The actor-critic: masked attention, action ranges, normalisation."""
+
+import numpy as np
+import pytest
+import torch
+
+from rpf_fly.learn.model import ActorCritic, ModelConfig, RunningNorm
+
+
+def obs(batch=5, k=10, seed=0):
+    g = torch.Generator().manual_seed(seed)
+    local = torch.rand(batch, 4, generator=g) * 5
+    neighbours = torch.rand(batch, k, 3, generator=g) * 3
+    mask = (torch.arange(k)[None, :] < torch.tensor([0, 1, 3, 7, 10])[:batch, None]).float()
+    return local, neighbours * mask.unsqueeze(-1), mask
+
+
+@pytest.mark.parametrize("embedding", ["attention", "mean"])
+def test_no_neighbours_gives_zero_context_and_finite_actions(embedding):
+    model = ActorCritic(ModelConfig(embedding=embedding))
+    local, neighbours, mask = obs()
+    c = model.embedding(local, neighbours, mask)
+    assert torch.all(c[0] == 0)
+    assert torch.isfinite(model.deterministic(local, neighbours, mask)).all()
+
+
+@pytest.mark.parametrize("embedding", ["attention", "mean"])
+def test_permutation_invariant_and_padding_ignored(embedding):
+    model = ActorCritic(ModelConfig(embedding=embedding))
+    local, neighbours, mask = obs()
+    out = model.deterministic(local, neighbours, mask)
+    perm = torch.tensor([2, 0, 1, 3, 4, 5, 6, 7, 8, 9])
+    row = 3  # 7 neighbours: permute among the first three
+    n2 = neighbours.clone()
+    n2[row] = neighbours[row, perm]
+    assert torch.allclose(model.deterministic(local, n2, mask), out, atol=1e-6)
+    n3 = neighbours.clone()
+    n3[:, 9] = 99.0  # padding slot of rows with fewer than 10 neighbours
+    changed = model.deterministic(local, n3, mask)
+    assert torch.allclose(changed[:4], out[:4], atol=1e-6)
+
+
+def test_attention_weights_depend_on_neighbours_mean_does_not_weigh():
+    att = ActorCritic(ModelConfig(embedding="attention"))
+    local, neighbours, mask = obs()
+    c = att.embedding(local, neighbours, mask)
+    assert c.shape == (5, 64)
+
+
+def test_action_ranges_even_for_extreme_inputs():
+    local, neighbours, mask = obs()
+    for action, low, high in (("gains", [0, 0], [0.1, 5.0]), ("heading", [-2.5], [2.5])):
+        model = ActorCritic(ModelConfig(action=action))
+        with torch.no_grad():
+            for layer in model.actor:
+                if isinstance(layer, torch.nn.Linear):
+                    layer.weight.mul_(50)
+        a = model.to_action(torch.tensor([[-1e3, 1e3], [1e3, -1e3]])[:, : model.config.action_size])
+        assert torch.all(a >= torch.tensor(low) - 1e-9) and torch.all(a <= torch.tensor(high) + 1e-9)
+        out = model.deterministic(local * 100, neighbours, mask)
+        assert torch.all(out >= torch.tensor(low) - 1e-9) and torch.all(out <= torch.tensor(high) + 1e-9)
+
+
+def test_untrained_gains_policy_starts_near_vanilla_apf():
+    model = ActorCritic(ModelConfig())
+    out = model.deterministic(*obs())
+    assert torch.allclose(out[:, 0], torch.tensor(0.05), atol=0.005)
+    assert torch.allclose(out[:, 1], torch.tensor(2.5), atol=0.25)
+
+
+def test_running_norm_matches_numpy_over_batches():
+    norm = RunningNorm(3)
+    rng = np.random.default_rng(0)
+    batches = [rng.normal(2.0, 3.0, (n, 3)) for n in (50, 7, 300)]
+    for b in batches:
+        norm.update(torch.from_numpy(b).float())
+    everything = np.concatenate(batches)
+    assert norm.mean.numpy() == pytest.approx(everything.mean(0), rel=1e-4)
+    assert norm.var.numpy() == pytest.approx(everything.var(0), rel=1e-3)
