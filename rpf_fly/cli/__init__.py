@@ -26,7 +26,7 @@ def _root() -> None:
 
 def get_app() -> typer.Typer:
     """The app with every command module imported (idempotent)."""
-    from rpf_fly.cli import mocap_cmd, sim_cmd, train_cmd  # noqa: F401
+    from rpf_fly.cli import bench_cmd, fly_cmd, mocap_cmd, review_cmd, sim_cmd, train_cmd  # noqa: F401
 
     return app
 

@@ -25,6 +25,7 @@ def sim(
     seed: int = typer.Option(0, "--seed", help="Seed of the mission's start jitter (sim section)."),
     json_output: bool = typer.Option(False, "--json", help="Print the metrics JSON (docs/metrics.md) only."),
     plot: Optional[Path] = typer.Option(None, "--plot", help="Write XY trajectories with planner modes to a PNG."),
+    log: Optional[Path] = typer.Option(None, "--log", help="Write the run as an MCAP flight log (rpf-fly review)."),
 ) -> None:
     """Simulate MISSION with its planner (no radio, no mocap) and report success, collisions and path quality."""
     from rpf_fly.mission import MissionError, load_mission, with_planner
@@ -58,6 +59,13 @@ def sim(
         planner=loaded.planner.kind,
         seed=seed,
     )
+    if log is not None:
+        from rpf_fly.log.sim_log import write_sim_log
+
+        try:
+            write_sim_log(log, loaded, scenario, result, seed)
+        except OSError as err:
+            raise fail(f"{log}: cannot write the log: {err.strerror or err}")
     if plot is not None:
         from rpf_fly.sim.plot import plot_rollout
 

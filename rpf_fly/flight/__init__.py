@@ -1,1 +1,2 @@
-"""See docs/architecture.md for what this package holds."""
+"""The flight: per-drone planners on their own local views, the supervisor, the flight loop, the dry run
+(docs/flight.md)."""

@@ -20,6 +20,7 @@ from .model import (
     Obstacle,
     PlannerSettings,
     RadioSettings,
+    SafetySettings,
     SimSettings,
     Vec2,
 )
@@ -44,6 +45,7 @@ __all__ = [
     "Obstacle",
     "PlannerSettings",
     "RadioSettings",
+    "SafetySettings",
     "SimSettings",
     "Vec2",
 ]

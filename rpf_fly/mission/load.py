@@ -37,7 +37,7 @@ URI_FORM = ("radio://DONGLE/CHANNEL/RATE/ADDRESS[?key=value] (e.g. radio://0/80/
 DEFAULT_POLICY = "policies/{kind}.onnx"
 """Where a policy kind looks for its policy when the mission names none (resolved like ``planner.policy``)."""
 
-TOP_KEYS = ("name", "arena", "flight", "planner", "mocap", "radio", "sim", "obstacles", "drones", "formation")
+TOP_KEYS = ("name", "arena", "flight", "planner", "mocap", "radio", "sim", "safety", "obstacles", "drones", "formation")
 DRONE_KEYS = ("name", "uri", "rigid_body", "start", "goal")
 FORMATION_KEYS = ("kind", "count", "radius", "center", "uri_base", "name_prefix", "phase_deg")
 FORMATION_KINDS = ("circle_swap",)
@@ -308,6 +308,16 @@ RADIO_SPEC: dict[str, tuple[str, Reader]] = {
     "kind": ("kind", _choice(("cflib",))),
     "min_battery_v": ("min_battery_v", _num(POSITIVE)),
     "extpos": ("extpos", _choice(("extpos", "extpose"))),
+    "extpos_rate_hz": ("extpos_rate_hz", _num(POSITIVE)),
+}
+SAFETY_SPEC: dict[str, tuple[str, Reader]] = {
+    "pose_timeout_s": ("pose_timeout_s", _num(POSITIVE)),
+    "pose_lost_land_s": ("pose_lost_land_s", _num(POSITIVE)),
+    "on_separation": ("on_separation", _choice(("warn", "hold", "land"))),
+    "on_obstacle": ("on_obstacle", _choice(("warn", "hold", "land"))),
+    "planner_budget_s": ("planner_budget_s", _num(POSITIVE)),
+    "start_tolerance_m": ("start_tolerance_m", _num(POSITIVE)),
+    "arrival_hold_s": ("arrival_hold_s", _num(NON_NEGATIVE)),
 }
 SIM_SPEC: dict[str, tuple[str, Reader]] = {
     "time_limit_s": ("time_limit_s", _num(POSITIVE)),
@@ -479,6 +489,7 @@ class _MissionParser(_Checker):
 
         parts: dict[str, Any] = {"flight": m.FlightSettings(), "planner": m.PlannerSettings(),
                                  "mocap": m.MocapSettings(), "radio": m.RadioSettings(), "sim": m.SimSettings(),
+                                 "safety": m.SafetySettings(),
                                  "obstacles": (), "formation": None,
                                  "name": source.stem if source is not None else "mission"}
         readers: dict[str, Callable[[YNode], Any]] = {
@@ -487,6 +498,7 @@ class _MissionParser(_Checker):
             "flight": lambda n: self.settings(n, m.FlightSettings, FLIGHT_SPEC),
             "radio": lambda n: self.settings(n, m.RadioSettings, RADIO_SPEC),
             "sim": lambda n: self.settings(n, m.SimSettings, SIM_SPEC),
+            "safety": lambda n: self.settings(n, m.SafetySettings, SAFETY_SPEC),
         }
         for key, node in entries.items():  # document order
             parts[key] = readers[key](node)

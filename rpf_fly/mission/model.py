@@ -15,7 +15,7 @@ from typing import Literal, Optional
 
 Vec2 = tuple[float, float]
 
-PLANNER_KINDS = ("apf", "apf-paper", "rpf", "rpf-mean", "ppo")
+PLANNER_KINDS = ("apf", "apf-paper", "rpf", "rpf-mean", "ppo", "orca")
 """Planner kinds a mission (or ``--planner``) may name. ``rpf``, ``rpf-mean`` and ``ppo`` need an ONNX policy."""
 
 POLICY_KINDS = ("rpf", "rpf-mean", "ppo")
@@ -91,7 +91,30 @@ class RadioSettings:
     kind: Literal["cflib"] = "cflib"
     min_battery_v: float = 3.7
     extpos: Literal["extpos", "extpose"] = "extpos"
+    extpos_rate_hz: float = 30.0
+    """How often each drone's mocap pose is forwarded to its estimator (cflib has no broadcast: every drone costs
+    radio packets; 20-50 Hz is plenty for the Kalman filter)."""
 
+
+@dataclass(frozen=True)
+class SafetySettings:
+    """What the flight supervisor checks every tick and how it responds (docs/flight.md)."""
+
+    pose_timeout_s: float = 0.25
+    """A drone whose newest valid mocap pose is older than this holds position (no planning on a stale pose)."""
+    pose_lost_land_s: float = 1.5
+    """A drone without a valid pose for this long lands; if every drone has none, all land."""
+    on_separation: Literal["warn", "hold", "land"] = "warn"
+    """Response when two drones come closer than 2r (always logged as an event)."""
+    on_obstacle: Literal["warn", "hold", "land"] = "warn"
+    """Response when a drone comes closer than r to an obstacle surface (always logged)."""
+    planner_budget_s: float = 0.05
+    """A planner call that raises, returns no finite direction or takes longer than this puts its drone on hold
+    and lands it; the other drones fly on."""
+    start_tolerance_m: float = 0.3
+    """Preflight: each drone must sit within this distance (xy) of its mission start."""
+    arrival_hold_s: float = 0.0
+    """Extra hover time at the goals before landing."""
 
 @dataclass(frozen=True)
 class CircleObstacle:
@@ -166,6 +189,7 @@ class Mission:
     obstacles: tuple[Obstacle, ...]
     drones: tuple[Drone, ...]
     formation: Optional[Formation] = None
+    safety: SafetySettings = field(default_factory=SafetySettings)
     source: Optional[Path] = None
     text: str = field(default="", repr=False)
     """The file's text as loaded (logged into flight records as metadata)."""

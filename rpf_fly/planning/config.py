@@ -40,8 +40,9 @@ class PlannerConfig:
     static_neighbours_as_obstacles: bool = True
     """robust 5: a neighbour slower than ``static_speed`` (hovering, arrived) is an obstacle of radius r, not a
     lambda-neighbour."""
-    static_speed: float = 0.05
-    """m/s: below this speed a neighbour counts as static (arrived or holding)."""
+    static_speed: float = 0.15
+    """m/s: below this speed a neighbour counts as static (arrived or holding). A hovering Crazyflie wobbles at
+    0.05-0.1 m/s as mocap sees it; moving drones fly at the mission speed (0.5 m/s)."""
     min_distance: float = 1.0e-3
     """Distances are clamped to this (metres) inside the force formulas so overlaps give a finite, outward push."""
 

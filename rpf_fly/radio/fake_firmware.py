@@ -226,6 +226,18 @@ class FakeFirmware:
                 logger.warning("fake firmware: malformed packet on %d:%d (%s): %s", port, channel, data.hex(), exc)
                 return []
 
+    def disturb(self, offset_m: tuple[float, float, float]) -> None:
+        """Move the true position by ``offset_m`` at once (a gust or a bump; the onboard estimate moves with it,
+        as an IMU-fused estimate would; the controller then steers back to its setpoint). For fault tests."""
+        with self._lock:
+            for axis in range(3):
+                self.vehicle.pos[axis] += offset_m[axis]
+
+    def set_battery(self, open_circuit_v: float) -> None:
+        """Set the battery's open-circuit voltage now (a failing cell; for fault tests)."""
+        with self._lock:
+            self.vehicle.battery.open_v = float(open_circuit_v)
+
     def snapshot(self) -> FirmwareSnapshot:
         """A consistent copy of the state."""
         with self._lock:

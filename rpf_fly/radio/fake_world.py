@@ -293,6 +293,14 @@ class FakeWorld:
         """The drone answers the radio again (a new connection is needed after cflib dropped the link)."""
         self._drones[parse_address(address)].link_dropped = False
 
+    def disturb(self, address: int | str, offset_m: tuple[float, float, float]) -> None:
+        """Push one drone's true position by ``offset_m`` metres now (a gust; see `FakeFirmware.disturb`)."""
+        self._drones[parse_address(address)].firmware.disturb(offset_m)
+
+    def set_battery(self, address: int | str, open_circuit_v: float) -> None:
+        """Set one drone's battery open-circuit voltage now (see `FakeFirmware.set_battery`)."""
+        self._drones[parse_address(address)].firmware.set_battery(open_circuit_v)
+
     def reboot(self, address: int | str) -> None:
         """Power-cycle one drone's firmware (clears a lock), on the floor where it is."""
         self._drones[parse_address(address)].firmware.reboot(self.time_s())

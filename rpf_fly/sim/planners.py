@@ -39,6 +39,10 @@ def make_planner(settings: PlannerSettings, obstacles: ObstacleSet) -> Planner |
     config = planner_config(settings)
     if settings.kind in ("apf", "apf-paper"):
         return Planner(obstacles, config, FixedGains(settings.eta, settings.lam))
+    if settings.kind == "orca":
+        from rpf_fly.planning.orca import OrcaPlanner
+
+        return OrcaPlanner(obstacles, config)
     if settings.policy is None:
         raise UnsupportedPlanner(f"planner kind {settings.kind!r} needs an ONNX policy")
     policy = OnnxPolicy(settings.policy)

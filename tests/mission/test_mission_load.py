@@ -359,3 +359,30 @@ def test_with_planner_unknown_override_is_a_programming_error(lab):
 
 def test_with_planner_lambda_override(lab):
     assert with_planner(lab, "apf", lam=1.0).planner.lam == 1.0
+
+
+def test_safety_section_defaults_and_values(tmp_path):
+    from rpf_fly.mission import SafetySettings, parse_mission
+
+    base = (
+        "arena: {x: [-2, 2], y: [-2, 2]}\n"
+        "drones:\n  - {name: cf1, uri: radio://0/80/2M/E7E7E7E701, start: [0, 0], goal: [1, 0]}\n"
+    )
+    assert parse_mission(base).safety == SafetySettings()
+    m = parse_mission(base + "safety: {pose_timeout_s: 0.5, on_separation: land, arrival_hold_s: 0}\n"
+                      "radio: {extpos_rate_hz: 50}\n")
+    assert m.safety.pose_timeout_s == 0.5 and m.safety.on_separation == "land" and m.radio.extpos_rate_hz == 50
+
+
+def test_safety_section_rejects_unknown_response():
+    import pytest as _pytest
+
+    from rpf_fly.mission import MissionError, parse_mission
+
+    text = (
+        "arena: {x: [-2, 2], y: [-2, 2]}\n"
+        "safety: {on_obstacle: panic}\n"
+        "drones:\n  - {name: cf1, uri: radio://0/80/2M/E7E7E7E701, start: [0, 0], goal: [1, 0]}\n"
+    )
+    with _pytest.raises(MissionError, match=r"<string>:2: safety.on_obstacle: .*panic"):
+        parse_mission(text)

@@ -1,0 +1,129 @@
+"""``rpf-fly bench``: the paper's comparison (planners x scenes x seeds), its table, claims, JSON, Markdown, figure."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+from rpf_fly.cli import app
+from rpf_fly.cli.errors import fail
+
+_PLANNERS = "rpf,rpf-mean,apf,ppo,orca"
+_SCENES = "arena-a-6,arena-b-6,circle-8-r3,circle-8-r8,lab-3,arena-a-fresh"
+
+
+@app.command()
+def bench(
+    episodes: int = typer.Option(20, "--episodes", help="Seeds per scene (start jitter 0..N-1; fresh arena-A seeds 1000000..)."),
+    planners: str = typer.Option(_PLANNERS, "--planners", help="Comma-separated planner kinds."),
+    scenes: str = typer.Option(_SCENES, "--scenes", help="Comma-separated scenes: paper missions and arena-a-fresh."),
+    policies: Path = typer.Option(Path("policies"), "--policies", help="Folder of <kind>.onnx policies."),
+    policy: list[str] = typer.Option(
+        [], "--policy", help="KIND=PATH: a policy for one learned kind (rpf, rpf-mean, ppo); repeatable."
+    ),
+    missions: Path = typer.Option(Path("missions"), "--missions", help="Folder of the paper missions."),
+    json_output: bool = typer.Option(
+        False, "--json", help="Print the results JSON to stdout instead of the table (progress goes to stderr)."
+    ),
+    json_file: Optional[Path] = typer.Option(None, "--json-file", help="Also write the results JSON to this file."),
+    markdown: Optional[Path] = typer.Option(None, "--markdown", help="Write the results as Markdown."),
+    figure: Optional[Path] = typer.Option(None, "--figure", help="Write the comparison figure (PNG)."),
+    out: Optional[Path] = typer.Option(
+        None, "--out", help="Write results.json, results.md and comparison.png into this folder."
+    ),
+) -> None:
+    """Run every planner on every scene for each seed; print success, collisions, path metrics and the paper's claims.
+
+    A learned planner whose policy file is absent or unusable gets 'missing' rows with the reason; the rest runs.
+    """
+    from rich.console import Console
+
+    from rpf_fly.bench.runner import BenchConfig, BenchError, prepare, run_bench
+
+    paths = {}
+    for item in policy:
+        kind, sep, raw = item.partition("=")
+        if not sep or not kind or not raw:
+            raise fail(f"--policy: expected KIND=PATH, got {item!r}")
+        paths[kind.strip()] = Path(raw)
+    config = BenchConfig(
+        planners=_split(planners),
+        scenes=_split(scenes),
+        episodes=episodes,
+        policies_dir=policies,
+        policy_paths=paths,
+        missions_dir=missions,
+    )
+    unknown = [k for k in paths if k not in ("rpf", "rpf-mean", "ppo")]
+    if unknown:
+        raise fail(f"--policy: {unknown[0]!r} is not a learned planner kind (rpf, rpf-mean, ppo)")
+    try:
+        plan = prepare(config)
+    except BenchError as err:
+        raise fail(f"rpf-fly bench: {err}")
+    console = Console()
+    if not console.is_terminal:
+        console = Console(width=140)  # a log file or pipe: keep the wide table readable
+    errors = Console(stderr=True)
+    for reason in dict.fromkeys(plan.missing.values()):
+        errors.print(f"[yellow]missing: {reason}[/yellow]")
+    result = _run_with_progress(plan, run_bench, errors)
+
+    from rpf_fly.bench.report import print_report, results_json, write_json, write_markdown
+
+    results = results_json(result)
+    written = []
+    if out is not None:
+        written += [write_json(results, out / "results.json"), write_markdown(results, out / "results.md")]
+        written.append(_figure(results, result, out / "comparison.png"))
+    if json_file is not None:
+        written.append(write_json(results, json_file))
+    if markdown is not None:
+        written.append(write_markdown(results, markdown))
+    if figure is not None:
+        written.append(_figure(results, result, figure))
+    if json_output:
+        from rpf_fly.bench.report import dumps
+
+        typer.echo(dumps(results))
+        for path in written:
+            errors.print(f"wrote {path}")
+        return
+    print_report(results, console)
+    for path in written:
+        console.print(f"wrote {path}")
+
+
+def _split(text: str) -> tuple[str, ...]:
+    return tuple(part.strip() for part in text.split(",") if part.strip())
+
+
+def _figure(results, result, path: Path) -> Path:  # type: ignore[no-untyped-def]
+    from rpf_fly.bench.figure import plot_comparison
+
+    return plot_comparison(results, path, result.trajectories)
+
+
+def _run_with_progress(plan, run_bench, console):  # type: ignore[no-untyped-def]
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+    with Progress(
+        TextColumn("[bold]bench[/bold]"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TextColumn("runs"),
+        TimeElapsedColumn(),
+        TimeRemainingColumn(),
+        TextColumn("{task.fields[now]}"),
+        console=console,
+        transient=False,
+    ) as progress:
+        task = progress.add_task("bench", total=plan.total_runs, now="")
+
+        def advance(record) -> None:  # type: ignore[no-untyped-def]
+            verdict = "ok" if record.success else (record.failure or "failed")
+            progress.update(task, advance=1, now=f"{record.planner} {record.scene} seed {record.seed}: {verdict}")
+
+        return run_bench(plan, advance)

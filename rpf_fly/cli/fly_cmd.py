@@ -1,0 +1,222 @@
+"""``rpf-fly fly`` and ``rpf-fly check``: fly a mission (or dry-run it on simulated drones), validate and preflight.
+
+Ctrl-C once: every drone lands and the log is closed. Ctrl-C twice: emergency stop (motors off). SIGTERM acts as
+the first Ctrl-C. Exit codes: 0 every drone reached its goal and landed; 1 the flight ended otherwise (a drone
+landed early, timed out, lost its link, the flight aborted before take-off); 2 invalid mission or policy;
+130 interrupted.
+"""
+
+from __future__ import annotations
+
+import signal
+import time
+from datetime import datetime
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+from rpf_fly.cli import app
+from rpf_fly.cli.errors import fail
+
+def _load(mission_path: Path):  # type: ignore[no-untyped-def]
+    from rpf_fly.mission import MissionError, load_mission
+
+    try:
+        return load_mission(mission_path)
+    except MissionError as err:
+        raise fail(str(err))
+
+
+def _planner_factory(mission, mission_path: Path):  # type: ignore[no-untyped-def]
+    """Each drone gets its own planner instance (its own ONNX session for learned planners)."""
+    from rpf_fly.planning.onnx_policy import PolicyError
+    from rpf_fly.sim.planners import UnsupportedPlanner, make_planner
+    from rpf_fly.sim.scenario import obstacle_set
+
+    obstacles = obstacle_set(mission.obstacles)
+    try:
+        make_planner(mission.planner, obstacles)  # fail early, before anything connects
+    except (UnsupportedPlanner, PolicyError) as err:
+        raise fail(f"{mission_path}:0: planner.policy: {err}")
+    return lambda drone: make_planner(mission.planner, obstacles)
+
+
+@app.command()
+def fly(
+    mission: Path = typer.Argument(..., help="Mission YAML file."),
+    dry_run: bool = typer.Option(False, "--dry-run", help="Simulated drones through the same stack (fake radio)."),
+    log: Optional[Path] = typer.Option(None, "--log", help="MCAP flight log (default flights/<mission>-<time>.mcap)."),
+    mocap: str = typer.Option("natnet", "--mocap", help="Dry run only: natnet (emulator over UDP) or sim."),
+    console: bool = typer.Option(True, "--console/--no-console", help="Live status table while flying."),
+) -> None:
+    """Fly MISSION: NatNet mocap and cflib radios as the mission says, or simulated drones with --dry-run."""
+    loaded = _load(mission)
+    factory = _planner_factory(loaded, mission)
+    if not dry_run and loaded.mocap.kind != "natnet":
+        raise fail(f"{mission}:0: mocap.kind: 'sim' can only fly with --dry-run (real drones need motion capture)")
+    if mocap not in ("natnet", "sim"):
+        raise fail(f"--mocap: expected natnet or sim, got {mocap!r}")
+    log_path = log or Path("flights") / f"{loaded.name}-{datetime.now():%Y%m%d-%H%M%S}.mcap"
+    log_path.parent.mkdir(parents=True, exist_ok=True)
+    code = _run_flight(loaded, factory, dry_run, mocap, log_path, console)
+    raise typer.Exit(code)
+
+
+def _run_flight(mission, factory, dry_run: bool, mocap_kind: str, log_path: Path, console: bool) -> int:  # type: ignore[no-untyped-def]
+    from rpf_fly.flight.dry_run import DryRun
+    from rpf_fly.flight.session import run_flight
+
+    live = _Console(mission) if console else None
+    restore: dict = {}
+
+    def on_loop(loop) -> None:  # type: ignore[no-untyped-def]
+        restore.update(_install_signals(loop))
+
+    kwargs = dict(status_hook=live.update if live else None, event_sinks=(live.event if live else _print_event,),
+                  on_loop=on_loop)
+    try:
+        with (live if live is not None else _nothing()):
+            if dry_run:
+                with DryRun(mission, mocap=mocap_kind) as rig:
+                    report = run_flight(mission, factory, log_path, rig=rig, **kwargs)
+            else:
+                report = run_flight(mission, factory, log_path, **kwargs)
+    except ConnectionError as err:
+        raise fail(f"mocap: {err}", code=1)
+    finally:
+        for sig, handler in restore.items():
+            signal.signal(sig, handler)
+    _summary(report, log_path)
+    if report.interrupted:
+        return 130
+    return 0 if report.success else 1
+
+
+class _nothing:
+    def __enter__(self) -> None:
+        return None
+
+    def __exit__(self, *exc: object) -> None:
+        return None
+
+
+def _install_signals(loop) -> dict:  # type: ignore[no-untyped-def]
+    presses = {"n": 0}
+
+    def on_interrupt(signum, frame) -> None:  # type: ignore[no-untyped-def]
+        presses["n"] += 1
+        if presses["n"] == 1 or signum == signal.SIGTERM:
+            loop.request_stop("interrupted: landing every drone (Ctrl-C again: emergency stop)")
+        else:
+            loop.emergency_stop("second Ctrl-C: emergency stop, motors off")
+
+    previous = {}
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        previous[sig] = signal.signal(sig, on_interrupt)
+    return previous
+
+
+def _print_event(event) -> None:  # type: ignore[no-untyped-def]
+    if event.level >= 2 and event.kind != "phase" or event.drone is None:
+        who = f"{event.drone}: " if event.drone else ""
+        typer.echo(f"[{event.kind}] {who}{event.message}", err=True)
+
+
+class _Console:
+    """The live status table (rich), refreshed by the flight loop at most a few times a second."""
+
+    def __init__(self, mission):  # type: ignore[no-untyped-def]
+        from rich.console import Console
+        from rich.live import Live
+
+        self.mission = mission
+        self.console = Console(stderr=True)
+        self.live = Live(console=self.console, refresh_per_second=4, transient=False)
+        self._last = 0.0
+
+    def __enter__(self) -> "_Console":
+        self.live.__enter__()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.live.__exit__(*exc)
+
+    def event(self, event) -> None:  # type: ignore[no-untyped-def]
+        if event.level >= 3 or (event.drone is None and event.kind == "phase"):
+            who = f"{event.drone}: " if event.drone else ""
+            style = {3: "yellow", 4: "red", 5: "bold red"}.get(event.level, "")
+            self.live.console.print(f"[{style}]{event.kind}[/{style}] {who}{event.message}" if style else f"{event.kind} {who}{event.message}")
+
+    def update(self, loop) -> None:  # type: ignore[no-untyped-def]
+        now = time.monotonic()
+        if now - self._last < 0.25:
+            return
+        self._last = now
+        from rich.table import Table
+
+        table = Table(title=f"{self.mission.name}: {loop.phase.value}")
+        for column in ("drone", "state", "x", "y", "z", "to goal [m]", "battery [V]", "link [%]"):
+            table.add_column(column, justify="left" if column in ("drone", "state") else "right")
+        for row in loop.snapshot():
+            pos = row["position"]
+            table.add_row(
+                row["name"], row["phase"],
+                *(f"{v:.2f}" for v in pos) if pos else ("-", "-", "-"),
+                "-" if row["goal_distance"] is None else f"{row['goal_distance']:.2f}",
+                "-" if row["battery_v"] is None else f"{row['battery_v']:.2f}",
+                "-" if row["link_pct"] is None else f"{row['link_pct']:.0f}",
+            )
+        self.live.update(table)
+
+
+def _summary(report, log_path: Path) -> None:  # type: ignore[no-untyped-def]
+    stats = report.stats.summary()
+    for name, outcome in report.outcomes.items():
+        reason = report.reasons.get(name) or ""
+        typer.echo(f"{name}: {outcome.value}{' (' + reason + ')' if reason and outcome.value != 'reached' else ''}")
+    if stats["latency_p50_s"] is not None:
+        typer.echo(
+            f"ticks {stats['ticks']}, overruns {stats['overruns']}, mocap-to-setpoint latency p50 "
+            f"{stats['latency_p50_s'] * 1e3:.2f} ms p99 {stats['latency_p99_s'] * 1e3:.2f} ms"
+        )
+    if report.error:
+        typer.echo(f"error: {report.error}", err=True)
+    typer.echo(f"log: {log_path}  (rpf-fly review {log_path})")
+
+
+@app.command()
+def check(
+    mission: Path = typer.Argument(..., help="Mission YAML file."),
+    dry_run: bool = typer.Option(False, "--dry-run", help="Preflight the simulated drones instead of hardware."),
+    preflight: bool = typer.Option(True, "--preflight/--no-preflight", help="Connect and run the preflight checks."),
+) -> None:
+    """Validate MISSION; then connect to the drones and the mocap and run the preflight checks (nothing takes off)."""
+    loaded = _load(mission)
+    factory = _planner_factory(loaded, mission)
+    typer.echo(f"{mission}: valid mission '{loaded.name}' with {len(loaded.drones)} drones, planner {loaded.planner.kind}")
+    if not preflight:
+        return
+    from rpf_fly.flight.dry_run import DryRun
+    from rpf_fly.flight.loop import FlightLoop
+    from rpf_fly.radio.cflib_backend import CflibBackend
+
+    if not dry_run and loaded.mocap.kind != "natnet":
+        typer.echo("preflight skipped: mocap.kind is 'sim' (use --dry-run to preflight simulated drones)")
+        return
+    from rpf_fly.flight.session import DEFAULT_TOC_CACHE, natnet_source
+
+    rig = DryRun(loaded) if dry_run else None
+    with (rig if rig is not None else _nothing()):
+        try:
+            source = rig.mocap if rig is not None else natnet_source(loaded)
+        except ConnectionError as err:
+            raise fail(f"mocap: {err}", code=1)
+        backend = CflibBackend(cache_dir=rig.cache_dir if rig is not None else DEFAULT_TOC_CACHE)
+        loop = FlightLoop(loaded, backend, source, factory, uris=rig.uris if rig is not None else None)
+        problems = loop.preflight_only()
+        if rig is None:
+            source.close()
+    for name, problem in problems.items():
+        typer.echo(f"{name}: {'ok' if not problem else problem}")
+    raise typer.Exit(0 if not any(problems.values()) else 1)

@@ -1,0 +1,110 @@
+"""``rpf-fly review``: summary, metrics, plots and CSV of a flight log (docs/log-format.md)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+from rpf_fly.cli import app
+from rpf_fly.cli.errors import fail
+
+
+@app.command()
+def review(
+    log: Path = typer.Argument(..., help="Flight log (.mcap) written by `rpf-fly fly --log` or `rpf-fly sim --log`."),
+    json_output: bool = typer.Option(False, "--json", help="Print the metrics JSON (docs/metrics.md) only."),
+    plot: Optional[Path] = typer.Option(None, "--plot", help="Write the review figure (tracks, altitude, tracking, "
+                                                             "separation, battery, events) to a PNG."),
+    csv_dir: Optional[Path] = typer.Option(None, "--csv", help="Write one CSV per topic into this directory."),
+) -> None:
+    """Review a flight log: message rates and gaps per topic, events, the mission's metrics; plots and CSV."""
+    from rpf_fly.log.reader import LogError, read_log
+    from rpf_fly.log.review import export_csv, review as compute_review
+
+    try:
+        data = read_log(log)
+    except LogError as err:
+        raise fail(f"{log}: {err}")
+    except OSError as err:
+        raise fail(f"{log}: {err.strerror or err}")
+    result = compute_review(data)
+    if json_output and result.metrics is None:
+        cut = " (the log is truncated)" if data.truncated else ""
+        raise fail(f"{log}: cannot compute metrics: {result.metrics_error}{cut}")
+    if data.truncated:
+        typer.echo(
+            f"{log}: warning: the log ends before its footer (writer killed?); reviewing the "
+            f"{data.message_count} messages of its complete chunks",
+            err=True,
+        )
+    if plot is not None:
+        from rpf_fly.log.review_plot import plot_review
+
+        try:
+            plot_review(data, result, plot)
+        except OSError as err:
+            raise fail(f"{plot}: cannot write the plot: {err.strerror or err}")
+    if csv_dir is not None:
+        try:
+            export_csv(data, csv_dir)
+        except OSError as err:
+            raise fail(f"{csv_dir}: cannot write CSV: {err.strerror or err}")
+    if json_output:
+        assert result.metrics is not None
+        typer.echo(json.dumps(result.metrics.to_json_dict()))
+        return
+    _print_summary(result, plot, csv_dir)
+
+
+def _fmt(value, unit: str = "", digits: int = 2) -> str:  # type: ignore[no-untyped-def]
+    return "-" if value is None else f"{value:.{digits}f}{unit}"
+
+
+def _print_summary(result, plot: Optional[Path], csv_dir: Optional[Path]) -> None:  # type: ignore[no-untyped-def]
+    from rich.console import Console
+    from rich.table import Table
+
+    console = Console()
+    head = f"{result.mission or result.path.name}: planner {result.planner or '?'}, seed {result.seed}"
+    console.print(f"[bold]{head}[/bold]  duration {result.duration_s:.1f} s, {len(result.drones)} drones"
+                  + ("  [yellow](truncated)[/yellow]" if result.truncated else ""))
+
+    topics = Table(title="topics")
+    for column in ("topic", "schema", "messages", "rate [Hz]", "gaps", "longest gap [s]", "missing"):
+        topics.add_column(column, justify="left" if column in ("topic", "schema") else "right",
+                          no_wrap=column == "topic")
+    for t in result.topics:
+        topics.add_row(t.topic, t.schema, str(t.count), _fmt(t.rate_hz, "", 1), str(len(t.gaps)),
+                       _fmt(t.longest_gap_s, "", 2), str(t.missing))
+    console.print(topics)
+    levels = ", ".join(f"{name} {count}" for name, count in result.events_by_level.items() if count)
+    console.print(f"events: {levels or 'none'}")
+    for t, level, message, _ in result.events:
+        if level >= 3:
+            console.print(f"  [{'red' if level >= 4 else 'yellow'}]{t:8.2f} s  {message}[/]")
+
+    m = result.metrics
+    if m is None:
+        console.print(f"[yellow]metrics: not available: {result.metrics_error}[/yellow]")
+    else:
+        drones = Table(title="metrics")
+        for column in ("drone", "outcome", "reached", "collided", "travel [m]", "time to goal [s]", "smoothness"):
+            drones.add_column(column, justify="left" if column in ("drone", "outcome") else "right")
+        for row in m.per_drone:
+            drones.add_row(row.name, result.outcomes.get(row.name) or "-", "yes" if row.reached else "no",
+                           "yes" if row.collided else "no", f"{row.travel_distance_m:.2f}",
+                           _fmt(row.time_to_goal_s, "", 1), f"{row.smoothness:.4f}")
+        console.print(drones)
+        verdict = "[green]success[/green]" if m.success else "[red]failure[/red]"
+        console.print(f"{verdict}: {m.reached}/{m.drones} reached, collisions drone-drone {m.collisions_drone_drone}, "
+                      f"drone-obstacle {m.collisions_drone_obstacle}")
+        console.print(f"travel {_fmt(m.travel_distance_m, ' m')}, smoothness {_fmt(m.smoothness, '', 4)}, makespan "
+                      f"{_fmt(m.makespan_s, ' s', 1)}, min separation {_fmt(m.min_separation_m, ' m', 3)}, "
+                      f"min obstacle clearance {_fmt(m.min_obstacle_clearance_m, ' m', 3)}")
+    if plot is not None:
+        console.print(f"plot: {plot}")
+    if csv_dir is not None:
+        console.print(f"csv: {csv_dir}")

@@ -1,0 +1,141 @@
+"""One drone's flight logic: its phase, its OWN planner, and the setpoint it streams.
+
+Isolation: every drone has its own planner instance and plans only from its own local view (neighbours and
+obstacles within its sensing range, its own goal). A planner call that raises, returns no finite direction, or
+takes longer than the budget is a planner fault for that drone alone: it holds and lands, the others fly on.
+
+Setpoints: the planner gives a direction; the drone should move at the mission speed along it. Streaming
+``measured + v dt d`` would make a position controller crawl (its lag eats the step), so the agent integrates a
+reference ``ref += v dt d`` (a carrot) that never leads the measured position by more than ``max_lead`` and never
+leaves the arena (the geofence clamps every setpoint). Planar vectors are complex.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from typing import Callable, Optional, Protocol
+
+from rpf_fly.flight.phases import DronePhase, FlightOutcome
+from rpf_fly.mission.model import Arena, Drone
+from rpf_fly.planning.planner import PlanStep
+from rpf_fly.planning.view import LocalView
+
+
+class PlannerLike(Protocol):
+    def step(self, view: LocalView) -> PlanStep: ...
+
+
+class PlannerFault(RuntimeError):
+    """A drone's planner raised, returned garbage, or ran over its time budget."""
+
+
+@dataclass
+class PlanResult:
+    """One planning tick of one drone."""
+
+    step: PlanStep
+    setpoint: complex
+    seconds: float
+
+
+class DroneAgent:
+    """A drone as the flight loop sees it."""
+
+    def __init__(
+        self,
+        drone: Drone,
+        planner: PlannerLike,
+        *,
+        height: float,
+        speed: float,
+        dt: float,
+        arena: Arena,
+        budget_s: float,
+        max_lead_m: float = 0.3,
+        clock: Callable[[], float] = time.perf_counter,
+    ):
+        self.drone = drone
+        self.name = drone.name
+        self.planner = planner
+        self.goal = complex(*drone.goal)
+        self.start = complex(*drone.start)
+        self.height = height
+        self.speed = speed
+        self.dt = dt
+        self.arena = arena
+        self.budget_s = budget_s
+        self.max_lead_m = max_lead_m
+        self._clock = clock
+        self.phase = DronePhase.WAITING
+        self.outcome: Optional[FlightOutcome] = None
+        self.reason = ""
+        self.heading = 1 + 0j
+        self.reference = self.start
+        self.hold_point: complex = self.start
+        self.phase_since_s = 0.0
+        self.last_step: Optional[PlanStep] = None
+        self.arrived_at_s: Optional[float] = None
+        self.stale_since_s: Optional[float] = None
+        self.landing_until_s: Optional[float] = None
+
+    # ------------------------------------------------------------------------------------------ phases
+
+    def set_phase(self, phase: DronePhase, now_s: float, reason: str = "") -> None:
+        self.phase = phase
+        self.phase_since_s = now_s
+        if reason:
+            self.reason = reason
+
+    def begin_planning(self, measured: complex, now_s: float) -> None:
+        """Start planning from the measured position, heading for the goal (paper: the initial heading points at
+        the goal)."""
+        self.reference = measured
+        delta = self.goal - measured
+        self.heading = delta / abs(delta) if abs(delta) > 1e-9 else 1 + 0j
+        self.set_phase(DronePhase.PLANNING, now_s)
+
+    def hold(self, at: complex, now_s: float, reason: str) -> None:
+        """Stop planning and hold ``at`` (the reference it was flying to)."""
+        self.hold_point = self.clamp(at)
+        self.set_phase(DronePhase.HOLDING, now_s, reason)
+
+    # ---------------------------------------------------------------------------------------- planning
+
+    def plan(self, view: LocalView, measured: complex) -> PlanResult:
+        """One guarded planning step from this drone's own view; raises :class:`PlannerFault`."""
+        started = self._clock()
+        try:
+            step = self.planner.step(view)
+            direction = complex(step.direction)
+        except Exception as err:  # noqa: BLE001 - any planner failure is this drone's fault only
+            raise PlannerFault(f"planner raised {type(err).__name__}: {err}") from err
+        seconds = self._clock() - started
+        if not (math.isfinite(direction.real) and math.isfinite(direction.imag)) or abs(direction) > 1.0 + 1e-6:
+            raise PlannerFault(f"planner returned an invalid direction {direction!r}")
+        if seconds > self.budget_s:
+            raise PlannerFault(f"planner took {seconds * 1e3:.1f} ms (budget {self.budget_s * 1e3:.0f} ms)")
+        if abs(direction) > 0:
+            self.heading = direction / abs(direction)
+        self.last_step = step
+        return PlanResult(step, self.advance(direction, measured), seconds)
+
+    def advance(self, direction: complex, measured: complex) -> complex:
+        """Move the reference one step along ``direction``; keep it within ``max_lead`` of the drone and inside
+        the arena."""
+        ref = self.reference + self.speed * self.dt * direction
+        lead = ref - measured
+        if abs(lead) > self.max_lead_m:
+            ref = measured + lead * (self.max_lead_m / abs(lead))
+        self.reference = self.clamp(ref)
+        return self.reference
+
+    def clamp(self, xy: complex) -> complex:
+        """The geofence: a setpoint never leaves the arena."""
+        x = min(max(xy.real, self.arena.x[0]), self.arena.x[1])
+        y = min(max(xy.imag, self.arena.y[0]), self.arena.y[1])
+        return complex(x, y)
+
+    def clamp_height(self, z: float) -> float:
+        return min(max(z, self.arena.z[0]), self.arena.z[1])

@@ -1,0 +1,148 @@
+"""The dry run: the same flight stack on simulated drones, before anyone arms a real one.
+
+Every ``radio://`` URI of the mission becomes ``fake://`` with the same path, answered by a simulated Crazyflie of
+the fake radio (:mod:`rpf_fly.radio.fake_world`) standing at the drone's mission start. Their true poses are
+served by the NatNet server emulator over UDP on 127.0.0.1 in the mission's up-axis convention, and the real NatNet
+client receives them; so the flight loop, the NatNet client, the cflib backend and cflib itself all run for real.
+``mocap="sim"`` uses the simulated mocap source instead of the UDP round trip.
+
+Fault hooks for tests and demos: :meth:`DryRun.hide` (a rigid body untracked for a while), :meth:`DryRun.blackout`
+(no body tracked at all), the fake world's link drop, battery and disturbance faults (``drone_configs``).
+"""
+
+from __future__ import annotations
+
+import math
+import tempfile
+import threading
+import time
+from dataclasses import replace
+from pathlib import Path
+from typing import Mapping, Optional
+
+from rpf_fly.mission.model import Mission
+from rpf_fly.mocap.frame import MocapSource
+from rpf_fly.radio.fake_world import FakeDroneConfig, FakeWorld
+
+
+def fake_uri(uri: str) -> str:
+    """``radio://0/80/2M/E7E7E7E701`` -> ``fake://0/80/2M/E7E7E7E701`` (fake URIs pass through)."""
+    scheme, _, rest = uri.partition("://")
+    return "fake://" + rest if scheme in ("radio", "fake") else uri
+
+
+def uri_address(uri: str) -> int:
+    """The radio address of a URI, as an integer."""
+    path = uri.partition("://")[2].partition("?")[0]
+    return int(path.split("/")[3], 16)
+
+
+class DryRun:
+    """Context manager owning the fake drones, the fake-radio registration and the mocap source of a dry run."""
+
+    def __init__(
+        self,
+        mission: Mission,
+        *,
+        mocap: str = "natnet",
+        natnet_version: str = "4.1",
+        drone_configs: Optional[Mapping[str, FakeDroneConfig]] = None,
+        mocap_rate_hz: Optional[float] = None,
+        cache_dir: Optional[Path] = None,
+        seed: int = 0,
+    ):
+        if mocap not in ("natnet", "sim"):
+            raise ValueError(f"dry-run mocap must be 'natnet' or 'sim', not {mocap!r}")
+        self.mission = mission
+        self.mocap_kind = mocap
+        self.natnet_version = natnet_version
+        self.rate_hz = mocap_rate_hz or mission.mocap.rate_hz
+        self.uris = {d.name: fake_uri(d.uri) for d in mission.drones}
+        self.addresses = {d.name: uri_address(d.uri) for d in mission.drones}
+        self.bodies = {d.name: d.rigid_body for d in mission.drones}
+        configs = dict(drone_configs or {})
+        self.world = FakeWorld(
+            {self.addresses[d.name]: configs.get(d.name, FakeDroneConfig.at(d.start[0], d.start[1], 0.0)) for d in mission.drones},
+            seed=seed,
+        )
+        self._cache = tempfile.TemporaryDirectory(prefix="rpf-fly-toc-") if cache_dir is None else None
+        self.cache_dir = Path(self._cache.name) if self._cache is not None else Path(cache_dir)  # type: ignore[arg-type]
+        self._hidden: dict[str, float] = {}
+        self._blackout_until = -math.inf
+        self._lock = threading.Lock()
+        self.server = None
+        self.mocap: Optional[MocapSource] = None
+
+    # ------------------------------------------------------------------------------------------- life
+
+    def __enter__(self) -> "DryRun":
+        from rpf_fly.radio import fake_radio
+
+        fake_radio.register(self.world)
+        self.world.start()
+        if self.mocap_kind == "natnet":
+            from rpf_fly.mocap.natnet_client import NatNetClient
+            from rpf_fly.mocap.natnet_server import NatNetServer
+
+            up = self.mission.mocap.up_axis
+            self.server = NatNetServer(
+                self.poses, version=self.natnet_version, multicast=False, local_ip="127.0.0.1", rate_hz=self.rate_hz,
+                up_axis=up, bodies=list(self.bodies.values()),
+            ).start()
+            client = NatNetClient(
+                "127.0.0.1", multicast=False, local_ip="127.0.0.1", command_port=self.server.command_port,
+                data_port=None, up_axis=up,
+            )
+            client.wait_for_server(5.0)
+            self.mocap = client
+        else:
+            from rpf_fly.mocap.simulated import SimulatedMocap
+
+            m = self.mission.mocap
+            self.mocap = SimulatedMocap(
+                self.poses, rate_hz=self.rate_hz, noise_m=m.noise_m, latency_s=m.latency_s, dropout=m.dropout
+            )
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        from rpf_fly.radio import fake_radio
+
+        if self.mocap is not None:
+            self.mocap.close()
+        if self.server is not None:
+            self.server.close()
+        self.world.close()
+        fake_radio.unregister()
+        if self._cache is not None:
+            self._cache.cleanup()
+
+    # ------------------------------------------------------------------------------------------ poses
+
+    def poses(self) -> dict[str, tuple[tuple[float, float, float], tuple[float, float, float, float], bool]]:
+        """The fake drones' true poses keyed by rigid-body name, Z-up, with the tracking faults applied."""
+        now = time.monotonic()
+        true = self.world.true_poses()
+        with self._lock:
+            blackout = now < self._blackout_until
+            hidden = {name for name, until in self._hidden.items() if now < until}
+        return {
+            self.bodies[name]: (true[address][0], true[address][1], not blackout and name not in hidden)
+            for name, address in self.addresses.items()
+        }
+
+    def hide(self, name: str, seconds: float) -> None:
+        """Report drone ``name``'s rigid body as not tracked for ``seconds`` (occlusion)."""
+        with self._lock:
+            self._hidden[name] = time.monotonic() + seconds
+
+    def blackout(self, seconds: float) -> None:
+        """Report every rigid body as not tracked for ``seconds`` (mocap lost)."""
+        with self._lock:
+            self._blackout_until = time.monotonic() + seconds
+
+    def snapshot(self, name: str):  # type: ignore[no-untyped-def]
+        """The fake firmware's state of drone ``name`` (position, motors, flags, ...)."""
+        return self.world.snapshot(self.addresses[name])

@@ -1,0 +1,556 @@
+"""The flight loop: connect, preflight, take off, plan every drone from its own view, supervise, land.
+
+One thread runs the loop. Every iteration takes the newest mocap frame (waiting at most until the next planning
+tick, so setpoints keep streaming even when mocap stops), forwards extpos to each drone at ``extpos_rate_hz``,
+runs the supervisor and applies its findings; at each planning tick (the mission rate) every planning drone's own
+planner runs on that drone's local view and its setpoint goes to the backend. A drone whose planner fails holds and
+lands alone (:mod:`rpf_fly.flight.agent`); a loop that stops altogether is caught by the watchdog thread.
+
+Every path out ends with the drones landing or stopped and the log closed: normal end, timeout, interrupt
+(:meth:`FlightLoop.request_stop`: all land; :meth:`FlightLoop.emergency_stop`: motors off), an exception inside the
+loop (all land, then the error is reported).
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from dataclasses import dataclass, field
+from typing import Callable, Optional, Protocol
+
+import numpy as np
+
+from rpf_fly.flight.agent import DroneAgent, PlannerFault, PlannerLike
+from rpf_fly.flight.events import ERROR, FATAL, INFO, WARNING, EventBus, FlightEvent
+from rpf_fly.flight.phases import DronePhase, FlightOutcome, SwarmPhase
+from rpf_fly.flight.poses import PoseTracker, TrackedPose
+from rpf_fly.flight.supervisor import Finding, Supervisor
+from rpf_fly.flight.watchdog import LoopWatchdog
+from rpf_fly.mission.model import Drone, Mission
+from rpf_fly.mocap.frame import MocapFrame, MocapSource
+from rpf_fly.planning.planner import PlanStep
+from rpf_fly.planning.view import view_of_drone
+from rpf_fly.planning.wall_following import MODE_NAMES
+from rpf_fly.radio.backend import DroneBackend, DroneState
+from rpf_fly.sim.scenario import obstacle_set
+
+
+class Recorder(Protocol):
+    """Where the loop writes what happened (the MCAP flight log; :class:`NullRecorder` for none). Times are the
+    loop's monotonic seconds."""
+
+    def poses(self, t_s: float, poses: dict[str, TrackedPose]) -> None: ...
+    def planner(self, t_s: float, tick: int, agent: DroneAgent, pose: Optional[TrackedPose], step: Optional[PlanStep], mode: str) -> None: ...
+    def setpoint(self, t_s: float, name: str, position: tuple[float, float, float]) -> None: ...
+    def status(self, t_s: float, agent: DroneAgent, state: Optional[DroneState]) -> None: ...
+    def event(self, event: FlightEvent) -> None: ...
+    def close(self) -> None: ...
+
+
+class NullRecorder:
+    """Records nothing."""
+
+    def poses(self, *args: object) -> None: ...
+    def planner(self, *args: object) -> None: ...
+    def setpoint(self, *args: object) -> None: ...
+    def status(self, *args: object) -> None: ...
+    def event(self, *args: object) -> None: ...
+    def close(self) -> None: ...
+
+
+@dataclass
+class LoopStats:
+    """Timing of the flying phase: tick intervals, overruns, planner time per drone, and the latency from a mocap
+    frame's receipt to each setpoint handed to the backend (seconds)."""
+
+    ticks: int = 0
+    overruns: int = 0
+    tick_intervals: list[float] = field(default_factory=list)
+    latencies: list[float] = field(default_factory=list)
+    planner_seconds: list[float] = field(default_factory=list)
+
+    def summary(self) -> dict[str, Optional[float]]:
+        def pct(values: list[float], q: float) -> Optional[float]:
+            return float(np.percentile(values, q)) if values else None
+
+        intervals = self.tick_intervals
+        return {
+            "ticks": self.ticks,
+            "overruns": self.overruns,
+            "tick_interval_p50_s": pct(intervals, 50),
+            "tick_jitter_p99_s": (pct([abs(i - float(np.median(intervals))) for i in intervals], 99) if intervals else None),
+            "latency_p50_s": pct(self.latencies, 50),
+            "latency_p99_s": pct(self.latencies, 99),
+            "planner_p50_s": pct(self.planner_seconds, 50),
+        }
+
+
+@dataclass
+class FlightReport:
+    """How the flight ended."""
+
+    mission: str
+    phase: SwarmPhase
+    outcomes: dict[str, FlightOutcome]
+    reasons: dict[str, str]
+    events: list[FlightEvent]
+    stats: LoopStats
+    interrupted: bool = False
+    error: Optional[str] = None
+
+    @property
+    def success(self) -> bool:
+        return self.error is None and not self.interrupted and all(o == FlightOutcome.REACHED for o in self.outcomes.values())
+
+
+PlannerFactory = Callable[[Drone], PlannerLike]
+
+
+class FlightLoop:
+    """Flies one mission with a backend (cflib over radio or fake radio) and a mocap source."""
+
+    TAKEOFF_SETTLE_S = 0.5
+    LAND_SETTLE_S = 0.5
+    PREFLIGHT_TIMEOUT_S = 8.0
+    STATUS_PERIOD_S = 0.1
+
+    def __init__(
+        self,
+        mission: Mission,
+        backend: DroneBackend,
+        mocap: MocapSource,
+        planner_factory: PlannerFactory,
+        *,
+        uris: Optional[dict[str, str]] = None,
+        recorder: Optional[Recorder] = None,
+        status_hook: Optional[Callable[["FlightLoop"], None]] = None,
+        clock: Callable[[], float] = time.monotonic,
+    ):
+        self.mission = mission
+        self.backend = backend
+        self.mocap = mocap
+        self.uris = uris or {d.name: d.uri for d in mission.drones}
+        self.recorder: Recorder = recorder or NullRecorder()
+        self.status_hook = status_hook
+        self.clock = clock
+        self.events = EventBus(clock)
+        self.events.subscribe(self._record_event)
+        flight = mission.flight
+        self.agents: dict[str, DroneAgent] = {
+            d.name: DroneAgent(
+                d, planner_factory(d), height=flight.height, speed=flight.speed, dt=flight.dt, arena=mission.arena,
+                budget_s=mission.safety.planner_budget_s,
+            )
+            for d in mission.drones
+        }
+        self.obstacles = obstacle_set(mission.obstacles)
+        self.tracker = PoseTracker({d.name: d.rigid_body for d in mission.drones})
+        self.supervisor = Supervisor(mission, self.obstacles)
+        self.phase = SwarmPhase.CONNECTING
+        self.stats = LoopStats()
+        self.tick = 0
+        self._stop = threading.Event()
+        self._stop_reason = ""
+        self._estop = threading.Event()
+        self._last_extpos: dict[str, float] = {}
+        self._last_status_s = -math.inf
+        self._states: dict[str, DroneState] = {}
+        self._watchdog = LoopWatchdog(self._on_loop_stall)
+
+    # ----------------------------------------------------------------------------------- external control
+
+    def request_stop(self, reason: str = "interrupted") -> None:
+        """Land every drone and end the flight (first Ctrl-C). Thread- and signal-safe: sets a flag."""
+        self._stop_reason = reason
+        self._stop.set()
+
+    def emergency_stop(self, reason: str = "emergency stop requested") -> None:
+        """Cut every drone's motors now (second Ctrl-C). Safe from any thread or a signal handler."""
+        self._estop.set()
+        self._stop.set()
+        try:
+            self.backend.emergency_stop(None)
+        finally:
+            for agent in self.agents.values():
+                if agent.phase.airborne or agent.phase == DronePhase.READY:
+                    agent.phase = DronePhase.EMERGENCY
+                    agent.outcome = FlightOutcome.EMERGENCY
+            self.events.emit(FATAL, "emergency", reason)
+
+    # ------------------------------------------------------------------------------------------------ run
+
+    def run(self) -> FlightReport:
+        """Fly the mission; always returns a report (and leaves no drone flying without a landing command)."""
+        error: Optional[str] = None
+        self._watchdog.start()
+        try:
+            if self._connect() and self._preflight() and not self._stop.is_set():
+                self._takeoff()
+                self._fly()
+            if self.phase not in (SwarmPhase.ABORTED,):
+                self._land_all(self._stop_reason or "mission complete")
+        except Exception as err:  # noqa: BLE001 - every path out lands the drones
+            error = f"{type(err).__name__}: {err}"
+            self.events.emit(FATAL, "error", f"flight loop failed ({error}): landing every drone")
+            self._land_all("flight loop error", wait=True)
+        finally:
+            self._watchdog.close()
+            self._finish()
+        return FlightReport(
+            mission=self.mission.name,
+            phase=self.phase,
+            outcomes={n: a.outcome or FlightOutcome.NOT_FLOWN for n, a in self.agents.items()},
+            reasons={n: a.reason for n, a in self.agents.items()},
+            events=list(self.events.history),
+            stats=self.stats,
+            interrupted=self._stop.is_set() and self._stop_reason != "",
+            error=error,
+        )
+
+    def _set_phase(self, phase: SwarmPhase) -> None:
+        self.phase = phase
+        self.events.emit(INFO, "phase", f"swarm: {phase.value}")
+
+    def _set_drone(self, agent: DroneAgent, phase: DronePhase, reason: str = "", level: int = INFO) -> None:
+        agent.set_phase(phase, self.clock(), reason)
+        self.events.emit(level, "phase", f"{phase.value}{': ' + reason if reason else ''}", agent.name)
+
+    # -------------------------------------------------------------------------------------------- stages
+
+    def _connect(self) -> bool:
+        self._set_phase(SwarmPhase.CONNECTING)
+        failures = self.backend.connect(self.uris)
+        for name, why in failures.items():
+            agent = self.agents[name]
+            agent.outcome = FlightOutcome.NOT_FLOWN
+            self._set_drone(agent, DronePhase.FAILED, f"connection failed: {why}", ERROR)
+        if failures:
+            self._abort(f"{len(failures)} drone(s) failed to connect: no drone takes off")
+            return False
+        return True
+
+    def _preflight(self) -> bool:
+        """Every drone tracked, on the ground near its start, inside the arena, battery above the minimum."""
+        self._set_phase(SwarmPhase.PREFLIGHT)
+        deadline = self.clock() + self.PREFLIGHT_TIMEOUT_S
+        problems: dict[str, str] = {}
+        while self.clock() < deadline and not self._stop.is_set():
+            self._spin_once(deadline, plan=False)
+            problems = {name: self._preflight_problem(agent) for name, agent in self.agents.items()}
+            problems = {n: p for n, p in problems.items() if p}
+            if not problems:
+                break
+        if self._stop.is_set():
+            self._abort("interrupted before take-off")
+            return False
+        if problems:
+            for name, problem in problems.items():
+                agent = self.agents[name]
+                agent.outcome = FlightOutcome.NOT_FLOWN
+                self._set_drone(agent, DronePhase.FAILED, f"preflight failed: {problem}", ERROR)
+            self._abort(f"preflight failed for {', '.join(sorted(problems))}: no drone takes off")
+            return False
+        for agent in self.agents.values():
+            self._set_drone(agent, DronePhase.READY, "preflight passed")
+        return True
+
+    def preflight_only(self) -> dict[str, str]:
+        """``rpf-fly check``: connect and run the preflight checks, take nothing off; name -> problem ('' if ok)."""
+        try:
+            if not self._connect():
+                return {n: a.reason for n, a in self.agents.items()}
+            self._preflight()
+            return {n: (a.reason if a.phase == DronePhase.FAILED else "") for n, a in self.agents.items()}
+        finally:
+            self._finish()
+
+    def _preflight_problem(self, agent: DroneAgent) -> str:
+        s, arena = self.mission.safety, self.mission.arena
+        state = self._states.get(agent.name)
+        if state is None or not state.link.up:
+            return "no radio link"
+        if state.supervisor is not None and (state.supervisor.locked or state.supervisor.crashed):
+            return "the drone's supervisor is locked or crashed: reboot it"
+        if state.battery is None:
+            return "no battery telemetry yet"
+        if state.battery.low or state.battery.voltage_v < self.mission.radio.min_battery_v:
+            return f"battery {state.battery.voltage_v:.2f} V below {self.mission.radio.min_battery_v:.2f} V"
+        pose = self.tracker.get(agent.name)
+        if pose is None or not pose.valid or self.tracker.age(agent.name, self.clock()) > s.pose_timeout_s:
+            return f"rigid body {agent.drone.rigid_body!r} not tracked by the mocap"
+        x, y, z = pose.position
+        if not (arena.x[0] <= x <= arena.x[1] and arena.y[0] <= y <= arena.y[1]):
+            return f"outside the arena at ({x:.2f}, {y:.2f})"
+        if abs(pose.xy - agent.start) > s.start_tolerance_m:
+            return (f"at ({x:.2f}, {y:.2f}), {abs(pose.xy - agent.start):.2f} m from its start "
+                    f"({agent.start.real:.2f}, {agent.start.imag:.2f}); allowed {s.start_tolerance_m:.2f} m")
+        if z > 0.3:
+            return f"not on the ground (z = {z:.2f} m)"
+        return ""
+
+    def _takeoff(self) -> None:
+        self._set_phase(SwarmPhase.TAKEOFF)
+        flight = self.mission.flight
+        for agent in self.agents.values():
+            self.backend.arm(agent.name, True)
+            if self.backend.takeoff(agent.name, flight.height, flight.takeoff_s):
+                self._set_drone(agent, DronePhase.TAKEOFF)
+            else:
+                self._set_drone(agent, DronePhase.LANDED, "take-off command failed", ERROR)
+                agent.outcome = FlightOutcome.NOT_FLOWN
+        until = self.clock() + flight.takeoff_s + self.TAKEOFF_SETTLE_S
+        while self.clock() < until and not self._stop.is_set():
+            self._spin_once(until, plan=False)
+        for agent in self.agents.values():
+            if agent.phase != DronePhase.TAKEOFF:
+                continue
+            pose = self.tracker.get(agent.name)
+            if pose is None or abs(pose.position[2] - flight.height) > max(0.15, 0.3 * flight.height):
+                z = "no pose" if pose is None else f"z = {pose.position[2]:.2f} m"
+                self._land(agent, f"take-off did not reach {flight.height:.2f} m ({z})")
+            else:
+                agent.begin_planning(pose.xy, self.clock())
+                self.events.emit(INFO, "takeoff", f"airborne at {pose.position[2]:.2f} m: planning", agent.name)
+
+    def _fly(self) -> None:
+        self._set_phase(SwarmPhase.FLYING)
+        period = self.mission.flight.dt
+        started = self.clock()
+        self._next_tick = started
+        self._last_tick_s: Optional[float] = None
+        all_arrived_at: Optional[float] = None
+        self._watchdog.arm(True)
+        try:
+            while not self._stop.is_set():
+                self._spin_once(self._next_tick, plan=True)
+                now = self.clock()
+                flying = [a for a in self.agents.values() if a.phase in (DronePhase.PLANNING, DronePhase.HOLDING, DronePhase.ARRIVED)]
+                if not flying:
+                    break
+                if all(a.phase == DronePhase.ARRIVED for a in flying):
+                    all_arrived_at = all_arrived_at if all_arrived_at is not None else now
+                    if now - all_arrived_at >= self.mission.safety.arrival_hold_s:
+                        self.events.emit(INFO, "arrived", "every flying drone is at its goal")
+                        break
+                else:
+                    all_arrived_at = None
+                if now - started > self.mission.flight.timeout_s:
+                    self.events.emit(WARNING, "timeout", f"mission timeout ({self.mission.flight.timeout_s:.0f} s): landing")
+                    for a in flying:
+                        if a.phase != DronePhase.ARRIVED:
+                            a.outcome = FlightOutcome.TIMEOUT
+                    break
+        finally:
+            self._watchdog.arm(False)
+
+    def _land_all(self, reason: str, wait: bool = True) -> None:
+        if self.phase not in (SwarmPhase.ABORTED,):
+            self.phase = SwarmPhase.LANDING
+            self.events.emit(INFO, "phase", f"swarm: landing ({reason})")
+        for agent in self.agents.values():
+            if agent.phase.airborne and agent.phase != DronePhase.LANDING:
+                self._land(agent, reason, quiet=True)
+        if not wait:
+            return
+        deadline = self.clock() + self.mission.flight.land_s + 3.0
+        while any(a.phase == DronePhase.LANDING for a in self.agents.values()) and self.clock() < deadline:
+            if self._estop.is_set():
+                break
+            try:
+                self._spin_once(min(deadline, self.clock() + 0.1), plan=False)
+            except Exception:  # noqa: BLE001 - landing must finish even if the mocap or log misbehaves
+                time.sleep(0.05)
+                self._finish_landings(self.clock())
+
+    def _land(self, agent: DroneAgent, reason: str, quiet: bool = False) -> None:
+        flight = self.mission.flight
+        if agent.outcome is None:
+            agent.outcome = FlightOutcome.REACHED if agent.phase == DronePhase.ARRIVED else FlightOutcome.LANDED_EARLY
+        ok = self.backend.land(agent.name, 0.0, flight.land_s)
+        agent.landing_until_s = self.clock() + flight.land_s + self.LAND_SETTLE_S
+        level = INFO if quiet else WARNING
+        self._set_drone(agent, DronePhase.LANDING, reason, level)
+        if not ok:
+            self.events.emit(ERROR, "error", "land command failed: emergency stop", agent.name)
+            self.backend.emergency_stop(agent.name)
+            agent.phase = DronePhase.EMERGENCY
+            agent.outcome = FlightOutcome.EMERGENCY
+
+    def _abort(self, message: str) -> None:
+        self.phase = SwarmPhase.ABORTED
+        self.events.emit(ERROR, "phase", f"swarm: aborted ({message})")
+
+    def _finish(self) -> None:
+        """Close the backend only when nothing flies (cflib's close cuts the motors), then the recorder."""
+        airborne = [a.name for a in self.agents.values() if a.phase.airborne]
+        if self.phase != SwarmPhase.ABORTED and not airborne:
+            self.phase = SwarmPhase.DONE
+            self.events.emit(INFO, "phase", "swarm: done")
+        if airborne:
+            self.events.emit(FATAL, "error", f"still airborne at the end: {', '.join(airborne)}; emergency stop")
+            self.backend.emergency_stop(None)
+        try:
+            now = self.clock()
+            for agent in self.agents.values():
+                if agent.outcome is None:
+                    agent.outcome = FlightOutcome.NOT_FLOWN
+                self.recorder.status(now, agent, self._states.get(agent.name))
+        finally:
+            try:
+                self.backend.close()
+            finally:
+                self.recorder.close()
+
+    # ------------------------------------------------------------------------------------- the iteration
+
+    def _spin_once(self, until_s: float, plan: bool) -> None:
+        """Receive the newest frame (waiting until ``until_s`` at most), forward extpos, supervise; plan at ticks."""
+        frame = self.mocap.receive(max(0.0, until_s - self.clock()))
+        now = self.clock()
+        self._states = self.backend.states()
+        if frame is not None:
+            self._on_frame(frame, now)
+        self._apply(self.supervisor.check(now, self.agents.values(), self.tracker, self._states), now)
+        self._finish_landings(now)
+        if plan and now >= self._next_tick:
+            self._plan_tick(now, frame)
+            if self._last_tick_s is not None:
+                self.stats.tick_intervals.append(now - self._last_tick_s)
+            self._last_tick_s = now
+            self._next_tick += self.mission.flight.dt
+            if now - self._next_tick > self.mission.flight.dt:
+                self.stats.overruns += 1
+                self._next_tick = now + self.mission.flight.dt
+        if now - self._last_status_s >= self.STATUS_PERIOD_S:
+            self._last_status_s = now
+            for agent in self.agents.values():
+                self.recorder.status(now, agent, self._states.get(agent.name))
+            if self.status_hook is not None:
+                self.status_hook(self)
+
+    def _on_frame(self, frame: MocapFrame, now: float) -> None:
+        self.tracker.update(frame)
+        fresh = {n: p for n, p in self.tracker.poses.items() if p.frame_number == frame.frame_number and p.valid}
+        self.recorder.poses(now, fresh)
+        period = 1.0 / self.mission.radio.extpos_rate_hz
+        extpose = self.mission.radio.extpos == "extpose"
+        for name, pose in fresh.items():
+            agent = self.agents[name]
+            if agent.phase.terminal or now - self._last_extpos.get(name, -math.inf) < period:
+                continue
+            self._last_extpos[name] = now
+            if extpose:
+                self.backend.send_extpose(name, pose.position, pose.quaternion)
+            else:
+                self.backend.send_extpos(name, pose.position)
+
+    def _finish_landings(self, now: float) -> None:
+        for agent in self.agents.values():
+            if agent.phase == DronePhase.LANDING and agent.landing_until_s is not None and now >= agent.landing_until_s:
+                self.backend.arm(agent.name, False)
+                self._set_drone(agent, DronePhase.LANDED)
+
+    def _plan_tick(self, now: float, frame: Optional[MocapFrame]) -> None:
+        self.stats.ticks += 1
+        self.tick += 1
+        self._watchdog.beat()
+        flight = self.mission.flight
+        airborne_poses = {
+            n: p for n, p in self.tracker.poses.items()
+            if p.position[2] > 0.5 * flight.height and not self.agents[n].phase.terminal
+        }
+        for agent in self.agents.values():
+            pose = self.tracker.get(agent.name)
+            step: Optional[PlanStep] = None
+            mode = agent.phase.value
+            if agent.phase == DronePhase.PLANNING and pose is not None:
+                if abs(agent.goal - pose.xy) < flight.goal_tolerance:
+                    agent.hold_point = agent.goal
+                    agent.arrived_at_s = now
+                    self._set_drone(agent, DronePhase.ARRIVED, "reached its goal")
+                else:
+                    others = [n for n in airborne_poses if n != agent.name]
+                    view = view_of_drone(
+                        pose.xy, agent.goal, agent.heading,
+                        np.array([airborne_poses[n].xy for n in others], dtype=complex),
+                        np.array([airborne_poses[n].velocity for n in others], dtype=complex),
+                        self.mission.planner.sensing_range,
+                    )
+                    try:
+                        result = agent.plan(view, pose.xy)
+                    except PlannerFault as fault:
+                        agent.hold(agent.reference, now, str(fault))
+                        self.events.emit(ERROR, "planner_fault", f"{fault}: holding, then landing", agent.name)
+                        self._land(agent, "planner fault")
+                        self.recorder.planner(now, self.tick, agent, pose, None, "hold")
+                        continue
+                    step = result.step
+                    mode = MODE_NAMES.get(int(step.mode), "apf")
+                    self.stats.planner_seconds.append(result.seconds)
+                    self._send(agent, result.setpoint, frame)
+            if agent.phase in (DronePhase.HOLDING, DronePhase.ARRIVED):
+                mode = "arrived" if agent.phase == DronePhase.ARRIVED else "hold"
+                self._send(agent, agent.hold_point, frame)
+            if agent.phase.airborne or agent.phase == DronePhase.LANDED:
+                self.recorder.planner(now, self.tick, agent, pose, step, mode)
+
+    def _send(self, agent: DroneAgent, xy: complex, frame: Optional[MocapFrame]) -> None:
+        z = agent.clamp_height(self.mission.flight.height)
+        xy = agent.clamp(xy)
+        self.backend.send_position_setpoint(agent.name, xy.real, xy.imag, z, 0.0)
+        sent = self.clock()
+        if frame is not None:
+            self.stats.latencies.append(sent - frame.receive_time_s)
+        self.recorder.setpoint(sent, agent.name, (xy.real, xy.imag, z))
+
+    # ---------------------------------------------------------------------------------------- findings
+
+    def _apply(self, findings: list[Finding], now: float) -> None:
+        for f in findings:
+            self.events.emit(f.level, f.kind, f.message, f.drone)
+            targets = [self.agents[f.drone]] if f.drone else list(self.agents.values())
+            for agent in targets:
+                if not agent.phase.airborne:
+                    continue
+                if f.response == "lost":
+                    agent.phase = DronePhase.LINK_LOST
+                    agent.outcome = FlightOutcome.LINK_LOST
+                    agent.reason = f.message
+                elif f.response == "land" and agent.phase != DronePhase.LANDING:
+                    self._land(agent, f.message)
+                elif f.response == "hold" and agent.phase == DronePhase.PLANNING:
+                    agent.hold(agent.reference, now, f.kind)
+                elif f.response == "resume" and agent.phase == DronePhase.HOLDING and agent.reason in ("pose_stale", "mocap_lost"):
+                    pose = self.tracker.get(agent.name)
+                    if pose is not None and pose.valid:
+                        agent.begin_planning(pose.xy, now)
+
+    def _on_loop_stall(self) -> None:
+        """Watchdog thread: the loop stopped ticking while drones stream setpoints: land them all now."""
+        self.events.emit(FATAL, "error", "flight loop stalled: landing every drone (watchdog)")
+        for agent in self.agents.values():
+            if agent.phase.airborne and agent.phase != DronePhase.LANDING:
+                self.backend.land(agent.name, 0.0, self.mission.flight.land_s)
+
+    def _record_event(self, event: FlightEvent) -> None:
+        self.recorder.event(event)
+
+    # ---------------------------------------------------------------------------------------- console
+
+    def snapshot(self) -> list[dict[str, object]]:
+        """Per-drone status for the console: phase, position, goal distance, battery, link quality."""
+        rows = []
+        for name, agent in self.agents.items():
+            pose = self.tracker.get(name)
+            state = self._states.get(name)
+            rows.append({
+                "name": name,
+                "phase": agent.phase.value,
+                "position": pose.position if pose else None,
+                "goal_distance": abs(agent.goal - pose.xy) if pose else None,
+                "battery_v": state.battery.voltage_v if state and state.battery else None,
+                "link_pct": state.link.quality_pct if state else None,
+                "reason": agent.reason,
+            })
+        return rows

@@ -1,0 +1,69 @@
+"""Assemble and run one flight: the dry-run rig or the real hardware, the cflib backend, the recorder, the loop.
+
+The CLI adds the console and the signal handlers around :func:`run_flight`; tests call it with fault hooks.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Callable, Optional
+
+from rpf_fly.flight.dry_run import DryRun
+from rpf_fly.flight.events import EventSink
+from rpf_fly.flight.loop import FlightLoop, FlightReport, PlannerFactory
+from rpf_fly.flight.recording import McapRecorder
+from rpf_fly.mission.model import Mission
+from rpf_fly.mocap.frame import MocapSource
+
+DEFAULT_TOC_CACHE = Path.home() / ".cache" / "rpf_fly" / "toc"
+
+
+def natnet_source(mission: Mission, timeout_s: float = 5.0) -> MocapSource:
+    """The mission's NatNet client, connected (raises ConnectionError if the server does not answer)."""
+    from rpf_fly.mocap.natnet_client import NatNetClient
+
+    m = mission.mocap
+    client = NatNetClient(
+        m.server, multicast=m.multicast, local_ip=m.local_ip, multicast_group=m.multicast_group,
+        command_port=m.command_port, data_port=m.data_port, up_axis=m.up_axis,
+    )
+    if not client.wait_for_server(timeout_s):
+        client.close()
+        raise ConnectionError(
+            f"no answer from the NatNet server {m.server}:{m.command_port} within {timeout_s:.0f} s "
+            "(is Motive streaming? try `rpf-fly mocap watch --natnet HOST`)"
+        )
+    return client
+
+
+def run_flight(
+    mission: Mission,
+    planner_factory: PlannerFactory,
+    log_path: Optional[Path],
+    *,
+    rig: Optional[DryRun] = None,
+    status_hook: Optional[Callable[[FlightLoop], None]] = None,
+    event_sinks: tuple[EventSink, ...] = (),
+    on_loop: Optional[Callable[[FlightLoop], None]] = None,
+    seed: int = 0,
+) -> FlightReport:
+    """Fly ``mission`` (on ``rig``'s simulated drones when given; the rig must be entered). ``on_loop`` receives the
+    loop before it runs (signal handlers, fault injection)."""
+    from rpf_fly.radio.cflib_backend import CflibBackend
+
+    if rig is not None:
+        backend, source, uris = CflibBackend(cache_dir=rig.cache_dir), rig.mocap, rig.uris
+    else:
+        backend, source, uris = CflibBackend(cache_dir=DEFAULT_TOC_CACHE), natnet_source(mission), None
+    recorder = McapRecorder(log_path, mission, seed, source="dry-run" if rig else "flight") if log_path else None
+    try:
+        loop = FlightLoop(mission, backend, source, planner_factory, uris=uris, recorder=recorder,
+                          status_hook=status_hook)
+        for sink in event_sinks:
+            loop.events.subscribe(sink)
+        if on_loop is not None:
+            on_loop(loop)
+        return loop.run()
+    finally:
+        if rig is None:
+            source.close()

@@ -1,0 +1,172 @@
+"""The supervisor: safety checks every loop iteration, each finding an event and a response.
+
+Checks (docs/flight.md):
+- pose: a drone whose newest valid mocap pose is older than ``pose_timeout_s`` holds; after ``pose_lost_land_s``
+  it lands; when no drone has a fresh pose the whole swarm holds, then lands (mocap lost);
+- geofence: a measured position outside the arena lands that drone (setpoints are clamped anyway);
+- separation: two drones closer than 2r (centre to centre, 3D) -> event, response ``on_separation``;
+- obstacle: a drone closer than r to an obstacle surface (planar, obstacles are vertical) -> event, ``on_obstacle``;
+- battery: the firmware reports low power, or the voltage under load is below ``min_battery_v - FLIGHT_SAG_V``:
+  that drone lands;
+- link: the backend says the link is down: that drone is lost (nothing can reach it); the others continue.
+
+Findings are edge-triggered where a condition persists (an event when it starts, another when it clears), so the
+log records episodes, not every tick.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Iterable, Literal, Optional
+
+from rpf_fly.flight.agent import DroneAgent
+from rpf_fly.flight.events import ERROR, INFO, WARNING
+from rpf_fly.flight.phases import DronePhase
+from rpf_fly.flight.poses import PoseTracker
+from rpf_fly.mission.model import Mission
+from rpf_fly.planning.obstacles import ObstacleSet
+from rpf_fly.radio.backend import DroneState
+
+FLIGHT_SAG_V = 0.4
+"""Voltage a Crazyflie battery sags under hover load; the in-flight threshold is the preflight one minus this."""
+
+Response = Literal["warn", "hold", "land", "lost", "resume"]
+
+
+@dataclass(frozen=True)
+class Finding:
+    """What the supervisor saw and what to do: ``response`` for ``drone`` (None: the whole swarm)."""
+
+    kind: str
+    level: int
+    message: str
+    drone: Optional[str]
+    response: Response
+
+
+class Supervisor:
+    """Stateless checks plus the memory needed for edge-triggered events."""
+
+    def __init__(self, mission: Mission, obstacles: ObstacleSet):
+        self.mission = mission
+        self.safety = mission.safety
+        self.obstacles = obstacles
+        self.r = mission.planner.safety_radius
+        self._close_pairs: set[tuple[str, str]] = set()
+        self._near_obstacle: set[str] = set()
+        self._stale: set[str] = set()
+        self._mocap_lost = False
+
+    def check(
+        self, now_s: float, agents: Iterable[DroneAgent], tracker: PoseTracker, states: dict[str, DroneState]
+    ) -> list[Finding]:
+        agents = [a for a in agents if a.phase.airborne]
+        findings: list[Finding] = []
+        findings += self._links(agents, states)
+        findings += self._poses(now_s, agents, tracker)
+        findings += self._geofence(agents, tracker)
+        findings += self._separation(agents, tracker)
+        findings += self._obstacles(agents, tracker)
+        findings += self._battery(agents, states)
+        return findings
+
+    # -------------------------------------------------------------------------------------------- checks
+
+    def _links(self, agents: list[DroneAgent], states: dict[str, DroneState]) -> list[Finding]:
+        out = []
+        for a in agents:
+            state = states.get(a.name)
+            if state is not None and not state.link.up:
+                why = state.link.error or "link down"
+                out.append(Finding("link_lost", ERROR, f"radio link lost ({why}); the others continue", a.name, "lost"))
+        return out
+
+    def _poses(self, now_s: float, agents: list[DroneAgent], tracker: PoseTracker) -> list[Finding]:
+        s = self.safety
+        out: list[Finding] = []
+        flying = [a for a in agents if a.phase != DronePhase.LANDING]
+        ages = {a.name: tracker.age(a.name, now_s) for a in flying}
+        all_stale = bool(flying) and all(age > s.pose_timeout_s for age in ages.values())
+        if all_stale and not self._mocap_lost:
+            self._mocap_lost = True
+            out.append(Finding("mocap_lost", ERROR, "no fresh mocap pose for any drone: all hold", None, "hold"))
+        elif not all_stale and self._mocap_lost:
+            self._mocap_lost = False
+            out.append(Finding("mocap_lost", INFO, "mocap poses are back", None, "resume"))
+        for a in flying:
+            age = ages[a.name]
+            if age > s.pose_lost_land_s:
+                out.append(Finding("pose_lost", ERROR, f"no valid pose for {age:.1f} s: landing", a.name, "land"))
+            elif age > s.pose_timeout_s:
+                if a.name not in self._stale:
+                    self._stale.add(a.name)
+                    out.append(Finding("pose_stale", WARNING, f"pose {age * 1e3:.0f} ms old: holding", a.name, "hold"))
+            elif a.name in self._stale:
+                self._stale.discard(a.name)
+                out.append(Finding("pose_stale", INFO, "pose fresh again: resuming", a.name, "resume"))
+        return out
+
+    def _geofence(self, agents: list[DroneAgent], tracker: PoseTracker) -> list[Finding]:
+        arena = self.mission.arena
+        out = []
+        for a in agents:
+            pose = tracker.get(a.name)
+            if pose is None or not pose.valid or a.phase == DronePhase.LANDING:
+                continue
+            x, y, z = pose.position
+            outside = not (arena.x[0] <= x <= arena.x[1] and arena.y[0] <= y <= arena.y[1] and z <= arena.z[1])
+            if outside:
+                out.append(Finding("geofence", ERROR, f"outside the arena at ({x:.2f}, {y:.2f}, {z:.2f}): landing",
+                                   a.name, "land"))
+        return out
+
+    def _separation(self, agents: list[DroneAgent], tracker: PoseTracker) -> list[Finding]:
+        out = []
+        close_now: set[tuple[str, str]] = set()
+        tracked = [(a.name, tracker.get(a.name)) for a in agents]
+        tracked = [(n, p) for n, p in tracked if p is not None]
+        for i, (ni, pi) in enumerate(tracked):
+            for nj, pj in tracked[i + 1 :]:
+                d = sum((u - v) ** 2 for u, v in zip(pi.position, pj.position)) ** 0.5
+                if d < 2 * self.r:
+                    pair = (ni, nj)
+                    close_now.add(pair)
+                    if pair not in self._close_pairs:
+                        response = self.safety.on_separation
+                        message = f"separation {d:.3f} m from {nj} is below 2r = {2 * self.r:.2f} m"
+                        out.append(Finding("separation", ERROR, message, ni, response))
+                        if response != "warn":
+                            out.append(Finding("separation", ERROR, f"separation {d:.3f} m from {ni}", nj, response))
+        self._close_pairs = close_now
+        return out
+
+    def _obstacles(self, agents: list[DroneAgent], tracker: PoseTracker) -> list[Finding]:
+        if self.obstacles.is_empty:
+            return []
+        out = []
+        near_now = set()
+        for a in agents:
+            pose = tracker.get(a.name)
+            if pose is None:
+                continue
+            clearance = float(self.obstacles.signed_distance(pose.xy))
+            if clearance < self.r:
+                near_now.add(a.name)
+                if a.name not in self._near_obstacle:
+                    message = f"obstacle clearance {clearance:.3f} m is below r = {self.r:.2f} m"
+                    out.append(Finding("obstacle", ERROR, message, a.name, self.safety.on_obstacle))
+        self._near_obstacle = near_now
+        return out
+
+    def _battery(self, agents: list[DroneAgent], states: dict[str, DroneState]) -> list[Finding]:
+        out = []
+        limit = self.mission.radio.min_battery_v - FLIGHT_SAG_V
+        for a in agents:
+            state = states.get(a.name)
+            battery = state.battery if state else None
+            if battery is None or a.phase == DronePhase.LANDING:
+                continue
+            if battery.low or battery.voltage_v < limit:
+                message = f"battery low ({battery.voltage_v:.2f} V, {battery.pm_state.name.lower()}): landing"
+                out.append(Finding("battery", WARNING, message, a.name, "land"))
+        return out

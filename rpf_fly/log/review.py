@@ -1,0 +1,386 @@
+"""Review of a flight log: what is in it, how well it was recorded, how well the swarm flew (docs/log-format.md).
+
+Computation only; :mod:`rpf_fly.log.review_plot` draws. The time axis of the review is the log time minus the
+first log time of the file (seconds): every topic is on the recorder's clock.
+
+- **summary**: duration, drones, per topic the message count, mean rate, gaps (intervals longer than three times
+  the topic's median period; not for ``/events`` and ``/scene``, which have no rate) and messages missing from the
+  sequence, events by level;
+- **metrics**: the metrics JSON of docs/metrics.md, computed by :func:`rpf_fly.sim.metrics.compute_metrics` from the
+  positions the planner saw at every tick (``/<drone>/planner``, ticks ``0..T``) and the ``scenario`` metadata
+  record, labelled with the ``mission`` record's name, planner kind and seed;
+- **series** for the plots: positions and altitude from ``/mocap``, setpoint tracking error (each setpoint against
+  the pose interpolated at the setpoint's log time), minimum planar separation over the mocap times of the first
+  drone (other drones interpolated), battery and flight states from ``/status``, events from ``/events``;
+- **CSV**: one file per topic with flattened columns.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Optional
+
+import numpy as np
+
+from rpf_fly.log.reader import LogData
+from rpf_fly.log.schemas import LOG_LEVELS
+from rpf_fly.sim.metrics import Metrics, compute_metrics
+
+GAP_FACTOR = 3.0
+"""An interval longer than this many median periods is a gap."""
+
+APERIODIC = ("foxglove.Log", "foxglove.SceneUpdate")
+"""Schemas of topics written when something happens, not at a rate: no gap analysis."""
+
+
+class ReviewError(Exception):
+    """The log lacks what a part of the review needs (metadata, planner ticks)."""
+
+
+@dataclass(frozen=True)
+class TopicStats:
+    """One topic's recording quality. Times in seconds from the start of the log."""
+
+    topic: str
+    schema: str
+    count: int
+    rate_hz: Optional[float]
+    median_period_s: Optional[float]
+    gaps: tuple[tuple[float, float], ...]
+    missing: int
+
+    @property
+    def longest_gap_s(self) -> Optional[float]:
+        return max((g[1] for g in self.gaps), default=None)
+
+
+@dataclass
+class Series:
+    """Time series of one drone (seconds from the start of the log)."""
+
+    t: np.ndarray
+    values: np.ndarray
+
+
+@dataclass
+class Review:
+    """Everything ``rpf-fly review`` shows."""
+
+    path: Path
+    truncated: bool
+    start_ns: int
+    duration_s: float
+    drones: list[str]
+    mission: str
+    planner: str
+    seed: Optional[int]
+    topics: list[TopicStats]
+    events_by_level: dict[str, int]
+    events: list[tuple[float, int, str, str]]
+    metrics: Optional[Metrics]
+    metrics_error: str
+    scenario: Optional[dict[str, Any]]
+    outcomes: dict[str, Optional[str]] = field(default_factory=dict)
+
+
+# ---------------------------------------------------------------------------------------------- metadata
+
+
+def scenario_of(data: LogData) -> dict[str, Any]:
+    """The ``scenario`` metadata record, parsed. Raises :class:`ReviewError`."""
+    record = data.metadata.get("scenario")
+    if record is None or "json" not in record:
+        raise ReviewError("no scenario metadata record")
+    try:
+        scenario = json.loads(record["json"])
+    except ValueError as err:
+        raise ReviewError(f"scenario metadata is not JSON: {err}") from None
+    missing = [k for k in ("names", "goals", "obstacles", "dt", "goal_tolerance", "safety_radius") if k not in scenario]
+    if missing:
+        raise ReviewError(f"scenario metadata lacks {', '.join(missing)}")
+    return scenario
+
+
+def drones_of(data: LogData) -> list[str]:
+    """Drone names: from the scenario record, else from the topics (``/mocap/<d>``, ``/<d>/planner``, ...)."""
+    try:
+        return list(scenario_of(data)["names"])
+    except ReviewError:
+        pass
+    names: list[str] = []
+    for topic in data.topics:
+        parts = topic.strip("/").split("/")
+        name = parts[1] if parts[0] == "mocap" and len(parts) == 2 else (parts[0] if len(parts) == 2 else None)
+        if name and name not in names:
+            names.append(name)
+    return names
+
+
+def obstacle_set_of(scenario: dict[str, Any]):  # type: ignore[no-untyped-def]
+    """The planner's obstacle arrays of the scenario record's obstacles."""
+    from rpf_fly.mission.model import BoxObstacle, CircleObstacle
+    from rpf_fly.sim.scenario import obstacle_set
+
+    shapes = []
+    for o in scenario["obstacles"]:
+        if o["shape"] == "circle":
+            shapes.append(CircleObstacle(tuple(o["center"]), o["radius"]))
+        else:
+            shapes.append(BoxObstacle(tuple(o["min"]), tuple(o["max"])))
+    return obstacle_set(shapes)
+
+
+# ---------------------------------------------------------------------------------------------- metrics
+
+
+def planner_positions(data: LogData, names: list[str]) -> np.ndarray:
+    """``(T+1, N)`` complex positions the planner used at ticks ``0..T`` (``T+1`` = the ticks every drone has).
+
+    A tick missing for one drone (dropped message) takes that drone's previous position."""
+    tracks = []
+    for name in names:
+        msgs = data.messages(f"/{name}/planner")
+        if not msgs:
+            raise ReviewError(f"no planner ticks for {name} (/{name}/planner)")
+        ticks = {}
+        for m in msgs:
+            p = m.data["position"]
+            ticks[int(m.data["tick"])] = complex(p["x"], p["y"])
+        tracks.append(ticks)
+    length = min(max(t) for t in tracks) + 1
+    positions = np.empty((length, len(names)), dtype=complex)
+    for i, ticks in enumerate(tracks):
+        last = ticks[min(ticks)]
+        for k in range(length):
+            last = ticks.get(k, last)
+            positions[k, i] = last
+    return positions
+
+
+def metrics_of(data: LogData) -> Metrics:
+    """The metrics JSON of the run (docs/metrics.md). Raises :class:`ReviewError`."""
+    scenario = scenario_of(data)
+    mission = data.metadata.get("mission", {})
+    names = list(scenario["names"])
+    positions = planner_positions(data, names)
+    goals = np.array([complex(g[0], g[1]) for g in scenario["goals"]])
+    try:
+        seed = int(mission.get("seed", "0") or 0)
+    except ValueError:
+        seed = 0
+    return compute_metrics(
+        positions,
+        goals,
+        float(scenario["dt"]),
+        float(scenario["goal_tolerance"]),
+        float(scenario["safety_radius"]),
+        obstacle_set_of(scenario),
+        names,
+        mission=mission.get("name", ""),
+        planner=mission.get("planner", ""),
+        seed=seed,
+    )
+
+
+# ---------------------------------------------------------------------------------------------- summary
+
+
+def topic_stats(data: LogData, topic: str, start_ns: int) -> TopicStats:
+    """Count, rate, gaps (> ``GAP_FACTOR`` median periods, on log time) and sequence numbers missing."""
+    msgs = data.messages(topic)
+    count = len(msgs)
+    rate = median = None
+    gaps: list[tuple[float, float]] = []
+    missing = 0
+    if count >= 2:
+        t = np.array([m.log_time for m in msgs], dtype=np.int64)
+        span = (t[-1] - t[0]) / 1e9
+        rate = (count - 1) / span if span > 0 else None
+        periods = np.diff(t) / 1e9
+        positive = periods[periods > 0]
+        if count >= 3 and positive.size and data.schemas.get(topic) not in APERIODIC:
+            median = float(np.median(positive))
+            for k in np.flatnonzero(periods > GAP_FACTOR * median):
+                gaps.append(((t[k] - start_ns) / 1e9, float(periods[k])))
+    if count:
+        seqs = {m.sequence for m in msgs}
+        missing = max(seqs) + 1 - len(seqs)
+    return TopicStats(topic, data.schemas.get(topic, ""), count, rate, median, tuple(gaps), missing)
+
+
+def review(data: LogData) -> Review:
+    """The review of a log (metrics are None with ``metrics_error`` set when the log cannot give them)."""
+    start = data.start_ns or 0
+    end = data.end_ns or start
+    mission = data.metadata.get("mission", {})
+    try:
+        scenario: Optional[dict[str, Any]] = scenario_of(data)
+    except ReviewError:
+        scenario = None
+    metrics = None
+    error = ""
+    try:
+        metrics = metrics_of(data)
+    except ReviewError as err:
+        error = str(err)
+    events = [
+        ((m.log_time - start) / 1e9, int(m.data.get("level", 0)), str(m.data.get("message", "")),
+         str(m.data.get("name", "")))
+        for m in data.messages("/events")
+    ]
+    by_level = {name: 0 for name in LOG_LEVELS.values()}
+    for _, level, _, _ in events:
+        key = LOG_LEVELS.get(level, "unknown")
+        by_level[key] = by_level.get(key, 0) + 1
+    drones = drones_of(data)
+    outcomes: dict[str, Optional[str]] = {}
+    for name in drones:
+        found = [m.data.get("outcome") for m in data.messages(f"/{name}/status") if m.data.get("outcome")]
+        outcomes[name] = found[-1] if found else None
+    try:
+        seed: Optional[int] = int(mission["seed"])
+    except (KeyError, ValueError):
+        seed = None
+    return Review(
+        path=data.path,
+        truncated=data.truncated,
+        start_ns=start,
+        duration_s=(end - start) / 1e9,
+        drones=drones,
+        mission=mission.get("name", ""),
+        planner=mission.get("planner", ""),
+        seed=seed,
+        topics=[topic_stats(data, topic, start) for topic in sorted(data.topics)],
+        events_by_level=by_level,
+        events=events,
+        metrics=metrics,
+        metrics_error=error,
+        scenario=scenario,
+        outcomes=outcomes,
+    )
+
+
+# ---------------------------------------------------------------------------------------------- series
+
+
+def _seconds(msgs: list, start_ns: int) -> np.ndarray:
+    return (np.array([m.log_time for m in msgs], dtype=np.int64) - start_ns) / 1e9
+
+
+def pose_series(data: LogData, drone: str, start_ns: int, topic: str = "") -> Series:
+    """``(n, 3)`` positions of ``/mocap/<drone>`` (or ``topic``: a PoseInFrame topic) over time."""
+    msgs = data.messages(topic or f"/mocap/{drone}")
+    xyz = np.array([[m.data["pose"]["position"][k] for k in "xyz"] for m in msgs], dtype=float).reshape(-1, 3)
+    return Series(_seconds(msgs, start_ns), xyz)
+
+
+def _interp(t: np.ndarray, series: Series) -> np.ndarray:
+    """``series`` at times ``t`` (linear; NaN outside its time range)."""
+    out = np.full((t.size, series.values.shape[1]), np.nan)
+    if series.t.size == 0:
+        return out
+    inside = (t >= series.t[0]) & (t <= series.t[-1])
+    for c in range(series.values.shape[1]):
+        out[inside, c] = np.interp(t[inside], series.t, series.values[:, c])
+    return out
+
+
+def tracking_error(data: LogData, drone: str, start_ns: int) -> Series:
+    """|setpoint - pose| (3D, metres) at each setpoint's time, the pose interpolated there."""
+    setpoints = pose_series(data, drone, start_ns, f"/{drone}/setpoint")
+    poses = pose_series(data, drone, start_ns)
+    at = _interp(setpoints.t, poses)
+    err = np.linalg.norm(setpoints.values - at, axis=1) if setpoints.t.size else np.zeros(0)
+    keep = np.isfinite(err)
+    return Series(setpoints.t[keep], err[keep])
+
+
+def rms_max(values: np.ndarray) -> tuple[Optional[float], Optional[float]]:
+    if values.size == 0:
+        return None, None
+    return float(np.sqrt(np.mean(values**2))), float(values.max())
+
+
+def min_separation(data: LogData, drones: list[str], start_ns: int) -> Series:
+    """Smallest planar centre distance of any pair over time, on the first drone's mocap times."""
+    if len(drones) < 2:
+        return Series(np.zeros(0), np.zeros(0))
+    tracks = [pose_series(data, d, start_ns) for d in drones]
+    base = next((s.t for s in tracks if s.t.size), np.zeros(0))
+    if base.size == 0:
+        return Series(base, np.zeros(0))
+    xy = np.stack([_interp(base, s)[:, :2] for s in tracks], axis=1)  # (n, N, 2)
+    points = xy[..., 0] + 1j * xy[..., 1]
+    d = abs(points[:, :, None] - points[:, None, :])
+    n = len(drones)
+    d[:, np.arange(n), np.arange(n)] = np.inf
+    d = np.where(np.isnan(d), np.inf, d)
+    low = d.reshape(base.size, -1).min(axis=1)
+    keep = np.isfinite(low)
+    return Series(base[keep], low[keep])
+
+
+def battery_series(data: LogData, drone: str, start_ns: int) -> Series:
+    msgs = [m for m in data.messages(f"/{drone}/status") if m.data.get("battery_v") is not None]
+    return Series(_seconds(msgs, start_ns), np.array([m.data["battery_v"] for m in msgs], dtype=float))
+
+
+def phases(data: LogData, drone: str, start_ns: int, end_s: float) -> list[tuple[float, float, str]]:
+    """``(start_s, end_s, state)`` segments of the drone's ``/status`` states."""
+    out: list[tuple[float, float, str]] = []
+    for m in data.messages(f"/{drone}/status"):
+        t = (m.log_time - start_ns) / 1e9
+        state = str(m.data.get("state", ""))
+        if out and out[-1][2] == state:
+            continue
+        if out:
+            out[-1] = (out[-1][0], t, out[-1][2])
+        out.append((t, end_s, state))
+    return out
+
+
+# ---------------------------------------------------------------------------------------------- CSV
+
+
+def _flatten(value: Any, prefix: str, row: dict[str, Any]) -> None:
+    if isinstance(value, dict):
+        for k, v in value.items():
+            _flatten(v, f"{prefix}.{k}" if prefix else str(k), row)
+    elif isinstance(value, list):
+        row[prefix] = json.dumps(value, separators=(",", ":"))
+    else:
+        row[prefix] = "" if value is None else value
+
+
+def csv_name(topic: str) -> str:
+    """File name of a topic's CSV: ``/mocap/cf1`` -> ``mocap_cf1.csv``."""
+    return topic.strip("/").replace("/", "_") + ".csv"
+
+
+def export_csv(data: LogData, directory: str | Path) -> list[Path]:
+    """One CSV per topic: ``log_time_ns, publish_time_ns, sequence`` and the message's fields flattened with dots
+    (``pose.position.x``); arrays as JSON in one cell; null as an empty cell."""
+    directory = Path(directory)
+    directory.mkdir(parents=True, exist_ok=True)
+    written = []
+    for topic in sorted(data.topics):
+        rows = []
+        columns: dict[str, None] = {"log_time_ns": None, "publish_time_ns": None, "sequence": None}
+        for m in data.messages(topic):
+            row: dict[str, Any] = {"log_time_ns": m.log_time, "publish_time_ns": m.publish_time, "sequence": m.sequence}
+            if isinstance(m.data, dict):
+                _flatten(m.data, "", row)
+            else:
+                row["data"] = m.data.hex() if isinstance(m.data, (bytes, bytearray)) else m.data
+            columns.update(dict.fromkeys(row))
+            rows.append(row)
+        path = directory / csv_name(topic)
+        with open(path, "w", newline="") as f:
+            writer = csv.DictWriter(f, fieldnames=list(columns), restval="")
+            writer.writeheader()
+            writer.writerows(rows)
+        written.append(path)
+    return written

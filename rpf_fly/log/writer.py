@@ -1,0 +1,345 @@
+"""``FlightLog``: the MCAP flight log, written by one background thread so the flight loop never waits on disk.
+
+Callers (flight loop, mocap thread, radio callbacks; any number of threads) only append a small tuple to a queue:
+the message is built and serialised to JSON on the writer thread, which drains the queue every 50 ms into zstd
+chunks and closes the open chunk about once a second (``flush``), so a SIGKILL or power cut loses at most about
+one second: the file is then unfinished but :func:`rpf_fly.log.reader.read_log` reads every complete chunk and
+:func:`rpf_fly.log.reader.salvage` rewrites it into a finished file.
+
+Queue policy (docs/log-format.md): the queue is bounded (``max_queue`` messages, default 50 000, several seconds
+of a 10-drone flight). When it is full a new high-rate message (pose, setpoint, planner step, status, tf) is
+dropped, never blocking the caller; events and scene updates still enter up to twice the bound. Drops are
+counted (:attr:`FlightLog.dropped`), leave a gap in the topic's ``sequence`` (sequences are drawn at the call), are
+reported with a Python ``logging`` warning and as a warning on ``/events`` at most once per flush, and are
+summarised on ``/events`` at close. Calls after :meth:`FlightLog.close` are ignored (and counted as dropped).
+A write error (disk full) is logged once, kept in :attr:`FlightLog.error`, and the log stops writing; nothing is
+raised into the flight loop.
+
+Arguments are serialised later on the writer thread: do not mutate them after the call (pass tuples, floats,
+fresh arrays). Timestamps are integer nanoseconds since the Unix epoch: ``t_ns`` is the message's publish time
+(when the data was created: mocap frame time, planner tick); the log time is the ``clock()`` at the call (when
+recorded), or ``t_ns`` itself with ``clock=None`` (simulated runs).
+"""
+
+from __future__ import annotations
+
+import atexit
+import collections
+import itertools
+import json
+import logging
+import threading
+import time
+from pathlib import Path
+from typing import Any, Callable, Mapping, Optional, Sequence
+
+from mcap.writer import CompressionType, Writer
+
+from rpf_fly.log import schemas as S
+
+logger = logging.getLogger(__name__)
+
+DEFAULT_MAX_QUEUE = 50_000
+FLUSH_INTERVAL_S = 1.0
+POLL_INTERVAL_S = 0.05
+CHUNK_SIZE = 1 << 20
+
+encode = S.encode
+
+def _strings(meta: Mapping[str, Any]) -> dict[str, str]:
+    """Metadata values as strings (MCAP metadata is string to string): non-strings as JSON."""
+    return {str(k): v if isinstance(v, str) else json.dumps(v) for k, v in meta.items()}
+
+
+def _status_message(t_ns: int, fields: dict[str, Any]) -> dict[str, Any]:
+    return S.drone_status(t_ns, **fields)
+
+
+def _setpoint_message(t_ns: int, position: Any, yaw: float) -> bytes:
+    return S.pose_json(t_ns, position, S.yaw_quaternion(yaw))
+
+
+def _scene_message(t_ns: int, fields: dict[str, Any]) -> dict[str, Any]:
+    return S.scene_update(t_ns, **fields)
+
+
+class FlightLog:
+    """An MCAP flight log being written (context manager). See the module docstring for the threading and the
+    queue policy and docs/log-format.md for the topics.
+
+    ``mission_meta`` and ``scenario_meta`` become the ``mission`` and ``scenario`` metadata records (string values;
+    other values are stored as JSON); build them with :func:`rpf_fly.log.schemas.mission_metadata` and
+    :func:`rpf_fly.log.schemas.scenario_metadata`. Opening the file happens here, so a bad path raises at once
+    (``OSError``), before the flight.
+
+    ``clock``: the log-time source (ns since the Unix epoch; None: log time = ``t_ns``). ``block_when_full``:
+    wait for room instead of dropping, for offline writers (simulated runs) only, never in a flight.
+    """
+
+    def __init__(
+        self,
+        path: str | Path,
+        mission_meta: Mapping[str, Any],
+        scenario_meta: Mapping[str, Any],
+        *,
+        clock: Optional[Callable[[], int]] = time.time_ns,
+        max_queue: int = DEFAULT_MAX_QUEUE,
+        flush_interval_s: float = FLUSH_INTERVAL_S,
+        chunk_size: int = CHUNK_SIZE,
+        name: str = "rpf_fly",
+        block_when_full: bool = False,
+    ):
+        from rpf_fly import __version__
+
+        self.path = Path(path)
+        self.name = name
+        self.max_queue = int(max_queue)
+        self.block_when_full = bool(block_when_full)
+        self.flush_interval_s = float(flush_interval_s)
+        self.error: Optional[BaseException] = None
+        self.written = 0
+        self.failed = 0
+        self.writer_cpu_s = 0.0
+        self.queue_peak = 0
+        self._clock = clock
+        self._dropped = 0
+        self._drop_lock = threading.Lock()
+        self._reported_drops = 0
+        self._queue: collections.deque = collections.deque()
+        self._closed = False
+        self._close_lock = threading.Lock()
+        self._stop = threading.Event()
+        self._wake = threading.Event()
+        self._poses: dict[str, tuple[str, Any]] = {}
+        self._setpoints: dict[str, tuple[str, Any]] = {}
+        self._planner: dict[str, tuple[str, Any]] = {}
+        self._status: dict[str, tuple[str, Any]] = {}
+        self._fixed = {name: (name, itertools.count()) for name in ("/scene", "/tf", "/events")}
+        self._channels: dict[str, int] = {}
+        self._schema_ids: dict[str, int] = {}
+        self._file = open(self.path, "wb")
+        try:
+            self._writer = Writer(self._file, chunk_size=chunk_size, compression=CompressionType.ZSTD)
+            self._writer.start(profile="", library=f"rpf_fly {__version__}")
+            self._writer.add_metadata("mission", _strings(mission_meta))
+            self._writer.add_metadata("scenario", _strings(scenario_meta))
+            self._writer.flush()
+        except BaseException:
+            self._file.close()
+            raise
+        self._thread = threading.Thread(target=self._run, name=f"flight-log:{self.path.name}", daemon=True)
+        self._thread.start()
+        atexit.register(self.close)
+
+    # ------------------------------------------------------------------ context manager
+
+    def __enter__(self) -> "FlightLog":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # ------------------------------------------------------------------ the public calls (any thread, never block)
+
+    @property
+    def dropped(self) -> int:
+        """Messages refused because the queue was full or the log was closed."""
+        return self._dropped
+
+    @property
+    def closed(self) -> bool:
+        return self._closed
+
+    def pose(self, drone: str, t_ns: int, position_xyz: Sequence[float],
+             quaternion_xyzw: Optional[Sequence[float]] = None) -> None:
+        """``/mocap/<drone>``: the pose as received (frame ``world``; quaternion ``(qx, qy, qz, qw)``, None:
+        identity). ``t_ns``: the mocap frame time."""
+        self._put(self._poses.get(drone) or self._topic(self._poses, "/mocap/{}", drone), t_ns, S.pose_json,
+                  (position_xyz, quaternion_xyzw))
+
+    def setpoint(self, drone: str, t_ns: int, position_xyz: Sequence[float], yaw_rad: float = 0.0) -> None:
+        """``/<drone>/setpoint``: the position setpoint sent, with its yaw (radians) as the orientation."""
+        self._put(self._setpoints.get(drone) or self._topic(self._setpoints, "/{}/setpoint", drone), t_ns,
+                  _setpoint_message, (position_xyz, yaw_rad))
+
+    def planner_step(self, drone: str, t_ns: int, **fields: Any) -> None:
+        """``/<drone>/planner``: one planning tick (fields of :func:`rpf_fly.log.schemas.planner_step`: tick,
+        position, goal, mode, eta, lam or lambda, f_a, f_r, f_in, direction, heading, neighbours,
+        obstacle_distance, goal_distance)."""
+        self._put(self._planner.get(drone) or self._topic(self._planner, "/{}/planner", drone), t_ns, S.planner_json,
+                  (fields,))
+
+    def status(self, drone: str, t_ns: int, **fields: Any) -> None:
+        """``/<drone>/status``: state, battery_v, link_quality, latency_ms, outcome."""
+        self._put(self._status.get(drone) or self._topic(self._status, "/{}/status", drone), t_ns, _status_message,
+                  (fields,))
+
+    def scene(self, t_ns: int, obstacles: Sequence[Mapping[str, Any]] = (), goals: Optional[Mapping[str, Any]] = None,
+              arena: Optional[Mapping[str, Sequence[float]]] = None, height: float = 0.0) -> None:
+        """``/scene``: obstacles (``{shape, center, radius}`` / ``{shape, min, max}``), goals ``{name: (x, y)}``,
+        arena ``{x, y, z}`` ranges, goal markers at ``height``."""
+        fields = {"obstacles": list(obstacles), "goals": dict(goals or {}), "arena": arena, "height": height}
+        self._put(self._fixed["/scene"], t_ns, _scene_message, (fields,), priority=True)
+
+    def tf(self, t_ns: int, poses: Mapping[str, tuple[Sequence[float], Optional[Sequence[float]]]]) -> None:
+        """``/tf``: transforms world -> each drone, ``{drone: (position, quaternion)}``."""
+        self._put(self._fixed["/tf"], t_ns, S.tf_json, (dict(poses),))
+
+    def event(self, t_ns: int, level: int, message: str, name: str = "rpf_fly", file: str = "", line: int = 0) -> None:
+        """``/events``: a ``foxglove.Log`` (level 1 debug, 2 info, 3 warning, 4 error, 5 fatal)."""
+        self._put(self._fixed["/events"], t_ns, S.log_message, (level, message, name, file, line),
+                  priority=True)
+
+    def close(self) -> None:
+        """Drain the queue, finish the file (summary and footer) and join the writer thread. Idempotent."""
+        with self._close_lock:
+            if self._closed:
+                return
+            self._closed = True
+        atexit.unregister(self.close)
+        self._stop.set()
+        self._wake.set()
+        if self._thread is not threading.current_thread():
+            self._thread.join()
+        leftover = len(self._queue)
+        if leftover:
+            self._count_drop(leftover)
+            self._queue.clear()
+
+    # ------------------------------------------------------------------ internals
+
+    @staticmethod
+    def _topic(table: dict[str, tuple[str, Any]], pattern: str, drone: str) -> tuple[str, Any]:
+        """The (name, sequence counter) of a drone's topic, made on first use (setdefault: thread-safe)."""
+        return table.setdefault(drone, (pattern.format(drone), itertools.count()))
+
+    def _count_drop(self, n: int = 1) -> None:
+        with self._drop_lock:
+            self._dropped += n
+
+    def _put(self, topic: tuple[str, Any], t_ns: int, build: Callable[..., dict], args: tuple,
+             priority: bool = False) -> None:
+        sequence = next(topic[1])
+        if self._closed:
+            self._count_drop()
+            return
+        queue = self._queue
+        if len(queue) >= self.max_queue and (not priority or len(queue) >= 2 * self.max_queue):
+            if not self.block_when_full:
+                self._count_drop()
+                return
+            while len(queue) >= self.max_queue and self._thread.is_alive():  # offline writers only
+                self._wake.set()
+                time.sleep(0.0005)
+        log_time = t_ns if self._clock is None else self._clock()
+        queue.append((topic[0], sequence, t_ns, log_time, build, args))
+
+    def _channel(self, topic: str) -> int:
+        channel = self._channels.get(topic)
+        if channel is None:
+            schema_name = S.topic_schema(topic)
+            schema = self._schema_ids.get(schema_name)
+            if schema is None:
+                schema = self._writer.register_schema(schema_name, S.SCHEMA_ENCODING, S.schema_bytes(schema_name))
+                self._schema_ids[schema_name] = schema
+            channel = self._writer.register_channel(topic, S.MESSAGE_ENCODING, schema)
+            self._channels[topic] = channel
+        return channel
+
+    def _write(self, topic: str, sequence: int, t_ns: int, log_time: int, message: dict | bytes) -> None:
+        if self.error is not None:
+            return
+        data = message if isinstance(message, bytes) else encode(message)
+        try:
+            self._writer.add_message(self._channel(topic), int(log_time), data, int(t_ns), sequence)
+            self.written += 1
+        except Exception as err:  # noqa: BLE001 - disk full, closed file: stop writing, never raise
+            self._fail(err)
+
+    def _fail(self, err: BaseException) -> None:
+        if self.error is None:
+            self.error = err
+            logger.error("flight log %s: writing failed, logging stopped: %s", self.path, err)
+
+    def _drain(self) -> None:
+        queue = self._queue
+        self.queue_peak = max(self.queue_peak, len(queue))
+        pop = queue.popleft
+        channels = self._channels
+        add = self._writer.add_message
+        written = 0
+        try:
+            while self.error is None:
+                try:
+                    topic, sequence, t_ns, log_time, build, args = pop()
+                except IndexError:
+                    return
+                try:
+                    if type(t_ns) is not int or type(log_time) is not int:
+                        t_ns, log_time = int(t_ns), int(log_time)
+                    data = build(t_ns, *args)
+                    if type(data) is not bytes:
+                        data = encode(data)
+                except Exception as err:  # noqa: BLE001 - a bad argument loses one message, not the log
+                    self.failed += 1
+                    if self.failed == 1:
+                        logger.warning("flight log %s: dropped a malformed %s message: %s", self.path, topic, err)
+                    continue
+                try:
+                    add(channels.get(topic) or self._channel(topic), log_time, data, t_ns, sequence)
+                    written += 1
+                except Exception as err:  # noqa: BLE001 - disk full, closed file: stop writing, never raise
+                    self._fail(err)
+            queue.clear()  # logging stopped after an error: discard, never grow
+        finally:
+            self.written += written
+
+    def _report_drops(self, final: bool = False) -> None:
+        dropped = self._dropped
+        if dropped == self._reported_drops and not (final and dropped):
+            return
+        self._reported_drops = dropped
+        text = f"flight log queue full: {dropped} messages dropped so far"
+        if final:
+            text = f"flight log: {dropped} messages dropped (queue full or logged after close)"
+        logger.warning("%s: %s", self.path, text)
+        now = time.time_ns() if self._clock is None else self._clock()
+        topic, counter = self._fixed["/events"]
+        self._write(topic, next(counter), now, now, S.log_message(now, 3, text, self.name))
+
+    def _flush(self) -> None:
+        if self.error is not None:
+            return
+        try:
+            self._writer.flush()
+        except Exception as err:  # noqa: BLE001
+            self._fail(err)
+
+    def _run(self) -> None:
+        last_flush = time.monotonic()
+        try:
+            while True:
+                stopping = self._stop.is_set()
+                self._drain()
+                now = time.monotonic()
+                if stopping:
+                    break
+                if now - last_flush >= self.flush_interval_s:
+                    self._report_drops()
+                    self._flush()
+                    last_flush = now
+                self._wake.wait(POLL_INTERVAL_S)
+                self._wake.clear()
+            self._drain()
+            self._report_drops(final=True)
+            if self.error is None:
+                try:
+                    self._writer.finish()
+                except Exception as err:  # noqa: BLE001
+                    self._fail(err)
+        finally:
+            try:
+                self._file.close()
+            except Exception as err:  # noqa: BLE001
+                self._fail(err)
+            self.writer_cpu_s = time.thread_time()

@@ -1,0 +1,92 @@
+"""Dry-run flight harness for the flight tests: real cflib over the fake radio, NatNet over loopback, a real MCAP
+log; faults are injected from a thread once the swarm flies."""
+
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Callable, Optional
+
+from rpf_fly.flight.dry_run import DryRun
+from rpf_fly.flight.loop import FlightLoop, FlightReport
+from rpf_fly.flight.phases import SwarmPhase
+from rpf_fly.flight.session import run_flight
+from rpf_fly.log.reader import LogData, read_log
+from rpf_fly.mission import parse_mission
+from rpf_fly.sim.planners import make_planner
+from rpf_fly.sim.scenario import obstacle_set
+
+SHORT_MISSION = """\
+name: short-3
+arena: {x: [-2.0, 2.0], y: [-2.0, 2.0], z: [0.0, 1.5]}
+flight: {height: 0.5, speed: 0.5, rate_hz: 10, goal_tolerance: 0.1, takeoff_s: 1.0, land_s: 1.0, timeout_s: 30}
+planner: {kind: apf}
+mocap: {kind: sim, rate_hz: 100}
+obstacles:
+  - {shape: circle, center: [0.0, 0.9], radius: 0.1}
+drones:
+  - {name: cf1, uri: radio://0/80/2M/E7E7E7E701, start: [-1.0, -0.6], goal: [1.0, -0.6]}
+  - {name: cf2, uri: radio://0/80/2M/E7E7E7E702, start: [-1.0, 0.0], goal: [1.0, 0.0]}
+  - {name: cf3, uri: radio://0/80/2M/E7E7E7E703, start: [-1.0, 0.6], goal: [1.0, 0.6]}
+"""
+
+
+@dataclass
+class Flight:
+    """A finished dry-run flight: the loop's report, each fake drone's final state, the log read back."""
+
+    report: FlightReport
+    snapshots: dict
+    log: LogData
+    log_path: Path
+
+    def events(self, kind: str, drone: Optional[str] = None) -> list:
+        return [e for e in self.report.events if e.kind == kind and (drone is None or e.drone == drone)]
+
+    def logged_events(self) -> list[str]:
+        return [m.data["message"] for m in self.log.messages("/events")]
+
+
+def default_factory(mission):
+    obstacles = obstacle_set(mission.obstacles)
+    return lambda drone: make_planner(mission.planner, obstacles)
+
+
+def fly(
+    mission,
+    tmp_path: Path,
+    *,
+    configs=None,
+    factory=None,
+    when_flying: Optional[Callable[[FlightLoop, DryRun], None]] = None,
+    mocap: str = "natnet",
+) -> Flight:
+    """Fly ``mission`` on simulated drones; ``when_flying(loop, rig)`` runs on its own thread once the swarm flies."""
+    log_path = tmp_path / "flight.mcap"
+    with DryRun(mission, mocap=mocap, drone_configs=configs) as rig:
+        workers: list[threading.Thread] = []
+
+        def on_loop(loop: FlightLoop) -> None:
+            if when_flying is None:
+                return
+
+            def wait_then_act() -> None:
+                deadline = time.monotonic() + 30
+                while loop.phase != SwarmPhase.FLYING and time.monotonic() < deadline:
+                    if loop.phase in (SwarmPhase.ABORTED, SwarmPhase.DONE):
+                        return
+                    time.sleep(0.01)
+                when_flying(loop, rig)
+
+            worker = threading.Thread(target=wait_then_act, daemon=True)
+            workers.append(worker)
+            worker.start()
+
+        report = run_flight(mission, factory or default_factory(mission), log_path, rig=rig, on_loop=on_loop)
+        for worker in workers:
+            worker.join(timeout=10)
+        time.sleep(0.2)
+        snapshots = {d.name: rig.snapshot(d.name) for d in mission.drones}
+    return Flight(report, snapshots, read_log(log_path), log_path)

@@ -1,0 +1,174 @@
+"""End-to-end dry-run flights and fault handling: what the drones did, and what the log says.
+
+Every test flies simulated Crazyflies through the real stack: the flight loop, the NatNet client receiving the
+emulator's UDP packets on 127.0.0.1, the cflib backend, cflib itself and the fake-radio firmware.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import replace
+
+import pytest
+
+from rpf_fly.flight.phases import FlightOutcome, SwarmPhase
+from rpf_fly.log.review import metrics_of
+from rpf_fly.mission import load_mission
+from rpf_fly.radio.fake_world import FakeDroneConfig
+from flight_harness import default_factory, fly
+
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def landed(snapshot) -> bool:
+    return snapshot.position[2] < 0.05 and not snapshot.motors_on
+
+
+def test_lab_mission_end_to_end(tmp_path):
+    """missions/lab-3.yaml: every drone takes off, reaches its goal and lands; the log reviews with the result."""
+    mission = load_mission(ROOT / "missions" / "lab-3.yaml")
+    flight = fly(mission, tmp_path)
+    assert flight.report.error is None and flight.report.phase == SwarmPhase.DONE
+    assert flight.report.success, flight.report.reasons
+    assert all(o == FlightOutcome.REACHED for o in flight.report.outcomes.values())
+    for name, snap in flight.snapshots.items():
+        goal = next(d.goal for d in mission.drones if d.name == name)
+        assert landed(snap), name
+        assert abs(snap.position[0] - goal[0]) < 0.2 and abs(snap.position[1] - goal[1]) < 0.2, name
+    metrics = metrics_of(flight.log)
+    assert metrics.success and metrics.reached == 3
+    assert metrics.collisions_drone_drone == metrics.collisions_drone_obstacle == 0
+    assert not flight.log.truncated
+    topics = set(flight.log.topics)
+    for name in ("cf1", "cf2", "cf3"):
+        assert {f"/mocap/{name}", f"/{name}/setpoint", f"/{name}/planner", f"/{name}/status"} <= topics
+    assert {"/scene", "/tf", "/events"} <= topics
+    final = {n: flight.log.messages(f"/{n}/status")[-1].data for n in ("cf1", "cf2", "cf3")}
+    assert all(s["state"] == "landed" and s["outcome"] == "reached" for s in final.values())
+    assert flight.report.stats.ticks > 50 and flight.report.stats.overruns <= 2
+
+
+def test_one_rigid_body_lost_for_one_second_holds_then_resumes(tmp_path, short_mission):
+    flight = fly(short_mission, tmp_path, when_flying=lambda loop, rig: (time.sleep(0.5), rig.hide("cf2", 1.0)))
+    stale = flight.events("pose_stale", "cf2")
+    assert stale and stale[0].level == 3 and "holding" in stale[0].message
+    assert any("resuming" in e.message for e in stale)
+    assert not flight.events("pose_lost")
+    assert flight.report.outcomes["cf2"] == FlightOutcome.REACHED and flight.report.success
+    assert all(landed(s) for s in flight.snapshots.values())
+    assert any("holding" in m for m in flight.logged_events())
+    # While hidden, cf2 streamed a fixed setpoint: its planner log says "hold".
+    modes = [m.data["mode"] for m in flight.log.messages("/cf2/planner")]
+    assert "hold" in modes
+
+
+def test_all_mocap_lost_all_hold_then_land(tmp_path, short_mission):
+    flight = fly(short_mission, tmp_path, when_flying=lambda loop, rig: (time.sleep(0.5), rig.blackout(10.0)))
+    assert flight.events("mocap_lost")
+    assert len(flight.events("pose_lost")) == 3
+    assert all(o == FlightOutcome.LANDED_EARLY for o in flight.report.outcomes.values())
+    assert all(landed(s) for s in flight.snapshots.values())
+    assert not flight.report.success and flight.report.phase == SwarmPhase.DONE
+    assert any("no fresh mocap pose for any drone" in m for m in flight.logged_events())
+
+
+def test_one_radio_link_dropped_others_continue(tmp_path, short_mission):
+    def drop(loop, rig):
+        time.sleep(0.5)
+        rig.world.drop_link(rig.addresses["cf3"])
+
+    flight = fly(short_mission, tmp_path, when_flying=drop)
+    assert flight.report.outcomes["cf3"] == FlightOutcome.LINK_LOST
+    assert flight.events("link_lost", "cf3")
+    assert flight.report.outcomes["cf1"] == flight.report.outcomes["cf2"] == FlightOutcome.REACHED
+    assert landed(flight.snapshots["cf1"]) and landed(flight.snapshots["cf2"])
+    # Without a link the firmware's watchdog cut cf3's motors (nothing could land it).
+    assert not flight.snapshots["cf3"].motors_on
+    assert any("radio link lost" in m for m in flight.logged_events())
+
+
+def test_low_battery_on_one_drone_lands_it(tmp_path, short_mission):
+    def drain(loop, rig):
+        time.sleep(0.5)
+        rig.world.set_battery(rig.addresses["cf1"], 3.3)  # 3.05 V under load, below 3.7 - 0.4
+
+    flight = fly(short_mission, tmp_path, when_flying=drain)
+    assert flight.events("battery", "cf1")
+    assert flight.report.outcomes["cf1"] == FlightOutcome.LANDED_EARLY
+    assert flight.report.outcomes["cf2"] == flight.report.outcomes["cf3"] == FlightOutcome.REACHED
+    assert all(landed(s) for s in flight.snapshots.values())
+    goal = short_mission.drones[0].goal
+    assert abs(flight.snapshots["cf1"].position[0] - goal[0]) > 0.3  # it landed on the way, not at its goal
+
+
+def test_planner_exception_in_one_drone(tmp_path, short_mission):
+    base = default_factory(short_mission)
+
+    class Failing:
+        def __init__(self, planner):
+            self.planner, self.calls = planner, 0
+
+        def step(self, view):
+            self.calls += 1
+            if self.calls > 8:
+                raise FloatingPointError("injected planner failure")
+            return self.planner.step(view)
+
+    factory = lambda drone: Failing(base(drone)) if drone.name == "cf2" else base(drone)  # noqa: E731
+    flight = fly(short_mission, tmp_path, factory=factory)
+    fault = flight.events("planner_fault", "cf2")
+    assert fault and "injected planner failure" in fault[0].message
+    assert flight.report.outcomes["cf2"] == FlightOutcome.LANDED_EARLY
+    assert flight.report.outcomes["cf1"] == flight.report.outcomes["cf3"] == FlightOutcome.REACHED
+    assert all(landed(s) for s in flight.snapshots.values())
+
+
+def test_geofence_breach_lands_that_drone(tmp_path, short_mission):
+    def gust(loop, rig):
+        time.sleep(0.5)
+        rig.world.disturb(rig.addresses["cf1"], (0.0, -1.8, 0.0))  # from y = -0.6 to beyond y = -2
+
+    flight = fly(short_mission, tmp_path, when_flying=gust)
+    breach = flight.events("geofence", "cf1")
+    assert breach and "outside the arena" in breach[0].message
+    assert flight.report.outcomes["cf1"] == FlightOutcome.LANDED_EARLY
+    assert flight.report.outcomes["cf2"] == flight.report.outcomes["cf3"] == FlightOutcome.REACHED
+    assert all(landed(s) for s in flight.snapshots.values())
+    # Every setpoint streamed stayed inside the arena (the geofence clamps them).
+    for name in ("cf1", "cf2", "cf3"):
+        for m in flight.log.messages(f"/{name}/setpoint"):
+            p = m.data["pose"]["position"]
+            assert -2.0 <= p["x"] <= 2.0 and -2.0 <= p["y"] <= 2.0
+
+
+def test_unhandled_exception_lands_everyone_and_closes_the_log(tmp_path, short_mission):
+    def break_supervisor(loop, rig):
+        time.sleep(0.5)
+
+        def boom(*args, **kwargs):
+            raise RuntimeError("injected supervisor bug")
+
+        loop.supervisor.check = boom
+
+    flight = fly(short_mission, tmp_path, when_flying=break_supervisor)
+    assert "injected supervisor bug" in (flight.report.error or "")
+    assert flight.events("error")
+    assert all(landed(s) for s in flight.snapshots.values())
+    assert not flight.log.truncated
+    assert any("flight loop failed" in m for m in flight.logged_events())
+
+
+def test_preflight_failure_arms_nothing(tmp_path, short_mission):
+    configs = {"cf2": FakeDroneConfig.at(0.5, 0.0, 0.0)}  # 1.5 m away from its mission start
+    flight = fly(short_mission, tmp_path, configs=configs)
+    assert flight.report.phase == SwarmPhase.ABORTED
+    assert "from its start" in flight.report.reasons["cf2"]
+    assert all(o == FlightOutcome.NOT_FLOWN for o in flight.report.outcomes.values())
+    assert all(not s.motors_on and s.position[2] < 0.01 for s in flight.snapshots.values())
+
+
+def test_simulated_mocap_source_flies_too(tmp_path, short_mission):
+    flight = fly(short_mission, tmp_path, mocap="sim")
+    assert flight.report.success
