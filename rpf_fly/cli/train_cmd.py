@@ -95,12 +95,13 @@ def _finish(trainer, out: Path, command: str, eval_seeds: int, missions_dir: Pat
 
     config = trainer.config
     commit = git_commit()
+    model = trainer.best_model()  # the weights that scored best on the validation scenes (not the paper missions)
     export_onnx(
-        trainer.model,
+        model,
         out,
         {"rpf_fly.kind": config.kind, "rpf_fly.preset": "robust", "rpf_fly.seed": str(config.seed), "rpf_fly.commit": commit},
     )
-    parity = check_parity(trainer.model, out)
+    parity = check_parity(model, out)
     curve_csv = out.with_suffix(".curve.csv")
     curve_csv.write_text((trainer.out_dir / "training_curve.csv").read_text())
     curve_png = plot_curves(curve_csv, out.with_suffix(".curve.png"), title=f"{config.kind}, seed {config.seed}")
@@ -119,6 +120,12 @@ def _finish(trainer, out: Path, command: str, eval_seeds: int, missions_dir: Pat
             "env_steps": trainer.env_steps,
             "robot_steps": trainer.env_steps * 6,
             "final_success_rate_last_200": trainer.history[-1].success_rate if trainer.history else None,
+            "selected_update": trainer.best["update"] if trainer.best else trainer.update,
+            "selected_validation": (
+                {"success_rate": trainer.best["success"], "mean_return": trainer.best["return"],
+                 "scenes": config.eval_episodes, "seed": config.eval_seed}
+                if trainer.best else None
+            ),
             "hyperparameters": dataclasses.asdict(config),
             "machine": machine(),
         },
