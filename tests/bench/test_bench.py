@@ -191,7 +191,8 @@ def test_claims_all_held():
     by_id = {c.id: c for c in claims}
     assert by_id["a"].numbers["RPF-2"]["travel_distance_m"] == 6.5
     assert by_id["b"].numbers["rpf1_succeeds_ppo_fails"] == 18 and by_id["b"].numbers["PPO failures"] == {"timeout": 18}
-    assert "successful planners: RPF-1, APF, ORCA" in by_id["c"].note
+    assert "successful planners: RPF-1, APF" in by_id["c"].note
+    assert "beyond the paper, ORCA" in by_id["c"].note
     assert by_id["d"].numbers["runs"] == 100 and by_id["d"].numbers["success_rate"] == 1.0
 
 
@@ -203,7 +204,9 @@ def test_claims_not_held():
     results["runs"] = _runs("rpf", "circle-8-r8", [True] * 20) + _runs("ppo", "circle-8-r8", [True] * 15 + [False] * 5)
     assert _status(results)["b"] == NOT_HELD
     # (c) ORCA travels less than RPF-1 on lab-3.
-    assert _status(_paper_results({("orca", "lab-3"): _row("orca", "lab-3", 1.0, 5.0, 0.012)}))["c"] == NOT_HELD
+    # ORCA is beyond the paper's comparison: reported beside (c), not judged; a paper planner that beats RPF-1 is.
+    assert _status(_paper_results({("orca", "lab-3"): _row("orca", "lab-3", 1.0, 5.0, 0.012)}))["c"] == HELD
+    assert _status(_paper_results({("rpf-mean", "lab-3"): _row("rpf-mean", "lab-3", 1.0, 5.0, 0.012)}))["c"] == NOT_HELD
     # (d) one collision, or 97 % success, breaks it; (e) likewise on fresh scenes.
     assert _status(_paper_results({("rpf", "lab-3"): _row("rpf", "lab-3", 1.0, 6.0, 0.01, collisions=1)}))["d"] == NOT_HELD
     assert _status(_paper_results({("rpf", "arena-b-6"): _row("rpf", "arena-b-6", 0.85, 6.0, 0.01)}))["d"] == NOT_HELD
