@@ -51,6 +51,9 @@ def train(
     config = PPOConfig(seed=seed, kind=kind, arena=arena, episodes=episodes, n_arenas=arenas, obstacle_radius=radius)  # type: ignore[arg-type]
     run_dir = out.with_suffix(".run")
     command = "rpf-fly train " + " ".join(shlex.quote(a) for a in sys.argv[2:]) if len(sys.argv) > 2 else "rpf-fly train"
+    from rpf_fly.learn.card import git_commit
+
+    commit = git_commit()  # the code that trains: taken now, not at export time
     trainer = Trainer(config, run_dir)
     if resume:
         if not trainer.checkpoint_path.exists():
@@ -58,7 +61,7 @@ def train(
         trainer.load_checkpoint()
     started = time.time()
     _train_with_progress(trainer)
-    _finish(trainer, out, command, eval_seeds, missions_dir, time.time() - started)
+    _finish(trainer, out, command, eval_seeds, missions_dir, time.time() - started, commit)
 
 
 def _train_with_progress(trainer) -> None:  # type: ignore[no-untyped-def]
@@ -86,15 +89,14 @@ def _train_with_progress(trainer) -> None:  # type: ignore[no-untyped-def]
         trainer.run(update)
 
 
-def _finish(trainer, out: Path, command: str, eval_seeds: int, missions_dir: Path, wall_s: float) -> None:  # type: ignore[no-untyped-def]
+def _finish(trainer, out: Path, command: str, eval_seeds: int, missions_dir: Path, wall_s: float, commit: str) -> None:  # type: ignore[no-untyped-def]
     import dataclasses
 
-    from rpf_fly.learn.card import git_commit, machine, write_card
+    from rpf_fly.learn.card import machine, write_card
     from rpf_fly.learn.curves import plot_curves
     from rpf_fly.learn.export import check_parity, export_onnx, file_sha256
 
     config = trainer.config
-    commit = git_commit()
     model = trainer.best_model()  # the weights that scored best on the validation scenes (not the paper missions)
     export_onnx(
         model,
