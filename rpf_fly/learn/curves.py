@@ -26,7 +26,11 @@ def plot_curves(csv_path: str | Path, png_path: str | Path, title: str = "") -> 
     axes[0, 1].plot(x, col("success_rate"), label="all")
     axes[0, 1].plot(x, col("success_rate_a"), label="arena A", alpha=0.7)
     axes[0, 1].plot(x, col("success_rate_b"), label="arena B", alpha=0.7)
-    axes[0, 1].set_ylabel("episode success (last 200)")
+    validated = [(xi, float(r["eval_success"])) for xi, r in zip(x, rows) if r.get("eval_success") not in (None, "", "nan")]
+    validated = [(xi, v) for xi, v in validated if v == v]
+    if validated:
+        axes[0, 1].plot(*zip(*validated), "ko", ms=3, label="validation (deterministic)")
+    axes[0, 1].set_ylabel("episode success (last 200; early values favour short episodes)")
     axes[0, 1].set_ylim(-0.02, 1.02)
     axes[0, 1].legend(fontsize=8)
     axes[1, 0].plot(x, col("approx_kl"), label="approx KL")
