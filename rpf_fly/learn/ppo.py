@@ -14,6 +14,7 @@ from __future__ import annotations
 import csv
 import dataclasses
 import json
+import logging
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -25,6 +26,8 @@ from torch import nn
 
 from rpf_fly.learn.env import EnvConfig, EpisodeStats, SwarmEnv
 from rpf_fly.learn.model import ActorCritic, ModelConfig
+
+logger = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -148,6 +151,7 @@ class Trainer:
         self.wall_s = 0.0
         self.history: list[UpdateLog] = []
         self.best: Optional[dict] = None
+        self.skipped_minibatches = 0
         self.best_score: tuple[float, float] = (-1.0, -float("inf"))
         self._warm_up_normalisers()
 
@@ -290,6 +294,8 @@ class Trainer:
             order = torch.randperm(n)
             for start in range(0, n, c.minibatch_size):
                 idx = order[start : start + c.minibatch_size]
+                if idx.numel() < 2:  # a 1-sample remainder has no advantage std (NaN): skip it
+                    continue
                 logp, entropy, value = model.evaluate(
                     batch["local"][idx], batch["neighbours"][idx], batch["mask"][idx], batch["u"][idx]
                 )
@@ -307,6 +313,10 @@ class Trainer:
                     (value - batch["returns"][idx]) ** 2, (clipped - batch["returns"][idx]) ** 2
                 ).mean()
                 loss = policy_loss - c.ent_coef * entropy.mean() + c.vf_coef * value_loss
+                if not torch.isfinite(loss):  # never let one bad minibatch poison the weights
+                    self.skipped_minibatches += 1
+                    logger.warning("update %d: non-finite loss, minibatch skipped", self.update)
+                    continue
                 self.optimizer.zero_grad()
                 loss.backward()
                 nn.utils.clip_grad_norm_(model.parameters(), c.max_grad_norm)

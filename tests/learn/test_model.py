@@ -77,3 +77,17 @@ def test_running_norm_matches_numpy_over_batches():
     everything = np.concatenate(batches)
     assert norm.mean.numpy() == pytest.approx(everything.mean(0), rel=1e-4)
     assert norm.var.numpy() == pytest.approx(everything.var(0), rel=1e-3)
+
+
+def test_ppo_update_survives_a_one_sample_minibatch(tmp_path):
+    """A rollout whose valid-sample count leaves a remainder of 1 must not turn the weights into NaN."""
+    from rpf_fly.learn.ppo import PPOConfig, Trainer
+
+    trainer = Trainer(PPOConfig(n_arenas=2, rollout_steps=8, minibatch_size=4, eval_every=10**9), tmp_path)
+    batch = trainer._collect()
+    keep = 4 * ((batch["local"].shape[0] - 1) // 4) + 1  # a remainder of exactly one sample
+    assert keep % 4 == 1 and keep > 1
+    batch = {k: (v[:keep] if hasattr(v, "shape") and v.shape[:1] == batch["local"].shape[:1] else v)
+             for k, v in batch.items()}
+    trainer._learn(batch)
+    assert all(torch.isfinite(p).all() for p in trainer.model.parameters())
