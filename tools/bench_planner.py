@@ -50,10 +50,12 @@ def timed(fn: Callable[[], object], inner: int, repeats: int) -> float:
 
 
 def midflight_views(mission_name: str):  # type: ignore[no-untyped-def]
-    """Each drone's own view at the middle of a simulated run of the mission, and the planner."""
+    """Each drone's own view at the middle of a simulated run of the mission (fixed-gains APF), and the planner."""
+    from dataclasses import replace
+
     mission = load_mission(ROOT / "missions" / f"{mission_name}.yaml")
     scenario = scenario_from_mission(mission, 0)
-    planner = make_planner(mission.planner, scenario.obstacles)
+    planner = make_planner(replace(mission.planner, kind="apf", policy=None), scenario.obstacles)
     params = SimParams(mission.flight.speed, mission.flight.dt, mission.flight.goal_tolerance, mission.sim.time_limit_s)
     run = rollout(scenario, planner, params)
     k = run.steps // 2
@@ -67,10 +69,17 @@ def midflight_views(mission_name: str):  # type: ignore[no-untyped-def]
     return planner, views
 
 
-def bench_per_drone(repeats: int) -> dict[str, float]:
+def bench_per_drone(repeats: int, kind: str = "apf") -> dict[str, float]:
+    """Median per-drone step on each mission's mid-flight views, with the fixed-gains APF or the shipped RPF policy."""
+    from dataclasses import replace
+
     out = {}
     for name in ("lab-3", "arena-a-6", "circle-8-r3"):
         planner, views = midflight_views(name)
+        if kind != "apf":
+            mission = load_mission(ROOT / "missions" / f"{name}.yaml")
+            settings = replace(mission.planner, kind=kind, policy=ROOT / "policies" / f"{kind}.onnx")
+            planner = make_planner(settings, planner.obstacles)
         per_view = [timed(lambda v=v: planner.step(v), 300, repeats) for v in views]
         out[name] = statistics.median(per_view)
     return out
@@ -132,11 +141,15 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
 
     per_drone = bench_per_drone(args.repeats)
+    per_drone_rpf = bench_per_drone(args.repeats, "rpf")
     ticks = {n: bench_tick(n, args.repeats) for n in (10, 100)}
     sim = bench_batched_sim(args.repeats)
 
     print("per-drone plan step, fixed gains (median; goal <= 50 us)")
     for name, s in per_drone.items():
+        print(f"  {name:14s} {s * 1e6:8.1f} us")
+    print("per-drone plan step, ONNX policy policies/rpf.onnx (median; goal <= 100 us)")
+    for name, s in per_drone_rpf.items():
         print(f"  {name:14s} {s * 1e6:8.1f} us")
     print("one tick, every drone from its own view (goal: 100 drones <= 5 ms)")
     for n, t in ticks.items():
@@ -152,6 +165,7 @@ def main(argv: list[str] | None = None) -> int:
             json.dumps(
                 {
                     "per_drone_step_s": per_drone,
+                    "per_drone_step_rpf_onnx_s": per_drone_rpf,
                     "tick_s": {str(n): t for n, t in ticks.items()},
                     "batched_sim_robot_steps_per_s": sim,
                     "python": sys.version.split()[0],

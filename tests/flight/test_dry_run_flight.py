@@ -48,6 +48,26 @@ def test_lab_mission_end_to_end(tmp_path):
     final = {n: flight.log.messages(f"/{n}/status")[-1].data for n in ("cf1", "cf2", "cf3")}
     assert all(s["state"] == "landed" and s["outcome"] == "reached" for s in final.values())
     assert flight.report.stats.ticks > 50 and flight.report.stats.overruns <= 2
+    validate_every_message(flight.log_path)
+
+
+def validate_every_message(path):
+    """Every message of the flight log against the JSON Schema embedded for its channel (Foxglove and ours)."""
+    import json
+
+    import jsonschema
+    from mcap.reader import make_reader
+
+    validators, seen = {}, set()
+    with open(path, "rb") as f:
+        for schema, channel, message in make_reader(f).iter_messages():
+            if schema.id not in validators:
+                document = json.loads(schema.data)
+                validators[schema.id] = jsonschema.validators.validator_for(document)(document)
+            validators[schema.id].validate(json.loads(message.data))
+            seen.add(schema.name)
+    assert {"foxglove.PoseInFrame", "foxglove.SceneUpdate", "foxglove.FrameTransforms", "foxglove.Log",
+            "rpf_fly.PlannerStep", "rpf_fly.DroneStatus"} <= seen
 
 
 def test_one_rigid_body_lost_for_one_second_holds_then_resumes(tmp_path, short_mission):

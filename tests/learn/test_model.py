@@ -1,5 +1,7 @@
 """The actor-critic: masked attention, action ranges, normalisation."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 import torch
@@ -91,3 +93,21 @@ def test_ppo_update_survives_a_one_sample_minibatch(tmp_path):
              for k, v in batch.items()}
     trainer._learn(batch)
     assert all(torch.isfinite(p).all() for p in trainer.model.parameters())
+
+
+def test_training_resumes_from_its_checkpoint(tmp_path):
+    """A run stopped after 2 updates continues from the checkpoint: weights, optimiser, counters and curve."""
+    from rpf_fly.learn.ppo import PPOConfig, Trainer
+
+    config = PPOConfig(n_arenas=2, rollout_steps=16, minibatch_size=64, eval_every=10**9, checkpoint_every=1,
+                       episodes=10**9, max_updates=2)
+    first = Trainer(config, tmp_path)
+    first.run()
+    saved = {k: v.clone() for k, v in first.model.state_dict().items()}
+    resumed = Trainer(dataclasses.replace(config, max_updates=3), tmp_path)
+    resumed.load_checkpoint()
+    assert resumed.update == 2 and len(resumed.history) == 2
+    assert all(torch.equal(saved[k], v) for k, v in resumed.model.state_dict().items())
+    resumed.run()
+    assert resumed.update == 3 and [h.update for h in resumed.history] == [1, 2, 3]
+    assert (tmp_path / "training_curve.csv").read_text().count("\n") == 4  # header + 3 updates
