@@ -74,3 +74,13 @@ def test_exported_policy_flies_in_the_simulator(tmp_path, kind, config):
     if kind == "rpf":  # the untrained gains policy is the vanilla APF with eta 0.05, lambda 2.5
         assert run.metrics.success
         assert np.allclose(run.rollout.eta, 0.05, atol=0.005)
+
+
+def test_one_drone_fast_path_equals_batched_call(tmp_path):
+    """The bound-buffer path for one drone returns what session.run returns for the same observation."""
+    policy = OnnxPolicy(export_onnx(trained_looking(ModelConfig()), tmp_path / "p.onnx"))
+    local, neighbours, mask = random_observations(12, 10)
+    batched = policy.act(Observation(local, neighbours, mask.astype(bool)))
+    for i in range(12):
+        one = policy.act(Observation(local[i], neighbours[i], mask[i].astype(bool)))
+        np.testing.assert_array_equal(one, batched[i])
