@@ -405,14 +405,12 @@ class FlightLoop:
     # ------------------------------------------------------------------------------------- the iteration
 
     def _spin_once(self, until_s: float, plan: bool) -> None:
-        """Receive the newest frame (waiting until ``until_s`` at most), forward extpos, supervise; plan at ticks."""
+        """Receive the newest frame (waiting until ``until_s`` at most); at a planning tick plan and send first (its
+        latency is what the drones feel), then forward extpos, record, and supervise."""
         frame = self.mocap.receive(max(0.0, until_s - self.clock()))
         now = self.clock()
-        self._states = self.backend.states()
         if frame is not None:
-            self._on_frame(frame, now)
-        self._apply(self.supervisor.check(now, self.agents.values(), self.tracker, self._states), now)
-        self._finish_landings(now)
+            self.tracker.update(frame)
         if plan and now >= self._next_tick:
             self._plan_tick(now, frame)
             if self._last_tick_s is not None:
@@ -422,6 +420,11 @@ class FlightLoop:
             if now - self._next_tick > self.mission.flight.dt:
                 self.stats.overruns += 1
                 self._next_tick = now + self.mission.flight.dt
+        self._states = self.backend.states()
+        if frame is not None:
+            self._on_frame(frame, now)
+        self._apply(self.supervisor.check(now, self.agents.values(), self.tracker, self._states), now)
+        self._finish_landings(now)
         if now - self._last_status_s >= self.STATUS_PERIOD_S:
             self._last_status_s = now
             for agent in self.agents.values():
@@ -430,7 +433,7 @@ class FlightLoop:
                 self.status_hook(self)
 
     def _on_frame(self, frame: MocapFrame, now: float) -> None:
-        self.tracker.update(frame)
+        """Record the frame's poses and forward them to the drones' estimators (rate-limited per drone)."""
         fresh = {n: p for n, p in self.tracker.poses.items() if p.frame_number == frame.frame_number and p.valid}
         self.recorder.poses(now, fresh)
         period = 1.0 / self.mission.radio.extpos_rate_hz
@@ -452,19 +455,28 @@ class FlightLoop:
                 self._set_drone(agent, DronePhase.LANDED)
 
     def _plan_tick(self, now: float, frame: Optional[MocapFrame]) -> None:
+        """Plan and send every drone's setpoint; the log records are written after the last send."""
         self.stats.ticks += 1
         self.tick += 1
         self._watchdog.beat()
         flight = self.mission.flight
+        stale_after = self.mission.safety.pose_timeout_s
         airborne_poses = {
             n: p for n, p in self.tracker.poses.items()
             if p.position[2] > 0.5 * flight.height and not self.agents[n].phase.terminal
         }
+        records: list[tuple[DroneAgent, Optional[TrackedPose], Optional[PlanStep], str]] = []
+        sent: list[tuple[str, tuple[float, float, float], float]] = []
         for agent in self.agents.values():
             pose = self.tracker.get(agent.name)
             step: Optional[PlanStep] = None
             mode = agent.phase.value
-            if agent.phase == DronePhase.PLANNING and pose is not None:
+            fresh = pose is not None and pose.valid and now - pose.stamp_s <= stale_after
+            if agent.phase == DronePhase.PLANNING and pose is not None and not fresh:
+                # Never plan on a stale pose; the supervisor puts the drone on hold right after this tick.
+                mode = "hold"
+                self._send(agent, agent.reference, frame, sent)
+            elif agent.phase == DronePhase.PLANNING and pose is not None:
                 if abs(agent.goal - pose.xy) < flight.goal_tolerance:
                     agent.hold_point = agent.goal
                     agent.arrived_at_s = now
@@ -483,26 +495,31 @@ class FlightLoop:
                         agent.hold(agent.reference, now, str(fault))
                         self.events.emit(ERROR, "planner_fault", f"{fault}: holding, then landing", agent.name)
                         self._land(agent, "planner fault")
-                        self.recorder.planner(now, self.tick, agent, pose, None, "hold")
+                        records.append((agent, pose, None, "hold"))
                         continue
                     step = result.step
                     mode = MODE_NAMES.get(int(step.mode), "apf")
                     self.stats.planner_seconds.append(result.seconds)
-                    self._send(agent, result.setpoint, frame)
+                    self._send(agent, result.setpoint, frame, sent)
             if agent.phase in (DronePhase.HOLDING, DronePhase.ARRIVED):
                 mode = "arrived" if agent.phase == DronePhase.ARRIVED else "hold"
-                self._send(agent, agent.hold_point, frame)
+                self._send(agent, agent.hold_point, frame, sent)
             if agent.phase.airborne or agent.phase == DronePhase.LANDED:
-                self.recorder.planner(now, self.tick, agent, pose, step, mode)
+                records.append((agent, pose, step, mode))
+        for name, position, t in sent:
+            self.recorder.setpoint(t, name, position)
+        for agent, pose, step, mode in records:
+            self.recorder.planner(now, self.tick, agent, pose, step, mode)
 
-    def _send(self, agent: DroneAgent, xy: complex, frame: Optional[MocapFrame]) -> None:
+    def _send(self, agent: DroneAgent, xy: complex, frame: Optional[MocapFrame],
+              sent: list[tuple[str, tuple[float, float, float], float]]) -> None:
         z = agent.clamp_height(self.mission.flight.height)
         xy = agent.clamp(xy)
         self.backend.send_position_setpoint(agent.name, xy.real, xy.imag, z, 0.0)
-        sent = self.clock()
+        t = self.clock()
         if frame is not None:
-            self.stats.latencies.append(sent - frame.receive_time_s)
-        self.recorder.setpoint(sent, agent.name, (xy.real, xy.imag, z))
+            self.stats.latencies.append(t - frame.receive_time_s)
+        sent.append((agent.name, (xy.real, xy.imag, z), t))
 
     # ---------------------------------------------------------------------------------------- findings
 
