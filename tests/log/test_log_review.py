@@ -51,7 +51,14 @@ def test_log_carries_the_mission_and_scenario(lab_log):
     data = read_log(path)
     mission = data.metadata["mission"]
     assert mission["yaml"] == (MISSIONS / "lab-3.yaml").read_text()
-    assert (mission["name"], mission["planner"], mission["seed"], mission["policy_sha256"]) == ("lab-3", "apf", "0", "")
+    import hashlib
+
+    from rpf_fly.mission import load_mission
+
+    loaded = load_mission(MISSIONS / "lab-3.yaml")
+    policy_sha = hashlib.sha256(loaded.planner.policy.read_bytes()).hexdigest() if loaded.planner.policy else ""
+    assert (mission["name"], mission["planner"], mission["seed"], mission["policy_sha256"]) == (
+        "lab-3", loaded.planner.kind, "0", policy_sha)
     assert mission["rpf_fly_version"] == __version__
     scenario = json.loads(data.metadata["scenario"]["json"])
     assert scenario["names"] == ["cf1", "cf2", "cf3"] and scenario["dt"] == 0.1 and scenario["height"] == 0.6
@@ -77,14 +84,14 @@ def test_planner_ticks_cover_every_step_and_a_final_tick(lab_log):
 
 
 def test_summary_of_a_simulated_log(lab_log):
-    path, _ = lab_log
+    path, metrics = lab_log
     result = review(read_log(path))
     assert result.drones == ["cf1", "cf2", "cf3"] and result.mission == "lab-3" and result.seed == 0
     stats = {t.topic: t for t in result.topics}
     assert stats["/mocap/cf1"].rate_hz == pytest.approx(10.0) and stats["/mocap/cf1"].gaps == ()
     assert stats["/mocap/cf1"].missing == 0 and stats["/scene"].count == 1
     assert result.events_by_level["info"] >= 5  # start, three arrivals, end
-    assert result.duration_s == pytest.approx(23.6)
+    assert result.duration_s == pytest.approx(metrics["makespan_s"])  # the run ends at the last arrival
 
 
 def test_gaps_and_missing_sequences_are_found(tmp_path):
