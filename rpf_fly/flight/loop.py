@@ -482,11 +482,15 @@ class FlightLoop:
                     agent.arrived_at_s = now
                     self._set_drone(agent, DronePhase.ARRIVED, "reached its goal")
                 else:
+                    # Plan on the commanded geometry (see flight/agent.py): from our own reference, with each
+                    # neighbour predicted ahead by our observed tracking lag.
                     others = [n for n in airborne_poses if n != agent.name]
+                    lag_s = agent.tracking_lag_s(pose.xy)
+                    velocity = np.array([airborne_poses[n].velocity for n in others], dtype=complex)
                     view = view_of_drone(
-                        pose.xy, agent.goal, agent.heading,
-                        np.array([airborne_poses[n].xy for n in others], dtype=complex),
-                        np.array([airborne_poses[n].velocity for n in others], dtype=complex),
+                        agent.reference, agent.goal, agent.heading,
+                        np.array([airborne_poses[n].xy for n in others], dtype=complex) + lag_s * velocity,
+                        velocity,
                         self.mission.planner.sensing_range,
                     )
                     try:

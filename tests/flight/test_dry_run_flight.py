@@ -40,6 +40,9 @@ def test_lab_mission_end_to_end(tmp_path):
     metrics = metrics_of(flight.log)
     assert metrics.success and metrics.reached == 3
     assert metrics.collisions_drone_drone == metrics.collisions_drone_obstacle == 0
+    # The margin the planner chose survives the drones' tracking lag: planning on the measured poses passed cf1 and
+    # cf3 within 0.186-0.217 m (2r = 0.2 m); planning on the commanded geometry keeps about 0.30 m, as in the sim.
+    assert metrics.min_separation_m > 0.25, metrics.min_separation_m
     assert not flight.log.truncated
     topics = set(flight.log.topics)
     for name in ("cf1", "cf2", "cf3"):

@@ -1,0 +1,54 @@
+"""DroneAgent: the carrot reference, its lead limit, the geofence and the observed tracking lag."""
+
+from __future__ import annotations
+
+import pytest
+
+from rpf_fly.flight.agent import DroneAgent, PlannerFault
+from rpf_fly.mission.model import Arena, Drone
+from rpf_fly.planning.planner import PlanStep
+
+
+class Straight:
+    """A planner that always heads +x (the agent under test, not the APF, is what matters here)."""
+
+    def __init__(self, direction: complex = 1 + 0j):
+        self.direction = direction
+
+    def step(self, view):  # type: ignore[no-untyped-def]
+        return PlanStep(self.direction, 0, 0j, 0j, 0j, 0.0, 0.0, 0, 1.0, 1.0)
+
+
+def make_agent(planner=None, **kw) -> DroneAgent:  # type: ignore[no-untyped-def]
+    drone = Drone(name="cf1", uri="radio://0/80/2M/E7E7E7E701", rigid_body="cf1", start=(0.0, 0.0), goal=(1.5, 0.0))
+    arena = Arena(x=(-2.0, 2.0), y=(-2.0, 2.0), z=(0.0, 1.5))
+    return DroneAgent(drone, planner or Straight(), height=0.5, speed=0.5, dt=0.1, arena=arena, budget_s=1.0, **kw)
+
+
+def test_reference_advances_at_mission_speed_and_lag_is_its_lead_over_the_drone():
+    agent = make_agent()
+    agent.begin_planning(0j, 0.0)
+    assert agent.tracking_lag_s(0j) == 0.0
+    for _ in range(3):
+        result = agent.plan(None, 0j)  # the drone has not moved yet
+    assert result.setpoint == pytest.approx(0.15)
+    assert agent.tracking_lag_s(0j) == pytest.approx(0.15 / 0.5)
+    assert agent.tracking_lag_s(0.1 + 0j) == pytest.approx(0.05 / 0.5)
+
+
+def test_reference_never_leads_the_drone_by_more_than_max_lead_nor_leaves_the_arena():
+    agent = make_agent(max_lead_m=0.2)
+    agent.begin_planning(0j, 0.0)
+    for _ in range(10):
+        agent.plan(None, 0j)
+    assert abs(agent.reference) == pytest.approx(0.2)
+    assert agent.tracking_lag_s(0j) == pytest.approx(0.2 / 0.5)
+    agent.reference = 1.95 + 0j
+    assert agent.plan(None, 1.9 + 0j).setpoint == 2.0 + 0j
+
+
+def test_an_invalid_direction_is_this_drones_planner_fault():
+    agent = make_agent(Straight(float("nan") + 0j))
+    agent.begin_planning(0j, 0.0)
+    with pytest.raises(PlannerFault, match="invalid direction"):
+        agent.plan(None, 0j)
