@@ -13,7 +13,7 @@ Part of the NatNet codec; import it through :mod:`rpf_fly.mocap.natnet_protocol`
 from __future__ import annotations
 
 import struct
-from typing import Sequence
+from typing import Any, Sequence
 
 from rpf_fly.mocap import natnet_wire as _wire
 from rpf_fly.mocap.natnet_types import (
@@ -88,6 +88,19 @@ def _close_section(off: int, limit: int, sized: bool, what: str) -> None:
     """For 4.1+, the parsed bytes must equal the declared section size."""
     if sized and off != limit:
         raise NatNetDecodeError(f"{what}: declared size ends at {limit}, content ends at {off}", _FRAME, off)
+
+
+def _record_section(
+    buf: bytes, mv: memoryview, off: int, end: int, sized: bool, record: struct.Struct, make: Any, what: str
+) -> tuple[list[Any], int]:
+    """A section of fixed-size records (count, 4.1+ byte size, records), each decoded by ``make`` (None: the raw
+    tuples). Returns the items and the offset after the section."""
+    n, off, limit = _open_section(buf, off, end, sized, record.size, what)
+    stop = off + record.size * n
+    raw = record.iter_unpack(mv[off:stop])
+    items = list(raw) if make is None else list(map(make, raw))
+    _close_section(stop, limit, sized, what)
+    return items, stop
 
 
 def _rigid_body_array(buf: bytes, mv: memoryview, off: int, limit: int, what: str) -> tuple[list[RigidBodyData], int]:
@@ -166,18 +179,10 @@ def _decode_frame(buf: bytes, layout: _Layout) -> FrameOfData:
     _close_section(off, limit, sized, "marker sets")
 
     # 2. other (unlabeled, legacy) markers
-    n, off, limit = _open_section(buf, off, end, sized, 12, "other markers")
-    stop = off + 12 * n
-    other_markers = list(_VEC3.iter_unpack(mv[off:stop]))
-    off = stop
-    _close_section(off, limit, sized, "other markers")
+    other_markers, off = _record_section(buf, mv, off, end, sized, _VEC3, None, "other markers")
 
     # 3. rigid bodies: fixed 38-byte records
-    n, off, limit = _open_section(buf, off, end, sized, _RB_SIZE, "rigid bodies")
-    stop = off + _RB_SIZE * n
-    rigid_bodies = list(map(_rb_make, _RB.iter_unpack(mv[off:stop])))
-    off = stop
-    _close_section(off, limit, sized, "rigid bodies")
+    rigid_bodies, off = _record_section(buf, mv, off, end, sized, _RB, _rb_make, "rigid bodies")
 
     # 4. skeletons: id, then rigid-body records
     n, off, limit = _open_section(buf, off, end, sized, 8, "skeletons")
@@ -211,11 +216,7 @@ def _decode_frame(buf: bytes, layout: _Layout) -> FrameOfData:
         _close_section(off, limit, sized, "assets")
 
     # 6. labeled markers: fixed 26-byte records
-    n, off, limit = _open_section(buf, off, end, sized, _LABELED_SIZE, "labeled markers")
-    stop = off + _LABELED_SIZE * n
-    labeled_markers = list(map(_lm_make, _LABELED.iter_unpack(mv[off:stop])))
-    off = stop
-    _close_section(off, limit, sized, "labeled markers")
+    labeled_markers, off = _record_section(buf, mv, off, end, sized, _LABELED, _lm_make, "labeled markers")
 
     # 7./8. force plates and devices
     n, off, limit = _open_section(buf, off, end, sized, 8, "force plates")
