@@ -75,11 +75,12 @@ class LoopStats:
             return float(np.percentile(values, q)) if values else None
 
         intervals = self.tick_intervals
+        median_interval = float(np.median(intervals)) if intervals else 0.0
         return {
             "ticks": self.ticks,
             "overruns": self.overruns,
             "tick_interval_p50_s": pct(intervals, 50),
-            "tick_jitter_p99_s": (pct([abs(i - float(np.median(intervals))) for i in intervals], 99) if intervals else None),
+            "tick_jitter_p99_s": pct([abs(i - median_interval) for i in intervals], 99),
             "latency_p50_s": pct(self.latencies, 50),
             "latency_p99_s": pct(self.latencies, 99),
             "planner_p50_s": pct(self.planner_seconds, 50),

@@ -11,6 +11,9 @@ Gains ``eta`` and ``lambda`` broadcast against the leading shape, so a policy ca
 
 from __future__ import annotations
 
+import cmath
+import math
+
 import numpy as np
 
 from rpf_fly.planning.config import PlannerConfig
@@ -63,9 +66,9 @@ def inter_robot(
     if config.repulsive_only:
         coefficient = np.minimum(coefficient, 0.0)
     force = plain(((mask * coefficient / d) * delta).sum(axis=-1))
-    count = plain(mask.sum(axis=-1))
+    count = np.count_nonzero(mask) if mask.ndim == 1 else mask.sum(axis=-1)
     if config.neighbour_aggregate == "mean":
         force = force / maximum(count, 1)
     if config.keep_right_deg:
-        force = force * complex(np.exp(1j * np.deg2rad(config.keep_right_deg)))
+        force = force * cmath.rect(1.0, math.radians(config.keep_right_deg))
     return force, count

@@ -92,7 +92,9 @@ class OnnxGains:
 
     def gains(self, observation: Observation | None):  # type: ignore[no-untyped-def]
         assert observation is not None
-        action = self.policy.act(observation).astype(float)
+        action = self.policy.act(observation)
         if action.ndim == 1:  # one drone: Python numbers keep the planner on its fast scalar path
-            return float(action[0]), float(action[1])
+            eta, lam = action.tolist()
+            return eta, lam
+        action = action.astype(float)
         return action[..., 0], action[..., 1]

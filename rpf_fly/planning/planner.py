@@ -7,7 +7,6 @@ The caller integrates the motion (constant speed along ``direction``) and keeps 
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -62,8 +61,10 @@ def apf_step(
     eta: np.ndarray | float,
     lam: np.ndarray | float,
     config: PlannerConfig,
+    observation: Observation | None = None,
 ) -> PlanStep:
-    """The APF with (soft) wall-following for given gains."""
+    """The APF with (soft) wall-following for given gains (``observation``, when the gains came from one, is kept
+    in the result for the log)."""
     f_a, d_g = attractive(view.position, view.goal)
     f_r = repulsive(nearest, eta, config)
     f_in, count = inter_robot(view.position, view.neighbour_position, lambda_mask, lam, config)
@@ -79,6 +80,7 @@ def apf_step(
         neighbours=count,
         obstacle_distance=nearest.distance,
         goal_distance=d_g,
+        observation=observation,
     )
 
 
@@ -97,7 +99,4 @@ class Planner:
         if self.gains.needs_observation:
             observation = build_observation(view, nearest, self.config, self.gains.max_neighbours)
         eta, lam = self.gains.gains(observation)
-        result = apf_step(view, nearest, lambda_mask, eta, lam, self.config)
-        if observation is not None:
-            result = dataclasses.replace(result, observation=observation)
-        return result
+        return apf_step(view, nearest, lambda_mask, eta, lam, self.config, observation)

@@ -1,5 +1,7 @@
 """The composed planner: one drone vs a batch, static neighbours, observations, gains."""
 
+import math
+
 import numpy as np
 import pytest
 
@@ -126,3 +128,13 @@ def test_gains_policy_is_asked_only_when_it_needs_observations():
     step = planner.step(views_from_states(positions, np.zeros(3, complex), positions + 5, np.ones(3, complex), 6.0))
     assert len(policy.seen) == 1 and policy.seen[0].neighbours.shape == (3, 2, 3)
     assert np.allclose(step.eta, 0.07) and np.allclose(step.lam, 1.5)
+
+
+def test_phase_is_in_the_half_open_interval_for_signed_zeros():
+    """atan2 gives -pi for (-1, -0.0); the planner's bearings are in (-pi, pi], for numbers and arrays alike."""
+    from rpf_fly.planning.vectors import phase
+
+    assert phase(complex(-1.0, -0.0)) == math.pi
+    assert phase(complex(-1.0, 0.0)) == math.pi
+    got = phase(np.array([complex(-1.0, -0.0), -1 + 0j, 1j, -1j, 0j, 1 - 1j]))
+    np.testing.assert_array_equal(got, [math.pi, math.pi, math.pi / 2, -math.pi / 2, 0.0, -math.pi / 4])
