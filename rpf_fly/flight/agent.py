@@ -27,7 +27,7 @@ from typing import Callable, Optional, Protocol
 
 from rpf_fly.flight.phases import DronePhase, FlightOutcome
 from rpf_fly.mission.model import Arena, Drone
-from rpf_fly.planning.planner import PlanStep
+from rpf_fly.planning.planner import PlanStep, plan_row
 from rpf_fly.planning.view import LocalView
 
 
@@ -39,13 +39,26 @@ class PlannerFault(RuntimeError):
     """A drone's planner raised, returned garbage, or ran over its time budget."""
 
 
+def check_direction(direction: complex) -> None:
+    """A planner's direction must be finite and at most a unit vector; else it is a :class:`PlannerFault`."""
+    if not (math.isfinite(direction.real) and math.isfinite(direction.imag)) or abs(direction) > 1.0 + 1e-6:
+        raise PlannerFault(f"planner returned an invalid direction {direction!r}")
+
+
 @dataclass
 class PlanResult:
-    """One planning tick of one drone."""
+    """One planning tick of one drone: its setpoint, the planner's seconds (its share of a batched call), and the
+    planner's step for the log. A batched call's row is cut out only when :attr:`step` is read, after the sends."""
 
-    step: PlanStep
     setpoint: complex
     seconds: float
+    planned: PlanStep
+    row: Optional[int] = None
+    """None: ``planned`` is this drone's own one-drone step; else its row in the batched ``planned``."""
+
+    @property
+    def step(self) -> PlanStep:
+        return self.planned if self.row is None else plan_row(self.planned, self.row)
 
 
 class DroneAgent:
@@ -83,7 +96,6 @@ class DroneAgent:
         self.reference = self.start
         self.hold_point: complex = self.start
         self.phase_since_s = 0.0
-        self.last_step: Optional[PlanStep] = None
         self.arrived_at_s: Optional[float] = None
         self.stale_since_s: Optional[float] = None
         self.landing_until_s: Optional[float] = None
@@ -120,14 +132,19 @@ class DroneAgent:
         except Exception as err:  # noqa: BLE001 - any planner failure is this drone's fault only
             raise PlannerFault(f"planner raised {type(err).__name__}: {err}") from err
         seconds = self._clock() - started
-        if not (math.isfinite(direction.real) and math.isfinite(direction.imag)) or abs(direction) > 1.0 + 1e-6:
-            raise PlannerFault(f"planner returned an invalid direction {direction!r}")
+        check_direction(direction)
         if seconds > self.budget_s:
             raise PlannerFault(f"planner took {seconds * 1e3:.1f} ms (budget {self.budget_s * 1e3:.0f} ms)")
+        return self.accept(step, direction, measured, seconds)
+
+    def accept(
+        self, step: PlanStep, direction: complex, measured: complex, seconds: float, row: Optional[int] = None
+    ) -> PlanResult:
+        """Take a checked planning result (from :meth:`plan`, or row ``row`` of a batched call): turn the heading
+        and move the reference."""
         if abs(direction) > 0:
             self.heading = direction / abs(direction)
-        self.last_step = step
-        return PlanResult(step, self.advance(direction, measured), seconds)
+        return PlanResult(self.advance(direction, measured), seconds, step, row)
 
     def tracking_lag_s(self, measured: complex) -> float:
         """This drone's observed tracking lag: how far its reference leads it, in seconds at the mission speed."""

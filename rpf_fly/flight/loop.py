@@ -21,16 +21,16 @@ from typing import Callable, Optional, Protocol
 
 import numpy as np
 
-from rpf_fly.flight.agent import DroneAgent, PlannerFault, PlannerLike
+from rpf_fly.flight.agent import DroneAgent, PlannerFault, PlannerLike, PlanResult
 from rpf_fly.flight.events import ERROR, FATAL, INFO, WARNING, EventBus, FlightEvent
 from rpf_fly.flight.phases import DronePhase, FlightOutcome, SwarmPhase
 from rpf_fly.flight.poses import PoseTracker, TrackedPose
 from rpf_fly.flight.supervisor import Finding, Supervisor
+from rpf_fly.flight.swarm_plan import Neighbourhood, SwarmPlanner
 from rpf_fly.flight.watchdog import LoopWatchdog
 from rpf_fly.mission.model import Drone, Mission
 from rpf_fly.mocap.frame import MocapFrame, MocapSource
 from rpf_fly.planning.planner import PlanStep
-from rpf_fly.planning.view import view_of_drone
 from rpf_fly.planning.wall_following import MODE_NAMES
 from rpf_fly.radio.backend import DroneBackend, DroneState
 from rpf_fly.sim.scenario import obstacle_set
@@ -158,6 +158,7 @@ class FlightLoop:
         self._last_status_s = -math.inf
         self._states: dict[str, DroneState] = {}
         self._watchdog = LoopWatchdog(self._on_loop_stall)
+        self._swarm_planner = SwarmPlanner(mission.planner.sensing_range, mission.safety.planner_budget_s)
 
     # ----------------------------------------------------------------------------------- external control
 
@@ -468,9 +469,10 @@ class FlightLoop:
         }
         records: list[tuple[DroneAgent, Optional[TrackedPose], Optional[PlanStep], str]] = []
         sent: list[tuple[str, tuple[float, float, float], float]] = []
+        requests: list[tuple[DroneAgent, TrackedPose]] = []
+        planned: list[tuple[DroneAgent, TrackedPose, PlanResult]] = []
         for agent in self.agents.values():
             pose = self.tracker.get(agent.name)
-            step: Optional[PlanStep] = None
             mode = agent.phase.value
             fresh = pose is not None and pose.valid and now - pose.stamp_s <= stale_after
             if agent.phase == DronePhase.PLANNING and pose is not None and not fresh:
@@ -483,34 +485,41 @@ class FlightLoop:
                     agent.arrived_at_s = now
                     self._set_drone(agent, DronePhase.ARRIVED, "reached its goal")
                 else:
-                    # Plan on the commanded geometry (see flight/agent.py): from our own reference, with each
-                    # neighbour predicted ahead by our observed tracking lag.
-                    others = [n for n in airborne_poses if n != agent.name]
-                    lag_s = agent.tracking_lag_s(pose.xy)
-                    velocity = np.array([airborne_poses[n].velocity for n in others], dtype=complex)
-                    view = view_of_drone(
-                        agent.reference, agent.goal, agent.heading,
-                        np.array([airborne_poses[n].xy for n in others], dtype=complex) + lag_s * velocity,
-                        velocity,
-                        self.mission.planner.sensing_range,
-                    )
-                    try:
-                        result = agent.plan(view, pose.xy)
-                    except PlannerFault as fault:
-                        agent.hold(agent.reference, now, str(fault))
-                        self.events.emit(ERROR, "planner_fault", f"{fault}: holding, then landing", agent.name)
-                        self._land(agent, "planner fault")
-                        records.append((agent, pose, None, "hold"))
-                        continue
-                    step = result.step
-                    mode = MODE_NAMES.get(int(step.mode), "apf")
-                    self.stats.planner_seconds.append(result.seconds)
-                    self._send(agent, result.setpoint, frame, sent)
+                    requests.append((agent, pose))
+                    continue
             if agent.phase in (DronePhase.HOLDING, DronePhase.ARRIVED):
                 mode = "arrived" if agent.phase == DronePhase.ARRIVED else "hold"
                 self._send(agent, agent.hold_point, frame, sent)
             if agent.phase.airborne or agent.phase == DronePhase.LANDED:
-                records.append((agent, pose, step, mode))
+                records.append((agent, pose, None, mode))
+        if requests:
+            # Plan on the commanded geometry (see flight/agent.py): each drone from its own reference, with each
+            # neighbour predicted ahead by that drone's observed tracking lag; batched where planners allow
+            # (flight/swarm_plan.py).
+            names = list(airborne_poses)
+            world = Neighbourhood(
+                names,
+                np.array([airborne_poses[n].xy for n in names], dtype=complex),
+                np.array([airborne_poses[n].velocity for n in names], dtype=complex),
+            )
+            outcomes = self._swarm_planner.plan([(a, p.xy) for a, p in requests], world)
+            for agent, pose in requests:
+                outcome = outcomes[agent.name]
+                if isinstance(outcome, PlannerFault):
+                    agent.hold(agent.reference, now, str(outcome))
+                    self.events.emit(ERROR, "planner_fault", f"{outcome}: holding, then landing", agent.name)
+                    self._land(agent, "planner fault")
+                    records.append((agent, pose, None, "hold"))
+                    continue
+                self.stats.planner_seconds.append(outcome.seconds)
+                self._send(agent, outcome.setpoint, frame, sent)
+                planned.append((agent, pose, outcome))
+            for note in self._swarm_planner.notes:
+                self.events.emit(WARNING, "planner_batch", note)
+            self._swarm_planner.notes.clear()
+        for agent, pose, outcome in planned:  # after the sends: a batched row is cut out only now
+            step = outcome.step
+            records.append((agent, pose, step, MODE_NAMES.get(int(step.mode), "apf")))
         for name, position, t in sent:
             self.recorder.setpoint(t, name, position)
         for agent, pose, step, mode in records:

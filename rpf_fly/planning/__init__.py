@@ -9,7 +9,7 @@ from rpf_fly.planning.gains import FixedGains, GainsPolicy
 from rpf_fly.planning.obstacles import FAR, NearestObstacle, ObstacleSet, nearest_obstacle
 from rpf_fly.planning.observation import Observation, build_observation
 from rpf_fly.planning.planner import Planner, PlanStep, apf_step, sense_obstacles
-from rpf_fly.planning.view import LocalView, view_of_drone, views_from_states
+from rpf_fly.planning.view import LocalView, view_of_drone, views_from_states, views_of_drones
 from rpf_fly.planning.wall_following import MODE_APF, MODE_NAMES, MODE_SOFT, MODE_WALL
 
 __all__ = [
@@ -33,4 +33,5 @@ __all__ = [
     "sense_obstacles",
     "view_of_drone",
     "views_from_states",
+    "views_of_drones",
 ]

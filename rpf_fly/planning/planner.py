@@ -43,6 +43,28 @@ class PlanStep:
     observation: Observation | None = None
 
 
+def plan_row(step: PlanStep, i: int) -> PlanStep:
+    """Drone ``i`` of a batched step ``(P,)``, shaped as the one-drone call returns it (scalars, its observation)."""
+
+    def pick(x):  # type: ignore[no-untyped-def]
+        return x[i] if isinstance(x, np.ndarray) and x.ndim else x
+
+    obs = step.observation
+    return PlanStep(
+        direction=pick(step.direction),
+        mode=pick(step.mode),
+        f_a=pick(step.f_a),
+        f_r=pick(step.f_r),
+        f_in=pick(step.f_in),
+        eta=pick(step.eta),
+        lam=pick(step.lam),
+        neighbours=pick(step.neighbours),
+        obstacle_distance=pick(step.obstacle_distance),
+        goal_distance=pick(step.goal_distance),
+        observation=None if obs is None else Observation(obs.local[i], obs.neighbours[i], obs.mask[i]),
+    )
+
+
 def sense_obstacles(view: LocalView, obstacles: ObstacleSet, config: PlannerConfig) -> tuple[NearestObstacle, np.ndarray]:
     """Nearest obstacle for each drone (static neighbours included as circles of radius r when the preset says so)
     and the mask of the neighbours that remain lambda-neighbours."""

@@ -78,3 +78,20 @@ def view_of_drone(
         others_velocity[keep],
         np.ones(nbr.shape[0], dtype=bool),
     )
+
+
+def views_of_drones(
+    position: np.ndarray,
+    goal: np.ndarray,
+    heading: np.ndarray,
+    others_position: np.ndarray,
+    others_velocity: np.ndarray,
+    others_present: np.ndarray,
+    sensing_range: float,
+) -> LocalView:
+    """The views of ``P`` drones at once (leading shape ``(P,)``), each from its own row ``(P, K)`` of the others'
+    positions and velocities; ``others_present`` is false for padding (and for the drone itself). Keeps those in
+    range exactly as :func:`view_of_drone` does for one drone, so a planner gives row ``i`` what the one-drone call
+    on drone ``i``'s view gives (up to float summation order)."""
+    mask = others_present & (abs(others_position - position[..., None]) < sensing_range)
+    return LocalView(position, goal, heading, others_position, others_velocity, mask)
