@@ -114,6 +114,52 @@ def bench_tick(n: int, repeats: int) -> dict[str, float]:
     return {"per_drone_calls": timed(per_drone_tick, inner, repeats), "batched": timed(batched_tick, inner * 5, repeats)}
 
 
+def bench_flight_tick(repeats: int, drones: int = 10) -> dict[str, dict[str, float]]:
+    """The flight loop's planning tick (``SwarmPlanner``) for ``drones`` drones of a circle swap, mid-flight: one
+    batched call against one call per drone, with the fixed-gains APF and the shipped RPF-1. Hot caches: in flight
+    the tick starts cold after the loop slept (docs/performance.md), so it costs more there."""
+    from rpf_fly.flight.agent import DroneAgent
+    from rpf_fly.flight.swarm_plan import Neighbourhood, SwarmPlanner
+    from rpf_fly.mission import parse_mission
+    from rpf_fly.sim import SimParams
+
+    out: dict[str, dict[str, float]] = {}
+    for kind in ("apf", "rpf"):
+        policy = f", policy: {ROOT / 'policies' / 'rpf.onnx'}" if kind == "rpf" else ""
+        mission = parse_mission(
+            f"name: tick\narena: {{x: [-4.5, 4.5], y: [-4.5, 4.5], z: [0.0, 2.0]}}\n"
+            f"flight: {{height: 1.0, speed: 0.5, rate_hz: 100}}\nplanner: {{kind: {kind}{policy}}}\n"
+            f"formation: {{kind: circle_swap, count: {drones}, radius: 3.0}}\n"
+        )
+        scenario = scenario_from_mission(mission, 0)
+        planner = make_planner(mission.planner, scenario.obstacles)
+        params = SimParams(mission.flight.speed, mission.flight.dt, mission.flight.goal_tolerance, 60.0)
+        run = rollout(scenario, planner, params)
+        k = run.steps // 2
+        xy = run.positions[k]
+        world = Neighbourhood([d.name for d in mission.drones], xy, (xy - run.positions[k - 1]) / params.dt)
+        agents = [
+            DroneAgent(d, make_planner(mission.planner, scenario.obstacles), height=1.0, speed=0.5, dt=params.dt,
+                       arena=mission.arena, budget_s=1.0)
+            for d in mission.drones
+        ]
+        requests = [(a, complex(p)) for a, p in zip(agents, xy)]
+        for agent, p in requests:
+            agent.begin_planning(p, 0.0)
+        figures = {}
+        for label, batching in (("batched", True), ("one_call_per_drone", False)):
+            swarm = SwarmPlanner(mission.planner.sensing_range, 1.0, batching=batching)
+
+            def tick() -> None:
+                for agent, p in requests:
+                    agent.reference = p
+                swarm.plan(requests, world)
+
+            figures[label] = timed(tick, 50, repeats)
+        out[kind] = figures
+    return out
+
+
 def bench_batched_sim(repeats: int) -> dict[str, float]:
     out = {}
     cases = {
@@ -144,6 +190,7 @@ def main(argv: list[str] | None = None) -> int:
     per_drone_rpf = bench_per_drone(args.repeats, "rpf")
     ticks = {n: bench_tick(n, args.repeats) for n in (10, 100)}
     sim = bench_batched_sim(args.repeats)
+    flight_tick = bench_flight_tick(args.repeats)
 
     print("per-drone plan step, fixed gains (median; goal <= 50 us)")
     for name, s in per_drone.items():
@@ -157,6 +204,12 @@ def main(argv: list[str] | None = None) -> int:
             f"  {n:3d} drones: one call per drone {t['per_drone_calls'] * 1e3:7.2f} ms"
             f" ({t['per_drone_calls'] / n * 1e6:.1f} us/drone), batched {t['batched'] * 1e3:6.2f} ms"
         )
+    print("flight planning tick, 10 drones mid-flight (rpf_fly.flight.swarm_plan, hot caches)")
+    for kind, t in flight_tick.items():
+        print(
+            f"  {kind}: batched {t['batched'] * 1e6:7.1f} us ({t['batched'] / 10 * 1e6:.1f} us/drone), "
+            f"one call per drone {t['one_call_per_drone'] * 1e6:7.1f} us"
+        )
     print("batched simulation throughput (goal >= 1M robot-steps/s)")
     for label, rate in sim.items():
         print(f"  {label:48s} {rate / 1e6:6.2f} M robot-steps/s")
@@ -167,6 +220,7 @@ def main(argv: list[str] | None = None) -> int:
                     "per_drone_step_s": per_drone,
                     "per_drone_step_rpf_onnx_s": per_drone_rpf,
                     "tick_s": {str(n): t for n, t in ticks.items()},
+                    "flight_tick_10_drones_s": flight_tick,
                     "batched_sim_robot_steps_per_s": sim,
                     "python": sys.version.split()[0],
                     "numpy": np.__version__,

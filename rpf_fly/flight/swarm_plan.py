@@ -79,7 +79,8 @@ class SwarmPlanner:
     sensing_range: float
     budget_s: float
     batching: bool = True
-    clock: Callable[[], float] = time.perf_counter
+    clock: Callable[[], float] = time.thread_time
+    """CPU time of the loop thread: a batch is judged by its own computing, not by GIL waits or pre-emption."""
     notes: list[str] = field(default_factory=list)
     """Why batching changed or a batch was not trusted, for the flight's event log (the caller drains it)."""
     _leaders: list[object] = field(default_factory=list, repr=False)

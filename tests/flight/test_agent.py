@@ -52,3 +52,37 @@ def test_an_invalid_direction_is_this_drones_planner_fault():
     agent.begin_planning(0j, 0.0)
     with pytest.raises(PlannerFault, match="invalid direction"):
         agent.plan(None, 0j)
+
+
+class Busy(Straight):
+    """Computes (burns CPU) or waits (sleeps) for ``seconds`` before answering."""
+
+    def __init__(self, seconds: float, compute: bool):
+        super().__init__()
+        self.seconds, self.compute = seconds, compute
+
+    def step(self, view):  # type: ignore[no-untyped-def]
+        import time
+
+        end = time.perf_counter() + self.seconds
+        while time.perf_counter() < end:
+            if not self.compute:
+                time.sleep(self.seconds)
+        return super().step(view)
+
+
+def test_a_planner_computing_past_its_budget_is_this_drones_fault():
+    agent = make_agent(Busy(0.03, compute=True))
+    agent.budget_s = 0.01
+    agent.begin_planning(0j, 0.0)
+    with pytest.raises(PlannerFault, match="planner took"):
+        agent.plan(None, 0j)
+
+
+def test_waiting_is_not_computing_the_drone_is_not_blamed_for_a_stalled_thread():
+    """The budget is CPU time of the loop thread: time spent descheduled or waiting (here: asleep) is not the
+    planner's doing (a GIL wait or a pre-emption in flight looks the same to a wall clock)."""
+    agent = make_agent(Busy(0.03, compute=False))
+    agent.budget_s = 0.01
+    agent.begin_planning(0j, 0.0)
+    assert agent.plan(None, 0j).setpoint == pytest.approx(0.5 * 0.1)  # one step at the mission speed
