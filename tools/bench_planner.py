@@ -120,17 +120,13 @@ def bench_flight_tick(repeats: int, drones: int = 10) -> dict[str, dict[str, flo
     the tick starts cold after the loop slept (docs/performance.md), so it costs more there."""
     from rpf_fly.flight.agent import DroneAgent
     from rpf_fly.flight.swarm_plan import Neighbourhood, SwarmPlanner
+    from bench_flight import mission_text as flight_bench_mission  # tools/ is on sys.path when run as a script
     from rpf_fly.mission import parse_mission
     from rpf_fly.sim import SimParams
 
     out: dict[str, dict[str, float]] = {}
     for kind in ("apf", "rpf"):
-        policy = f", policy: {ROOT / 'policies' / 'rpf.onnx'}" if kind == "rpf" else ""
-        mission = parse_mission(
-            f"name: tick\narena: {{x: [-4.5, 4.5], y: [-4.5, 4.5], z: [0.0, 2.0]}}\n"
-            f"flight: {{height: 1.0, speed: 0.5, rate_hz: 100}}\nplanner: {{kind: {kind}{policy}}}\n"
-            f"formation: {{kind: circle_swap, count: {drones}, radius: 3.0}}\n"
-        )
+        mission = parse_mission(flight_bench_mission(drones, 100.0, kind))  # the swarm tools/bench_flight.py flies
         scenario = scenario_from_mission(mission, 0)
         planner = make_planner(mission.planner, scenario.obstacles)
         params = SimParams(mission.flight.speed, mission.flight.dt, mission.flight.goal_tolerance, 60.0)

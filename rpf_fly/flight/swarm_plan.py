@@ -17,6 +17,7 @@ A drone with a different planner (a wrapper, another policy) is always planned a
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass, field
 from typing import Callable, Sequence, Union
@@ -34,9 +35,7 @@ Outcome = Union[PlanResult, PlannerFault]
 
 
 def _same_obstacles(a: ObstacleSet, b: ObstacleSet) -> bool:
-    return a is b or all(
-        np.array_equal(getattr(a, f), getattr(b, f)) for f in ("centers", "radii", "box_center", "box_half_x", "box_half_y")
-    )
+    return a is b or all(np.array_equal(getattr(a, f.name), getattr(b, f.name)) for f in dataclasses.fields(ObstacleSet))
 
 
 def _same_gains(a: object, b: object) -> bool:

@@ -7,6 +7,7 @@ The caller integrates the motion (constant speed along ``direction``) and keeps 
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -45,24 +46,15 @@ class PlanStep:
 
 def plan_row(step: PlanStep, i: int) -> PlanStep:
     """Drone ``i`` of a batched step ``(P,)``, shaped as the one-drone call returns it (scalars, its observation)."""
-
-    def pick(x):  # type: ignore[no-untyped-def]
-        return x[i] if isinstance(x, np.ndarray) and x.ndim else x
-
-    obs = step.observation
-    return PlanStep(
-        direction=pick(step.direction),
-        mode=pick(step.mode),
-        f_a=pick(step.f_a),
-        f_r=pick(step.f_r),
-        f_in=pick(step.f_in),
-        eta=pick(step.eta),
-        lam=pick(step.lam),
-        neighbours=pick(step.neighbours),
-        obstacle_distance=pick(step.obstacle_distance),
-        goal_distance=pick(step.goal_distance),
-        observation=None if obs is None else Observation(obs.local[i], obs.neighbours[i], obs.mask[i]),
-    )
+    row = {}
+    for f in dataclasses.fields(PlanStep):
+        x = getattr(step, f.name)
+        if isinstance(x, Observation):
+            x = Observation(x.local[i], x.neighbours[i], x.mask[i])
+        elif isinstance(x, np.ndarray) and x.ndim:
+            x = x[i]
+        row[f.name] = x
+    return PlanStep(**row)
 
 
 def sense_obstacles(view: LocalView, obstacles: ObstacleSet, config: PlannerConfig) -> tuple[NearestObstacle, np.ndarray]:
