@@ -27,6 +27,7 @@ from rpf_fly.flight.phases import DronePhase, FlightOutcome, SwarmPhase
 from rpf_fly.flight.poses import PoseTracker, TrackedPose
 from rpf_fly.flight.supervisor import Finding, Supervisor
 from rpf_fly.flight.swarm_plan import Neighbourhood, SwarmPlanner
+from rpf_fly.flight.ticks import TickSchedule
 from rpf_fly.flight.watchdog import LoopWatchdog
 from rpf_fly.mission.model import Drone, Mission
 from rpf_fly.mocap.frame import MocapFrame, MocapSource
@@ -62,10 +63,12 @@ class NullRecorder:
 @dataclass
 class LoopStats:
     """Timing of the flying phase: tick intervals, overruns, planner time per drone, and the latency from a mocap
-    frame's receipt to each setpoint handed to the backend (seconds)."""
+    frame's receipt to each setpoint handed to the backend (seconds) at the ticks fired by a frame. Ticks fired
+    without a frame (mocap late, lost, or slower than the planning rate) are counted in ``frameless_ticks``."""
 
     ticks: int = 0
     overruns: int = 0
+    frameless_ticks: int = 0
     tick_intervals: list[float] = field(default_factory=list)
     latencies: list[float] = field(default_factory=list)
     planner_seconds: list[float] = field(default_factory=list)
@@ -79,6 +82,7 @@ class LoopStats:
         return {
             "ticks": self.ticks,
             "overruns": self.overruns,
+            "frameless_ticks": self.frameless_ticks,
             "tick_interval_p50_s": pct(intervals, 50),
             "tick_jitter_p99_s": pct([abs(i - median_interval) for i in intervals], 99),
             "latency_p50_s": pct(self.latencies, 50),
@@ -151,6 +155,7 @@ class FlightLoop:
         self.phase = SwarmPhase.CONNECTING
         self.stats = LoopStats()
         self.tick = 0
+        self._ticks = TickSchedule(mission.flight.dt, 0.0)
         self._stop = threading.Event()
         self._stop_reason = ""
         self._estop = threading.Event()
@@ -319,13 +324,13 @@ class FlightLoop:
         self._set_phase(SwarmPhase.FLYING)
         period = self.mission.flight.dt
         started = self.clock()
-        self._next_tick = started
+        self._ticks = TickSchedule(period, started)
         self._last_tick_s: Optional[float] = None
         all_arrived_at: Optional[float] = None
         self._watchdog.arm(True)
         try:
             while not self._stop.is_set():
-                self._spin_once(self._next_tick, plan=True)
+                self._spin_once(started, plan=True)
                 now = self.clock()
                 flying = [a for a in self.agents.values() if a.phase in (DronePhase.PLANNING, DronePhase.HOLDING, DronePhase.ARRIVED)]
                 if not flying:
@@ -406,22 +411,24 @@ class FlightLoop:
 
     # ------------------------------------------------------------------------------------- the iteration
 
-    def _spin_once(self, until_s: float, plan: bool) -> None:
+    def _spin_once(self, until_s: float, plan: bool = False) -> None:
         """Receive the newest frame (waiting until ``until_s`` at most); at a planning tick plan and send first (its
-        latency is what the drones feel), then forward extpos, record, and supervise."""
+        latency is what the drones feel), then forward extpos, record, and supervise. With ``plan`` the wait and
+        the tick follow the flight's :class:`TickSchedule` (ticks locked to the mocap frames; ``until_s`` unused)."""
+        ticks = self._ticks
+        if plan:
+            until_s = ticks.window_end_s
         frame = self.mocap.receive(max(0.0, until_s - self.clock()))
         now = self.clock()
         if frame is not None:
             self.tracker.update(frame)
-        if plan and now >= self._next_tick:
+        if plan and ticks.is_due(now, frame is not None):
             self._plan_tick(now, frame)
             if self._last_tick_s is not None:
                 self.stats.tick_intervals.append(now - self._last_tick_s)
             self._last_tick_s = now
-            self._next_tick += self.mission.flight.dt
-            if now - self._next_tick > self.mission.flight.dt:
-                self.stats.overruns += 1
-                self._next_tick = now + self.mission.flight.dt
+            ticks.fired(now, frame is not None)
+            self.stats.overruns, self.stats.frameless_ticks = ticks.overruns, ticks.frameless
         self._states = self.backend.states()
         if frame is not None:
             self._on_frame(frame, now)
