@@ -46,6 +46,7 @@ class Recorder(Protocol):
     def setpoint(self, t_s: float, name: str, position: tuple[float, float, float]) -> None: ...
     def status(self, t_s: float, agent: DroneAgent, state: Optional[DroneState]) -> None: ...
     def event(self, event: FlightEvent) -> None: ...
+    def after_tick(self, t_s: float) -> None: ...
     def close(self) -> None: ...
 
 
@@ -57,6 +58,7 @@ class NullRecorder:
     def setpoint(self, *args: object) -> None: ...
     def status(self, *args: object) -> None: ...
     def event(self, *args: object) -> None: ...
+    def after_tick(self, *args: object) -> None: ...
     def close(self) -> None: ...
 
 
@@ -422,7 +424,8 @@ class FlightLoop:
         now = self.clock()
         if frame is not None:
             self.tracker.update(frame)
-        if plan and ticks.is_due(now, frame is not None):
+        ticked = plan and ticks.is_due(now, frame is not None)
+        if ticked:
             self._plan_tick(now, frame)
             if self._last_tick_s is not None:
                 self.stats.tick_intervals.append(now - self._last_tick_s)
@@ -440,6 +443,8 @@ class FlightLoop:
                 self.recorder.status(now, agent, self._states.get(agent.name))
             if self.status_hook is not None:
                 self.status_hook(self)
+        if ticked:
+            self.recorder.after_tick(now)  # the log writer's burst goes in the gap before the next frame
 
     def _on_frame(self, frame: MocapFrame, now: float) -> None:
         """Record the frame's poses and forward them to the drones' estimators (rate-limited per drone)."""

@@ -26,13 +26,21 @@ from rpf_fly.radio.backend import DroneState
 TF_PERIOD_S = 0.05
 """/tf at 20 Hz: it repeats the mocap poses (logged at the full rate) for Foxglove's 3D panel, which needs no more."""
 
+DRAIN_PERIOD_S = 0.05
+"""The writer drains right after a planning tick at most this often (:meth:`McapRecorder.after_tick`)."""
+
+POLL_FALLBACK_S = 0.25
+"""The writer's own drain period in a flight: only a fallback when no tick asks (take-off, landing)."""
+
 
 class McapRecorder:
     """Implements :class:`rpf_fly.flight.loop.Recorder` on a :class:`~rpf_fly.log.writer.FlightLog`."""
 
     def __init__(self, path: str | Path, mission: Mission, seed: int = 0, source: str = "flight"):
         self.mission = mission
-        self.log = FlightLog(path, S.mission_metadata(mission, seed, source=source), S.scenario_metadata(mission))
+        self.log = FlightLog(path, S.mission_metadata(mission, seed, source=source), S.scenario_metadata(mission),
+                             poll_interval_s=POLL_FALLBACK_S)
+        self._last_drain_s = -math.inf
         self._offset_s = time.time() - time.monotonic()
         self._sensing = mission.planner.sensing_range
         self._last_tf_s = -math.inf
@@ -72,6 +80,13 @@ class McapRecorder:
             neighbours=int(step.neighbours), obstacle_distance=d_o if d_o < min(FAR, self._sensing + 1e-9) else None,
             **common,
         )
+
+    def after_tick(self, t_s: float) -> None:
+        """The loop finished a planning tick and waits for the next frame: let the writer drain now (its GIL-holding
+        burst then falls in that idle gap instead of delaying the next frame's setpoints)."""
+        if t_s - self._last_drain_s >= DRAIN_PERIOD_S:
+            self._last_drain_s = t_s
+            self.log.drain_soon()
 
     def setpoint(self, t_s: float, name: str, position: tuple[float, float, float]) -> None:
         self.log.setpoint(name, self._ns(t_s), position, 0.0)

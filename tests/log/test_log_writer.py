@@ -212,3 +212,19 @@ def test_indexed_file_with_valid_crcs(tmp_path):
         assert len(list(reader.iter_messages(log_time_order=True, reverse=True))) == summary.statistics.message_count
         topics = list(reader.iter_messages(topics=["/cf1/planner"], starting_at=T0 + 100 * MS))
         assert [m.publish_time for _, _, m in topics] == [T0 + k * 10 * MS for k in range(10, 30)]
+
+
+def test_drain_soon_writes_without_waiting_for_the_poll(tmp_path):
+    """A flight wakes the writer right after a planning tick (its GIL burst then falls in the loop's idle gap);
+    the writer's own poll is only a fallback."""
+    with FlightLog(tmp_path / "nudged.mcap", MISSION, SCENARIO, clock=None, poll_interval_s=30.0) as log:
+        time.sleep(0.1)  # the writer is now waiting on its 30 s poll
+        for k in range(20):
+            log.pose("cf1", T0 + k * MS, (0.0, 0.0, 0.6))
+        time.sleep(0.2)
+        assert log.written == 0  # nothing drains by itself before the poll
+        log.drain_soon()
+        deadline = time.monotonic() + 5.0
+        while log.written < 20 and time.monotonic() < deadline:
+            time.sleep(0.005)
+        assert log.written == 20
