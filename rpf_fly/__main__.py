@@ -2,4 +2,5 @@
 
 from rpf_fly.cli import main
 
-main()
+if __name__ == "__main__":  # guarded: a dry run's simulated-drone process imports this module when it spawns
+    main()

@@ -41,10 +41,10 @@ formation: {{kind: circle_swap, count: {drones}, radius: 3.0}}
 """
 
 
-def run_once(drones: int, rate: float, planner: str, log: bool) -> dict:
+def run_once(drones: int, rate: float, planner: str, log: bool, in_process: bool = False) -> dict:
     mission = parse_mission(mission_text(drones, rate, planner))
     obstacles = obstacle_set(mission.obstacles)
-    with tempfile.TemporaryDirectory() as tmp, DryRun(mission) as rig:
+    with tempfile.TemporaryDirectory() as tmp, DryRun(mission, process=not in_process) as rig:
         report = run_flight(mission, lambda d: make_planner(mission.planner, obstacles),
                             Path(tmp) / "bench.mcap" if log else None, rig=rig)
     summary = report.stats.summary()
@@ -59,9 +59,11 @@ def main() -> int:
     parser.add_argument("--planner", default="apf", choices=("apf", "rpf"))
     parser.add_argument("--runs", type=int, default=3)
     parser.add_argument("--no-log", action="store_true", help="fly without the MCAP log")
+    parser.add_argument("--in-process", action="store_true",
+                        help="simulated drones and NatNet emulator on threads of this process (default: their own)")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
-    runs = [run_once(args.drones, args.rate, args.planner, not args.no_log) for _ in range(args.runs)]
+    runs = [run_once(args.drones, args.rate, args.planner, not args.no_log, args.in_process) for _ in range(args.runs)]
 
     def med(key: str) -> float:
         values = [r[key] for r in runs if r[key] is not None]

@@ -6,19 +6,21 @@ served by the NatNet server emulator over UDP on 127.0.0.1 in the mission's up-a
 client receives them; so the flight loop, the NatNet client, the cflib backend and cflib itself all run for real.
 ``mocap="sim"`` uses the simulated mocap source instead of the UDP round trip.
 
+The simulated drones and the NatNet emulator run in a process of their own (``process=True``, the default;
+:mod:`rpf_fly.radio.world_process`), as real drones and Motive are outside a real flight's process: on threads of
+the flight's process they would hold its GIL at moments no real flight sees. ``process=False`` keeps them in this
+process (debugging, packet observers).
+
 Fault hooks for tests and demos: :meth:`DryRun.hide` (a rigid body untracked for a while), :meth:`DryRun.blackout`
-(no body tracked at all), the fake world's link drop, battery and disturbance faults (``drone_configs``).
+(no body tracked at all), ``DryRun.world``'s link drop, battery and disturbance hooks and the faults of
+``drone_configs``.
 """
 
 from __future__ import annotations
 
-import math
 import tempfile
-import threading
-import time
-from dataclasses import replace
 from pathlib import Path
-from typing import Mapping, Optional
+from typing import Any, Mapping, Optional
 
 from rpf_fly.mission.model import Mission
 from rpf_fly.mocap.frame import MocapSource
@@ -50,6 +52,7 @@ class DryRun:
         mocap_rate_hz: Optional[float] = None,
         cache_dir: Optional[Path] = None,
         seed: int = 0,
+        process: bool = True,
     ):
         if mocap not in ("natnet", "sim"):
             raise ValueError(f"dry-run mocap must be 'natnet' or 'sim', not {mocap!r}")
@@ -61,40 +64,66 @@ class DryRun:
         self.addresses = {d.name: uri_address(d.uri) for d in mission.drones}
         self.bodies = {d.name: d.rigid_body for d in mission.drones}
         configs = dict(drone_configs or {})
-        self.world = FakeWorld(
-            {self.addresses[d.name]: configs.get(d.name, FakeDroneConfig.at(d.start[0], d.start[1], 0.0)) for d in mission.drones},
-            seed=seed,
-        )
+        self.drone_configs = {
+            self.addresses[d.name]: configs.get(d.name, FakeDroneConfig.at(d.start[0], d.start[1], 0.0))
+            for d in mission.drones
+        }
+        self.seed = seed
+        self.in_process = not process
+        self.world: Any = None  # a FakeWorld, or the WorldProcess speaking to one (same hook names)
+        self._bodies: Any = None
         self._cache = tempfile.TemporaryDirectory(prefix="rpf-fly-toc-") if cache_dir is None else None
         self.cache_dir = Path(self._cache.name) if self._cache is not None else Path(cache_dir)  # type: ignore[arg-type]
-        self._hidden: dict[str, float] = {}
-        self._blackout_until = -math.inf
-        self._lock = threading.Lock()
         self.server = None
         self.mocap: Optional[MocapSource] = None
 
     # ------------------------------------------------------------------------------------------- life
 
     def __enter__(self) -> "DryRun":
-        from rpf_fly.radio import fake_radio
+        try:
+            self._start()
+        except BaseException:
+            self.close()
+            raise
+        return self
 
-        fake_radio.register(self.world)
-        self.world.start()
+    def _start(self) -> None:
+        from rpf_fly.radio import fake_radio
+        from rpf_fly.radio.world_process import RemoteWorld, SimulatedBodies, WorldProcess
+
+        up = self.mission.mocap.up_axis
+        body_of_address = {self.addresses[n]: body for n, body in self.bodies.items()}
+        natnet = {"version": self.natnet_version, "rate_hz": self.rate_hz, "up_axis": up}
+        if self.in_process:
+            self.world = FakeWorld(self.drone_configs, seed=self.seed).start()
+            self._bodies = SimulatedBodies(self.world, body_of_address)
+            fake_radio.register(self.world)
+            command_port = None
+            if self.mocap_kind == "natnet":
+                from rpf_fly.mocap.natnet_server import NatNetServer
+
+                self.server = NatNetServer(
+                    self._bodies.poses, version=self.natnet_version, multicast=False, local_ip="127.0.0.1",
+                    rate_hz=self.rate_hz, up_axis=up, bodies=list(self.bodies.values()),
+                ).start()
+                command_port = self.server.command_port
+        else:
+            self.world = self._bodies = WorldProcess(
+                self.drone_configs, body_of_address, seed=self.seed,
+                natnet=natnet if self.mocap_kind == "natnet" else None,
+            )
+            fake_radio.register(RemoteWorld(self.world.radio, tuple(self.drone_configs)))
+            command_port = self.world.natnet_command_port
         if self.mocap_kind == "natnet":
             from rpf_fly.mocap.natnet_client import NatNetClient
-            from rpf_fly.mocap.natnet_server import NatNetServer
 
-            up = self.mission.mocap.up_axis
-            self.server = NatNetServer(
-                self.poses, version=self.natnet_version, multicast=False, local_ip="127.0.0.1", rate_hz=self.rate_hz,
-                up_axis=up, bodies=list(self.bodies.values()),
-            ).start()
             client = NatNetClient(
-                "127.0.0.1", multicast=False, local_ip="127.0.0.1", command_port=self.server.command_port,
+                "127.0.0.1", multicast=False, local_ip="127.0.0.1", command_port=command_port,
                 data_port=None, up_axis=up,
             )
-            client.wait_for_server(5.0)
             self.mocap = client
+            if not client.wait_for_server(5.0):
+                raise RuntimeError("dry run: the NatNet emulator did not answer within 5 s")
         else:
             from rpf_fly.mocap.simulated import SimulatedMocap
 
@@ -102,7 +131,6 @@ class DryRun:
             self.mocap = SimulatedMocap(
                 self.poses, rate_hz=self.rate_hz, noise_m=m.noise_m, latency_s=m.latency_s, dropout=m.dropout
             )
-        return self
 
     def __exit__(self, *exc: object) -> None:
         self.close()
@@ -114,7 +142,8 @@ class DryRun:
             self.mocap.close()
         if self.server is not None:
             self.server.close()
-        self.world.close()
+        if self.world is not None:
+            self.world.close()
         fake_radio.unregister()
         if self._cache is not None:
             self._cache.cleanup()
@@ -123,25 +152,15 @@ class DryRun:
 
     def poses(self) -> dict[str, tuple[tuple[float, float, float], tuple[float, float, float, float], bool]]:
         """The fake drones' true poses keyed by rigid-body name, Z-up, with the tracking faults applied."""
-        now = time.monotonic()
-        true = self.world.true_poses()
-        with self._lock:
-            blackout = now < self._blackout_until
-            hidden = {name for name, until in self._hidden.items() if now < until}
-        return {
-            self.bodies[name]: (true[address][0], true[address][1], not blackout and name not in hidden)
-            for name, address in self.addresses.items()
-        }
+        return self._bodies.poses()
 
     def hide(self, name: str, seconds: float) -> None:
         """Report drone ``name``'s rigid body as not tracked for ``seconds`` (occlusion)."""
-        with self._lock:
-            self._hidden[name] = time.monotonic() + seconds
+        self._bodies.hide(self.bodies[name], seconds)
 
     def blackout(self, seconds: float) -> None:
         """Report every rigid body as not tracked for ``seconds`` (mocap lost)."""
-        with self._lock:
-            self._blackout_until = time.monotonic() + seconds
+        self._bodies.blackout(seconds)
 
     def snapshot(self, name: str):  # type: ignore[no-untyped-def]
         """The fake firmware's state of drone ``name`` (position, motors, flags, ...)."""

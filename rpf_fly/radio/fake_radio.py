@@ -25,12 +25,11 @@ from __future__ import annotations
 
 import logging
 import queue
-import random
 import threading
 import time
 from collections import deque
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import Any, ClassVar, Protocol
 from urllib.parse import urlparse
 
 import cflib.crtp
@@ -39,13 +38,27 @@ from cflib.crtp.crtpstack import CRTPPacket
 from cflib.crtp.exceptions import WrongUriType
 from cflib.crtp.radio_link_statistics import RadioLinkStatistics
 
-from .fake_world import FakeWorld, LinkFaults, SimDrone
+from .fake_world import DronePort, LinkFaults, RadioTiming
 
 logger = logging.getLogger(__name__)
 
 SCHEME = "fake://"
 DEFAULT_ADDRESS = 0xE7E7E7E7E7
 DATARATES = ("250K", "1M", "2M")
+
+
+class RadioWorld(Protocol):
+    """What the fake radio needs of a world of drones: a `FakeWorld` in this process, or a
+    :class:`rpf_fly.radio.world_process.RemoteWorld` reaching one in another process."""
+
+    timing: RadioTiming
+
+    @property
+    def addresses(self) -> tuple[int, ...]: ...
+    def start(self) -> Any: ...
+    def port(self, address: int) -> DronePort | None: ...
+    def dongle_lock(self, devid: int) -> threading.Lock: ...
+    def uri(self, address: int) -> str: ...
 
 
 @dataclass(frozen=True)
@@ -89,13 +102,12 @@ class _Ack:
 class FakeLink:
     """One open fake radio link and its transaction thread."""
 
-    def __init__(self, world: FakeWorld, uri: FakeUri, stats_callback: Any, error_callback: Any) -> None:
+    def __init__(self, world: RadioWorld, uri: FakeUri, stats_callback: Any, error_callback: Any) -> None:
         self._world = world
         self._uri = uri
-        self._drone: SimDrone | None = world.drone(uri.address)
-        self._faults = self._drone.config.faults if self._drone else LinkFaults()
-        self._rssi = self._drone.config.rssi_dbm if self._drone else 0
-        self._rng = self._drone.rng if self._drone else random.Random(uri.address)
+        self._drone = world.port(uri.address)
+        self._faults = self._drone.faults if self._drone else LinkFaults()
+        self._rssi = self._drone.rssi_dbm if self._drone else 0
         self._timing = world.timing
         self._dongle = world.dongle_lock(uri.devid)
         self._stats = RadioLinkStatistics(stats_callback) if stats_callback else None
@@ -148,16 +160,6 @@ class FakeLink:
 
     # Transaction thread ---------------------------------------------------------------------------------------
 
-    def _attempt(self) -> tuple[bool, int]:
-        """(acknowledged, retries used) of one transaction."""
-        if self._drone is None or not self._drone.reachable(self._uri.channel):
-            return False, self._timing.arc_retries
-        loss = self._faults.packet_loss
-        for retry in range(self._timing.arc_retries + 1):
-            if loss <= 0.0 or self._rng.random() >= loss:
-                return True, retry
-        return False, self._timing.arc_retries
-
     def _release_downlink(self, now: float) -> None:
         while self._down_delayed and self._down_delayed[0][0] <= now:
             self._in.put(self._down_delayed.popleft()[1])
@@ -176,9 +178,7 @@ class FakeLink:
             _, header, payload = self._up.popleft()
             for _ in range(3):
                 with self._dongle:
-                    ok, _retry = self._attempt()
-                    if ok:
-                        self._drone.exchange((header, payload), self._world.time_s())
+                    ok, _retry, _down = self._drone.transact(self._uri.channel, (header, payload))
                 if ok:
                     break
 
@@ -203,11 +203,12 @@ class FakeLink:
             last_tx = now
             down = None
             with self._dongle:
-                ok, retry = self._attempt()
-                if ok and self._drone is not None:
-                    if item is not None:
+                if self._drone is None:  # nobody at this address: the radio's attempts all go unanswered
+                    ok, retry = False, timing.arc_retries
+                else:
+                    ok, retry, down = self._drone.transact(self._uri.channel, (item[1], item[2]) if item else None)
+                    if ok and item is not None:
                         self._up.popleft()
-                    down = self._drone.exchange((item[1], item[2]) if item else None, self._world.time_s())
                 if timing.transaction_s > 0.0:
                     time.sleep(timing.transaction_s)
             if not ok:
@@ -252,7 +253,7 @@ class FakeLink:
 class FakeRadioDriver(CRTPDriver):
     """cflib link driver for ``fake://`` URIs. Use `register(world)`, which binds a subclass to a world."""
 
-    world: ClassVar[FakeWorld | None] = None
+    world: ClassVar[RadioWorld | None] = None
 
     def __init__(self) -> None:
         super().__init__()
@@ -306,7 +307,7 @@ class FakeRadioDriver(CRTPDriver):
         return self.scan_interface()
 
 
-def register(world: FakeWorld) -> type[FakeRadioDriver]:
+def register(world: RadioWorld) -> type[FakeRadioDriver]:
     """Make ``fake://`` URIs reach `world` through cflib (replacing any previously registered fake driver)."""
     unregister()
     driver = type("BoundFakeRadioDriver", (FakeRadioDriver,), {"world": world})

@@ -179,6 +179,40 @@ class SimDrone:
             return self._tx.popleft() if self._tx else None
 
 
+class DronePort:
+    """What a fake radio link reaches of one drone: radio transactions, its link settings and its downlink queue.
+
+    This one calls the drone in the same process; :class:`rpf_fly.radio.world_process.RemotePort` reaches a drone
+    of a world in another process through the same methods."""
+
+    def __init__(self, world: FakeWorld, drone: SimDrone) -> None:
+        self._world = world
+        self._drone = drone
+        self.faults = drone.config.faults
+        self.rssi_dbm = drone.config.rssi_dbm
+
+    def transact(self, channel: int, uplink: tuple[int, bytes] | None) -> tuple[bool, int, Packet | None]:
+        """One radio transaction on ``channel``: (acknowledged, retries used, the ack's downlink packet). Lost when
+        the drone does not answer on that channel or each of the radio's attempts is lost."""
+        drone, retries = self._drone, self._world.timing.arc_retries
+        if not drone.reachable(channel):
+            return False, retries, None
+        loss = self.faults.packet_loss
+        for retry in range(retries + 1):
+            if loss <= 0.0 or drone.rng.random() >= loss:
+                return True, retry, drone.exchange(uplink, self._world.time_s())
+        return False, retries, None
+
+    def has_downlink(self) -> bool:
+        return self._drone.has_downlink()
+
+    def attach(self, waker: threading.Event) -> None:
+        self._drone.attach(waker)
+
+    def detach(self, waker: threading.Event) -> None:
+        self._drone.detach(waker)
+
+
 class FakeWorld:
     """Fake Crazyflies keyed by radio address, stepped in real time by one thread.
 
@@ -259,6 +293,11 @@ class FakeWorld:
     def drone(self, address: int | str) -> SimDrone | None:
         """The drone at `address`, None if there is none."""
         return self._drones.get(parse_address(address))
+
+    def port(self, address: int | str) -> DronePort | None:
+        """The radio side of the drone at `address` for a fake link, None if there is none."""
+        drone = self._drones.get(parse_address(address))
+        return DronePort(self, drone) if drone is not None else None
 
     def firmware(self, address: int | str) -> FakeFirmware:
         """The firmware at `address` (KeyError if none)."""

@@ -62,10 +62,11 @@ def fly(
     factory=None,
     when_flying: Optional[Callable[[FlightLoop, DryRun], None]] = None,
     mocap: str = "natnet",
+    process: bool = True,
 ) -> Flight:
     """Fly ``mission`` on simulated drones; ``when_flying(loop, rig)`` runs on its own thread once the swarm flies."""
     log_path = tmp_path / "flight.mcap"
-    with DryRun(mission, mocap=mocap, drone_configs=configs) as rig:
+    with DryRun(mission, mocap=mocap, drone_configs=configs, process=process) as rig:
         workers: list[threading.Thread] = []
 
         def on_loop(loop: FlightLoop) -> None:

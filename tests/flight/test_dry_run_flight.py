@@ -197,3 +197,12 @@ def test_preflight_failure_arms_nothing(tmp_path, short_mission):
 def test_simulated_mocap_source_flies_too(tmp_path, short_mission):
     flight = fly(short_mission, tmp_path, mocap="sim")
     assert flight.report.success
+
+
+def test_simulated_drones_on_threads_of_this_process_fly_too(tmp_path, short_mission):
+    """``DryRun(process=False)``: the simulated drones and the NatNet emulator in the flight's own process."""
+    flight = fly(short_mission, tmp_path, process=False, when_flying=lambda loop, rig: (time.sleep(0.5), rig.hide("cf2", 1.0)))
+    assert flight.report.success, flight.report.reasons
+    stale = flight.events("pose_stale", "cf2")  # the hook reached the in-process NatNet emulator
+    assert stale and any("resuming" in e.message for e in stale)
+    assert all(landed(s) for s in flight.snapshots.values())

@@ -1,0 +1,434 @@
+"""The dry run's simulated drones and Motive emulator in a process of their own.
+
+Why: a real flight's process holds the flight loop, the NatNet client, cflib with its radio driver and the log
+writer; the drones and Motive are other machines. In a dry run the simulated firmwares (stepped at 100 Hz, about
+0.4 ms of Python for 10 drones), the packet handling of every radio transaction and the NatNet emulator would
+otherwise run on threads of the flight's process and hold its GIL at random moments, delaying setpoints in a way
+no real flight sees. So the dry run starts them here, in a child process, and reaches them over 127.0.0.1:
+
+- the radio: each fake link (``fake_radio.FakeLink``, in the flight's process, emulating cflib's Crazyradio driver
+  thread) performs each transaction as one UDP request to the child and waits for its reply, as the real driver
+  waits on the USB dongle; lost attempts, unreachable drones and the firmware's answers are decided in the child;
+- the mocap: the child runs the NatNet server emulator, which the flight's NatNet client receives as from Motive;
+- the fault hooks and firmware snapshots of tests and demos go over a `multiprocessing.connection` to 127.0.0.1
+  (:class:`WorldProcess`).
+
+The child ignores SIGINT (a Ctrl-C in a terminal reaches the whole process group: the drones must stay up while
+the flight lands them) and exits when its parent goes away (the connection closes, even after a SIGKILL).
+
+Radio wire format, little-endian: request ``op u8, seq u32, address u64, channel u8, flags u8`` then, for a
+transaction with an uplink packet (flags bit 0), the CRTP header byte and payload; reply ``seq u32, ok u8, retry
+u8, more u8, down u8`` then, when ``down``, port u8, channel u8 and the payload. ``more``: the drone still has
+downlink packets queued (the link polls again at once). An ``open`` reply carries ``latency_s f64, rssi i32``.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import pickle
+import queue
+import secrets
+import signal
+import socket
+import struct
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Mapping
+from multiprocessing.connection import Client, Listener
+from typing import Any, Optional
+
+from .fake_firmware import FirmwareSnapshot, Packet
+from .fake_world import DronePort, FakeDroneConfig, FakeWorld, LinkFaults, RadioTiming
+
+logger = logging.getLogger(__name__)
+
+OPEN, TRANSACT, CLOSE = 1, 2, 3
+_REQUEST = struct.Struct("<BIQBB")
+_REPLY = struct.Struct("<IBBBB")
+_INFO = struct.Struct("<di")
+REPLY_TIMEOUT_S = 0.1
+"""A transaction whose reply has not come back by then is a lost ack (a loopback round trip takes well under 1 ms)."""
+START_TIMEOUT_S = 60.0
+
+Pose = tuple[tuple[float, float, float], tuple[float, float, float, float], bool]
+
+
+class SimulatedBodies:
+    """The drones' true poses as the mocap sees them, keyed by rigid-body name, with tracking faults: a body hidden
+    for a while (occlusion) or every body lost (blackout)."""
+
+    def __init__(self, world: FakeWorld, bodies: Mapping[int, str]) -> None:
+        self._world = world
+        self._bodies = dict(bodies)  # radio address -> rigid-body name
+        self._hidden: dict[str, float] = {}
+        self._blackout_until = -math.inf
+        self._lock = threading.Lock()
+
+    def poses(self) -> dict[str, Pose]:
+        now = time.monotonic()
+        true = self._world.true_poses()
+        with self._lock:
+            blackout = now < self._blackout_until
+            hidden = {name for name, until in self._hidden.items() if now < until}
+        return {
+            name: (true[address][0], true[address][1], not blackout and name not in hidden)
+            for address, name in self._bodies.items()
+        }
+
+    def hide(self, body: str, seconds: float) -> None:
+        with self._lock:
+            self._hidden[body] = time.monotonic() + seconds
+
+    def blackout(self, seconds: float) -> None:
+        with self._lock:
+            self._blackout_until = time.monotonic() + seconds
+
+
+# ------------------------------------------------------------------------------------------ flight's process
+
+
+class RemotePort:
+    """A drone of the child's world, reached over UDP (the fake link's `DronePort`). Thread-safe."""
+
+    def __init__(self, server: tuple[str, int], address: int, timing: RadioTiming) -> None:
+        self._address = address
+        self._retries = timing.arc_retries
+        self._lock = threading.Lock()
+        self._seq = 0
+        self._more = False
+        self._open = False
+        self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self._sock.connect(server)
+        self._sock.settimeout(REPLY_TIMEOUT_S)
+        reply = self._call(OPEN, 0, b"")
+        if reply is None or not reply[1]:
+            self._sock.close()
+            raise LookupError(f"no simulated drone at address {address:010X}")
+        self._open = True
+        latency_s, rssi = _INFO.unpack_from(reply[5])
+        self.faults = LinkFaults(latency_s=latency_s)
+        self.rssi_dbm = rssi
+
+    def _call(self, op: int, channel: int, body: bytes) -> Optional[tuple[int, int, int, int, int, bytes]]:
+        with self._lock:
+            self._seq = (self._seq + 1) & 0xFFFFFFFF
+            seq = self._seq
+            try:
+                self._sock.send(_REQUEST.pack(op, seq, self._address, channel, 1 if body else 0) + body)
+                while True:
+                    data = self._sock.recv(2048)
+                    if len(data) >= _REPLY.size and _REPLY.unpack_from(data)[0] == seq:
+                        return (*_REPLY.unpack_from(data), data[_REPLY.size:])  # type: ignore[return-value]
+            except OSError:  # timeout (a lost ack), or the drones' process is gone
+                return None
+
+    def transact(self, channel: int, uplink: tuple[int, bytes] | None) -> tuple[bool, int, Packet | None]:
+        body = b"" if uplink is None else bytes((uplink[0],)) + uplink[1]
+        reply = self._call(TRANSACT, channel, body)
+        if reply is None:
+            return False, self._retries, None
+        _, ok, retry, more, has_down, rest = reply
+        self._more = bool(more)
+        down = (rest[0], rest[1], bytes(rest[2:])) if has_down else None
+        return bool(ok), retry, down
+
+    def has_downlink(self) -> bool:
+        return self._more
+
+    def attach(self, waker: threading.Event) -> None:
+        """Attached at open (the child queues downlink packets only while a link is open); polls find them."""
+
+    def detach(self, waker: threading.Event) -> None:
+        if self._open:
+            self._open = False
+            self._call(CLOSE, 0, b"")
+            self._sock.close()
+
+
+class RemoteWorld:
+    """What the fake radio needs of a world (`fake_radio.RadioWorld`) for the drones of a child process."""
+
+    def __init__(self, radio: tuple[str, int], addresses: tuple[int, ...], timing: RadioTiming | None = None) -> None:
+        self._radio = radio
+        self._addresses = tuple(addresses)
+        self.timing = timing or RadioTiming()
+        self._dongles: dict[int, threading.Lock] = {}
+        self._lock = threading.Lock()
+
+    @property
+    def addresses(self) -> tuple[int, ...]:
+        return self._addresses
+
+    def start(self) -> RemoteWorld:
+        return self  # the child started its world before it reported ready
+
+    def port(self, address: int) -> RemotePort | None:
+        if address not in self._addresses:
+            return None
+        try:
+            return RemotePort(self._radio, address, self.timing)
+        except LookupError:
+            return None
+
+    def dongle_lock(self, devid: int) -> threading.Lock:
+        with self._lock:
+            return self._dongles.setdefault(devid, threading.Lock())
+
+    def uri(self, address: int) -> str:
+        return f"fake://0/80/2M/{address:010X}"
+
+
+class WorldProcess:
+    """Starts the child process and speaks to it: the fault hooks and snapshots of `FakeWorld` and
+    `SimulatedBodies`, by the same names. ``natnet``: the NatNet server's settings (``version``, ``rate_hz``,
+    ``up_axis``), None for no NatNet server.
+
+    The child is ``python -m rpf_fly.radio.world_process``, not a multiprocessing spawn (which re-imports the
+    caller's main script: a user's unguarded script would run again in it). It reads its settings as one pickle on
+    stdin, answers with one JSON line on stdout (its ports), then serves calls on a `multiprocessing.connection`
+    to 127.0.0.1, authenticated with a random key."""
+
+    def __init__(
+        self,
+        drones: Mapping[int, FakeDroneConfig],
+        bodies: Mapping[int, str],
+        *,
+        seed: int = 0,
+        natnet: Optional[Mapping[str, Any]] = None,
+    ) -> None:
+        self._lock = threading.Lock()
+        self._conn: Any = None
+        key = secrets.token_bytes(32)
+        settings = {"drones": dict(drones), "bodies": dict(bodies), "seed": seed,
+                    "natnet": dict(natnet) if natnet else None, "authkey": key}
+        self._process = subprocess.Popen(
+            [sys.executable, "-m", "rpf_fly.radio.world_process"], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+        )
+        try:
+            assert self._process.stdin is not None and self._process.stdout is not None
+            self._process.stdin.write(pickle.dumps(settings))
+            self._process.stdin.close()
+            line = _read_line(self._process.stdout, START_TIMEOUT_S)
+            if line is None:
+                raise RuntimeError(f"the simulated drones' process did not start within {START_TIMEOUT_S:g} s")
+            ready = json.loads(line)
+            if "error" in ready:
+                raise RuntimeError(f"the simulated drones' process failed to start: {ready['error']}")
+            self._conn = Client(tuple(ready["control"]), authkey=key)
+        except BaseException:
+            self.close()
+            raise
+        self.radio: tuple[str, int] = (ready["radio"][0], ready["radio"][1])
+        self.natnet_command_port: Optional[int] = ready["natnet_command_port"]
+        self.addresses: tuple[int, ...] = tuple(drones)
+
+    def call(self, method: str, *args: Any) -> Any:
+        with self._lock:
+            if self._conn is None:
+                raise RuntimeError(f"simulated drones: {method} after close")
+            self._conn.send((method, args))
+            status, value = self._conn.recv()
+        if status != "ok":
+            raise RuntimeError(f"simulated drones: {method} failed: {value}")
+        return value
+
+    def drop_link(self, address: int) -> None:
+        self.call("drop_link", address)
+
+    def restore_link(self, address: int) -> None:
+        self.call("restore_link", address)
+
+    def disturb(self, address: int, offset_m: tuple[float, float, float]) -> None:
+        self.call("disturb", address, offset_m)
+
+    def set_battery(self, address: int, open_circuit_v: float) -> None:
+        self.call("set_battery", address, open_circuit_v)
+
+    def reboot(self, address: int) -> None:
+        self.call("reboot", address)
+
+    def snapshot(self, address: int) -> FirmwareSnapshot:
+        return self.call("snapshot", address)
+
+    def true_poses(self) -> dict[int, tuple[tuple[float, float, float], tuple[float, float, float, float]]]:
+        return self.call("true_poses")
+
+    def poses(self) -> dict[str, Pose]:
+        """The bodies as the mocap sees them (`SimulatedBodies.poses`)."""
+        return self.call("poses")
+
+    def hide(self, body: str, seconds: float) -> None:
+        self.call("hide", body, seconds)
+
+    def blackout(self, seconds: float) -> None:
+        self.call("blackout", seconds)
+
+    def close(self) -> None:
+        """Stop the child (its world powers the drones off) and wait for it; idempotent."""
+        if self._conn is not None:
+            try:
+                self.call("close")
+            except (OSError, EOFError, RuntimeError):
+                pass
+            with self._lock:
+                self._conn.close()
+                self._conn = None
+        try:
+            self._process.wait(5.0)
+        except subprocess.TimeoutExpired:
+            self._process.kill()
+            self._process.wait(2.0)
+        if self._process.stdout is not None:
+            self._process.stdout.close()
+
+
+def _read_line(stream: Any, timeout_s: float) -> Optional[bytes]:
+    """One line from a pipe; None after ``timeout_s`` or at its end (a thread: portable, unlike select on pipes)."""
+    lines: queue.Queue[bytes] = queue.Queue()
+    threading.Thread(target=lambda: lines.put(stream.readline()), daemon=True).start()
+    try:
+        line = lines.get(timeout=timeout_s)
+    except queue.Empty:
+        return None
+    return line or None
+
+
+# ------------------------------------------------------------------------------------------------ child
+
+
+class _RadioServer:
+    """The child's end of the fake links: one UDP socket, one thread, every link's transactions in turn."""
+
+    def __init__(self, world: FakeWorld) -> None:
+        self._world = world
+        self._ports: dict[int, DronePort | None] = {}
+        self._wakers: dict[tuple[Any, int], threading.Event] = {}
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.bind(("127.0.0.1", 0))
+        self._thread = threading.Thread(target=self._run, name="fake-radio-server", daemon=True)
+
+    def start(self) -> _RadioServer:
+        self._thread.start()
+        return self
+
+    def close(self) -> None:
+        self.sock.close()
+
+    def _port(self, address: int) -> DronePort | None:
+        if address not in self._ports:
+            self._ports[address] = self._world.port(address)
+        return self._ports[address]
+
+    def _run(self) -> None:
+        while True:
+            try:
+                data, peer = self.sock.recvfrom(2048)
+            except OSError:
+                return  # closed
+            try:
+                reply = self._handle(data, peer)
+            except Exception:  # noqa: BLE001 - a bad request loses one transaction, never the radio
+                logger.exception("fake radio server: bad request")
+                continue
+            try:
+                self.sock.sendto(reply, peer)
+            except OSError:
+                pass
+
+    def _handle(self, data: bytes, peer: Any) -> bytes:
+        op, seq, address, channel, flags = _REQUEST.unpack_from(data)
+        port = self._port(address)
+        if op == OPEN:
+            if port is None:
+                return _REPLY.pack(seq, 0, 0, 0, 0)
+            port.attach(self._wakers.setdefault((peer, address), threading.Event()))
+            return _REPLY.pack(seq, 1, 0, 0, 0) + _INFO.pack(port.faults.latency_s, port.rssi_dbm)
+        if op == CLOSE:
+            waker = self._wakers.pop((peer, address), None)
+            if port is not None and waker is not None:
+                port.detach(waker)
+            return _REPLY.pack(seq, 1, 0, 0, 0)
+        if port is None:
+            return _REPLY.pack(seq, 0, self._world.timing.arc_retries, 0, 0)
+        body = data[_REQUEST.size:]
+        uplink = (body[0], bytes(body[1:])) if flags & 1 else None
+        ok, retry, down = port.transact(channel, uplink)
+        more = port.has_downlink()
+        if down is None:
+            return _REPLY.pack(seq, ok, retry, more, 0)
+        return _REPLY.pack(seq, ok, retry, more, 1) + bytes((down[0] & 0xFF, down[1] & 0xFF)) + bytes(down[2])
+
+
+def serve(settings: dict[str, Any], out: Any) -> None:
+    """The child process: world, radio server, NatNet server; reports its ports as one JSON line on ``out``, then
+    answers the parent's calls until it closes them or goes away."""
+    world = FakeWorld(settings["drones"], seed=settings["seed"]).start()
+    bodies = settings["bodies"]
+    tracked = SimulatedBodies(world, bodies)
+    radio = _RadioServer(world).start()
+    server = None
+    natnet = settings["natnet"]
+    try:
+        if natnet is not None:
+            from rpf_fly.mocap.natnet_server import NatNetServer
+
+            server = NatNetServer(
+                tracked.poses, version=natnet["version"], multicast=False, local_ip="127.0.0.1",
+                rate_hz=natnet["rate_hz"], up_axis=natnet["up_axis"], bodies=list(bodies.values()),
+            ).start()
+        with Listener(("127.0.0.1", 0), authkey=settings["authkey"]) as listener:
+            out.write(json.dumps({
+                "control": list(listener.address), "radio": list(radio.sock.getsockname()),
+                "natnet_command_port": server.command_port if server is not None else None,
+            }) + "\n")
+            out.flush()
+            conn = listener.accept()
+        calls = {
+            "drop_link": world.drop_link, "restore_link": world.restore_link, "disturb": world.disturb,
+            "set_battery": world.set_battery, "reboot": world.reboot, "snapshot": world.snapshot,
+            "true_poses": world.true_poses, "poses": tracked.poses, "hide": tracked.hide,
+            "blackout": tracked.blackout,
+        }
+        with conn:
+            while True:
+                try:
+                    method, args = conn.recv()
+                except (EOFError, OSError):
+                    return  # the parent is gone
+                if method == "close":
+                    conn.send(("ok", None))
+                    return
+                try:
+                    conn.send(("ok", calls[method](*args)))
+                except Exception as err:  # noqa: BLE001 - reported to the caller, the child stays up
+                    conn.send(("error", f"{type(err).__name__}: {err}"))
+    finally:
+        if server is not None:
+            server.close()
+        world.close()
+        radio.close()
+
+
+def main() -> None:
+    """``python -m rpf_fly.radio.world_process``: settings as one pickle on stdin (from `WorldProcess` only)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # a Ctrl-C reaches the whole process group: the parent lands first
+    out = sys.stdout
+    sys.stdout = sys.stderr  # nothing else may write on the parent's pipe
+    try:
+        settings = pickle.loads(sys.stdin.buffer.read())
+        serve(settings, out)
+    except Exception as err:  # noqa: BLE001 - tell the parent (it waits for this line at startup)
+        logger.exception("simulated drones failed")
+        try:
+            out.write(json.dumps({"error": f"{type(err).__name__}: {err}"}) + "\n")
+            out.flush()
+        except (OSError, ValueError):
+            pass
+
+
+if __name__ == "__main__":
+    main()

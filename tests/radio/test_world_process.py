@@ -1,0 +1,126 @@
+"""Simulated drones in a process of their own (the dry run's default): real cflib in this process reaches them
+through the fake radio over UDP, the fault hooks go over the control connection, and the child never outlives its
+parent or a Ctrl-C."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import pytest
+from cflib.crazyflie import Crazyflie
+from cflib.crazyflie.syncCrazyflie import SyncCrazyflie
+
+from rpf_fly.radio import fake_radio
+from rpf_fly.radio.fake_world import FakeDroneConfig
+from rpf_fly.radio.world_process import RemoteWorld, WorldProcess
+
+A1, A2 = 0xE7E7E7E701, 0xE7E7E7E702
+
+
+def uri(address: int) -> str:
+    return f"fake://0/80/2M/{address:010X}"
+
+
+@pytest.fixture
+def child():  # type: ignore[no-untyped-def]
+    drones = {A1: FakeDroneConfig.at(0.0, 0.0), A2: FakeDroneConfig.at(1.0, 0.5, initial_vbat_v=3.5)}
+    process = WorldProcess(drones, {A1: "cf1", A2: "cf2"}, natnet=None)
+    fake_radio.register(RemoteWorld(process.radio, process.addresses))
+    yield process
+    fake_radio.unregister()
+    process.close()
+
+
+def wait_for(predicate, timeout_s: float) -> bool:  # type: ignore[no-untyped-def]
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if predicate():
+            return True
+        time.sleep(0.02)
+    return predicate()
+
+
+def test_cflib_flies_a_drone_of_the_child_process(child, tmp_path: Path) -> None:
+    with SyncCrazyflie(uri(A1), cf=Crazyflie(rw_cache=str(tmp_path))) as scf:
+        cf = scf.cf
+        assert cf.param.get_value("stabilizer.estimator") is not None  # TOC and parameters over the UDP radio
+        cf.high_level_commander.takeoff(0.5, 1.0)
+        assert wait_for(lambda: child.snapshot(A1).position[2] > 0.45, 5.0)
+        cf.high_level_commander.land(0.0, 1.0)
+        assert wait_for(lambda: child.snapshot(A1).position[2] < 0.02, 5.0)
+    assert child.snapshot(A2).position[:2] == pytest.approx((1.0, 0.5))  # the other drone never moved
+    assert child.snapshot(A1).toc_item_requests > 0
+
+
+def test_a_dropped_link_fails_cflib_with_its_usual_error(child, tmp_path: Path) -> None:
+    errors: list[str] = []
+    cf = Crazyflie(rw_cache=str(tmp_path))
+    cf.connection_lost.add_callback(lambda _uri, message: errors.append(message))
+    with SyncCrazyflie(uri(A2), cf=cf):
+        child.drop_link(A2)
+        assert wait_for(lambda: bool(errors), 5.0)
+    assert errors[0] == "Too many packets lost"
+
+
+def test_unknown_address_fails_to_connect(child, tmp_path: Path) -> None:
+    scf = SyncCrazyflie(uri(0xE7E7E7E7AA), cf=Crazyflie(rw_cache=str(tmp_path)))
+    with pytest.raises(Exception, match="Too many packets lost"):
+        scf.open_link()
+
+
+def test_hooks_and_bad_calls_over_the_control_connection(child) -> None:
+    poses = child.poses()
+    assert set(poses) == {"cf1", "cf2"} and poses["cf2"][0][:2] == pytest.approx((1.0, 0.5)) and poses["cf2"][2]
+    child.hide("cf2", 5.0)
+    assert child.poses()["cf2"][2] is False and child.poses()["cf1"][2] is True
+    child.blackout(5.0)
+    assert not any(tracked for _, _, tracked in child.poses().values())
+    with pytest.raises(RuntimeError, match="snapshot failed: KeyError"):
+        child.snapshot(0xE7E7E7E7AA)
+    assert child.snapshot(A2).vbat_v < 3.6  # the child stays up after a bad call (cf2 has a low battery)
+
+
+def test_the_child_ignores_sigint(child) -> None:
+    os.kill(child._process.pid, signal.SIGINT)  # noqa: SLF001 - what a Ctrl-C in a terminal does to the group
+    time.sleep(0.3)
+    assert child._process.poll() is None  # noqa: SLF001
+    assert set(child.poses()) == {"cf1", "cf2"}
+
+
+def test_the_child_exits_when_its_parent_is_killed() -> None:
+    parent = subprocess.Popen([sys.executable, "-c", textwrap.dedent("""
+        import sys, time
+        from rpf_fly.radio.fake_world import FakeDroneConfig
+        from rpf_fly.radio.world_process import WorldProcess
+        process = WorldProcess({0xE7E7E7E701: FakeDroneConfig.at(0.0, 0.0)}, {0xE7E7E7E701: "cf1"})
+        print(process._process.pid, flush=True)
+        time.sleep(60)
+    """)], stdout=subprocess.PIPE, text=True)
+    try:
+        pid = int(parent.stdout.readline())  # type: ignore[union-attr]
+        os.kill(parent.pid, signal.SIGKILL)
+        parent.wait(5)
+        assert wait_for(lambda: not _alive(pid), 10.0), "the simulated drones outlived their parent"
+    finally:
+        if parent.poll() is None:
+            parent.kill()
+
+
+def _alive(pid: int) -> bool:
+    try:
+        finished, _ = os.waitpid(pid, os.WNOHANG)  # not our child: raises ChildProcessError
+    except ChildProcessError:
+        finished = 0
+    if finished:
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    return Path(f"/proc/{pid}/stat").exists() and Path(f"/proc/{pid}/stat").read_text().split()[2] != "Z"
