@@ -433,7 +433,7 @@ class NatNetClient:
                     stats.dropped += 1  # before SERVERINFO (or unsupported version): cannot decode yet
                     return
                 try:
-                    data = decode_frame(payload, self._version)
+                    data = decode_frame(payload, self._version, markers=False)  # poses need rigid bodies only
                 except NatNetDecodeError:
                     self._bad_frames += 1
                     if self._bad_frames >= _BAD_FRAMES_RECONNECT and (

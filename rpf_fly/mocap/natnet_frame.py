@@ -90,15 +90,22 @@ def _close_section(off: int, limit: int, sized: bool, what: str) -> None:
         raise NatNetDecodeError(f"{what}: declared size ends at {limit}, content ends at {off}", _FRAME, off)
 
 
+_SKIP = object()
+"""``make`` of :func:`_record_section` for a section that is checked and stepped over, not decoded."""
+
+
 def _record_section(
     buf: bytes, mv: memoryview, off: int, end: int, sized: bool, record: struct.Struct, make: Any, what: str
 ) -> tuple[list[Any], int]:
     """A section of fixed-size records (count, 4.1+ byte size, records), each decoded by ``make`` (None: the raw
-    tuples). Returns the items and the offset after the section."""
+    tuples; ``_SKIP``: none, an empty list). Returns the items and the offset after the section."""
     n, off, limit = _open_section(buf, off, end, sized, record.size, what)
     stop = off + record.size * n
-    raw = record.iter_unpack(mv[off:stop])
-    items = list(raw) if make is None else list(map(make, raw))
+    if make is _SKIP:
+        items: list[Any] = []
+    else:
+        raw = record.iter_unpack(mv[off:stop])
+        items = list(raw) if make is None else list(map(make, raw))
     _close_section(stop, limit, sized, what)
     return items, stop
 
@@ -139,21 +146,25 @@ def _analog_section(buf: bytes, off: int, limit: int, n: int, what: str) -> tupl
     return items, off
 
 
-def decode_frame(payload: bytes, version: Version) -> FrameOfData:
+def decode_frame(payload: bytes, version: Version, *, markers: bool = True) -> FrameOfData:
     """Decode a FRAMEOFDATA payload (after the header) of bitstream ``version``.
+
+    ``markers=False`` checks the marker sections (marker sets, other markers, labeled markers) exactly as a full
+    decode does but steps over their contents, leaving those lists empty: a flight needs the rigid bodies only, and
+    Motive streams its markers by default (10 bodies with 3 markers each: 8 us against 35 us a frame).
 
     Raises :class:`NatNetDecodeError` on any malformed, truncated or inconsistent payload.
     """
     layout = _layout(version, _FRAME)
     try:
-        return _decode_frame(payload, layout)
+        return _decode_frame(payload, layout, markers)
     except NatNetDecodeError:
         raise
     except (struct.error, ValueError, IndexError, OverflowError, MemoryError) as exc:  # defence in depth
         raise NatNetDecodeError(f"frame: {exc}", _FRAME) from exc
 
 
-def _decode_frame(buf: bytes, layout: _Layout) -> FrameOfData:
+def _decode_frame(buf: bytes, layout: _Layout, markers: bool = True) -> FrameOfData:
     sized = layout.section_sizes
     end = len(buf)
     mv = memoryview(buf)
@@ -174,12 +185,13 @@ def _decode_frame(buf: bytes, layout: _Layout) -> FrameOfData:
         if k < 0 or k * 12 > limit - off:
             raise NatNetDecodeError(f"marker set {name!r}: {k} markers do not fit", _FRAME, off - 4)
         stop = off + 12 * k
-        marker_sets.append(MarkerSetData(name, list(_VEC3.iter_unpack(mv[off:stop]))))
+        if markers:
+            marker_sets.append(MarkerSetData(name, list(_VEC3.iter_unpack(mv[off:stop]))))
         off = stop
     _close_section(off, limit, sized, "marker sets")
 
     # 2. other (unlabeled, legacy) markers
-    other_markers, off = _record_section(buf, mv, off, end, sized, _VEC3, None, "other markers")
+    other_markers, off = _record_section(buf, mv, off, end, sized, _VEC3, None if markers else _SKIP, "other markers")
 
     # 3. rigid bodies: fixed 38-byte records
     rigid_bodies, off = _record_section(buf, mv, off, end, sized, _RB, _rb_make, "rigid bodies")
@@ -216,7 +228,9 @@ def _decode_frame(buf: bytes, layout: _Layout) -> FrameOfData:
         _close_section(off, limit, sized, "assets")
 
     # 6. labeled markers: fixed 26-byte records
-    labeled_markers, off = _record_section(buf, mv, off, end, sized, _LABELED, _lm_make, "labeled markers")
+    labeled_markers, off = _record_section(
+        buf, mv, off, end, sized, _LABELED, _lm_make if markers else _SKIP, "labeled markers"
+    )
 
     # 7./8. force plates and devices
     n, off, limit = _open_section(buf, off, end, sized, 8, "force plates")

@@ -213,3 +213,22 @@ def test_echo_pairs_in_the_session(datagrams):
     assert [e.request_stamp for e in answered] == sent
     ticks = [e.server_ticks for e in answered]
     assert ticks == sorted(ticks)
+
+
+def test_every_frame_of_the_live_session_decodes_the_same_without_markers(datagrams, server_info, decoded_frames):
+    """What the flight's client decodes (markers stepped over) of real Motive 2.1 frames: the same rigid bodies and
+    timing as the full decode."""
+    import dataclasses
+
+    from rpf_fly.mocap.natnet_protocol import decode_frame, decode_header
+
+    seen = 0
+    for d in datagrams:
+        message_id, payload = decode_header(d.payload)
+        if message_id != MessageId.FRAMEOFDATA:
+            continue
+        lean = decode_frame(payload, server_info.version, markers=False)
+        full = decoded_frames[lean.frame_number]
+        assert lean == dataclasses.replace(full, marker_sets=[], other_markers=[], labeled_markers=[])
+        seen += 1
+    assert seen == len(decoded_frames) == 518

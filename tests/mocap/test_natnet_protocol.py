@@ -238,3 +238,33 @@ def test_encoder_rejects_oversized_payloads_and_nul_in_names():
     frame.marker_sets.append(type(rich_frame((3, 0)).marker_sets[0])("bad\0name", []))
     with pytest.raises(ValueError):
         encode_frame(frame, (3, 0))
+
+
+def _without_markers(frame):  # type: ignore[no-untyped-def]
+    return dataclasses.replace(frame, marker_sets=[], other_markers=[], labeled_markers=[])
+
+
+@pytest.mark.parametrize("version", VERSIONS, ids=lambda v: f"{v[0]}.{v[1]}")
+def test_frame_without_markers_is_the_full_decode_minus_the_marker_lists(version):
+    """The flight's NatNet client steps over the marker sections (it needs rigid bodies only)."""
+    frame = rich_frame(version)
+    assert frame.marker_sets and frame.other_markers and frame.labeled_markers  # something to step over
+    payload = decode_header(encode_frame(frame, version))[1]
+    full = decode_frame(payload, version)
+    assert decode_frame(payload, version, markers=False) == _without_markers(full)
+
+
+@pytest.mark.parametrize("version", VERSIONS, ids=lambda v: f"{v[0]}.{v[1]}")
+def test_frame_without_markers_rejects_every_malformed_payload_the_full_decode_rejects(version):
+    payload = decode_header(encode_frame(rich_frame(version), version))[1]
+    variants = [payload[:cut] for cut in range(len(payload))]
+    # every int32 count or size field of the marker sections, set far too large
+    variants += [payload[:k] + struct.pack("<i", 10_000) + payload[k + 4:] for k in range(4, min(len(payload), 600) - 4)]
+    for bad in variants:
+        try:
+            full = decode_frame(bad, version)
+        except NatNetDecodeError:
+            with pytest.raises(NatNetDecodeError):
+                decode_frame(bad, version, markers=False)
+        else:
+            assert decode_frame(bad, version, markers=False) == _without_markers(full)
