@@ -245,7 +245,7 @@ class FlightLoop:
         deadline = self.clock() + self.PREFLIGHT_TIMEOUT_S
         problems: dict[str, str] = {}
         while self.clock() < deadline and not self._stop.is_set():
-            self._spin_once(deadline, plan=False)
+            self._spin_once(deadline)
             problems = {name: self._preflight_problem(agent) for name, agent in self.agents.items()}
             problems = {n: p for n, p in problems.items() if p}
             if not problems:
@@ -310,7 +310,7 @@ class FlightLoop:
                 agent.outcome = FlightOutcome.NOT_FLOWN
         until = self.clock() + flight.takeoff_s + self.TAKEOFF_SETTLE_S
         while self.clock() < until and not self._stop.is_set():
-            self._spin_once(until, plan=False)
+            self._spin_once(until)
         for agent in self.agents.values():
             if agent.phase != DronePhase.TAKEOFF:
                 continue
@@ -332,7 +332,7 @@ class FlightLoop:
         self._watchdog.arm(True)
         try:
             while not self._stop.is_set():
-                self._spin_once(started, plan=True)
+                self._spin_once(None)
                 now = self.clock()
                 flying = [a for a in self.agents.values() if a.phase in (DronePhase.PLANNING, DronePhase.HOLDING, DronePhase.ARRIVED)]
                 if not flying:
@@ -367,7 +367,7 @@ class FlightLoop:
             if self._estop.is_set():
                 break
             try:
-                self._spin_once(min(deadline, self.clock() + 0.1), plan=False)
+                self._spin_once(min(deadline, self.clock() + 0.1))
             except Exception:  # noqa: BLE001 - landing must finish even if the mocap or log misbehaves
                 time.sleep(0.05)
                 self._finish_landings(self.clock())
@@ -413,12 +413,13 @@ class FlightLoop:
 
     # ------------------------------------------------------------------------------------- the iteration
 
-    def _spin_once(self, until_s: float, plan: bool = False) -> None:
+    def _spin_once(self, until_s: Optional[float]) -> None:
         """Receive the newest frame (waiting until ``until_s`` at most); at a planning tick plan and send first (its
-        latency is what the drones feel), then forward extpos, record, and supervise. With ``plan`` the wait and
-        the tick follow the flight's :class:`TickSchedule` (ticks locked to the mocap frames; ``until_s`` unused)."""
+        latency is what the drones feel), then forward extpos, record, and supervise. ``until_s`` None: flying,
+        the wait and the ticks follow the flight's :class:`TickSchedule` (ticks locked to the mocap frames)."""
         ticks = self._ticks
-        if plan:
+        plan = until_s is None
+        if until_s is None:
             until_s = ticks.window_end_s
         frame = self.mocap.receive(max(0.0, until_s - self.clock()))
         now = self.clock()
