@@ -50,8 +50,11 @@ OPEN, TRANSACT, CLOSE = 1, 2, 3
 _REQUEST = struct.Struct("<BIQBB")
 _REPLY = struct.Struct("<IBBBB")
 _INFO = struct.Struct("<di")
-REPLY_TIMEOUT_S = 0.1
-"""A transaction whose reply has not come back by then is a lost ack (a loopback round trip takes well under 1 ms)."""
+REPLY_TIMEOUT_S = 0.5
+"""A transaction whose reply has not come back by then is a lost ack. A loopback round trip takes well under 1 ms;
+the margin is for a loaded machine, because a reply given up on is lost with the downlink packet it carried (the
+real radio's safelink loses none). A child that died fails at once instead: the closed port answers the connected
+socket with ECONNREFUSED."""
 START_TIMEOUT_S = 60.0
 
 Pose = tuple[tuple[float, float, float], tuple[float, float, float, float], bool]

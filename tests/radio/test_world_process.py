@@ -124,3 +124,16 @@ def _alive(pid: int) -> bool:
     except ProcessLookupError:
         return False
     return Path(f"/proc/{pid}/stat").exists() and Path(f"/proc/{pid}/stat").read_text().split()[2] != "Z"
+
+
+def test_killed_simulated_drones_fail_the_links_at_once(child, tmp_path: Path) -> None:
+    """Link loss, the dry-run way: the drones' process dies; cflib reports the usual error within a second."""
+    errors: list[tuple[float, str]] = []
+    cf = Crazyflie(rw_cache=str(tmp_path))
+    cf.connection_lost.add_callback(lambda _uri, message: errors.append((time.monotonic(), message)))
+    with SyncCrazyflie(uri(A1), cf=cf):
+        killed = time.monotonic()
+        child._process.kill()  # noqa: SLF001
+        assert wait_for(lambda: bool(errors), 5.0)
+    when, message = errors[0]
+    assert message == "Too many packets lost" and when - killed < 1.5  # a transaction in flight waits out 0.5 s
