@@ -19,9 +19,12 @@ def review(
     plot: Optional[Path] = typer.Option(None, "--plot", help="Write the review figure (tracks, altitude, tracking, "
                                                              "separation, battery, events) to a PNG."),
     csv_dir: Optional[Path] = typer.Option(None, "--csv", help="Write one CSV per topic into this directory."),
+    salvage_to: Optional[Path] = typer.Option(
+        None, "--salvage", help="Also write a finished copy of the log here (every complete chunk of a log cut short "
+                                "by a kill, with the summary and footer Foxglove needs to open it)."),
 ) -> None:
     """Review a flight log: message rates and gaps per topic, events, the mission's metrics; plots and CSV."""
-    from rpf_fly.log.reader import LogError, read_log
+    from rpf_fly.log.reader import LogError, read_log, salvage
     from rpf_fly.log.review import export_csv, review as compute_review
 
     try:
@@ -30,6 +33,14 @@ def review(
         raise fail(f"{log}: {err}")
     except OSError as err:
         raise fail(f"{log}: {err.strerror or err}")
+    if salvage_to is not None:
+        try:
+            saved = salvage(log, salvage_to)
+        except (LogError, ValueError) as err:
+            raise fail(f"{salvage_to}: cannot salvage {log}: {err}")
+        except OSError as err:
+            raise fail(f"{salvage_to}: cannot write: {err.strerror or err}")
+        typer.echo(f"{salvage_to}: {saved.messages} messages on {saved.channels} channels, finished", err=True)
     result = compute_review(data)
     if json_output and result.metrics is None:
         cut = " (the log is truncated)" if data.truncated else ""
@@ -37,7 +48,8 @@ def review(
     if data.truncated:
         typer.echo(
             f"{log}: warning: the log ends before its footer (writer killed?); reviewing the "
-            f"{data.message_count} messages of its complete chunks",
+            f"{data.message_count} messages of its complete chunks"
+            + ("" if salvage_to is not None else "; `--salvage FIXED.mcap` writes a finished copy for Foxglove"),
             err=True,
         )
     if plot is not None:

@@ -103,3 +103,21 @@ def test_salvage_of_a_finished_file_is_a_copy(lab_log, tmp_path):
     result = salvage(path, out)
     assert not result.truncated
     assert read_log(out).topics == read_log(path).topics
+
+
+def test_review_salvage_writes_a_finished_copy_and_says_so(killed, tmp_path):
+    from conftest import run_cli
+
+    path, _ = killed
+    plain = run_cli("review", path)
+    assert "--salvage FIXED.mcap" in plain.stderr  # the truncation warning says how to get a file Foxglove opens
+    out = tmp_path / "fixed.mcap"
+    result = run_cli("review", path, "--salvage", out)
+    assert result.exit_code == 0, result.output
+    data = read_log(path)
+    assert f"{out}: {data.message_count} messages" in result.stderr
+    with open(out, "rb") as f:
+        summary = make_reader(f).get_summary()
+    assert summary is not None and summary.statistics.message_count == data.message_count
+    same = run_cli("review", path, "--salvage", path)
+    assert same.exit_code == 2 and "cannot salvage" in same.stderr and len(same.stderr.strip().splitlines()) == 1
