@@ -20,8 +20,8 @@ def review(
                                                              "separation, battery, events) to a PNG."),
     csv_dir: Optional[Path] = typer.Option(None, "--csv", help="Write one CSV per topic into this directory."),
     salvage_to: Optional[Path] = typer.Option(
-        None, "--salvage", help="Also write a finished copy of the log here (every complete chunk of a log cut short "
-                                "by a kill, with the summary and footer Foxglove needs to open it)."),
+        None, "--salvage", help="Also write a finished copy of the log here: every complete chunk of a log cut short "
+                                "by a kill, with the summary and footer indexed readers need."),
 ) -> None:
     """Review a flight log: message rates and gaps per topic, events, the mission's metrics; plots and CSV."""
     from rpf_fly.log.reader import LogError, read_log, salvage
@@ -49,7 +49,7 @@ def review(
         typer.echo(
             f"{log}: warning: the log ends before its footer (writer killed?); reviewing the "
             f"{data.message_count} messages of its complete chunks"
-            + ("" if salvage_to is not None else "; `--salvage FIXED.mcap` writes a finished copy for Foxglove"),
+            + ("" if salvage_to is not None else "; `--salvage FIXED.mcap` writes a finished copy"),
             err=True,
         )
     if plot is not None:
