@@ -106,7 +106,12 @@ def test_salvage_of_a_finished_file_is_a_copy(lab_log, tmp_path):
 
 
 def test_review_salvage_writes_a_finished_copy_and_says_so(killed, tmp_path):
-    from conftest import run_cli
+    from typer.testing import CliRunner
+
+    from rpf_fly.cli import get_app
+
+    def run_cli(*args):  # type: ignore[no-untyped-def]
+        return CliRunner().invoke(get_app(), [str(a) for a in args])
 
     path, _ = killed
     plain = run_cli("review", path)
