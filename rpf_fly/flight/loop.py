@@ -1,9 +1,10 @@
 """The flight loop: connect, preflight, take off, plan every drone from its own view, supervise, land.
 
-One thread runs the loop. Every iteration takes the newest mocap frame (waiting at most until the next planning
-tick, so setpoints keep streaming even when mocap stops), forwards extpos to each drone at ``extpos_rate_hz``,
-runs the supervisor and applies its findings; at each planning tick (the mission rate) every planning drone's own
-planner runs on that drone's local view and its setpoint goes to the backend. A drone whose planner fails holds and
+One thread runs the loop. Every iteration takes the newest mocap frame (waiting at most until the end of the next
+planning tick's window, so setpoints keep streaming even when mocap stops), forwards extpos to each drone at
+``extpos_rate_hz``, runs the supervisor and applies its findings; at each planning tick (the mission rate, fired by
+a frame the moment it arrives: :mod:`rpf_fly.flight.ticks`) every planning drone's own planner runs on that drone's
+local view and its setpoint goes to the backend. A drone whose planner fails holds and
 lands alone (:mod:`rpf_fly.flight.agent`); a loop that stops altogether is caught by the watchdog thread.
 
 Every path out ends with the drones landing or stopped and the log closed: normal end, timeout, interrupt
