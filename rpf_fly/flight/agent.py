@@ -42,9 +42,13 @@ class PlannerFault(RuntimeError):
     """A drone's planner raised, returned garbage, or ran over its time budget."""
 
 
+MAX_DIRECTION_NORM = 1.0 + 1e-6
+"""A planner's direction is at most a unit vector (this rounding allowed); one call or a batched row alike."""
+
+
 def check_direction(direction: complex) -> None:
     """A planner's direction must be finite and at most a unit vector; else it is a :class:`PlannerFault`."""
-    if not (math.isfinite(direction.real) and math.isfinite(direction.imag)) or abs(direction) > 1.0 + 1e-6:
+    if not (math.isfinite(direction.real) and math.isfinite(direction.imag)) or abs(direction) > MAX_DIRECTION_NORM:
         raise PlannerFault(f"planner returned an invalid direction {direction!r}")
 
 

@@ -24,7 +24,7 @@ from typing import Callable, Sequence, Union
 
 import numpy as np
 
-from rpf_fly.flight.agent import DroneAgent, PlannerFault, PlanResult
+from rpf_fly.flight.agent import MAX_DIRECTION_NORM, DroneAgent, PlannerFault, PlanResult
 from rpf_fly.planning.gains import FixedGains
 from rpf_fly.planning.obstacles import ObstacleSet
 from rpf_fly.planning.onnx_policy import OnnxGains
@@ -153,7 +153,7 @@ class SwarmPlanner:
                 f"batched planning of {len(agents)} drones took {seconds * 1e3:.1f} ms (budget "
                 f"{self.budget_s * 1e3:.0f} ms): planning each drone alone from now on"
             )
-        ok = np.isfinite(directions.real) & np.isfinite(directions.imag) & (abs(directions) <= 1.0 + 1e-6)
+        ok = np.isfinite(directions.real) & np.isfinite(directions.imag) & (abs(directions) <= MAX_DIRECTION_NORM)
         share = seconds / len(agents)
         return {
             agent.name: agent.accept(step, complex(directions[i]), complex(measured[i]), share, row=i)
