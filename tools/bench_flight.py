@@ -7,7 +7,9 @@ Measured by the flight loop itself (rpf_fly.flight.loop.LoopStats) while the dro
   radio driver (``CflibBackend.send_position_setpoint`` returned), p50 and p99 over all drones and the ticks fired
   by a frame (every tick but the ``frameless`` ones, which fire at a window's end when no frame came);
 - tick interval and jitter: |interval - median interval|, p99; overruns (ticks later than one period);
-- planner time per drone.
+- planner time per drone;
+- the flight log's CPU time (the loop thread inside the recorder's calls plus the writer thread) over the whole
+  flight, take-off and landing included, in percent of a core (tools/bench_log.py measures it at a steady rate).
 Goals: latency p50 <= 0.5 ms, p99 <= 2 ms. The machine is shared: read medians over runs.
 """
 
@@ -17,9 +19,11 @@ import argparse
 import json
 import statistics
 import tempfile
+import time
 from pathlib import Path
 
 from rpf_fly.flight.dry_run import DryRun
+from rpf_fly.flight.recording import McapRecorder
 from rpf_fly.flight.session import run_flight
 from rpf_fly.mission import parse_mission
 from rpf_fly.sim.planners import make_planner
@@ -44,11 +48,19 @@ formation: {{kind: circle_swap, count: {drones}, radius: 3.0}}
 def run_once(drones: int, rate: float, planner: str, log: bool, in_process: bool = False) -> dict:
     mission = parse_mission(mission_text(drones, rate, planner))
     obstacles = obstacle_set(mission.obstacles)
+    loops = []
     with tempfile.TemporaryDirectory() as tmp, DryRun(mission, process=not in_process) as rig:
+        wall0 = time.perf_counter()
         report = run_flight(mission, lambda d: make_planner(mission.planner, obstacles),
-                            Path(tmp) / "bench.mcap" if log else None, rig=rig)
+                            Path(tmp) / "bench.mcap" if log else None, rig=rig, on_loop=loops.append)
+        wall = time.perf_counter() - wall0
     summary = report.stats.summary()
     summary["success"] = report.success
+    recorder = loops[0].recorder
+    if isinstance(recorder, McapRecorder):  # the log's CPU time: the loop thread in the recorder + the writer thread
+        summary["log_messages_per_s"] = recorder.log.written / wall
+        summary["log_cpu_pct"] = 100 * (recorder.cpu_s + recorder.log.writer_cpu_s) / wall
+        summary["log_recorder_pct"] = 100 * recorder.cpu_s / wall
     return summary
 
 
@@ -76,6 +88,9 @@ def main() -> int:
         "planner_p50_us": med("planner_p50_s") * 1e6, "overruns_median": med("overruns"),
         "frameless_ticks_median": med("frameless_ticks"), "ticks_median": med("ticks"),
     }
+    if not args.no_log:
+        result.update(log_cpu_pct=med("log_cpu_pct"), log_recorder_pct=med("log_recorder_pct"),
+                      log_messages_per_s=med("log_messages_per_s"))
     if args.json:
         print(json.dumps(result))
         return 0
@@ -86,6 +101,10 @@ def main() -> int:
           f"overruns {result['overruns_median']:.0f} per run")
     print(f"  ticks without a fresh frame: {result['frameless_ticks_median']:.0f} of {result['ticks_median']:.0f} per run "
           f"(ticks are locked to the frames: rpf_fly/flight/ticks.py)")
+    if not args.no_log:
+        print(f"  flight log: {result['log_cpu_pct']:.2f} % of a core over the whole flight (loop thread in the "
+              f"recorder {result['log_recorder_pct']:.2f} %, the rest the writer thread), "
+              f"{result['log_messages_per_s']:.0f} messages/s")
     print(f"  planner p50 {result['planner_p50_us']:.1f} us per drone; every run succeeded: "
           f"{all(r['success'] for r in runs)}")
     return 0

@@ -1,7 +1,8 @@
 """Benchmark: CPU cost of the flight log at flight rates, in percent of one core.
 
 Simulates the logging of a flight in real time: every tick (``--rate`` Hz) each of ``--drones`` drones logs its
-mocap pose, its setpoint and its planner step, ``/tf`` gets one message at 20 Hz (as the flight writes it), and every ``--status-every`` ticks each
+mocap pose, its setpoint and its planner step (by default through the batch calls the flight's recorder makes, one
+per topic kind and tick; ``--per-message``: one call per message), ``/tf`` gets one message at 20 Hz (as the flight writes it), and every ``--status-every`` ticks each
 drone logs its status. Measured:
 
 - enqueue: CPU time (``time.thread_time``) of the calling thread inside the ``FlightLog`` calls;
@@ -27,7 +28,7 @@ from pathlib import Path
 from rpf_fly.log.writer import FlightLog
 
 
-def run(drones: int, rate: float, seconds: float, status_every: int, path: Path) -> dict:
+def run(drones: int, rate: float, seconds: float, status_every: int, path: Path, batched: bool = True) -> dict:
     names = [f"cf{i + 1}" for i in range(drones)]
     period_ns = int(1e9 / rate)
     tf_every = max(1, round(rate / 20))
@@ -47,17 +48,29 @@ def run(drones: int, rate: float, seconds: float, status_every: int, path: Path)
             a = 0.01 * k + i
             poses.append(((math.cos(a), math.sin(a), 0.6), (0.0, 0.0, math.sin(a / 2), math.cos(a / 2))))
         c0 = time.thread_time()
-        for i, name in enumerate(names):
-            position, quaternion = poses[i]
-            log.pose(name, t, position, quaternion)
-            log.setpoint(name, t, (position[0] + 0.05, position[1], 0.6), 0.3)
-            log.planner_step(name, t, tick=k, position=position, goal=(1.0, 1.0), mode="apf", eta=0.05, lam=2.0,
-                             f_a=0.7 + 0.7j, f_r=-0.1j, f_in=0.05 + 0j, direction=0.6 + 0.8j, heading=0.93,
-                             neighbours=2, obstacle_distance=0.8, goal_distance=1.2)
-            if k % status_every == 0:
+        if batched:  # as the flight's recorder calls it: one call per topic kind and tick
+            frame = dict(zip(names, poses))
+            log.poses(t, frame)
+            log.setpoints([(name, t, (p[0] + 0.05, p[1], 0.6), 0.3) for name, (p, _) in frame.items()])
+            log.planner_steps(t, {name: dict(
+                tick=k, position=p, goal=(1.0, 1.0), mode="apf", eta=0.05, lam=2.0, f_a=0.7 + 0.7j, f_r=-0.1j,
+                f_in=0.05 + 0j, direction=0.6 + 0.8j, heading=0.93, neighbours=2, obstacle_distance=0.8,
+                goal_distance=1.2) for name, (p, _) in frame.items()})
+            if k % tf_every == 0:  # the flight writes /tf at 20 Hz (rpf_fly/flight/recording.py)
+                log.tf(t, frame)
+        else:  # one call per message
+            for i, name in enumerate(names):
+                position, quaternion = poses[i]
+                log.pose(name, t, position, quaternion)
+                log.setpoint(name, t, (position[0] + 0.05, position[1], 0.6), 0.3)
+                log.planner_step(name, t, tick=k, position=position, goal=(1.0, 1.0), mode="apf", eta=0.05, lam=2.0,
+                                 f_a=0.7 + 0.7j, f_r=-0.1j, f_in=0.05 + 0j, direction=0.6 + 0.8j, heading=0.93,
+                                 neighbours=2, obstacle_distance=0.8, goal_distance=1.2)
+            if k % tf_every == 0:
+                log.tf(t, {name: poses[i] for i, name in enumerate(names)})
+        if k % status_every == 0:
+            for name in names:
                 log.status(name, t, state="planning", battery_v=3.9, link_quality=0.97, latency_ms=5.0)
-        if k % tf_every == 0:  # the flight writes /tf at 20 Hz (rpf_fly/flight/recording.py)
-            log.tf(t, {name: poses[i] for i, name in enumerate(names)})
         enqueue_cpu += time.thread_time() - c0
         next_tick += 1.0 / rate
         delay = next_tick - time.perf_counter()
@@ -72,6 +85,7 @@ def run(drones: int, rate: float, seconds: float, status_every: int, path: Path)
     messages = log.written
     return {
         "drones": drones,
+        "calls": "batched" if batched else "per message",
         "rate_hz": rate,
         "seconds": round(wall, 3),
         "messages": messages,
@@ -96,16 +110,18 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=10.0)
     parser.add_argument("--status-every", type=int, default=10, help="status every N ticks (10: 10 Hz at 100 Hz)")
     parser.add_argument("--out", type=Path, default=None, help="keep the log here (default: a temporary file)")
+    parser.add_argument("--per-message", action="store_true",
+                        help="one FlightLog call per message (default: the batch calls the flight's recorder makes)")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         path = args.out or Path(tmp) / "bench.mcap"
-        result = run(args.drones, args.rate, args.seconds, args.status_every, path)
+        result = run(args.drones, args.rate, args.seconds, args.status_every, path, not args.per_message)
     result["cpus"] = os.cpu_count()
     if args.json:
         print(json.dumps(result))
         return
-    print(f"{result['drones']} drones x {result['rate_hz']:g} Hz for {result['seconds']:.1f} s: "
+    print(f"{result['drones']} drones x {result['rate_hz']:g} Hz for {result['seconds']:.1f} s, {result['calls']} calls: "
           f"{result['messages']} messages ({result['messages_per_s']:.0f}/s), {result['dropped']} dropped, "
           f"queue peak {result['queue_peak']}, file {result['file_bytes'] / 1e6:.2f} MB")
     print(f"  enqueue  {result['enqueue_cpu_pct']:5.2f} % of a core  ({result['enqueue_us_per_msg']:.2f} us/message)")

@@ -8,7 +8,9 @@ one second: the file is then unfinished but :func:`rpf_fly.log.reader.read_log` 
 
 Queue policy (docs/log-format.md): the queue is bounded (``max_queue`` messages, default 50 000, several seconds
 of a 10-drone flight). When it is full a new high-rate message (pose, setpoint, planner step, status, tf) is
-dropped, never blocking the caller; events and scene updates still enter up to twice the bound. Drops are
+dropped, never blocking the caller; events and scene updates still enter up to twice the bound. A batch call
+(:meth:`FlightLog.poses`, :meth:`FlightLog.setpoints`, :meth:`FlightLog.planner_steps`: one queue entry for one
+tick of every drone, several times cheaper for the caller) counts as its messages and enters or drops whole. Drops are
 counted (:attr:`FlightLog.dropped`), leave a gap in the topic's ``sequence`` (sequences are drawn at the call), are
 reported with a Python ``logging`` warning and as a warning on ``/events`` at most once per flush, and are
 summarised on ``/events`` at close. Calls after :meth:`FlightLog.close` are ignored (and counted as dropped).
@@ -31,7 +33,7 @@ import logging
 import threading
 import time
 from pathlib import Path
-from typing import Any, Callable, Mapping, Optional, Sequence
+from typing import Any, Callable, Iterable, Mapping, Optional, Sequence
 
 from mcap.writer import CompressionType, Writer
 
@@ -109,6 +111,9 @@ class FlightLog:
         self._drop_lock = threading.Lock()
         self._reported_drops = 0
         self._queue: collections.deque = collections.deque()
+        self._pushed = 0  # messages queued so far (a batch entry holds several), under _push_lock
+        self._push_lock = threading.Lock()
+        self._popped = 0  # messages taken off the queue so far (writer thread only)
         self._closed = False
         self._close_lock = threading.Lock()
         self._stop = threading.Event()
@@ -159,6 +164,25 @@ class FlightLog:
         identity). ``t_ns``: the mocap frame time."""
         self._put(self._poses.get(drone) or self._topic(self._poses, "/mocap/{}", drone), t_ns, S.pose_json,
                   (position_xyz, quaternion_xyzw))
+
+    def poses(self, t_ns: int, poses: Mapping[str, tuple[Sequence[float], Optional[Sequence[float]]]]) -> None:
+        """``/mocap/<drone>`` of several drones at one frame time ``{drone: (position, quaternion)}``: the same
+        messages as :meth:`pose` per drone, queued as one entry (a flight logs every frame of every drone)."""
+        self._put_batch(self._poses, "/mocap/{}", [(d, t_ns, v) for d, v in poses.items()], S.pose_json)
+
+    def setpoints(self, setpoints: Iterable[tuple[str, int, Sequence[float], float]]) -> None:
+        """``/<drone>/setpoint`` of several drones, ``(drone, t_ns, position, yaw)`` each (each its own send time):
+        the same messages as :meth:`setpoint` per drone, queued as one entry."""
+        self._put_batch(self._setpoints, "/{}/setpoint", [(d, t, (p, yaw)) for d, t, p, yaw in setpoints],
+                        _setpoint_message)
+
+    def planner_steps(self, t_ns: int, steps: Mapping[str, Any],
+                      build: Callable[[int, Any], bytes | dict] = S.planner_json) -> None:
+        """``/<drone>/planner`` of several drones at one tick, queued as one entry. ``steps``: ``{drone: value}``;
+        ``build(t_ns, value)`` makes each message on the writer thread (default: ``value`` is the fields mapping of
+        :meth:`planner_step`). A flight's recorder passes its own ``build`` so that the loop thread only hands
+        over references (rpf_fly/flight/recording.py)."""
+        self._put_batch(self._planner, "/{}/planner", [(d, t_ns, (v,)) for d, v in steps.items()], build)
 
     def setpoint(self, drone: str, t_ns: int, position_xyz: Sequence[float], yaw_rad: float = 0.0) -> None:
         """``/<drone>/setpoint``: the position setpoint sent, with its yaw (radians) as the orientation."""
@@ -212,10 +236,12 @@ class FlightLog:
         self._wake.set()
         if self._thread is not threading.current_thread():
             self._thread.join()
-        leftover = len(self._queue)
+        with self._push_lock:
+            leftover = self._pending()
+            self._popped = self._pushed
+            self._queue.clear()
         if leftover:
             self._count_drop(leftover)
-            self._queue.clear()
 
     # ------------------------------------------------------------------ internals
 
@@ -228,22 +254,54 @@ class FlightLog:
         with self._drop_lock:
             self._dropped += n
 
+    def _pending(self) -> int:
+        return self._pushed - self._popped
+
+    def _room(self, n: int, priority: bool) -> bool:
+        """Whether ``n`` more messages may enter the queue (``block_when_full``: wait for room instead)."""
+        bound = self.max_queue * (2 if priority else 1)
+        if self._pending() + n <= bound or not self._pending():
+            return True
+        if not self.block_when_full:
+            return False
+        while self._pending() + n > bound and self._pending() and self._thread.is_alive():  # offline writers only
+            self._wake.set()
+            time.sleep(0.0005)
+        return True
+
+    def _enqueue(self, n: int, entry: tuple) -> None:
+        with self._push_lock:
+            self._pushed += n
+            self._queue.append(entry)
+
     def _put(self, topic: tuple[str, Any], t_ns: int, build: Callable[..., dict], args: tuple,
              priority: bool = False) -> None:
         sequence = next(topic[1])
         if self._closed:
             self._count_drop()
             return
-        queue = self._queue
-        if len(queue) >= self.max_queue and (not priority or len(queue) >= 2 * self.max_queue):
-            if not self.block_when_full:
-                self._count_drop()
-                return
-            while len(queue) >= self.max_queue and self._thread.is_alive():  # offline writers only
-                self._wake.set()
-                time.sleep(0.0005)
+        if self._pushed - self._popped >= self.max_queue and not self._room(1, priority):
+            self._count_drop()
+            return
         log_time = t_ns if self._clock is None else self._clock()
-        queue.append((topic[0], sequence, t_ns, log_time, build, args))
+        self._enqueue(1, (topic[0], sequence, t_ns, log_time, build, args))
+
+    def _put_batch(self, table: dict[str, tuple[str, Any]], pattern: str, items: list[tuple[str, int, Any]],
+                   build: Callable[[int, Any], bytes | dict]) -> None:
+        """Queue one message per ``(drone, t_ns, args)`` as one entry; ``build(t_ns, *args)`` runs on the writer."""
+        if not items:
+            return
+        topics, sequences = [], []
+        for drone, _, _ in items:
+            topic = table.get(drone) or self._topic(table, pattern, drone)
+            topics.append(topic[0])
+            sequences.append(next(topic[1]))
+        n = len(items)
+        if self._closed or not self._room(n, False):
+            self._count_drop(n)
+            return
+        log_time = None if self._clock is None else self._clock()
+        self._enqueue(n, (topics, sequences, None, log_time, build, items))
 
     def _channel(self, topic: str) -> int:
         channel = self._channels.get(topic)
@@ -274,7 +332,7 @@ class FlightLog:
 
     def _drain(self) -> None:
         queue = self._queue
-        self.queue_peak = max(self.queue_peak, len(queue))
+        self.queue_peak = max(self.queue_peak, self._pending())
         pop = queue.popleft
         channels = self._channels
         add = self._writer.add_message
@@ -285,25 +343,39 @@ class FlightLog:
                     topic, sequence, t_ns, log_time, build, args = pop()
                 except IndexError:
                     return
-                try:
-                    if type(t_ns) is not int or type(log_time) is not int:
-                        t_ns, log_time = int(t_ns), int(log_time)
-                    data = build(t_ns, *args)
-                    if type(data) is not bytes:
-                        data = encode(data)
-                except Exception as err:  # noqa: BLE001 - a bad argument loses one message, not the log
-                    self.failed += 1
-                    if self.failed == 1:
-                        logger.warning("flight log %s: dropped a malformed %s message: %s", self.path, topic, err)
-                    continue
-                try:
-                    add(channels.get(topic) or self._channel(topic), log_time, data, t_ns, sequence)
-                    written += 1
-                except Exception as err:  # noqa: BLE001 - disk full, closed file: stop writing, never raise
-                    self._fail(err)
-            queue.clear()  # logging stopped after an error: discard, never grow
+                if type(topic) is str:
+                    self._popped += 1
+                    items: Any = ((topic, sequence, t_ns, args),)
+                else:  # a batch: [topic], [sequence], None, log time (None: each t_ns), build, [(drone, t_ns, args)]
+                    self._popped += len(topic)
+                    items = zip(topic, sequence, (item[1] for item in args), (item[2] for item in args))
+                for topic, sequence, t_ns, args in items:
+                    try:
+                        if type(t_ns) is not int:
+                            t_ns = int(t_ns)
+                        data = build(t_ns, *args)
+                        if type(data) is not bytes:
+                            data = encode(data)
+                    except Exception as err:  # noqa: BLE001 - a bad argument loses one message, not the log
+                        self._malformed(topic, err)
+                        continue
+                    try:
+                        add(channels.get(topic) or self._channel(topic), int(t_ns if log_time is None else log_time),
+                            data, t_ns, sequence)
+                        written += 1
+                    except Exception as err:  # noqa: BLE001 - disk full, closed file: stop writing, never raise
+                        self._fail(err)
+                        break
+            with self._push_lock:  # logging stopped after an error: discard, never grow
+                self._popped = self._pushed
+                queue.clear()
         finally:
             self.written += written
+
+    def _malformed(self, topic: str, err: Exception) -> None:
+        self.failed += 1
+        if self.failed == 1:
+            logger.warning("flight log %s: dropped a malformed %s message: %s", self.path, topic, err)
 
     def _report_drops(self, final: bool = False) -> None:
         dropped = self._dropped

@@ -228,3 +228,70 @@ def test_drain_soon_writes_without_waiting_for_the_poll(tmp_path):
         while log.written < 20 and time.monotonic() < deadline:
             time.sleep(0.005)
         assert log.written == 20
+
+
+def _planner_fields(k: int, i: int) -> dict:
+    return dict(tick=k, position=(0.01 * k, float(i), 0.6), goal=1 + 1j, mode="apf", eta=0.05, lam=2.0,
+                f_a=0.7 + 0.7j, f_r=-0.1j, f_in=0j, direction=1 + 0j, heading=0.0, neighbours=1,
+                obstacle_distance=0.4)
+
+
+def test_batch_calls_write_what_the_per_message_calls_write(tmp_path):
+    drones = ("cf1", "cf2", "cf3")
+    single, batched = tmp_path / "single.mcap", tmp_path / "batched.mcap"
+    with FlightLog(single, MISSION, SCENARIO, clock=None) as log:
+        for k in range(20):
+            t = T0 + k * 10 * MS
+            for i, d in enumerate(drones):
+                log.pose(d, t, (0.01 * k, float(i), 0.6), (0.0, 0.0, 0.1, 0.99))
+            for i, d in enumerate(drones):
+                log.setpoint(d, t + i, (0.01 * k + 0.05, float(i), 0.6), 0.25)
+            for i, d in enumerate(drones):
+                log.planner_step(d, t, **_planner_fields(k, i))
+    with FlightLog(batched, MISSION, SCENARIO, clock=None) as log:
+        for k in range(20):
+            t = T0 + k * 10 * MS
+            log.poses(t, {d: ((0.01 * k, float(i), 0.6), (0.0, 0.0, 0.1, 0.99)) for i, d in enumerate(drones)})
+            if k == 7:  # one drone logged alone in between: the per-drone sequences stay one series
+                log.setpoint("cf1", t, (0.01 * k + 0.05, 0.0, 0.6), 0.25)
+                log.setpoints([(d, t + i, (0.01 * k + 0.05, float(i), 0.6), 0.25) for i, d in enumerate(drones)
+                               if d != "cf1"])
+            else:
+                log.setpoints([(d, t + i, (0.01 * k + 0.05, float(i), 0.6), 0.25) for i, d in enumerate(drones)])
+            log.planner_steps(t, {d: _planner_fields(k, i) for i, d in enumerate(drones)})
+    assert log.written == 180 and log.dropped == 0 and log.failed == 0
+    a, b = read_log(single), read_log(batched)
+    for d in drones:
+        for topic in (f"/mocap/{d}", f"/{d}/setpoint", f"/{d}/planner"):
+            ma, mb = a.messages(topic), b.messages(topic)
+            assert len(ma) == len(mb) == 20, topic
+            assert [(m.log_time, m.publish_time, m.sequence, m.data) for m in ma] == \
+                   [(m.log_time, m.publish_time, m.sequence, m.data) for m in mb], topic
+
+
+def test_batch_calls_drop_whole_and_count_every_message(tmp_path):
+    path = tmp_path / "full.mcap"
+    gate = Gate()
+    log = FlightLog(path, MISSION, SCENARIO, clock=None, max_queue=10)
+    log.pose("cf1", T0, gate)
+    assert gate.entered.wait(5)  # the writer is stuck in the first message: nothing drains
+    log.poses(T0 + 1, {f"cf{i}": ((0.0, 0.0, 0.0), None) for i in range(1, 9)})  # 8 messages: fit (9 of 10)
+    log.poses(T0 + 2, {f"cf{i}": ((0.0, 0.0, 0.0), None) for i in range(1, 4)})  # 3 would make 12: dropped whole
+    assert log.dropped == 3
+    gate.release.set()
+    log.close()
+    log.planner_steps(T0 + 3, {"cf1": _planner_fields(0, 0), "cf2": _planner_fields(0, 1)})  # after close
+    assert log.dropped == 5 and log.written == 10  # 9 poses and the drop report on /events
+    data = read_log(path)
+    assert [m.sequence for m in data.messages("/mocap/cf1")] == [0, 1]  # the dropped batch is a gap: 2 is missing
+    assert len(data.messages("/mocap/cf2")) == 1 and len(data.messages("/mocap/cf8")) == 1
+
+
+def test_a_bad_value_in_a_batch_loses_that_message_only(tmp_path):
+    path = tmp_path / "bad.mcap"
+    with FlightLog(path, MISSION, SCENARIO, clock=None) as log:
+        log.planner_steps(T0, {"cf1": _planner_fields(0, 0), "cf2": {**_planner_fields(0, 1), "mode": "dancing"},
+                               "cf3": _planner_fields(0, 2)})
+    assert log.failed == 1 and log.written == 2
+    data = read_log(path)
+    assert [len(data.messages(f"/{d}/planner")) for d in ("cf1", "cf2", "cf3")] == [1, 0, 1]
