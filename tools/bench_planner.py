@@ -1,6 +1,7 @@
 """Planner and simulator benchmark: per-drone plan step, one flight tick, batched simulation throughput.
 
     python tools/bench_planner.py [--repeats 15] [--json out.json]
+    python tools/bench_planner.py --cadence      # the flight tick's cold start at the flight's cadence
 
 1. Per-drone plan step (fixed gains): one drone planned from its own view, as the flight loop does, on views taken
    mid-flight from the paper missions. Median over repeats of the mean time per call.
@@ -114,45 +115,93 @@ def bench_tick(n: int, repeats: int) -> dict[str, float]:
     return {"per_drone_calls": timed(per_drone_tick, inner, repeats), "batched": timed(batched_tick, inner * 5, repeats)}
 
 
-def bench_flight_tick(repeats: int, drones: int = 10) -> dict[str, dict[str, float]]:
-    """The flight loop's planning tick (``SwarmPlanner``) for ``drones`` drones of a circle swap, mid-flight: one
-    batched call against one call per drone, with the fixed-gains APF and the shipped RPF-1. Hot caches: in flight
-    the tick starts cold after the loop slept (docs/performance.md), so it costs more there."""
+def flight_tick(kind: str, drones: int = 10, batching: bool = True) -> Callable[[], None]:
+    """The flight loop's planning tick (``SwarmPlanner``) for ``drones`` drones of the circle swap that
+    tools/bench_flight.py flies, mid-flight, as a callable (fixed-gains APF: ``kind`` apf; RPF-1: rpf)."""
     from rpf_fly.flight.agent import DroneAgent
     from rpf_fly.flight.swarm_plan import Neighbourhood, SwarmPlanner
     from bench_flight import mission_text as flight_bench_mission  # tools/ is on sys.path when run as a script
     from rpf_fly.mission import parse_mission
-    from rpf_fly.sim import SimParams
+
+    mission = parse_mission(flight_bench_mission(drones, 100.0, kind))
+    scenario = scenario_from_mission(mission, 0)
+    planner = make_planner(mission.planner, scenario.obstacles)
+    params = SimParams(mission.flight.speed, mission.flight.dt, mission.flight.goal_tolerance, 60.0)
+    run = rollout(scenario, planner, params)
+    k = run.steps // 2
+    xy = run.positions[k]
+    world = Neighbourhood([d.name for d in mission.drones], xy, (xy - run.positions[k - 1]) / params.dt)
+    agents = [
+        DroneAgent(d, make_planner(mission.planner, scenario.obstacles), height=1.0, speed=0.5, dt=params.dt,
+                   arena=mission.arena, budget_s=1.0)
+        for d in mission.drones
+    ]
+    requests = [(a, complex(p)) for a, p in zip(agents, xy)]
+    for agent, p in requests:
+        agent.begin_planning(p, 0.0)
+    swarm = SwarmPlanner(mission.planner.sensing_range, 1.0, batching=batching)
+
+    def tick() -> None:
+        for agent, p in requests:
+            agent.reference = p
+        swarm.plan(requests, world)
+
+    return tick
+
+
+def bench_flight_tick(repeats: int, drones: int = 10) -> dict[str, dict[str, float]]:
+    """The flight's planning tick: one batched call against one call per drone, with the fixed-gains APF and the
+    shipped RPF-1. Hot caches: in flight the tick starts cold (see :func:`bench_flight_tick_cadence`)."""
+    return {
+        kind: {label: timed(flight_tick(kind, drones, batching), 50, repeats)
+               for label, batching in (("batched", True), ("one_call_per_drone", False))}
+        for kind in ("apf", "rpf")
+    }
+
+
+def bench_flight_tick_cadence(ticks: int = 150, drones: int = 10) -> dict[str, dict[str, float]]:
+    """The batched flight tick timed one call at a time (median wall time) at the flight's cadence: back to back;
+    after 10 ms asleep (what the loop does between 100 Hz frames); after 10 ms polling a non-blocking UDP socket
+    (busy, never asleep); after 9.5 ms asleep and one warm-up tick. Shows what the flight pays for a cold start
+    (docs/performance.md)."""
+    import socket
+
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    sock.bind(("127.0.0.1", 0))
+    sock.setblocking(False)
+
+    def poll(seconds: float) -> None:
+        end = time.perf_counter() + seconds
+        while time.perf_counter() < end:
+            try:
+                sock.recvfrom(65536)
+            except BlockingIOError:
+                pass
 
     out: dict[str, dict[str, float]] = {}
-    for kind in ("apf", "rpf"):
-        mission = parse_mission(flight_bench_mission(drones, 100.0, kind))  # the swarm tools/bench_flight.py flies
-        scenario = scenario_from_mission(mission, 0)
-        planner = make_planner(mission.planner, scenario.obstacles)
-        params = SimParams(mission.flight.speed, mission.flight.dt, mission.flight.goal_tolerance, 60.0)
-        run = rollout(scenario, planner, params)
-        k = run.steps // 2
-        xy = run.positions[k]
-        world = Neighbourhood([d.name for d in mission.drones], xy, (xy - run.positions[k - 1]) / params.dt)
-        agents = [
-            DroneAgent(d, make_planner(mission.planner, scenario.obstacles), height=1.0, speed=0.5, dt=params.dt,
-                       arena=mission.arena, budget_s=1.0)
-            for d in mission.drones
-        ]
-        requests = [(a, complex(p)) for a, p in zip(agents, xy)]
-        for agent, p in requests:
-            agent.begin_planning(p, 0.0)
-        figures = {}
-        for label, batching in (("batched", True), ("one_call_per_drone", False)):
-            swarm = SwarmPlanner(mission.planner.sensing_range, 1.0, batching=batching)
+    try:
+        for kind in ("apf", "rpf"):
+            tick = flight_tick(kind, drones)
+            for _ in range(50):
+                tick()
 
-            def tick() -> None:
-                for agent, p in requests:
-                    agent.reference = p
-                swarm.plan(requests, world)
+            def median_after(prepare: Callable[[], object]) -> float:
+                samples = []
+                for _ in range(ticks):
+                    prepare()
+                    t0 = time.perf_counter()
+                    tick()
+                    samples.append(time.perf_counter() - t0)
+                return statistics.median(samples)
 
-            figures[label] = timed(tick, 50, repeats)
-        out[kind] = figures
+            out[kind] = {
+                "back_to_back": median_after(lambda: None),
+                "after_10ms_asleep": median_after(lambda: time.sleep(0.010)),
+                "after_10ms_polling": median_after(lambda: poll(0.010)),
+                "after_9.5ms_asleep_and_a_warm_up_tick": median_after(lambda: (time.sleep(0.0095), tick())),
+            }
+    finally:
+        sock.close()
     return out
 
 
@@ -180,7 +229,18 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--repeats", type=int, default=15)
     parser.add_argument("--json", type=Path, default=None, help="also write the figures as JSON")
+    parser.add_argument("--cadence", action="store_true",
+                        help="only the flight tick at the flight's cadence (cold start after a sleep vs back to back)")
     args = parser.parse_args(argv)
+    if args.cadence:
+        cadence = bench_flight_tick_cadence()
+        print("batched flight tick, 10 drones mid-flight, median wall time of single calls")
+        for kind, figures in cadence.items():
+            for label, seconds in figures.items():
+                print(f"  {kind}: {label.replace('_', ' '):40s} {seconds * 1e6:7.0f} us")
+        if args.json:
+            args.json.write_text(json.dumps({"flight_tick_cadence_s": cadence}, indent=2))
+        return 0
 
     per_drone = bench_per_drone(args.repeats)
     per_drone_rpf = bench_per_drone(args.repeats, "rpf")
