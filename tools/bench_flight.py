@@ -6,7 +6,8 @@ Measured by the flight loop itself (rpf_fly.flight.loop.LoopStats) while the dro
 - latency: a mocap frame's receipt by the NatNet client (its receive timestamp) to each setpoint handed to the
   radio driver (``CflibBackend.send_position_setpoint`` returned), p50 and p99 over all drones and the ticks fired
   by a frame (every tick but the ``frameless`` ones, which fire at a window's end when no frame came);
-- tick interval and jitter: |interval - median interval|, p99; overruns (ticks later than one period);
+- tick interval and jitter: |interval - median interval|, p99; overruns (ticks later than one period); the longest
+  tick interval and latency of all runs (a stall, e.g. a full garbage collection, shows there, not in a p99);
 - planner time per drone;
 - the flight log's CPU time (the loop thread inside the recorder's calls plus the writer thread) over the whole
   flight, take-off and landing included, in percent of a core (tools/bench_log.py measures it at a steady rate).
@@ -85,6 +86,9 @@ def main() -> int:
         "drones": args.drones, "rate_hz": args.rate, "planner": args.planner, "runs": runs,
         "latency_p50_ms": med("latency_p50_s") * 1e3, "latency_p99_ms": med("latency_p99_s") * 1e3,
         "tick_interval_p50_ms": med("tick_interval_p50_s") * 1e3, "tick_jitter_p99_ms": med("tick_jitter_p99_s") * 1e3,
+        "tick_interval_max_ms": max(r["tick_interval_max_s"] or 0.0 for r in runs) * 1e3,
+        "latency_max_ms": max(r["latency_max_s"] or 0.0 for r in runs) * 1e3,
+        "gc_collections_median": med("gc_collections"),
         "planner_p50_us": med("planner_p50_s") * 1e6, "overruns_median": med("overruns"),
         "frameless_ticks_median": med("frameless_ticks"), "ticks_median": med("ticks"),
     }
@@ -99,6 +103,9 @@ def main() -> int:
           f"(goal <= 0.5), p99 {result['latency_p99_ms']:.3f} ms (goal <= 2)")
     print(f"  tick interval p50 {result['tick_interval_p50_ms']:.2f} ms, jitter p99 {result['tick_jitter_p99_ms']:.2f} ms, "
           f"overruns {result['overruns_median']:.0f} per run")
+    print(f"  worst of all runs: tick interval {result['tick_interval_max_ms']:.1f} ms, latency "
+          f"{result['latency_max_ms']:.2f} ms; garbage collections in the loop's gaps: "
+          f"{result['gc_collections_median']:.0f} per run (rpf_fly/flight/gc_pacing.py)")
     print(f"  ticks without a fresh frame: {result['frameless_ticks_median']:.0f} of {result['ticks_median']:.0f} per run "
           f"(ticks are locked to the frames: rpf_fly/flight/ticks.py)")
     if not args.no_log:

@@ -24,6 +24,7 @@ import numpy as np
 
 from rpf_fly.flight.agent import DroneAgent, PlannerFault, PlannerLike, PlanResult
 from rpf_fly.flight.events import ERROR, FATAL, INFO, WARNING, EventBus, FlightEvent
+from rpf_fly.flight.gc_pacing import GcPacer, GcStats
 from rpf_fly.flight.phases import DronePhase, FlightOutcome, SwarmPhase
 from rpf_fly.flight.poses import PoseTracker, TrackedPose
 from rpf_fly.flight.supervisor import Finding, Supervisor
@@ -76,6 +77,8 @@ class LoopStats:
     tick_intervals: list[float] = field(default_factory=list)
     latencies: list[float] = field(default_factory=list)
     planner_seconds: list[float] = field(default_factory=list)
+    gc: GcStats = field(default_factory=GcStats)
+    """The garbage collections the loop ran in its gaps (flight/gc_pacing.py)."""
 
     def summary(self) -> dict[str, Optional[float]]:
         def pct(values: list[float], q: float) -> Optional[float]:
@@ -89,9 +92,13 @@ class LoopStats:
             "frameless_ticks": self.frameless_ticks,
             "tick_interval_p50_s": pct(intervals, 50),
             "tick_jitter_p99_s": pct([abs(i - median_interval) for i in intervals], 99),
+            "tick_interval_max_s": max(intervals) if intervals else None,
             "latency_p50_s": pct(self.latencies, 50),
             "latency_p99_s": pct(self.latencies, 99),
+            "latency_max_s": max(self.latencies) if self.latencies else None,
             "planner_p50_s": pct(self.planner_seconds, 50),
+            "gc_collections": sum(self.gc.collections),
+            "gc_seconds": sum(self.gc.seconds),
         }
 
 
@@ -167,6 +174,7 @@ class FlightLoop:
         self._last_status_s = -math.inf
         self._states: dict[str, DroneState] = {}
         self._watchdog = LoopWatchdog(self._on_loop_stall)
+        self._gc = GcPacer()
         self._swarm_planner = SwarmPlanner(mission.planner.sensing_range, mission.safety.planner_budget_s)
 
     # ----------------------------------------------------------------------------------- external control
@@ -197,6 +205,7 @@ class FlightLoop:
         self._watchdog.start()
         try:
             if self._connect() and self._preflight() and not self._stop.is_set():
+                self._gc.start()  # from here on the collector runs in the gaps between frames (flight/gc_pacing.py)
                 self._takeoff()
                 self._fly()
             if self.phase not in (SwarmPhase.ABORTED,):
@@ -206,6 +215,8 @@ class FlightLoop:
             self.events.emit(FATAL, "error", f"flight loop failed ({error}): landing every drone")
             self._land_all("flight loop error", wait=True)
         finally:
+            self._gc.stop()
+            self.stats.gc = self._gc.stats
             self._watchdog.close()
             self._finish()
         return FlightReport(
@@ -446,6 +457,7 @@ class FlightLoop:
                 self.recorder.status(now, agent, self._states.get(agent.name))
             if self.status_hook is not None:
                 self.status_hook(self)
+        self._gc.collect_if_due()  # the frame's work is done: a due collection goes in the gap before the next
         if ticked:
             self.recorder.after_tick(now)  # the log writer's burst goes in the gap before the next frame
 

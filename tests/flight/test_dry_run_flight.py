@@ -6,6 +6,7 @@ emulator's UDP packets on 127.0.0.1, the cflib backend, cflib itself and the fak
 
 from __future__ import annotations
 
+import gc
 import time
 from dataclasses import replace
 
@@ -53,6 +54,9 @@ def test_lab_mission_end_to_end(tmp_path):
     assert flight.report.stats.ticks > 50 and flight.report.stats.overruns <= 2
     # Ticks are locked to the frames (flight/ticks.py): 100 Hz mocap, 10 Hz planning, a tick without a frame is rare.
     assert flight.report.stats.frameless_ticks <= 0.05 * flight.report.stats.ticks
+    # The garbage collector ran in the loop's gaps during the flight and is back to automatic after it.
+    assert flight.report.stats.gc.collections[0] > 0 and flight.report.stats.gc.freeze_s > 0
+    assert gc.isenabled() and gc.get_freeze_count() == 0
     validate_every_message(flight.log_path)
 
 
