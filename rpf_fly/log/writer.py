@@ -6,15 +6,15 @@ chunks and closes the open chunk about once a second (``flush``), so a SIGKILL o
 one second: the file is then unfinished but :func:`rpf_fly.log.reader.read_log` reads every complete chunk and
 :func:`rpf_fly.log.reader.salvage` rewrites it into a finished file.
 
-Queue policy (docs/log-format.md): the queue is bounded (``max_queue`` messages, default 50 000, several seconds
-of a 10-drone flight). When it is full a new high-rate message (pose, setpoint, planner step, status, tf) is
-dropped, never blocking the caller; events and scene updates still enter up to twice the bound. A batch call
-(:meth:`FlightLog.poses`, :meth:`FlightLog.setpoints`, :meth:`FlightLog.planner_steps`: one queue entry for one
-tick of every drone, several times cheaper for the caller) counts as its messages and enters or drops whole. Drops are
-counted (:attr:`FlightLog.dropped`), leave a gap in the topic's ``sequence`` (sequences are drawn at the call), are
-reported with a Python ``logging`` warning and as a warning on ``/events`` at most once per flush, and are
-summarised on ``/events`` at close. Calls after :meth:`FlightLog.close` are ignored (and counted as dropped).
-A write error (disk full) is logged once, kept in :attr:`FlightLog.error`, and the log stops writing; nothing is
+Queue policy (docs/log-format.md): the queue is bounded (``max_queue`` messages, default 50 000, several seconds of
+a 10-drone flight). When it is full a new high-rate message (pose, setpoint, planner step, status, tf) is dropped,
+never blocking the caller; events and scene updates still enter up to twice the bound. A batch call
+(:meth:`FlightLog.poses`, :meth:`FlightLog.setpoints`, :meth:`FlightLog.planner_steps`: one queue entry for one tick
+of every drone; about half the caller's cost a message, hot) counts as its messages and enters or drops whole. Drops
+are counted (:attr:`FlightLog.dropped`), leave a gap in the topic's ``sequence`` (sequences are drawn at the call),
+are reported with a Python ``logging`` warning and as a warning on ``/events`` at most once per flush, and are
+summarised on ``/events`` at close. Calls after :meth:`FlightLog.close` are ignored (and counted as dropped). A
+write error (disk full) is logged once, kept in :attr:`FlightLog.error`, and the log stops writing; nothing is
 raised into the flight loop.
 
 Arguments are serialised later on the writer thread: do not mutate them after the call (pass tuples, floats,
