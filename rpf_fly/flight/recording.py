@@ -41,9 +41,6 @@ class McapRecorder:
         self.log = FlightLog(path, S.mission_metadata(mission, seed, source=source), S.scenario_metadata(mission),
                              poll_interval_s=POLL_FALLBACK_S)
         self._last_drain_s = -math.inf
-        self.cpu_s = 0.0
-        """CPU time the calling (loop) thread spent in the recorder's high-rate calls (poses, setpoints, planner
-        steps, status); the writer thread's is ``log.writer_cpu_s`` (tools/bench_flight.py reports both)."""
         self._offset_s = time.time() - time.monotonic()
         self._sensing = mission.planner.sensing_range
         self._last_tf_s = -math.inf
@@ -60,24 +57,20 @@ class McapRecorder:
         return int(round((t_s + self._offset_s) * 1e9))
 
     def poses(self, t_s: float, poses: dict[str, TrackedPose]) -> None:
-        c0 = time.thread_time()
         t = self._ns(t_s)
         items = {name: (pose.position, pose.quaternion) for name, pose in poses.items()}
         self.log.poses(t, items)
         if items and t_s - self._last_tf_s >= TF_PERIOD_S:
             self._last_tf_s = t_s
             self.log.tf(t, items)
-        self.cpu_s += time.thread_time() - c0
 
     def planner_steps(self, t_s: float, tick: int,
                       records: list[tuple[DroneAgent, Optional[TrackedPose], Optional[PlanStep], str]]) -> None:
         """One tick's planner records. Only references cross to the writer thread (poses, goals and headings are
         immutable values, a step's fields numpy scalars); :meth:`_planner_message` builds the messages there."""
-        c0 = time.thread_time()
         steps = {agent.name: (tick, pose.position, agent.goal, agent.heading, step, mode)
                  for agent, pose, step, mode in records if pose is not None}
         self.log.planner_steps(self._ns(t_s), steps, self._planner_message)
-        self.cpu_s += time.thread_time() - c0
 
     def _planner_message(self, t_ns: int, value: tuple) -> bytes:
         """Writer thread: one ``rpf_fly.PlannerStep`` from what :meth:`planner_steps` handed over."""
@@ -103,20 +96,16 @@ class McapRecorder:
 
     def setpoints(self, sent: list[tuple[str, tuple[float, float, float], float]]) -> None:
         """The setpoints handed to the radio this tick: ``(drone, position, send time)``."""
-        c0 = time.thread_time()
         ns = self._ns
         self.log.setpoints([(name, ns(t), position, 0.0) for name, position, t in sent])
-        self.cpu_s += time.thread_time() - c0
 
     def status(self, t_s: float, agent: DroneAgent, state: Optional[DroneState]) -> None:
-        c0 = time.thread_time()
         battery = state.battery.voltage_v if state is not None and state.battery is not None else None
         quality = state.link.quality_pct / 100.0 if state is not None and state.link.quality_pct is not None else None
         latency = state.link.latency_ms if state is not None else None
         outcome = agent.outcome.value if agent.outcome is not None and agent.phase.terminal else None
         self.log.status(agent.name, self._ns(t_s), state=agent.phase.value, battery_v=battery, link_quality=quality,
                         latency_ms=latency, outcome=outcome)
-        self.cpu_s += time.thread_time() - c0
 
     def event(self, event: FlightEvent) -> None:
         self.log.event(self._ns(event.time_s), event.level, event.message, name=event.drone or "flight",
