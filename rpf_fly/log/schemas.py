@@ -596,8 +596,8 @@ def encode(message: Mapping[str, Any]) -> bytes:
 
 # Fast encoders for the high-rate topics: the same bytes as ``encode(builder(...))`` (tests pin it), with the
 # dict built inline from plain floats instead of through the per-field helpers (about 2x cheaper). Anything
-# unusual (complex or 2D positions, unknown fields, bad values, numpy scalars orjson does not take) takes the
-# builder path, which also raises what the builder raises.
+# unusual (complex or 2D positions, unknown fields, bad values) takes the builder path, which also raises what
+# the builder raises.
 
 
 def pose_json(t_ns: int, position: Any, quaternion: Optional[Sequence[float]] = None) -> bytes:
