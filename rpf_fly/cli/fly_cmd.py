@@ -28,6 +28,16 @@ def _load(mission_path: Path):  # type: ignore[no-untyped-def]
         raise fail(str(err))
 
 
+def _resolve_server(mission, mission_path: Path) -> None:  # type: ignore[no-untyped-def]
+    """An unresolvable ``mocap.server`` is an invalid mission: one line, exit 2, before anything connects."""
+    from rpf_fly.flight.session import UnresolvableServer, resolve_mocap_server
+
+    try:
+        resolve_mocap_server(mission)
+    except UnresolvableServer as err:
+        raise fail(f"{mission_path}:0: mocap.server: {err}")
+
+
 def _planner_factory(mission, mission_path: Path):  # type: ignore[no-untyped-def]
     """Each drone gets its own planner instance (its own ONNX session for learned planners)."""
     from rpf_fly.planning.onnx_policy import PolicyError
@@ -55,6 +65,8 @@ def fly(
     factory = _planner_factory(loaded, mission)
     if not dry_run and loaded.mocap.kind != "natnet":
         raise fail(f"{mission}:0: mocap.kind: 'sim' can only fly with --dry-run (real drones need motion capture)")
+    if not dry_run:
+        _resolve_server(loaded, mission)
     if mocap not in ("natnet", "sim"):
         raise fail(f"--mocap: expected natnet or sim, got {mocap!r}")
     log_path = log or Path("flights") / f"{loaded.name}-{datetime.now():%Y%m%d-%H%M%S}.mcap"
@@ -194,6 +206,8 @@ def check(
     """Validate MISSION; then connect to the drones and the mocap and run the preflight checks (nothing takes off)."""
     loaded = _load(mission)
     factory = _planner_factory(loaded, mission)
+    if preflight and not dry_run and loaded.mocap.kind == "natnet":
+        _resolve_server(loaded, mission)
     typer.echo(f"{mission}: valid mission '{loaded.name}' with {len(loaded.drones)} drones, planner {loaded.planner.kind}")
     if not preflight:
         return

@@ -81,6 +81,7 @@ class DroneAgent:
         dt: float,
         arena: Arena,
         budget_s: float,
+        body_radius_m: float = 0.0,
         max_lead_m: float = 0.3,
         clock: Callable[[], float] = time.thread_time,
     ):
@@ -94,6 +95,10 @@ class DroneAgent:
         self.dt = dt
         self.arena = arena
         self.budget_s = budget_s
+        self.body_radius_m = body_radius_m
+        inset = [(lo + body_radius_m, hi - body_radius_m) if hi - lo > 2 * body_radius_m else ((lo + hi) / 2,) * 2
+                 for lo, hi in (arena.x, arena.y, arena.z)]
+        self._fence = tuple(inset)
         self.max_lead_m = max_lead_m
         self._clock = clock
         self.phase = DronePhase.WAITING
@@ -110,6 +115,8 @@ class DroneAgent:
     # ------------------------------------------------------------------------------------------ phases
 
     def set_phase(self, phase: DronePhase, now_s: float, reason: str = "") -> None:
+        """Called by :class:`rpf_fly.flight.commander.Commander` only: it owns the phase (with the command that goes
+        with each change)."""
         self.phase = phase
         self.phase_since_s = now_s
         if reason:
@@ -170,10 +177,12 @@ class DroneAgent:
         return self.reference
 
     def clamp(self, xy: complex) -> complex:
-        """The geofence: a setpoint never leaves the arena."""
-        x = min(max(xy.real, self.arena.x[0]), self.arena.x[1])
-        y = min(max(xy.imag, self.arena.y[0]), self.arena.y[1])
-        return complex(x, y)
+        """The geofence: a setpoint keeps the drone's whole body (a disc of ``body_radius_m``, the mission's safety
+        radius) inside the arena, not only its centre."""
+        (x0, x1), (y0, y1) = self._fence[0], self._fence[1]
+        return complex(min(max(xy.real, x0), x1), min(max(xy.imag, y0), y1))
 
     def clamp_height(self, z: float) -> float:
-        return min(max(z, self.arena.z[0]), self.arena.z[1])
+        """The geofence in height: the body stays under the arena's ceiling (and over its floor)."""
+        z0, z1 = self._fence[2]
+        return min(max(z, z0), z1)

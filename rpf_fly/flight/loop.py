@@ -15,116 +15,41 @@ loop (all land, then the error is reported).
 from __future__ import annotations
 
 import math
+import signal
 import threading
 import time
-from dataclasses import dataclass, field
-from typing import Callable, Optional, Protocol
+from typing import Callable, Optional
 
 import numpy as np
 
 from rpf_fly.flight.agent import DroneAgent, PlannerFault, PlannerLike, PlanResult
+from rpf_fly.flight.commander import ON_FLOOR_Z_M, Commander
 from rpf_fly.flight.events import ERROR, FATAL, INFO, WARNING, EventBus, FlightEvent
-from rpf_fly.flight.gc_pacing import GcPacer, GcStats
+from rpf_fly.flight.gc_pacing import GcPacer
 from rpf_fly.flight.phases import DronePhase, FlightOutcome, SwarmPhase
 from rpf_fly.flight.poses import PoseTracker, TrackedPose
+from rpf_fly.flight.preflight import preflight_problem
+from rpf_fly.flight.recorder import NullRecorder, PlannerRecord, Recorder
+from rpf_fly.flight.report import FlightReport, LoopStats
 from rpf_fly.flight.supervisor import Finding, Supervisor
 from rpf_fly.flight.swarm_plan import Neighbourhood, SwarmPlanner
 from rpf_fly.flight.ticks import TickSchedule
-from rpf_fly.flight.watchdog import LoopWatchdog
+from rpf_fly.flight.watchdog import LoopWatchdog, stall_timeout_s
 from rpf_fly.mission.model import Drone, Mission
 from rpf_fly.mocap.frame import MocapFrame, MocapSource
-from rpf_fly.planning.planner import PlanStep
 from rpf_fly.planning.wall_following import MODE_NAMES
 from rpf_fly.radio.backend import DroneBackend, DroneState
 from rpf_fly.sim.scenario import obstacle_set
 
-
-class Recorder(Protocol):
-    """Where the loop writes what happened (the MCAP flight log; :class:`NullRecorder` for none). Times are the
-    loop's monotonic seconds."""
-
-    def poses(self, t_s: float, poses: dict[str, TrackedPose]) -> None: ...
-    def planner_steps(self, t_s: float, tick: int,
-                      records: list[tuple[DroneAgent, Optional[TrackedPose], Optional[PlanStep], str]]) -> None: ...
-    def setpoints(self, sent: list[tuple[str, tuple[float, float, float], float]]) -> None: ...
-    def status(self, t_s: float, agent: DroneAgent, state: Optional[DroneState]) -> None: ...
-    def event(self, event: FlightEvent) -> None: ...
-    def after_tick(self, t_s: float) -> None: ...
-    def close(self) -> None: ...
-
-
-class NullRecorder:
-    """Records nothing."""
-
-    def poses(self, *args: object) -> None: ...
-    def planner_steps(self, *args: object) -> None: ...
-    def setpoints(self, *args: object) -> None: ...
-    def status(self, *args: object) -> None: ...
-    def event(self, *args: object) -> None: ...
-    def after_tick(self, *args: object) -> None: ...
-    def close(self) -> None: ...
-
-
-@dataclass
-class LoopStats:
-    """Timing of the flying phase: tick intervals, overruns, planner time per drone, and the latency from a mocap
-    frame's receipt to each setpoint handed to the backend (seconds) at the ticks fired by a frame. Ticks fired
-    without a frame (mocap late, lost, or slower than the planning rate) are counted in ``frameless_ticks``."""
-
-    ticks: int = 0
-    overruns: int = 0
-    frameless_ticks: int = 0
-    tick_intervals: list[float] = field(default_factory=list)
-    latencies: list[float] = field(default_factory=list)
-    planner_seconds: list[float] = field(default_factory=list)
-    gc: GcStats = field(default_factory=GcStats)
-    """The garbage collections the loop ran in its gaps (flight/gc_pacing.py)."""
-
-    def summary(self) -> dict[str, Optional[float]]:
-        def pct(values: list[float], q: float) -> Optional[float]:
-            return float(np.percentile(values, q)) if values else None
-
-        intervals = self.tick_intervals
-        median_interval = float(np.median(intervals)) if intervals else 0.0
-        return {
-            "ticks": self.ticks,
-            "overruns": self.overruns,
-            "frameless_ticks": self.frameless_ticks,
-            "tick_interval_p50_s": pct(intervals, 50),
-            "tick_jitter_p99_s": pct([abs(i - median_interval) for i in intervals], 99),
-            "tick_interval_max_s": max(intervals) if intervals else None,
-            "latency_p50_s": pct(self.latencies, 50),
-            "latency_p99_s": pct(self.latencies, 99),
-            "latency_max_s": max(self.latencies) if self.latencies else None,
-            "planner_p50_s": pct(self.planner_seconds, 50),
-            "gc_collections": sum(self.gc.collections),
-            "gc_seconds": sum(self.gc.seconds),
-        }
-
-
-@dataclass
-class FlightReport:
-    """How the flight ended."""
-
-    mission: str
-    phase: SwarmPhase
-    outcomes: dict[str, FlightOutcome]
-    reasons: dict[str, str]
-    events: list[FlightEvent]
-    stats: LoopStats
-    interrupted: bool = False
-    error: Optional[str] = None
-
-    @property
-    def success(self) -> bool:
-        return self.error is None and not self.interrupted and all(o == FlightOutcome.REACHED for o in self.outcomes.values())
+__all__ = ["FlightLoop", "FlightReport", "LoopStats", "NullRecorder", "PlannerFactory", "Recorder"]
 
 
 PlannerFactory = Callable[[Drone], PlannerLike]
 
 
 class FlightLoop:
-    """Flies one mission with a backend (cflib over radio or fake radio) and a mocap source."""
+    """Flies one mission with a backend (cflib over radio or fake radio) and a mocap source: the sequencer of the
+    flight's stages. Every command to a drone goes through :attr:`commander`."""
 
     TAKEOFF_SETTLE_S = 0.5
     LAND_SETTLE_S = 0.5
@@ -156,10 +81,12 @@ class FlightLoop:
         self.agents: dict[str, DroneAgent] = {
             d.name: DroneAgent(
                 d, planner_factory(d), height=flight.height, speed=flight.speed, dt=flight.dt, arena=mission.arena,
-                budget_s=mission.safety.planner_budget_s,
+                budget_s=mission.safety.planner_budget_s, body_radius_m=mission.planner.safety_radius,
             )
             for d in mission.drones
         }
+        self.commander = Commander(backend, self.agents, self.events, clock, land_s=flight.land_s,
+                                   land_settle_s=self.LAND_SETTLE_S, floor_z=0.0)
         self.obstacles = obstacle_set(mission.obstacles)
         self.tracker = PoseTracker({d.name: d.rigid_body for d in mission.drones})
         self.supervisor = Supervisor(mission, self.obstacles)
@@ -167,49 +94,75 @@ class FlightLoop:
         self.stats = LoopStats()
         self.tick = 0
         self._ticks = TickSchedule(mission.flight.dt, 0.0)
+        self._last_tick_s: Optional[float] = None
         self._stop = threading.Event()
         self._stop_reason = ""
         self._estop = threading.Event()
+        self._estop_reason = ""
+        self._estop_lock = threading.Lock()
+        self._estop_done = False
         self._last_extpos: dict[str, float] = {}
         self._last_status_s = -math.inf
         self._states: dict[str, DroneState] = {}
-        self._watchdog = LoopWatchdog(self._on_loop_stall)
+        self._watchdog = LoopWatchdog(self._on_loop_stall, stall_timeout_s(flight.dt),
+                                      on_emergency=self._emergency_now)
         self._gc = GcPacer()
         self._swarm_planner = SwarmPlanner(mission.planner.sensing_range, mission.safety.planner_budget_s)
 
     # ----------------------------------------------------------------------------------- external control
 
     def request_stop(self, reason: str = "interrupted") -> None:
-        """Land every drone and end the flight (first Ctrl-C). Thread- and signal-safe: sets a flag."""
+        """Land every drone and end the flight (first Ctrl-C). Safe from a signal handler: it only sets flags; the
+        loop does the landing."""
         self._stop_reason = reason
         self._stop.set()
 
     def emergency_stop(self, reason: str = "emergency stop requested") -> None:
-        """Cut every drone's motors now (second Ctrl-C). Safe from any thread or a signal handler."""
+        """Cut every drone's motors now (second Ctrl-C). Safe from a signal handler: it only sets flags and wakes
+        the safety thread, which sends the stop (radio I/O in a handler could deadlock on cflib's send lock, which
+        the interrupted thread may hold); the loop does it too if it gets there first."""
+        self._estop_reason = reason
         self._estop.set()
         self._stop.set()
-        try:
-            self.backend.emergency_stop(None)
-        finally:
-            for agent in self.agents.values():
-                if agent.phase.airborne or agent.phase == DronePhase.READY:
-                    agent.phase = DronePhase.EMERGENCY
-                    agent.outcome = FlightOutcome.EMERGENCY
-            self.events.emit(FATAL, "emergency", reason)
+        self._watchdog.emergency()
+
+    def _emergency_now(self) -> None:
+        """The safety thread or the loop thread: send the requested emergency stop, once."""
+        with self._estop_lock:
+            if self._estop_done:
+                return
+            self._estop_done = True
+            self.commander.emergency_stop(self._estop_reason or "emergency stop requested")
 
     # ------------------------------------------------------------------------------------------------ run
 
     def run(self) -> FlightReport:
-        """Fly the mission; always returns a report (and leaves no drone flying without a landing command)."""
+        """Fly the mission; always returns a report (and leaves no drone flying without a landing command).
+
+        A KeyboardInterrupt (library use: Python's own SIGINT handler) lands every drone like the first Ctrl-C of
+        ``rpf-fly fly``; a second one during that landing stops every motor. The report then says interrupted."""
         error: Optional[str] = None
+        restore_interrupt = self._take_interrupts()
         self._watchdog.start()
         try:
-            if self._connect() and self._preflight() and not self._stop.is_set():
-                self._gc.start()  # from here on the collector runs in the gaps between frames (flight/gc_pacing.py)
-                self._takeoff()
-                self._fly()
-            if self.phase not in (SwarmPhase.ABORTED,):
-                self._land_all(self._stop_reason or "mission complete")
+            try:
+                if self._connect() and self._preflight() and not self._stop.is_set():
+                    self._gc.start()  # from here on the collector runs in the gaps between frames (gc_pacing.py)
+                    self._takeoff()
+                    self._fly()
+                if self.phase not in (SwarmPhase.ABORTED,):
+                    if self._stop_reason:
+                        self.events.emit(WARNING, "interrupt", self._stop_reason)
+                    self._land_all(self._stop_reason or "mission complete")
+            except KeyboardInterrupt:
+                self.request_stop("interrupted (KeyboardInterrupt): landing every drone")
+                self.events.emit(WARNING, "interrupt", self._stop_reason)
+                try:
+                    self._land_all(self._stop_reason)
+                except KeyboardInterrupt:
+                    self._estop_reason = "second KeyboardInterrupt: emergency stop, motors off"
+                    self._estop.set()
+                    self._emergency_now()
         except Exception as err:  # noqa: BLE001 - every path out lands the drones
             error = f"{type(err).__name__}: {err}"
             self.events.emit(FATAL, "error", f"flight loop failed ({error}): landing every drone")
@@ -217,8 +170,11 @@ class FlightLoop:
         finally:
             self._gc.stop()
             self.stats.gc = self._gc.stats
-            self._watchdog.close()
-            self._finish()
+            try:
+                self._finish()
+            finally:
+                self._watchdog.close()
+                restore_interrupt()
         return FlightReport(
             mission=self.mission.name,
             phase=self.phase,
@@ -230,13 +186,30 @@ class FlightLoop:
             error=error,
         )
 
+    def _take_interrupts(self) -> Callable[[], None]:
+        """Library use on the main thread with Python's own SIGINT handler: for the flight, Ctrl-C sets flags as
+        in ``rpf-fly fly`` (once: land every drone; twice: stop every motor) instead of raising KeyboardInterrupt
+        wherever the loop happens to be (inside cflib's ``send_packet``, whose lock is then never released and
+        that drone's link is dead). Returns what puts the previous handler back. A caller's own handler is kept."""
+        if threading.current_thread() is not threading.main_thread():
+            return lambda: None
+        if signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
+            return lambda: None
+        presses = [0]
+
+        def on_interrupt(signum: int, frame: object) -> None:
+            presses[0] += 1
+            if presses[0] == 1:
+                self.request_stop("interrupted (Ctrl-C): landing every drone (Ctrl-C again: emergency stop)")
+            else:
+                self.emergency_stop("second Ctrl-C: emergency stop, motors off")
+
+        signal.signal(signal.SIGINT, on_interrupt)
+        return lambda: signal.signal(signal.SIGINT, signal.default_int_handler)
+
     def _set_phase(self, phase: SwarmPhase) -> None:
         self.phase = phase
         self.events.emit(INFO, "phase", f"swarm: {phase.value}")
-
-    def _set_drone(self, agent: DroneAgent, phase: DronePhase, reason: str = "", level: int = INFO) -> None:
-        agent.set_phase(phase, self.clock(), reason)
-        self.events.emit(level, "phase", f"{phase.value}{': ' + reason if reason else ''}", agent.name)
 
     # -------------------------------------------------------------------------------------------- stages
 
@@ -244,9 +217,7 @@ class FlightLoop:
         self._set_phase(SwarmPhase.CONNECTING)
         failures = self.backend.connect(self.uris)
         for name, why in failures.items():
-            agent = self.agents[name]
-            agent.outcome = FlightOutcome.NOT_FLOWN
-            self._set_drone(agent, DronePhase.FAILED, f"connection failed: {why}", ERROR)
+            self.commander.fail(self.agents[name], f"connection failed: {why}")
         if failures:
             self._abort(f"{len(failures)} drone(s) failed to connect: no drone takes off")
             return False
@@ -268,13 +239,11 @@ class FlightLoop:
             return False
         if problems:
             for name, problem in problems.items():
-                agent = self.agents[name]
-                agent.outcome = FlightOutcome.NOT_FLOWN
-                self._set_drone(agent, DronePhase.FAILED, f"preflight failed: {problem}", ERROR)
+                self.commander.fail(self.agents[name], f"preflight failed: {problem}")
             self._abort(f"preflight failed for {', '.join(sorted(problems))}: no drone takes off")
             return False
         for agent in self.agents.values():
-            self._set_drone(agent, DronePhase.READY, "preflight passed")
+            self.commander.ready(agent)
         return True
 
     def preflight_only(self) -> dict[str, str]:
@@ -288,39 +257,14 @@ class FlightLoop:
             self._finish()
 
     def _preflight_problem(self, agent: DroneAgent) -> str:
-        s, arena = self.mission.safety, self.mission.arena
-        state = self._states.get(agent.name)
-        if state is None or not state.link.up:
-            return "no radio link"
-        if state.supervisor is not None and (state.supervisor.locked or state.supervisor.crashed):
-            return "the drone's supervisor is locked or crashed: reboot it"
-        if state.battery is None:
-            return "no battery telemetry yet"
-        if state.battery.low or state.battery.voltage_v < self.mission.radio.min_battery_v:
-            return f"battery {state.battery.voltage_v:.2f} V below {self.mission.radio.min_battery_v:.2f} V"
-        pose = self.tracker.get(agent.name)
-        if pose is None or not pose.valid or self.tracker.age(agent.name, self.clock()) > s.pose_timeout_s:
-            return f"rigid body {agent.drone.rigid_body!r} not tracked by the mocap"
-        x, y, z = pose.position
-        if not (arena.x[0] <= x <= arena.x[1] and arena.y[0] <= y <= arena.y[1]):
-            return f"outside the arena at ({x:.2f}, {y:.2f})"
-        if abs(pose.xy - agent.start) > s.start_tolerance_m:
-            return (f"at ({x:.2f}, {y:.2f}), {abs(pose.xy - agent.start):.2f} m from its start "
-                    f"({agent.start.real:.2f}, {agent.start.imag:.2f}); allowed {s.start_tolerance_m:.2f} m")
-        if z > 0.3:
-            return f"not on the ground (z = {z:.2f} m)"
-        return ""
+        return preflight_problem(self.mission, agent, self._states.get(agent.name), self.tracker.get(agent.name),
+                                 self.tracker.age(agent.name, self.clock()))
 
     def _takeoff(self) -> None:
         self._set_phase(SwarmPhase.TAKEOFF)
         flight = self.mission.flight
         for agent in self.agents.values():
-            self.backend.arm(agent.name, True)
-            if self.backend.takeoff(agent.name, flight.height, flight.takeoff_s):
-                self._set_drone(agent, DronePhase.TAKEOFF)
-            else:
-                self._set_drone(agent, DronePhase.LANDED, "take-off command failed", ERROR)
-                agent.outcome = FlightOutcome.NOT_FLOWN
+            self.commander.take_off(agent, flight.height, flight.takeoff_s)
         until = self.clock() + flight.takeoff_s + self.TAKEOFF_SETTLE_S
         while self.clock() < until and not self._stop.is_set():
             self._spin_once(until)
@@ -330,17 +274,15 @@ class FlightLoop:
             pose = self.tracker.get(agent.name)
             if pose is None or abs(pose.position[2] - flight.height) > max(0.15, 0.3 * flight.height):
                 z = "no pose" if pose is None else f"z = {pose.position[2]:.2f} m"
-                self._land(agent, f"take-off did not reach {flight.height:.2f} m ({z})")
-            else:
-                agent.begin_planning(pose.xy, self.clock())
+                self.commander.land(agent, f"take-off did not reach {flight.height:.2f} m ({z})")
+            elif self.commander.begin_planning(agent, pose.xy, self.clock()):
                 self.events.emit(INFO, "takeoff", f"airborne at {pose.position[2]:.2f} m: planning", agent.name)
 
     def _fly(self) -> None:
         self._set_phase(SwarmPhase.FLYING)
-        period = self.mission.flight.dt
         started = self.clock()
-        self._ticks = TickSchedule(period, started)
-        self._last_tick_s: Optional[float] = None
+        self._ticks = TickSchedule(self.mission.flight.dt, started)
+        self._last_tick_s = None
         all_arrived_at: Optional[float] = None
         self._watchdog.arm(True)
         try:
@@ -370,14 +312,15 @@ class FlightLoop:
         if self.phase not in (SwarmPhase.ABORTED,):
             self.phase = SwarmPhase.LANDING
             self.events.emit(INFO, "phase", f"swarm: landing ({reason})")
-        for agent in self.agents.values():
-            if agent.phase.airborne and agent.phase != DronePhase.LANDING:
-                self._land(agent, reason, quiet=True)
+        self.commander.land_all(reason)
         if not wait:
             return
-        deadline = self.clock() + self.mission.flight.land_s + 3.0
+        from rpf_fly.flight.commander import TOUCHDOWN_TIMEOUT_S
+
+        deadline = self.clock() + self.mission.flight.land_s + self.LAND_SETTLE_S + TOUCHDOWN_TIMEOUT_S + 1.0
         while any(a.phase == DronePhase.LANDING for a in self.agents.values()) and self.clock() < deadline:
             if self._estop.is_set():
+                self._emergency_now()
                 break
             try:
                 self._spin_once(min(deadline, self.clock() + 0.1))
@@ -385,33 +328,21 @@ class FlightLoop:
                 time.sleep(0.05)
                 self._finish_landings(self.clock())
 
-    def _land(self, agent: DroneAgent, reason: str, quiet: bool = False) -> None:
-        flight = self.mission.flight
-        if agent.outcome is None:
-            agent.outcome = FlightOutcome.REACHED if agent.phase == DronePhase.ARRIVED else FlightOutcome.LANDED_EARLY
-        ok = self.backend.land(agent.name, 0.0, flight.land_s)
-        agent.landing_until_s = self.clock() + flight.land_s + self.LAND_SETTLE_S
-        level = INFO if quiet else WARNING
-        self._set_drone(agent, DronePhase.LANDING, reason, level)
-        if not ok:
-            self.events.emit(ERROR, "error", "land command failed: emergency stop", agent.name)
-            self.backend.emergency_stop(agent.name)
-            agent.phase = DronePhase.EMERGENCY
-            agent.outcome = FlightOutcome.EMERGENCY
-
     def _abort(self, message: str) -> None:
         self.phase = SwarmPhase.ABORTED
         self.events.emit(ERROR, "phase", f"swarm: aborted ({message})")
 
     def _finish(self) -> None:
         """Close the backend only when nothing flies (cflib's close cuts the motors), then the recorder."""
+        if self._estop.is_set():
+            self._emergency_now()
         airborne = [a.name for a in self.agents.values() if a.phase.airborne]
         if self.phase != SwarmPhase.ABORTED and not airborne:
             self.phase = SwarmPhase.DONE
             self.events.emit(INFO, "phase", "swarm: done")
         if airborne:
             self.events.emit(FATAL, "error", f"still airborne at the end: {', '.join(airborne)}; emergency stop")
-            self.backend.emergency_stop(None)
+            self.commander.emergency_stop("still airborne at the end of the flight", airborne)
         try:
             now = self.clock()
             for agent in self.agents.values():
@@ -430,6 +361,8 @@ class FlightLoop:
         """Receive the newest frame (waiting until ``until_s`` at most); at a planning tick plan and send first (its
         latency is what the drones feel), then forward extpos, record, and supervise. ``until_s`` None: flying,
         the wait and the ticks follow the flight's :class:`TickSchedule` (ticks locked to the mocap frames)."""
+        if self._estop.is_set():
+            self._emergency_now()
         ticks = self._ticks
         plan = until_s is None
         if until_s is None:
@@ -472,16 +405,24 @@ class FlightLoop:
             if agent.phase.terminal or now - self._last_extpos.get(name, -math.inf) < period:
                 continue
             self._last_extpos[name] = now
-            if extpose:
-                self.backend.send_extpose(name, pose.position, pose.quaternion)
-            else:
-                self.backend.send_extpos(name, pose.position)
+            self.commander.extpos(agent, pose.position, pose.quaternion if extpose else None)
 
     def _finish_landings(self, now: float) -> None:
+        stale_after = self.mission.safety.pose_timeout_s
         for agent in self.agents.values():
-            if agent.phase == DronePhase.LANDING and agent.landing_until_s is not None and now >= agent.landing_until_s:
-                self.backend.arm(agent.name, False)
-                self._set_drone(agent, DronePhase.LANDED)
+            if agent.phase == DronePhase.LANDING:
+                pose = self.tracker.get(agent.name)
+                fresh = pose is not None and pose.valid and now - pose.stamp_s <= stale_after
+                self.commander.confirm_touchdown(agent, now, pose.position[2] if pose is not None else None, fresh,
+                                                 self._states.get(agent.name))
+
+    def _in_the_way(self, agent: DroneAgent, pose: TrackedPose) -> bool:
+        """Whether a drone is in the other drones' views: airborne near the planning plane; a drone nobody
+        commands any more (link lost, motors cut) until mocap shows it on the floor, since it may still hover,
+        drift or fall there for up to 2 s."""
+        if agent.phase in (DronePhase.LINK_LOST, DronePhase.EMERGENCY):
+            return pose.position[2] > ON_FLOOR_Z_M
+        return pose.position[2] > 0.5 * self.mission.flight.height and not agent.phase.terminal
 
     def _plan_tick(self, now: float, frame: Optional[MocapFrame]) -> None:
         """Plan and send every drone's setpoint; the log records are written after the last send."""
@@ -490,11 +431,8 @@ class FlightLoop:
         self._watchdog.beat()
         flight = self.mission.flight
         stale_after = self.mission.safety.pose_timeout_s
-        airborne_poses = {
-            n: p for n, p in self.tracker.poses.items()
-            if p.position[2] > 0.5 * flight.height and not self.agents[n].phase.terminal
-        }
-        records: list[tuple[DroneAgent, Optional[TrackedPose], Optional[PlanStep], str]] = []
+        airborne_poses = {n: p for n, p in self.tracker.poses.items() if self._in_the_way(self.agents[n], p)}
+        records: list[PlannerRecord] = []
         sent: list[tuple[str, tuple[float, float, float], float]] = []
         requests: list[tuple[DroneAgent, TrackedPose]] = []
         planned: list[tuple[DroneAgent, TrackedPose, PlanResult]] = []
@@ -508,16 +446,14 @@ class FlightLoop:
                 self._send(agent, agent.reference, frame, sent)
             elif agent.phase == DronePhase.PLANNING and pose is not None:
                 if abs(agent.goal - pose.xy) < flight.goal_tolerance:
-                    agent.hold_point = agent.goal
-                    agent.arrived_at_s = now
-                    self._set_drone(agent, DronePhase.ARRIVED, "reached its goal")
+                    self.commander.arrive(agent, now)
                 else:
                     requests.append((agent, pose))
                     continue
             if agent.phase in (DronePhase.HOLDING, DronePhase.ARRIVED):
                 mode = "arrived" if agent.phase == DronePhase.ARRIVED else "hold"
                 self._send(agent, agent.hold_point, frame, sent)
-            if agent.phase.airborne or agent.phase == DronePhase.LANDED:
+            if agent.phase not in (DronePhase.WAITING, DronePhase.READY, DronePhase.FAILED):
                 records.append((agent, pose, None, mode))
         if requests:
             # Plan on the commanded geometry (see flight/agent.py): each drone from its own reference, with each
@@ -533,9 +469,9 @@ class FlightLoop:
             for agent, pose in requests:
                 outcome = outcomes[agent.name]
                 if isinstance(outcome, PlannerFault):
-                    agent.hold(agent.reference, now, str(outcome))
+                    self.commander.hold(agent, pose.xy, now, str(outcome))
                     self.events.emit(ERROR, "planner_fault", f"{outcome}: holding, then landing", agent.name)
-                    self._land(agent, "planner fault")
+                    self.commander.land(agent, "planner fault")
                     records.append((agent, pose, None, "hold"))
                     continue
                 self.stats.planner_seconds.append(outcome.seconds)
@@ -554,13 +490,17 @@ class FlightLoop:
               sent: list[tuple[str, tuple[float, float, float], float]]) -> None:
         z = agent.clamp_height(self.mission.flight.height)
         xy = agent.clamp(xy)
-        self.backend.send_position_setpoint(agent.name, xy.real, xy.imag, z, 0.0)
+        if not self.commander.stream(agent, xy.real, xy.imag, z):
+            return
         t = self.clock()
         if frame is not None:
             self.stats.latencies.append(t - frame.receive_time_s)
         sent.append((agent.name, (xy.real, xy.imag, z), t))
 
     # ---------------------------------------------------------------------------------------- findings
+
+    RESUMABLE = frozenset({"pose_stale", "mocap_lost", "pose_glitch", "separation", "obstacle"})
+    """Hold reasons that end when the supervisor says the condition cleared."""
 
     def _apply(self, findings: list[Finding], now: float) -> None:
         for f in findings:
@@ -570,24 +510,22 @@ class FlightLoop:
                 if not agent.phase.airborne:
                     continue
                 if f.response == "lost":
-                    agent.phase = DronePhase.LINK_LOST
-                    agent.outcome = FlightOutcome.LINK_LOST
-                    agent.reason = f.message
-                elif f.response == "land" and agent.phase != DronePhase.LANDING:
-                    self._land(agent, f.message)
-                elif f.response == "hold" and agent.phase == DronePhase.PLANNING:
-                    agent.hold(agent.reference, now, f.kind)
-                elif f.response == "resume" and agent.phase == DronePhase.HOLDING and agent.reason in ("pose_stale", "mocap_lost"):
+                    self.commander.link_lost(agent, f.message)
+                elif f.response == "land":
+                    self.commander.land(agent, f.message)
+                elif f.response == "hold":
                     pose = self.tracker.get(agent.name)
-                    if pose is not None and pose.valid:
-                        agent.begin_planning(pose.xy, now)
+                    self.commander.hold(agent, pose.xy if pose is not None else agent.reference, now, f.kind)
+                elif f.response == "resume" and agent.phase == DronePhase.HOLDING and agent.reason == f.kind:
+                    pose = self.tracker.get(agent.name)
+                    if pose is not None and pose.valid and f.kind in self.RESUMABLE:
+                        self.commander.begin_planning(agent, pose.xy, now)
 
     def _on_loop_stall(self) -> None:
-        """Watchdog thread: the loop stopped ticking while drones stream setpoints: land them all now."""
-        self.events.emit(FATAL, "error", "flight loop stalled: landing every drone (watchdog)")
-        for agent in self.agents.values():
-            if agent.phase.airborne and agent.phase != DronePhase.LANDING:
-                self.backend.land(agent.name, 0.0, self.mission.flight.land_s)
+        """Watchdog thread: the loop stopped ticking while drones stream setpoints: land them all now, through the
+        commander, so the landing stands when the loop recovers (it streams to no drone that was told to land)."""
+        self.events.emit(FATAL, "loop", "flight loop stalled: landing every drone (watchdog)")
+        self.commander.land_all("flight loop stalled (watchdog)", FATAL)
 
     def _record_event(self, event: FlightEvent) -> None:
         self.recorder.event(event)

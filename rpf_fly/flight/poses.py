@@ -3,10 +3,17 @@
 The planner needs neighbours' velocities (a hovering neighbour is an obstacle for the robust preset); mocap gives
 positions only, so velocity is a low-pass filtered finite difference of valid samples. Invalid or missing bodies
 keep their last pose but age; the supervisor decides what a stale pose means.
+
+Glitches: a pose that jumped further from the previous sample than a Crazyflie can move in that time (a marker
+swap, a reflection taken for a marker) is not followed. The body's pose freezes (and ages, so the supervisor holds
+the drone) until the track jumps back near the frozen pose, or until the new track has been consistent for
+``REACQUIRE_S`` (the drone really is there: it was pushed, or Motive fixed its model). The raw samples are compared
+frame to frame, so a swap is caught however long it lasts, and so is the swap back.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Mapping, Optional
 
@@ -31,6 +38,16 @@ class TrackedPose:
         return complex(self.position[0], self.position[1])
 
 
+MAX_SPEED_M_S = 5.0
+"""Faster than a Crazyflie moves: 1 m/s commanded at most, about 4.4 m/s after a free fall from 1 m."""
+
+JUMP_TOLERANCE_M = 0.05
+"""Added to ``MAX_SPEED_M_S * dt``: mocap noise and a body's model fit wobble by millimetres, never this."""
+
+REACQUIRE_S = 0.5
+"""A jumped track consistent for this long is taken as the drone's real pose."""
+
+
 class PoseTracker:
     """Folds mocap frames into per-drone poses. ``bodies`` maps drone name -> rigid body name."""
 
@@ -39,6 +56,46 @@ class PoseTracker:
         self.velocity_tau_s = velocity_tau_s
         self.poses: dict[str, TrackedPose] = {}
         self.last_frame_s: Optional[float] = None
+        self.glitching: set[str] = set()
+        """Drones whose newest samples are refused as a jump."""
+        self.glitches: dict[str, int] = {}
+        """Samples refused as jumps, per drone."""
+        self._raw: dict[str, tuple[tuple[float, float, float], float, float]] = {}
+        """drone -> its newest sample: (position, receive time, capture time)."""
+        self._jumped_at: dict[str, float] = {}
+
+    @staticmethod
+    def _jump(a: tuple[float, ...], b: tuple[float, ...], dt: float) -> bool:
+        return math.dist(a, b) > MAX_SPEED_M_S * max(dt, 0.0) + JUMP_TOLERANCE_M
+
+    def _accept(self, name: str, position: tuple[float, float, float], t: float, captured: float,
+                previous: Optional[TrackedPose]) -> bool:
+        """Whether this sample may be followed (see the module docstring); updates the glitch state. The time a
+        sample had to move is the longer of its receive and capture intervals: frames delayed and then received
+        in a burst (a loaded host or network) are close in receive time but not in capture time."""
+        raw = self._raw.get(name)
+        self._raw[name] = (position, t, captured)
+        dt = 0.0
+        if raw is not None:
+            dt_capture = captured - raw[2]
+            dt = max(t - raw[1], dt_capture if 0.0 <= dt_capture < 10.0 else 0.0)
+        if name not in self.glitching:
+            if raw is None or previous is None or not self._jump(position, raw[0], dt):
+                return True
+            self.glitching.add(name)
+            self._jumped_at[name] = t
+        elif raw is not None and self._jump(position, raw[0], dt):
+            if previous is not None and not self._jump(position, previous.position, t - previous.stamp_s):
+                self.glitching.discard(name)  # jumped back onto the frozen track
+                return True
+            self._jumped_at[name] = t  # jumped elsewhere: a new candidate track
+        elif t - self._jumped_at[name] >= REACQUIRE_S:
+            self.glitching.discard(name)  # the new track held: the drone is there
+            return True
+        self.glitches[name] = self.glitches.get(name, 0) + 1
+        if previous is not None:
+            previous.valid = False
+        return False
 
     def update(self, frame: MocapFrame) -> None:
         """Take the frame's poses of our drones (Z-up world frame)."""
@@ -50,6 +107,12 @@ class PoseTracker:
                 if previous is not None:
                     previous.valid = False
                 continue
+            position = tuple(body.position)
+            jumped = name in self.glitching
+            if not self._accept(name, position, frame.receive_time_s, frame.capture_time_s, previous):  # type: ignore[arg-type]
+                continue
+            if jumped:
+                previous = None  # a re-acquired track: no velocity across the jump
             velocity = 0j
             if previous is not None:
                 dt = frame.receive_time_s - previous.stamp_s
@@ -60,7 +123,7 @@ class PoseTracker:
                 else:
                     velocity = previous.velocity
             self.poses[name] = TrackedPose(
-                tuple(body.position), tuple(body.quaternion), velocity, frame.receive_time_s, frame.frame_number
+                position, tuple(body.quaternion), velocity, frame.receive_time_s, frame.frame_number  # type: ignore[arg-type]
             )
 
     def get(self, name: str) -> Optional[TrackedPose]:

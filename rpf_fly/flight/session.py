@@ -5,6 +5,7 @@ The CLI adds the console and the signal handlers around :func:`run_flight`; test
 
 from __future__ import annotations
 
+import socket
 from pathlib import Path
 from typing import Callable, Optional
 
@@ -18,10 +19,28 @@ from rpf_fly.mocap.frame import MocapSource
 DEFAULT_TOC_CACHE = Path.home() / ".cache" / "rpf_fly" / "toc"
 
 
+class UnresolvableServer(ValueError):
+    """``mocap.server`` names no host this machine can resolve."""
+
+
+def resolve_mocap_server(mission: Mission) -> str:
+    """The mission's NatNet server as an IP address; :class:`UnresolvableServer` with the reason if it has none.
+    Called before anything connects, so a typo never reaches a drone."""
+    m = mission.mocap
+    try:
+        infos = socket.getaddrinfo(m.server, m.command_port, type=socket.SOCK_DGRAM)
+    except (socket.gaierror, UnicodeError) as err:
+        reason = err.strerror if isinstance(err, socket.gaierror) and err.strerror else str(err)
+        raise UnresolvableServer(f"cannot resolve {m.server!r} ({reason}): expected the IP address or host name "
+                                 "of the PC running Motive") from None
+    return str(infos[0][4][0])
+
+
 def natnet_source(mission: Mission, timeout_s: float = 5.0) -> MocapSource:
     """The mission's NatNet client, connected (raises ConnectionError if the server does not answer)."""
     from rpf_fly.mocap.natnet_client import NatNetClient
 
+    resolve_mocap_server(mission)
     m = mission.mocap
     client = NatNetClient(
         m.server, multicast=m.multicast, local_ip=m.local_ip, multicast_group=m.multicast_group,
@@ -63,7 +82,10 @@ def run_flight(
             loop.events.subscribe(sink)
         if on_loop is not None:
             on_loop(loop)
-        return loop.run()
+        report = loop.run()
+        if recorder is not None:
+            report.log_dropped, report.log_failed = recorder.log.dropped, recorder.log.failed
+        return report
     finally:
         if rig is None:
             source.close()

@@ -8,7 +8,14 @@ Checks (docs/flight.md):
 - obstacle: a drone closer than r to an obstacle surface (planar, obstacles are vertical) -> event, ``on_obstacle``;
 - battery: the firmware reports low power, or the voltage under load is below ``min_battery_v - FLIGHT_SAG_V``:
   that drone lands;
-- link: the backend says the link is down: that drone is lost (nothing can reach it); the others continue.
+- link: the backend says the link is down: that drone is lost (nothing can reach it); the others continue;
+- telemetry: a linked drone whose status telemetry stopped arriving for ``TELEMETRY_STALE_S`` -> warning event;
+- pose glitch: the pose tracker refused a pose that jumped further than a drone can fly (a marker swap) -> hold
+  until the track is back.
+
+A drone nobody commands any more (link lost, motors cut) stays in the separation check at its mocap pose until
+mocap shows it on the floor: it may hover, drift or fall for up to 2 s where the others fly. A ``hold`` response
+ends (``resume``) when the condition that caused it clears for that drone.
 
 Findings are edge-triggered where a condition persists (an event when it starts, another when it clears), so the
 log records episodes, not every tick.
@@ -20,6 +27,7 @@ from dataclasses import dataclass
 from typing import Iterable, Literal, Optional
 
 from rpf_fly.flight.agent import DroneAgent
+from rpf_fly.flight.commander import ON_FLOOR_Z_M
 from rpf_fly.flight.events import ERROR, INFO, WARNING
 from rpf_fly.flight.phases import DronePhase
 from rpf_fly.flight.poses import PoseTracker
@@ -29,6 +37,13 @@ from rpf_fly.radio.backend import DroneState
 
 FLIGHT_SAG_V = 0.4
 """Voltage a Crazyflie battery sags under hover load; the in-flight threshold is the preflight one minus this."""
+
+LOW_BATTERY_SAMPLES = 5
+"""Consecutive status samples (10 Hz: half a second) below the in-flight threshold before a drone is landed: one
+sample taken during a thrust peak (a turn, a gust) sags far lower than the hover load, and must not end a flight."""
+
+TELEMETRY_STALE_S = 1.0
+"""A linked drone whose status telemetry (10 Hz) is older than this: the battery and supervisor checks are blind."""
 
 Response = Literal["warn", "hold", "land", "lost", "resume"]
 
@@ -56,18 +71,27 @@ class Supervisor:
         self._near_obstacle: set[str] = set()
         self._stale: set[str] = set()
         self._mocap_lost = False
+        self._low_battery: dict[str, tuple[int, float]] = {}
+        """drone -> (consecutive low samples, stamp of the last one counted)."""
+        self._telemetry_stale: set[str] = set()
+        self._glitching: set[str] = set()
 
     def check(
         self, now_s: float, agents: Iterable[DroneAgent], tracker: PoseTracker, states: dict[str, DroneState]
     ) -> list[Finding]:
-        agents = [a for a in agents if a.phase.airborne]
+        everyone = list(agents)
+        agents = [a for a in everyone if a.phase.airborne]
+        uncommanded = [a for a in everyone if a.phase in (DronePhase.LINK_LOST, DronePhase.EMERGENCY)
+                       and (p := tracker.get(a.name)) is not None and p.position[2] > ON_FLOOR_Z_M]
         findings: list[Finding] = []
         findings += self._links(agents, states)
+        findings += self._glitches(agents, tracker)
         findings += self._poses(now_s, agents, tracker)
         findings += self._geofence(agents, tracker)
-        findings += self._separation(agents, tracker)
+        findings += self._separation(agents + uncommanded, tracker)
         findings += self._obstacles(agents, tracker)
         findings += self._battery(agents, states)
+        findings += self._telemetry(now_s, agents, states)
         return findings
 
     # -------------------------------------------------------------------------------------------- checks
@@ -137,6 +161,10 @@ class Supervisor:
                         out.append(Finding("separation", ERROR, message, ni, response))
                         if response != "warn":
                             out.append(Finding("separation", ERROR, f"separation {d:.3f} m from {ni}", nj, response))
+        if self.safety.on_separation == "hold":
+            still_close = {n for pair in close_now for n in pair}
+            for name in {n for pair in self._close_pairs - close_now for n in pair} - still_close:
+                out.append(Finding("separation", INFO, "separation restored: resuming", name, "resume"))
         self._close_pairs = close_now
         return out
 
@@ -155,18 +183,61 @@ class Supervisor:
                 if a.name not in self._near_obstacle:
                     message = f"obstacle clearance {clearance:.3f} m is below r = {self.r:.2f} m"
                     out.append(Finding("obstacle", ERROR, message, a.name, self.safety.on_obstacle))
+        if self.safety.on_obstacle == "hold":
+            for name in self._near_obstacle - near_now:
+                out.append(Finding("obstacle", INFO, "obstacle clearance restored: resuming", name, "resume"))
         self._near_obstacle = near_now
         return out
 
     def _battery(self, agents: list[DroneAgent], states: dict[str, DroneState]) -> list[Finding]:
+        """Land after ``LOW_BATTERY_SAMPLES`` consecutive new samples that are low (each sample counted once)."""
         out = []
         limit = self.mission.radio.min_battery_v - FLIGHT_SAG_V
         for a in agents:
             state = states.get(a.name)
             battery = state.battery if state else None
-            if battery is None or a.phase == DronePhase.LANDING:
+            if battery is None or a.phase == DronePhase.LANDING or state is None or state.telemetry_stamp_s is None:
                 continue
-            if battery.low or battery.voltage_v < limit:
-                message = f"battery low ({battery.voltage_v:.2f} V, {battery.pm_state.name.lower()}): landing"
+            count, stamp = self._low_battery.get(a.name, (0, -1.0))
+            if state.telemetry_stamp_s == stamp:
+                continue
+            low = battery.low or battery.voltage_v < limit
+            count = count + 1 if low else 0
+            self._low_battery[a.name] = (count, state.telemetry_stamp_s)
+            if count == LOW_BATTERY_SAMPLES:
+                message = (f"battery low ({battery.voltage_v:.2f} V, {battery.pm_state.name.lower()}; "
+                           f"{count} samples in a row): landing")
                 out.append(Finding("battery", WARNING, message, a.name, "land"))
+        return out
+
+    def _telemetry(self, now_s: float, agents: list[DroneAgent], states: dict[str, DroneState]) -> list[Finding]:
+        """A linked drone whose status telemetry stopped: its battery and supervisor are no longer watched."""
+        out = []
+        for a in agents:
+            state = states.get(a.name)
+            if state is None or not state.link.up:
+                continue
+            stamp = state.telemetry_stamp_s
+            age = float("inf") if stamp is None else now_s - stamp
+            if age > TELEMETRY_STALE_S and a.name not in self._telemetry_stale:
+                self._telemetry_stale.add(a.name)
+                out.append(Finding("telemetry", WARNING, f"no status telemetry for {age:.1f} s: battery and "
+                                   "supervisor unwatched", a.name, "warn"))
+            elif age <= TELEMETRY_STALE_S and a.name in self._telemetry_stale:
+                self._telemetry_stale.discard(a.name)
+                out.append(Finding("telemetry", INFO, "status telemetry is back", a.name, "warn"))
+        return out
+
+    def _glitches(self, agents: list[DroneAgent], tracker: PoseTracker) -> list[Finding]:
+        """Poses the tracker refused as jumps (edge-triggered): hold until the track is back."""
+        out = []
+        for a in agents:
+            glitching = a.name in tracker.glitching
+            if glitching and a.name not in self._glitching:
+                self._glitching.add(a.name)
+                out.append(Finding("pose_glitch", WARNING, "mocap pose jumped further than a drone can fly in one "
+                                   "frame (marker swap?): not followed, holding", a.name, "hold"))
+            elif not glitching and a.name in self._glitching:
+                self._glitching.discard(a.name)
+                out.append(Finding("pose_glitch", INFO, "mocap track consistent again: resuming", a.name, "resume"))
         return out

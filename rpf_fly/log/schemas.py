@@ -27,8 +27,10 @@ SCHEMA_ENCODING = "jsonschema"
 MESSAGE_ENCODING = "json"
 WORLD_FRAME = "world"
 
-PLANNER_MODES = ("apf", "wall", "soft", "arrived", "stalled", "hold")
-"""Values of ``rpf_fly.PlannerStep.mode``."""
+PLANNER_MODES = ("apf", "wall", "soft", "arrived", "stalled", "hold", "takeoff", "landing", "landed", "link_lost",
+                 "emergency")
+"""Values of ``rpf_fly.PlannerStep.mode``: the rule that chose the direction (apf, wall, soft), or what the drone did
+instead of planning (arrived, hold, and the flight phases in which it does not plan)."""
 
 MODE_NAMES = {0: "apf", 1: "wall", 2: "soft", -1: "arrived"}
 """Planner mode codes (``PlanStep.mode``, ``Rollout.modes``) to their log names."""

@@ -95,6 +95,9 @@ def parse_uri(uri: str) -> RadioUri:
 
 # ---------------------------------------------------------------------------------------------- value checks
 
+_HOST_NAME = re.compile(r"(?!-)[A-Za-z0-9-]{1,63}(?<!-)(\.(?!-)[A-Za-z0-9-]{1,63}(?<!-))*\.?")
+"""A host name: dot-separated labels of letters, digits and hyphens, no label starting or ending with a hyphen."""
+
 class _Bound(NamedTuple):
     text: str
     ok: Callable[[float], bool]
@@ -235,9 +238,20 @@ class _Checker:
         return lo, hi
 
     def host(self, node: YNode) -> str:
+        """An IP address or a syntactically valid host name (RFC 1123). Dotted numbers must be a whole IPv4
+        address: ``192.168.1.1000`` and ``192.168.1`` are typos, not host names. Whether a name resolves is
+        checked when a command needs the server (``rpf-fly fly`` and ``check``), not here: ``sim`` needs none."""
         text = self.string(node)
-        if any(ch.isspace() for ch in text):
-            raise self.error(node, node.path, f"expected a host name or IP address, got {text!r}")
+        expected = f"expected a host name or IP address, got {text!r}"
+        try:
+            ipaddress.ip_address(text)
+            return text
+        except ValueError:
+            pass
+        if re.fullmatch(r"[0-9.]+", text):
+            raise self.error(node, node.path, f"{expected}: not an IPv4 address (four numbers 0-255 joined by dots)")
+        if len(text) > 253 or not _HOST_NAME.fullmatch(text):
+            raise self.error(node, node.path, expected)
         return text
 
     def ip(self, node: YNode, multicast: bool = False) -> str:
@@ -273,8 +287,13 @@ def _planner_kind(c: _Checker, n: YNode) -> str:
 
 
 # YAML key -> (dataclass field, reader)
+RATE_HZ = _Bound(
+    f"at least {m.MIN_RATE_HZ:g} Hz, so the loop watchdog acts before the Crazyflie's "
+    f"{m.FIRMWARE_SETPOINT_WATCHDOG_S:g} s setpoint watchdog levels the drones out",
+    lambda x: x >= m.MIN_RATE_HZ)
 FLIGHT_SPEC: dict[str, tuple[str, Reader]] = {
-    k: (k, _num(POSITIVE)) for k in ("height", "speed", "rate_hz", "goal_tolerance", "takeoff_s", "land_s", "timeout_s")
+    k: (k, _num(RATE_HZ if k == "rate_hz" else POSITIVE))
+    for k in ("height", "speed", "rate_hz", "goal_tolerance", "takeoff_s", "land_s", "timeout_s")
 }
 PLANNER_SPEC: dict[str, tuple[str, Reader]] = {
     "kind": ("kind", _planner_kind),

@@ -30,6 +30,23 @@ class Arena:
     z: Vec2 = (0.0, 2.0)
 
 
+FIRMWARE_SETPOINT_WATCHDOG_S = 0.5
+"""A Crazyflie levels out this long after its last streamed setpoint (and cuts its motors at 2 s)."""
+
+STALL_TICKS = 3
+"""The loop watchdog acts after this many planning ticks without one (flight/watchdog.py)."""
+
+MIN_STALL_TIMEOUT_S = 0.35
+"""The loop watchdog never acts sooner than this (a loaded machine's pauses are not stalls)."""
+
+MAX_STALL_TIMEOUT_S = 0.4
+"""The loop watchdog must act by then to land the drones before the firmware's watchdog levels them out (it polls at
+a fifth of its timeout, so it acts within 1.2 timeouts: 0.48 s < 0.5 s)."""
+
+MIN_RATE_HZ = STALL_TICKS / MAX_STALL_TIMEOUT_S
+"""The lowest planning rate (``flight.rate_hz``) whose watchdog acts in time: 7.5 Hz."""
+
+
 @dataclass(frozen=True)
 class FlightSettings:
     """How the drones fly. ``rate_hz`` is the planning rate: the planner and the simulator step at 1/rate_hz."""

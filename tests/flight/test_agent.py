@@ -47,6 +47,18 @@ def test_reference_never_leads_the_drone_by_more_than_max_lead_nor_leaves_the_ar
     assert agent.plan(None, 1.9 + 0j).setpoint == 2.0 + 0j
 
 
+def test_the_geofence_keeps_the_whole_body_inside_the_arena():
+    """A setpoint at the arena's edge would put half the drone outside it: the fence is the arena shrunk by the
+    body radius (the mission's safety radius), in x, y and under the ceiling."""
+    agent = make_agent(body_radius_m=0.1)
+    assert agent.clamp(5 + 5j) == pytest.approx(1.9 + 1.9j)
+    assert agent.clamp(-5 - 5j) == pytest.approx(-1.9 - 1.9j)
+    assert agent.clamp(0.3 - 0.4j) == 0.3 - 0.4j
+    assert agent.clamp_height(1.5) == pytest.approx(1.4)
+    agent.begin_planning(1.85 + 0j, 0.0)
+    assert agent.plan(None, 1.85 + 0j).setpoint == pytest.approx(1.9 + 0j)
+
+
 def test_an_invalid_direction_is_this_drones_planner_fault():
     agent = make_agent(Straight(float("nan") + 0j))
     agent.begin_planning(0j, 0.0)

@@ -1,0 +1,217 @@
+"""The commander: the one object through which every command reaches a drone, and the owner of each drone's phase.
+
+Why one object: a flight has three threads that may command a drone (the loop, the watchdog when the loop is
+stuck, the safety thread acting on a second Ctrl-C). If each sent what it thought right, a landing ordered by the
+watchdog would be overridden by the loop's next streamed setpoint as soon as the loop recovered (a low-level
+setpoint takes priority over the high-level land in the firmware), and the drone would fly on with nobody
+planning for it. Here a drone's phase and the command that goes with it change together under that drone's lock:
+
+- a setpoint is streamed only to a drone whose phase streams (planning, holding, arrived); after ``land`` (or an
+  emergency stop, a lost link) nothing can stream to it again;
+- every transition names the phases it may start from, so a stale decision of one thread (the loop planned a drone
+  that the watchdog has since landed) is refused instead of undoing the other's;
+- ``land`` and ``emergency_stop`` may be called from any thread; the loop's per-tick calls stay cheap (a lock
+  that is never contended in normal flight).
+
+Touchdown is confirmed before disarming (disarming a flying Crazyflie cuts its motors): the drone's mocap height
+near the floor and its supervisor no longer reporting flying (:meth:`Commander.confirm_touchdown`).
+"""
+
+from __future__ import annotations
+
+import threading
+from typing import Callable, Iterable, Optional
+
+from rpf_fly.flight.agent import DroneAgent
+from rpf_fly.flight.events import ERROR, FATAL, INFO, WARNING, EventBus
+from rpf_fly.flight.phases import DronePhase, FlightOutcome
+from rpf_fly.radio.backend import DroneBackend, DroneState, Quaternion, Vec3
+
+STREAMING = frozenset({DronePhase.PLANNING, DronePhase.HOLDING, DronePhase.ARRIVED})
+"""Phases in which the drone follows streamed setpoints (the firmware levels out 0.5 s after the last one)."""
+
+ON_FLOOR_Z_M = 0.1
+"""Mocap height (above the arena floor) under which a drone counts as on the floor: a Crazyflie's markers sit a few
+centimetres above its feet, and a landed drone's estimate settles within a few centimetres of the floor."""
+
+TOUCHDOWN_TIMEOUT_S = 3.0
+"""How long after its landing should have ended a drone may take to be confirmed down before an event says it is
+not (the firmware's own landing timeout is 3 s)."""
+
+
+class Commander:
+    """Owns each drone's phase and sends every command (see the module docstring). Thread-safe."""
+
+    def __init__(
+        self,
+        backend: DroneBackend,
+        agents: dict[str, DroneAgent],
+        events: EventBus,
+        clock: Callable[[], float],
+        *,
+        land_s: float,
+        land_settle_s: float,
+        floor_z: float,
+    ):
+        self.backend = backend
+        self.agents = agents
+        self.events = events
+        self.clock = clock
+        self.land_s = land_s
+        self.land_settle_s = land_settle_s
+        self.floor_z = floor_z
+        self._locks = {name: threading.RLock() for name in agents}
+        self._touchdown_late: set[str] = set()
+
+    # ------------------------------------------------------------------------------------------ phases
+
+    def _set(self, agent: DroneAgent, phase: DronePhase, reason: str = "", level: int = INFO) -> None:
+        agent.set_phase(phase, self.clock(), reason)
+        self.events.emit(level, "phase", f"{phase.value}{': ' + reason if reason else ''}", agent.name)
+
+    def fail(self, agent: DroneAgent, reason: str) -> None:
+        """Connection or preflight failure: the drone never flies."""
+        with self._locks[agent.name]:
+            agent.outcome = FlightOutcome.NOT_FLOWN
+            self._set(agent, DronePhase.FAILED, reason, ERROR)
+
+    def ready(self, agent: DroneAgent) -> None:
+        with self._locks[agent.name]:
+            if agent.phase == DronePhase.WAITING:
+                self._set(agent, DronePhase.READY, "preflight passed")
+
+    def take_off(self, agent: DroneAgent, height_m: float, duration_s: float) -> bool:
+        """Arm, then high-level take-off; a drone whose arming or take-off is refused stays on the ground."""
+        with self._locks[agent.name]:
+            if agent.phase != DronePhase.READY:
+                return False
+            if not self.backend.arm(agent.name, True):
+                self.fail(agent, "arming request failed: it stays on the ground")
+                return False
+            if not self.backend.takeoff(agent.name, height_m, duration_s):
+                self.backend.arm(agent.name, False)  # still on the ground: disarming is safe
+                self.fail(agent, "take-off command failed: it stays on the ground")
+                return False
+            self._set(agent, DronePhase.TAKEOFF)
+            return True
+
+    def begin_planning(self, agent: DroneAgent, measured: complex, now_s: float) -> bool:
+        """Take-off done, or a hold over: plan from the measured position again."""
+        with self._locks[agent.name]:
+            if agent.phase not in (DronePhase.TAKEOFF, DronePhase.HOLDING):
+                return False
+            agent.begin_planning(measured, now_s)
+            return True
+
+    def hold(self, agent: DroneAgent, at: complex, now_s: float, reason: str) -> bool:
+        """Stop planning and hover at ``at`` (where the drone is)."""
+        with self._locks[agent.name]:
+            if agent.phase != DronePhase.PLANNING:
+                return False
+            agent.hold(at, now_s, reason)
+            return True
+
+    def arrive(self, agent: DroneAgent, now_s: float) -> bool:
+        with self._locks[agent.name]:
+            if agent.phase != DronePhase.PLANNING:
+                return False
+            agent.hold_point = agent.goal
+            agent.arrived_at_s = now_s
+            self._set(agent, DronePhase.ARRIVED, "reached its goal")
+            return True
+
+    def link_lost(self, agent: DroneAgent, message: str) -> None:
+        """Nothing reaches the drone any more: its firmware levels out, then cuts its motors."""
+        with self._locks[agent.name]:
+            if not agent.phase.airborne:
+                return
+            agent.outcome = FlightOutcome.LINK_LOST
+            self._set(agent, DronePhase.LINK_LOST, message, ERROR)
+
+    # ---------------------------------------------------------------------------------------- commands
+
+    def stream(self, agent: DroneAgent, x: float, y: float, z: float) -> bool:
+        """Stream one position setpoint, only to a drone whose phase streams (never after ``land``)."""
+        with self._locks[agent.name]:
+            if agent.phase not in STREAMING:
+                return False
+            return self.backend.send_position_setpoint(agent.name, x, y, z, 0.0)
+
+    def extpos(self, agent: DroneAgent, position: Vec3, quaternion: Optional[Quaternion]) -> bool:
+        """Forward a mocap pose to the drone's estimator (also while it lands: the landing needs it)."""
+        if agent.phase in (DronePhase.LINK_LOST, DronePhase.FAILED):
+            return False
+        if quaternion is None:
+            return self.backend.send_extpos(agent.name, position)
+        return self.backend.send_extpose(agent.name, position, quaternion)
+
+    def land(self, agent: DroneAgent, reason: str, level: int = WARNING) -> bool:
+        """High-level landing of an airborne drone (once; from any thread). A land command that cannot be sent is
+        followed by an emergency stop: a drone nobody can land must not fly on."""
+        with self._locks[agent.name]:
+            if not agent.phase.airborne or agent.phase == DronePhase.LANDING:
+                return False
+            if agent.outcome is None:
+                agent.outcome = FlightOutcome.REACHED if agent.phase == DronePhase.ARRIVED else FlightOutcome.LANDED_EARLY
+            self._set(agent, DronePhase.LANDING, reason, level)
+            agent.landing_until_s = self.clock() + self.land_s + self.land_settle_s
+            if self.backend.land(agent.name, 0.0, self.land_s):
+                return True
+            self.events.emit(ERROR, "error", "land command failed: emergency stop", agent.name)
+            self._emergency(agent)
+            return False
+
+    def land_all(self, reason: str, level: int = INFO) -> None:
+        for agent in self.agents.values():
+            self.land(agent, reason, level)
+
+    def confirm_touchdown(self, agent: DroneAgent, now_s: float, pose_z: Optional[float], pose_fresh: bool,
+                          state: Optional[DroneState]) -> bool:
+        """A landing drone is down when its (fresh) mocap height is near the floor and its supervisor no longer says
+        flying; only then is it disarmed (disarming in flight cuts the motors). With mocap lost, the on-board
+        estimate's height stands in for it. Late confirmation is an event (once), never a disarm."""
+        with self._locks[agent.name]:
+            if agent.phase != DronePhase.LANDING or agent.landing_until_s is None or now_s < agent.landing_until_s:
+                return False
+            if pose_fresh and pose_z is not None:
+                low = pose_z - self.floor_z < ON_FLOOR_Z_M
+            else:
+                estimate = state.position_m if state is not None else None
+                low = estimate is not None and estimate[2] - self.floor_z < ON_FLOOR_Z_M
+            flying = state is None or state.supervisor is None or state.supervisor.flying
+            if low and not flying:
+                self.backend.arm(agent.name, False)
+                self._set(agent, DronePhase.LANDED)
+                return True
+            if now_s > agent.landing_until_s + TOUCHDOWN_TIMEOUT_S and agent.name not in self._touchdown_late:
+                self._touchdown_late.add(agent.name)
+                why = "its height is not near the floor" if not low else "its supervisor still says flying"
+                self.events.emit(ERROR, "touchdown", f"touchdown not confirmed {TOUCHDOWN_TIMEOUT_S:.0f} s after "
+                                 f"landing ({why}): not disarmed", agent.name)
+            return False
+
+    def _emergency(self, agent: DroneAgent) -> None:
+        self.backend.emergency_stop(agent.name)
+        if agent.phase.airborne or agent.phase == DronePhase.READY:
+            agent.outcome = FlightOutcome.EMERGENCY
+            agent.set_phase(DronePhase.EMERGENCY, self.clock(), "emergency stop")
+
+    def emergency_stop(self, reason: str, names: Optional[Iterable[str]] = None) -> None:
+        """Motors off now (latched until reboot), from any thread but a signal handler (it does radio I/O). It takes
+        no drone lock first: a drone whose link is blocked must not delay the stop of the others; the phase is set
+        after the packets went out."""
+        targets = [self.agents[n] for n in names] if names is not None else list(self.agents.values())
+        if names is None:
+            failures = dict(self.backend.emergency_stop(None))
+        else:
+            failures = {}
+            for agent in targets:
+                failures.update(self.backend.emergency_stop(agent.name))
+        for agent in targets:
+            with self._locks[agent.name]:
+                if agent.phase.airborne or agent.phase == DronePhase.READY:
+                    agent.outcome = FlightOutcome.EMERGENCY
+                    agent.set_phase(DronePhase.EMERGENCY, self.clock(), reason)
+        self.events.emit(FATAL, "emergency", reason)
+        for name, why in failures.items():
+            self.events.emit(FATAL, "emergency", why, name)

@@ -1,0 +1,139 @@
+"""The flight's ways out under faults, on simulated drones through the real stack: a stuck loop, an interrupt, an
+emergency stop asked for while a radio send is in progress, a drone whose link is lost. Each of these once left a
+drone flying or cut its motors in the air."""
+
+from __future__ import annotations
+
+import _thread
+import threading
+import time
+
+import pytest
+
+from rpf_fly.flight.phases import FlightOutcome
+from rpf_fly.flight.watchdog import LoopWatchdog, stall_timeout_s
+from flight_harness import default_factory, fly
+
+
+def landed(snapshot) -> bool:  # type: ignore[no-untyped-def]
+    return snapshot.position[2] < 0.05 and not snapshot.motors_on
+
+
+def event_time_ns(flight, text: str) -> int:  # type: ignore[no-untyped-def]
+    for m in flight.log.messages("/events"):
+        if text in m.data["message"]:
+            return m.log_time
+    raise AssertionError(f"no event with {text!r}")
+
+
+def test_a_loop_stall_lands_every_drone_and_the_landing_stands(tmp_path, short_mission):
+    """A planner call that blocks the loop for 1 s: the watchdog lands every drone through the commander, and when
+    the loop comes back it streams no setpoint to a drone that was told to land (a streamed setpoint would override
+    the high-level landing and the drone would fly on, unplanned)."""
+    base = default_factory(short_mission)
+
+    class Hanging:
+        def __init__(self, planner):  # type: ignore[no-untyped-def]
+            self.planner, self.calls = planner, 0
+
+        def step(self, view):  # type: ignore[no-untyped-def]
+            self.calls += 1
+            if self.calls == 10:
+                time.sleep(1.0)
+            return self.planner.step(view)
+
+    factory = lambda drone: Hanging(base(drone)) if drone.name == "cf2" else base(drone)  # noqa: E731
+    flight = fly(short_mission, tmp_path, factory=factory)
+    stalled = event_time_ns(flight, "flight loop stalled")
+    for name in ("cf1", "cf2", "cf3"):
+        late = [m for m in flight.log.messages(f"/{name}/setpoint") if m.log_time > stalled]
+        assert late == [], f"{name}: {len(late)} setpoints streamed after the watchdog landed it"
+        assert flight.report.outcomes[name] == FlightOutcome.LANDED_EARLY
+    assert all(landed(s) for s in flight.snapshots.values())
+    assert [e.level for e in flight.events("loop")] == [5]
+
+
+def test_the_watchdog_rearms_after_a_stall_and_follows_the_rate():
+    assert stall_timeout_s(0.1) == pytest.approx(0.35)
+    assert stall_timeout_s(0.125) == pytest.approx(0.375)
+    stalls = []
+    watchdog = LoopWatchdog(lambda: stalls.append(time.monotonic()), 0.1)
+    watchdog.start()
+    try:
+        watchdog.arm(True)
+        time.sleep(0.3)
+        assert len(stalls) == 1  # once a stall
+        for _ in range(10):
+            watchdog.beat()
+            time.sleep(0.02)
+        time.sleep(0.3)
+        assert len(stalls) == 2  # and again after the loop ticked again
+    finally:
+        watchdog.close()
+
+
+def test_a_keyboard_interrupt_in_library_use_lands_every_drone(tmp_path, short_mission):
+    """Python's own SIGINT handling (a library user's script): the first Ctrl-C lands, it does not cut motors."""
+    flight = fly(short_mission, tmp_path, when_flying=lambda loop, rig: (time.sleep(0.5), _thread.interrupt_main()))
+    assert flight.report.interrupted and not flight.events("emergency")
+    assert all(o == FlightOutcome.LANDED_EARLY for o in flight.report.outcomes.values())
+    assert all(landed(s) for s in flight.snapshots.values())
+    assert flight.events("interrupt")
+
+
+def test_an_emergency_stop_asked_during_a_radio_send_does_not_wait_for_it(tmp_path, short_mission):
+    """The second Ctrl-C's handler runs on the thread it interrupted, which may be inside cflib's send_packet
+    holding the send lock: the handler must only set flags (radio I/O there would deadlock), and another thread
+    stops the motors."""
+    returned_after: list[float] = []
+
+    def second_ctrl_c(loop, rig):  # type: ignore[no-untyped-def]
+        time.sleep(0.5)
+        cf = loop.backend._drones["cf1"].scf.cf  # noqa: SLF001 - the send lock a real handler could interrupt
+        with cf._send_lock:  # noqa: SLF001
+            started = time.monotonic()
+            loop.emergency_stop("second Ctrl-C (test)")
+            returned_after.append(time.monotonic() - started)
+            time.sleep(0.3)
+
+    flight = fly(short_mission, tmp_path, when_flying=second_ctrl_c)
+    assert returned_after and returned_after[0] < 0.05, returned_after
+    assert all(o == FlightOutcome.EMERGENCY for o in flight.report.outcomes.values())
+    assert all(not s.motors_on and s.emergency_stop_latched for s in flight.snapshots.values())
+
+
+def test_a_lost_link_drone_stays_in_the_others_views_until_it_is_down(tmp_path, short_mission):
+    """cf3's link drops: its firmware hovers, levels out at 0.5 s and falls at 2 s. Until mocap shows it on the
+    floor it is still in cf2's view (before, it vanished from every view at once, still in the air)."""
+    base = default_factory(short_mission)
+    seen: list[tuple[float, int]] = []  # (time, neighbours in cf2's view)
+
+    class Probe:
+        """cf2's own planner, with a record of the view it was given."""
+
+        def __init__(self, planner):  # type: ignore[no-untyped-def]
+            self.planner = planner
+
+        def step(self, view):  # type: ignore[no-untyped-def]
+            seen.append((time.monotonic(), int(sum(bool(m) for m in view.neighbour_mask))))
+            return self.planner.step(view)
+
+    dropped_at: list[float] = []
+
+    def drop(loop, rig):  # type: ignore[no-untyped-def]
+        time.sleep(1.0)
+        rig.world.drop_link(rig.addresses["cf3"])
+        dropped_at.append(time.monotonic())
+
+    factory = lambda drone: Probe(base(drone)) if drone.name == "cf2" else base(drone)  # noqa: E731
+    flight = fly(short_mission, tmp_path, factory=factory, when_flying=drop)
+    assert flight.report.outcomes["cf3"] == FlightOutcome.LINK_LOST
+    # cflib declares the link lost after 100 lost acks (~0.2 s); cf3 falls 2 s after its last setpoint.
+    soon = [n for t, n in seen if dropped_at[0] + 0.3 < t < dropped_at[0] + 1.5]
+    assert soon and all(n == 2 for n in soon), soon
+    late = [n for t, n in seen if t > dropped_at[0] + 3.5]
+    assert late and all(n == 1 for n in late), late  # on the floor: out of the way
+    assert flight.report.outcomes["cf1"] == flight.report.outcomes["cf2"] == FlightOutcome.REACHED
+    # cf3's rows after the loss are logged too (schema mode link_lost), and the log dropped and failed nothing.
+    assert any(m.data["mode"] == "link_lost" for m in flight.log.messages("/cf3/planner"))
+    assert flight.report.log_dropped == 0 and flight.report.log_failed == 0

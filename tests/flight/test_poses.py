@@ -1,0 +1,80 @@
+"""PoseTracker: velocities from mocap samples, and pose glitches (a marker swap) refused instead of followed."""
+
+from __future__ import annotations
+
+import pytest
+
+from rpf_fly.flight.poses import REACQUIRE_S, PoseTracker
+from rpf_fly.mocap.frame import MocapFrame, RigidBodyPose
+
+RATE_HZ = 100.0
+
+
+def frame(n: int, position: tuple[float, float, float], valid: bool = True) -> MocapFrame:
+    t = n / RATE_HZ
+    body = RigidBodyPose("cf1", 1, position, (0.0, 0.0, 0.0, 1.0), valid)
+    return MocapFrame(n, t, t, None, {"cf1": body})
+
+
+def fly_along_x(tracker: PoseTracker, start: int, stop: int, speed: float = 0.5) -> None:
+    for n in range(start, stop):
+        tracker.update(frame(n, (speed * n / RATE_HZ, 0.0, 1.0)))
+
+
+def test_smooth_motion_is_followed_with_its_velocity():
+    tracker = PoseTracker({"cf1": "cf1"})
+    fly_along_x(tracker, 0, 50)
+    pose = tracker.get("cf1")
+    assert pose.valid and pose.position[0] == pytest.approx(0.245)
+    assert pose.velocity.real == pytest.approx(0.5, abs=0.02)
+    assert not tracker.glitching and not tracker.glitches
+
+
+def test_a_marker_swap_is_refused_and_the_track_taken_back_when_it_ends():
+    tracker = PoseTracker({"cf1": "cf1"})
+    fly_along_x(tracker, 0, 50)
+    for n in range(50, 80):  # 0.3 s with the body reported 0.6 m away
+        tracker.update(frame(n, (0.5 * n / RATE_HZ + 0.6, 0.0, 1.0)))
+        assert "cf1" in tracker.glitching
+        pose = tracker.get("cf1")
+        assert not pose.valid and pose.position[0] == pytest.approx(0.245)  # frozen at the last good sample
+    assert tracker.glitches["cf1"] == 30
+    fly_along_x(tracker, 80, 90)
+    pose = tracker.get("cf1")
+    assert "cf1" not in tracker.glitching and pose.valid and pose.position[0] == pytest.approx(0.445)
+
+
+def test_a_jump_that_stays_is_taken_as_the_drone_after_reacquire_s():
+    tracker = PoseTracker({"cf1": "cf1"})
+    fly_along_x(tracker, 0, 50)
+    held = int(REACQUIRE_S * RATE_HZ)
+    for n in range(50, 50 + held + 1):
+        tracker.update(frame(n, (2.0, 1.0, 1.0)))
+    assert "cf1" not in tracker.glitching
+    pose = tracker.get("cf1")
+    assert pose.valid and pose.position == (2.0, 1.0, 1.0) and pose.velocity == 0j
+
+
+def test_frames_received_in_a_burst_are_judged_on_their_capture_times():
+    """Frames delayed by a loaded host arrive back to back: 0.1 m apart in capture time 0.2 s, in receive time
+    1 ms. That is motion, not a jump."""
+    tracker = PoseTracker({"cf1": "cf1"})
+    fly_along_x(tracker, 0, 50)
+    late = MocapFrame(70, 0.70, 0.491, None, {"cf1": RigidBodyPose("cf1", 1, (0.35, 0.0, 1.0), (0.0, 0.0, 0.0, 1.0), True)})
+    tracker.update(late)
+    assert not tracker.glitches and tracker.get("cf1").position[0] == 0.35
+
+
+def test_a_fall_and_a_reappearance_after_occlusion_are_not_glitches():
+    tracker = PoseTracker({"cf1": "cf1"})
+    z = 1.0
+    for n in range(0, 45):  # free fall from 1 m: 4.4 m/s at the floor
+        t = n / RATE_HZ
+        z = max(1.0 - 0.5 * 9.81 * t * t, 0.0)
+        tracker.update(frame(n, (0.0, 0.0, z)))
+    assert not tracker.glitches
+    tracker.update(frame(45, (0.0, 0.0, 0.0), valid=False))
+    for n in range(46, 100):
+        tracker.update(frame(n, (0.0, 0.0, 0.0), valid=False))
+    tracker.update(frame(100, (0.3, 0.0, 0.0)))  # moved 0.3 m while hidden for 0.55 s: possible
+    assert not tracker.glitches and tracker.get("cf1").position == (0.3, 0.0, 0.0)

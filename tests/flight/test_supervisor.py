@@ -1,0 +1,102 @@
+"""Supervisor checks on real flight objects (agents, the pose tracker, backend states): what a finding is, when it
+fires, and when a hold ends."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+from rpf_fly.flight.agent import DroneAgent
+from rpf_fly.flight.phases import DronePhase
+from rpf_fly.flight.poses import PoseTracker
+from rpf_fly.flight.supervisor import LOW_BATTERY_SAMPLES, TELEMETRY_STALE_S, Supervisor
+from rpf_fly.mission import parse_mission
+from rpf_fly.mocap.frame import MocapFrame, RigidBodyPose
+from rpf_fly.radio.backend import BatteryState, DroneState, LinkState, PmState, SupervisorState
+from rpf_fly.sim.scenario import obstacle_set
+from flight_harness import SHORT_MISSION
+
+
+def setup(mission_text: str = SHORT_MISSION):  # type: ignore[no-untyped-def]
+    mission = parse_mission(mission_text)
+    agents = {d.name: DroneAgent(d, None, height=0.5, speed=0.5, dt=0.1, arena=mission.arena, budget_s=1.0)  # type: ignore[arg-type]
+              for d in mission.drones}
+    for agent in agents.values():
+        agent.set_phase(DronePhase.PLANNING, 0.0)
+    tracker = PoseTracker({d.name: d.rigid_body for d in mission.drones})
+    return mission, agents, tracker, Supervisor(mission, obstacle_set(mission.obstacles))
+
+
+def see(tracker: PoseTracker, n: int, t: float, positions: dict[str, tuple[float, float, float]]) -> None:
+    bodies = {name: RigidBodyPose(name, i, p, (0.0, 0.0, 0.0, 1.0), True) for i, (name, p) in enumerate(positions.items())}
+    tracker.update(MocapFrame(n, t, t, None, bodies))
+
+
+def state(name: str, t: float, vbat: float = 3.9, up: bool = True) -> DroneState:
+    return DroneState(name, "fake://0/80/2M/E7E7E7E701", LinkState(up), BatteryState(vbat, PmState.BATTERY),
+                      SupervisorState(0x0018), (0.0, 0.0, 0.5), t)
+
+
+POSITIONS = {"cf1": (-1.0, -0.6, 0.5), "cf2": (-1.0, 0.0, 0.5), "cf3": (-1.0, 0.6, 0.5)}
+
+
+def test_one_low_battery_sample_does_not_land_a_drone_but_consecutive_ones_do():
+    _, agents, tracker, supervisor = setup()
+    see(tracker, 1, 0.0, POSITIONS)
+    limit_under = 3.0  # below min_battery_v (3.7) - 0.4 V of sag
+    states = {n: state(n, 0.0) for n in agents}
+    states["cf1"] = state("cf1", 0.0, vbat=limit_under)  # a thrust peak
+    assert not [f for f in supervisor.check(0.0, agents.values(), tracker, states) if f.kind == "battery"]
+    states["cf1"] = state("cf1", 0.1)
+    assert not [f for f in supervisor.check(0.1, agents.values(), tracker, states) if f.kind == "battery"]
+    found = []
+    for k in range(LOW_BATTERY_SAMPLES):
+        t = 0.2 + 0.1 * k
+        see(tracker, 2 + k, t, POSITIONS)
+        states = {n: state(n, t) for n in agents}
+        states["cf1"] = state("cf1", t, vbat=limit_under)
+        for _ in range(3):  # the loop runs faster than telemetry: the same sample is counted once
+            found += [f for f in supervisor.check(t, agents.values(), tracker, states) if f.kind == "battery"]
+        assert bool(found) == (k == LOW_BATTERY_SAMPLES - 1)
+    assert [(f.drone, f.response) for f in found] == [("cf1", "land")]
+
+
+def test_stale_telemetry_of_a_linked_drone_is_an_event():
+    _, agents, tracker, supervisor = setup()
+    see(tracker, 1, 0.0, POSITIONS)
+    states = {n: state(n, 0.0) for n in agents}
+    assert not [f for f in supervisor.check(0.5, agents.values(), tracker, states) if f.kind == "telemetry"]
+    see(tracker, 2, TELEMETRY_STALE_S + 0.1, POSITIONS)
+    states["cf1"] = state("cf1", TELEMETRY_STALE_S + 0.1)
+    states["cf2"] = state("cf2", TELEMETRY_STALE_S + 0.1)
+    found = [f for f in supervisor.check(TELEMETRY_STALE_S + 0.1, agents.values(), tracker, states) if f.kind == "telemetry"]
+    assert [(f.drone, f.level) for f in found] == [("cf3", 3)]
+    again = [f for f in supervisor.check(TELEMETRY_STALE_S + 0.2, agents.values(), tracker, states) if f.kind == "telemetry"]
+    assert again == []  # edge-triggered
+
+
+def test_a_separation_hold_resumes_when_the_pair_is_clear_again():
+    mission_text = SHORT_MISSION.replace("planner: {kind: apf}", "planner: {kind: apf}\nsafety: {on_separation: hold}")
+    _, agents, tracker, supervisor = setup(mission_text)
+    close = dict(POSITIONS, cf2=(-1.0, -0.45, 0.5))  # 0.15 m from cf1 < 2r = 0.2 m
+    see(tracker, 1, 0.0, close)
+    states = {n: state(n, 0.0) for n in agents}
+    holds = [f for f in supervisor.check(0.0, agents.values(), tracker, states) if f.kind == "separation"]
+    assert {(f.drone, f.response) for f in holds} == {("cf1", "hold"), ("cf2", "hold")}
+    see(tracker, 2, 0.5, POSITIONS)
+    states = {n: state(n, 0.5) for n in agents}
+    resumed = [f for f in supervisor.check(0.5, agents.values(), tracker, states) if f.kind == "separation"]
+    assert {(f.drone, f.response) for f in resumed} == {("cf1", "resume"), ("cf2", "resume")}
+
+
+def test_a_drone_nobody_commands_stays_in_the_separation_check_until_it_is_on_the_floor():
+    _, agents, tracker, supervisor = setup()
+    agents["cf2"].set_phase(DronePhase.LINK_LOST, 0.0)
+    hovering = dict(POSITIONS, cf1=(-1.0, -0.1, 0.5))  # cf1 0.1 m from the lost cf2, still in the air
+    see(tracker, 1, 0.0, hovering)
+    states = {n: state(n, 0.0) for n in agents}
+    found = [f for f in supervisor.check(0.0, agents.values(), tracker, states) if f.kind == "separation"]
+    assert [f.drone for f in found] == ["cf1"] and "cf2" in found[0].message
+    fallen = dict(hovering, cf2=(-1.0, 0.0, 0.02))
+    see(tracker, 2, 0.4, fallen)
+    found = [f for f in supervisor.check(0.4, agents.values(), tracker, states) if f.kind == "separation"]
+    assert found == []
