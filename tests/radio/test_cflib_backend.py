@@ -324,7 +324,7 @@ def test_reset_estimator_to_the_mocap_pose_cures_the_yaw_error(make_world: MakeW
     position, _ = world.true_poses()[address(0)]
     start = time.monotonic()
     assert backend.reset_estimator("cf0", position, math.radians(FACING_DEG))
-    assert time.monotonic() - start < 0.5  # five confirmed writes, no wait for the variance
+    assert time.monotonic() - start < 2.0  # five confirmed writes (ms), no 5 s wait for the variance
     params = world.snapshot(address(0)).params
     assert params["kalman.initialYaw"] == pytest.approx(math.radians(FACING_DEG), rel=1e-6)
     assert (params["kalman.initialX"], params["kalman.initialY"], params["kalman.initialZ"]) == pytest.approx(
