@@ -5,9 +5,10 @@ own thread at a fixed rate; the backend reports per-drone problems in return val
 raises one drone's failure across the swarm.
 
 Units everywhere: positions in metres in the world frame (right-handed, Z up), durations in seconds, battery in
-volts, yaw in DEGREES for setpoints (as cflib's `send_position_setpoint`) and for `go_to`, link latency in
-milliseconds, link quality in percent (0-100, the share of radio packets acknowledged without retries, as cflib
-computes it).
+volts, yaw in DEGREES for setpoints (as cflib's `send_position_setpoint`), for `go_to` and in
+`DroneState.yaw_deg` (as the firmware logs `stateEstimate.yaw`) but in RADIANS for `reset_estimator` (as the
+firmware's `kalman.initialYaw`), link latency in milliseconds, link quality in percent (0-100, the share of radio
+packets acknowledged without retries, as cflib computes it).
 
 Implementations: `rpf_fly.radio.cflib_backend.CflibBackend` (cflib over `radio://` or the fake radio `fake://`).
 """
@@ -141,6 +142,9 @@ class DroneState:
     """Estimated position (`stateEstimate.x/y/z`) in metres; None until the first status log packet."""
     telemetry_stamp_s: float | None
     """`time.monotonic()` when the last status log packet arrived (10 Hz by default); None if none yet."""
+    yaw_deg: float | None = None
+    """Estimated yaw (`stateEstimate.yaw`) in DEGREES, as the firmware logs it; None until the first status log
+    packet. Compare it with the mocap's yaw before take-off: position-only extpos never corrects it."""
 
 
 @runtime_checkable
@@ -221,6 +225,13 @@ class DroneBackend(Protocol):
 
     def send_extpose(self, name: str, position: Vec3, quaternion: Quaternion) -> bool:
         """Forward a motion-capture pose (metres, unit quaternion qx, qy, qz, qw) to the drone's estimator."""
+        ...
+
+    def reset_estimator(self, name: str, position: Vec3, yaw_rad: float) -> bool:
+        """Restart the drone's estimate at `position` (metres) and yaw `yaw_rad` (RADIANS, as the firmware's
+        `kalman.initialYaw`), typically its mocap pose before take-off: with position-only extpos the yaw estimate
+        is otherwise wherever the estimator started. Blocks only for the parameter confirmations, not for the
+        estimate to settle. False when the drone is unreachable or a write is not confirmed."""
         ...
 
     def battery(self, name: str) -> BatteryState | None:

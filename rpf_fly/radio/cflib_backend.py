@@ -8,8 +8,10 @@ What it does per drone (cflib 0.1.34, firmware protocol 12):
 - configure: `stabilizer.estimator` = 2 (Kalman), `commander.enHighLevel` = 1 (when the firmware still has it),
   `locSrv.extQuatStdDev` when streaming poses, `locSrv.extPosStdDev` if given; each write is confirmed by the
   firmware's echo;
-- telemetry: one `LogConfig` at 10 Hz with `pm.vbat`, `pm.state`, `supervisor.info`, `stateEstimate.x/y/z`; link
-  quality and latency from `cf.link_statistics`;
+- telemetry: one `LogConfig` at 10 Hz with `pm.vbat`, `pm.state`, `supervisor.info`, `stateEstimate.x/y/z` and
+  `stateEstimate.yaw` (degrees); link quality and latency from `cf.link_statistics`;
+- estimator: `reset_estimator` sets `kalman.initialX/Y/Z/Yaw` (from mocap) and triggers `kalman.resetEstimation`
+  without waiting for the variance; `reset_estimators` resets and waits until the variance settles;
 - commands: supervisor arming, high-level take-off / go-to / land / stop, streamed position setpoints (yaw in
   degrees) with `send_notify_setpoint_stop` at every hand-over back to the high-level commander, extpos / extpose,
   supervisor emergency stop (cflib falls back to the localization emergency stop for firmware older than protocol
@@ -72,8 +74,12 @@ STATUS_VARIABLES: tuple[tuple[str, str], ...] = (
     ("stateEstimate.x", "float"),
     ("stateEstimate.y", "float"),
     ("stateEstimate.z", "float"),
+    ("stateEstimate.yaw", "float"),
 )
-"""The status log block (19 bytes, fits one log packet)."""
+"""The status log block (23 bytes; one log packet carries 26 bytes of values)."""
+
+INITIAL_STATE_PARAMS: tuple[str, ...] = ("kalman.initialX", "kalman.initialY", "kalman.initialZ", "kalman.initialYaw")
+"""The Kalman estimator's initial state (metres, radians), used at its next reset."""
 
 ESTIMATOR_KALMAN = 2
 VARIANCE_THRESHOLD_M2 = 0.001
@@ -100,6 +106,7 @@ class _Drone:
     pm_state: int | None = None
     sup_bits: int | None = None
     position: Vec3 | None = None
+    yaw_deg: float | None = None
     stamp_s: float | None = None
     streaming: bool = False
     last_setpoint: tuple[float, float, float, float] | None = None
@@ -337,6 +344,36 @@ class CflibBackend:
             config.stop()
             config.delete()
 
+    def reset_estimator(self, name: str, position: Vec3, yaw_rad: float) -> bool:
+        """Restart one drone's Kalman estimate at `position` (metres) and `yaw_rad` (radians), e.g. its mocap pose.
+
+        Why: position-only extpos does not observe yaw, so the yaw estimate stays where the estimator started
+        (`kalman.initialYaw`, 0 at power-on); a drone facing elsewhere flies off under position control. Writes
+        `kalman.initialX/Y/Z/Yaw`, each confirmed by the firmware's echo, then `kalman.resetEstimation` = 1 (the
+        firmware resets at its next estimator step and clears the flag itself). Blocks only for those five
+        confirmations (milliseconds; `param_timeout_s` each at worst), not for the variance to settle: keep
+        streaming extpos, which the estimator takes almost whole after the reset. Takes no command lock, so the
+        drone's setpoints and extpos keep flowing meanwhile. Returns False when the link is down, a value is not
+        finite, or a write is not confirmed; never raises for a known drone."""
+        try:
+            values = tuple(float(v) for v in (*position, yaw_rad))
+        except (TypeError, ValueError):
+            values = ()
+        if len(values) != 4 or not all(math.isfinite(v) for v in values):
+            logger.warning("drone %s: estimator reset refused: %r, %r", name, position, yaw_rad)
+            return False
+        cf = self._live_cf(name)
+        if cf is None:
+            return False
+        try:
+            for param, value in zip(INITIAL_STATE_PARAMS, values):
+                self._set_param(cf, param, value)
+            self._set_param(cf, "kalman.resetEstimation", 1)
+        except Exception as exc:  # one drone's failure must not propagate
+            logger.warning("drone %s: estimator reset failed: %s", name, exc)
+            return False
+        return True
+
     def close(self) -> None:
         """Close every link (on the ground only: cflib sends a zero-thrust setpoint when closing)."""
         with self._lock:
@@ -370,6 +407,7 @@ class CflibBackend:
             drone.sup_bits = int(data["supervisor.info"])
             drone.position = (float(data["stateEstimate.x"]), float(data["stateEstimate.y"]),
                               float(data["stateEstimate.z"]))
+            drone.yaw_deg = float(data["stateEstimate.yaw"])
             drone.stamp_s = time.monotonic()
         drone.first_status.set()
 
@@ -428,6 +466,7 @@ class CflibBackend:
                 supervisor=SupervisorState(d.sup_bits) if d.sup_bits is not None else None,
                 position_m=d.position,
                 telemetry_stamp_s=d.stamp_s,
+                yaw_deg=d.yaw_deg,
             )
 
     def states(self) -> dict[str, DroneState]:

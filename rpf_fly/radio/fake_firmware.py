@@ -50,9 +50,9 @@ _LOG_VARIABLES: tuple[tuple[str, str, Callable[[FakeFirmware], float]], ...] = (
     ("stateEstimate.x", "float", lambda f: f.vehicle.estimate[0]),
     ("stateEstimate.y", "float", lambda f: f.vehicle.estimate[1]),
     ("stateEstimate.z", "float", lambda f: f.vehicle.estimate[2]),
-    ("stateEstimate.vx", "float", lambda f: f.vehicle.vel[0]),
-    ("stateEstimate.vy", "float", lambda f: f.vehicle.vel[1]),
-    ("stateEstimate.vz", "float", lambda f: f.vehicle.vel[2]),
+    ("stateEstimate.vx", "float", lambda f: f.vehicle.estimate_velocity[0]),
+    ("stateEstimate.vy", "float", lambda f: f.vehicle.estimate_velocity[1]),
+    ("stateEstimate.vz", "float", lambda f: f.vehicle.estimate_velocity[2]),
     ("stateEstimate.roll", "float", lambda f: 0.0),
     ("stateEstimate.pitch", "float", lambda f: 0.0),
     ("stateEstimate.yaw", "float", lambda f: math.degrees(f.vehicle.estimate_yaw)),
@@ -135,6 +135,8 @@ class FirmwareSnapshot:
     velocity: tuple[float, float, float]
     yaw_deg: float
     estimate: tuple[float, float, float]
+    estimate_yaw_deg: float
+    """The estimator's yaw (`stateEstimate.yaw`); `yaw_deg` is the true one."""
     setpoint_source: str
     setpoint_position: tuple[float, float, float]
     control_source: str
@@ -163,13 +165,16 @@ class FakeFirmware:
     vehicle: Vehicle
     rssi: int
 
-    def __init__(self, config: VehicleConfig | None = None, *, now_s: float = 0.0, rssi: int = 35) -> None:
+    def __init__(self, config: VehicleConfig | None = None, *, now_s: float = 0.0, rssi: int = 35,
+                 seed: int = 0) -> None:
+        """`seed` draws the drone's IMU bias and noise (`fake_vehicle`): give each drone of a world its own."""
         self.config = config or VehicleConfig()
         self.rssi = rssi
+        self.seed = seed
         self._lock = threading.RLock()
         self._boot_s = now_s
         self._now_s = now_s
-        self.vehicle = Vehicle(self.config, now_s)
+        self.vehicle = Vehicle(self.config, now_s, seed)
         self._params: dict[str, float] = dict(_PARAM_DEFAULTS)
         self._blocks: dict[int, _LogBlock] = {}
         self._counts: Counter[tuple[int, int]] = Counter()
@@ -183,14 +188,15 @@ class FakeFirmware:
         return self.vehicle.powered
 
     def reboot(self, now_s: float) -> None:
-        """Power-cycle: a new flight stack on the floor where the drone is, same battery, default parameters."""
+        """Power-cycle: a new flight stack on the floor where the drone is, same battery and IMU, default
+        parameters (so the estimator restarts at `kalman.initialX/Y/Z/Yaw` = 0)."""
         with self._lock:
             vbat = self.vehicle.battery.open_v
             x, y = self.vehicle.pos[0], self.vehicle.pos[1]
             floor = self.vehicle.floor_z
             yaw = math.degrees(self.vehicle.yaw)
             self.config = VehicleConfig((x, y, floor), yaw, vbat, self.config.auto_arm, self.config.positioning)
-            self.vehicle = Vehicle(self.config, now_s)
+            self.vehicle = Vehicle(self.config, now_s, self.seed)
             self._params = dict(_PARAM_DEFAULTS)
             self._blocks.clear()
             self._boot_s = self._now_s = now_s
@@ -257,6 +263,7 @@ class FakeFirmware:
                 velocity=(v.vel[0], v.vel[1], v.vel[2]),
                 yaw_deg=math.degrees(v.yaw),
                 estimate=v.estimate,
+                estimate_yaw_deg=math.degrees(v.estimate_yaw),
                 setpoint_source=v.setpoint.source,
                 setpoint_position=v.setpoint.position,
                 control_source=v.control_setpoint.source,
@@ -439,7 +446,9 @@ class FakeFirmware:
             v.param_emergency_stop = bool(value)
         elif full_name == "locSrv.extPosStdDev":
             v.ext_pos_std_dev = float(value)
-        elif full_name.startswith("kalman.initial") and full_name != "kalman.initialYaw":
+        elif full_name == "kalman.initialYaw":  # used at the next reset, as in the firmware
+            v.initial_yaw = float(value)
+        elif full_name.startswith("kalman.initial"):
             v.initial_estimate = (self._params["kalman.initialX"], self._params["kalman.initialY"],
                                   self._params["kalman.initialZ"])
         elif full_name in ("posCtlPid.xVelMax", "posCtlPid.yVelMax"):

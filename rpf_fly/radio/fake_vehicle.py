@@ -3,24 +3,53 @@
 One `Vehicle.step(now_s)` runs the firmware's stabilizer loop in the firmware's order (estimator, high-level
 commander, commander, supervisor update, supervisor override, controller, motors), sub-stepped at 10 ms.
 
+Rule: a simulated Crazyflie is never kinder than a real one. Where the model simplifies, it does not simplify away
+a failure a real drone has (the yaw fly-away, drift without mocap).
+
 Dynamics (documented model, not physics):
-- The controller acts on the *estimate* (true position + estimator error), as the real one does, so an external
-  position that disagrees with the truth moves the true drone.
+- The controller acts on the *estimate* (position, velocity, yaw), as the real one does, so an external position
+  that disagrees with the truth moves the true drone.
 - Absolute position axes track the setpoint with a first-order lag of time constant `TRACK_TAU_S` (0.25 s), plus the
   setpoint's velocity feed-forward (high-level trajectories carry one, plain position setpoints do not). Velocity is
   limited per axis to the firmware's `posCtlPid.x/y/zVelMax` (1 m/s) times its 1.1 overhead.
-- Velocity axes reach the commanded velocity with the same time constant. Disabled horizontal axes (level attitude:
-  the watchdog's "level out", attitude-only setpoints) keep their velocity, decaying with `DRAG_TAU_S` (1 s).
-- Yaw tracks like position (time constant `TRACK_TAU_S`) or integrates a yaw rate.
+- Velocity axes bring the *estimated* velocity to the commanded one with the same time constant. Disabled horizontal
+  axes (level attitude: the watchdog's "level out", attitude-only setpoints) keep their velocity, decaying with
+  `DRAG_TAU_S` (1 s).
+- The controller works in its estimated frame: the horizontal velocity it commands (position axes) or aims at
+  (velocity axes) is realised through the true attitude, i.e. rotated by the yaw error (true minus estimated yaw)
+  in the true world. A small error bends the path (5 degrees: 1.6 cm sideways on a 0.5 m move); beyond 90 degrees
+  the position loop is unstable and the drone spirals away from its setpoint at up to the velocity limit (120
+  degrees: 2.7 m off after 3 s), the classic fly-away of a drone whose yaw estimate is wrong.
+- Yaw tracks a yaw setpoint on the *estimated* yaw (time constant `TRACK_TAU_S`) or integrates a yaw rate; the
+  estimate turns with the truth (an ideal gyro), so the yaw error stays what it was.
 - Motors off (null setpoint, supervisor forbids flying, power off): free fall at 9.81 m/s^2 onto the floor (the
   initial z), then rest. On the floor a drone cannot slide.
 
-Estimator: estimate = truth + offset. Each external position (extpos, extpose) sets the offset so the estimate
-equals the measurement at that instant; between measurements the estimate moves with the true motion (an ideal
-IMU). With `positioning="extpos"` the estimate starts at the `kalman.initialX/Y/Z` parameters (0, 0, 0) until the
-first measurement, and the position variance grows by 0.01 m^2/s while measurements are older than 0.5 s; with
-`"onboard"` (a Lighthouse-like onboard system) it starts at the truth. `kalman.resetEstimation` sets the variance to
-1 m^2, decaying to `locSrv.extPosStdDev`^2 with a 0.05 s time constant.
+Estimator with `positioning="extpos"` (a mocap drone; the Kalman estimator fed by CRTP 6:0 / 6:1):
+- Yaw: the estimate starts at `kalman.initialYaw` (radians, 0) at power-on and on `kalman.resetEstimation`, not at
+  the true yaw. Position-only extpos never corrects it; extpose sets it to the measured yaw.
+- Position: the estimate starts at `kalman.initialX/Y/Z` (0, 0, 0) at power-on and on reset, at rest, with variance
+  `VARIANCE_AFTER_RESET_M2` (1 m^2; velocity 0.01 (m/s)^2). Initial values written later act at the next reset.
+  Writing `kalman.resetEstimation` non-zero resets at once and the flag reads 0 again.
+- Between measurements the estimate integrates a biased, noisy IMU: each drone has a constant accelerometer bias of
+  norm `ACCEL_BIAS_M_S2` (0.08 m/s^2, direction drawn from the drone's seed) and white noise of
+  `ACCEL_NOISE_M_S2` (0.1 m/s^2) per 10 ms; both enter the velocity error, which enters the position error. With a
+  yaw error the true horizontal acceleration is integrated rotated by it (the IMU's body-frame reading turned into
+  the world by the wrong yaw). The estimate drifts on the ground too, as a real one does.
+- Each extpos or extpose is a Kalman update of a position-velocity filter, one covariance shared by the three axes:
+  predicted with the filter's process noise (velocity variance + `ACCEL_PROCESS_NOISE` = 1 (m/s)^2 a second),
+  gains k_pos = P_pp / (P_pp + s^2) and k_vel = P_pv / (P_pp + s^2) with s = `locSrv.extPosStdDev` (0.01 m). After
+  a reset or a blind spell P_pp is large and the next measurement is taken almost whole.
+- Measured (tests/radio/test_fake_firmware.py, `test_imu_drift_without_extpos_and_the_kalman_pull_back`; 40 seeds,
+  hovering): with extpos at 50 Hz the estimate stays within 0.3 mm of the truth; 1 s without extpos it is 3.2-6.1
+  cm off (median 4.5), 2 s without 12-21 cm (median 17), and the first extpos after that brings it back under 1 mm.
+  The controller holds the *estimate* on its setpoint, so the true drone drifts the other way.
+- `kalman.varPX/PY/PZ` is P_pp.
+With `"onboard"` (a Lighthouse-like onboard system that observes position and yaw): the estimate is the truth; an
+extpos sets a position offset that then moves with the truth (extpose also a yaw offset); a reset clears the
+offsets and sets the variance to 1 m^2, decaying to `locSrv.extPosStdDev`^2 with a 0.05 s time constant.
+Not modelled: gyro drift of the yaw estimate, tilt, outlier rejection, the weight of `locSrv.extQuatStdDev` (an
+extpose sets the yaw whole).
 
 Battery: open-circuit voltage drains 0.0002 V/s with motors off and 0.0017 V/s with motors on (a 250 mAh
 Crazyflie hovers about 7 minutes); `pm.vbat` sags 0.25 V under load. `pm.state` becomes low-power after 5 s below
@@ -32,6 +61,7 @@ from __future__ import annotations
 
 import logging
 import math
+import random
 from dataclasses import dataclass, replace
 
 from .fake_planner import HighLevelCommander
@@ -55,10 +85,21 @@ BATTERY_DRAIN_FLYING_V_PER_S = 0.0017
 BATTERY_SAG_V = 0.25
 BATTERY_LOW_DURATION_S = 5.0
 
-EXTPOS_STALE_S = 0.5
-VARIANCE_GROWTH_M2_PER_S = 0.01
+ACCEL_BIAS_M_S2 = 0.08
+"""Norm of each drone's constant accelerometer bias (seeded direction): 4 cm of drift after 1 s blind."""
+ACCEL_NOISE_M_S2 = 0.1
+"""Standard deviation of the accelerometer noise over one 10 ms sub-step."""
+_NOISE_PER_SUBSTEP = ACCEL_NOISE_M_S2 * SUBSTEP_S
+ACCEL_PROCESS_NOISE = 1.0
+"""The filter's process noise: its velocity variance grows by this many (m/s)^2 a second."""
 VARIANCE_AFTER_RESET_M2 = 1.0
+"""Position variance after a reset (and at power-on), m^2: the first external position is taken almost whole."""
+VELOCITY_VARIANCE_AFTER_RESET = 0.01
+"""Velocity variance after a reset, (m/s)^2: the drone is assumed at rest."""
+MAX_VARIANCE_M2 = 100.0
+"""Bound of the filter's variances (m^2 and (m/s)^2)."""
 VARIANCE_DECAY_TAU_S = 0.05
+"""Onboard positioning: time constant of the variance settling after a reset."""
 
 
 @dataclass(frozen=True)
@@ -68,12 +109,15 @@ class VehicleConfig:
     position: Vec3 = (0.0, 0.0, 0.0)
     """Initial true position in metres; its z is the floor."""
     yaw_deg: float = 0.0
+    """Initial true yaw in degrees. With "extpos" the yaw estimate starts at `kalman.initialYaw` (0) whatever this
+    is, so a drone set up facing away from +x has that yaw error (see the module doc)."""
     initial_vbat_v: float = 4.15
     """Open-circuit battery voltage at power-on (4.2 full, 3.7 nominal); lower it to inject a low battery."""
     auto_arm: bool = True
     """Crazyflie 2.x default; False mirrors firmware built with CONFIG_MOTORS_REQUIRE_ARMING (Brushless, Bolt)."""
     positioning: str = "onboard"
-    """"onboard" (estimate starts at the truth) or "extpos" (needs external positions, see module doc)."""
+    """"onboard" (an onboard system observing position and yaw: the estimate is the truth) or "extpos" (a mocap
+    drone: a Kalman-like estimate from extpos/extpose and a biased IMU, see the module doc)."""
 
     def __post_init__(self) -> None:
         if self.positioning not in ("onboard", "extpos"):
@@ -107,19 +151,37 @@ class Battery:
 
 
 class Vehicle:
-    """One simulated Crazyflie's flight stack and body. Not thread-safe: `FakeFirmware` serialises calls."""
+    """One simulated Crazyflie's flight stack and body. Not thread-safe: `FakeFirmware` serialises calls.
 
-    def __init__(self, config: VehicleConfig, now_s: float) -> None:
+    Estimator state (see the module docstring): `offset` and `vel_error` are the estimate's errors (estimate minus
+    truth) in position and velocity, `yaw_offset` its yaw error; `p_pp`, `p_pv`, `p_vv` the filter's covariance
+    of one axis (the same for all three: they are measured together and modelled alike)."""
+
+    def __init__(self, config: VehicleConfig, now_s: float, seed: int = 0) -> None:
         self.config = config
         self.pos: list[float] = [float(v) for v in config.position]
         self.vel: list[float] = [0.0, 0.0, 0.0]
         self.yaw = math.radians(config.yaw_deg)
         self.floor_z = float(config.position[2])
+        self.kalman = config.positioning == "extpos"
+        """True when the estimate is the mocap-fed filter; False for "onboard" (an ideal onboard system)."""
+        self._rng = random.Random(f"fake-imu-{seed}")
+        self.accel_bias: Vec3 = self._draw_bias() if self.kalman else (0.0, 0.0, 0.0)
+        """The accelerometer's constant bias in m/s^2 (world frame; norm `ACCEL_BIAS_M_S2`), per drone."""
         self.initial_estimate: Vec3 = (0.0, 0.0, 0.0)
-        self.offset: list[float] = self._reset_offset()
+        """`kalman.initialX/Y/Z`, metres."""
+        self.initial_yaw = 0.0
+        """`kalman.initialYaw`, radians."""
+        self.ext_pos_std_dev = 0.01
+        self.offset: list[float] = [0.0, 0.0, 0.0]
+        self.vel_error: list[float] = [0.0, 0.0, 0.0]
         self.yaw_offset = 0.0
+        self.p_pp = self.p_pv = self.p_vv = 0.0
+        self._onboard_variance_m2 = self.ext_pos_std_dev**2
+        self.reset_estimator()
+        self._onboard_variance_m2 = self.ext_pos_std_dev**2  # an onboard system is settled at power-on
         self.supervisor = Supervisor(auto_arm=config.auto_arm)
-        self.hl = HighLevelCommander(self.estimate, self.yaw)
+        self.hl = HighLevelCommander(self.estimate, self.estimate_yaw)
         self.priority = PRIORITY_DISABLE
         self.setpoint: Setpoint = null_setpoint(-math.inf)
         self.control_setpoint: Setpoint = self.setpoint
@@ -128,9 +190,7 @@ class Vehicle:
         self.z_vel_max = 1.0
         self.low_voltage_v = 3.2
         self.critical_voltage_v = 3.0
-        self.ext_pos_std_dev = 0.01
         self.param_emergency_stop = False
-        self.variance_m2 = self.ext_pos_std_dev**2
         self.last_extpos_s: float | None = None
         self.last_crtp_setpoint_s: float | None = None
         self.thrusting = False
@@ -139,10 +199,14 @@ class Vehicle:
 
     # Estimator ------------------------------------------------------------------------------------------------
 
-    def _reset_offset(self) -> list[float]:
-        if self.config.positioning == "extpos":
-            return [e - p for e, p in zip(self.initial_estimate, self.pos)]
-        return [0.0, 0.0, 0.0]
+    def _draw_bias(self) -> Vec3:
+        """A bias of norm `ACCEL_BIAS_M_S2` in a direction drawn from this drone's seed."""
+        while True:
+            x, y, z = (self._rng.gauss(0.0, 1.0) for _ in range(3))
+            norm = math.sqrt(x * x + y * y + z * z)
+            if norm > 1e-6:
+                scale = ACCEL_BIAS_M_S2 / norm
+                return (x * scale, y * scale, z * scale)
 
     @property
     def estimate(self) -> Vec3:
@@ -150,29 +214,83 @@ class Vehicle:
         return (self.pos[0] + self.offset[0], self.pos[1] + self.offset[1], self.pos[2] + self.offset[2])
 
     @property
+    def estimate_velocity(self) -> Vec3:
+        """Estimated velocity in m/s (world frame)."""
+        return (self.vel[0] + self.vel_error[0], self.vel[1] + self.vel_error[1], self.vel[2] + self.vel_error[2])
+
+    @property
     def estimate_yaw(self) -> float:
         """Estimated yaw in radians, wrapped."""
         return wrap_angle(self.yaw + self.yaw_offset)
+
+    @property
+    def variance_m2(self) -> float:
+        """Position variance of one axis (`kalman.varPX/PY/PZ`), m^2."""
+        return self.p_pp if self.kalman else self._onboard_variance_m2
 
     @property
     def powered(self) -> bool:
         return not self.battery.shutdown
 
     def external_position(self, position: Vec3, now_s: float) -> None:
-        """An external position measurement (metres)."""
-        self.offset = [m - p for m, p in zip(position, self.pos)]
+        """An external position measurement (metres): a Kalman update of position and velocity (module doc)."""
         self.last_extpos_s = now_s
+        if not self.kalman:
+            self.offset = [m - p for m, p in zip(position, self.pos)]
+            return
+        innovation_var = self.p_pp + self.ext_pos_std_dev**2
+        k_pos, k_vel = self.p_pp / innovation_var, self.p_pv / innovation_var
+        pos, offset, vel_error = self.pos, self.offset, self.vel_error
+        for axis in range(3):
+            innovation = position[axis] - pos[axis] - offset[axis]
+            offset[axis] += k_pos * innovation
+            vel_error[axis] += k_vel * innovation
+        self.p_vv -= k_vel * self.p_pv
+        self.p_pp *= 1.0 - k_pos
+        self.p_pv *= 1.0 - k_pos
 
     def external_pose(self, position: Vec3, quaternion: tuple[float, float, float, float], now_s: float) -> None:
-        """An external pose measurement (metres, quaternion qx, qy, qz, qw)."""
+        """An external pose measurement (metres, quaternion qx, qy, qz, qw): position as `external_position`; the
+        yaw estimate is set to the measured yaw."""
         self.external_position(position, now_s)
         self.yaw_offset = wrap_angle(yaw_from_quaternion(*quaternion) - self.yaw)
 
     def reset_estimator(self) -> None:
-        """`kalman.resetEstimation`: restart the estimate and its variance."""
-        self.offset = self._reset_offset()
-        self.yaw_offset = 0.0
-        self.variance_m2 = VARIANCE_AFTER_RESET_M2
+        """`kalman.resetEstimation` (and power-on): the estimate restarts at `kalman.initialX/Y/Z` and
+        `kalman.initialYaw`, at rest, with a large variance. An onboard system restarts at the truth."""
+        if self.kalman:
+            self.offset = [e - p for e, p in zip(self.initial_estimate, self.pos)]
+            self.vel_error = [-v for v in self.vel]
+            self.yaw_offset = wrap_angle(self.initial_yaw - self.yaw)
+            self.p_pp, self.p_pv, self.p_vv = VARIANCE_AFTER_RESET_M2, 0.0, VELOCITY_VARIANCE_AFTER_RESET
+        else:
+            self.offset = [0.0, 0.0, 0.0]
+            self.yaw_offset = 0.0
+            self._onboard_variance_m2 = VARIANCE_AFTER_RESET_M2
+
+    def _predict(self, dt: float, dv_x: float, dv_y: float) -> None:
+        """Integrate the IMU over one sub-step: bias and noise enter the velocity error, which enters the position
+        error; with a yaw error the true horizontal velocity change (dv) is integrated rotated (the IMU's body-frame
+        acceleration turned into the world by the wrong yaw). The covariance grows with the filter's process
+        noise."""
+        vel_error, offset, bias = self.vel_error, self.offset, self.accel_bias
+        if self.yaw_offset != 0.0:
+            c, s = math.cos(self.yaw_offset), math.sin(self.yaw_offset)
+            vel_error[0] += (c - 1.0) * dv_x - s * dv_y
+            vel_error[1] += s * dv_x + (c - 1.0) * dv_y
+        noise = _NOISE_PER_SUBSTEP if dt == SUBSTEP_S else ACCEL_NOISE_M_S2 * math.sqrt(SUBSTEP_S * dt)
+        gauss = self._rng.gauss
+        for axis in range(3):
+            vel_error[axis] += bias[axis] * dt + noise * gauss(0.0, 1.0)
+            offset[axis] += vel_error[axis] * dt
+        p_vv = self.p_vv
+        p_pp = self.p_pp + dt * (2.0 * self.p_pv + dt * p_vv)
+        p_pv = self.p_pv + dt * p_vv
+        p_vv += ACCEL_PROCESS_NOISE * dt
+        if p_pp > MAX_VARIANCE_M2 or p_vv > MAX_VARIANCE_M2:  # bounded, as a long blind spell would not be
+            p_pp, p_vv = min(p_pp, MAX_VARIANCE_M2), min(p_vv, MAX_VARIANCE_M2)
+            p_pv = min(p_pv, math.sqrt(p_pp * p_vv))
+        self.p_pp, self.p_pv, self.p_vv = p_pp, p_pv, p_vv
 
     # Commander ------------------------------------------------------------------------------------------------
 
@@ -196,7 +314,7 @@ class Vehicle:
         Firmware 2026.08 ignores `remain_valid_ms` ("an artifact of the old pull-based high-level commander"): if
         no high-level plan follows, the idle high-level commander asks for motors off at once."""
         del remain_valid_ms
-        self.hl.tell_state(self.estimate, (self.vel[0], self.vel[1], self.vel[2]), self.estimate_yaw)
+        self.hl.tell_state(self.estimate, self.estimate_velocity, self.estimate_yaw)
         self.priority = PRIORITY_HIGH_LEVEL
 
     # Stabilizer loop ------------------------------------------------------------------------------------------
@@ -221,8 +339,7 @@ class Vehicle:
         can_fly = self.supervisor.motors_allowed
         self.hl.block(not can_fly)
         if can_fly:
-            velocity = (self.vel[0], self.vel[1], self.vel[2])
-            hl_setpoint = self.hl.get_setpoint(now_s, self.estimate, velocity, self.estimate_yaw)
+            hl_setpoint = self.hl.get_setpoint(now_s, self.estimate, self.estimate_velocity, self.estimate_yaw)
             if hl_setpoint is not None:
                 self._commander_set(hl_setpoint, PRIORITY_HIGH_LEVEL, now_s)
         setpoint = self.setpoint if can_fly else null_setpoint(0.0)
@@ -235,10 +352,16 @@ class Vehicle:
         setpoint = self._override(setpoint)
         self.control_setpoint = setpoint
         self.motors_on = self.supervisor.motors_allowed and setpoint.commands_thrust
+        vx, vy = self.vel[0], self.vel[1]
         self._move(dt, setpoint, motors_on=self.motors_on)
         self.thrusting = self.motors_on
         self.battery.step(now_s, dt, self.motors_on, self.low_voltage_v, self.critical_voltage_v)
-        self._update_variance(now_s, dt)
+        if self.kalman:
+            self._predict(dt, self.vel[0] - vx, self.vel[1] - vy)
+        else:
+            floor = self.ext_pos_std_dev**2
+            self._onboard_variance_m2 = floor + (self._onboard_variance_m2 - floor) * math.exp(
+                -dt / VARIANCE_DECAY_TAU_S)
 
     def _override(self, setpoint: Setpoint) -> Setpoint:
         state = self.supervisor.state
@@ -258,6 +381,9 @@ class Vehicle:
         return null_setpoint(setpoint.timestamp_s, "supervisor")
 
     def _move(self, dt: float, sp: Setpoint, *, motors_on: bool) -> None:
+        """Advance the true body by `dt`. The controller works on the estimate: positions and velocities are the
+        estimated ones, and the horizontal velocity it commands in its (estimated) frame is realised through the
+        true attitude, i.e. rotated by the yaw error (true minus estimated yaw)."""
         pos, vel = self.pos, self.vel
         if not motors_on:
             if pos[2] <= self.floor_z and vel[2] <= 0.0:
@@ -265,17 +391,29 @@ class Vehicle:
                 return
             vel[2] -= GRAVITY_M_S2 * dt
         else:
-            est = self.estimate
+            est, vel_error = self.estimate, self.vel_error
             gain = 1.0 - math.exp(-dt / TRACK_TAU_S)
+            modes = sp.modes
+            # per controlled axis the velocity the controller commands (position axes) or aims at (velocity axes),
+            # in the world as it believes it to be
+            wanted = [0.0, 0.0, 0.0]
             for axis in range(3):
                 limit = (self.xy_vel_max if axis < 2 else max(self.z_vel_max, 0.5)) * VEL_MAX_OVERHEAD
-                mode = sp.modes[axis]
+                mode = modes[axis]
                 if mode is AxisMode.ABS:
-                    wanted = sp.velocity[axis] + (sp.position[axis] - est[axis]) / TRACK_TAU_S
-                    vel[axis] = min(max(wanted, -limit), limit)
+                    command = sp.velocity[axis] + (sp.position[axis] - est[axis]) / TRACK_TAU_S
+                    wanted[axis] = min(max(command, -limit), limit)
                 elif mode is AxisMode.VELOCITY:
-                    target = min(max(sp.velocity[axis], -limit), limit)
-                    vel[axis] += (target - vel[axis]) * gain
+                    wanted[axis] = min(max(sp.velocity[axis], -limit), limit) - vel_error[axis]
+            if self.yaw_offset != 0.0:
+                c, s = math.cos(self.yaw_offset), math.sin(self.yaw_offset)  # rotation by true - estimated yaw
+                wanted[0], wanted[1] = c * wanted[0] + s * wanted[1], c * wanted[1] - s * wanted[0]
+            for axis in range(3):
+                mode = modes[axis]
+                if mode is AxisMode.ABS:
+                    vel[axis] = wanted[axis]
+                elif mode is AxisMode.VELOCITY:
+                    vel[axis] += (wanted[axis] - vel[axis]) * gain
                 elif axis < 2:
                     vel[axis] *= math.exp(-dt / DRAG_TAU_S)
                 else:
@@ -291,13 +429,3 @@ class Vehicle:
             pos[2] = self.floor_z
             if vel[2] <= 0.0:
                 vel[:] = [0.0, 0.0, 0.0]
-
-    def _update_variance(self, now_s: float, dt: float) -> None:
-        floor = self.ext_pos_std_dev**2
-        stale = self.config.positioning == "extpos" and (
-            self.last_extpos_s is None or now_s - self.last_extpos_s > EXTPOS_STALE_S
-        )
-        if stale:
-            self.variance_m2 += VARIANCE_GROWTH_M2_PER_S * dt
-        else:
-            self.variance_m2 = floor + (self.variance_m2 - floor) * math.exp(-dt / VARIANCE_DECAY_TAU_S)

@@ -11,7 +11,9 @@ from pathlib import Path
 import pytest
 
 from rpf_fly.radio.backend import DroneBackend, PmState
-from rpf_fly.radio.cflib_backend import CflibBackend
+from rpf_fly.radio.cflib_backend import STATUS_VARIABLES, CflibBackend
+from rpf_fly.radio.fake_firmware import LOG_MAX_PAYLOAD
+from rpf_fly.radio.fake_toc import value_size
 from rpf_fly.radio.fake_world import FakeDroneConfig, FakeWorld
 
 MakeWorld = Callable[..., FakeWorld]
@@ -28,6 +30,14 @@ def wait_for(condition: Callable[[], bool], timeout_s: float, poll_s: float = 0.
             return False
         time.sleep(poll_s)
     return True
+
+
+def stream(seconds: float, send: Callable[[], object], period_s: float = 0.02) -> None:
+    """Call `send` every `period_s` for `seconds`: a mocap (and setpoint) stream from the test thread."""
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        send()
+        time.sleep(period_s)
 
 
 @pytest.fixture
@@ -50,6 +60,12 @@ def names_to_uris(world: FakeWorld) -> dict[str, str]:
 
 def test_backend_implements_the_protocol() -> None:
     assert isinstance(CflibBackend(), DroneBackend)
+    assert "reset_estimator" in dir(DroneBackend)
+
+
+def test_status_block_fits_one_log_packet() -> None:
+    assert sum(value_size(ctype) for _, ctype in STATUS_VARIABLES) <= LOG_MAX_PAYLOAD == 26
+    assert ("stateEstimate.yaw", "float") in STATUS_VARIABLES
 
 
 def test_connects_ten_drones_and_reports_preflight_state(make_world: MakeWorld, toc_cache: Path,
@@ -209,13 +225,17 @@ def test_extpose_configures_and_feeds_the_estimator(make_world: MakeWorld, toc_c
     params = world.snapshot(address(0)).params
     assert params["locSrv.extQuatStdDev"] == pytest.approx(0.01) and params["locSrv.extPosStdDev"] == pytest.approx(
         0.002)
-    assert backend.state("cf0").position_m == pytest.approx((0.0, 0.0, 0.0))  # no mocap yet
+    # no mocap yet: the estimate started at kalman.initialX/Y/Z (0, 0, 0) and drifts with the IMU, far from the truth
+    assert math.dist(backend.state("cf0").position_m, (1.0, 1.0, 0.0)) > 0.5
     yaw = math.radians(45.0)
-    assert backend.send_extpose("cf0", (1.0, 1.0, 0.0), (0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2)))
-    assert wait_for(lambda: backend.state("cf0").position_m == pytest.approx((1.0, 1.0, 0.0), abs=1e-4), 1.0)
-    assert world.snapshot(address(0)).estimate == pytest.approx((1.0, 1.0, 0.0), abs=1e-4)
-    assert backend.send_extpos("cf0", (1.2, 1.0, 0.0))
-    assert wait_for(lambda: backend.state("cf0").position_m[0] == pytest.approx(1.2, abs=1e-4), 1.0)
+    quaternion = (0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2))
+    stream(0.5, lambda: backend.send_extpose("cf0", (1.0, 1.0, 0.0), quaternion))
+    assert world.snapshot(address(0)).estimate == pytest.approx((1.0, 1.0, 0.0), abs=1e-3)
+    assert world.snapshot(address(0)).estimate_yaw_deg == pytest.approx(45.0, abs=1e-3)
+    assert wait_for(lambda: backend.state("cf0").position_m == pytest.approx((1.0, 1.0, 0.0), abs=2e-3), 1.0)
+    stream(0.5, lambda: backend.send_extpos("cf0", (1.2, 1.0, 0.0)))
+    assert world.snapshot(address(0)).estimate == pytest.approx((1.2, 1.0, 0.0), abs=2e-3)
+    assert world.snapshot(address(0)).estimate_yaw_deg == pytest.approx(45.0, abs=1e-3)  # extpos leaves yaw alone
 
 
 def test_reset_estimators_and_low_battery(make_world: MakeWorld, toc_cache: Path,
@@ -232,3 +252,152 @@ def test_reset_estimators_and_low_battery(make_world: MakeWorld, toc_cache: Path
     assert wait_for(lambda: backend.battery("cf1").pm_state is PmState.LOW_POWER, 1.0)
     assert backend.battery("cf1").low and backend.battery("cf1").voltage_v == pytest.approx(3.1, abs=0.01)
     assert not backend.battery("cf0").low
+
+
+# The estimator: yaw and drift (fake_vehicle's model, the firmware's behaviour) --------------------------------
+
+FACING_DEG = 120.0
+"""True yaw of the drones below: powered on facing away from +x, where the yaw estimate starts (initialYaw 0)."""
+GOAL = (0.3, 0.0, 0.5)
+"""Position setpoint of the drones below (they stand at the origin)."""
+
+
+def mocap_drone(world: FakeWorld, backend: CflibBackend, *, extpose: bool = False) -> Callable[[], object]:
+    """A function that sends cf0 its true pose, as a mocap would: extpos (position only) or extpose."""
+    def send() -> object:
+        position, quaternion = world.true_poses()[address(0)]
+        if extpose:
+            return backend.send_extpose("cf0", position, quaternion)
+        return backend.send_extpos("cf0", position)
+
+    return send
+
+
+def fly_to_goal(world: FakeWorld, backend: CflibBackend, mocap: Callable[[], object], seconds: float) -> float:
+    """Stream the mocap and position setpoints to `GOAL` (yaw `FACING_DEG`) at 50 Hz for `seconds`; the largest
+    distance between the estimate and the truth in the last second (metres). Not earlier: while the drone moves
+    at 1 m/s an extpos that spent 10 ms on the (loaded) radio is a centimetre old, as a real mocap's would be."""
+    worst = 0.0
+    settled_from = time.monotonic() + seconds - 1.0
+
+    def tick() -> None:
+        nonlocal worst
+        mocap()
+        backend.send_position_setpoint("cf0", *GOAL, FACING_DEG)
+        if time.monotonic() >= settled_from:
+            snap = world.snapshot(address(0))
+            worst = max(worst, math.dist(snap.estimate, snap.position))
+
+    stream(seconds, tick)
+    return worst
+
+
+def facing_world(make_world: MakeWorld) -> FakeWorld:
+    return make_world({address(0): FakeDroneConfig.at(0.0, 0.0, yaw_deg=FACING_DEG, positioning="extpos")})
+
+
+def test_yaw_error_with_position_only_extpos_flies_off(make_world: MakeWorld, toc_cache: Path,
+                                                       backends: Callable[..., CflibBackend]) -> None:
+    world = facing_world(make_world)
+    backend = backends(cache_dir=toc_cache)
+    assert backend.connect(names_to_uris(world)) == {}
+    mocap = mocap_drone(world, backend)
+    stream(0.3, mocap)
+    snap = world.snapshot(address(0))
+    assert math.dist(snap.estimate, snap.position) < 0.01  # the position estimate is right...
+    assert snap.estimate_yaw_deg == pytest.approx(0.0, abs=0.5) and snap.yaw_deg == pytest.approx(FACING_DEG)
+    fly_to_goal(world, backend, mocap, 3.0)
+    snap = world.snapshot(address(0))
+    # ...but the controller pushes 120 degrees off: the drone spirals away from its setpoint (the classic fly-away)
+    assert math.dist(snap.position, GOAL) > 0.5
+    assert snap.supervisor_state == "Flying"
+
+
+def test_reset_estimator_to_the_mocap_pose_cures_the_yaw_error(make_world: MakeWorld, toc_cache: Path,
+                                                              backends: Callable[..., CflibBackend]) -> None:
+    world = facing_world(make_world)
+    backend = backends(cache_dir=toc_cache)
+    assert backend.connect(names_to_uris(world)) == {}
+    mocap = mocap_drone(world, backend)
+    stream(0.3, mocap)
+    assert world.snapshot(address(0)).estimate_yaw_deg == pytest.approx(0.0, abs=0.5)  # 120 degrees off
+    position, _ = world.true_poses()[address(0)]
+    start = time.monotonic()
+    assert backend.reset_estimator("cf0", position, math.radians(FACING_DEG))
+    assert time.monotonic() - start < 2.0  # five confirmed writes (ms), no 5 s wait for the variance
+    params = world.snapshot(address(0)).params
+    assert params["kalman.initialYaw"] == pytest.approx(math.radians(FACING_DEG), rel=1e-6)
+    assert (params["kalman.initialX"], params["kalman.initialY"], params["kalman.initialZ"]) == pytest.approx(
+        position, abs=1e-6)
+    assert params["kalman.resetEstimation"] == 0  # the firmware clears the trigger when it resets
+    assert world.snapshot(address(0)).estimate_yaw_deg == pytest.approx(FACING_DEG, abs=1e-3)
+    worst = fly_to_goal(world, backend, mocap, 3.0)
+    snap = world.snapshot(address(0))
+    assert snap.position == pytest.approx(GOAL, abs=0.02), snap
+    assert worst < 0.01
+
+
+def test_extpose_corrects_the_yaw_estimate_and_the_drone_tracks(make_world: MakeWorld, toc_cache: Path,
+                                                               backends: Callable[..., CflibBackend]) -> None:
+    world = facing_world(make_world)
+    backend = backends(cache_dir=toc_cache, use_extpose=True)
+    assert backend.connect(names_to_uris(world)) == {}
+    assert world.snapshot(address(0)).estimate_yaw_deg == pytest.approx(0.0, abs=0.5)
+    mocap = mocap_drone(world, backend, extpose=True)
+    stream(0.3, mocap)
+    assert world.snapshot(address(0)).estimate_yaw_deg == pytest.approx(FACING_DEG, abs=1e-3)
+    worst = fly_to_goal(world, backend, mocap, 3.0)
+    snap = world.snapshot(address(0))
+    assert snap.position == pytest.approx(GOAL, abs=0.02), snap
+    assert worst < 0.01
+
+
+def test_drone_state_yaw_is_the_estimate_in_degrees(make_world: MakeWorld, toc_cache: Path,
+                                                    backends: Callable[..., CflibBackend]) -> None:
+    world = facing_world(make_world)
+    backend = backends(cache_dir=toc_cache)
+    assert backend.connect(names_to_uris(world)) == {}
+    assert backend.state("cf0").yaw_deg == pytest.approx(0.0, abs=0.5)  # initialYaw, not the true 120 degrees
+    assert backend.reset_estimator("cf0", (0.0, 0.0, 0.0), math.radians(-45.0))
+    assert wait_for(lambda: backend.state("cf0").yaw_deg == pytest.approx(-45.0, abs=0.01), 1.0)
+    assert world.snapshot(address(0)).yaw_deg == pytest.approx(FACING_DEG)  # the truth did not move
+    assert not backend.reset_estimator("cf0", (math.nan, 0.0, 0.0), 0.0)  # refused, nothing sent
+
+
+def test_reset_estimator_on_a_lost_link_returns_false(make_world: MakeWorld, toc_cache: Path,
+                                                      backends: Callable[..., CflibBackend]) -> None:
+    world = make_world(2)
+    backend = backends(cache_dir=toc_cache, param_timeout_s=0.3)
+    assert backend.connect(names_to_uris(world)) == {}
+    world.drop_link(address(1))
+    assert wait_for(lambda: not backend.state("cf1").link.up, 2.0)
+    assert not backend.reset_estimator("cf1", (0.5, 0.0, 0.0), 0.0)
+    assert backend.reset_estimator("cf0", (0.0, 0.0, 0.0), 0.0)
+
+
+def test_estimate_drifts_without_extpos_and_recovers_when_it_resumes(make_world: MakeWorld, toc_cache: Path,
+                                                                     backends: Callable[..., CflibBackend]) -> None:
+    world = make_world({address(0): FakeDroneConfig.at(0.0, 0.0, positioning="extpos")})
+    backend = backends(cache_dir=toc_cache)
+    assert backend.connect(names_to_uris(world)) == {}
+    mocap = mocap_drone(world, backend)
+    hover = (0.0, 0.0, 0.5)
+    stream(0.3, mocap)
+
+    def tick() -> None:
+        mocap()
+        backend.send_position_setpoint("cf0", *hover, 0.0)
+
+    stream(2.0, tick)
+    snap = world.snapshot(address(0))
+    assert snap.position == pytest.approx(hover, abs=0.01) and math.dist(snap.estimate, snap.position) < 0.01
+    blind_from = time.monotonic()
+    while time.monotonic() - blind_from < 1.0:  # the mocap stops; setpoints go on
+        backend.send_position_setpoint("cf0", *hover, 0.0)
+        time.sleep(0.02)
+    snap = world.snapshot(address(0))
+    drift = math.dist(snap.estimate, snap.position)
+    assert 0.02 < drift < 0.08  # docs/radio.md: 3-6 cm after 1 s blind (ACCEL_BIAS_M_S2 0.08 m/s^2 and noise)
+    stream(0.5, tick)  # the first extpos brings the estimate back; the drone then flies back to its setpoint
+    snap = world.snapshot(address(0))
+    assert math.dist(snap.estimate, snap.position) < 0.01 and snap.position == pytest.approx(hover, abs=0.01)

@@ -12,9 +12,9 @@ from cflib.crazyflie.log import LogTocElement
 from cflib.crazyflie.param import ParamTocElement
 from cflib.utils.encoding import compress_quaternion
 
-from rpf_fly.radio.fake_firmware import LOG_TOC, PARAM_TOC, PROTOCOL_VERSION, FakeFirmware
+from rpf_fly.radio.fake_firmware import LOG_TOC, PARAM_TOC, PROTOCOL_VERSION, FakeFirmware, FirmwareSnapshot
 from rpf_fly.radio.fake_planner import Trajectory
-from rpf_fly.radio.fake_vehicle import TRACK_TAU_S, VehicleConfig
+from rpf_fly.radio.fake_vehicle import ACCEL_BIAS_M_S2, TRACK_TAU_S, VehicleConfig
 
 DT = 0.01
 
@@ -36,12 +36,14 @@ def position(x: float, y: float, z: float, yaw_deg: float = 0.0) -> bytes:
 
 
 class Sim:
-    """A firmware on a synthetic clock stepped at 100 Hz."""
+    """A firmware on a synthetic clock stepped at 100 Hz. With `mocap` set (an offset in metres, (0, 0, 0) for
+    none), every tick first sends an extpos of the true position plus that offset, as a 100 Hz mocap would."""
 
-    def __init__(self, **config: object) -> None:
+    def __init__(self, seed: int = 0, **config: object) -> None:
         self.t = 0.0
-        self.fw = FakeFirmware(VehicleConfig(**config))  # type: ignore[arg-type]
+        self.fw = FakeFirmware(VehicleConfig(**config), seed=seed)  # type: ignore[arg-type]
         self.log_packets: list[tuple[float, bytes]] = []
+        self.mocap: tuple[float, float, float] | None = None
 
     def send(self, port: int, channel: int, data: bytes) -> list[tuple[int, int, bytes]]:
         return self.fw.handle(port, channel, data, self.t)
@@ -50,6 +52,9 @@ class Sim:
         end = self.t + seconds
         while self.t < end - 1e-9:
             self.t = round(self.t + DT, 6)
+            if self.mocap is not None:
+                pos = self.fw.vehicle.pos
+                self.send(6, 0, struct.pack("<fff", *(p + o for p, o in zip(pos, self.mocap))))
             if each is not None:
                 each(self.t)
             for _, _, payload in self.fw.step(self.t):
@@ -84,6 +89,11 @@ def test_tocs_decode_with_cflib_and_have_stable_distinct_crcs() -> None:
     assert LOG_TOC.by_name["supervisor.info"].ctype == "uint16_t"
     assert {"stabilizer.estimator", "commander.enHighLevel", "locSrv.extQuatStdDev", "locSrv.extPosStdDev",
             "kalman.resetEstimation"} <= set(PARAM_TOC.by_name)
+    # what the backend's status log and reset_estimator use, with the firmware's types
+    assert LOG_TOC.by_name["stateEstimate.yaw"].ctype == "float"
+    for name in ("kalman.initialX", "kalman.initialY", "kalman.initialZ", "kalman.initialYaw"):
+        assert PARAM_TOC.by_name[name].ctype == "float" and not PARAM_TOC.by_name[name].read_only
+    assert PARAM_TOC.by_name["kalman.resetEstimation"].ctype == "uint8_t"
     # a second firmware has the very same tables (cflib's cache keys on the CRC)
     fw = FakeFirmware()
     assert fw.handle(5, 0, bytes([3]), 0.0)[0][2] == LOG_TOC.info_reply()
@@ -301,14 +311,16 @@ def test_supervisor_state_query_and_arming_when_required() -> None:
 def test_external_position_moves_the_estimate_and_the_controller_follows_it() -> None:
     sim = Sim(position=(1.0, 1.0, 0.0), positioning="extpos")
     sim.run(0.1)
-    assert sim.snap().estimate == pytest.approx((0.0, 0.0, 0.0))  # kalman.initialX/Y/Z until mocap arrives
+    # kalman.initialX/Y/Z until mocap arrives (the IMU's drift in 0.1 s is under a millimetre)
+    assert sim.snap().estimate == pytest.approx((0.0, 0.0, 0.0), abs=1e-3)
     assert sim.snap().variance_m2 > 1e-3
     sim.send(6, 0, struct.pack("<fff", 1.0, 1.0, 0.0))
-    assert sim.snap().estimate == pytest.approx((1.0, 1.0, 0.0))
+    assert sim.snap().estimate == pytest.approx((1.0, 1.0, 0.0), abs=1e-3)  # large variance: taken almost whole
+    sim.mocap = (0.0, 0.0, 0.0)
     sim.hover(0.5)
     # the mocap says the drone is 0.1 m further in x than it is: the true drone settles 0.1 m short
-    sim.run(1.0, lambda t: sim.send(6, 0, struct.pack("<fff", sim.fw.vehicle.pos[0] + 0.1, 1.0,
-                                                        sim.fw.vehicle.pos[2])))
+    sim.mocap = (0.1, 0.0, 0.0)
+    sim.run(1.0)
     assert sim.snap().position[0] == pytest.approx(0.9, abs=0.01)
     assert sim.snap().variance_m2 < 1e-3
     quat = (0.0, 0.0, math.sin(math.pi / 8), math.cos(math.pi / 8))  # yaw 45 degrees
@@ -373,3 +385,95 @@ def test_other_setpoint_types() -> None:
     assert sim.snap().position[2] == 0.0 and not sim.snap().motors_on
     sim.run(1.5)
     assert sim.snap().locked
+
+
+def set_param(sim: Sim, name: str, value: float) -> None:
+    entry = PARAM_TOC.by_name[name]
+    payload = struct.pack("<H", entry.ident) + (struct.pack("<f", value) if entry.ctype == "float"
+                                                 else bytes([int(value)]))
+    assert sim.send(2, 2, payload) == [(2, 2, payload)]
+
+
+def test_yaw_estimate_starts_at_initial_yaw_and_only_extpose_corrects_it() -> None:
+    sim = Sim(position=(1.0, 0.0, 0.0), yaw_deg=120.0, positioning="extpos")
+    sim.run(0.1)
+    assert sim.snap().estimate_yaw_deg == pytest.approx(0.0) and sim.snap().yaw_deg == pytest.approx(120.0)
+    sim.mocap = (0.0, 0.0, 0.0)
+    sim.run(1.0)  # position-only extpos: the position converges, the yaw estimate does not
+    assert sim.snap().estimate == pytest.approx((1.0, 0.0, 0.0), abs=1e-3)
+    assert sim.snap().estimate_yaw_deg == pytest.approx(0.0)
+    set_param(sim, "kalman.initialYaw", math.radians(-30.0))
+    set_param(sim, "kalman.initialX", 2.0)
+    assert sim.snap().estimate_yaw_deg == pytest.approx(0.0)  # initial values act at the next reset
+    set_param(sim, "kalman.resetEstimation", 1)
+    snap = sim.snap()
+    assert snap.estimate_yaw_deg == pytest.approx(-30.0, abs=1e-4) and snap.estimate == pytest.approx((2.0, 0.0, 0.0))
+    assert snap.variance_m2 == pytest.approx(1.0) and snap.params["kalman.resetEstimation"] == 0
+    sim.run(0.02)  # the large variance takes the next extpos almost whole
+    assert sim.snap().estimate == pytest.approx((1.0, 0.0, 0.0), abs=1e-3) and sim.snap().variance_m2 < 1e-3
+    quat = (0.0, 0.0, math.sin(math.radians(60.0)), math.cos(math.radians(60.0)))  # yaw 120 degrees
+    sim.send(6, 1, struct.pack("<Bfffffff", 8, 1.0, 0.0, 0.0, *quat))
+    assert sim.snap().estimate_yaw_deg == pytest.approx(120.0, abs=1e-3)
+    sim.fw.reboot(sim.t)  # power-cycle: default parameters, the estimate starts at yaw 0 again
+    assert sim.fw.snapshot().estimate_yaw_deg == pytest.approx(0.0) and sim.fw.snapshot().yaw_deg == pytest.approx(120)
+
+
+def fly_with_yaw_error(yaw_error_deg: float, seconds: float = 3.0) -> tuple[FirmwareSnapshot, float]:
+    """A mocap (extpos) drone whose true yaw is `yaw_error_deg` off its estimate flies from the origin to
+    (0.5, 0, 0.5) under position setpoints; its last snapshot and its largest sideways (y) excursion."""
+    sim = Sim(positioning="extpos", yaw_deg=yaw_error_deg)
+    sim.mocap = (0.0, 0.0, 0.0)
+    sideways = 0.0
+
+    def each(t: float) -> None:
+        nonlocal sideways
+        sim.send(7, 0, position(0.5, 0.0, 0.5, 0.0))
+        sideways = max(sideways, abs(sim.fw.vehicle.pos[1]))
+
+    sim.run(seconds, each)
+    return sim.snap(), sideways
+
+
+def test_the_position_controller_acts_in_the_estimated_frame() -> None:
+    snap, sideways = fly_with_yaw_error(0.0)
+    assert snap.position == pytest.approx((0.5, 0.0, 0.5), abs=1e-3) and sideways < 1e-3
+    snap, sideways = fly_with_yaw_error(5.0)  # a small error bends the path, then it arrives
+    assert snap.position == pytest.approx((0.5, 0.0, 0.5), abs=1e-3) and 0.005 < sideways < 0.03
+    assert snap.estimate_yaw_deg == pytest.approx(0.0) and snap.yaw_deg == pytest.approx(5.0)  # yaw 0 held estimated
+    snap, sideways = fly_with_yaw_error(120.0)  # the classic fly-away
+    assert math.dist(snap.position, (0.5, 0.0, 0.5)) > 1.0 and math.dist(snap.estimate, snap.position) < 0.01
+
+
+def test_imu_drift_without_extpos_and_the_kalman_pull_back() -> None:
+    """The figures of docs/radio.md ("Estimator"), over ten drones (seeds): hovering under position setpoints with
+    a 50 Hz mocap, then 1 s and 2 s without it, then the mocap again."""
+    biases = set()
+    for seed in range(10):
+        sim = Sim(seed=seed, positioning="extpos")
+        sim.mocap = (0.0, 0.0, 0.0)
+        sim.hover(0.5)
+        sim.mocap = None
+        ticks = iter(range(10**6))
+        worst = 0.0
+
+        def streamed(t: float) -> None:
+            nonlocal worst
+            sim.send(7, 0, position(0.0, 0.0, 0.5))
+            if next(ticks) % 2 == 0:
+                sim.send(6, 0, struct.pack("<fff", *sim.fw.vehicle.pos))
+            worst = max(worst, math.dist(sim.fw.vehicle.estimate, sim.fw.vehicle.pos))
+
+        def error() -> float:
+            return math.dist(sim.snap().estimate, sim.snap().position)
+
+        sim.run(2.0, streamed)
+        assert worst < 1e-3  # 50 Hz extpos: within a millimetre (0.2-0.3 mm measured)
+        sim.run(1.0, lambda t: sim.send(7, 0, position(0.0, 0.0, 0.5)))
+        assert 0.025 < error() < 0.07  # 1 s blind: 3.2-6.1 cm measured over 40 seeds
+        sim.run(1.0, lambda t: sim.send(7, 0, position(0.0, 0.0, 0.5)))
+        assert 0.10 < error() < 0.25  # 2 s blind: 12-21 cm measured over 40 seeds
+        sim.run(0.05, streamed)
+        assert error() < 1e-3  # the variance grew while blind: the first extpos is taken almost whole
+        biases.add(sim.fw.vehicle.accel_bias)
+        assert math.hypot(*sim.fw.vehicle.accel_bias) == pytest.approx(ACCEL_BIAS_M_S2)
+    assert len(biases) == 10  # each drone its own
