@@ -80,6 +80,13 @@ class Commander:
             if agent.phase == DronePhase.WAITING:
                 self._set(agent, DronePhase.READY, "preflight passed")
 
+    def reset_estimator(self, agent: DroneAgent, position: Vec3, yaw_rad: float) -> bool:
+        """Restart the on-board estimate at the mocap pose; only on the ground, before take-off."""
+        with self._locks[agent.name]:
+            if agent.phase != DronePhase.WAITING:
+                return False
+            return self.backend.reset_estimator(agent.name, position, yaw_rad)
+
     def take_off(self, agent: DroneAgent, height_m: float, duration_s: float) -> bool:
         """Arm, then high-level take-off; a drone whose arming or take-off is refused stays on the ground."""
         with self._locks[agent.name]:
@@ -167,17 +174,15 @@ class Commander:
 
     def confirm_touchdown(self, agent: DroneAgent, now_s: float, pose_z: Optional[float], pose_fresh: bool,
                           state: Optional[DroneState]) -> bool:
-        """A landing drone is down when its (fresh) mocap height is near the floor and its supervisor no longer says
-        flying; only then is it disarmed (disarming in flight cuts the motors). With mocap lost, the on-board
-        estimate's height stands in for it. Late confirmation is an event (once), never a disarm."""
+        """A landing drone is down when its supervisor no longer says flying (its motors have idled for the
+        firmware's hysteresis: the landing ended) and, where mocap sees it, its height is near the floor; only then
+        is it disarmed (disarming in flight cuts the motors). With mocap lost the supervisor alone decides: the
+        on-board height estimate drifts by decimetres within seconds without extpos. Late confirmation is an event
+        (once), never a disarm."""
         with self._locks[agent.name]:
             if agent.phase != DronePhase.LANDING or agent.landing_until_s is None or now_s < agent.landing_until_s:
                 return False
-            if pose_fresh and pose_z is not None:
-                low = pose_z - self.floor_z < ON_FLOOR_Z_M
-            else:
-                estimate = state.position_m if state is not None else None
-                low = estimate is not None and estimate[2] - self.floor_z < ON_FLOOR_Z_M
+            low = pose_z - self.floor_z < ON_FLOOR_Z_M if pose_fresh and pose_z is not None else True
             flying = state is None or state.supervisor is None or state.supervisor.flying
             if low and not flying:
                 self.backend.arm(agent.name, False)

@@ -65,7 +65,7 @@ class DryRun:
         self.bodies = {d.name: d.rigid_body for d in mission.drones}
         configs = dict(drone_configs or {})
         self.drone_configs = {
-            self.addresses[d.name]: configs.get(d.name, FakeDroneConfig.at(d.start[0], d.start[1], 0.0))
+            self.addresses[d.name]: configs.get(d.name, FakeDroneConfig.at(d.start[0], d.start[1], 0.0, positioning="extpos"))
             for d in mission.drones
         }
         self.seed = seed

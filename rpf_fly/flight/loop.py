@@ -28,7 +28,7 @@ from rpf_fly.flight.events import ERROR, FATAL, INFO, WARNING, EventBus, FlightE
 from rpf_fly.flight.gc_pacing import GcPacer
 from rpf_fly.flight.phases import DronePhase, FlightOutcome, SwarmPhase
 from rpf_fly.flight.poses import PoseTracker, TrackedPose
-from rpf_fly.flight.preflight import preflight_problem
+from rpf_fly.flight.preflight import estimate_problem, preflight_problem, yaw_of
 from rpf_fly.flight.recorder import NullRecorder, PlannerRecord, Recorder
 from rpf_fly.flight.report import FlightReport, LoopStats
 from rpf_fly.flight.supervisor import Finding, Supervisor
@@ -224,7 +224,8 @@ class FlightLoop:
         return True
 
     def _preflight(self) -> bool:
-        """Every drone tracked, on the ground near its start, inside the arena, battery above the minimum."""
+        """Every drone tracked, on the ground near its start, inside the arena, battery above the minimum; then its
+        estimator restarted at its mocap pose and agreeing with it (preflight.py)."""
         self._set_phase(SwarmPhase.PREFLIGHT)
         deadline = self.clock() + self.PREFLIGHT_TIMEOUT_S
         problems: dict[str, str] = {}
@@ -234,6 +235,8 @@ class FlightLoop:
             problems = {n: p for n, p in problems.items() if p}
             if not problems:
                 break
+        if not problems and not self._stop.is_set():
+            problems = self._align_estimators()
         if self._stop.is_set():
             self._abort("interrupted before take-off")
             return False
@@ -245,6 +248,35 @@ class FlightLoop:
         for agent in self.agents.values():
             self.commander.ready(agent)
         return True
+
+    ESTIMATOR_SETTLE_S = 3.0
+    """How long the estimates may take to agree with mocap after their reset (extpos streams meanwhile)."""
+
+    def _align_estimators(self) -> dict[str, str]:
+        """Restart every drone's on-board estimate at its mocap position and yaw, then wait until each estimate
+        agrees with mocap (position and yaw). Why: with position-only extpos the yaw estimate starts wherever the
+        estimator started (0 at power-on) and nothing corrects it; a drone powered on facing another way, or
+        turned after power-on, flies off under position control (the classic Crazyflie fly-away). Returns
+        name -> problem for the drones whose estimate does not agree (they do not take off)."""
+        problems: dict[str, str] = {}
+        reset_at = self.clock()
+        for name, agent in self.agents.items():
+            pose = self.tracker.get(name)
+            if pose is None or not self.commander.reset_estimator(agent, pose.position, yaw_of(pose.quaternion)):
+                problems[name] = "its estimator could not be reset (kalman.initialX/Y/Z/Yaw, resetEstimation)"
+        deadline = self.clock() + self.ESTIMATOR_SETTLE_S
+        pending = {n: "" for n in self.agents if n not in problems}
+        while pending and self.clock() < deadline and not self._stop.is_set():
+            self._spin_once(min(deadline, self.clock() + 0.05))
+            for name in list(pending):
+                pose = self.tracker.get(name)
+                problem = estimate_problem(self._states.get(name), pose, reset_at) if pose else "not tracked"
+                if problem:
+                    pending[name] = problem
+                else:
+                    del pending[name]
+        problems.update(pending)
+        return problems
 
     def preflight_only(self) -> dict[str, str]:
         """``rpf-fly check``: connect and run the preflight checks, take nothing off; name -> problem ('' if ok)."""

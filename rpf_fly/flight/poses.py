@@ -63,6 +63,8 @@ class PoseTracker:
         self._raw: dict[str, tuple[tuple[float, float, float], float, float]] = {}
         """drone -> its newest sample: (position, receive time, capture time)."""
         self._jumped_at: dict[str, float] = {}
+        self.last_jump: dict[str, tuple[float, float]] = {}
+        """drone -> (metres, seconds) of its newest refused jump, for the event that reports it."""
 
     @staticmethod
     def _jump(a: tuple[float, ...], b: tuple[float, ...], dt: float) -> bool:
@@ -82,6 +84,7 @@ class PoseTracker:
         if name not in self.glitching:
             if raw is None or previous is None or not self._jump(position, raw[0], dt):
                 return True
+            self.last_jump[name] = (math.dist(position, raw[0]), dt)
             self.glitching.add(name)
             self._jumped_at[name] = t
         elif raw is not None and self._jump(position, raw[0], dt):

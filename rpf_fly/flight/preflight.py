@@ -7,6 +7,7 @@ until every drone passes or the preflight times out.
 
 from __future__ import annotations
 
+import math
 from typing import Optional
 
 from rpf_fly.flight.agent import DroneAgent
@@ -40,4 +41,40 @@ def preflight_problem(mission: Mission, agent: DroneAgent, state: Optional[Drone
                 f"({agent.start.real:.2f}, {agent.start.imag:.2f}); allowed {s.start_tolerance_m:.2f} m")
     if z > ON_GROUND_MAX_Z_M:
         return f"not on the ground (z = {z:.2f} m)"
+    return ""
+
+
+ESTIMATE_POSITION_TOLERANCE_M = 0.1
+"""How far the on-board position estimate may be from mocap before take-off: extpos at tens of hertz holds it
+within a centimetre, so a decimetre means the estimator did not take the mocap (wrong rigid body, no extpos)."""
+
+ESTIMATE_YAW_TOLERANCE_DEG = 10.0
+"""How far the on-board yaw estimate may be from mocap's yaw before take-off. With position-only extpos nothing
+corrects yaw in flight, and the position controller acts in the estimated frame: 10 degrees bends the path by a
+sixth of each move; 90 or more and the drone flies away from its setpoint."""
+
+
+def yaw_of(quaternion: tuple[float, float, float, float]) -> float:
+    """Yaw (radians, about world z) of a unit quaternion (qx, qy, qz, qw), world from body."""
+    qx, qy, qz, qw = quaternion
+    return math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
+
+
+def estimate_problem(state: Optional[DroneState], pose: TrackedPose, since_s: float) -> str:
+    """Whether the drone's on-board estimate agrees with mocap (position and yaw), from telemetry newer than
+    ``since_s`` (the estimator reset); "" when it does."""
+    if state is None or state.telemetry_stamp_s is None or state.telemetry_stamp_s <= since_s:
+        return "no estimator telemetry since its reset"
+    if state.position_m is None or state.yaw_deg is None:
+        return "no position or yaw estimate in its telemetry"
+    off = math.dist(state.position_m, pose.position)
+    if off > ESTIMATE_POSITION_TOLERANCE_M:
+        ex, ey, ez = state.position_m
+        return (f"its on-board position estimate ({ex:.2f}, {ey:.2f}, {ez:.2f}) is {off:.2f} m from mocap's: is "
+                "the rigid body the right drone, and does extpos reach it?")
+    mocap_yaw = math.degrees(yaw_of(pose.quaternion))
+    yaw_error = (state.yaw_deg - mocap_yaw + 180.0) % 360.0 - 180.0
+    if abs(yaw_error) > ESTIMATE_YAW_TOLERANCE_DEG:
+        return (f"its on-board yaw estimate {state.yaw_deg:.0f} deg is {abs(yaw_error):.0f} deg from mocap's "
+                f"{mocap_yaw:.0f} deg after the estimator reset: it would fly off")
     return ""

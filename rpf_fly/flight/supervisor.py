@@ -23,6 +23,7 @@ log records episodes, not every tick.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Iterable, Literal, Optional
 
@@ -235,8 +236,9 @@ class Supervisor:
             glitching = a.name in tracker.glitching
             if glitching and a.name not in self._glitching:
                 self._glitching.add(a.name)
-                out.append(Finding("pose_glitch", WARNING, "mocap pose jumped further than a drone can fly in one "
-                                   "frame (marker swap?): not followed, holding", a.name, "hold"))
+                metres, seconds = tracker.last_jump.get(a.name, (math.nan, math.nan))
+                out.append(Finding("pose_glitch", WARNING, f"mocap pose jumped {metres:.2f} m in {seconds * 1e3:.0f} ms, "
+                                   "further than a drone can fly (marker swap?): not followed, holding", a.name, "hold"))
             elif not glitching and a.name in self._glitching:
                 self._glitching.discard(a.name)
                 out.append(Finding("pose_glitch", INFO, "mocap track consistent again: resuming", a.name, "resume"))

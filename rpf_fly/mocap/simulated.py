@@ -116,7 +116,8 @@ class SimulatedMocap:
         deadline = self._clock() + max(0.0, timeout_s)
         while True:
             now = self._clock()
-            self._sample(now)
+            if self._sample(now):
+                now = self._clock()  # poses() may have taken a while (a remote world): stamp after it
             frame = self._pop_ready(now)
             if frame is not None:
                 return frame
@@ -152,14 +153,19 @@ class SimulatedMocap:
             wake = min(wake, self._queue[0][1] + self._latency_s)
         return wake
 
-    def _sample(self, now: float) -> None:
-        """Sample ``poses()`` for the current frame slot if it has not been sampled yet."""
+    def _sample(self, now: float) -> bool:
+        """Sample ``poses()`` for the current frame slot if it has not been sampled yet (True if it did). The sample
+        is stamped when ``poses()`` returned: a remote world (the dry run's) answers after a loopback round trip,
+        which on a loaded machine takes a while, and a stamp taken before the call would make the motion between
+        two frames look faster than it was."""
         slot = self._slot(now)
         if slot <= self._last_slot:
-            return
+            return False
         self._last_slot = slot
         bodies: dict[str, RigidBodyPose] = {}
-        for name, (position, quaternion, valid) in self._poses().items():
+        poses = self._poses()
+        now = self._clock()
+        for name, (position, quaternion, valid) in poses.items():
             body_id = self._ids.setdefault(name, len(self._ids) + 1)
             if self._dropout > 0.0 and self._rng.random() < self._dropout:
                 valid = False
@@ -173,6 +179,7 @@ class SimulatedMocap:
         self._queue.append((slot, now, bodies))
         self._stats.packets += 1
         self._stats.frames += 1
+        return True
 
     def _noisy(self, name: str, body_id: int, position: Sequence[float], quaternion: Sequence[float]) -> RigidBodyPose:
         x, y, z = (float(v) for v in position)

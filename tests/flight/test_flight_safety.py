@@ -137,3 +137,17 @@ def test_a_lost_link_drone_stays_in_the_others_views_until_it_is_down(tmp_path, 
     # cf3's rows after the loss are logged too (schema mode link_lost), and the log dropped and failed nothing.
     assert any(m.data["mode"] == "link_lost" for m in flight.log.messages("/cf3/planner"))
     assert flight.report.log_dropped == 0 and flight.report.log_failed == 0
+
+
+def test_a_drone_standing_rotated_flies_right_after_its_estimator_is_reset_to_mocap(tmp_path, short_mission):
+    """cf2 was powered on facing 120 degrees from +x: its yaw estimate starts at 0 (kalman.initialYaw) and
+    position-only extpos never corrects it, so without the preflight reset it flies off (the classic fly-away)."""
+    from rpf_fly.radio.fake_world import FakeDroneConfig
+
+    start = short_mission.drones[1].start
+    configs = {"cf2": FakeDroneConfig.at(start[0], start[1], 0.0, yaw_deg=120.0, positioning="extpos")}
+    flight = fly(short_mission, tmp_path, configs=configs)
+    assert flight.report.success, flight.report.reasons
+    assert abs(flight.snapshots["cf2"].yaw_deg) < 5.0  # it turned to the setpoints' yaw 0 on a right estimate
+    goal = short_mission.drones[1].goal
+    assert abs(flight.snapshots["cf2"].position[0] - goal[0]) < 0.2
