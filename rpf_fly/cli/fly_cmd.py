@@ -59,9 +59,13 @@ def fly(
     log: Optional[Path] = typer.Option(None, "--log", help="MCAP flight log (default flights/<mission>-<time>.mcap)."),
     mocap: str = typer.Option("natnet", "--mocap", help="Dry run only: natnet (emulator over UDP) or sim."),
     console: bool = typer.Option(True, "--console/--no-console", help="Live status table while flying."),
+    faults: Optional[Path] = typer.Option(None, "--faults", help="Dry run only: a fault schedule (docs/faults.md)."),
 ) -> None:
     """Fly MISSION: NatNet mocap and cflib radios as the mission says, or simulated drones with --dry-run."""
     loaded = _load(mission)
+    if faults is not None and not dry_run:
+        raise fail(f"--faults: {faults}: faults are injected into simulated drones only; add --dry-run")
+    schedule = _load_faults(faults, loaded) if faults is not None else None
     factory = _planner_factory(loaded, mission)
     if not dry_run and loaded.mocap.kind != "natnet":
         raise fail(f"{mission}:0: mocap.kind: 'sim' can only fly with --dry-run (real drones need motion capture)")
@@ -71,27 +75,53 @@ def fly(
         raise fail(f"--mocap: expected natnet or sim, got {mocap!r}")
     log_path = log or Path("flights") / f"{loaded.name}-{datetime.now():%Y%m%d-%H%M%S}.mcap"
     log_path.parent.mkdir(parents=True, exist_ok=True)
-    code = _run_flight(loaded, factory, dry_run, mocap, log_path, console)
+    code = _run_flight(loaded, factory, dry_run, mocap, log_path, console, schedule)
     raise typer.Exit(code)
 
 
-def _run_flight(mission, factory, dry_run: bool, mocap_kind: str, log_path: Path, console: bool) -> int:  # type: ignore[no-untyped-def]
+def _load_faults(path: Path, mission):  # type: ignore[no-untyped-def]
+    from rpf_fly.flight.faults import load_faults
+    from rpf_fly.mission import MissionError
+
+    try:
+        return load_faults(path, mission)
+    except MissionError as err:
+        raise fail(str(err))
+
+
+def _run_flight(mission, factory, dry_run: bool, mocap_kind: str, log_path: Path, console: bool,  # type: ignore[no-untyped-def]
+                schedule=None) -> int:
     from rpf_fly.flight.dry_run import DryRun
+    from rpf_fly.flight.fault_injection import FaultInjection
     from rpf_fly.flight.session import run_flight
 
     live = _Console(mission) if console else None
     restore: dict = {}
+    injection = FaultInjection(mission, schedule) if schedule else None
+    rig_holder: dict = {}
 
     def on_loop(loop) -> None:  # type: ignore[no-untyped-def]
         restore.update(_install_signals(loop))
+        if injection is not None:
+            injection.start(loop, rig_holder["rig"])
 
+    if injection is not None:
+        factory = injection.planner_factory(factory)
     kwargs = dict(status_hook=live.update if live else None, event_sinks=(live.event if live else _print_event,),
                   on_loop=on_loop)
     try:
         with (live if live is not None else _nothing()):
             if dry_run:
-                with DryRun(mission, mocap=mocap_kind) as rig:
-                    report = run_flight(mission, factory, log_path, rig=rig, **kwargs)
+                configs = injection.drone_configs() if injection is not None else None
+                with DryRun(mission, mocap=mocap_kind, drone_configs=configs) as rig:
+                    rig_holder["rig"] = rig
+                    if injection is not None:
+                        FaultInjection.wrap(rig)
+                    try:
+                        report = run_flight(mission, factory, log_path, rig=rig, **kwargs)
+                    finally:
+                        if injection is not None:
+                            injection.close()
             else:
                 report = run_flight(mission, factory, log_path, **kwargs)
     except ConnectionError as err:

@@ -24,6 +24,8 @@ neighbour). Goal arrival and every safety check still use the measured pose.
 from __future__ import annotations
 
 import math
+import queue
+import threading
 import time
 from dataclasses import dataclass
 from typing import Callable, Optional, Protocol
@@ -50,6 +52,46 @@ def check_direction(direction: complex) -> None:
     """A planner's direction must be finite and at most a unit vector; else it is a :class:`PlannerFault`."""
     if not (math.isfinite(direction.real) and math.isfinite(direction.imag)) or abs(direction) > MAX_DIRECTION_NORM:
         raise PlannerFault(f"planner returned an invalid direction {direction!r}")
+
+
+class PlannerWorker:
+    """One drone's planner on a daemon thread of its own, called with a wall-clock deadline. A call that misses it
+    is a :class:`PlannerFault`; the thread is left to finish (or never) on its own, and its late answer is dropped:
+    the drone is already holding and landing. Daemon: a planner stuck for good must not keep the process alive."""
+
+    def __init__(self, step: Callable[[LocalView], tuple[PlanStep, complex, float]], name: str):
+        self._step = step
+        self._requests: queue.Queue[Optional[tuple[LocalView, queue.Queue]]] = queue.Queue()
+        self._busy = False
+        self._thread = threading.Thread(target=self._run, name=name, daemon=True)
+        self._thread.start()
+
+    def call(self, view: LocalView, deadline_s: float) -> tuple[PlanStep, complex, float]:
+        if self._busy:
+            raise PlannerFault("planner still busy with an earlier call")
+        reply: queue.Queue = queue.Queue(maxsize=1)
+        self._busy = True
+        self._requests.put((view, reply))
+        try:
+            ok, value = reply.get(timeout=deadline_s)
+        except queue.Empty:
+            raise PlannerFault(f"planner did not return within {deadline_s * 1e3:.0f} ms") from None
+        if not ok:
+            raise value
+        return value
+
+    def close(self) -> None:
+        self._requests.put(None)
+
+    def _run(self) -> None:
+        while (request := self._requests.get()) is not None:
+            view, reply = request
+            try:
+                result = (True, self._step(view))
+            except BaseException as err:  # noqa: BLE001 - handed to the caller
+                result = (False, err if isinstance(err, PlannerFault) else PlannerFault(f"planner raised {err!r}"))
+            self._busy = False
+            reply.put(result)
 
 
 @dataclass
@@ -111,6 +153,7 @@ class DroneAgent:
         self.arrived_at_s: Optional[float] = None
         self.stale_since_s: Optional[float] = None
         self.landing_until_s: Optional[float] = None
+        self._worker: Optional[PlannerWorker] = None
 
     # ------------------------------------------------------------------------------------------ phases
 
@@ -137,19 +180,37 @@ class DroneAgent:
 
     # ---------------------------------------------------------------------------------------- planning
 
-    def plan(self, view: LocalView, measured: complex) -> PlanResult:
-        """One guarded planning step from this drone's own view; raises :class:`PlannerFault`."""
+    def plan(self, view: LocalView, measured: complex, deadline_s: Optional[float] = None) -> PlanResult:
+        """One guarded planning step from this drone's own view; raises :class:`PlannerFault`.
+
+        ``deadline_s``: run the planner on this drone's own worker thread and give up after that many seconds of
+        wall time (a planner that blocks must not stop the loop that streams every other drone's setpoints; a
+        Python call cannot be pre-empted, so the worker is abandoned and the drone faulted). None: inline."""
+        if deadline_s is None:
+            step, direction, seconds = self._step(view)
+        else:
+            if self._worker is None:
+                self._worker = PlannerWorker(self._step, f"rpf-fly-planner-{self.name}")
+            step, direction, seconds = self._worker.call(view, deadline_s)
+        check_direction(direction)
+        if seconds > self.budget_s:
+            raise PlannerFault(f"planner took {seconds * 1e3:.1f} ms (budget {self.budget_s * 1e3:.0f} ms)")
+        return self.accept(step, direction, measured, seconds)
+
+    def _step(self, view: LocalView) -> tuple[PlanStep, complex, float]:
+        """The planner's call, timed in CPU time of the thread that runs it."""
         started = self._clock()
         try:
             step = self.planner.step(view)
             direction = complex(step.direction)
         except Exception as err:  # noqa: BLE001 - any planner failure is this drone's fault only
             raise PlannerFault(f"planner raised {type(err).__name__}: {err}") from err
-        seconds = self._clock() - started
-        check_direction(direction)
-        if seconds > self.budget_s:
-            raise PlannerFault(f"planner took {seconds * 1e3:.1f} ms (budget {self.budget_s * 1e3:.0f} ms)")
-        return self.accept(step, direction, measured, seconds)
+        return step, direction, self._clock() - started
+
+    def close(self) -> None:
+        """Let this drone's planner worker thread (if any) end."""
+        if self._worker is not None:
+            self._worker.close()
 
     def accept(
         self, step: PlanStep, direction: complex, measured: complex, seconds: float, row: Optional[int] = None

@@ -97,6 +97,7 @@ class FlightLoop:
         self._last_tick_s: Optional[float] = None
         self._stop = threading.Event()
         self._stop_reason = ""
+        self._end_reason = "mission complete"
         self._estop = threading.Event()
         self._estop_reason = ""
         self._estop_lock = threading.Lock()
@@ -153,7 +154,7 @@ class FlightLoop:
                 if self.phase not in (SwarmPhase.ABORTED,):
                     if self._stop_reason:
                         self.events.emit(WARNING, "interrupt", self._stop_reason)
-                    self._land_all(self._stop_reason or "mission complete")
+                    self._land_all(self._stop_reason or self._end_reason)
             except KeyboardInterrupt:
                 self.request_stop("interrupted (KeyboardInterrupt): landing every drone")
                 self.events.emit(WARNING, "interrupt", self._stop_reason)
@@ -235,24 +236,50 @@ class FlightLoop:
             problems = {n: p for n, p in problems.items() if p}
             if not problems:
                 break
-        if not problems and not self._stop.is_set():
-            problems = self._align_estimators()
+        if not self._stop.is_set():
+            problems.update(self._align_estimators([n for n in self.agents if n not in problems]))
         if self._stop.is_set():
             self._abort("interrupted before take-off")
             return False
         if problems:
             for name, problem in problems.items():
                 self.commander.fail(self.agents[name], f"preflight failed: {problem}")
-            self._abort(f"preflight failed for {', '.join(sorted(problems))}: no drone takes off")
+            if self.mission.safety.on_preflight_failure == "abort" or len(problems) == len(self.agents):
+                self._abort(f"preflight failed for {', '.join(sorted(problems))}: no drone takes off")
+                return False
+            self._ground_neighbours(set(problems))
+        flying = [a for a in self.agents.values() if a.phase == DronePhase.WAITING]
+        if not flying:
+            self._abort("no drone passed its preflight: no drone takes off")
             return False
-        for agent in self.agents.values():
+        for agent in flying:
             self.commander.ready(agent)
+        if problems:
+            grounded = sorted(n for n, a in self.agents.items() if a.phase == DronePhase.FAILED)
+            self.events.emit(ERROR, "preflight", f"{', '.join(grounded)} stay on the ground; the others fly")
         return True
+
+    def _ground_neighbours(self, grounded: set[str]) -> None:
+        """``safety.on_preflight_failure: ground``: a drone whose start or goal is within 2r of where a grounded
+        drone stands could not take off or land there; it stays down too."""
+        r2 = 2 * self.mission.planner.safety_radius
+        spots = {n: p.xy for n in grounded if (p := self.tracker.get(n)) is not None}
+        for agent in self.agents.values():
+            if agent.phase != DronePhase.WAITING:
+                continue
+            for name, xy in spots.items():
+                for what, point in (("start", agent.start), ("goal", agent.goal)):
+                    if abs(point - xy) < r2:
+                        self.commander.fail(agent, f"preflight: its {what} is {abs(point - xy):.2f} m from {name}, "
+                                            "which stays on the ground")
+                        break
+                if agent.phase != DronePhase.WAITING:
+                    break
 
     ESTIMATOR_SETTLE_S = 3.0
     """How long the estimates may take to agree with mocap after their reset (extpos streams meanwhile)."""
 
-    def _align_estimators(self) -> dict[str, str]:
+    def _align_estimators(self, names: list[str]) -> dict[str, str]:
         """Restart every drone's on-board estimate at its mocap position and yaw, then wait until each estimate
         agrees with mocap (position and yaw). Why: with position-only extpos the yaw estimate starts wherever the
         estimator started (0 at power-on) and nothing corrects it; a drone powered on facing another way, or
@@ -260,12 +287,13 @@ class FlightLoop:
         name -> problem for the drones whose estimate does not agree (they do not take off)."""
         problems: dict[str, str] = {}
         reset_at = self.clock()
-        for name, agent in self.agents.items():
+        for name in names:
             pose = self.tracker.get(name)
-            if pose is None or not self.commander.reset_estimator(agent, pose.position, yaw_of(pose.quaternion)):
+            if pose is None or not self.commander.reset_estimator(self.agents[name], pose.position,
+                                                                  yaw_of(pose.quaternion)):
                 problems[name] = "its estimator could not be reset (kalman.initialX/Y/Z/Yaw, resetEstimation)"
         deadline = self.clock() + self.ESTIMATOR_SETTLE_S
-        pending = {n: "" for n in self.agents if n not in problems}
+        pending = {n: "" for n in names if n not in problems}
         while pending and self.clock() < deadline and not self._stop.is_set():
             self._spin_once(min(deadline, self.clock() + 0.05))
             for name in list(pending):
@@ -323,6 +351,7 @@ class FlightLoop:
                 now = self.clock()
                 flying = [a for a in self.agents.values() if a.phase in (DronePhase.PLANNING, DronePhase.HOLDING, DronePhase.ARRIVED)]
                 if not flying:
+                    self._end_reason = "no drone is flying its mission any more"
                     break
                 if all(a.phase == DronePhase.ARRIVED for a in flying):
                     all_arrived_at = all_arrived_at if all_arrived_at is not None else now
@@ -336,6 +365,7 @@ class FlightLoop:
                     for a in flying:
                         if a.phase != DronePhase.ARRIVED:
                             a.outcome = FlightOutcome.TIMEOUT
+                    self._end_reason = "mission timeout"
                     break
         finally:
             self._watchdog.arm(False)
@@ -375,6 +405,8 @@ class FlightLoop:
         if airborne:
             self.events.emit(FATAL, "error", f"still airborne at the end: {', '.join(airborne)}; emergency stop")
             self.commander.emergency_stop("still airborne at the end of the flight", airborne)
+        for agent in self.agents.values():
+            agent.close()
         try:
             now = self.clock()
             for agent in self.agents.values():

@@ -71,6 +71,15 @@ class Neighbourhood:
         return self.xy[keep], self.velocity[keep]
 
 
+def isolated(planner: object) -> bool:
+    """Whether a drone's planner runs on a thread of its own with a wall-clock deadline: every planner but the
+    product's own :class:`Planner` (pure numpy and onnxruntime, planned inline and batched, its stalls left to the
+    loop watchdog). A wrapper, ORCA, the heading policy or a user's planner may block (a lock, I/O, a bug): on the
+    loop thread it would stop every drone's setpoints; on its own thread it faults only its drone. Costs one thread
+    hand-off per call (tens of microseconds)."""
+    return type(planner) is not Planner
+
+
 @dataclass
 class SwarmPlanner:
     """Plans a tick of drones; ``batching`` turns off (for good) when a batched call runs over ``budget_s``."""
@@ -82,6 +91,9 @@ class SwarmPlanner:
     """CPU time of the loop thread: a batch is judged by its own computing, not by GIL waits or pre-emption."""
     notes: list[str] = field(default_factory=list)
     """Why batching changed or a batch was not trusted, for the flight's event log (the caller drains it)."""
+    hang_s: float = 0.25
+    """Wall-clock deadline of an isolated planner's call (below the loop watchdog's 0.35 s: the loop keeps
+    ticking for everyone else)."""
     _leaders: list[object] = field(default_factory=list, repr=False)
     _known: dict[int, tuple[object, int]] = field(default_factory=dict, repr=False)
 
@@ -120,7 +132,7 @@ class SwarmPlanner:
         xy, velocity = world.others_of(agent)
         view = view_of_drone(agent.reference, agent.goal, agent.heading, xy + lag_s * velocity, velocity, self.sensing_range)
         try:
-            return agent.plan(view, measured)
+            return agent.plan(view, measured, deadline_s=self.hang_s if isolated(agent.planner) else None)
         except PlannerFault as fault:
             return fault
 

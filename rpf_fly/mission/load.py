@@ -334,6 +334,7 @@ SAFETY_SPEC: dict[str, tuple[str, Reader]] = {
     "pose_lost_land_s": ("pose_lost_land_s", _num(POSITIVE)),
     "on_separation": ("on_separation", _choice(("warn", "hold", "land"))),
     "on_obstacle": ("on_obstacle", _choice(("warn", "hold", "land"))),
+    "on_preflight_failure": ("on_preflight_failure", _choice(("ground", "abort"))),
     "planner_budget_s": ("planner_budget_s", _num(POSITIVE)),
     "start_tolerance_m": ("start_tolerance_m", _num(POSITIVE)),
     "arrival_hold_s": ("arrival_hold_s", _num(NON_NEGATIVE)),

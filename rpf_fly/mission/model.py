@@ -132,6 +132,10 @@ class SafetySettings:
     """Preflight: each drone must sit within this distance (xy) of its mission start."""
     arrival_hold_s: float = 0.0
     """Extra hover time at the goals before landing."""
+    on_preflight_failure: Literal["ground", "abort"] = "ground"
+    """A drone that fails its preflight stays on the ground; ``ground``: the others fly (those whose start or goal
+    is within 2r of a grounded drone stay down too: they could not take off or land there); ``abort``: nothing
+    takes off. A connection failure always aborts."""
 
 @dataclass(frozen=True)
 class CircleObstacle:

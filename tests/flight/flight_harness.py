@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Callable, Optional
 
 from rpf_fly.flight.dry_run import DryRun
+from rpf_fly.flight.fault_injection import FaultInjection
 from rpf_fly.flight.loop import FlightLoop, FlightReport
 from rpf_fly.flight.phases import SwarmPhase
 from rpf_fly.flight.session import run_flight
@@ -67,6 +68,7 @@ def fly(
     """Fly ``mission`` on simulated drones; ``when_flying(loop, rig)`` runs on its own thread once the swarm flies."""
     log_path = tmp_path / "flight.mcap"
     with DryRun(mission, mocap=mocap, drone_configs=configs, process=process) as rig:
+        FaultInjection.wrap(rig)  # rig.mocap.stall(seconds) blocks the loop thread (the loop_stall fault)
         workers: list[threading.Thread] = []
 
         def on_loop(loop: FlightLoop) -> None:

@@ -199,13 +199,25 @@ def test_unhandled_exception_lands_everyone_and_closes_the_log(tmp_path, short_m
     assert any("flight loop failed" in m for m in flight.logged_events())
 
 
-def test_preflight_failure_arms_nothing(tmp_path, short_mission):
+def test_preflight_failure_arms_nothing_when_the_mission_says_abort(tmp_path, short_mission):
     configs = {"cf2": FakeDroneConfig.at(0.5, 0.0, 0.0)}  # 1.5 m away from its mission start
-    flight = fly(short_mission, tmp_path, configs=configs)
+    mission = replace(short_mission, safety=replace(short_mission.safety, on_preflight_failure="abort"))
+    flight = fly(mission, tmp_path, configs=configs)
     assert flight.report.phase == SwarmPhase.ABORTED
     assert "from its start" in flight.report.reasons["cf2"]
     assert all(o == FlightOutcome.NOT_FLOWN for o in flight.report.outcomes.values())
     assert all(not s.motors_on and s.position[2] < 0.01 for s in flight.snapshots.values())
+
+
+def test_a_drone_failing_its_preflight_stays_on_the_ground_and_the_others_fly(tmp_path, short_mission):
+    configs = {"cf2": FakeDroneConfig.at(-0.5, 0.0, 0.0, positioning="extpos")}  # 0.5 m from its start
+    flight = fly(short_mission, tmp_path, configs=configs)
+    assert "from its start" in flight.report.reasons["cf2"]
+    assert flight.report.outcomes["cf2"] == FlightOutcome.NOT_FLOWN
+    assert flight.report.outcomes["cf1"] == flight.report.outcomes["cf3"] == FlightOutcome.REACHED
+    assert not flight.snapshots["cf2"].motors_on and flight.snapshots["cf2"].position[2] < 0.01
+    assert flight.snapshots["cf2"].transitions == () or all(t.new.value != "Flying" for t in flight.snapshots["cf2"].transitions)
+    assert any("cf2 stay on the ground" in m for m in flight.logged_events())
 
 
 def test_simulated_mocap_source_flies_too(tmp_path, short_mission):

@@ -27,9 +27,23 @@ def event_time_ns(flight, text: str) -> int:  # type: ignore[no-untyped-def]
 
 
 def test_a_loop_stall_lands_every_drone_and_the_landing_stands(tmp_path, short_mission):
-    """A planner call that blocks the loop for 1 s: the watchdog lands every drone through the commander, and when
-    the loop comes back it streams no setpoint to a drone that was told to land (a streamed setpoint would override
-    the high-level landing and the drone would fly on, unplanned)."""
+    """The loop thread blocks for 1 s: the watchdog lands every drone through the commander, and when the loop comes
+    back it streams no setpoint to a drone that was told to land (a streamed setpoint would override the high-level
+    landing and the drone would fly on, unplanned)."""
+    flight = fly(short_mission, tmp_path, when_flying=lambda loop, rig: (time.sleep(1.0), rig.mocap.stall(1.0)))
+    stalled = event_time_ns(flight, "flight loop stalled")
+    for name in ("cf1", "cf2", "cf3"):
+        late = [m for m in flight.log.messages(f"/{name}/setpoint") if m.log_time > stalled]
+        assert late == [], f"{name}: {len(late)} setpoints streamed after the watchdog landed it"
+        assert flight.report.outcomes[name] == FlightOutcome.LANDED_EARLY
+    assert all(landed(s) for s in flight.snapshots.values())
+    assert [e.level for e in flight.events("loop")] == [5]
+
+
+def test_a_planner_that_blocks_faults_its_drone_only(tmp_path, short_mission):
+    """A drone's planner blocks for 1 s: it runs on its own thread with a deadline, so the loop keeps streaming the
+    others' setpoints; that drone holds and lands, the others reach their goals (before, the loop stopped with it
+    and the watchdog landed everyone)."""
     base = default_factory(short_mission)
 
     class Hanging:
@@ -44,13 +58,12 @@ def test_a_loop_stall_lands_every_drone_and_the_landing_stands(tmp_path, short_m
 
     factory = lambda drone: Hanging(base(drone)) if drone.name == "cf2" else base(drone)  # noqa: E731
     flight = fly(short_mission, tmp_path, factory=factory)
-    stalled = event_time_ns(flight, "flight loop stalled")
-    for name in ("cf1", "cf2", "cf3"):
-        late = [m for m in flight.log.messages(f"/{name}/setpoint") if m.log_time > stalled]
-        assert late == [], f"{name}: {len(late)} setpoints streamed after the watchdog landed it"
-        assert flight.report.outcomes[name] == FlightOutcome.LANDED_EARLY
+    fault = flight.events("planner_fault", "cf2")
+    assert fault and "did not return within" in fault[0].message
+    assert not flight.events("loop")
+    assert flight.report.outcomes["cf2"] == FlightOutcome.LANDED_EARLY
+    assert flight.report.outcomes["cf1"] == flight.report.outcomes["cf3"] == FlightOutcome.REACHED
     assert all(landed(s) for s in flight.snapshots.values())
-    assert [e.level for e in flight.events("loop")] == [5]
 
 
 def test_the_watchdog_rearms_after_a_stall_and_follows_the_rate():
