@@ -10,7 +10,9 @@ Measured by the flight loop itself (rpf_fly.flight.loop.LoopStats) while the dro
   tick interval and latency of all runs (a stall, e.g. a full garbage collection, shows there, not in a p99);
 - planner time per drone;
 - the flight log's CPU time (the loop thread inside the recorder's calls plus the writer thread) over the whole
-  flight, take-off and landing included, in percent of a core (tools/bench_log.py measures it at a steady rate).
+  flight, take-off and landing included, in percent of a core (tools/bench_log.py measures it at a steady rate);
+  the dry run's truth feed (``/truth``, rpf_fly/flight/truth.py) separately: its thread's CPU time, and the
+  writer's share of its messages is in the log's figure (``--no-truth`` flies without it, for comparison).
 Goals: latency p50 <= 0.5 ms, p99 <= 2 ms. The machine is shared: read medians over runs.
 """
 
@@ -46,7 +48,7 @@ formation: {{kind: circle_swap, count: {drones}, radius: 3.0}}
 """
 
 
-def run_once(drones: int, rate: float, planner: str, log: bool, in_process: bool = False) -> dict:
+def run_once(drones: int, rate: float, planner: str, log: bool, in_process: bool = False, truth: bool = True) -> dict:
     mission = parse_mission(mission_text(drones, rate, planner))
     obstacles = obstacle_set(mission.obstacles)
     loops = []
@@ -65,7 +67,7 @@ def run_once(drones: int, rate: float, planner: str, log: bool, in_process: bool
 
             setattr(loop.recorder, name, timed)
 
-    with tempfile.TemporaryDirectory() as tmp, DryRun(mission, process=not in_process) as rig:
+    with tempfile.TemporaryDirectory() as tmp, DryRun(mission, process=not in_process, truth=truth) as rig:
         wall0 = time.perf_counter()
         report = run_flight(mission, lambda d: make_planner(mission.planner, obstacles),
                             Path(tmp) / "bench.mcap" if log else None, rig=rig, on_loop=time_the_recorder)
@@ -77,6 +79,9 @@ def run_once(drones: int, rate: float, planner: str, log: bool, in_process: bool
         summary["log_messages_per_s"] = recorder.log.written / wall
         summary["log_cpu_pct"] = 100 * (recorder_cpu[0] + recorder.log.writer_cpu_s) / wall
         summary["log_recorder_pct"] = 100 * recorder_cpu[0] / wall
+        feed = recorder.truth_feed
+        summary["truth_cpu_pct"] = 100 * feed.cpu_s / wall if feed is not None else None
+        summary["truth_messages_per_s"] = feed.samples * drones / wall if feed is not None else None
     return summary
 
 
@@ -89,9 +94,11 @@ def main() -> int:
     parser.add_argument("--no-log", action="store_true", help="fly without the MCAP log")
     parser.add_argument("--in-process", action="store_true",
                         help="simulated drones and NatNet emulator on threads of this process (default: their own)")
+    parser.add_argument("--no-truth", action="store_true", help="fly without the dry run's /truth in the log")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
-    runs = [run_once(args.drones, args.rate, args.planner, not args.no_log, args.in_process) for _ in range(args.runs)]
+    runs = [run_once(args.drones, args.rate, args.planner, not args.no_log, args.in_process,
+                     not args.no_truth) for _ in range(args.runs)]
 
     def med(key: str) -> float:
         values = [r[key] for r in runs if r[key] is not None]
@@ -110,6 +117,8 @@ def main() -> int:
     if not args.no_log:
         result.update(log_cpu_pct=med("log_cpu_pct"), log_recorder_pct=med("log_recorder_pct"),
                       log_messages_per_s=med("log_messages_per_s"))
+        if not args.no_truth:
+            result.update(truth_cpu_pct=med("truth_cpu_pct"), truth_messages_per_s=med("truth_messages_per_s"))
     if args.json:
         print(json.dumps(result))
         return 0
@@ -127,6 +136,9 @@ def main() -> int:
         print(f"  flight log: {result['log_cpu_pct']:.2f} % of a core over the whole flight (loop thread in the "
               f"recorder {result['log_recorder_pct']:.2f} %, the rest the writer thread), "
               f"{result['log_messages_per_s']:.0f} messages/s")
+        if not args.no_truth:
+            print(f"  truth feed thread: {result['truth_cpu_pct']:.2f} % of a core, "
+                  f"{result['truth_messages_per_s']:.0f} /truth messages/s (their writing is in the log's figure)")
     print(f"  planner p50 {result['planner_p50_us']:.1f} us per drone; every run succeeded: "
           f"{all(r['success'] for r in runs)}")
     return 0

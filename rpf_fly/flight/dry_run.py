@@ -14,6 +14,10 @@ process (debugging, packet observers).
 Fault hooks for tests and demos: :meth:`DryRun.hide` (a rigid body untracked for a while), :meth:`DryRun.blackout`
 (no body tracked at all), ``DryRun.world``'s link drop, battery and disturbance hooks and the faults of
 ``drone_configs``.
+
+The simulated drones crash on contact with each other or with the mission's obstacles
+(:mod:`rpf_fly.radio.fake_contact`), and their true states reach the flight log as ``/truth/<drone>``
+(:meth:`DryRun.truth_samples`, :mod:`rpf_fly.flight.truth`).
 """
 
 from __future__ import annotations
@@ -53,7 +57,10 @@ class DryRun:
         cache_dir: Optional[Path] = None,
         seed: int = 0,
         process: bool = True,
+        truth: bool = True,
     ):
+        """``truth``: the flight log of a flight on this rig gets the world's truth (``/truth/<drone>``); False only
+        to measure what that costs (tools/bench_flight.py ``--no-truth``)."""
         if mocap not in ("natnet", "sim"):
             raise ValueError(f"dry-run mocap must be 'natnet' or 'sim', not {mocap!r}")
         self.mission = mission
@@ -68,8 +75,10 @@ class DryRun:
             self.addresses[d.name]: configs.get(d.name, FakeDroneConfig.at(d.start[0], d.start[1], 0.0, positioning="extpos"))
             for d in mission.drones
         }
+        self._names = {address: name for name, address in self.addresses.items()}
         self.seed = seed
         self.in_process = not process
+        self.truth = truth
         self.world: Any = None  # a FakeWorld, or the WorldProcess speaking to one (same hook names)
         self._bodies: Any = None
         self._cache = tempfile.TemporaryDirectory(prefix="rpf-fly-toc-") if cache_dir is None else None
@@ -95,7 +104,7 @@ class DryRun:
         body_of_address = {self.addresses[n]: body for n, body in self.bodies.items()}
         natnet = {"version": self.natnet_version, "rate_hz": self.rate_hz, "up_axis": up}
         if self.in_process:
-            self.world = FakeWorld(self.drone_configs, seed=self.seed).start()
+            self.world = FakeWorld(self.drone_configs, seed=self.seed, obstacles=self.mission.obstacles).start()
             self._bodies = SimulatedBodies(self.world, body_of_address)
             fake_radio.register(self.world)
             command_port = None
@@ -110,7 +119,7 @@ class DryRun:
         else:
             self.world = self._bodies = WorldProcess(
                 self.drone_configs, body_of_address, seed=self.seed,
-                natnet=natnet if self.mocap_kind == "natnet" else None,
+                natnet=natnet if self.mocap_kind == "natnet" else None, obstacles=self.mission.obstacles,
             )
             fake_radio.register(RemoteWorld(self.world.radio, tuple(self.drone_configs)))
             command_port = self.world.natnet_command_port
@@ -161,6 +170,14 @@ class DryRun:
     def blackout(self, seconds: float) -> None:
         """Report every rigid body as not tracked for ``seconds`` (mocap lost)."""
         self._bodies.blackout(seconds)
+
+    def truth_samples(self) -> list[tuple[float, dict[str, Any]]]:
+        """The simulated world's truth since the previous call, keyed by drone name: ``[(monotonic_s, {drone:
+        (position, yaw, motors, crashed, estimate)})]`` (one sample per world step; one round trip to the world
+        process, or a direct call with ``process=False``). One reader: the flight log's truth feed."""
+        names = self._names
+        return [(stamp, {names[a]: state for a, state in states.items()})
+                for stamp, states in self.world.truth_samples()]
 
     def snapshot(self, name: str):  # type: ignore[no-untyped-def]
         """The fake firmware's state of drone ``name`` (position, motors, flags, ...)."""

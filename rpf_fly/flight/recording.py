@@ -2,7 +2,8 @@
 
 Converts the loop's monotonic seconds to nanoseconds since the Unix epoch (one offset taken at the start), and
 the loop's objects to the log's topics: poses and /tf at the mocap rate, planner steps and setpoints at the
-planning rate, status at 10 Hz, events as they happen, the scene once.
+planning rate, status at 10 Hz, events as they happen, the scene once; in a dry run also the simulated world's
+truth (``/truth/<drone>``, every world step, fed by :class:`rpf_fly.flight.truth.TruthFeed`).
 """
 
 from __future__ import annotations
@@ -10,11 +11,12 @@ from __future__ import annotations
 import math
 import time
 from pathlib import Path
-from typing import Optional
+from typing import Any, Callable, Optional
 
 from rpf_fly.flight.agent import DroneAgent
 from rpf_fly.flight.events import FlightEvent
 from rpf_fly.flight.poses import TrackedPose
+from rpf_fly.flight.truth import TruthBatch, TruthFeed
 from rpf_fly.log import schemas as S
 from rpf_fly.log.writer import FlightLog
 from rpf_fly.mission.model import Mission
@@ -34,9 +36,14 @@ POLL_FALLBACK_S = 0.25
 
 
 class McapRecorder:
-    """Implements :class:`rpf_fly.flight.loop.Recorder` on a :class:`~rpf_fly.log.writer.FlightLog`."""
+    """Implements :class:`rpf_fly.flight.loop.Recorder` on a :class:`~rpf_fly.log.writer.FlightLog`.
 
-    def __init__(self, path: str | Path, mission: Mission, seed: int = 0, source: str = "flight"):
+    ``truth``: a dry run's truth source (:meth:`rpf_fly.flight.dry_run.DryRun.truth_samples`); its feed runs from
+    here until :meth:`close`, so ``/truth`` covers the whole log and ends before the log does. None: no truth (a
+    real flight has none)."""
+
+    def __init__(self, path: str | Path, mission: Mission, seed: int = 0, source: str = "flight",
+                 truth: Optional[Callable[[], TruthBatch]] = None):
         self.mission = mission
         self.log = FlightLog(path, S.mission_metadata(mission, seed, source=source), S.scenario_metadata(mission),
                              poll_interval_s=POLL_FALLBACK_S)
@@ -48,6 +55,7 @@ class McapRecorder:
         arena = {"x": list(mission.arena.x), "y": list(mission.arena.y), "z": list(mission.arena.z)}
         goals = {d.name: complex(*d.goal) for d in mission.drones}
         self.log.scene(now, [S._obstacle_dict(o) for o in mission.obstacles], goals, arena, mission.flight.height)  # noqa: SLF001
+        self.truth_feed = TruthFeed(truth, self._truth).start() if truth is not None else None
 
     @property
     def path(self) -> Path:
@@ -87,6 +95,10 @@ class McapRecorder:
                 obstacle_distance=d_o if d_o < min(FAR, self._sensing + 1e-9) else None)
         return S.planner_json(t_ns, fields)
 
+    def _truth(self, stamp_s: float, states: dict[str, Any]) -> None:
+        """The feed's thread: one world sample (``time.monotonic()`` seconds, shared with this process)."""
+        self.log.truth(self._ns(stamp_s), states)
+
     def after_tick(self, t_s: float) -> None:
         """The loop finished a planning tick and waits for the next frame: let the writer drain now (its GIL-holding
         burst then falls in that idle gap instead of delaying the next frame's setpoints)."""
@@ -112,4 +124,6 @@ class McapRecorder:
                        file=event.kind)
 
     def close(self) -> None:
+        if self.truth_feed is not None:
+            self.truth_feed.stop()
         self.log.close()

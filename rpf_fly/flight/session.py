@@ -74,10 +74,18 @@ def run_flight(
         backend, source, uris = CflibBackend(cache_dir=rig.cache_dir), rig.mocap, rig.uris
     else:
         backend, source, uris = CflibBackend(cache_dir=DEFAULT_TOC_CACHE), natnet_source(mission), None
-    recorder = McapRecorder(log_path, mission, seed, source="dry-run" if rig else "flight") if log_path else None
+    recorder = None
+    if log_path:
+        truth = rig.truth_samples if rig is not None and rig.truth else None  # only a dry run has a truth
+        recorder = McapRecorder(log_path, mission, seed, source="dry-run" if rig else "flight", truth=truth)
     try:
-        loop = FlightLoop(mission, backend, source, planner_factory, uris=uris, recorder=recorder,
-                          status_hook=status_hook)
+        try:
+            loop = FlightLoop(mission, backend, source, planner_factory, uris=uris, recorder=recorder,
+                              status_hook=status_hook)
+        except BaseException:
+            if recorder is not None:  # the loop closes it once it exists; before that, nobody would
+                recorder.close()
+            raise
         for sink in event_sinks:
             loop.events.subscribe(sink)
         if on_loop is not None:

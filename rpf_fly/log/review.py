@@ -104,8 +104,13 @@ def scenario_of(data: LogData) -> dict[str, Any]:
     return scenario
 
 
+DRONE_PREFIXES = ("mocap", "truth")
+"""Topics ``/<prefix>/<drone>``; every other two-part topic is ``/<drone>/<what>``."""
+
+
 def drones_of(data: LogData) -> list[str]:
-    """Drone names: from the scenario record, else from the topics (``/mocap/<d>``, ``/<d>/planner``, ...)."""
+    """Drone names: from the scenario record, else from the topics (``/mocap/<d>``, ``/truth/<d>``,
+    ``/<d>/planner``, ...)."""
     try:
         return list(scenario_of(data)["names"])
     except ReviewError:
@@ -113,7 +118,9 @@ def drones_of(data: LogData) -> list[str]:
     names: list[str] = []
     for topic in data.topics:
         parts = topic.strip("/").split("/")
-        name = parts[1] if parts[0] == "mocap" and len(parts) == 2 else (parts[0] if len(parts) == 2 else None)
+        if len(parts) != 2:
+            continue
+        name = parts[1] if parts[0] in DRONE_PREFIXES else parts[0]
         if name and name not in names:
             names.append(name)
     return names

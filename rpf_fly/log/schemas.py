@@ -3,8 +3,9 @@
 Foxglove's well-known schemas (``foxglove.PoseInFrame``, ``foxglove.SceneUpdate``, ``foxglove.FrameTransforms``,
 ``foxglove.Log``) are written here from the field lists Foxglove documents (every field their ``required`` lists
 name, arrays included even when empty), so Foxglove's 3D, Log and plot panels open our files unchanged. Our own
-``rpf_fly.PlannerStep`` and ``rpf_fly.DroneStatus`` follow the same conventions: times ``{"sec", "nsec"}``,
-planar vectors ``{"x", "y"}``, unknown values ``null``. See docs/log-format.md for what each field means.
+``rpf_fly.PlannerStep``, ``rpf_fly.DroneStatus`` and ``rpf_fly.TruthState`` (dry runs only) follow the same
+conventions: times ``{"sec", "nsec"}``, planar vectors ``{"x", "y"}``, unknown values ``null``. See
+docs/log-format.md for what each field means.
 
 The builders return plain dicts ready for :func:`encode` (floats are Python floats, NaN becomes ``null`` where the
 schema allows it). Planar vectors may be given as complex numbers ``x + iy`` (rpf_fly's convention) or as
@@ -352,6 +353,20 @@ DRONE_STATUS: dict[str, Any] = _obj(
     description="State, battery and link of one drone",
 )
 
+TRUTH_STATE: dict[str, Any] = _obj(
+    {
+        "timestamp": _time("When the simulated world was in this state"),
+        "position": _obj({"x": _num(), "y": _num(), "z": _num()}, description="The drone's true centre (m)"),
+        "yaw": _num("True yaw (rad, counter-clockwise from +x)"),
+        "motors": {"type": "boolean", "description": "The motors spin"},
+        "crashed": {"type": "boolean", "description": "The drone hit another drone or an obstacle (locked)"},
+        "estimate": _obj({"x": _num(), "y": _num(), "z": _num()},
+                         description="The firmware's estimated position (m)"),
+    },
+    title="rpf_fly.TruthState",
+    description="One drone's true state in a dry run's simulated world (not measured: real flights have none)",
+)
+
 SCHEMAS: dict[str, dict[str, Any]] = {
     "foxglove.PoseInFrame": POSE_IN_FRAME,
     "foxglove.SceneUpdate": SCENE_UPDATE,
@@ -359,6 +374,7 @@ SCHEMAS: dict[str, dict[str, Any]] = {
     "foxglove.Log": LOG,
     "rpf_fly.PlannerStep": PLANNER_STEP,
     "rpf_fly.DroneStatus": DRONE_STATUS,
+    "rpf_fly.TruthState": TRUTH_STATE,
 }
 """Every schema the log uses, by the schema name written into the file."""
 
@@ -375,6 +391,8 @@ def topic_schema(topic: str) -> str:
     """The schema name of a topic of the contract (docs/log-format.md)."""
     if topic.startswith("/mocap/") or topic.endswith("/setpoint"):
         return "foxglove.PoseInFrame"
+    if topic.startswith("/truth/"):
+        return "rpf_fly.TruthState"
     if topic.endswith("/planner"):
         return "rpf_fly.PlannerStep"
     if topic.endswith("/status"):
@@ -518,6 +536,18 @@ def drone_status(t_ns: int, state: str, battery_v: Any = None, link_quality: Any
     }
 
 
+def truth_state(t_ns: int, position: Any, yaw: float, motors: bool, crashed: bool, estimate: Any) -> dict[str, Any]:
+    """A ``rpf_fly.TruthState``: positions ``(x, y, z)`` in metres, yaw in radians."""
+    return {
+        "timestamp": stamp(t_ns),
+        "position": xyz(position),
+        "yaw": float(yaw),
+        "motors": bool(motors),
+        "crashed": bool(crashed),
+        "estimate": xyz(estimate),
+    }
+
+
 def _colour(r: float, g: float, b: float, a: float = 1.0) -> dict[str, float]:
     return {"r": r, "g": g, "b": b, "a": a}
 
@@ -630,6 +660,20 @@ def tf_json(t_ns: int, poses: Mapping[str, tuple[Any, Optional[Sequence[float]]]
         return _dumps({"transforms": transforms})
     except (TypeError, ValueError):
         return encode(frame_transforms(t_ns, poses))
+
+
+def truth_json(t_ns: int, position: Any, yaw: float, motors: bool, crashed: bool, estimate: Any) -> bytes:
+    """``encode(truth_state(t_ns, position, yaw, motors, crashed, estimate))``, fast."""
+    try:
+        x, y, z = position
+        ex, ey, ez = estimate
+        sec, nsec = divmod(int(t_ns), 1_000_000_000)
+        return _dumps({"timestamp": {"sec": sec, "nsec": nsec},
+                       "position": {"x": float(x), "y": float(y), "z": float(z)}, "yaw": float(yaw),
+                       "motors": bool(motors), "crashed": bool(crashed),
+                       "estimate": {"x": float(ex), "y": float(ey), "z": float(ez)}})
+    except (TypeError, ValueError):
+        return encode(truth_state(t_ns, position, yaw, motors, crashed, estimate))
 
 
 _PLANNER_KEYS = frozenset(PLANNER_FIELDS) | {"lam"}

@@ -7,20 +7,21 @@ one second: the file is then unfinished but :func:`rpf_fly.log.reader.read_log` 
 :func:`rpf_fly.log.reader.salvage` rewrites it into a finished file.
 
 Queue policy (docs/log-format.md): the queue is bounded (``max_queue`` messages, default 50 000, several seconds of
-a 10-drone flight). When it is full a new high-rate message (pose, setpoint, planner step, status, tf) is dropped,
-never blocking the caller; events and scene updates still enter up to twice the bound. A batch call
-(:meth:`FlightLog.poses`, :meth:`FlightLog.setpoints`, :meth:`FlightLog.planner_steps`: one queue entry for one tick
-of every drone; about half the caller's cost a message, hot) counts as its messages and enters or drops whole. Drops
-are counted (:attr:`FlightLog.dropped`), leave a gap in the topic's ``sequence`` (sequences are drawn at the call),
-are reported with a Python ``logging`` warning and as a warning on ``/events`` at most once per flush, and are
-summarised on ``/events`` at close. Calls after :meth:`FlightLog.close` are ignored (and counted as dropped). A
-write error (disk full) is logged once, kept in :attr:`FlightLog.error`, and the log stops writing; nothing is
-raised into the flight loop.
+a 10-drone flight). When it is full a new high-rate message (pose, setpoint, planner step, status, tf, truth) is
+dropped, never blocking the caller; events and scene updates still enter up to twice the bound. A batch call
+(:meth:`FlightLog.poses`, :meth:`FlightLog.setpoints`, :meth:`FlightLog.planner_steps`, :meth:`FlightLog.truth`: one
+queue entry for one tick of every drone; about half the caller's cost a message, hot) counts as its messages and
+enters or drops whole. Drops are counted (:attr:`FlightLog.dropped`), leave a gap in the topic's ``sequence``
+(sequences are drawn at the call), are reported with a Python ``logging`` warning and as a warning on ``/events``
+at most once per flush, and are summarised on ``/events`` at close. Calls after :meth:`FlightLog.close` are
+ignored (and counted as dropped). A write error (disk full) is logged once, kept in :attr:`FlightLog.error`, and
+the log stops writing; nothing is raised into the flight loop.
 
 Arguments are serialised later on the writer thread: do not mutate them after the call (pass tuples, floats,
 fresh arrays). Timestamps are integer nanoseconds since the Unix epoch: ``t_ns`` is the message's publish time
 (when the data was created: mocap frame time, planner tick); the log time is the ``clock()`` at the call (when
-recorded), or ``t_ns`` itself with ``clock=None`` (simulated runs).
+recorded), or ``t_ns`` itself with ``clock=None`` (simulated runs) and for ``/truth`` (its samples arrive in
+batches).
 """
 
 from __future__ import annotations
@@ -122,6 +123,7 @@ class FlightLog:
         self._setpoints: dict[str, tuple[str, Any]] = {}
         self._planner: dict[str, tuple[str, Any]] = {}
         self._status: dict[str, tuple[str, Any]] = {}
+        self._truth: dict[str, tuple[str, Any]] = {}
         self._fixed = {name: (name, itertools.count()) for name in ("/scene", "/tf", "/events")}
         self._channels: dict[str, int] = {}
         self._schema_ids: dict[str, int] = {}
@@ -183,6 +185,15 @@ class FlightLog:
         :meth:`planner_step`). A flight's recorder passes its own ``build`` so that the loop thread only hands
         over references (rpf_fly/flight/recording.py)."""
         self._put_batch(self._planner, "/{}/planner", [(d, t_ns, (v,)) for d, v in steps.items()], build)
+
+    def truth(self, t_ns: int, states: Mapping[str, tuple[Sequence[float], float, bool, bool, Sequence[float]]]
+              ) -> None:
+        """``/truth/<drone>`` of every drone at one sample of a dry run's simulated world, queued as one entry:
+        ``{drone: (position, yaw, motors, crashed, estimate)}`` (metres, radians; see
+        :func:`rpf_fly.log.schemas.truth_state`). ``t_ns``: when the world was in that state. Log time = ``t_ns``
+        (not the clock at the call): the samples reach the flight's process in batches (docs/log-format.md)."""
+        self._put_batch(self._truth, "/truth/{}", [(d, t_ns, v) for d, v in states.items()], S.truth_json,
+                        log_at_publish=True)
 
     def setpoint(self, drone: str, t_ns: int, position_xyz: Sequence[float], yaw_rad: float = 0.0) -> None:
         """``/<drone>/setpoint``: the position setpoint sent, with its yaw (radians) as the orientation."""
@@ -287,8 +298,9 @@ class FlightLog:
         self._enqueue(1, (topic[0], sequence, t_ns, log_time, build, args))
 
     def _put_batch(self, table: dict[str, tuple[str, Any]], pattern: str, items: list[tuple[str, int, Any]],
-                   build: Callable[[int, Any], bytes | dict]) -> None:
-        """Queue one message per ``(drone, t_ns, args)`` as one entry; ``build(t_ns, *args)`` runs on the writer."""
+                   build: Callable[[int, Any], bytes | dict], log_at_publish: bool = False) -> None:
+        """Queue one message per ``(drone, t_ns, args)`` as one entry; ``build(t_ns, *args)`` runs on the writer.
+        ``log_at_publish``: each message's log time is its ``t_ns`` instead of the clock at the call."""
         if not items:
             return
         topics, sequences = [], []
@@ -300,7 +312,7 @@ class FlightLog:
         if self._closed or not self._room(n, False):
             self._count_drop(n)
             return
-        log_time = None if self._clock is None else self._clock()
+        log_time = None if self._clock is None or log_at_publish else self._clock()
         self._enqueue(n, (topics, sequences, None, log_time, build, items))
 
     def _channel(self, topic: str) -> int:

@@ -26,8 +26,9 @@ from collections import Counter
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from types import MappingProxyType
+from typing import NamedTuple
 
-from .fake_setpoint import decode_generic, decode_rpyt
+from .fake_setpoint import decode_generic, decode_rpyt, wrap_angle
 from .fake_supervisor import Transition
 from .fake_toc import EXTENDED_TYPE_PERSISTENT, LOG_TYPE_NAMES, Toc, make_toc, pack_value, unpack_value, value_size
 from .fake_vehicle import Vehicle, VehicleConfig
@@ -62,7 +63,7 @@ _LOG_VARIABLES: tuple[tuple[str, str, Callable[[FakeFirmware], float]], ...] = (
     ("supervisor.info", "uint16_t", lambda f: f.supervisor_bits()),
     ("sys.canfly", "uint8_t", lambda f: f.vehicle.supervisor.motors_allowed),
     ("sys.isFlying", "uint8_t", lambda f: f.vehicle.supervisor.is_flying),
-    ("sys.isTumbled", "uint8_t", lambda f: 0),
+    ("sys.isTumbled", "uint8_t", lambda f: f.vehicle.supervisor.tumbled),
     ("kalman.varPX", "float", lambda f: f.vehicle.variance_m2),
     ("kalman.varPY", "float", lambda f: f.vehicle.variance_m2),
     ("kalman.varPZ", "float", lambda f: f.vehicle.variance_m2),
@@ -118,6 +119,19 @@ class _LogBlock:
     next_due_s: float = 0.0
 
 
+class Body(NamedTuple):
+    """One drone's body as the fake world sees it each step. Metres, radians."""
+
+    position: tuple[float, float, float]
+    yaw: float
+    """Radians, wrapped to (-pi, pi]."""
+    motors_on: bool
+    airborne: bool
+    """Above its floor or motors on (only then can it hit something)."""
+    crashed: bool
+    estimate: tuple[float, float, float]
+
+
 @dataclass(frozen=True)
 class FirmwareSnapshot:
     """A consistent copy of one fake Crazyflie's state, for tests and tools. Metres, seconds, degrees, volts."""
@@ -128,6 +142,12 @@ class FirmwareSnapshot:
     supervisor_bits: int
     armed: bool
     locked: bool
+    crashed: bool
+    """The drone hit another drone or an obstacle (the fake world's contact model); it is locked until reboot."""
+    crash_time_s: float | None
+    """World time of the crash, None if it never crashed."""
+    crash_reason: str | None
+    """``"contact with <other address>"`` (10 hex digits) or ``"obstacle"``, None if it never crashed."""
     flying: bool
     motors_on: bool
     emergency_stop_latched: bool
@@ -244,6 +264,19 @@ class FakeFirmware:
         with self._lock:
             self.vehicle.battery.open_v = float(open_circuit_v)
 
+    def body(self) -> Body:
+        """The little the fake world needs every step (contact, truth), read under the lock: far cheaper than a
+        snapshot."""
+        with self._lock:
+            v = self.vehicle
+            return Body((v.pos[0], v.pos[1], v.pos[2]), wrap_angle(v.yaw), v.motors_on, v.airborne,
+                        v.crash_s is not None, v.estimate)
+
+    def crash(self, now_s: float, reason: str, at: tuple[float, float, float] | None = None) -> bool:
+        """The drone hit something at true position `at` (see `Vehicle.crash`); True if this was its first crash."""
+        with self._lock:
+            return self.vehicle.crash(max(now_s, self._now_s), reason, at)
+
     def snapshot(self) -> FirmwareSnapshot:
         """A consistent copy of the state."""
         with self._lock:
@@ -256,6 +289,9 @@ class FakeFirmware:
                 supervisor_bits=self.supervisor_bits(),
                 armed=sup.armed,
                 locked=sup.is_locked,
+                crashed=v.crash_s is not None,
+                crash_time_s=v.crash_s,
+                crash_reason=v.crash_reason,
                 flying=sup.is_flying,
                 motors_on=v.motors_on,
                 emergency_stop_latched=sup.emergency_stop_requested,
@@ -513,8 +549,9 @@ class FakeFirmware:
             if cmd == 0x01:
                 success = sup.request_arming(bool(data[1]) if len(data) > 1 else True)
                 return [(PORT_SUPERVISOR, 1, bytes([0x81, int(success), int(sup.armed)]))]
-            if cmd == 0x02:
-                return [(PORT_SUPERVISOR, 1, bytes([0x82, 1, 1]))]
+            if cmd == 0x02:  # crash recovery: refused while tumbled (the firmware's rule); a crash here tumbles for good
+                recovered = not sup.tumbled
+                return [(PORT_SUPERVISOR, 1, bytes([0x82, int(recovered), int(recovered)]))]
             if cmd == 0x03:
                 sup.request_emergency_stop()
             elif cmd == 0x04:

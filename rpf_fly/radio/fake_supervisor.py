@@ -2,8 +2,9 @@
 
 It mirrors the state machine of crazyflie-firmware 2026.08 (`supervisor.c`, `supervisor_state_machine.c`) with the
 conditions this simulation can produce: armed, is-flying, commander watchdog warning (setpoint older than 0.5 s) and
-timeout (older than 2 s), emergency stop, pre-flight timeout (30 s armed without flying) and landing timeout (3 s
-after landing). Not simulated: tumble and crash detection, deck faults, motor RPM checks (arming passes at once).
+timeout (older than 2 s), emergency stop, pre-flight timeout (30 s armed without flying), landing timeout (3 s
+after landing) and a crash (a contact found by the fake world, :meth:`Supervisor.crash`). Not simulated: tumble
+detection from attitude (the simulation has none), deck faults, motor RPM checks (arming passes at once).
 
 Key behaviours kept from the firmware:
 - Flying + watchdog warning -> "warning, level out"; flying or levelled out + watchdog timeout -> free fall ->
@@ -11,6 +12,10 @@ Key behaviours kept from the firmware:
 - An emergency stop (supervisor command, legacy localization command, expired emergency-stop watchdog or the
   `stabilizer.stop` parameter) sends every state but "landed" to free fall -> locked; "landed" gets there through
   reset.
+- A crash (contact with another drone or an obstacle) sends every state to free fall -> locked at once, and sets
+  the tumbled and crashed bits for good. The firmware's crash handling lets a drone that is upright again recover
+  (supervisor command 0x02); a drone that hit something may have broken propellers, so this one stays locked until
+  reboot (the project rule: a simulated Crazyflie is never kinder than a real one).
 - Motors may run only in ready-to-fly, flying, warning-level-out and landed.
 - Disarming in flight resets (motors off). Entering any state outside arming/ready/flying/level-out/landed disarms.
 - Auto-arming (the Crazyflie 2.x default) re-arms whenever pre-flight checks pass.
@@ -71,6 +76,7 @@ class Conditions:
     wdt_warning: bool
     wdt_timeout: bool
     emergency_stop: bool
+    crashed: bool
     preflight_timeout: bool
     landing_timeout: bool
 
@@ -93,6 +99,10 @@ class Supervisor:
         self.armed = False
         self.emergency_stop_requested = False
         """Latched by an emergency-stop command until reboot."""
+        self.crashed = False
+        """Latched by :meth:`crash` until reboot (with :attr:`tumbled`)."""
+        self.tumbled = False
+        """The drone lies tumbled (a crash knocked it over); only set by :meth:`crash` here."""
         self._latest_thrust_s: float | None = None
         self._latest_arming_s = 0.0
         self._latest_landing_s: float | None = None
@@ -113,6 +123,13 @@ class Supervisor:
     def request_emergency_stop(self) -> None:
         """Latch an emergency stop."""
         self.emergency_stop_requested = True
+
+    def crash(self, now_s: float) -> None:
+        """The drone hit something: free fall at once (motors off this instant, not at the next update), then
+        locked; the crashed and tumbled bits stay set until reboot."""
+        self.crashed = self.tumbled = True
+        if self.state not in (S.EXCEPTION_FREE_FALL, S.LOCKED):
+            self._enter(now_s, S.EXCEPTION_FREE_FALL)
 
     def notify_emergency_stop_watchdog(self, now_s: float) -> None:
         """Feed (and from the first call on, arm) the emergency-stop watchdog."""
@@ -147,8 +164,12 @@ class Supervisor:
             bits |= 0x0008
         if self.is_flying:
             bits |= 0x0010
+        if self.tumbled:
+            bits |= 0x0020
         if self.is_locked:
             bits |= 0x0040
+        if self.crashed:
+            bits |= 0x0080
         return bits | (hl_bits & 0x0700)
 
     # Update ---------------------------------------------------------------------------------------------------
@@ -169,6 +190,7 @@ class Supervisor:
             wdt_warning=setpoint_age_s > WDT_WARNING_S,
             wdt_timeout=setpoint_age_s > WDT_TIMEOUT_S,
             emergency_stop=estop,
+            crashed=self.crashed,
             preflight_timeout=self.state is S.READY_TO_FLY and now_s - self._latest_arming_s > PREFLIGHT_TIMEOUT_S,
             landing_timeout=self._latest_landing_s is not None
             and now_s - self._latest_landing_s > LANDING_TIMEOUT_S,
@@ -185,8 +207,11 @@ class Supervisor:
             param_emergency_stop=param_emergency_stop,
         )
         new = _next_state(self.state, c)
-        if new is self.state:
-            return
+        if new is not self.state:
+            self._enter(now_s, new)
+
+    def _enter(self, now_s: float, new: SupervisorStateName) -> None:
+        """Change state and apply the side effects of entering ``new``."""
         old, self.state = self.state, new
         self.transitions.append(Transition(now_s, old, new))
         logger.debug("supervisor %s -> %s at %.3f s", old.value, new.value, now_s)
@@ -203,7 +228,9 @@ class Supervisor:
 
 
 def _next_state(state: SupervisorStateName, c: Conditions) -> SupervisorStateName:
-    """The firmware's transition table, first matching transition wins."""
+    """The firmware's transition table, first matching transition wins (a crash overrides every state)."""
+    if c.crashed and state not in (S.EXCEPTION_FREE_FALL, S.LOCKED):
+        return S.EXCEPTION_FREE_FALL
     if state is S.PRE_FLIGHT_CHECKS_NOT_PASSED:
         return S.EXCEPTION_FREE_FALL if c.emergency_stop else S.PRE_FLIGHT_CHECKS_PASSED
     if state is S.PRE_FLIGHT_CHECKS_PASSED:

@@ -24,6 +24,9 @@ Dynamics (documented model, not physics):
   estimate turns with the truth (an ideal gyro), so the yaw error stays what it was.
 - Motors off (null setpoint, supervisor forbids flying, power off): free fall at 9.81 m/s^2 onto the floor (the
   initial z), then rest. On the floor a drone cannot slide.
+- A crash (`Vehicle.crash`, called by the fake world on a contact): motors off at once and the horizontal velocity
+  lost in the impact, so the drone drops where it hit (an inelastic impact: a Crazyflie that clips a pole or
+  another drone does not sail on), then rests on the floor; its supervisor is crashed, tumbled and locked.
 
 Estimator with `positioning="extpos"` (a mocap drone; the Kalman estimator fed by CRTP 6:0 / 6:1):
 - Yaw: the estimate starts at `kalman.initialYaw` (radians, 0) at power-on and on `kalman.resetEstimation`, not at
@@ -195,6 +198,9 @@ class Vehicle:
         self.last_crtp_setpoint_s: float | None = None
         self.thrusting = False
         self.motors_on = False
+        self.crash_s: float | None = None
+        """Time of the crash (seconds on the caller's clock), None if the drone never crashed."""
+        self.crash_reason: str | None = None
         self._last_s = now_s
 
     # Estimator ------------------------------------------------------------------------------------------------
@@ -316,6 +322,31 @@ class Vehicle:
         del remain_valid_ms
         self.hl.tell_state(self.estimate, self.estimate_velocity, self.estimate_yaw)
         self.priority = PRIORITY_HIGH_LEVEL
+
+    # Contact --------------------------------------------------------------------------------------------------
+
+    @property
+    def airborne(self) -> bool:
+        """Above the floor or motors on: only such a drone can hit something (two drones resting on the floor
+        cannot collide)."""
+        return self.motors_on or self.pos[2] > self.floor_z + 1e-6
+
+    def crash(self, now_s: float, reason: str, at: Vec3 | None = None) -> bool:
+        """The drone hit something at `now_s` (at true position `at`, where it touched; None: where it is): motors
+        off now, the impact takes its horizontal velocity, it falls to the floor and its supervisor locks (crashed,
+        tumbled). The first crash is the one recorded; returns True if this one was it."""
+        if at is not None:
+            self.pos[:] = [float(at[0]), float(at[1]), max(float(at[2]), self.floor_z)]
+        self.motors_on = self.thrusting = False
+        self.vel[0] = self.vel[1] = 0.0
+        self.vel[2] = min(self.vel[2], 0.0)
+        self.control_setpoint = null_setpoint(now_s, "crash")
+        self.supervisor.crash(now_s)
+        if self.crash_s is not None:
+            return False
+        self.crash_s, self.crash_reason = now_s, reason
+        logger.debug("fake Crazyflie crashed at %.3f s (%s): motors off, locked", now_s, reason)
+        return True
 
     # Stabilizer loop ------------------------------------------------------------------------------------------
 

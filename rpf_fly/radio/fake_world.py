@@ -1,7 +1,9 @@
 """A world of fake Crazyflies: their firmwares, radio-side fault configuration and a real-time dynamics thread.
 
 `FakeWorld` owns one `FakeFirmware` per radio address and a thread that steps them all every `step_s` (10 ms) on
-the world clock (seconds since `start()`), queueing their log packets for the radio links (`fake_radio`). It also
+the world clock (seconds since `start()`), queueing their log packets for the radio links (`fake_radio`). After
+each step it checks contacts between the drones and with the mission's obstacles (`fake_contact`: a drone that
+touched something crashes) and keeps the step's truth (`FakeWorld.truth_samples`, for a dry run's log). It also
 exposes the true poses of all drones (for a NatNet emulator) and firmware snapshots (for test assertions).
 
 Addresses are the 5-byte radio addresses as integers (0xE7E7E7E701); strings are read as hexadecimal.
@@ -15,9 +17,12 @@ import random
 import threading
 import time
 from collections import deque
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 
+from rpf_fly.mission.model import Obstacle
+
+from .fake_contact import ContactModel
 from .fake_firmware import FakeFirmware, FirmwareSnapshot, Packet
 from .fake_vehicle import VehicleConfig
 
@@ -30,6 +35,19 @@ their pre-flight checks and (auto-)armed when cflib connects, as real drones pow
 TX_QUEUE_SIZE = 64
 """Downlink packets a firmware buffers; when full, new packets (log data) are dropped, as the firmware's CRTP queue
 does."""
+
+TRUTH_BUFFER_S = 5.0
+"""Seconds of truth samples the world keeps for `FakeWorld.truth_samples` (older ones are dropped): a dry run's log
+fetches them ten times a second; a world nobody reads from does not grow."""
+
+TruthState = tuple[tuple[float, float, float], float, bool, bool, tuple[float, float, float]]
+"""``(position, yaw, motors, crashed, estimate)`` of one drone: true centre (m), true yaw (rad), motors spinning,
+crashed (`fake_contact`), the firmware's estimated position (m). Plain tuples: they cross to the flight's process
+as a cheap pickle and go into the log as they are (`rpf_fly.log.schemas.truth_json`)."""
+
+TruthSample = tuple[float, dict[int, TruthState]]
+"""``(monotonic_s, {address: state})``: every drone's true state after one world step, stamped with the
+``time.monotonic()`` the step advanced the drones to (one clock for all processes of a machine)."""
 
 PacketObserver = Callable[[int, int, bytes, float], None]
 """``observer(port, channel, payload, monotonic_s)``, called after the firmware handled an uplink packet."""
@@ -228,7 +246,9 @@ class FakeWorld:
         step_s: float = 0.01,
         timing: RadioTiming | None = None,
         seed: int = 0,
+        obstacles: Sequence[Obstacle] = (),
     ) -> None:
+        """``obstacles``: the mission's vertical obstacles (`CircleObstacle`, `BoxObstacle`), for contacts."""
         self.step_s = step_s
         self.timing = timing or RadioTiming()
         self.seed = seed
@@ -242,6 +262,8 @@ class FakeWorld:
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._started = False
+        self._contacts = ContactModel(obstacles)
+        self._truth: deque[TruthSample] = deque(maxlen=max(1, round(TRUTH_BUFFER_S / step_s)))
 
     # Life cycle -----------------------------------------------------------------------------------------------
 
@@ -317,6 +339,15 @@ class FakeWorld:
             poses[address] = (snap.position, (0.0, 0.0, math.sin(half), math.cos(half)))
         return poses
 
+    def truth_samples(self) -> list[TruthSample]:
+        """The truth samples taken since the previous call, oldest first (one per world step, at most the last
+        `TRUTH_BUFFER_S`); each call hands them over once (one reader: the dry run's log)."""
+        out = []
+        pop = self._truth.popleft
+        for _ in range(len(self._truth)):
+            out.append(pop())
+        return out
+
     def uri(self, address: int | str, *, devid: int = 0, channel: int | None = None, datarate: str = "2M") -> str:
         """The ``fake://`` URI of a drone."""
         addr = parse_address(address)
@@ -384,3 +415,15 @@ class FakeWorld:
                     logger.info("fake drone %010X: link dropped at %.3f s (fault)", drone.address, now)
                     drone.drop_fault_applied = drone.link_dropped = True
                 drone.enqueue(drone.firmware.step(now))
+            self._after_step(now)
+
+    def _after_step(self, now: float) -> None:
+        """Contacts, then the truth sample of the step that advanced every drone to world time ``now``."""
+        bodies = {address: drone.firmware.body() for address, drone in self._drones.items()}
+        for contact in self._contacts.check(bodies):
+            firmware = self._drones[contact.address].firmware
+            if firmware.crash(now, contact.reason, contact.position):
+                logger.warning("fake drone %010X crashed at %.3f s: %s", contact.address, now, contact.reason)
+            bodies[contact.address] = firmware.body()
+        self._truth.append((self._t0 + now, {a: (b.position, b.yaw, b.motors_on, b.crashed, b.estimate)
+                                             for a, b in bodies.items()}))

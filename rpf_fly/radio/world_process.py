@@ -10,8 +10,9 @@ no real flight sees. So the dry run starts them here, in a child process, and re
   thread) performs each transaction as one UDP request to the child and waits for its reply, as the real driver
   waits on the USB dongle; lost attempts, unreachable drones and the firmware's answers are decided in the child;
 - the mocap: the child runs the NatNet server emulator, which the flight's NatNet client receives as from Motive;
-- the fault hooks and firmware snapshots of tests and demos go over a `multiprocessing.connection` to 127.0.0.1
-  (:class:`WorldProcess`).
+- the fault hooks and firmware snapshots of tests and demos, and the truth samples of the dry run's log
+  (:meth:`WorldProcess.truth_samples`, fetched in batches: rpf_fly/flight/truth.py), go over a
+  `multiprocessing.connection` to 127.0.0.1 (:class:`WorldProcess`).
 
 The child ignores SIGINT (a Ctrl-C in a terminal reaches the whole process group: the drones must stay up while
 the flight lands them) and exits when its parent goes away (the connection closes, even after a SIGKILL).
@@ -37,12 +38,14 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from multiprocessing.connection import Client, Listener
 from typing import Any, Optional
 
+from rpf_fly.mission.model import Obstacle
+
 from .fake_firmware import FirmwareSnapshot, Packet
-from .fake_world import DronePort, FakeDroneConfig, FakeWorld, LinkFaults, RadioTiming
+from .fake_world import DronePort, FakeDroneConfig, FakeWorld, LinkFaults, RadioTiming, TruthSample
 
 logger = logging.getLogger(__name__)
 
@@ -188,7 +191,7 @@ class RemoteWorld:
 class WorldProcess:
     """Starts the child process and speaks to it: the fault hooks and snapshots of `FakeWorld` and
     `SimulatedBodies`, by the same names. ``natnet``: the NatNet server's settings (``version``, ``rate_hz``,
-    ``up_axis``), None for no NatNet server.
+    ``up_axis``), None for no NatNet server. ``obstacles``: the mission's obstacles, for the world's contacts.
 
     The child is ``python -m rpf_fly.radio.world_process``, not a multiprocessing spawn (which re-imports the
     caller's main script: a user's unguarded script would run again in it). It reads its settings as one pickle on
@@ -202,11 +205,12 @@ class WorldProcess:
         *,
         seed: int = 0,
         natnet: Optional[Mapping[str, Any]] = None,
+        obstacles: Sequence[Obstacle] = (),
     ) -> None:
         self._lock = threading.Lock()
         self._conn: Any = None
         key = secrets.token_bytes(32)
-        settings = {"drones": dict(drones), "bodies": dict(bodies), "seed": seed,
+        settings = {"drones": dict(drones), "bodies": dict(bodies), "seed": seed, "obstacles": tuple(obstacles),
                     "natnet": dict(natnet) if natnet else None, "authkey": key}
         self._process = subprocess.Popen(
             [sys.executable, "-m", "rpf_fly.radio.world_process"], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
@@ -259,6 +263,10 @@ class WorldProcess:
 
     def true_poses(self) -> dict[int, tuple[tuple[float, float, float], tuple[float, float, float, float]]]:
         return self.call("true_poses")
+
+    def truth_samples(self) -> list[TruthSample]:
+        """The world's truth samples since the previous call (`FakeWorld.truth_samples`): one round trip."""
+        return self.call("truth_samples")
 
     def poses(self) -> dict[str, Pose]:
         """The bodies as the mocap sees them (`SimulatedBodies.poses`)."""
@@ -369,7 +377,7 @@ class _RadioServer:
 def serve(settings: dict[str, Any], out: Any) -> None:
     """The child process: world, radio server, NatNet server; reports its ports as one JSON line on ``out``, then
     answers the parent's calls until it closes them or goes away."""
-    world = FakeWorld(settings["drones"], seed=settings["seed"]).start()
+    world = FakeWorld(settings["drones"], seed=settings["seed"], obstacles=settings.get("obstacles", ())).start()
     bodies = settings["bodies"]
     tracked = SimulatedBodies(world, bodies)
     radio = _RadioServer(world).start()
@@ -393,7 +401,8 @@ def serve(settings: dict[str, Any], out: Any) -> None:
         calls = {
             "drop_link": world.drop_link, "restore_link": world.restore_link, "disturb": world.disturb,
             "set_battery": world.set_battery, "reboot": world.reboot, "snapshot": world.snapshot,
-            "true_poses": world.true_poses, "poses": tracked.poses, "hide": tracked.hide,
+            "true_poses": world.true_poses, "truth_samples": world.truth_samples, "poses": tracked.poses,
+            "hide": tracked.hide,
             "blackout": tracked.blackout,
         }
         with conn:

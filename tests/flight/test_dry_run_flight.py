@@ -62,7 +62,8 @@ def test_lab_mission_end_to_end(tmp_path):
 
 
 def validate_every_message(path):
-    """Every message of the flight log against the JSON Schema embedded for its channel (Foxglove and ours)."""
+    """Every message of a dry run's flight log against the JSON Schema embedded for its channel (Foxglove and
+    ours, the simulated world's truth included)."""
     import json
 
     import jsonschema
@@ -77,7 +78,7 @@ def validate_every_message(path):
             validators[schema.id].validate(json.loads(message.data))
             seen.add(schema.name)
     assert {"foxglove.PoseInFrame", "foxglove.SceneUpdate", "foxglove.FrameTransforms", "foxglove.Log",
-            "rpf_fly.PlannerStep", "rpf_fly.DroneStatus"} <= seen
+            "rpf_fly.PlannerStep", "rpf_fly.DroneStatus", "rpf_fly.TruthState"} <= seen  # a dry run: truth too
 
 
 def test_one_rigid_body_lost_for_one_second_holds_then_resumes(tmp_path, short_mission):
@@ -232,3 +233,8 @@ def test_simulated_drones_on_threads_of_this_process_fly_too(tmp_path, short_mis
     stale = flight.events("pose_stale", "cf2")  # the hook reached the in-process NatNet emulator
     assert stale and any("resuming" in e.message for e in stale)
     assert all(landed(s) for s in flight.snapshots.values())
+    for name in ("cf1", "cf2", "cf3"):  # the truth feed reads the in-process world directly
+        truth = flight.log.messages(f"/truth/{name}")
+        span_s = (truth[-1].publish_time - truth[0].publish_time) / 1e9
+        assert span_s > 3.0 and (len(truth) - 1) / span_s >= 50.0, name
+        assert truth[-1].data["motors"] is False and not any(m.data["crashed"] for m in truth)

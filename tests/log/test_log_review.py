@@ -109,6 +109,33 @@ def test_gaps_and_missing_sequences_are_found(tmp_path):
     assert result.metrics is None and "scenario" in result.metrics_error
 
 
+def test_truth_topics_name_drones_not_a_drone_called_truth(tmp_path):
+    """A dry run's /truth/<drone> is a drone topic like /mocap/<drone> when the review names the drones from the
+    topics (a log without its scenario record)."""
+    from rpf_fly.log.review import drones_of
+    from rpf_fly.log.writer import FlightLog
+
+    path = tmp_path / "truth.mcap"
+    t0 = 1_700_000_000_000_000_000
+    with FlightLog(path, {}, {}, clock=None) as log:
+        for k in range(20):
+            log.truth(t0 + k * 10_000_000, {d: ((0.0, 0.0, 0.5), 0.0, True, False, (0.0, 0.0, 0.5))
+                                            for d in ("cf1", "cf2")})
+            log.pose("cf1", t0 + k * 10_000_000, (0, 0, 0.5))
+    data = read_log(path)
+    assert sorted(drones_of(data)) == ["cf1", "cf2"]
+    (truth,) = [t for t in review(data).topics if t.topic == "/truth/cf2"]
+    assert truth.count == 20 and truth.rate_hz == pytest.approx(100.0) and truth.gaps == ()
+    result = run_cli("review", path, "--csv", tmp_path / "csv")
+    assert result.exit_code == 0, result.output
+    assert "/truth/cf1" in result.stdout
+    with open(tmp_path / "csv" / "truth_cf1.csv", newline="") as f:
+        rows = list(csv.reader(f))
+    assert rows[0][3:] == ["timestamp.sec", "timestamp.nsec", "position.x", "position.y", "position.z", "yaw", "motors",
+                           "crashed", "estimate.x", "estimate.y", "estimate.z"]
+    assert len(rows) == 21 and rows[1][9:11] == ["True", "False"]
+
+
 def test_plot_and_csv(lab_log, tmp_path):
     path, _ = lab_log
     png = tmp_path / "review.png"

@@ -94,7 +94,7 @@ def test_every_message_of_a_flight_validates(tmp_path):
 def test_every_message_of_a_simulated_mission_validates(lab_log):
     path, _ = lab_log
     checked = validate_file(path)
-    assert set(checked) == set(SCHEMAS)
+    assert set(checked) == set(SCHEMAS) - {"rpf_fly.TruthState"}  # only a dry run has a simulated world's truth
     assert checked["rpf_fly.PlannerStep"] == 3 * checked["foxglove.FrameTransforms"]
 
 
@@ -106,6 +106,7 @@ def test_topic_schema_names_follow_the_contract():
     assert S.topic_schema("/scene") == "foxglove.SceneUpdate"
     assert S.topic_schema("/tf") == "foxglove.FrameTransforms"
     assert S.topic_schema("/events") == "foxglove.Log"
+    assert S.topic_schema("/truth/cf1") == "rpf_fly.TruthState"
     with pytest.raises(KeyError):
         S.topic_schema("/elsewhere")
 
@@ -148,6 +149,20 @@ def test_fast_pose_encoder_equals_the_builder(position, quaternion):
 ])
 def test_fast_planner_encoder_equals_the_builder(fields):
     assert S.planner_json(T, fields) == S.encode(S.planner_step(T, **fields))
+
+
+@pytest.mark.parametrize("state", [
+    ((0.1, 2.0, 0.6), 0.5, True, False, (0.11, 2.0, 0.6)),
+    ((np.float64(1.0), 2, 3), np.float32(0.25), np.bool_(False), 1, np.array([1.0, 2.0, 3.0])),
+    ((float("nan"), 0.0, 0.0), float("inf"), False, True, (0.0, 0.0, 0.0)),
+    ((1.0, 2.0), 0.0, True, False, 1 + 2j),
+])
+def test_fast_truth_encoder_equals_the_builder_and_validates(state):
+    assert S.truth_json(T, *state) == S.encode(S.truth_state(T, *state))
+    message = json.loads(S.truth_json(T, *state))
+    if all(v is not None for v in (*message["position"].values(), message["yaw"])):
+        jsonschema.Draft7Validator(SCHEMAS["rpf_fly.TruthState"]).validate(message)
+    assert type(message["motors"]) is bool and type(message["crashed"]) is bool
 
 
 def test_fast_encoders_raise_what_the_builders_raise():

@@ -36,6 +36,8 @@ def write_flight(path, drones=("cf1", "cf2"), ticks=50):  # type: ignore[no-unty
                 if k % 10 == 0:
                     log.status(d, t, state="planning", battery_v=3.9, link_quality=0.98, latency_ms=4.0)
             log.tf(t, {d: ((0.01 * k, float(i), 0.6), None) for i, d in enumerate(drones)})
+            log.truth(t, {d: ((0.01 * k, float(i), 0.6), 0.1, True, False, (0.01 * k, float(i) + 0.01, 0.6))
+                          for i, d in enumerate(drones)})
         log.event(T0 + ticks * 10 * MS, 3, "landing early")
     return log
 
@@ -55,13 +57,14 @@ def test_seeking_reader_reads_the_summary(tmp_path):
             **{f"/{d}/setpoint": 50 for d in ("cf1", "cf2")},
             **{f"/{d}/planner": 50 for d in ("cf1", "cf2")},
             **{f"/{d}/status": 5 for d in ("cf1", "cf2")},
+            **{f"/truth/{d}": 50 for d in ("cf1", "cf2")},
         }
         assert stats.message_count == sum(counts.values()) == log.written
         assert stats.message_start_time == T0 and stats.message_end_time == T0 + 500 * MS
         assert stats.chunk_count >= 1
         schemas = {summary.schemas[c.schema_id].name for c in summary.channels.values()}
         assert schemas == {"foxglove.PoseInFrame", "foxglove.SceneUpdate", "foxglove.FrameTransforms", "foxglove.Log",
-                           "rpf_fly.PlannerStep", "rpf_fly.DroneStatus"}
+                           "rpf_fly.PlannerStep", "rpf_fly.DroneStatus", "rpf_fly.TruthState"}
         assert all(s.encoding == "jsonschema" for s in summary.schemas.values())
         assert all(c.message_encoding == "json" for c in summary.channels.values())
         metadata = {m.name: m.metadata for m in reader.iter_metadata()}
@@ -87,6 +90,29 @@ def test_default_clock_records_log_time_at_the_call(tmp_path):
     after = time.time_ns()
     (msg,) = read_log(path).messages("/mocap/cf1")
     assert msg.publish_time == T0 and before <= msg.log_time <= after
+
+
+def test_truth_is_one_entry_per_sample_with_the_sample_time_as_log_time(tmp_path):
+    """/truth arrives in batches (a dry run fetches the world's samples every 0.1 s): its log time is the world's
+    sample time, not the clock at the call, so the review sees its real rate and no false gaps."""
+    path = tmp_path / "truth.mcap"
+    gate = Gate()
+    with FlightLog(path, MISSION, SCENARIO) as log:
+        log.pose("cf0", T0, gate)
+        assert gate.entered.wait(5)  # the writer is held inside that message: the queue holds what follows
+        for k in range(10):
+            log.truth(T0 + k * 10 * MS, {"cf1": ((0.1 * k, 0.0, 0.5), 0.0, True, False, (0.1 * k, 0.0, 0.5)),
+                                         "cf2": ((1.0, 0.0, 0.0), -1.5, False, True, (1.0, 0.02, 0.0))})
+        assert len(log._queue) == 10 and log._pending() == 20  # noqa: SLF001 - one entry per sample, 2 messages each
+        gate.release.set()
+    data = read_log(path)
+    cf1, cf2 = data.messages("/truth/cf1"), data.messages("/truth/cf2")
+    assert [m.log_time for m in cf1] == [m.publish_time for m in cf1] == [T0 + k * 10 * MS for k in range(10)]
+    assert [m.sequence for m in cf2] == list(range(10)) and data.schemas["/truth/cf2"] == "rpf_fly.TruthState"
+    assert cf1[3].data == {"timestamp": {"sec": 1_700_000_000, "nsec": 30 * MS},
+                           "position": {"x": pytest.approx(0.3), "y": 0.0, "z": 0.5}, "yaw": 0.0, "motors": True,
+                           "crashed": False, "estimate": {"x": pytest.approx(0.3), "y": 0.0, "z": 0.5}}
+    assert cf2[0].data["crashed"] is True and cf2[0].data["motors"] is False and cf2[0].data["yaw"] == -1.5
 
 
 def test_threads_log_concurrently(tmp_path):

@@ -16,6 +16,7 @@ import pytest
 from cflib.crazyflie import Crazyflie
 from cflib.crazyflie.syncCrazyflie import SyncCrazyflie
 
+from rpf_fly.mission.model import CircleObstacle
 from rpf_fly.radio import fake_radio
 from rpf_fly.radio.fake_world import FakeDroneConfig
 from rpf_fly.radio.world_process import RemoteWorld, WorldProcess
@@ -56,6 +57,38 @@ def test_cflib_flies_a_drone_of_the_child_process(child, tmp_path: Path) -> None
         assert wait_for(lambda: child.snapshot(A1).position[2] < 0.02, 5.0)
     assert child.snapshot(A2).position[:2] == pytest.approx((1.0, 0.5))  # the other drone never moved
     assert child.snapshot(A1).toc_item_requests > 0
+
+
+def test_obstacles_and_truth_reach_across_the_processes(tmp_path: Path) -> None:
+    """The mission's obstacles go to the child's world with its settings (a drone flown into one crashes there);
+    the child's truth samples, one per world step stamped with its ``time.monotonic()``, come back in batches."""
+    process = WorldProcess({A1: FakeDroneConfig.at(0.0, 0.0), A2: FakeDroneConfig.at(0.0, 1.0)},
+                           {A1: "cf1", A2: "cf2"}, natnet=None, obstacles=[CircleObstacle((1.0, 0.0), 0.1)])
+    fake_radio.register(RemoteWorld(process.radio, process.addresses))
+    try:
+        process.truth_samples()
+        with SyncCrazyflie(uri(A1), cf=Crazyflie(rw_cache=str(tmp_path))) as scf:
+            scf.cf.high_level_commander.takeoff(0.5, 1.0)
+            assert wait_for(lambda: process.snapshot(A1).position[2] > 0.48, 5.0)
+            scf.cf.high_level_commander.go_to(2.0, 0.0, 0.5, 0.0, 2.0)
+            assert wait_for(lambda: process.snapshot(A1).crashed, 5.0)
+            time.sleep(0.5)
+        snap = process.snapshot(A1)
+        assert snap.crash_reason == "obstacle" and snap.locked and snap.position[2] == 0.0
+        samples = process.truth_samples() + process.truth_samples()  # the second call brings only what is new
+        stamps = [t for t, _ in samples]
+        assert stamps == sorted(stamps) and stamps[-1] <= time.monotonic() and len(samples) > 200
+        periods = sorted(b - a for a, b in zip(stamps, stamps[1:]))
+        assert periods[len(periods) // 2] == pytest.approx(0.01, abs=0.002)  # every world step
+        assert all(set(states) == {A1, A2} for _, states in samples)
+        flying = [s[A1] for _, s in samples if s[A1][2]]
+        assert flying and all(not crashed for _, _, _, crashed, _ in flying)
+        position, yaw, motors, crashed, estimate = samples[-1][1][A1]
+        assert crashed and not motors and position == snap.position and estimate == pytest.approx(position)
+        assert samples[-1][1][A2] == ((0.0, 1.0, 0.0), 0.0, False, False, (0.0, 1.0, 0.0))  # the other stayed put
+    finally:
+        fake_radio.unregister()
+        process.close()
 
 
 def test_a_dropped_link_fails_cflib_with_its_usual_error(child, tmp_path: Path) -> None:
