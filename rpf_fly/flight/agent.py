@@ -154,6 +154,8 @@ class DroneAgent:
         self.stale_since_s: Optional[float] = None
         self.landing_until_s: Optional[float] = None
         self._worker: Optional[PlannerWorker] = None
+        self.last_setpoint: Optional[complex] = None
+        """The last position setpoint streamed to it (x + iy), for the supervisor's tracking check."""
 
     # ------------------------------------------------------------------------------------------ phases
 

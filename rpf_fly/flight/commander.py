@@ -135,6 +135,14 @@ class Commander:
             agent.outcome = FlightOutcome.LINK_LOST
             self._set(agent, DronePhase.LINK_LOST, message, ERROR)
 
+    def crashed(self, agent: DroneAgent, message: str) -> None:
+        """Its firmware says it crashed or tumbled (motors cut, locked): nothing to command, it falls."""
+        with self._locks[agent.name]:
+            if not agent.phase.airborne:
+                return
+            agent.outcome = FlightOutcome.CRASHED
+            self._set(agent, DronePhase.EMERGENCY, message, FATAL)
+
     # ---------------------------------------------------------------------------------------- commands
 
     def stream(self, agent: DroneAgent, x: float, y: float, z: float) -> bool:
@@ -142,6 +150,7 @@ class Commander:
         with self._locks[agent.name]:
             if agent.phase not in STREAMING:
                 return False
+            agent.last_setpoint = complex(x, y)
             return self.backend.send_position_setpoint(agent.name, x, y, z, 0.0)
 
     def extpos(self, agent: DroneAgent, position: Vec3, quaternion: Optional[Quaternion]) -> bool:

@@ -289,6 +289,10 @@ class FlightLoop:
         reset_at = self.clock()
         for name in names:
             pose = self.tracker.get(name)
+            before = estimate_problem(self._states.get(name), pose, -math.inf) if pose is not None else ""
+            if before:
+                self.events.emit(WARNING, "estimator", f"before take-off: {before}; restarting its estimator at the "
+                                 "mocap pose", name)
             if pose is None or not self.commander.reset_estimator(self.agents[name], pose.position,
                                                                   yaw_of(pose.quaternion)):
                 problems[name] = "its estimator could not be reset (kalman.initialX/Y/Z/Yaw, resetEstimation)"
@@ -575,6 +579,8 @@ class FlightLoop:
                     continue
                 if f.response == "lost":
                     self.commander.link_lost(agent, f.message)
+                elif f.response == "crashed":
+                    self.commander.crashed(agent, f.message)
                 elif f.response == "land":
                     self.commander.land(agent, f.message)
                 elif f.response == "hold":

@@ -67,4 +67,6 @@ class FlightOutcome(str, enum.Enum):
     """The supervisor landed it (stale pose, geofence, battery, planner fault, separation or an interrupt)."""
     LINK_LOST = "link_lost"
     EMERGENCY = "emergency"
+    CRASHED = "crashed"
+    """Its supervisor reported a crash or tumble in the air (motors cut by the firmware)."""
     NOT_FLOWN = "not_flown"

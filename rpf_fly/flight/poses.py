@@ -56,6 +56,8 @@ class PoseTracker:
         self.velocity_tau_s = velocity_tau_s
         self.poses: dict[str, TrackedPose] = {}
         self.last_frame_s: Optional[float] = None
+        self.latency_s: Optional[float] = None
+        """The newest frame's camera-to-receipt latency as the mocap measures it (None if it does not)."""
         self.glitching: set[str] = set()
         """Drones whose newest samples are refused as a jump."""
         self.glitches: dict[str, int] = {}
@@ -103,6 +105,7 @@ class PoseTracker:
     def update(self, frame: MocapFrame) -> None:
         """Take the frame's poses of our drones (Z-up world frame)."""
         self.last_frame_s = frame.receive_time_s
+        self.latency_s = frame.latency_s
         for name, body_name in self.bodies.items():
             body = frame.bodies.get(body_name)
             previous = self.poses.get(name)

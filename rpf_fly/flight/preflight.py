@@ -76,5 +76,5 @@ def estimate_problem(state: Optional[DroneState], pose: TrackedPose, since_s: fl
     yaw_error = (state.yaw_deg - mocap_yaw + 180.0) % 360.0 - 180.0
     if abs(yaw_error) > ESTIMATE_YAW_TOLERANCE_DEG:
         return (f"its on-board yaw estimate {state.yaw_deg:.0f} deg is {abs(yaw_error):.0f} deg from mocap's "
-                f"{mocap_yaw:.0f} deg after the estimator reset: it would fly off")
+                f"{mocap_yaw:.0f} deg: under position control it would fly off")
     return ""

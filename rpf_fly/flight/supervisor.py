@@ -46,7 +46,25 @@ sample taken during a thrust peak (a turn, a gust) sags far lower than the hover
 TELEMETRY_STALE_S = 1.0
 """A linked drone whose status telemetry (10 Hz) is older than this: the battery and supervisor checks are blind."""
 
-Response = Literal["warn", "hold", "land", "lost", "resume"]
+ESTIMATE_DIVERGENCE_M = 0.15
+"""In flight, an on-board position estimate this far from a fresh mocap pose (in 2 status samples in a row) means
+the estimator no longer takes extpos: the drone holds its ESTIMATE at the setpoint while its true position drifts.
+With extpos streaming the two agree within a centimetre or two."""
+
+LINK_QUALITY_WARN_PCT = 70.0
+"""Below this share of packets acknowledged without retries the link is failing: setpoints and extpos arrive late
+or not at all (cflib drops the link only after 100 lost acks in a row)."""
+
+TRACKING_WARN_M = 0.35
+"""A drone this far from its last setpoint (beyond the 0.3 m the setpoint may lead it) for ``TRACKING_WARN_S``:
+something pushes it (a gust, a contact, a failing motor)."""
+TRACKING_WARN_S = 0.2
+
+MOCAP_LATENCY_WARN_S = 0.05
+"""Mocap latency (camera to receipt, as the mocap measures it) above this: the estimators and the planners act on
+a picture that old (Crazyswarm2 warns at 10 ms over unicast; a healthy Motive link is 3-8 ms)."""
+
+Response = Literal["warn", "hold", "land", "lost", "resume", "crashed"]
 
 
 @dataclass(frozen=True)
@@ -76,6 +94,11 @@ class Supervisor:
         """drone -> (consecutive low samples, stamp of the last one counted)."""
         self._telemetry_stale: set[str] = set()
         self._glitching: set[str] = set()
+        self._diverging: dict[str, tuple[int, float]] = {}
+        self._poor_link: set[str] = set()
+        self._off_track: dict[str, float] = {}
+        self._off_track_warned: set[str] = set()
+        self._late_mocap = False
 
     def check(
         self, now_s: float, agents: Iterable[DroneAgent], tracker: PoseTracker, states: dict[str, DroneState]
@@ -93,6 +116,11 @@ class Supervisor:
         findings += self._obstacles(agents, tracker)
         findings += self._battery(agents, states)
         findings += self._telemetry(now_s, agents, states)
+        findings += self._crashes(agents, states)
+        findings += self._estimates(now_s, agents, tracker, states)
+        findings += self._link_quality(agents, states)
+        findings += self._tracking(now_s, agents, tracker)
+        findings += self._mocap_latency(tracker)
         return findings
 
     # -------------------------------------------------------------------------------------------- checks
@@ -243,3 +271,86 @@ class Supervisor:
                 self._glitching.discard(a.name)
                 out.append(Finding("pose_glitch", INFO, "mocap track consistent again: resuming", a.name, "resume"))
         return out
+
+    def _crashes(self, agents: list[DroneAgent], states: dict[str, DroneState]) -> list[Finding]:
+        """An airborne drone whose firmware reports a crash, a tumble or a lock: its motors are cut."""
+        out = []
+        for a in agents:
+            sup = states[a.name].supervisor if a.name in states else None
+            if sup is not None and (sup.crashed or sup.tumbled or sup.locked):
+                what = "crashed" if sup.crashed else "tumbled" if sup.tumbled else "locked"
+                out.append(Finding("crashed", ERROR, f"its supervisor says {what}: motors cut, it falls",
+                                   a.name, "crashed"))
+        return out
+
+    def _estimates(self, now_s: float, agents: list[DroneAgent], tracker: PoseTracker,
+                   states: dict[str, DroneState]) -> list[Finding]:
+        """The on-board estimate against a fresh mocap pose (see ``ESTIMATE_DIVERGENCE_M``)."""
+        out = []
+        for a in agents:
+            state, pose = states.get(a.name), tracker.get(a.name)
+            if (state is None or state.position_m is None or state.telemetry_stamp_s is None or pose is None
+                    or not pose.valid or now_s - pose.stamp_s > self.safety.pose_timeout_s
+                    or a.phase in (DronePhase.LANDING, DronePhase.TAKEOFF)):
+                continue
+            count, stamp = self._diverging.get(a.name, (0, -1.0))
+            if state.telemetry_stamp_s == stamp:
+                continue
+            off = math.dist(state.position_m, pose.position)
+            count = count + 1 if off > ESTIMATE_DIVERGENCE_M else 0
+            self._diverging[a.name] = (count, state.telemetry_stamp_s)
+            if count == 2:
+                out.append(Finding("estimator", ERROR, f"on-board estimate {off:.2f} m from mocap: the estimator "
+                                   "no longer follows extpos; landing", a.name, "land"))
+        return out
+
+    def _link_quality(self, agents: list[DroneAgent], states: dict[str, DroneState]) -> list[Finding]:
+        out = []
+        for a in agents:
+            state = states.get(a.name)
+            quality = state.link.quality_pct if state is not None and state.link.up else None
+            if quality is None:
+                continue
+            if quality < LINK_QUALITY_WARN_PCT and a.name not in self._poor_link:
+                self._poor_link.add(a.name)
+                out.append(Finding("radio", WARNING, f"radio link quality {quality:.0f} % (packets retried or "
+                                   "lost): its setpoints and extpos arrive late", a.name, "warn"))
+            elif quality >= LINK_QUALITY_WARN_PCT + 10.0 and a.name in self._poor_link:
+                self._poor_link.discard(a.name)
+                out.append(Finding("radio", INFO, f"radio link quality back to {quality:.0f} %", a.name, "warn"))
+        return out
+
+    def _tracking(self, now_s: float, agents: list[DroneAgent], tracker: PoseTracker) -> list[Finding]:
+        out = []
+        for a in agents:
+            pose = tracker.get(a.name)
+            if a.last_setpoint is None or pose is None or not pose.valid or a.phase in (
+                    DronePhase.TAKEOFF, DronePhase.LANDING):
+                self._off_track.pop(a.name, None)
+                continue
+            off = abs(pose.xy - a.last_setpoint)
+            if off > TRACKING_WARN_M:
+                since = self._off_track.setdefault(a.name, now_s)
+                if now_s - since >= TRACKING_WARN_S and a.name not in self._off_track_warned:
+                    self._off_track_warned.add(a.name)
+                    out.append(Finding("tracking", WARNING, f"{off:.2f} m off its setpoint for "
+                                       f"{now_s - since:.1f} s: something pushes it (a gust, a contact?)", a.name, "warn"))
+            else:
+                self._off_track.pop(a.name, None)
+                if off < TRACKING_WARN_M - 0.1 and a.name in self._off_track_warned:
+                    self._off_track_warned.discard(a.name)
+                    out.append(Finding("tracking", INFO, "back on its setpoint", a.name, "warn"))
+        return out
+
+    def _mocap_latency(self, tracker: PoseTracker) -> list[Finding]:
+        latency = tracker.latency_s
+        if latency is None:
+            return []
+        if latency > MOCAP_LATENCY_WARN_S and not self._late_mocap:
+            self._late_mocap = True
+            return [Finding("mocap_latency", WARNING, f"mocap latency {latency * 1e3:.0f} ms: estimators and "
+                            "planners act on an old picture", None, "warn")]
+        if latency < MOCAP_LATENCY_WARN_S / 2 and self._late_mocap:
+            self._late_mocap = False
+            return [Finding("mocap_latency", INFO, f"mocap latency back to {latency * 1e3:.0f} ms", None, "warn")]
+        return []

@@ -1,0 +1,273 @@
+"""The fault campaign: every fault kind on several missions, each flight judged on the simulated world's truth.
+
+    python tools/fault_campaign.py                       # every kind on lab-3 and circle-8-r3 (about 15 minutes)
+    python tools/fault_campaign.py --kinds occlusion,gust --missions lab-3 --out -
+
+Each run is ``rpf-fly fly MISSION --dry-run --faults F --no-console --log L`` in a process of its own, with a
+schedule of ONE fault (the kind's default parameters below) naming the mission's middle drone. The verdict does
+not trust the stack: it reads the flight log with the mcap library itself and judges the ``/truth/<drone>`` topics
+(the simulated world's state, not what the stack believed) and the process's exit:
+
+- no drone crashed; no two airborne drones' true centres closer than 0.13 m; no true position outside the arena
+  by more than the safety radius; at the end every drone's motors off and it on the floor;
+- drones the fault does not name reach their goals (single-drone faults); a drone the fault makes unsafe to fly
+  (start_offset beyond the tolerance) never leaves the floor;
+- the fault leaves an event of level warning or above naming the drone (or mocap / loop) within 1 s of its effect
+  (the injection's own info event marks the effect; power-on faults: before the planning phase);
+- the log reviews (``rpf-fly review --json``); the process exits by itself within the flight timeout plus 10 s
+  of its planning phase, 0 when every drone reached, 1 otherwise, and never with a traceback.
+
+Writes the table (markdown) to ``--out`` (default docs/fault-campaign.md) and the verdicts as JSON to ``--json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any, Optional
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from mcap.reader import make_reader  # noqa: E402
+
+from rpf_fly.mission import load_mission  # noqa: E402
+
+CONTACT_M = 0.13
+"""Two airborne drones' true centres closer than this touch (a Crazyflie 2.1's rotor-tip span)."""
+ON_FLOOR_M = 0.05
+GOAL_M = 0.25
+"""A drone reached its goal when it landed within this of it (goal tolerance 0.1 m plus the landing's drift)."""
+EVENT_WINDOW_S = 1.0
+
+DEFAULTS: dict[str, dict[str, Any]] = {
+    "occlusion": {"duration_s": 1.0},
+    "blackout": {"duration_s": 2.0},
+    "pose_jump": {"duration_s": 0.3, "offset_m": [0.6, 0.0, 0.0]},
+    "mocap_delay": {"duration_s": 3.0, "delay_s": 0.08},
+    "link_drop": {},
+    "packet_loss": {"duration_s": 4.0, "rate": 0.5},
+    "low_battery": {},
+    "planner_error": {},
+    "planner_hang": {"duration_s": 2.0},
+    "loop_stall": {"duration_s": 1.0},
+    "yaw_offset": {"deg": 120},
+    "start_offset": {"offset_m": [0.5, 0.0]},
+    "gust": {"duration_s": 1.0, "accel": [0.0, 1.5, 0.0]},
+    "estimator_divergence": {"rate_m_s": 0.3},
+    "reboot": {},
+}
+SWARM_KINDS = {"blackout", "mocap_delay", "loop_stall"}
+POWER_ON = {"yaw_offset", "start_offset"}
+UNSAFE_TO_FLY = {"start_offset"}
+AT_S = 3.0
+
+
+@dataclass
+class Verdict:
+    kind: str
+    mission: str
+    drone: Optional[str]
+    passed: bool = False
+    exit_code: Optional[int] = None
+    seconds: float = 0.0
+    outcomes: dict[str, str] = field(default_factory=dict)
+    failures: list[str] = field(default_factory=list)
+    events: list[str] = field(default_factory=list)
+    min_separation_m: Optional[float] = None
+
+
+def schedule(kind: str, drone: Optional[str]) -> str:
+    fields = {"kind": kind, **({} if kind in SWARM_KINDS else {"drone": drone}),
+              **({} if kind in POWER_ON else {"at_s": AT_S}), **DEFAULTS[kind]}
+    return "faults:\n  - " + json.dumps(fields) + "\n"
+
+
+def read_log(path: Path) -> tuple[dict[str, list[tuple[int, dict]]], dict[str, str]]:
+    """topic -> [(log time ns, message)] and the metadata's string records, with the mcap library alone."""
+    topics: dict[str, list[tuple[int, dict]]] = {}
+    with open(path, "rb") as f:
+        reader = make_reader(f)
+        for _schema, channel, message in reader.iter_messages():
+            topics.setdefault(channel.topic, []).append((message.log_time, json.loads(message.data)))
+    return topics, {}
+
+
+def judge(kind: str, mission_path: Path, workdir: Path, timeout_extra_s: float = 10.0) -> Verdict:
+    mission = load_mission(mission_path)
+    names = [d.name for d in mission.drones]
+    drone = None if kind in SWARM_KINDS else names[len(names) // 2]
+    verdict = Verdict(kind, mission.name, drone)
+    faults = workdir / f"{mission.name}-{kind}.yaml"
+    faults.write_text(schedule(kind, drone))
+    log = workdir / f"{mission.name}-{kind}.mcap"
+    started = time.monotonic()
+    limit = mission.flight.timeout_s + 60.0 + timeout_extra_s  # connect, preflight and take-off come first
+    try:
+        done = subprocess.run([sys.executable, "-m", "rpf_fly", "fly", str(mission_path), "--dry-run", "--faults",
+                               str(faults), "--no-console", "--log", str(log)], capture_output=True, text=True,
+                              timeout=limit, cwd=workdir)
+    except subprocess.TimeoutExpired:
+        verdict.failures.append(f"did not exit within {limit:.0f} s")
+        return verdict
+    verdict.seconds = time.monotonic() - started
+    verdict.exit_code = done.returncode
+    fail = verdict.failures.append
+    if "Traceback" in done.stderr or "Traceback" in done.stdout:
+        fail("traceback in the output")
+    for line in done.stdout.splitlines():
+        name, _, rest = line.partition(": ")
+        if name in names:
+            verdict.outcomes[name] = rest.split(" ")[0]
+    try:
+        topics, _ = read_log(log)
+    except Exception as err:  # noqa: BLE001 - an unreadable log is a verdict, not a crash of the campaign
+        fail(f"log unreadable: {err}")
+        return verdict
+    review = subprocess.run([sys.executable, "-m", "rpf_fly", "review", str(log), "--json"], capture_output=True,
+                            text=True, timeout=120, cwd=workdir)
+    if review.returncode != 0:
+        fail(f"review failed: {review.stderr.strip()[-200:]}")
+
+    events = [(t, m) for t, m in topics.get("/events", [])]
+    flying_at = next((t for t, m in events if m.get("message") == "swarm: flying"), None)
+    injected = next((t for t, m in events if m.get("file") == "fault" and m.get("message", "").startswith("injected")),
+                    None)
+    if flying_at is not None:
+        end_ns = max(t for t, _ in events)
+        if (end_ns - flying_at) / 1e9 > mission.flight.timeout_s + timeout_extra_s + mission.flight.land_s + 5:
+            fail("the flight outlasted its timeout plus 10 s")
+    # --- the truth
+    truth = {n: topics.get(f"/truth/{n}", []) for n in names}
+    if any(not samples for samples in truth.values()):
+        fail("no /truth for " + ", ".join(n for n, s in truth.items() if not s))
+        return verdict
+    r = mission.planner.safety_radius
+    arena = mission.arena
+    crashed = sorted(n for n, s in truth.items() if any(m["crashed"] for _, m in s))
+    if crashed:
+        fail("crashed: " + ", ".join(crashed))
+    outside = []
+    for n, samples in truth.items():
+        for _, m in samples:
+            p = m["position"]
+            excess = max(arena.x[0] - p["x"], p["x"] - arena.x[1], arena.y[0] - p["y"], p["y"] - arena.y[1],
+                         p["z"] - arena.z[1])
+            if excess > r:
+                outside.append(f"{n} {excess:.2f} m")
+                break
+    if outside:
+        fail("outside the arena by more than r: " + ", ".join(outside))
+    min_sep = _min_separation(truth)
+    verdict.min_separation_m = min_sep
+    if min_sep is not None and min_sep < CONTACT_M:
+        fail(f"two airborne drones {min_sep:.3f} m apart (< {CONTACT_M} m)")
+    for n, samples in truth.items():
+        last = samples[-1][1]
+        if last["motors"] or last["position"]["z"] > ON_FLOOR_M:
+            fail(f"{n} not down at the end (motors {last['motors']}, z {last['position']['z']:.2f} m)")
+    goals = {d.name: d.goal for d in mission.drones}
+    reached = {n: math.dist((truth[n][-1][1]["position"]["x"], truth[n][-1][1]["position"]["y"]), goals[n]) < GOAL_M
+               and verdict.outcomes.get(n) == "reached" for n in names}
+    if kind not in SWARM_KINDS:
+        missed = [n for n in names if n != drone and not reached[n]]
+        if missed:
+            fail("did not reach their goals: " + ", ".join(missed))
+    if kind in UNSAFE_TO_FLY and drone is not None:
+        if max(m["position"]["z"] for _, m in truth[drone]) > ON_FLOOR_M or any(m["motors"] for _, m in truth[drone]):
+            fail(f"{drone} left the floor")
+    expected = 0 if all(reached.values()) else 1
+    if done.returncode != expected:
+        fail(f"exit code {done.returncode}, expected {expected}")
+    # --- the stack's own word on it
+    target = drone if drone is not None else ("loop" if kind == "loop_stall" else "mocap")
+
+    def names_target(m: dict) -> bool:
+        if drone is not None:
+            return m.get("name") == drone
+        return target in m.get("file", "") or target in m.get("message", "").lower()
+
+    if kind in POWER_ON:
+        window = [(t, m) for t, m in events if flying_at is None or t <= flying_at]
+    elif injected is None:
+        window = []
+        fail("the fault was never injected")
+    else:
+        window = [(t, m) for t, m in events if injected <= t <= injected + EVENT_WINDOW_S * 1e9]
+    found = [m for t, m in window if m.get("level", 0) >= 3 and names_target(m)]
+    verdict.events = [f"{m.get('file')}: {m.get('message')}" for m in found][:3]
+    if not found:
+        fail(f"no warning naming {target} within {EVENT_WINDOW_S:g} s of the fault")
+    verdict.passed = not verdict.failures
+    return verdict
+
+
+def _min_separation(truth: dict[str, list[tuple[int, dict]]]) -> Optional[float]:
+    """Smallest true distance between two airborne drones at the same sample index (samples are per world step)."""
+    names = list(truth)
+    best: Optional[float] = None
+    length = min(len(s) for s in truth.values())
+    for k in range(length):
+        airborne = []
+        for n in names:
+            m = truth[n][k][1]
+            p = m["position"]
+            if m["motors"] or p["z"] > ON_FLOOR_M:
+                airborne.append((p["x"], p["y"], p["z"]))
+        for i in range(len(airborne)):
+            for j in range(i + 1, len(airborne)):
+                d = math.dist(airborne[i], airborne[j])
+                best = d if best is None or d < best else best
+    return best
+
+
+def table(verdicts: list[Verdict]) -> str:
+    lines = ["| kind | mission | drone | verdict | exit | outcomes | min separation | events | failures |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    for v in verdicts:
+        outcomes = ", ".join(f"{n} {o}" for n, o in v.outcomes.items())
+        sep = "-" if v.min_separation_m is None else f"{v.min_separation_m:.3f} m"
+        events = "; ".join(v.events).replace("|", "/")
+        lines.append(f"| {v.kind} | {v.mission} | {v.drone or '-'} | {'pass' if v.passed else 'FAIL'} | "
+                     f"{v.exit_code} | {outcomes} | {sep} | {events} | {'; '.join(v.failures).replace('|', '/')} |")
+    return "\n".join(lines) + "\n"
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--missions", default="lab-3,circle-8-r3")
+    parser.add_argument("--kinds", default=",".join(DEFAULTS))
+    parser.add_argument("--out", default=str(ROOT / "docs" / "fault-campaign.md"), help="markdown table, - for stdout")
+    parser.add_argument("--json", default=None, help="verdicts as JSON")
+    args = parser.parse_args()
+    verdicts = []
+    with tempfile.TemporaryDirectory(prefix="rpf-fly-campaign-") as tmp:
+        for mission_name in args.missions.split(","):
+            for kind in args.kinds.split(","):
+                v = judge(kind, ROOT / "missions" / f"{mission_name}.yaml", Path(tmp))
+                verdicts.append(v)
+                print(f"{v.mission:14s} {v.kind:22s} {'pass' if v.passed else 'FAIL'}  {'; '.join(v.failures)}",
+                      flush=True)
+    text = table(verdicts)
+    if args.out == "-":
+        print(text)
+    else:
+        header = ("# Fault campaign\n\n`python tools/fault_campaign.py` (docs/faults.md): one fault a run, judged on "
+                  "the `/truth` topics by the tool's own reader.\n\n")
+        Path(args.out).write_text(header + text)
+    if args.json:
+        Path(args.json).write_text(json.dumps([asdict(v) for v in verdicts], indent=1))
+    passed = sum(v.passed for v in verdicts)
+    print(f"{passed} passed, {len(verdicts) - passed} failed")
+    return 0 if passed == len(verdicts) else 1
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
