@@ -146,18 +146,24 @@ def obstacle_set_of(scenario: dict[str, Any]):  # type: ignore[no-untyped-def]
 def planner_positions(data: LogData, names: list[str]) -> np.ndarray:
     """``(T+1, N)`` complex positions the planner used at ticks ``0..T`` (``T+1`` = the ticks every drone has).
 
-    A tick missing for one drone (dropped message) takes that drone's previous position."""
+    A tick missing for one drone (dropped message) takes that drone's previous position. A drone that never planned
+    (it failed its preflight and stayed on the ground while the others flew) stands where mocap first saw it."""
     tracks = []
     for name in names:
         msgs = data.messages(f"/{name}/planner")
         if not msgs:
-            raise ReviewError(f"no planner ticks for {name} (/{name}/planner)")
+            seen = data.messages(f"/mocap/{name}")
+            if not seen:
+                raise ReviewError(f"no planner ticks for {name} (/{name}/planner) and no mocap pose")
+            p = seen[0].data["pose"]["position"]
+            tracks.append({0: complex(p["x"], p["y"])})
+            continue
         ticks = {}
         for m in msgs:
             p = m.data["position"]
             ticks[int(m.data["tick"])] = complex(p["x"], p["y"])
         tracks.append(ticks)
-    length = min(max(t) for t in tracks) + 1
+    length = min((max(t) for t in tracks if len(t) > 1), default=0) + 1
     positions = np.empty((length, len(names)), dtype=complex)
     for i, ticks in enumerate(tracks):
         last = ticks[min(ticks)]

@@ -219,6 +219,8 @@ def test_a_drone_failing_its_preflight_stays_on_the_ground_and_the_others_fly(tm
     assert not flight.snapshots["cf2"].motors_on and flight.snapshots["cf2"].position[2] < 0.01
     assert flight.snapshots["cf2"].transitions == () or all(t.new.value != "Flying" for t in flight.snapshots["cf2"].transitions)
     assert any("cf2 stay on the ground" in m for m in flight.logged_events())
+    metrics = metrics_of(flight.log)  # the review reads a flight with a drone that never planned
+    assert metrics.reached == 2 and not metrics.success
 
 
 def test_simulated_mocap_source_flies_too(tmp_path, short_mission):
