@@ -11,18 +11,28 @@ The simulated drones and the NatNet emulator run in a process of their own (``pr
 the flight's process they would hold its GIL at moments no real flight sees. ``process=False`` keeps them in this
 process (debugging, packet observers).
 
-Fault hooks for tests and demos: :meth:`DryRun.hide` (a rigid body untracked for a while), :meth:`DryRun.blackout`
-(no body tracked at all), ``DryRun.world``'s link drop, battery and disturbance hooks and the faults of
-``drone_configs``.
-
 The simulated drones crash on contact with each other or with the mission's obstacles
 (:mod:`rpf_fly.radio.fake_contact`), and their true states reach the flight log as ``/truth/<drone>``
 (:meth:`DryRun.truth_samples`, :mod:`rpf_fly.flight.truth`).
+Fault hooks for tests, demos and fault campaigns, by drone name, safe to call while the flight runs (durations
+in seconds from the call; each behaves as the real thing would, see docs/radio.md, "Fault hooks"):
+
+- mocap: :meth:`DryRun.hide` (a rigid body untracked for a while), :meth:`DryRun.blackout` (no body tracked at
+  all), :meth:`DryRun.pose_jump` (a body reported in the wrong place, as tracked), :meth:`DryRun.mocap_delay`
+  (every pose late);
+- radio: :meth:`DryRun.packet_loss` (lossy link for a while);
+- drone: :meth:`DryRun.gust` (an external push its controller fights), :meth:`DryRun.estimator_divergence` (the
+  estimate runs away, the true drone the other way), :meth:`DryRun.reboot` (a brown-out: falls, radio silent,
+  fresh firmware on the floor);
+- at power-on: ``start_faults`` (a drone standing rotated or away from its mission start, :class:`StartFault`);
+- and ``DryRun.world``'s ``drop_link``, ``set_battery`` and ``disturb`` (a teleport) by radio address, and the
+  faults of ``drone_configs``.
 """
 
 from __future__ import annotations
 
 import tempfile
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Mapping, Optional
 
@@ -43,8 +53,22 @@ def uri_address(uri: str) -> int:
     return int(path.split("/")[3], 16)
 
 
+@dataclass(frozen=True)
+class StartFault:
+    """How one simulated drone stands at power-on, unlike its mission says (``DryRun(start_faults=...)``)."""
+
+    yaw_deg: float = 0.0
+    """It stands rotated by this much (degrees, counter-clockwise from +x). Its estimator still starts at
+    `kalman.initialYaw` = 0, as a real Crazyflie's does: only a reset to the mocap yaw or extpose cures that."""
+    offset_m: tuple[float, float] = (0.0, 0.0)
+    """It stands this far (x, y, metres) from its mission start (put down in the wrong place)."""
+
+
 class DryRun:
-    """Context manager owning the fake drones, the fake-radio registration and the mocap source of a dry run."""
+    """Context manager owning the fake drones, the fake-radio registration and the mocap source of a dry run.
+
+    ``drone_configs`` replaces a drone's simulated Crazyflie (by drone name); ``start_faults`` then moves or turns
+    the drone (its given config or the default one: at its mission start, mocap positioning) before power-on."""
 
     def __init__(
         self,
@@ -53,6 +77,7 @@ class DryRun:
         mocap: str = "natnet",
         natnet_version: str = "4.1",
         drone_configs: Optional[Mapping[str, FakeDroneConfig]] = None,
+        start_faults: Optional[Mapping[str, StartFault]] = None,
         mocap_rate_hz: Optional[float] = None,
         cache_dir: Optional[Path] = None,
         seed: int = 0,
@@ -71,10 +96,15 @@ class DryRun:
         self.addresses = {d.name: uri_address(d.uri) for d in mission.drones}
         self.bodies = {d.name: d.rigid_body for d in mission.drones}
         configs = dict(drone_configs or {})
-        self.drone_configs = {
-            self.addresses[d.name]: configs.get(d.name, FakeDroneConfig.at(d.start[0], d.start[1], 0.0, positioning="extpos"))
-            for d in mission.drones
-        }
+        faults = dict(start_faults or {})
+        unknown = sorted(set(faults) - set(self.addresses))
+        if unknown:
+            raise ValueError(f"start_faults for drones not in the mission: {', '.join(unknown)}")
+        self.drone_configs = {}
+        for d in mission.drones:
+            default = FakeDroneConfig.at(d.start[0], d.start[1], 0.0, positioning="extpos")
+            config = configs.get(d.name, default)
+            self.drone_configs[self.addresses[d.name]] = _with_start_fault(config, faults.get(d.name))
         self._names = {address: name for name, address in self.addresses.items()}
         self.seed = seed
         self.in_process = not process
@@ -178,7 +208,44 @@ class DryRun:
         names = self._names
         return [(stamp, {names[a]: state for a, state in states.items()})
                 for stamp, states in self.world.truth_samples()]
+    def pose_jump(self, name: str, offset_m: tuple[float, float, float], seconds: float) -> None:
+        """Report drone ``name``'s rigid body ``offset_m`` metres from where it is, as tracked, for ``seconds`` (a
+        marker swap, a wrong model fit); the drone does not move."""
+        self._bodies.pose_jump(self.bodies[name], offset_m, seconds)
+
+    def mocap_delay(self, delay_s: float, seconds: float) -> None:
+        """For ``seconds`` every mocap frame carries poses ``delay_s`` old (latency, not a frame-rate drop)."""
+        self._bodies.mocap_delay(delay_s, seconds)
+
+    def packet_loss(self, name: str, rate: float, seconds: float) -> None:
+        """For ``seconds`` each radio attempt with drone ``name`` is lost with probability ``rate``."""
+        self.world.packet_loss(self.addresses[name], rate, seconds)
+
+    def gust(self, name: str, accel_m_s2: tuple[float, float, float], seconds: float) -> None:
+        """Push drone ``name`` with ``accel_m_s2`` (m/s^2, world frame) for ``seconds``; its controller fights it
+        (1.5 m/s^2: 17.6 cm off its setpoint) and it comes back after."""
+        self.world.gust(self.addresses[name], accel_m_s2, seconds)
+
+    def estimator_divergence(self, name: str, rate_m_s: float) -> None:
+        """Drone ``name``'s estimate runs away at ``rate_m_s`` and ignores extpos until a reboot: the true drone
+        drifts the other way while its telemetry looks fine."""
+        self.world.estimator_divergence(self.addresses[name], rate_m_s)
+
+    def reboot(self, name: str) -> None:
+        """Brown-out of drone ``name``: motors off (it falls), radio silent for 1.5 s (its cflib link fails), then
+        a fresh firmware on the floor that a new connection reaches."""
+        self.world.reboot(self.addresses[name])
 
     def snapshot(self, name: str):  # type: ignore[no-untyped-def]
         """The fake firmware's state of drone ``name`` (position, motors, flags, ...)."""
         return self.world.snapshot(self.addresses[name])
+
+
+def _with_start_fault(config: FakeDroneConfig, fault: Optional[StartFault]) -> FakeDroneConfig:
+    """``config`` with the drone moved by ``fault.offset_m`` and turned by ``fault.yaw_deg`` (no fault: as is)."""
+    if fault is None:
+        return config
+    x, y, z = config.vehicle.position
+    vehicle = replace(config.vehicle, position=(x + fault.offset_m[0], y + fault.offset_m[1], z),
+                      yaw_deg=config.vehicle.yaw_deg + fault.yaw_deg)
+    return replace(config, vehicle=vehicle)

@@ -42,6 +42,9 @@ PROTOCOL_VERSION = 12
 FIRMWARE_VERSION = "rpf-fake-2026.08"
 LOG_MAX_BLOCKS = 16
 LOG_MAX_PAYLOAD = 26
+REBOOT_BOOT_S = 1.5
+"""Radio silence of a reboot: a Crazyflie 2.x takes about 1-2 s from power-on (nRF51 and STM32 bootloaders, then
+the firmware's start-up) until its radio answers again. The fake's choice within that range."""
 
 PORT_CONSOLE, PORT_PARAM, PORT_COMMANDER, PORT_MEM, PORT_LOG = 0, 2, 3, 4, 5
 PORT_LOCALIZATION, PORT_COMMANDER_GENERIC, PORT_SETPOINT_HL, PORT_SUPERVISOR = 6, 7, 8, 9
@@ -164,6 +167,15 @@ class FirmwareSnapshot:
     vbat_v: float
     pm_state: int
     variance_m2: float
+    estimator_diverging: bool
+    """The estimator ignores extpos and runs away (`FakeFirmware.estimator_divergence`); `estimate` shows it
+    against `position`."""
+    gust_m_s2: tuple[float, float, float]
+    """The external acceleration pushing the true body now (m/s^2; zeros when no gust blows)."""
+    booting: bool
+    """Power was cut (`FakeFirmware.reboot`) and the new flight stack has not started: radio silent."""
+    boots: int
+    """Reboots completed since the first power-on (0: still the first flight stack)."""
     last_crtp_setpoint_s: float | None
     transitions: tuple[Transition, ...]
     params: dict[str, float]
@@ -199,27 +211,50 @@ class FakeFirmware:
         self._blocks: dict[int, _LogBlock] = {}
         self._counts: Counter[tuple[int, int]] = Counter()
         self._toc_item_requests = 0
+        self._booting_until: float | None = None
+        self._boots = 0
 
     # Public API -----------------------------------------------------------------------------------------------
 
     @property
     def powered(self) -> bool:
-        """False once the battery shut the firmware down: it then answers nothing."""
+        """False once the battery shut the firmware down, and while it reboots: it then answers nothing."""
         return self.vehicle.powered
 
-    def reboot(self, now_s: float) -> None:
-        """Power-cycle: a new flight stack on the floor where the drone is, same battery and IMU, default
-        parameters (so the estimator restarts at `kalman.initialX/Y/Z/Yaw` = 0)."""
+    @property
+    def booting(self) -> bool:
+        """True from a `reboot` until the new flight stack runs."""
+        return self._booting_until is not None
+
+    def reboot(self, now_s: float, boot_s: float = REBOOT_BOOT_S) -> None:
+        """Power-cycle as a brown-out or the power button does: the motors stop at once and a flying drone falls
+        under gravity to the floor; the radio is silent for ``boot_s`` (`REBOOT_BOOT_S`, so a connected cflib link
+        loses its acks and fails with "Too many packets lost"); then a new flight stack starts on the floor where
+        the drone lies (once it has landed there): same battery and IMU, fresh supervisor, no log blocks, default
+        parameters (so the estimator restarts at `kalman.initialX/Y/Z/Yaw` = 0). A new connection reaches it."""
         with self._lock:
-            vbat = self.vehicle.battery.open_v
-            x, y = self.vehicle.pos[0], self.vehicle.pos[1]
-            floor = self.vehicle.floor_z
-            yaw = math.degrees(self.vehicle.yaw)
-            self.config = VehicleConfig((x, y, floor), yaw, vbat, self.config.auto_arm, self.config.positioning)
-            self.vehicle = Vehicle(self.config, now_s, self.seed)
-            self._params = dict(_PARAM_DEFAULTS)
+            self.vehicle.cut_power()
             self._blocks.clear()
-            self._boot_s = self._now_s = now_s
+            self._booting_until = now_s + max(0.0, boot_s)
+            self._finish_boot(now_s)
+
+    def _finish_boot(self, now_s: float) -> None:
+        """Start the new flight stack of a reboot once its boot time is over and the body rests on the floor."""
+        old = self.vehicle
+        if self._booting_until is None or now_s < self._booting_until:
+            return
+        if old.pos[2] > old.floor_z or old.vel[2] != 0.0:
+            return  # still falling: it boots where it lands
+        self.config = VehicleConfig((old.pos[0], old.pos[1], old.floor_z), math.degrees(old.yaw), old.battery.open_v,
+                                    self.config.auto_arm, self.config.positioning)
+        self.vehicle = Vehicle(self.config, now_s, self.seed)
+        self.vehicle.gust(old.gust_accel, old.gust_until_s)  # the wind does not care
+        self._params = dict(_PARAM_DEFAULTS)
+        self._blocks.clear()
+        self._boot_s = self._now_s = max(self._now_s, now_s)
+        self._booting_until = None
+        self._boots += 1
+        logger.info("fake Crazyflie rebooted at %.3f s", now_s)
 
     def supervisor_bits(self) -> int:
         """Current `supervisor.info`."""
@@ -232,6 +267,8 @@ class FakeFirmware:
                 return []
             self._now_s = now_s
             self.vehicle.step(now_s)
+            if self._booting_until is not None:
+                self._finish_boot(now_s)
             if not self.powered:
                 return []
             return self._log_data_due(now_s)
@@ -258,6 +295,23 @@ class FakeFirmware:
         with self._lock:
             for axis in range(3):
                 self.vehicle.pos[axis] += offset_m[axis]
+
+    def gust(self, accel_m_s2: tuple[float, float, float], seconds: float, now_s: float) -> None:
+        """An external acceleration ``accel_m_s2`` (m/s^2, world frame) on the true drone for ``seconds`` from
+        ``now_s``, which its position controller fights (`fake_vehicle`, "Gust": 1.5 m/s^2 holds a hovering drone
+        17.6 cm downwind; it comes back when the gust ends). Unlike `disturb`, nothing is teleported. For fault
+        tests."""
+        with self._lock:
+            self.vehicle.gust(accel_m_s2, max(now_s, self._now_s) + seconds)
+
+    def estimator_divergence(self, rate_m_s: float) -> None:
+        """From now until a reboot the estimator takes no extpos/extpose and its position estimate runs away at
+        ``rate_m_s`` in a fixed horizontal direction (seeded): under position control the true drone drifts the
+        other way while `stateEstimate` looks right (`fake_vehicle`, "Estimator divergence"). For fault tests."""
+        if not rate_m_s >= 0.0:
+            raise ValueError(f"rate_m_s must be >= 0, not {rate_m_s}")
+        with self._lock:
+            self.vehicle.diverge(float(rate_m_s))
 
     def set_battery(self, open_circuit_v: float) -> None:
         """Set the battery's open-circuit voltage now (a failing cell; for fault tests)."""
@@ -307,6 +361,10 @@ class FakeFirmware:
                 vbat_v=v.battery.vbat_v,
                 pm_state=v.battery.pm_state,
                 variance_m2=v.variance_m2,
+                estimator_diverging=v.divergence_velocity is not None,
+                gust_m_s2=v.gust_accel if self._now_s <= v.gust_until_s else (0.0, 0.0, 0.0),
+                booting=self._booting_until is not None,
+                boots=self._boots,
                 last_crtp_setpoint_s=v.last_crtp_setpoint_s,
                 transitions=tuple(sup.transitions),
                 params=dict(self._params),

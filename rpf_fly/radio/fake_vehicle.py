@@ -54,6 +54,25 @@ offsets and sets the variance to 1 m^2, decaying to `locSrv.extPosStdDev`^2 with
 Not modelled: gyro drift of the yaw estimate, tilt, outlier rejection, the weight of `locSrv.extQuatStdDev` (an
 extpose sets the yaw whole).
 
+Faults a test injects while the drone flies (each as a real Crazyflie would suffer it):
+- Gust (`Vehicle.gust`): an external acceleration on the true body for a while. The position controller fights it
+  through a velocity loop of time constant `GUST_RESPONSE_TAU_S` (0.47 s): the push builds a disturbance velocity
+  d (d' = a - d / 0.47 s) on top of the commanded one, so a steady gust of a m/s^2 holds the drone
+  a * 0.25 s * 0.47 s = 0.1175 s^2 * a off its setpoint downwind (1.5 m/s^2: 17.6 cm, 97 % of it after 2 s), and
+  it comes back as the gust ends (the same two time constants). The figure is the firmware's default gains worked
+  out (position Kp 2 /s, velocity Kp 25 deg per m/s: 0.117 m per m/s^2); the integrators that would slowly remove
+  the offset (velocity Ki, tens of seconds) are not modelled. The commanded velocity stays limited to 1.1 m/s, so
+  a gust over 1.1 / 0.47 = 2.3 m/s^2 blows the drone away downwind (a real one holds up to about 3.5 m/s^2, its
+  20-degree tilt limit). Level attitude (watchdog level-out) and free fall do not fight: the gust just accelerates
+  the body. On the floor a drone cannot slide. The IMU feels the push, so the estimate follows the true motion
+  (and extpos keeps it on the truth).
+- Estimator divergence (`Vehicle.diverge`): the estimate stops taking extpos/extpose and runs away from the truth
+  at a constant horizontal velocity (direction drawn from the drone's seed); its estimated velocity and variance
+  stay plausible (the filter believes itself). The controller holds the *estimate* on the setpoint, so the true
+  drone drifts the opposite way at that rate while telemetry looks fine. A `kalman.resetEstimation` restarts the
+  estimate at `kalman.initial*` but does not cure it; only a reboot (a new vehicle) does.
+- Power cut (`Vehicle.cut_power`, a brown-out or reboot): motors off at once, free fall, nothing answered.
+
 Battery: open-circuit voltage drains 0.0002 V/s with motors off and 0.0017 V/s with motors on (a 250 mAh
 Crazyflie hovers about 7 minutes); `pm.vbat` sags 0.25 V under load. `pm.state` becomes low-power after 5 s below
 `pm.lowVoltage` (3.2 V) and the firmware shuts down after 5 s low-power below `pm.criticalLowVoltage` (3.0 V):
@@ -103,6 +122,11 @@ MAX_VARIANCE_M2 = 100.0
 """Bound of the filter's variances (m^2 and (m/s)^2)."""
 VARIANCE_DECAY_TAU_S = 0.05
 """Onboard positioning: time constant of the variance settling after a reset."""
+GUST_RESPONSE_TAU_S = 0.47
+"""Time constant with which the controller's velocity loop cancels a velocity an external push builds up (module
+doc): with `TRACK_TAU_S` it sets the steady offset of a gust, 0.1175 m per m/s^2. From the firmware's default
+position and velocity gains (2 /s and 25 degrees of tilt per m/s: 1 / (2 * 25 * g * pi / 180) = 0.117 m per
+m/s^2)."""
 
 
 @dataclass(frozen=True)
@@ -168,6 +192,7 @@ class Vehicle:
         self.floor_z = float(config.position[2])
         self.kalman = config.positioning == "extpos"
         """True when the estimate is the mocap-fed filter; False for "onboard" (an ideal onboard system)."""
+        self._seed = seed
         self._rng = random.Random(f"fake-imu-{seed}")
         self.accel_bias: Vec3 = self._draw_bias() if self.kalman else (0.0, 0.0, 0.0)
         """The accelerometer's constant bias in m/s^2 (world frame; norm `ACCEL_BIAS_M_S2`), per drone."""
@@ -180,6 +205,8 @@ class Vehicle:
         self.vel_error: list[float] = [0.0, 0.0, 0.0]
         self.yaw_offset = 0.0
         self.p_pp = self.p_pv = self.p_vv = 0.0
+        self.divergence_velocity: Vec3 | None = None
+        """While the estimator diverges: the velocity (m/s) at which the estimate runs away from the truth."""
         self._onboard_variance_m2 = self.ext_pos_std_dev**2
         self.reset_estimator()
         self._onboard_variance_m2 = self.ext_pos_std_dev**2  # an onboard system is settled at power-on
@@ -201,6 +228,13 @@ class Vehicle:
         self.crash_s: float | None = None
         """Time of the crash (seconds on the caller's clock), None if the drone never crashed."""
         self.crash_reason: str | None = None
+        self.power_cut = False
+        """True after `cut_power` (a brown-out, a reboot): the stack is dead until a new vehicle replaces it."""
+        self.gust_accel: Vec3 = (0.0, 0.0, 0.0)
+        """External acceleration on the true body (m/s^2, world frame) until `gust_until_s`."""
+        self.gust_until_s = -math.inf
+        self._gust_vel = [0.0, 0.0, 0.0]
+        """The velocity the gust has built up and the controller has not cancelled yet (m/s)."""
         self._last_s = now_s
 
     # Estimator ------------------------------------------------------------------------------------------------
@@ -236,11 +270,43 @@ class Vehicle:
 
     @property
     def powered(self) -> bool:
-        return not self.battery.shutdown
+        return not self.battery.shutdown and not self.power_cut
+
+    def cut_power(self) -> None:
+        """Power lost now (brown-out, reset button): the motors stop at once and the drone falls; nothing of this
+        stack runs again (the firmware boots a new one)."""
+        self.power_cut = True
+        self.motors_on = self.thrusting = False
+
+    def gust(self, accel_m_s2: Vec3, until_s: float) -> None:
+        """Push the true body with ``accel_m_s2`` (m/s^2, world frame) until ``until_s`` (module doc, "Gust");
+        replaces a gust still blowing."""
+        self.gust_accel = (float(accel_m_s2[0]), float(accel_m_s2[1]), float(accel_m_s2[2]))
+        self.gust_until_s = until_s
+
+    def diverge(self, rate_m_s: float) -> None:
+        """From now on the estimator ignores external positions and its position estimate runs away at
+        ``rate_m_s`` in a horizontal direction drawn from the drone's seed (module doc, "Estimator divergence").
+        Until a new vehicle (reboot)."""
+        angle = random.Random(f"fake-divergence-{self._seed}").uniform(0.0, 2.0 * math.pi)
+        self.divergence_velocity = (rate_m_s * math.cos(angle), rate_m_s * math.sin(angle), 0.0)
+        self.vel_error = list(self.divergence_velocity)
+
+    def _run_away(self, dt: float) -> None:
+        """A diverged estimator's step: the estimate moves with the truth (the IMU) plus the runaway; the
+        estimated velocity carries the runaway, so the estimate looks still while the true drone drifts."""
+        runaway = self.divergence_velocity or (0.0, 0.0, 0.0)
+        offset = self.offset
+        for axis in range(3):
+            offset[axis] += runaway[axis] * dt
+        self.vel_error = list(runaway)
 
     def external_position(self, position: Vec3, now_s: float) -> None:
-        """An external position measurement (metres): a Kalman update of position and velocity (module doc)."""
+        """An external position measurement (metres): a Kalman update of position and velocity (module doc).
+        Ignored by a diverged estimator."""
         self.last_extpos_s = now_s
+        if self.divergence_velocity is not None:
+            return
         if not self.kalman:
             self.offset = [m - p for m, p in zip(position, self.pos)]
             return
@@ -259,7 +325,8 @@ class Vehicle:
         """An external pose measurement (metres, quaternion qx, qy, qz, qw): position as `external_position`; the
         yaw estimate is set to the measured yaw."""
         self.external_position(position, now_s)
-        self.yaw_offset = wrap_angle(yaw_from_quaternion(*quaternion) - self.yaw)
+        if self.divergence_velocity is None:
+            self.yaw_offset = wrap_angle(yaw_from_quaternion(*quaternion) - self.yaw)
 
     def reset_estimator(self) -> None:
         """`kalman.resetEstimation` (and power-on): the estimate restarts at `kalman.initialX/Y/Z` and
@@ -273,6 +340,8 @@ class Vehicle:
             self.offset = [0.0, 0.0, 0.0]
             self.yaw_offset = 0.0
             self._onboard_variance_m2 = VARIANCE_AFTER_RESET_M2
+        if self.divergence_velocity is not None:  # a reset restarts the estimate, not the broken filter
+            self.vel_error = list(self.divergence_velocity)
 
     def _predict(self, dt: float, dv_x: float, dv_y: float) -> None:
         """Integrate the IMU over one sub-step: bias and noise enter the velocity error, which enters the position
@@ -362,10 +431,11 @@ class Vehicle:
         self._last_s = max(self._last_s, now_s)
 
     def _tick(self, now_s: float, dt: float) -> None:
+        push = self.gust_accel if now_s <= self.gust_until_s else None
         if not self.powered:
             self.control_setpoint = null_setpoint(now_s, "power-off")
             self.motors_on = self.thrusting = False
-            self._move(dt, self.control_setpoint, motors_on=False)
+            self._move(dt, self.control_setpoint, motors_on=False, push=push)
             return
         can_fly = self.supervisor.motors_allowed
         self.hl.block(not can_fly)
@@ -384,10 +454,12 @@ class Vehicle:
         self.control_setpoint = setpoint
         self.motors_on = self.supervisor.motors_allowed and setpoint.commands_thrust
         vx, vy = self.vel[0], self.vel[1]
-        self._move(dt, setpoint, motors_on=self.motors_on)
+        self._move(dt, setpoint, motors_on=self.motors_on, push=push)
         self.thrusting = self.motors_on
         self.battery.step(now_s, dt, self.motors_on, self.low_voltage_v, self.critical_voltage_v)
-        if self.kalman:
+        if self.divergence_velocity is not None:
+            self._run_away(dt)
+        elif self.kalman:
             self._predict(dt, self.vel[0] - vx, self.vel[1] - vy)
         else:
             floor = self.ext_pos_std_dev**2
@@ -411,16 +483,21 @@ class Vehicle:
             return setpoint
         return null_setpoint(setpoint.timestamp_s, "supervisor")
 
-    def _move(self, dt: float, sp: Setpoint, *, motors_on: bool) -> None:
+    def _move(self, dt: float, sp: Setpoint, *, motors_on: bool, push: Vec3 | None = None) -> None:
         """Advance the true body by `dt`. The controller works on the estimate: positions and velocities are the
         estimated ones, and the horizontal velocity it commands in its (estimated) frame is realised through the
-        true attitude, i.e. rotated by the yaw error (true minus estimated yaw)."""
-        pos, vel = self.pos, self.vel
+        true attitude, i.e. rotated by the yaw error (true minus estimated yaw). `push`: a gust's acceleration
+        (module doc), fought by the controlled axes, taken whole by the others."""
+        pos, vel, gust = self.pos, self.vel, self._gust_vel
         if not motors_on:
+            gust[0] = gust[1] = gust[2] = 0.0
             if pos[2] <= self.floor_z and vel[2] <= 0.0:
                 pos[2], vel[:] = self.floor_z, [0.0, 0.0, 0.0]
                 return
             vel[2] -= GRAVITY_M_S2 * dt
+            if push is not None:
+                for axis in range(3):
+                    vel[axis] += push[axis] * dt
         else:
             est, vel_error = self.estimate, self.vel_error
             gain = 1.0 - math.exp(-dt / TRACK_TAU_S)
@@ -439,16 +516,19 @@ class Vehicle:
             if self.yaw_offset != 0.0:
                 c, s = math.cos(self.yaw_offset), math.sin(self.yaw_offset)  # rotation by true - estimated yaw
                 wanted[0], wanted[1] = c * wanted[0] + s * wanted[1], c * wanted[1] - s * wanted[0]
-            for axis in range(3):
-                mode = modes[axis]
-                if mode is AxisMode.ABS:
-                    vel[axis] = wanted[axis]
-                elif mode is AxisMode.VELOCITY:
-                    vel[axis] += (wanted[axis] - vel[axis]) * gain
-                elif axis < 2:
-                    vel[axis] *= math.exp(-dt / DRAG_TAU_S)
-                else:
-                    vel[axis] *= 1.0 - gain
+            if push is None and not (gust[0] or gust[1] or gust[2]):
+                for axis in range(3):
+                    mode = modes[axis]
+                    if mode is AxisMode.ABS:
+                        vel[axis] = wanted[axis]
+                    elif mode is AxisMode.VELOCITY:
+                        vel[axis] += (wanted[axis] - vel[axis]) * gain
+                    elif axis < 2:
+                        vel[axis] *= math.exp(-dt / DRAG_TAU_S)
+                    else:
+                        vel[axis] *= 1.0 - gain
+            else:
+                self._move_in_gust(dt, modes, wanted, gain, push)
             if sp.yaw_mode is AxisMode.ABS:
                 self.yaw += wrap_angle(math.radians(sp.yaw_deg) - self.estimate_yaw) * gain
             elif sp.yaw_mode is AxisMode.VELOCITY:
@@ -460,3 +540,24 @@ class Vehicle:
             pos[2] = self.floor_z
             if vel[2] <= 0.0:
                 vel[:] = [0.0, 0.0, 0.0]
+
+    def _move_in_gust(self, dt: float, modes: tuple[AxisMode, AxisMode, AxisMode], wanted: list[float],
+                      gain: float, push: Vec3 | None) -> None:
+        """The controlled velocities of `_move` with a gust (or what is left of one): on controlled axes the true
+        velocity is the controller's plus the disturbance velocity d, d' = push - d / `GUST_RESPONSE_TAU_S`
+        (integrated exactly over the step); uncontrolled axes take the push whole."""
+        vel, gust = self.vel, self._gust_vel
+        decay = math.exp(-dt / GUST_RESPONSE_TAU_S)
+        for axis in range(3):
+            a = push[axis] if push is not None else 0.0
+            mode = modes[axis]
+            if mode is AxisMode.ABS or mode is AxisMode.VELOCITY:
+                controlled = wanted[axis] if mode is AxisMode.ABS else vel[axis] - gust[axis]
+                if mode is AxisMode.VELOCITY:
+                    controlled += (wanted[axis] - controlled) * gain
+                d = gust[axis] * decay + a * GUST_RESPONSE_TAU_S * (1.0 - decay)
+                gust[axis] = d if abs(d) > 1e-9 or a else 0.0
+                vel[axis] = controlled + gust[axis]
+            else:
+                gust[axis] = 0.0
+                vel[axis] = vel[axis] * (math.exp(-dt / DRAG_TAU_S) if axis < 2 else 1.0 - gain) + a * dt

@@ -74,6 +74,19 @@ class LinkFaults:
 
 
 @dataclass(frozen=True)
+class RadioCounters:
+    """One drone's radio transactions since the world was created, as its radio saw them."""
+
+    transactions: int
+    """Acknowledged transactions (packets and empty polls)."""
+    lost_transactions: int
+    """Transactions that got no ack (each of the radio's attempts lost, or the drone did not answer): what
+    cflib's radio driver counts towards its 100 lost acks."""
+    lost_attempts: int
+    """Single attempts lost, retried ones included (the retries that lower cflib's link quality)."""
+
+
+@dataclass(frozen=True)
 class FakeDroneConfig:
     """One fake drone: initial state (see `VehicleConfig`), radio faults and radio settings."""
 
@@ -131,6 +144,37 @@ class SimDrone:
         """Downlink packets dropped because the queue was full."""
         self.transactions = 0
         """Acknowledged radio transactions (packets and empty polls) with this drone."""
+        self.lost_transactions = 0
+        self.lost_attempts = 0
+        self._loss_override: tuple[float, float] | None = None
+        """(rate, until world time) of a runtime packet-loss fault (`FakeWorld.packet_loss`)."""
+
+    def packet_loss(self, now_s: float) -> float:
+        """The probability that one radio attempt is lost now: a runtime fault while it lasts, else the configured
+        `LinkFaults.packet_loss`."""
+        override = self._loss_override  # one read: a fault set meanwhile is not lost
+        if override is not None and now_s < override[1]:
+            return override[0]
+        return self.config.faults.packet_loss
+
+    def set_packet_loss(self, rate: float, until_s: float) -> None:
+        if not 0.0 <= rate <= 1.0:
+            raise ValueError(f"packet loss rate must be in [0, 1], not {rate}")
+        self._loss_override = (float(rate), until_s)
+
+    def count_lost(self, transactions: int, attempts: int) -> None:
+        with self._lock:
+            self.lost_transactions += transactions
+            self.lost_attempts += attempts
+
+    def counters(self) -> RadioCounters:
+        with self._lock:
+            return RadioCounters(self.transactions, self.lost_transactions, self.lost_attempts)
+
+    def flush_downlink(self) -> None:
+        """Forget the queued downlink packets (a rebooted firmware lost its queue)."""
+        with self._lock:
+            self._tx.clear()
 
     def reachable(self, channel: int) -> bool:
         """True if the drone answers the radio on `channel` now."""
@@ -211,14 +255,20 @@ class DronePort:
 
     def transact(self, channel: int, uplink: tuple[int, bytes] | None) -> tuple[bool, int, Packet | None]:
         """One radio transaction on ``channel``: (acknowledged, retries used, the ack's downlink packet). Lost when
-        the drone does not answer on that channel or each of the radio's attempts is lost."""
+        the drone does not answer on that channel or each of the radio's attempts is lost (with the drone's packet
+        loss now: `SimDrone.packet_loss`, so a runtime fault acts here, in whichever process runs the world)."""
         drone, retries = self._drone, self._world.timing.arc_retries
         if not drone.reachable(channel):
+            drone.count_lost(1, retries + 1)
             return False, retries, None
-        loss = self.faults.packet_loss
+        now = self._world.time_s()
+        loss = drone.packet_loss(now)
         for retry in range(retries + 1):
             if loss <= 0.0 or drone.rng.random() >= loss:
-                return True, retry, drone.exchange(uplink, self._world.time_s())
+                if retry:
+                    drone.count_lost(0, retry)
+                return True, retry, drone.exchange(uplink, now)
+        drone.count_lost(1, retries + 1)
         return False, retries, None
 
     def has_downlink(self) -> bool:
@@ -372,8 +422,40 @@ class FakeWorld:
         self._drones[parse_address(address)].firmware.set_battery(open_circuit_v)
 
     def reboot(self, address: int | str) -> None:
-        """Power-cycle one drone's firmware (clears a lock), on the floor where it is."""
-        self._drones[parse_address(address)].firmware.reboot(self.time_s())
+        """Power-cycle one drone now, as a brown-out would (see `FakeFirmware.reboot`): motors off at once and a
+        flying drone falls to the floor; radio silent for `REBOOT_BOOT_S` (1.5 s), so a connected cflib link fails
+        with "Too many packets lost"; then a fresh flight stack on the floor where it fell (default parameters,
+        estimator at `kalman.initial*` = 0, supervisor fresh, a lock cleared), reachable by a new connection."""
+        drone = self._drones[parse_address(address)]
+        drone.firmware.reboot(self.time_s())
+        drone.flush_downlink()
+
+    def packet_loss(self, address: int | str, rate: float, seconds: float) -> None:
+        """For ``seconds`` from now each radio attempt with this drone is lost with probability ``rate`` (0-1),
+        instead of its configured `LinkFaults.packet_loss` (interference, a drone flying behind an obstacle). The
+        same model: the radio retries each packet 3 times, a transaction whose 4 attempts are all lost is a lost
+        ack, 100 in a row drop cflib's link; retries lower cflib's link quality. The fault then expires."""
+        if seconds < 0.0:
+            raise ValueError(f"seconds must be >= 0, not {seconds}")
+        self._drones[parse_address(address)].set_packet_loss(rate, self.time_s() + seconds)
+
+    def gust(self, address: int | str, accel_m_s2: tuple[float, float, float], seconds: float) -> None:
+        """An external acceleration on one drone's true body for ``seconds``, fought by its position controller
+        (see `FakeFirmware.gust`; 1.5 m/s^2 holds a hovering drone 17.6 cm off its setpoint). `disturb` is the
+        teleport."""
+        if seconds < 0.0:
+            raise ValueError(f"seconds must be >= 0, not {seconds}")
+        self._drones[parse_address(address)].firmware.gust(accel_m_s2, seconds, self.time_s())
+
+    def estimator_divergence(self, address: int | str, rate_m_s: float) -> None:
+        """From now until a reboot one drone's estimator ignores extpos/extpose and its estimate runs away at
+        ``rate_m_s`` horizontally (see `FakeFirmware.estimator_divergence`): the true drone drifts the other way
+        while its telemetry looks fine."""
+        self._drones[parse_address(address)].firmware.estimator_divergence(rate_m_s)
+
+    def radio_counters(self, address: int | str) -> RadioCounters:
+        """One drone's acknowledged and lost radio transactions and lost attempts so far."""
+        return self._drones[parse_address(address)].counters()
 
     def add_packet_observer(self, address: int | str, observer: PacketObserver) -> None:
         """Call `observer` after the firmware at `address` handled each uplink packet (on the link's thread)."""

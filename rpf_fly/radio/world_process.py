@@ -38,6 +38,7 @@ import subprocess
 import sys
 import threading
 import time
+from collections import deque
 from collections.abc import Mapping, Sequence
 from multiprocessing.connection import Client, Listener
 from typing import Any, Optional
@@ -45,7 +46,7 @@ from typing import Any, Optional
 from rpf_fly.mission.model import Obstacle
 
 from .fake_firmware import FirmwareSnapshot, Packet
-from .fake_world import DronePort, FakeDroneConfig, FakeWorld, LinkFaults, RadioTiming, TruthSample
+from .fake_world import DronePort, FakeDroneConfig, FakeWorld, LinkFaults, RadioCounters, RadioTiming, TruthSample
 
 logger = logging.getLogger(__name__)
 
@@ -61,37 +62,93 @@ socket with ECONNREFUSED."""
 START_TIMEOUT_S = 60.0
 
 Pose = tuple[tuple[float, float, float], tuple[float, float, float, float], bool]
+TruePoses = dict[int, tuple[tuple[float, float, float], tuple[float, float, float, float]]]
+
+MOCAP_HISTORY_S = 2.0
+"""Seconds of true poses `SimulatedBodies` keeps for `mocap_delay` (the longest delay it can serve)."""
 
 
 class SimulatedBodies:
     """The drones' true poses as the mocap sees them, keyed by rigid-body name, with tracking faults: a body hidden
-    for a while (occlusion) or every body lost (blackout)."""
+    for a while (occlusion), every body lost (blackout), a body reported in the wrong place (pose jump), every
+    pose late (mocap delay). Durations are seconds from the call, on `time.monotonic()`. Thread-safe."""
 
     def __init__(self, world: FakeWorld, bodies: Mapping[int, str]) -> None:
         self._world = world
         self._bodies = dict(bodies)  # radio address -> rigid-body name
         self._hidden: dict[str, float] = {}
         self._blackout_until = -math.inf
+        self._jumps: dict[str, tuple[tuple[float, float, float], float]] = {}
+        self._delay: tuple[float, float] | None = None  # (delay_s, until)
+        self._history: deque[tuple[float, TruePoses]] = deque()
         self._lock = threading.Lock()
 
     def poses(self) -> dict[str, Pose]:
+        """Each body's pose as this frame reports it: the true pose (or the one `mocap_delay` ago), plus a pose
+        jump's offset, tracked unless hidden or blacked out."""
         now = time.monotonic()
         true = self._world.true_poses()
         with self._lock:
+            served = self._served(now, true)
             blackout = now < self._blackout_until
             hidden = {name for name, until in self._hidden.items() if now < until}
-        return {
-            name: (true[address][0], true[address][1], not blackout and name not in hidden)
-            for address, name in self._bodies.items()
-        }
+            jumps = {name: offset for name, (offset, until) in self._jumps.items() if now < until}
+        poses: dict[str, Pose] = {}
+        for address, name in self._bodies.items():
+            position, quaternion = served[address]
+            jump = jumps.get(name)
+            if jump is not None:
+                position = (position[0] + jump[0], position[1] + jump[1], position[2] + jump[2])
+            poses[name] = (position, quaternion, not blackout and name not in hidden)
+        return poses
+
+    def _served(self, now: float, true: TruePoses) -> TruePoses:
+        """Record ``true`` in the history and return the poses this frame serves (call with the lock held)."""
+        history = self._history
+        history.append((now, true))
+        while len(history) > 1 and history[1][0] <= now - MOCAP_HISTORY_S:
+            history.popleft()
+        if self._delay is None:
+            return true
+        delay_s, until = self._delay
+        if now >= until:
+            self._delay = None
+            return true
+        cutoff = now - delay_s
+        served = history[0][1]  # younger than the delay only right after the world started: the oldest there is
+        for stamp, poses in history:
+            if stamp > cutoff:
+                break
+            served = poses
+        return served
 
     def hide(self, body: str, seconds: float) -> None:
+        """Report ``body`` as not tracked for ``seconds`` (occlusion)."""
         with self._lock:
             self._hidden[body] = time.monotonic() + seconds
 
     def blackout(self, seconds: float) -> None:
+        """Report every body as not tracked for ``seconds`` (mocap lost)."""
         with self._lock:
             self._blackout_until = time.monotonic() + seconds
+
+    def pose_jump(self, body: str, offset_m: tuple[float, float, float], seconds: float) -> None:
+        """Report ``body`` ``offset_m`` metres from where it is for ``seconds``, as tracked (valid): a marker swap
+        or a wrong fit of the rigid-body model. The drone itself does not move; a flight that sends this pose as
+        extpos moves it the other way."""
+        offset = (float(offset_m[0]), float(offset_m[1]), float(offset_m[2]))
+        with self._lock:
+            self._jumps[body] = (offset, time.monotonic() + seconds)
+
+    def mocap_delay(self, delay_s: float, seconds: float) -> None:
+        """For ``seconds`` every frame carries poses ``delay_s`` old (at most `MOCAP_HISTORY_S`): latency (a
+        loaded Motive host or network), not a frame-rate drop, so frames keep coming at the rate and the frame's
+        own latency figure does not show it. The poses served are the ones recorded at earlier frames (the
+        resolution is the frame period)."""
+        if not 0.0 <= delay_s <= MOCAP_HISTORY_S:
+            raise ValueError(f"delay_s must be in [0, {MOCAP_HISTORY_S:g}], not {delay_s}")
+        with self._lock:
+            self._delay = (float(delay_s), time.monotonic() + seconds)
 
 
 # ------------------------------------------------------------------------------------------ flight's process
@@ -258,6 +315,18 @@ class WorldProcess:
     def reboot(self, address: int) -> None:
         self.call("reboot", address)
 
+    def packet_loss(self, address: int, rate: float, seconds: float) -> None:
+        self.call("packet_loss", address, rate, seconds)
+
+    def gust(self, address: int, accel_m_s2: tuple[float, float, float], seconds: float) -> None:
+        self.call("gust", address, accel_m_s2, seconds)
+
+    def estimator_divergence(self, address: int, rate_m_s: float) -> None:
+        self.call("estimator_divergence", address, rate_m_s)
+
+    def radio_counters(self, address: int) -> RadioCounters:
+        return self.call("radio_counters", address)
+
     def snapshot(self, address: int) -> FirmwareSnapshot:
         return self.call("snapshot", address)
 
@@ -277,6 +346,12 @@ class WorldProcess:
 
     def blackout(self, seconds: float) -> None:
         self.call("blackout", seconds)
+
+    def pose_jump(self, body: str, offset_m: tuple[float, float, float], seconds: float) -> None:
+        self.call("pose_jump", body, offset_m, seconds)
+
+    def mocap_delay(self, delay_s: float, seconds: float) -> None:
+        self.call("mocap_delay", delay_s, seconds)
 
     def close(self) -> None:
         """Stop the child (its world powers the drones off) and wait for it; idempotent."""
@@ -404,6 +479,10 @@ def serve(settings: dict[str, Any], out: Any) -> None:
             "true_poses": world.true_poses, "truth_samples": world.truth_samples, "poses": tracked.poses,
             "hide": tracked.hide,
             "blackout": tracked.blackout,
+            # fault hooks of a campaign (same names and arguments as on FakeWorld and SimulatedBodies)
+            "packet_loss": world.packet_loss, "gust": world.gust, "estimator_divergence": world.estimator_divergence,
+            "radio_counters": world.radio_counters, "pose_jump": tracked.pose_jump,
+            "mocap_delay": tracked.mocap_delay,
         }
         with conn:
             while True:

@@ -60,14 +60,16 @@ def fly(
     tmp_path: Path,
     *,
     configs=None,
+    start_faults=None,
     factory=None,
     when_flying: Optional[Callable[[FlightLoop, DryRun], None]] = None,
     mocap: str = "natnet",
     process: bool = True,
 ) -> Flight:
-    """Fly ``mission`` on simulated drones; ``when_flying(loop, rig)`` runs on its own thread once the swarm flies."""
+    """Fly ``mission`` on simulated drones; ``when_flying(loop, rig)`` runs on its own thread once the swarm flies.
+    ``configs`` and ``start_faults`` go to `DryRun` (``drone_configs``, ``start_faults``)."""
     log_path = tmp_path / "flight.mcap"
-    with DryRun(mission, mocap=mocap, drone_configs=configs, process=process) as rig:
+    with DryRun(mission, mocap=mocap, drone_configs=configs, start_faults=start_faults, process=process) as rig:
         FaultInjection.wrap(rig)  # rig.mocap.stall(seconds) blocks the loop thread (the loop_stall fault)
         workers: list[threading.Thread] = []
 

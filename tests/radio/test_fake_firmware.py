@@ -12,7 +12,9 @@ from cflib.crazyflie.log import LogTocElement
 from cflib.crazyflie.param import ParamTocElement
 from cflib.utils.encoding import compress_quaternion
 
-from rpf_fly.radio.fake_firmware import LOG_TOC, PARAM_TOC, PROTOCOL_VERSION, FakeFirmware, FirmwareSnapshot
+from rpf_fly.radio.fake_firmware import (
+    LOG_TOC, PARAM_TOC, PROTOCOL_VERSION, REBOOT_BOOT_S, FakeFirmware, FirmwareSnapshot,
+)
 from rpf_fly.radio.fake_planner import Trajectory
 from rpf_fly.radio.fake_vehicle import ACCEL_BIAS_M_S2, TRACK_TAU_S, VehicleConfig
 
@@ -274,6 +276,7 @@ def test_emergency_stop_latches_until_reboot() -> None:
     sim.run(1.0, lambda t: sim.send(7, 0, position(0.0, 0.0, 0.5)))
     assert sim.snap().position[2] == 0.0 and sim.snap().locked
     sim.fw.reboot(sim.t)
+    sim.run(REBOOT_BOOT_S)  # radio silent while it boots
     sim.hover(0.4)
 
 
@@ -415,6 +418,7 @@ def test_yaw_estimate_starts_at_initial_yaw_and_only_extpose_corrects_it() -> No
     sim.send(6, 1, struct.pack("<Bfffffff", 8, 1.0, 0.0, 0.0, *quat))
     assert sim.snap().estimate_yaw_deg == pytest.approx(120.0, abs=1e-3)
     sim.fw.reboot(sim.t)  # power-cycle: default parameters, the estimate starts at yaw 0 again
+    sim.run(REBOOT_BOOT_S)
     assert sim.fw.snapshot().estimate_yaw_deg == pytest.approx(0.0) and sim.fw.snapshot().yaw_deg == pytest.approx(120)
 
 
@@ -477,3 +481,121 @@ def test_imu_drift_without_extpos_and_the_kalman_pull_back() -> None:
         biases.add(sim.fw.vehicle.accel_bias)
         assert math.hypot(*sim.fw.vehicle.accel_bias) == pytest.approx(ACCEL_BIAS_M_S2)
     assert len(biases) == 10  # each drone its own
+
+
+# Fault hooks (docs/radio.md, "Fault hooks"): the figures, on synthetic time ------------------------------------
+
+
+def gust_offsets(accel_m_s2: float, seconds: float = 3.0) -> tuple[list[float], float, FirmwareSnapshot]:
+    """A mocap (extpos) drone hovering at the origin under the high-level commander, pushed along +x: its x every
+    0.5 s of the gust, the largest estimate error meanwhile, and its snapshot at the end of the gust."""
+    sim = Sim(positioning="extpos")
+    sim.mocap = (0.0, 0.0, 0.0)
+    sim.hover(0.5)
+    sim.fw.gust((accel_m_s2, 0.0, 0.0), seconds, sim.t)
+    xs, worst = [], 0.0
+
+    def each(t: float) -> None:
+        nonlocal worst
+        worst = max(worst, math.dist(sim.fw.vehicle.pos, sim.fw.vehicle.estimate))
+
+    for _ in range(round(seconds / 0.5)):
+        sim.run(0.5, each)
+        xs.append(sim.snap().position[0])
+    return xs, worst, sim.snap()
+
+
+def test_a_gust_holds_the_drone_off_its_setpoint_by_the_documented_amount_and_it_comes_back() -> None:
+    xs, worst, snap = gust_offsets(1.5)
+    assert xs[3] == pytest.approx(0.171, abs=0.003)  # 97 % of the steady offset after 2 s
+    assert xs[-1] == pytest.approx(0.1175 * 1.5, abs=0.003)  # steady: 0.1175 m per m/s^2 (17.6 cm)
+    assert snap.gust_m_s2 == (1.5, 0.0, 0.0) and snap.position[1:] == pytest.approx((0.0, 0.5), abs=1e-3)
+    assert worst < 1e-3  # the IMU feels the push: with extpos the estimate stays on the truth
+    assert gust_offsets(0.75)[0][-1] == pytest.approx(xs[-1] / 2, abs=0.003)  # it grows with the gust
+    # beyond 1.1 m/s / 0.47 s = 2.3 m/s^2 the velocity-limited controller cannot hold: blown away
+    assert gust_offsets(3.0)[0][-1] > 0.6
+    sim = Sim()
+    sim.hover(0.5)
+    sim.fw.gust((0.0, -1.5, 0.0), 1.0, sim.t)
+    sim.run(1.0, lambda t: sim.send(7, 0, position(0.0, 0.0, 0.5)))  # streamed setpoints fight it alike
+    assert -0.16 < sim.snap().position[1] < -0.12
+    sim.run(0.5, lambda t: sim.send(7, 0, position(0.0, 0.0, 0.5)))
+    assert sim.snap().gust_m_s2 == (0.0, 0.0, 0.0) and -0.10 < sim.snap().position[1] < -0.07  # coming back
+    sim.run(1.5, lambda t: sim.send(7, 0, position(0.0, 0.0, 0.5)))
+    assert abs(sim.snap().position[1]) < 0.005
+    grounded = Sim(position=(1.0, 1.0, 0.0))
+    grounded.run(0.1)
+    grounded.fw.gust((5.0, 0.0, 0.0), 1.0, grounded.t)
+    grounded.run(1.0)
+    assert grounded.snap().position == (1.0, 1.0, 0.0)  # on the floor a drone cannot slide
+
+
+def test_estimator_divergence_drifts_the_true_drone_the_other_way_until_reboot() -> None:
+    sim = Sim(position=(0.5, -0.5, 0.0), positioning="extpos")
+    sim.mocap = (0.0, 0.0, 0.0)  # extpos at 100 Hz throughout: the diverged estimator ignores it
+    sim.hover(0.5)
+    hover = sim.snap()
+    sim.fw.estimator_divergence(0.2)
+    sim.run(1.0)
+    one = sim.snap()
+    sim.run(1.0)
+    two = sim.snap()
+    assert two.estimator_diverging and two.variance_m2 == pytest.approx(hover.variance_m2)  # it looks fine
+    runaway = [e - p for e, p in zip(two.estimate, two.position)]
+    assert math.hypot(runaway[0], runaway[1]) == pytest.approx(0.4, abs=0.005) and abs(runaway[2]) < 1e-3
+    drift = [b - a for a, b in zip(one.position, two.position)]
+    assert math.hypot(drift[0], drift[1]) == pytest.approx(0.2, abs=0.005)  # the true drone: 0.2 m/s ...
+    assert drift[0] * runaway[0] + drift[1] * runaway[1] < -0.99 * 0.2 * 0.4  # ... the other way
+    assert math.dist(two.estimate, hover.position) < 0.06  # the estimate sits near the setpoint (lagging 5 cm)
+    set_param(sim, "kalman.resetEstimation", 1)
+    sim.run(0.5)
+    assert sim.snap().estimator_diverging  # a reset does not mend it
+    other = Sim(seed=1, positioning="extpos")
+    other.fw.estimator_divergence(0.2)
+    other.run(1.0)
+    direction = [e - p for e, p in zip(other.snap().estimate, other.snap().position)]
+    assert abs(direction[0] * runaway[1] - direction[1] * runaway[0]) > 0.01  # each drone its own direction
+    sim.fw.reboot(sim.t)
+    sim.run(REBOOT_BOOT_S + 0.05)
+    snap = sim.snap()
+    assert not snap.estimator_diverging and snap.boots == 1
+    assert math.dist(snap.estimate, snap.position) < 1e-3  # a fresh estimator takes the extpos again
+
+
+def test_a_reboot_in_flight_cuts_the_motors_falls_is_silent_then_boots_fresh_on_the_floor() -> None:
+    sim = Sim(position=(0.3, 0.2, 0.0), positioning="extpos")
+    sim.mocap = (0.0, 0.0, 0.0)
+    sim.hover(0.5)
+    set_param(sim, "stabilizer.estimator", 2)
+    ident = LOG_TOC.by_name["stateEstimate.z"].ident
+    assert sim.send(5, 1, bytes([6, 1, 0x07, *struct.pack("<H", ident)]))[0][2][2] == 0
+    sim.send(8, 0, go_to(0.6, 0.2, 0.5, 0.0, 1.0))
+    sim.run(1.5)
+    sim.mocap = None
+    sim.fw.reboot(sim.t)
+    snap = sim.snap()
+    assert not snap.motors_on and not snap.powered and snap.booting and snap.boots == 0
+    assert sim.send(15, 0, b"ping") == []  # radio silent
+    sim.run(0.1)
+    assert 0.40 < sim.snap().position[2] < 0.46  # falling: 4.9 cm in 0.1 s
+    sim.run(0.25)
+    assert sim.snap().position == pytest.approx((0.6, 0.2, 0.0), abs=1e-3)  # on the floor where it fell (0.32 s)
+    sim.run(REBOOT_BOOT_S - 0.4)
+    assert sim.snap().booting and sim.send(15, 0, b"ping") == []
+    sim.run(0.1)
+    snap = sim.snap()
+    assert snap.powered and not snap.booting and snap.boots == 1 and not snap.motors_on
+    assert sim.send(15, 0, b"ping") == [(15, 0, b"ping")]
+    assert snap.params["stabilizer.estimator"] == 0 and snap.log_blocks == {}  # default parameters, no blocks
+    assert snap.estimate == pytest.approx((0.0, 0.0, 0.0), abs=0.01)  # kalman.initialX/Y/Z = 0, no mocap yet
+    assert snap.position == pytest.approx((0.6, 0.2, 0.0), abs=1e-3)
+    assert all(t.time_s > sim.t - 0.2 for t in snap.transitions) and snap.supervisor_state == "Ready to fly"
+    sim.mocap = (0.0, 0.0, 0.0)
+    sim.hover(0.4)  # a fresh drone flies
+    falling = Sim()
+    falling.hover(0.5)
+    falling.fw.reboot(falling.t, boot_s=0.1)
+    falling.run(0.2)
+    assert falling.snap().booting and falling.snap().position[2] > 0.0  # still falling: it boots where it lands
+    falling.run(0.2)
+    assert not falling.snap().booting and falling.snap().position[2] == 0.0

@@ -1,0 +1,37 @@
+"""Dry-run flights with the fault hooks of a fault campaign (docs/flight.md, "Dry run"): the hooks can be called
+while the swarm flies, and the start-condition faults reach the preflight."""
+
+from __future__ import annotations
+
+import time
+
+from flight_harness import fly
+
+from rpf_fly.flight.dry_run import StartFault
+from rpf_fly.flight.phases import FlightOutcome, SwarmPhase
+
+
+def test_a_drone_put_down_away_from_its_start_stops_the_preflight(tmp_path, short_mission):
+    flight = fly(short_mission, tmp_path, start_faults={"cf2": StartFault(offset_m=(0.5, 0.0), yaw_deg=30.0)})
+    assert flight.report.phase == SwarmPhase.ABORTED, flight.report.reasons
+    assert "0.50 m from its start" in flight.report.reasons["cf2"], flight.report.reasons
+    start = short_mission.drones[1].start
+    assert flight.snapshots["cf2"].position[:2] == (start[0] + 0.5, start[1])
+    assert all(not s.flying and s.position[2] == 0.0 for s in flight.snapshots.values())  # nothing took off
+
+
+def test_mocap_radio_and_drone_faults_mid_flight_the_swarm_stays_safe(tmp_path, short_mission):
+    def campaign(loop, rig):
+        time.sleep(0.5)
+        rig.packet_loss("cf3", 0.5, 1.5)
+        rig.gust("cf2", (0.0, 1.0, 0.0), 1.0)
+        rig.mocap_delay(0.03, 1.0)
+        time.sleep(0.3)
+        rig.pose_jump("cf1", (0.4, 0.0, 0.0), 0.3)
+
+    flight = fly(short_mission, tmp_path, when_flying=campaign)
+    assert flight.report.error is None and flight.report.phase == SwarmPhase.DONE
+    assert flight.events("pose_glitch", "cf1")  # the jump was refused, not followed
+    assert not flight.events("link_lost")
+    assert all(o == FlightOutcome.REACHED for o in flight.report.outcomes.values()), flight.report.reasons
+    assert all(s.position[2] < 0.05 and not s.motors_on for s in flight.snapshots.values())
