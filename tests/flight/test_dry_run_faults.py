@@ -4,6 +4,7 @@ while the swarm flies, and the start-condition faults reach the preflight."""
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 
 from flight_harness import fly
 
@@ -12,7 +13,8 @@ from rpf_fly.flight.phases import FlightOutcome, SwarmPhase
 
 
 def test_a_drone_put_down_away_from_its_start_stops_the_preflight(tmp_path, short_mission):
-    flight = fly(short_mission, tmp_path, start_faults={"cf2": StartFault(offset_m=(0.5, 0.0), yaw_deg=30.0)})
+    mission = replace(short_mission, safety=replace(short_mission.safety, on_preflight_failure="abort"))
+    flight = fly(mission, tmp_path, start_faults={"cf2": StartFault(offset_m=(0.5, 0.0), yaw_deg=30.0)})
     assert flight.report.phase == SwarmPhase.ABORTED, flight.report.reasons
     assert "0.50 m from its start" in flight.report.reasons["cf2"], flight.report.reasons
     start = short_mission.drones[1].start

@@ -69,7 +69,8 @@ def test_two_drones_commanded_into_each_other_both_crash(make_world: MakeWorld, 
     # They stopped where their rotors met (centres one span apart, a sweep of 1 cm steps at most), and fell there.
     assert fell[B][0] - fell[A][0] == pytest.approx(DRONE_CONTACT_M, abs=1e-6)
     assert (fell[A][0] + fell[B][0]) / 2 == pytest.approx(0.5, abs=0.03) and fell[A][1] == fell[B][1] == 0.0
-    world.reboot(A)  # a reboot clears the crash
+    world.reboot(A)  # a reboot clears the crash, once the drone has booted (about 1.5 s, radio silent)
+    assert world.wait_until(lambda w: not w.snapshot(A).booting and w.snapshot(A).powered, 4.0)
     assert not world.snapshot(A).crashed and not world.snapshot(A).locked
 
 
