@@ -144,6 +144,7 @@ class DryRun:
                 self.server = NatNetServer(
                     self._bodies.poses, version=self.natnet_version, multicast=False, local_ip="127.0.0.1",
                     rate_hz=self.rate_hz, up_axis=up, bodies=list(self.bodies.values()),
+                    extra_latency_s=self._bodies.extra_latency_s,
                 ).start()
                 command_port = self.server.command_port
         else:

@@ -29,7 +29,7 @@ import socket
 import threading
 import time
 from types import TracebackType
-from typing import Sequence
+from typing import Callable, Optional, Sequence
 
 from rpf_fly.mocap.frame import PoseCallable
 from rpf_fly.mocap.natnet_protocol import (
@@ -96,6 +96,8 @@ class NatNetServer:
         app_name, app_version: announced in SERVERINFO.
         clock_frequency_hz: HighResClockFrequency of the frame hardware stamps.
         camera_latency_s: camera mid-exposure to data-received latency encoded in every frame.
+        extra_latency_s: called for every frame, seconds added to that latency (the poses served are that much
+            older: a delayed mocap pipeline, which Motive's own timestamps show).
         markers_per_body: markers streamed per body (0-4).
         models_changed_frames: how many frames carry the models-changed bit after :meth:`set_bodies`.
     """
@@ -117,6 +119,7 @@ class NatNetServer:
         app_version: Sequence[int] = (3, 1, 0, 0),
         clock_frequency_hz: int = 10_000_000,
         camera_latency_s: float = 0.004,
+        extra_latency_s: Optional[Callable[[], float]] = None,
         markers_per_body: int = 3,
         models_changed_frames: int = 3,
     ) -> None:
@@ -136,6 +139,7 @@ class NatNetServer:
         self._app_version = tuple(app_version)
         self._clock_hz = int(clock_frequency_hz)
         self._camera_latency_s = float(camera_latency_s)
+        self._extra_latency_s = extra_latency_s
         self._markers_per_body = markers_per_body
         self._models_changed_frames = models_changed_frames
 
@@ -342,7 +346,8 @@ class NatNetServer:
             rigid_bodies=rigid_bodies,
             labeled_markers=labeled,
             timestamp=now - self._t0,
-            camera_mid_exposure=received - self._ticks(self._camera_latency_s),
+            camera_mid_exposure=received - self._ticks(self._camera_latency_s + (
+                self._extra_latency_s() if self._extra_latency_s is not None else 0.0)),
             camera_data_received=received,
             transmit=received + self._ticks(0.0003),
             precision_seconds=int(wall),

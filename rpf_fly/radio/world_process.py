@@ -122,6 +122,12 @@ class SimulatedBodies:
             served = poses
         return served
 
+    def extra_latency_s(self) -> float:
+        """How much older than the truth the served poses are now (``mocap_delay``; 0 without one)."""
+        with self._lock:
+            delay = self._delay
+        return delay[0] if delay is not None and time.monotonic() < delay[1] else 0.0
+
     def hide(self, body: str, seconds: float) -> None:
         """Report ``body`` as not tracked for ``seconds`` (occlusion)."""
         with self._lock:
@@ -465,6 +471,7 @@ def serve(settings: dict[str, Any], out: Any) -> None:
             server = NatNetServer(
                 tracked.poses, version=natnet["version"], multicast=False, local_ip="127.0.0.1",
                 rate_hz=natnet["rate_hz"], up_axis=natnet["up_axis"], bodies=list(bodies.values()),
+                extra_latency_s=tracked.extra_latency_s,
             ).start()
         with Listener(("127.0.0.1", 0), authkey=settings["authkey"]) as listener:
             out.write(json.dumps({
