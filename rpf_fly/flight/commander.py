@@ -226,6 +226,10 @@ class Commander:
                 if agent.phase.airborne or agent.phase == DronePhase.READY:
                     agent.outcome = FlightOutcome.EMERGENCY
                     agent.set_phase(DronePhase.EMERGENCY, self.clock(), reason)
-        self.events.emit(FATAL, "emergency", reason)
+        if names is None:
+            self.events.emit(FATAL, "emergency", reason)
+        else:
+            for agent in targets:
+                self.events.emit(FATAL, "emergency", reason, agent.name)
         for name, why in failures.items():
             self.events.emit(FATAL, "emergency", why, name)

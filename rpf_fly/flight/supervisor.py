@@ -51,22 +51,28 @@ ESTIMATE_DIVERGENCE_M = 0.15
 the estimator no longer takes extpos: the drone holds its ESTIMATE at the setpoint while its true position drifts.
 With extpos streaming the two agree within a centimetre or two."""
 
-LINK_QUALITY_WARN_PCT = 70.0
-"""Below this share of packets acknowledged without retries the link is failing: setpoints and extpos arrive late
-or not at all (cflib drops the link only after 100 lost acks in a row)."""
+LINK_QUALITY_WARN_PCT = 95.0
+"""cflib's link quality loses 10 points per retry a packet needs on average: below 95 % half the packets need a
+retry (a third of the radio's attempts lost), setpoints and extpos arrive late, and the link is on its way to the
+100 lost acks in a row after which cflib drops it. Crazyswarm2 warns under an ack rate of 0.9."""
 
-TRACKING_WARN_M = 0.12
-"""A drone this far off its setpoint for ``TRACKING_WARN_S``: something pushes it (a gust, a contact, a failing
-motor). Across its heading while it plans (along it, the setpoint leads the drone by its tracking lag, about
-v tau = 0.125 m, and up to 0.3 m); in any direction while it holds or hovers at its goal. A Crazyflie under mocap
-tracks within 2-5 cm; a 1.5 m/s^2 gust holds the simulated one 0.18 m off."""
-TRACKING_WARN_S = 0.3
+TRACKING_WARN_M = 0.1
+"""A drone this far from where its setpoints should have brought it, for ``TRACKING_WARN_S``: something pushes it
+(a gust, a contact, a failing motor). "Should have": a first-order follower of the streamed setpoints with the
+position loop's time constant ``TRACKING_TAU_S`` and speed limit (a disturbance observer; the carrot's lead and lag
+are in it, so they are not taken for a push). A Crazyflie under mocap follows that within 2-5 cm; a 1.5 m/s^2
+gust holds the simulated one 0.18 m off."""
+TRACKING_WARN_S = 0.2
+TRACKING_TAU_S = 0.25
+"""The Crazyflie position loop's time constant (docs/flight.md: drones trail their setpoints by about v tau)."""
+TRACKING_SPEED_M_S = 1.1
+"""The firmware's horizontal speed limit (posCtlPid.xyVelMax 1 m/s, plus its 10 % overhead)."""
 
 MOCAP_LATENCY_WARN_S = 0.05
 """Mocap latency (camera to receipt, as the mocap measures it) above this: the estimators and the planners act on
 a picture that old (Crazyswarm2 warns at 10 ms over unicast; a healthy Motive link is 3-8 ms)."""
 
-Response = Literal["warn", "hold", "land", "lost", "resume", "crashed"]
+Response = Literal["warn", "hold", "land", "lost", "resume", "crashed", "stop"]
 
 
 @dataclass(frozen=True)
@@ -99,6 +105,8 @@ class Supervisor:
         self._diverging: dict[str, tuple[int, float]] = {}
         self._poor_link: set[str] = set()
         self._off_track: dict[str, float] = {}
+        self._predicted: dict[str, tuple[complex, float]] = {}
+        """drone -> (where its setpoints should have brought it, when)."""
         self._off_track_warned: set[str] = set()
         self._late_mocap = False
 
@@ -303,7 +311,8 @@ class Supervisor:
             self._diverging[a.name] = (count, state.telemetry_stamp_s)
             if count == 2:
                 out.append(Finding("estimator", ERROR, f"on-board estimate {off:.2f} m from mocap: the estimator "
-                                   "no longer follows extpos; landing", a.name, "land"))
+                                   "no longer follows extpos, and a landing would fly wherever the estimate goes: "
+                                   "motors off", a.name, "stop"))
         return out
 
     def _link_quality(self, agents: list[DroneAgent], states: dict[str, DroneState]) -> list[Finding]:
@@ -323,30 +332,34 @@ class Supervisor:
         return out
 
     def _tracking(self, now_s: float, agents: list[DroneAgent], tracker: PoseTracker) -> list[Finding]:
+        """Measured position against a first-order follower of the streamed setpoints (``TRACKING_WARN_M``)."""
         out = []
         for a in agents:
             pose = tracker.get(a.name)
             if a.last_setpoint is None or pose is None or not pose.valid or a.phase in (
                     DronePhase.TAKEOFF, DronePhase.LANDING):
                 self._off_track.pop(a.name, None)
+                self._predicted.pop(a.name, None)
                 continue
-            error = pose.xy - a.last_setpoint
-            if a.phase == DronePhase.PLANNING:
-                heading = a.heading if abs(a.heading) > 0 else 1 + 0j
-                off = abs((error * heading.conjugate()).imag)  # across the heading
-            else:
-                off = abs(error)
+            predicted, then = self._predicted.get(a.name, (pose.xy, now_s))
+            dt = max(0.0, min(now_s - then, 0.1))
+            step = (a.last_setpoint - predicted) * (1.0 - math.exp(-dt / TRACKING_TAU_S))
+            if abs(step) > TRACKING_SPEED_M_S * dt:
+                step *= TRACKING_SPEED_M_S * dt / abs(step)
+            predicted += step
+            self._predicted[a.name] = (predicted, now_s)
+            off = abs(pose.xy - predicted)
             if off > TRACKING_WARN_M:
                 since = self._off_track.setdefault(a.name, now_s)
                 if now_s - since >= TRACKING_WARN_S and a.name not in self._off_track_warned:
                     self._off_track_warned.add(a.name)
-                    out.append(Finding("tracking", WARNING, f"{off:.2f} m off its setpoint for "
-                                       f"{now_s - since:.1f} s: something pushes it (a gust, a contact?)", a.name, "warn"))
+                    out.append(Finding("tracking", WARNING, f"{off:.2f} m from where its setpoints should have "
+                                       "brought it: something pushes it (a gust, a contact?)", a.name, "warn"))
             else:
                 self._off_track.pop(a.name, None)
                 if off < TRACKING_WARN_M / 2 and a.name in self._off_track_warned:
                     self._off_track_warned.discard(a.name)
-                    out.append(Finding("tracking", INFO, "back on its setpoint", a.name, "warn"))
+                    out.append(Finding("tracking", INFO, "following its setpoints again", a.name, "warn"))
         return out
 
     def _mocap_latency(self, tracker: PoseTracker) -> list[Finding]:

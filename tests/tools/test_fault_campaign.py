@@ -1,0 +1,41 @@
+"""The fault campaign's smoke test: one fault on one mission, run and judged exactly as the full campaign does
+(its own reader of the log, the /truth topics, the exit code), so the command cannot rot between campaigns."""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def load_campaign():  # type: ignore[no-untyped-def]
+    spec = importlib.util.spec_from_file_location("fault_campaign", ROOT / "tools" / "fault_campaign.py")
+    module = importlib.util.module_from_spec(spec)  # type: ignore[arg-type]
+    sys.modules["fault_campaign"] = module  # its dataclasses look their module up
+    spec.loader.exec_module(module)  # type: ignore[union-attr]
+    return module
+
+
+def test_an_occlusion_on_lab_3_passes_the_campaigns_judge(tmp_path):
+    campaign = load_campaign()
+    verdict = campaign.judge("occlusion", ROOT / "missions" / "lab-3.yaml", tmp_path)
+    assert verdict.passed, verdict.failures
+    assert verdict.exit_code == 0 and set(verdict.outcomes.values()) == {"reached"}
+    assert any("pose_stale" in e for e in verdict.events)
+    assert verdict.min_separation_m is not None and verdict.min_separation_m > 0.13
+
+
+def test_the_judges_truth_checks_can_fail():
+    """The judge is not a rubber stamp: two airborne drones 0.1 m apart in the truth are a contact; two drones on
+    the floor with motors off are not."""
+    campaign = load_campaign()
+
+    def sample(x: float, z: float, motors: bool) -> tuple[int, dict]:
+        return 0, {"position": {"x": x, "y": 0.0, "z": z}, "motors": motors, "crashed": False}
+
+    airborne = {"cf1": [sample(0.0, 1.0, True)], "cf2": [sample(0.1, 1.0, True)]}
+    assert campaign._min_separation(airborne) < campaign.CONTACT_M  # noqa: SLF001
+    on_floor = {"cf1": [sample(0.0, 0.0, False)], "cf2": [sample(0.1, 0.0, False)]}
+    assert campaign._min_separation(on_floor) is None  # noqa: SLF001
