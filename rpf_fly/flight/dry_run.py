@@ -38,7 +38,13 @@ from typing import Any, Mapping, Optional
 
 from rpf_fly.mission.model import Mission
 from rpf_fly.mocap.frame import MocapSource
-from rpf_fly.radio.fake_world import FakeDroneConfig, FakeWorld
+from rpf_fly.radio.fake_world import FakeDroneConfig, FakeWorld, RadioTiming
+
+
+AIR_TIME_S = 0.001
+"""Air time of one radio transaction on a dry run's dongle: a Crazyradio carries about 1000 transactions a second,
+shared by every link on it (../shared/reference: crazyradio2-firmware issues #9, #16, #22), so a dry run shows what a
+full radio does to latency. Each fake link holds its dongle's lock that long per transaction."""
 
 
 def fake_uri(uri: str) -> str:
@@ -83,9 +89,12 @@ class DryRun:
         seed: int = 0,
         process: bool = True,
         truth: bool = True,
+        air_time_s: Optional[float] = None,
     ):
         """``truth``: the flight log of a flight on this rig gets the world's truth (``/truth/<drone>``); False only
-        to measure what that costs (tools/bench_flight.py ``--no-truth``)."""
+        to measure what that costs (tools/bench_flight.py ``--no-truth``). ``air_time_s``: how long each radio
+        transaction holds its dongle, shared by every link on it (default ``AIR_TIME_S``, a Crazyradio's; 0: an
+        infinitely fast radio, only to measure what the radio costs)."""
         if mocap not in ("natnet", "sim"):
             raise ValueError(f"dry-run mocap must be 'natnet' or 'sim', not {mocap!r}")
         self.mission = mission
@@ -107,6 +116,7 @@ class DryRun:
             self.drone_configs[self.addresses[d.name]] = _with_start_fault(config, faults.get(d.name))
         self._names = {address: name for name, address in self.addresses.items()}
         self.seed = seed
+        self.timing = RadioTiming(transaction_s=AIR_TIME_S if air_time_s is None else float(air_time_s))
         self.in_process = not process
         self.truth = truth
         self.world: Any = None  # a FakeWorld, or the WorldProcess speaking to one (same hook names)
@@ -134,7 +144,8 @@ class DryRun:
         body_of_address = {self.addresses[n]: body for n, body in self.bodies.items()}
         natnet = {"version": self.natnet_version, "rate_hz": self.rate_hz, "up_axis": up}
         if self.in_process:
-            self.world = FakeWorld(self.drone_configs, seed=self.seed, obstacles=self.mission.obstacles).start()
+            self.world = FakeWorld(self.drone_configs, seed=self.seed, obstacles=self.mission.obstacles,
+                                   timing=self.timing).start()
             self._bodies = SimulatedBodies(self.world, body_of_address)
             fake_radio.register(self.world)
             command_port = None
@@ -152,7 +163,7 @@ class DryRun:
                 self.drone_configs, body_of_address, seed=self.seed,
                 natnet=natnet if self.mocap_kind == "natnet" else None, obstacles=self.mission.obstacles,
             )
-            fake_radio.register(RemoteWorld(self.world.radio, tuple(self.drone_configs)))
+            fake_radio.register(RemoteWorld(self.world.radio, tuple(self.drone_configs), self.timing))
             command_port = self.world.natnet_command_port
         if self.mocap_kind == "natnet":
             from rpf_fly.mocap.natnet_client import NatNetClient

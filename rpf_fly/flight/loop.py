@@ -28,7 +28,7 @@ from rpf_fly.flight.events import ERROR, FATAL, INFO, WARNING, EventBus, FlightE
 from rpf_fly.flight.gc_pacing import GcPacer
 from rpf_fly.flight.phases import DronePhase, FlightOutcome, SwarmPhase
 from rpf_fly.flight.poses import PoseTracker, TrackedPose
-from rpf_fly.flight.preflight import estimate_problem, preflight_problem, yaw_of
+from rpf_fly.flight.preflight import estimate_problem, preflight_problem, yaw_of, yaw_problem
 from rpf_fly.flight.recorder import NullRecorder, PlannerRecord, Recorder
 from rpf_fly.flight.report import FlightReport, LoopStats
 from rpf_fly.flight.supervisor import Finding, Supervisor
@@ -289,8 +289,8 @@ class FlightLoop:
         reset_at = self.clock()
         for name in names:
             pose = self.tracker.get(name)
-            before = estimate_problem(self._states.get(name), pose, -math.inf) if pose is not None else ""
-            if "yaw" in before:  # the position converges with extpos; a yaw estimate never does
+            before = yaw_problem(self._states.get(name), pose) if pose is not None else ""
+            if before:  # the position converges with extpos; a yaw estimate never does
                 self.events.emit(WARNING, "estimator", f"before take-off: {before}; restarting its estimator at the "
                                  "mocap pose", name)
             if pose is None or not self.commander.reset_estimator(self.agents[name], pose.position,

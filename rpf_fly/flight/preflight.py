@@ -72,6 +72,14 @@ def estimate_problem(state: Optional[DroneState], pose: TrackedPose, since_s: fl
         ex, ey, ez = state.position_m
         return (f"its on-board position estimate ({ex:.2f}, {ey:.2f}, {ez:.2f}) is {off:.2f} m from mocap's: is "
                 "the rigid body the right drone, and does extpos reach it?")
+    return yaw_problem(state, pose)
+
+
+def yaw_problem(state: Optional[DroneState], pose: TrackedPose) -> str:
+    """Whether the drone's yaw estimate is off mocap's yaw by more than ``ESTIMATE_YAW_TOLERANCE_DEG``; "" if
+    not (or if there is no yaw estimate yet)."""
+    if state is None or state.yaw_deg is None:
+        return ""
     mocap_yaw = math.degrees(yaw_of(pose.quaternion))
     yaw_error = (state.yaw_deg - mocap_yaw + 180.0) % 360.0 - 180.0
     if abs(yaw_error) > ESTIMATE_YAW_TOLERANCE_DEG:

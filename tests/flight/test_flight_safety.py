@@ -164,3 +164,15 @@ def test_a_drone_standing_rotated_flies_right_after_its_estimator_is_reset_to_mo
     assert abs(flight.snapshots["cf2"].yaw_deg) < 5.0  # it turned to the setpoints' yaw 0 on a right estimate
     goal = short_mission.drones[1].goal
     assert abs(flight.snapshots["cf2"].position[0] - goal[0]) < 0.2
+
+
+def test_the_preflight_says_when_a_yaw_estimate_was_off_before_its_reset(tmp_path, short_mission):
+    from rpf_fly.radio.fake_world import FakeDroneConfig
+
+    start = short_mission.drones[0].start
+    configs = {"cf1": FakeDroneConfig.at(start[0], start[1], 0.0, yaw_deg=-90.0, positioning="extpos")}
+    flight = fly(short_mission, tmp_path, configs=configs)
+    warned = flight.events("estimator", "cf1")
+    assert warned and warned[0].level == 3 and "yaw estimate" in warned[0].message
+    assert not flight.events("estimator", "cf2")
+    assert flight.report.success
