@@ -14,6 +14,14 @@ Measured by the flight loop itself (rpf_fly.flight.loop.LoopStats) while the dro
   the dry run's truth feed (``/truth``, rpf_fly/flight/truth.py) separately: its thread's CPU time, and the
   writer's share of its messages is in the log's figure (``--no-truth`` flies without it, for comparison).
 Goals: latency p50 <= 0.5 ms, p99 <= 2 ms. The machine is shared: read medians over runs.
+
+    python tools/bench_flight.py --floor [--planner apf|rpf]
+
+measures, in the same run, the floor beside the stack, with the dry run's radio air time on (1 ms a transaction,
+a Crazyradio's) and off: the floor receives the same NatNet frames with the same client and sends one position
+setpoint per drone and frame at the planning rate through cflib (``Crazyflie.commander``), with nothing of ours in
+between (no loop, planner, supervisor, commander or log). Goal (docs/performance.md): the stack's p50 and p99 at
+most 1.5x the floor's.
 """
 
 from __future__ import annotations
@@ -48,7 +56,54 @@ formation: {{kind: circle_swap, count: {drones}, radius: 3.0}}
 """
 
 
-def run_once(drones: int, rate: float, planner: str, log: bool, in_process: bool = False, truth: bool = True) -> dict:
+def floor_once(drones: int, rate: float, air_time_s: float, seconds: float = 8.0) -> dict:
+    """The floor: NatNet frames in, one cflib position setpoint per drone out at the planning rate, nothing else."""
+    import contextlib
+
+    from cflib.crazyflie import Crazyflie
+    from cflib.crazyflie.syncCrazyflie import SyncCrazyflie
+
+    mission = parse_mission(mission_text(drones, rate, "apf"))
+    latencies: list[float] = []
+    with DryRun(mission, air_time_s=air_time_s, truth=False) as rig, contextlib.ExitStack() as stack:
+        cfs = []
+        for d in mission.drones:
+            scf = stack.enter_context(SyncCrazyflie(rig.uris[d.name], cf=Crazyflie(rw_cache=str(rig.cache_dir))))
+            cfs.append((scf.cf, d.start))
+        period, due = 1.0 / rate, 0.0
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            frame = rig.mocap.receive(0.05)
+            if frame is None or frame.receive_time_s < due:
+                continue
+            due = frame.receive_time_s + 0.5 * period  # the planning rate, fired by a frame as the loop does
+            for cf, start in cfs:
+                cf.commander.send_position_setpoint(start[0], start[1], 0.0, 0.0)
+                latencies.append(time.monotonic() - frame.receive_time_s)
+    ordered = sorted(latencies)
+    pick = lambda q: ordered[min(len(ordered) - 1, int(q * len(ordered)))]  # noqa: E731
+    return {"latency_p50_s": pick(0.5), "latency_p99_s": pick(0.99), "sends": len(latencies)}
+
+
+def floor_table(drones: int, rate: float, planner: str) -> None:
+    """Floor and stack side by side, air time on and off (interleaved, one run each)."""
+    rows = []
+    for air in (0.001, 0.0):
+        floor = floor_once(drones, rate, air)
+        stack = run_once(drones, rate, planner, True, air_time_s=air)
+        rows.append((air, floor, stack))
+    print(f"{drones} drones, {rate:g} Hz, planner {planner}: mocap frame -> setpoint handed to cflib")
+    print("| radio air time | floor p50 | floor p99 | stack p50 | stack p99 | p50 ratio | p99 ratio |")
+    print("|---|---|---|---|---|---|---|")
+    for air, floor, stack in rows:
+        f50, f99 = floor["latency_p50_s"] * 1e3, floor["latency_p99_s"] * 1e3
+        s50, s99 = stack["latency_p50_s"] * 1e3, stack["latency_p99_s"] * 1e3
+        print(f"| {air * 1e3:g} ms | {f50:.3f} ms | {f99:.3f} ms | {s50:.3f} ms | {s99:.3f} ms | {s50 / f50:.2f}x | "
+              f"{s99 / f99:.2f}x |")
+
+
+def run_once(drones: int, rate: float, planner: str, log: bool, in_process: bool = False, truth: bool = True,
+             air_time_s: float | None = None) -> dict:
     mission = parse_mission(mission_text(drones, rate, planner))
     obstacles = obstacle_set(mission.obstacles)
     loops = []
@@ -67,7 +122,8 @@ def run_once(drones: int, rate: float, planner: str, log: bool, in_process: bool
 
             setattr(loop.recorder, name, timed)
 
-    with tempfile.TemporaryDirectory() as tmp, DryRun(mission, process=not in_process, truth=truth) as rig:
+    with tempfile.TemporaryDirectory() as tmp, DryRun(mission, process=not in_process, truth=truth,
+                                                      air_time_s=air_time_s) as rig:
         wall0 = time.perf_counter()
         report = run_flight(mission, lambda d: make_planner(mission.planner, obstacles),
                             Path(tmp) / "bench.mcap" if log else None, rig=rig, on_loop=time_the_recorder)
@@ -96,7 +152,11 @@ def main() -> int:
                         help="simulated drones and NatNet emulator on threads of this process (default: their own)")
     parser.add_argument("--no-truth", action="store_true", help="fly without the dry run's /truth in the log")
     parser.add_argument("--json", action="store_true")
+    parser.add_argument("--floor", action="store_true", help="the floor beside the stack, radio air time on and off")
     args = parser.parse_args()
+    if args.floor:
+        floor_table(args.drones, args.rate, args.planner)
+        return 0
     runs = [run_once(args.drones, args.rate, args.planner, not args.no_log, args.in_process,
                      not args.no_truth) for _ in range(args.runs)]
 

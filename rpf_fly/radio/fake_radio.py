@@ -69,6 +69,8 @@ class FakeUri:
     channel: int
     datarate: str
     address: int
+    place: tuple[float, float] | None = None
+    """Where a drone appearing on this URI's first connection stands (``?x=..&y=..``), None: the next grid spot."""
 
 
 def parse_fake_uri(uri: str) -> FakeUri:
@@ -87,7 +89,14 @@ def parse_fake_uri(uri: str) -> FakeUri:
     address = int(parts[2], 16) if len(parts) > 2 else DEFAULT_ADDRESS
     if not 0 <= channel <= 125 or not 0 <= address < 1 << 40:
         raise ValueError(f"fake URI {uri!r}: channel or address out of range")
-    return FakeUri(int(parsed.netloc), channel, datarate, address)
+    place = None
+    if parsed.query:
+        query = dict(part.partition("=")[::2] for part in parsed.query.split("&"))
+        try:
+            place = (float(query.get("x", 0.0)), float(query.get("y", 0.0)))
+        except ValueError:
+            raise ValueError(f"fake URI {uri!r}: ?x=..&y=.. must be numbers (metres)") from None
+    return FakeUri(int(parsed.netloc), channel, datarate, address, place)
 
 
 class _Ack:
@@ -105,7 +114,8 @@ class FakeLink:
     def __init__(self, world: RadioWorld, uri: FakeUri, stats_callback: Any, error_callback: Any) -> None:
         self._world = world
         self._uri = uri
-        self._drone = world.port(uri.address)
+        spawn = getattr(world, "spawn", None)
+        self._drone = spawn(uri.address, uri.place) if spawn is not None else world.port(uri.address)
         self._faults = self._drone.faults if self._drone else LinkFaults()
         self._rssi = self._drone.rssi_dbm if self._drone else 0
         self._timing = world.timing
@@ -307,9 +317,16 @@ class FakeRadioDriver(CRTPDriver):
         return self.scan_interface()
 
 
-def register(world: RadioWorld) -> type[FakeRadioDriver]:
-    """Make ``fake://`` URIs reach `world` through cflib (replacing any previously registered fake driver)."""
-    unregister()
+def register(world: RadioWorld | None = None) -> type[FakeRadioDriver]:
+    """Make ``fake://`` URIs reach `world` through cflib (replacing any previously registered fake driver).
+
+    Without a world, any unchanged cflib program works: a world of drones that appear on their first connection,
+    on the floor, on a 0.5 m grid in the order they connect (ten a row along +x, rows along +y), or where the URI's
+    query says (``fake://0/80/2M/E7E7E7E701?x=0.5&y=0``)."""
+    if world is None:
+        from .fake_world import FakeWorld
+
+        world = FakeWorld({}, appear_on_connect=True)
     driver = type("BoundFakeRadioDriver", (FakeRadioDriver,), {"world": world})
     cflib.crtp.CLASSES.append(driver)
     return driver

@@ -297,8 +297,10 @@ class FakeWorld:
         timing: RadioTiming | None = None,
         seed: int = 0,
         obstacles: Sequence[Obstacle] = (),
+        appear_on_connect: bool = False,
     ) -> None:
-        """``obstacles``: the mission's vertical obstacles (`CircleObstacle`, `BoxObstacle`), for contacts."""
+        """``obstacles``: the mission's vertical obstacles (`CircleObstacle`, `BoxObstacle`), for contacts.
+        ``appear_on_connect``: a link to an unknown address brings a drone into the world (:meth:`spawn`)."""
         self.step_s = step_s
         self.timing = timing or RadioTiming()
         self.seed = seed
@@ -313,6 +315,7 @@ class FakeWorld:
         self._thread: threading.Thread | None = None
         self._started = False
         self._contacts = ContactModel(obstacles)
+        self.appear_on_connect = appear_on_connect
         self._truth: deque[TruthSample] = deque(maxlen=max(1, round(TRUTH_BUFFER_S / step_s)))
 
     # Life cycle -----------------------------------------------------------------------------------------------
@@ -365,6 +368,28 @@ class FakeWorld:
     def drone(self, address: int | str) -> SimDrone | None:
         """The drone at `address`, None if there is none."""
         return self._drones.get(parse_address(address))
+
+    GRID_M = 0.5
+    """Spacing of the grid drones appear on (``appear_on_connect``), ten a row."""
+
+    def spawn(self, address: int | str, place: tuple[float, float] | None = None) -> DronePort | None:
+        """The radio side of the drone at ``address``; with ``appear_on_connect`` an unknown address first brings a
+        booted drone onto the floor at ``place`` or the next grid spot. The drone table is replaced, not changed,
+        so the dynamics thread's loop over it is never disturbed."""
+        addr = parse_address(address)
+        if addr not in self._drones and self.appear_on_connect:
+            with self._lock:
+                if addr not in self._drones:
+                    n = len(self._drones)
+                    x, y = place if place is not None else ((n % 10) * self.GRID_M, (n // 10) * self.GRID_M)
+                    now = self.time_s()
+                    drone = SimDrone(addr, FakeDroneConfig.at(x, y, 0.0), now - BOOT_S,
+                                     self.seed * 1_000_003 + addr % 1_000_003)
+                    ticks = round(BOOT_S / self.step_s)
+                    for tick in range(1, ticks + 1):
+                        drone.firmware.step(now - BOOT_S + tick * self.step_s)
+                    self._drones = {**self._drones, addr: drone}
+        return self.port(addr)
 
     def port(self, address: int | str) -> DronePort | None:
         """The radio side of the drone at `address` for a fake link, None if there is none."""

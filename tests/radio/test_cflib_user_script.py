@@ -143,3 +143,36 @@ def test_streamed_setpoints_are_followed_by_the_estimate(make_world: Callable[..
     assert max(xs) == pytest.approx(0.4 - 0.4 * 0.25, abs=0.04)  # a ramp lags by speed x time constant
     assert all(b >= a - 1e-6 for a, b in itertools.pairwise(xs))
     assert estimates[-1][1] == pytest.approx(0.0, abs=0.01)
+
+
+def test_register_without_a_world_serves_any_unchanged_cflib_program(toc_cache: Path) -> None:
+    """``fake_radio.register()`` with no argument: drones appear on their first connection, on the floor, on a
+    0.5 m grid in the order they connect, or where the URI's query says; a plain script flies them."""
+    from rpf_fly.radio import fake_radio
+
+    driver = fake_radio.register()
+    try:
+        uris = ["fake://0/80/2M/E7E7E7E701", "fake://0/80/2M/E7E7E7E702", "fake://0/80/2M/E7E7E7E703?x=0.5&y=1.5"]
+        # ------------------------------------------ the user script ------------------------------------------
+        with SyncCrazyflie(uris[0], cf=Crazyflie(rw_cache=str(toc_cache))) as a, \
+                SyncCrazyflie(uris[1], cf=Crazyflie(rw_cache=str(toc_cache))) as b, \
+                SyncCrazyflie(uris[2], cf=Crazyflie(rw_cache=str(toc_cache))) as c:
+            for scf in (a, b, c):
+                scf.cf.high_level_commander.takeoff(0.4, 1.0)
+            time.sleep(1.6)
+            heights = {scf.cf.link_uri: driver.world.snapshot(int(scf.cf.link_uri.split("/")[5][:10], 16)).position
+                       for scf in (a, b, c)}
+            for scf in (a, b, c):
+                scf.cf.high_level_commander.land(0.0, 1.0)
+            time.sleep(1.5)
+        # -----------------------------------------------------------------------------------------------------
+        world = driver.world
+        assert world.snapshot(0xE7E7E7E701).position[:2] == (0.0, 0.0)
+        assert world.snapshot(0xE7E7E7E702).position[:2] == pytest.approx((0.5, 0.0), abs=0.02)
+        assert world.snapshot(0xE7E7E7E703).position[:2] == pytest.approx((0.5, 1.5), abs=0.02)
+        assert all(p[2] == pytest.approx(0.4, abs=0.05) for p in heights.values()), heights
+        assert all(world.snapshot(a).position[2] < 0.02 for a in (0xE7E7E7E701, 0xE7E7E7E702, 0xE7E7E7E703))
+        assert world.snapshot(0xE7E7E7E701).estimate == pytest.approx(world.snapshot(0xE7E7E7E701).position, abs=0.05)
+    finally:
+        driver.world.close()
+        fake_radio.unregister()
