@@ -82,7 +82,10 @@ _LOG_VARIABLES: tuple[tuple[str, str, Callable[[FakeFirmware], float]], ...] = (
     ("stabilizer.thrust", "float", lambda f: 36000.0 if f.vehicle.motors_on else 0.0),
 )
 
-# (name, ctype, default, read_only, persistent)
+# (name, ctype, default, read_only, persistent). Names and defaults of the firmware's groups that cflib programs and
+# Bitcraze's examples touch (crazyflie-firmware's param definitions and platform defaults: attitude PID 6/3/0 roll and
+# pitch, 6/1/0.35 yaw; rate PID 250/500/2.5 roll and pitch, 120/16.7/0 yaw); only their values are kept, the
+# simulated controller does not use them.
 _PARAMS: tuple[tuple[str, str, float, bool, bool], ...] = (
     ("stabilizer.estimator", "uint8_t", 0, False, False),
     ("stabilizer.controller", "uint8_t", 0, False, False),
@@ -102,6 +105,25 @@ _PARAMS: tuple[tuple[str, str, float, bool, bool], ...] = (
     ("posCtlPid.zVelMax", "float", 1.0, False, True),
     ("pm.lowVoltage", "float", 3.2, False, True),
     ("pm.criticalLowVoltage", "float", 3.0, False, True),
+    ("led.bitmask", "uint8_t", 0, False, False),
+    ("pid_attitude.roll_kp", "float", 6.0, False, True),
+    ("pid_attitude.roll_ki", "float", 3.0, False, True),
+    ("pid_attitude.roll_kd", "float", 0.0, False, True),
+    ("pid_attitude.pitch_kp", "float", 6.0, False, True),
+    ("pid_attitude.pitch_ki", "float", 3.0, False, True),
+    ("pid_attitude.pitch_kd", "float", 0.0, False, True),
+    ("pid_attitude.yaw_kp", "float", 6.0, False, True),
+    ("pid_attitude.yaw_ki", "float", 1.0, False, True),
+    ("pid_attitude.yaw_kd", "float", 0.35, False, True),
+    ("pid_rate.roll_kp", "float", 250.0, False, True),
+    ("pid_rate.roll_ki", "float", 500.0, False, True),
+    ("pid_rate.roll_kd", "float", 2.5, False, True),
+    ("pid_rate.pitch_kp", "float", 250.0, False, True),
+    ("pid_rate.pitch_ki", "float", 500.0, False, True),
+    ("pid_rate.pitch_kd", "float", 2.5, False, True),
+    ("pid_rate.yaw_kp", "float", 120.0, False, True),
+    ("pid_rate.yaw_ki", "float", 16.7, False, True),
+    ("pid_rate.yaw_kd", "float", 0.0, False, True),
     ("firmware.revision0", "uint32_t", 0x2026_0800, True, False),
     ("firmware.modified", "uint8_t", 0, True, False),
 )

@@ -327,6 +327,7 @@ def register(world: RadioWorld | None = None) -> type[FakeRadioDriver]:
         from .fake_world import FakeWorld
 
         world = FakeWorld({}, appear_on_connect=True)
+    unregister()
     driver = type("BoundFakeRadioDriver", (FakeRadioDriver,), {"world": world})
     cflib.crtp.CLASSES.append(driver)
     return driver
