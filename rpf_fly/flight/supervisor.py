@@ -24,6 +24,7 @@ log records episodes, not every tick.
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import dataclass
 from typing import Iterable, Literal, Optional
 
@@ -50,6 +51,10 @@ ESTIMATE_DIVERGENCE_M = 0.15
 """In flight, an on-board position estimate this far from a fresh mocap pose (in 2 status samples in a row) means
 the estimator no longer takes extpos: the drone holds its ESTIMATE at the setpoint while its true position drifts.
 With extpos streaming the two agree within a centimetre or two."""
+
+ESTIMATE_HISTORY_S = 0.5
+"""How far back an on-board estimate may be matched against mocap: telemetry queued behind a full radio arrives
+hundreds of milliseconds late, and a late estimate of a drone at 0.5 m/s is decimetres behind the newest pose."""
 
 LINK_QUALITY_WARN_PCT = 95.0
 """cflib's link quality loses 10 points per retry a packet needs on average: below 95 % half the packets need a
@@ -102,7 +107,8 @@ class Supervisor:
         """drone -> (consecutive low samples, stamp of the last one counted)."""
         self._telemetry_stale: set[str] = set()
         self._glitching: set[str] = set()
-        self._diverging: dict[str, tuple[int, float]] = {}
+        self._diverging: dict[str, tuple[int, int, float]] = {}
+        self._history: dict[str, deque[tuple[float, tuple[float, float, float]]]] = {}
         self._poor_link: set[str] = set()
         self._off_track: dict[str, float] = {}
         self._predicted: dict[str, tuple[complex, float]] = {}
@@ -295,24 +301,36 @@ class Supervisor:
 
     def _estimates(self, now_s: float, agents: list[DroneAgent], tracker: PoseTracker,
                    states: dict[str, DroneState]) -> list[Finding]:
-        """The on-board estimate against a fresh mocap pose (see ``ESTIMATE_DIVERGENCE_M``)."""
+        """The on-board estimate against mocap (``ESTIMATE_DIVERGENCE_M``), in two steps. Off the newest pose in 2
+        samples: a warning (also what late telemetry on a full radio looks like at flight speed). Off EVERY pose of
+        the last ``ESTIMATE_HISTORY_S`` in 2 samples: the estimate is not just late, it is wrong; motors off."""
         out = []
         for a in agents:
             state, pose = states.get(a.name), tracker.get(a.name)
+            history = self._history.setdefault(a.name, deque())
+            if pose is not None and pose.valid and (not history or history[-1][0] != pose.stamp_s):
+                history.append((pose.stamp_s, pose.position))
+            while history and history[0][0] < now_s - ESTIMATE_HISTORY_S:
+                history.popleft()
             if (state is None or state.position_m is None or state.telemetry_stamp_s is None or pose is None
                     or not pose.valid or now_s - pose.stamp_s > self.safety.pose_timeout_s
                     or a.phase in (DronePhase.LANDING, DronePhase.TAKEOFF)):
                 continue
-            count, stamp = self._diverging.get(a.name, (0, -1.0))
+            late, wrong, stamp = self._diverging.get(a.name, (0, 0, -1.0))
             if state.telemetry_stamp_s == stamp:
                 continue
             off = math.dist(state.position_m, pose.position)
-            count = count + 1 if off > ESTIMATE_DIVERGENCE_M else 0
-            self._diverging[a.name] = (count, state.telemetry_stamp_s)
-            if count == 2:
-                out.append(Finding("estimator", ERROR, f"on-board estimate {off:.2f} m from mocap: the estimator "
-                                   "no longer follows extpos, and a landing would fly wherever the estimate goes: "
-                                   "motors off", a.name, "stop"))
+            nearest = min((math.dist(state.position_m, p) for _, p in history), default=off)
+            late = late + 1 if off > ESTIMATE_DIVERGENCE_M else 0
+            wrong = wrong + 1 if nearest > ESTIMATE_DIVERGENCE_M else 0
+            self._diverging[a.name] = (late, wrong, state.telemetry_stamp_s)
+            if late == 2 and wrong < 2:
+                out.append(Finding("estimator", WARNING, f"on-board estimate {off:.2f} m from mocap (late telemetry "
+                                   "on a full radio, or an estimator that stopped taking extpos)", a.name, "warn"))
+            if wrong == 2:
+                out.append(Finding("estimator", ERROR, f"on-board estimate {nearest:.2f} m from every mocap pose of "
+                                   f"the last {ESTIMATE_HISTORY_S:g} s: the estimator no longer follows extpos, and a "
+                                   "landing would fly wherever the estimate goes: motors off", a.name, "stop"))
         return out
 
     def _link_quality(self, agents: list[DroneAgent], states: dict[str, DroneState]) -> list[Finding]:
