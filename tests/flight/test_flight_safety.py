@@ -176,3 +176,16 @@ def test_the_preflight_says_when_a_yaw_estimate_was_off_before_its_reset(tmp_pat
     assert warned and warned[0].level == 3 and "yaw estimate" in warned[0].message
     assert not flight.events("estimator", "cf2")
     assert flight.report.success
+
+
+def test_a_drone_is_disarmed_only_after_its_supervisor_says_it_landed(tmp_path, short_mission):
+    """Disarming a flying Crazyflie cuts its motors. Every drone's supervisor must go Flying -> Landed before the
+    disarm resets it: a reset straight from Flying (before, the disarm followed the landing command on a timer, while
+    the firmware still counted the drone as flying) is a motor cut."""
+    flight = fly(short_mission, tmp_path)
+    assert flight.report.success, flight.report.reasons
+    for name, snap in flight.snapshots.items():
+        moves = [(t.old.value, t.new.value) for t in snap.transitions]
+        assert ("Flying", "Reset") not in moves, (name, moves)
+        assert ("Flying", "Landed") in moves, (name, moves)
+        assert landed(snap)
