@@ -23,7 +23,7 @@ from typing import Callable, Optional
 import numpy as np
 
 from rpf_fly.flight.agent import DroneAgent, PlannerFault, PlannerLike, PlanResult
-from rpf_fly.flight.commander import ON_FLOOR_Z_M, Commander
+from rpf_fly.flight.commander import ON_FLOOR_Z_M, TOUCHDOWN_TIMEOUT_S, Commander
 from rpf_fly.flight.events import ERROR, FATAL, INFO, WARNING, EventBus, FlightEvent
 from rpf_fly.flight.gc_pacing import GcPacer
 from rpf_fly.flight.phases import DronePhase, FlightOutcome, SwarmPhase
@@ -381,8 +381,6 @@ class FlightLoop:
         self.commander.land_all(reason)
         if not wait:
             return
-        from rpf_fly.flight.commander import TOUCHDOWN_TIMEOUT_S
-
         deadline = self.clock() + self.mission.flight.land_s + self.LAND_SETTLE_S + TOUCHDOWN_TIMEOUT_S + 1.0
         while any(a.phase == DronePhase.LANDING for a in self.agents.values()) and self.clock() < deadline:
             if self._estop.is_set():
