@@ -112,8 +112,8 @@ def _run_flight(mission, factory, dry_run: bool, mocap_kind: str, log_path: Path
     try:
         with (live if live is not None else _nothing()):
             if dry_run:
-                configs = injection.drone_configs() if injection is not None else None
-                with DryRun(mission, mocap=mocap_kind, drone_configs=configs) as rig:
+                start_faults = injection.start_faults() if injection is not None else None
+                with DryRun(mission, mocap=mocap_kind, start_faults=start_faults) as rig:
                     rig_holder["rig"] = rig
                     if injection is not None:
                         FaultInjection.wrap(rig)

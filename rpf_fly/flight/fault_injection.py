@@ -1,6 +1,6 @@
 """Applying a fault schedule (:mod:`rpf_fly.flight.faults`) to a dry run.
 
-Power-on faults shape the simulated drones before the flight (:meth:`FaultInjection.drone_configs`); planner faults
+Power-on faults shape the simulated drones before the flight (:meth:`FaultInjection.start_faults`); planner faults
 wrap the named drone's own planner (:meth:`FaultInjection.planner_factory`); a loop stall blocks the loop thread
 inside its mocap wait (:class:`StallableMocap`); everything else is a hook of the simulated world, called from a
 thread of its own at its time. The clock starts when the swarm enters its planning phase. Each fault, when it is
@@ -84,24 +84,21 @@ class FaultInjection:
 
     # ------------------------------------------------------------------------------------------ before
 
-    def drone_configs(self) -> dict[str, Any]:
-        """The simulated drones of the power-on faults (``yaw_offset``, ``start_offset``), by drone name."""
-        from rpf_fly.radio.fake_world import FakeDroneConfig
+    def start_faults(self) -> dict[str, Any]:
+        """The power-on faults (``yaw_offset``, ``start_offset``) as ``DryRun(start_faults=...)`` takes them."""
+        from rpf_fly.flight.dry_run import StartFault
 
-        configs = {}
-        for drone in self.mission.drones:
-            mine = [f for f in self.faults if f.drone == drone.name and f.at_s is None]
-            if not mine:
+        faults: dict[str, Any] = {}
+        for f in self.faults:
+            if f.at_s is not None or f.drone is None:
                 continue
-            x, y = drone.start
-            yaw = 0.0
-            for f in mine:
-                if f.kind == "start_offset":
-                    x, y = x + f.params["offset_m"][0], y + f.params["offset_m"][1]
-                elif f.kind == "yaw_offset":
-                    yaw = f.params["deg"]
-            configs[drone.name] = FakeDroneConfig.at(x, y, 0.0, yaw_deg=yaw, positioning="extpos")
-        return configs
+            yaw, offset = (faults[f.drone].yaw_deg, faults[f.drone].offset_m) if f.drone in faults else (0.0, (0.0, 0.0))
+            if f.kind == "yaw_offset":
+                yaw = f.params["deg"]
+            elif f.kind == "start_offset":
+                offset = tuple(f.params["offset_m"])
+            faults[f.drone] = StartFault(yaw_deg=yaw, offset_m=offset)
+        return faults
 
     def planner_factory(self, base: Callable[[Drone], Any]) -> Callable[[Drone], Any]:
         """``base`` with the planner faults of each drone wrapped around its own planner."""
