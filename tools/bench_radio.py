@@ -31,8 +31,8 @@ from cflib.crazyflie.log import LogConfig
 from cflib.crazyflie.swarm import CachedCfFactory, Swarm
 from cflib.crazyflie.syncCrazyflie import SyncCrazyflie
 
-from rpf_fly.radio import fake_radio
-from rpf_fly.radio.fake_world import FakeDroneConfig, FakeWorld
+from rpf_fly.emulator import fake_radio
+from rpf_fly.emulator.fake_world import FakeDroneConfig, FakeWorld
 
 BASE_ADDRESS = 0xE7E7E7E700
 

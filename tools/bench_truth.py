@@ -30,8 +30,8 @@ from pathlib import Path
 
 from rpf_fly.flight.truth import TruthFeed
 from rpf_fly.log.writer import FlightLog
-from rpf_fly.radio.fake_world import FakeDroneConfig, FakeWorld
-from rpf_fly.radio.world_process import WorldProcess
+from rpf_fly.emulator.fake_world import FakeDroneConfig, FakeWorld
+from rpf_fly.emulator.world_process import WorldProcess
 
 BASE = 0xE7E7E7E700
 
@@ -67,7 +67,7 @@ def poll(n: int, seconds: float, period_s: float) -> dict:
 
 PUSHER = textwrap.dedent("""
     import pickle, socket, sys, time
-    from rpf_fly.radio.fake_world import FakeDroneConfig, FakeWorld
+    from rpf_fly.emulator.fake_world import FakeDroneConfig, FakeWorld
     n, port, seconds = int(sys.argv[1]), int(sys.argv[2]), float(sys.argv[3])
     world = FakeWorld({0xE7E7E7E700 + i: FakeDroneConfig.at(0.5 * (i % 5), 0.5 * (i // 5)) for i in range(n)}).start()
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)

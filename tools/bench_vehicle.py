@@ -18,8 +18,8 @@ import statistics
 import struct
 import time
 
-from rpf_fly.radio.fake_firmware import FakeFirmware
-from rpf_fly.radio.fake_vehicle import VehicleConfig
+from rpf_fly.emulator.fake_firmware import FakeFirmware
+from rpf_fly.emulator.fake_vehicle import VehicleConfig
 
 DT_S = 0.01
 

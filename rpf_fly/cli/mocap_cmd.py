@@ -170,7 +170,7 @@ def emulate(
 ) -> None:
     """Run a NatNet server emulator streaming bodies on circles, so `mocap watch` can be tried without Motive."""
     from rpf_fly.mocap.natnet_protocol import SUPPORTED_VERSIONS, parse_version
-    from rpf_fly.mocap.natnet_server import NatNetServer
+    from rpf_fly.emulator.natnet_server import NatNetServer
 
     try:
         parsed = parse_version(version)

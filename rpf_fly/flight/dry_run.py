@@ -1,18 +1,18 @@
 """The dry run: the same flight stack on simulated drones, before anyone arms a real one.
 
 Every ``radio://`` URI of the mission becomes ``fake://`` with the same path, answered by a simulated Crazyflie of
-the fake radio (:mod:`rpf_fly.radio.fake_world`) standing at the drone's mission start. Their true poses are
+the fake radio (:mod:`rpf_fly.emulator.fake_world`) standing at the drone's mission start. Their true poses are
 served by the NatNet server emulator over UDP on 127.0.0.1 in the mission's up-axis convention, and the real NatNet
 client receives them; so the flight loop, the NatNet client, the cflib backend and cflib itself all run for real.
 ``mocap="sim"`` uses the simulated mocap source instead of the UDP round trip.
 
 The simulated drones and the NatNet emulator run in a process of their own (``process=True``, the default;
-:mod:`rpf_fly.radio.world_process`), as real drones and Motive are outside a real flight's process: on threads of
+:mod:`rpf_fly.emulator.world_process`), as real drones and Motive are outside a real flight's process: on threads of
 the flight's process they would hold its GIL at moments no real flight sees. ``process=False`` keeps them in this
 process (debugging, packet observers).
 
 The simulated drones crash on contact with each other or with the mission's obstacles
-(:mod:`rpf_fly.radio.fake_contact`), and their true states reach the flight log as ``/truth/<drone>``
+(:mod:`rpf_fly.emulator.fake_contact`), and their true states reach the flight log as ``/truth/<drone>``
 (:meth:`DryRun.truth_samples`, :mod:`rpf_fly.flight.truth`).
 Fault hooks for tests, demos and fault campaigns, by drone name, safe to call while the flight runs (durations
 in seconds from the call; each behaves as the real thing would, see docs/radio.md, "Fault hooks"):
@@ -38,7 +38,7 @@ from typing import Any, Mapping, Optional
 
 from rpf_fly.mission.model import Mission
 from rpf_fly.mocap.frame import MocapSource
-from rpf_fly.radio.fake_world import FakeDroneConfig, FakeWorld, RadioTiming
+from rpf_fly.emulator.fake_world import FakeDroneConfig, FakeWorld, RadioTiming
 
 
 AIR_TIME_S = 0.001
@@ -137,8 +137,8 @@ class DryRun:
         return self
 
     def _start(self) -> None:
-        from rpf_fly.radio import fake_radio
-        from rpf_fly.radio.world_process import RemoteWorld, SimulatedBodies, WorldProcess
+        from rpf_fly.emulator import fake_radio
+        from rpf_fly.emulator.world_process import RemoteWorld, SimulatedBodies, WorldProcess
 
         up = self.mission.mocap.up_axis
         body_of_address = {self.addresses[n]: body for n, body in self.bodies.items()}
@@ -150,7 +150,7 @@ class DryRun:
             fake_radio.register(self.world)
             command_port = None
             if self.mocap_kind == "natnet":
-                from rpf_fly.mocap.natnet_server import NatNetServer
+                from rpf_fly.emulator.natnet_server import NatNetServer
 
                 self.server = NatNetServer(
                     self._bodies.poses, version=self.natnet_version, multicast=False, local_ip="127.0.0.1",
@@ -176,7 +176,7 @@ class DryRun:
             if not client.wait_for_server(5.0):
                 raise RuntimeError("dry run: the NatNet emulator did not answer within 5 s")
         else:
-            from rpf_fly.mocap.simulated import SimulatedMocap
+            from rpf_fly.emulator.simulated_mocap import SimulatedMocap
 
             m = self.mission.mocap
             self.mocap = SimulatedMocap(
@@ -187,7 +187,7 @@ class DryRun:
         self.close()
 
     def close(self) -> None:
-        from rpf_fly.radio import fake_radio
+        from rpf_fly.emulator import fake_radio
 
         if self.mocap is not None:
             self.mocap.close()

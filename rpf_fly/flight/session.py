@@ -7,14 +7,16 @@ from __future__ import annotations
 
 import socket
 from pathlib import Path
-from typing import Callable, Optional
+from typing import TYPE_CHECKING, Callable, Optional
 
-from rpf_fly.flight.dry_run import DryRun
 from rpf_fly.flight.events import EventSink
 from rpf_fly.flight.loop import FlightLoop, FlightReport, PlannerFactory
 from rpf_fly.flight.recording import McapRecorder
 from rpf_fly.mission.model import Mission
 from rpf_fly.mocap.frame import MocapSource
+
+if TYPE_CHECKING:  # the dry run's emulators stay out of a real flight's imports
+    from rpf_fly.flight.dry_run import DryRun
 
 DEFAULT_TOC_CACHE = Path.home() / ".cache" / "rpf_fly" / "toc"
 
@@ -60,7 +62,7 @@ def run_flight(
     planner_factory: PlannerFactory,
     log_path: Optional[Path],
     *,
-    rig: Optional[DryRun] = None,
+    rig: Optional["DryRun"] = None,
     status_hook: Optional[Callable[[FlightLoop], None]] = None,
     event_sinks: tuple[EventSink, ...] = (),
     on_loop: Optional[Callable[[FlightLoop], None]] = None,

@@ -2,13 +2,13 @@
 flight log (``/truth/<drone>``, docs/log-format.md).
 
 The simulated world samples every drone after each of its 10 ms steps, stamped with ``time.monotonic()`` of that
-step (:meth:`rpf_fly.radio.fake_world.FakeWorld.truth_samples`). This thread fetches what accumulated every
+step (:meth:`rpf_fly.emulator.fake_world.FakeWorld.truth_samples`). This thread fetches what accumulated every
 `FETCH_PERIOD_S` and hands each sample to the recorder, which turns the stamp into log time with its own offset
 (the clock is shared by every process of one machine).
 
 Why a poll of batches (docs/flight.md, "Dry run"): the flight's process pays for the truth with its GIL, and what
 costs is each wake-up and each round trip, not the bytes. One fetch of 0.1 s of samples (10 per drone) is one round
-trip over the world process's control connection (:meth:`rpf_fly.radio.world_process.WorldProcess.call`, locked,
+trip over the world process's control connection (:meth:`rpf_fly.emulator.world_process.WorldProcess.call`, locked,
 shared with the fault hooks) and one small unpickle; a poll at 50 Hz does five times the round trips for the same
 samples, and a push of every sample over a socket wakes a receiving thread 100 times a second. The log gets every
 sample all the same: latency to the file does not matter, the stamps are the world's.

@@ -27,10 +27,15 @@ cflib's threads (the link's receive thread, the radio thread on link loss). `con
 `close` block and must not run concurrently with each other. Link-lost callbacks must be short and must not call
 `close`.
 
-Hand-over rule (firmware 2026.08): a streamed setpoint stops the high-level plan; after notify-setpoint-stop the
-high-level commander takes over at its next tick and, with no plan, asks for motors off. So every high-level
-command sent while streaming is preceded by notify-setpoint-stop and sent right after it (`hand_over`, `go_to`,
-`land`, `takeoff` do both).
+Hand-over rule (crazyflie-firmware `commander.c`, `crtp_commander_high_level.c`): a streamed setpoint stops the
+high-level plan; notify-setpoint-stop relaxes the commander's priority, and at its next tick (100 Hz) the
+high-level commander takes over and, with no plan, asks for motors off. A high-level command sent while the stream
+still holds the priority is planned at once (from the state the planner tracks every tick) but its setpoints are
+ignored until the priority is relaxed; until then the last streamed setpoint holds the drone. So every high-level
+command sent while streaming goes first and notify-setpoint-stop right after it (`hand_over`, `go_to`, `land`,
+`takeoff` do both): two radio transactions about 1 ms apart, and a firmware tick between them finds the drone
+holding its last setpoint, never motors off. The reverse order (notify first) cuts the motors for the tick that
+falls between the two packets, and for as long as the command packet is retried or lost.
 
 Safety: `close` must only be called on the ground: cflib's `close_link` sends a zero-thrust setpoint, which cuts the
 motors of a flying drone.
@@ -503,6 +508,7 @@ class CflibBackend:
 
     @staticmethod
     def _release_stream(cf: Any, drone: _Drone) -> None:
+        """Hand the priority back to the high-level commander; call it right after the high-level command."""
         if drone.streaming:
             cf.commander.send_notify_setpoint_stop()
             drone.streaming = False
@@ -512,16 +518,16 @@ class CflibBackend:
 
     def takeoff(self, name: str, height_m: float, duration_s: float) -> bool:
         def action(cf: Any, d: _Drone) -> None:
-            self._release_stream(cf, d)
             cf.high_level_commander.takeoff(height_m, duration_s, yaw=None)
+            self._release_stream(cf, d)
 
         return self._command(name, action)
 
     def go_to(self, name: str, position: Vec3, yaw_deg: float, duration_s: float) -> bool:
         def action(cf: Any, d: _Drone) -> None:
-            self._release_stream(cf, d)
             x, y, z = position
             cf.high_level_commander.go_to(x, y, z, math.radians(yaw_deg), duration_s)
+            self._release_stream(cf, d)
 
         return self._command(name, action)
 
@@ -538,15 +544,15 @@ class CflibBackend:
             if not d.streaming or d.last_setpoint is None:
                 return
             x, y, z, yaw_deg = d.last_setpoint
-            self._release_stream(cf, d)
             cf.high_level_commander.go_to(x, y, z, math.radians(yaw_deg), hold_duration_s)
+            self._release_stream(cf, d)
 
         return self._command(name, action)
 
     def land(self, name: str, height_m: float = 0.0, duration_s: float = 2.0) -> bool:
         def action(cf: Any, d: _Drone) -> None:
-            self._release_stream(cf, d)
             cf.high_level_commander.land(height_m, duration_s, yaw=None)
+            self._release_stream(cf, d)
 
         return self._command(name, action)
 

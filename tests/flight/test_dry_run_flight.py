@@ -15,7 +15,7 @@ import pytest
 from rpf_fly.flight.phases import FlightOutcome, SwarmPhase
 from rpf_fly.log.review import metrics_of
 from rpf_fly.mission import load_mission
-from rpf_fly.radio.fake_world import FakeDroneConfig
+from rpf_fly.emulator.fake_world import FakeDroneConfig
 from flight_harness import default_factory, fly
 
 from pathlib import Path

@@ -63,13 +63,11 @@ def test_dry_run_log_has_the_truth_of_every_drone(tmp_path, short_mission):
         for t, p in zip(t_mocap, p_mocap):
             lo, hi = np.searchsorted(t_truth, [t - MOCAP_LATENCY_MAX_S, t + 0.001])
             assert hi > lo and np.linalg.norm(p_truth[lo:hi] - p, axis=1).min() < 1e-3, (name, t - t_mocap[0])
-        # In the air with the motors on. One world step (10 ms) may be motors-off at the hand-over to the landing:
-        # notify-setpoint-stop and the high-level land are two radio transactions (1 ms of air time apart since the
-        # dry run has a radio), and when a firmware tick falls between them the idle high-level commander asks
-        # for motors off (docs/radio.md; the drone drops well under a millimetre). More than one is a real drop.
+        # In the air with the motors on, every world step: the hand-over to the landing sends the land before
+        # notify-setpoint-stop, so the firmware tick between the two packets holds the last setpoint (docs/radio.md).
         flying = p_truth[:, 2] > 0.1
         motors = np.array([m.data["motors"] for m in truth])
-        assert flying.sum() > 150 and (~motors[flying]).sum() <= 1 and not motors[-1]
+        assert flying.sum() > 150 and (~motors[flying]).sum() == 0 and not motors[-1]
         assert not any(m.data["crashed"] for m in truth)
         _, estimate = series(truth, "estimate")  # the firmware's estimate, fed by the mocap, stays on the truth
         offset = np.linalg.norm(estimate[flying] - p_truth[flying], axis=1)  # (as late as the mocap: a lag)

@@ -155,7 +155,7 @@ def test_a_lost_link_drone_stays_in_the_others_views_until_it_is_down(tmp_path, 
 def test_a_drone_standing_rotated_flies_right_after_its_estimator_is_reset_to_mocap(tmp_path, short_mission):
     """cf2 was powered on facing 120 degrees from +x: its yaw estimate starts at 0 (kalman.initialYaw) and
     position-only extpos never corrects it, so without the preflight reset it flies off (the classic fly-away)."""
-    from rpf_fly.radio.fake_world import FakeDroneConfig
+    from rpf_fly.emulator.fake_world import FakeDroneConfig
 
     start = short_mission.drones[1].start
     configs = {"cf2": FakeDroneConfig.at(start[0], start[1], 0.0, yaw_deg=120.0, positioning="extpos")}
@@ -167,7 +167,7 @@ def test_a_drone_standing_rotated_flies_right_after_its_estimator_is_reset_to_mo
 
 
 def test_the_preflight_says_when_a_yaw_estimate_was_off_before_its_reset(tmp_path, short_mission):
-    from rpf_fly.radio.fake_world import FakeDroneConfig
+    from rpf_fly.emulator.fake_world import FakeDroneConfig
 
     start = short_mission.drones[0].start
     configs = {"cf1": FakeDroneConfig.at(start[0], start[1], 0.0, yaw_deg=-90.0, positioning="extpos")}

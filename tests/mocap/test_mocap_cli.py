@@ -13,7 +13,7 @@ from typer.testing import CliRunner
 
 import rpf_fly.cli.mocap_cmd  # noqa: F401 - registers the `mocap` group on the app
 from rpf_fly.cli import app
-from rpf_fly.mocap.natnet_server import NatNetServer
+from rpf_fly.emulator.natnet_server import NatNetServer
 
 TRANSPORTS = {"unicast": False, "multicast": True}
 POSES = {

@@ -12,9 +12,9 @@ import pytest
 
 from rpf_fly.radio.backend import DroneBackend, PmState
 from rpf_fly.radio.cflib_backend import STATUS_VARIABLES, CflibBackend
-from rpf_fly.radio.fake_firmware import LOG_MAX_PAYLOAD
-from rpf_fly.radio.fake_toc import value_size
-from rpf_fly.radio.fake_world import FakeDroneConfig, FakeWorld
+from rpf_fly.emulator.fake_firmware import LOG_MAX_PAYLOAD
+from rpf_fly.emulator.fake_toc import value_size
+from rpf_fly.emulator.fake_world import FakeDroneConfig, FakeWorld, RadioTiming
 
 MakeWorld = Callable[..., FakeWorld]
 
@@ -164,6 +164,38 @@ def test_streaming_then_land_hands_over_with_notify(make_world: MakeWorld, toc_c
     snap = world.snapshot(address(0))
     assert snap.packets_received[(7, 1)] == 1 and not snap.locked
     assert snap.position[0] == pytest.approx(0.1, abs=0.05)  # landed where it was, not dropped
+
+
+@pytest.mark.parametrize("command", ["land", "hand_over", "go_to"])
+def test_the_hand_over_from_streaming_never_cuts_the_motors(make_world: MakeWorld, toc_cache: Path,
+                                                            backends: Callable[..., CflibBackend],
+                                                            command: str) -> None:
+    """Leaving the stream for the high-level commander: the firmware tick between the two packets finds the drone
+    holding its last setpoint. A slow radio (15 ms a transaction) puts one or two ticks between them every time; with
+    notify-setpoint-stop sent first those ticks were motors-off (the idle high-level commander)."""
+    world = make_world(1, timing=RadioTiming(transaction_s=0.015))
+    backend = backends(cache_dir=toc_cache)
+    assert backend.connect(names_to_uris(world)) == {}
+    backend.takeoff("cf0", 0.5, 0.5)
+    assert world.wait_until(lambda w: w.snapshot(address(0)).position[2] > 0.45, 3.0)
+    for _ in range(10):
+        backend.send_position_setpoint("cf0", 0.0, 0.0, 0.5, 0.0)
+        time.sleep(0.03)
+    world.truth_samples()  # from here on
+    if command == "land":
+        assert backend.land("cf0", 0.0, 1.0)
+    elif command == "hand_over":
+        assert backend.hand_over("cf0", 1.0)
+    else:
+        assert backend.go_to("cf0", (0.0, 0.0, 0.5), 0.0, 1.0)
+    time.sleep(0.3)
+    samples = world.truth_samples()
+    assert len(samples) > 20
+    motors = [drones[address(0)][2] for _, drones in samples]
+    heights = [drones[address(0)][0][2] for _, drones in samples]
+    assert all(motors), f"motors off in {motors.count(False)} of {len(motors)} steps of the hand-over"
+    assert min(heights) > (0.3 if command == "land" else 0.45)  # 0.3 s into a 1 s landing from 0.5 m
+    assert world.snapshot(address(0)).hl_state == ("LANDING" if command == "land" else "FLYING")
 
 
 def test_link_loss_is_surfaced_per_drone(make_world: MakeWorld, toc_cache: Path,

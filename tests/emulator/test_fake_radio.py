@@ -18,9 +18,9 @@ from cflib.crazyflie.syncCrazyflie import SyncCrazyflie
 from cflib.crazyflie.syncLogger import SyncLogger
 from cflib.crtp.exceptions import WrongUriType
 
-from rpf_fly.radio import fake_radio
-from rpf_fly.radio.fake_radio import FakeLink, FakeUri, parse_fake_uri
-from rpf_fly.radio.fake_world import FakeDroneConfig, FakeWorld, LinkFaults, RadioTiming
+from rpf_fly.emulator import fake_radio
+from rpf_fly.emulator.fake_radio import FakeLink, FakeUri, parse_fake_uri
+from rpf_fly.emulator.fake_world import FakeDroneConfig, FakeWorld, LinkFaults, RadioTiming
 
 MakeWorld = Callable[..., FakeWorld]
 

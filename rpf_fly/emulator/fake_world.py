@@ -244,7 +244,7 @@ class SimDrone:
 class DronePort:
     """What a fake radio link reaches of one drone: radio transactions, its link settings and its downlink queue.
 
-    This one calls the drone in the same process; :class:`rpf_fly.radio.world_process.RemotePort` reaches a drone
+    This one calls the drone in the same process; :class:`rpf_fly.emulator.world_process.RemotePort` reaches a drone
     of a world in another process through the same methods."""
 
     def __init__(self, world: FakeWorld, drone: SimDrone) -> None:

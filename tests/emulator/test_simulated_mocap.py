@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from rpf_fly.mocap.frame import MocapSource
-from rpf_fly.mocap.simulated import SimulatedMocap
+from rpf_fly.emulator.simulated_mocap import SimulatedMocap
 
 
 class FakeClock:

@@ -19,7 +19,7 @@ from cflib.crazyflie.swarm import CachedCfFactory, Swarm
 from cflib.crazyflie.syncCrazyflie import SyncCrazyflie
 from cflib.crazyflie.syncLogger import SyncLogger
 
-from rpf_fly.radio.fake_world import FakeWorld
+from rpf_fly.emulator.fake_world import FakeWorld
 
 
 def test_plain_cflib_swarm_script_flies_ten_fake_drones(make_world: Callable[..., FakeWorld], toc_cache: Path) -> None:
@@ -148,7 +148,7 @@ def test_streamed_setpoints_are_followed_by_the_estimate(make_world: Callable[..
 def test_register_without_a_world_serves_any_unchanged_cflib_program(toc_cache: Path) -> None:
     """``fake_radio.register()`` with no argument: drones appear on their first connection, on the floor, on a
     0.5 m grid in the order they connect, or where the URI's query says; a plain script flies them."""
-    from rpf_fly.radio import fake_radio
+    from rpf_fly.emulator import fake_radio
 
     driver = fake_radio.register()
     try:

@@ -256,7 +256,7 @@ class WorldProcess:
     `SimulatedBodies`, by the same names. ``natnet``: the NatNet server's settings (``version``, ``rate_hz``,
     ``up_axis``), None for no NatNet server. ``obstacles``: the mission's obstacles, for the world's contacts.
 
-    The child is ``python -m rpf_fly.radio.world_process``, not a multiprocessing spawn (which re-imports the
+    The child is ``python -m rpf_fly.emulator.world_process``, not a multiprocessing spawn (which re-imports the
     caller's main script: a user's unguarded script would run again in it). It reads its settings as one pickle on
     stdin, answers with one JSON line on stdout (its ports), then serves calls on a `multiprocessing.connection`
     to 127.0.0.1, authenticated with a random key."""
@@ -276,7 +276,7 @@ class WorldProcess:
         settings = {"drones": dict(drones), "bodies": dict(bodies), "seed": seed, "obstacles": tuple(obstacles),
                     "natnet": dict(natnet) if natnet else None, "authkey": key}
         self._process = subprocess.Popen(
-            [sys.executable, "-m", "rpf_fly.radio.world_process"], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+            [sys.executable, "-m", "rpf_fly.emulator.world_process"], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
         )
         try:
             assert self._process.stdin is not None and self._process.stdout is not None
@@ -466,7 +466,7 @@ def serve(settings: dict[str, Any], out: Any) -> None:
     natnet = settings["natnet"]
     try:
         if natnet is not None:
-            from rpf_fly.mocap.natnet_server import NatNetServer
+            from rpf_fly.emulator.natnet_server import NatNetServer
 
             server = NatNetServer(
                 tracked.poses, version=natnet["version"], multicast=False, local_ip="127.0.0.1",
@@ -512,7 +512,7 @@ def serve(settings: dict[str, Any], out: Any) -> None:
 
 
 def main() -> None:
-    """``python -m rpf_fly.radio.world_process``: settings as one pickle on stdin (from `WorldProcess` only)."""
+    """``python -m rpf_fly.emulator.world_process``: settings as one pickle on stdin (from `WorldProcess` only)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # a Ctrl-C reaches the whole process group: the parent lands first
     out = sys.stdout
     sys.stdout = sys.stderr  # nothing else may write on the parent's pipe

@@ -19,7 +19,7 @@ from cflib.crazyflie.syncCrazyflie import SyncCrazyflie
 from rpf_fly.flight.dry_run import DryRun, StartFault
 from rpf_fly.mission import parse_mission
 from rpf_fly.mocap.frame import MocapFrame
-from rpf_fly.radio.fake_firmware import REBOOT_BOOT_S
+from rpf_fly.emulator.fake_firmware import REBOOT_BOOT_S
 
 MISSION = """\
 name: faults-2

@@ -17,9 +17,9 @@ from cflib.crazyflie import Crazyflie
 from cflib.crazyflie.syncCrazyflie import SyncCrazyflie
 
 from rpf_fly.mission.model import CircleObstacle
-from rpf_fly.radio import fake_radio
-from rpf_fly.radio.fake_world import FakeDroneConfig
-from rpf_fly.radio.world_process import RemoteWorld, WorldProcess
+from rpf_fly.emulator import fake_radio
+from rpf_fly.emulator.fake_world import FakeDroneConfig
+from rpf_fly.emulator.world_process import RemoteWorld, WorldProcess
 
 A1, A2 = 0xE7E7E7E701, 0xE7E7E7E702
 
@@ -129,8 +129,8 @@ def test_the_child_ignores_sigint(child) -> None:
 def test_the_child_exits_when_its_parent_is_killed() -> None:
     parent = subprocess.Popen([sys.executable, "-c", textwrap.dedent("""
         import sys, time
-        from rpf_fly.radio.fake_world import FakeDroneConfig
-        from rpf_fly.radio.world_process import WorldProcess
+        from rpf_fly.emulator.fake_world import FakeDroneConfig
+        from rpf_fly.emulator.world_process import WorldProcess
         process = WorldProcess({0xE7E7E7E701: FakeDroneConfig.at(0.0, 0.0)}, {0xE7E7E7E701: "cf1"})
         print(process._process.pid, flush=True)
         time.sleep(60)

@@ -1,8 +1,8 @@
 """Contact between the fake world's drones, and between a drone and the mission's obstacles: who crashed, when.
 
 A real Crazyflie that touches another one or a pole with a rotor does not fly on: it tumbles and falls. The fake
-world (:class:`rpf_fly.radio.fake_world.FakeWorld`) asks :class:`ContactModel` after every step which drones touched
-something, and crashes them (:meth:`rpf_fly.radio.fake_vehicle.Vehicle.crash`).
+world (:class:`rpf_fly.emulator.fake_world.FakeWorld`) asks :class:`ContactModel` after every step which drones touched
+something, and crashes them (:meth:`rpf_fly.emulator.fake_vehicle.Vehicle.crash`).
 
 The model, on the drones' *true* centres (not the estimates, not the mocap):
 

@@ -49,7 +49,7 @@ DATARATES = ("250K", "1M", "2M")
 
 class RadioWorld(Protocol):
     """What the fake radio needs of a world of drones: a `FakeWorld` in this process, or a
-    :class:`rpf_fly.radio.world_process.RemoteWorld` reaching one in another process."""
+    :class:`rpf_fly.emulator.world_process.RemoteWorld` reaching one in another process."""
 
     timing: RadioTiming
 
@@ -276,7 +276,7 @@ class FakeRadioDriver(CRTPDriver):
             raise WrongUriType("Not a fake radio URI")
         world = type(self).world
         if world is None:
-            raise RuntimeError("no FakeWorld registered: call rpf_fly.radio.fake_radio.register(world)")
+            raise RuntimeError("no FakeWorld registered: call rpf_fly.emulator.fake_radio.register(world)")
         parsed = parse_fake_uri(uri)
         if self._link is not None:
             raise RuntimeError("Link already open!")
