@@ -60,13 +60,15 @@ DEFAULTS: dict[str, dict[str, Any]] = {
     "loop_stall": {"duration_s": 1.0},
     "yaw_offset": {"deg": 120},
     "start_offset": {"offset_m": [0.5, 0.0]},
+    "upside_down": {},
+    "motor_fault": {},
     "gust": {"duration_s": 1.0, "accel": [0.0, 1.5, 0.0]},
     "estimator_divergence": {"rate_m_s": 0.3},
     "reboot": {},
 }
 SWARM_KINDS = {"blackout", "mocap_delay", "loop_stall"}
-POWER_ON = {"yaw_offset", "start_offset"}
-UNSAFE_TO_FLY = {"start_offset"}
+POWER_ON = {"yaw_offset", "start_offset", "upside_down", "motor_fault"}
+UNSAFE_TO_FLY = {"start_offset", "upside_down", "motor_fault"}
 AT_S = 3.0
 
 

@@ -3,8 +3,12 @@
 It mirrors the state machine of crazyflie-firmware 2026.08 (`supervisor.c`, `supervisor_state_machine.c`) with the
 conditions this simulation can produce: armed, is-flying, commander watchdog warning (setpoint older than 0.5 s) and
 timeout (older than 2 s), emergency stop, pre-flight timeout (30 s armed without flying), landing timeout (3 s
-after landing) and a crash (a contact found by the fake world, :meth:`Supervisor.crash`). Not simulated: tumble
-detection from attitude (the simulation has none), deck faults, motor RPM checks (arming passes at once).
+after landing), a crash (a contact found by the fake world, :meth:`Supervisor.crash`), a drone lying tumbled at
+power-on (``tumbled=True``: the tumble check blocks the pre-flight checks, so arming is refused) and a motor that
+fails the arming spin-up check (``spinup_fails=True``: the RPM check of firmware built with
+CONFIG_MOTORS_ESC_PROTOCOL_DSHOT_BIDIRECTIONAL, the Brushless; arming ends after ARMING_SPINUP_TIMEOUT_MS = 2 s back
+in pre-flight checks not passed). Not simulated: tumble detection from attitude in flight (the simulation has
+none), deck faults, the in-flight motors-not-responding check; good motors pass the arming spin-up at once.
 
 Key behaviours kept from the firmware:
 - Flying + watchdog warning -> "warning, level out"; flying or levelled out + watchdog timeout -> free fall ->
@@ -42,6 +46,9 @@ PREFLIGHT_TIMEOUT_S = 30.0
 """Armed (ready to fly) this long without flying -> disarmed."""
 LANDING_TIMEOUT_S = 3.0
 """Landed this long -> reset (disarmed)."""
+ARMING_SPINUP_TIMEOUT_S = 2.0
+"""Arming this long without the motors' RPM check passing -> back to pre-flight checks not passed
+(ARMING_SPINUP_TIMEOUT_MS, platform_defaults.h)."""
 EMERGENCY_STOP_WATCHDOG_S = 1.0
 """Once an emergency-stop watchdog notification was received, silence this long triggers an emergency stop."""
 
@@ -79,6 +86,9 @@ class Conditions:
     crashed: bool
     preflight_timeout: bool
     landing_timeout: bool
+    tumbled: bool = False
+    spinup_timeout: bool = False
+    rpm_at_arming_valid: bool = True
 
 
 @dataclass(frozen=True)
@@ -93,18 +103,21 @@ class Transition:
 class Supervisor:
     """State machine of one drone's supervisor. Not thread-safe: the owning vehicle serialises calls."""
 
-    def __init__(self, *, auto_arm: bool) -> None:
+    def __init__(self, *, auto_arm: bool, tumbled: bool = False, spinup_fails: bool = False) -> None:
         self.auto_arm = auto_arm
+        self.spinup_fails = spinup_fails
+        """A motor does not spin up: the arming RPM check never passes."""
         self.state = S.PRE_FLIGHT_CHECKS_NOT_PASSED
         self.armed = False
         self.emergency_stop_requested = False
         """Latched by an emergency-stop command until reboot."""
         self.crashed = False
         """Latched by :meth:`crash` until reboot (with :attr:`tumbled`)."""
-        self.tumbled = False
-        """The drone lies tumbled (a crash knocked it over); only set by :meth:`crash` here."""
+        self.tumbled = tumbled
+        """The drone lies tumbled: put down on its back (power-on), or knocked over by a crash (:meth:`crash`)."""
         self._latest_thrust_s: float | None = None
         self._latest_arming_s = 0.0
+        self._arming_entered_s: float | None = None
         self._latest_landing_s: float | None = None
         self._estop_watchdog_s: float | None = None
         self.transitions: deque[Transition] = deque(maxlen=64)
@@ -194,6 +207,10 @@ class Supervisor:
             preflight_timeout=self.state is S.READY_TO_FLY and now_s - self._latest_arming_s > PREFLIGHT_TIMEOUT_S,
             landing_timeout=self._latest_landing_s is not None
             and now_s - self._latest_landing_s > LANDING_TIMEOUT_S,
+            tumbled=self.tumbled,
+            spinup_timeout=self.state is S.ARMING and self._arming_entered_s is not None
+            and now_s - self._arming_entered_s > ARMING_SPINUP_TIMEOUT_S,
+            rpm_at_arming_valid=not self.spinup_fails,
         )
 
     def update(
@@ -217,6 +234,7 @@ class Supervisor:
         logger.debug("supervisor %s -> %s at %.3f s", old.value, new.value, now_s)
         if new is S.READY_TO_FLY:
             self._latest_arming_s = now_s
+        self._arming_entered_s = now_s if new is S.ARMING else None
         if new is S.LANDED:
             self._latest_landing_s = now_s
         if new is S.LOCKED:
@@ -232,15 +250,21 @@ def _next_state(state: SupervisorStateName, c: Conditions) -> SupervisorStateNam
     if c.crashed and state not in (S.EXCEPTION_FREE_FALL, S.LOCKED):
         return S.EXCEPTION_FREE_FALL
     if state is S.PRE_FLIGHT_CHECKS_NOT_PASSED:
-        return S.EXCEPTION_FREE_FALL if c.emergency_stop else S.PRE_FLIGHT_CHECKS_PASSED
+        if c.emergency_stop:
+            return S.EXCEPTION_FREE_FALL
+        return state if c.tumbled else S.PRE_FLIGHT_CHECKS_PASSED  # tumbled blocks (deck faults too, not simulated)
     if state is S.PRE_FLIGHT_CHECKS_PASSED:
         if c.emergency_stop:
             return S.EXCEPTION_FREE_FALL
+        if c.tumbled:
+            return S.PRE_FLIGHT_CHECKS_NOT_PASSED
         return S.ARMING if c.armed else state
     if state is S.ARMING:
         if c.emergency_stop:
             return S.EXCEPTION_FREE_FALL
-        return S.READY_TO_FLY if c.armed else S.PRE_FLIGHT_CHECKS_NOT_PASSED
+        if c.tumbled or c.spinup_timeout or not c.armed:
+            return S.PRE_FLIGHT_CHECKS_NOT_PASSED
+        return S.READY_TO_FLY if c.rpm_at_arming_valid else state
     if state is S.READY_TO_FLY:
         if c.emergency_stop:
             return S.EXCEPTION_FREE_FALL

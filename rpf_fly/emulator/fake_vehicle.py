@@ -145,6 +145,12 @@ class VehicleConfig:
     positioning: str = "onboard"
     """"onboard" (an onboard system observing position and yaw: the estimate is the truth) or "extpos" (a mocap
     drone: a Kalman-like estimate from extpos/extpose and a biased IMU, see the module doc)."""
+    upside_down: bool = False
+    """It lies on its back at power-on: the supervisor's tumble check keeps the pre-flight checks from passing, so
+    it reports tumbled and refuses to arm (supervisor_state_machine.c)."""
+    motor_fault: bool = False
+    """A motor that does not spin up: the arming RPM check (Brushless firmware) never passes, so arming ends after
+    2 s back in pre-flight checks not passed and the drone never gets ready to fly."""
 
     def __post_init__(self) -> None:
         if self.positioning not in ("onboard", "extpos"):
@@ -210,7 +216,8 @@ class Vehicle:
         self._onboard_variance_m2 = self.ext_pos_std_dev**2
         self.reset_estimator()
         self._onboard_variance_m2 = self.ext_pos_std_dev**2  # an onboard system is settled at power-on
-        self.supervisor = Supervisor(auto_arm=config.auto_arm)
+        self.supervisor = Supervisor(auto_arm=config.auto_arm, tumbled=config.upside_down,
+                                     spinup_fails=config.motor_fault)
         self.hl = HighLevelCommander(self.estimate, self.estimate_yaw)
         self.priority = PRIORITY_DISABLE
         self.setpoint: Setpoint = null_setpoint(-math.inf)

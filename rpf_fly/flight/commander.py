@@ -87,13 +87,31 @@ class Commander:
                 return False
             return self.backend.reset_estimator(agent.name, position, yaw_rad)
 
-    def take_off(self, agent: DroneAgent, height_m: float, duration_s: float) -> bool:
-        """Arm, then high-level take-off; a drone whose arming or take-off is refused stays on the ground."""
+    def arm(self, agent: DroneAgent) -> bool:
+        """Ask a ready drone's supervisor to arm it. The request is only asked: the sequencer takes off a drone
+        once its telemetry says it can fly (:meth:`refuse_take_off` otherwise)."""
         with self._locks[agent.name]:
             if agent.phase != DronePhase.READY:
                 return False
             if not self.backend.arm(agent.name, True):
-                self.fail(agent, "arming request failed: it stays on the ground")
+                self.fail(agent, "arming request not delivered: it stays on the ground")
+                return False
+            return True
+
+    def refuse_take_off(self, agent: DroneAgent, reason: str) -> None:
+        """A ready drone whose supervisor did not get ready to fly: disarm (it is on the ground) and keep it
+        there with ``reason``."""
+        with self._locks[agent.name]:
+            if agent.phase != DronePhase.READY:
+                return
+            self.backend.arm(agent.name, False)
+            self.fail(agent, f"{reason}: it stays on the ground")
+
+    def take_off(self, agent: DroneAgent, height_m: float, duration_s: float) -> bool:
+        """High-level take-off of an armed drone (:meth:`arm`); one whose take-off is refused stays on the
+        ground."""
+        with self._locks[agent.name]:
+            if agent.phase != DronePhase.READY:
                 return False
             if not self.backend.takeoff(agent.name, height_m, duration_s):
                 self.backend.arm(agent.name, False)  # still on the ground: disarming is safe

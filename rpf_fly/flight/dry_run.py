@@ -68,6 +68,10 @@ class StartFault:
     `kalman.initialYaw` = 0, as a real Crazyflie's does: only a reset to the mocap yaw or extpose cures that."""
     offset_m: tuple[float, float] = (0.0, 0.0)
     """It stands this far (x, y, metres) from its mission start (put down in the wrong place)."""
+    upside_down: bool = False
+    """It lies on its back: its supervisor reports tumbled and refuses to arm (`VehicleConfig.upside_down`)."""
+    motor_fault: bool = False
+    """A motor does not spin up: arming never gets ready to fly (`VehicleConfig.motor_fault`)."""
 
 
 class DryRun:
@@ -259,5 +263,7 @@ def _with_start_fault(config: FakeDroneConfig, fault: Optional[StartFault]) -> F
         return config
     x, y, z = config.vehicle.position
     vehicle = replace(config.vehicle, position=(x + fault.offset_m[0], y + fault.offset_m[1], z),
-                      yaw_deg=config.vehicle.yaw_deg + fault.yaw_deg)
+                      yaw_deg=config.vehicle.yaw_deg + fault.yaw_deg,
+                      upside_down=config.vehicle.upside_down or fault.upside_down,
+                      motor_fault=config.vehicle.motor_fault or fault.motor_fault)
     return replace(config, vehicle=vehicle)

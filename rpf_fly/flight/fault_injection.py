@@ -85,19 +85,28 @@ class FaultInjection:
     # ------------------------------------------------------------------------------------------ before
 
     def start_faults(self) -> dict[str, Any]:
-        """The power-on faults (``yaw_offset``, ``start_offset``) as ``DryRun(start_faults=...)`` takes them."""
+        """The power-on faults (``yaw_offset``, ``start_offset``, ``upside_down``, ``motor_fault``) as
+        ``DryRun(start_faults=...)`` takes them."""
+        from dataclasses import replace
+
         from rpf_fly.flight.dry_run import StartFault
 
         faults: dict[str, Any] = {}
         for f in self.faults:
             if f.at_s is not None or f.drone is None:
                 continue
-            yaw, offset = (faults[f.drone].yaw_deg, faults[f.drone].offset_m) if f.drone in faults else (0.0, (0.0, 0.0))
+            current = faults.get(f.drone, StartFault())
             if f.kind == "yaw_offset":
-                yaw = f.params["deg"]
+                current = replace(current, yaw_deg=f.params["deg"])
             elif f.kind == "start_offset":
-                offset = tuple(f.params["offset_m"])
-            faults[f.drone] = StartFault(yaw_deg=yaw, offset_m=offset)
+                current = replace(current, offset_m=tuple(f.params["offset_m"]))
+            elif f.kind == "upside_down":
+                current = replace(current, upside_down=True)
+            elif f.kind == "motor_fault":
+                current = replace(current, motor_fault=True)
+            else:
+                continue
+            faults[f.drone] = current
         return faults
 
     def planner_factory(self, base: Callable[[Drone], Any]) -> Callable[[Drone], Any]:

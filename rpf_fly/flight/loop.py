@@ -47,6 +47,12 @@ __all__ = ["FlightLoop", "FlightReport", "LoopStats", "NullRecorder", "PlannerFa
 PlannerFactory = Callable[[Drone], PlannerLike]
 
 
+ARM_CONFIRM_TIMEOUT_S = 3.0
+"""How long a drone's supervisor may take from the arming request to ready-to-fly: immediate for a Crazyflie 2.x
+(auto-armed), the motors' spin-up check for a Brushless, which gives up after ARMING_SPINUP_TIMEOUT_MS = 2 s; plus
+the 10 Hz status telemetry."""
+
+
 class FlightLoop:
     """Flies one mission with a backend (cflib over radio or fake radio) and a mocap source: the sequencer of the
     flight's stages. Every command to a drone goes through :attr:`commander`."""
@@ -265,15 +271,18 @@ class FlightLoop:
         r2 = 2 * self.mission.planner.safety_radius
         spots = {n: p.xy for n in grounded if (p := self.tracker.get(n)) is not None}
         for agent in self.agents.values():
-            if agent.phase != DronePhase.WAITING:
+            if agent.phase not in (DronePhase.WAITING, DronePhase.READY):
                 continue
             for name, xy in spots.items():
                 for what, point in (("start", agent.start), ("goal", agent.goal)):
                     if abs(point - xy) < r2:
-                        self.commander.fail(agent, f"preflight: its {what} is {abs(point - xy):.2f} m from {name}, "
-                                            "which stays on the ground")
+                        why = f"its {what} is {abs(point - xy):.2f} m from {name}, which stays on the ground"
+                        if agent.phase == DronePhase.READY:  # armed (or asked to): disarm and keep it down
+                            self.commander.refuse_take_off(agent, why)
+                        else:
+                            self.commander.fail(agent, f"preflight: {why}")
                         break
-                if agent.phase != DronePhase.WAITING:
+                if agent.phase not in (DronePhase.WAITING, DronePhase.READY):
                     break
 
     ESTIMATOR_SETTLE_S = 3.0
@@ -324,10 +333,49 @@ class FlightLoop:
         return preflight_problem(self.mission, agent, self._states.get(agent.name), self.tracker.get(agent.name),
                                  self.tracker.age(agent.name, self.clock()))
 
+    def _arm(self) -> list[DroneAgent]:
+        """Arm every ready drone and wait until its supervisor says it can fly (a fresh telemetry sample after the
+        request): the firmware refuses to arm a tumbled drone, and a motor that fails the arming spin-up check
+        ends the arming 2 s later. Those stay on the ground with the reason; the armed ones are returned."""
+        asked_at = time.monotonic()  # telemetry stamps are on time.monotonic()
+        asked = [a for a in self.agents.values() if self.commander.arm(a)]
+        pending = {a.name for a in asked}
+        deadline = self.clock() + ARM_CONFIRM_TIMEOUT_S
+        while pending and self.clock() < deadline and not self._stop.is_set():
+            self._spin_once(min(deadline, self.clock() + 0.05))
+            for name in list(pending):
+                state = self._states.get(name)
+                if (state is not None and state.supervisor is not None and state.telemetry_stamp_s is not None
+                        and state.telemetry_stamp_s >= asked_at and state.supervisor.can_fly):
+                    pending.discard(name)
+        ready = []
+        for agent in asked:
+            if agent.name not in pending:
+                ready.append(agent)
+                continue
+            state = self._states.get(agent.name)
+            sup = state.supervisor if state is not None else None
+            if sup is None:
+                why = "no supervisor telemetry"
+            elif sup.tumbled:
+                why = "it reports tumbled (lying on its back or tilted): set it upright"
+            elif sup.armed:
+                why = "armed but its motors did not pass the spin-up check"
+            else:
+                why = "not armed (its pre-flight checks did not pass)"
+            if not self._stop.is_set():
+                self.commander.refuse_take_off(agent, f"its supervisor was not ready to fly "
+                                                      f"{ARM_CONFIRM_TIMEOUT_S:.0f} s after the arming request ({why})")
+        refused = {a.name for a in asked if a.phase == DronePhase.FAILED}
+        if refused:
+            self._ground_neighbours(refused)
+            self.events.emit(ERROR, "takeoff", f"{', '.join(sorted(refused))} stay on the ground; the others fly")
+        return [a for a in ready if a.phase == DronePhase.READY]
+
     def _takeoff(self) -> None:
         self._set_phase(SwarmPhase.TAKEOFF)
         flight = self.mission.flight
-        for agent in self.agents.values():
+        for agent in self._arm():
             self.commander.take_off(agent, flight.height, flight.takeoff_s)
         until = self.clock() + flight.takeoff_s + self.TAKEOFF_SETTLE_S
         while self.clock() < until and not self._stop.is_set():

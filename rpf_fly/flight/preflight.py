@@ -27,6 +27,8 @@ def preflight_problem(mission: Mission, agent: DroneAgent, state: Optional[Drone
         return "no radio link"
     if state.supervisor is not None and (state.supervisor.locked or state.supervisor.crashed):
         return "the drone's supervisor is locked or crashed: reboot it"
+    if state.supervisor is not None and state.supervisor.tumbled:
+        return "the drone's supervisor reports it tumbled (on its back or tilted): set it upright"
     if state.battery is None:
         return "no battery telemetry yet"
     if state.battery.low or state.battery.voltage_v < mission.radio.min_battery_v:

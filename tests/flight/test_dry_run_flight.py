@@ -16,6 +16,7 @@ from rpf_fly.flight.phases import FlightOutcome, SwarmPhase
 from rpf_fly.log.review import metrics_of
 from rpf_fly.mission import load_mission
 from rpf_fly.emulator.fake_world import FakeDroneConfig
+from rpf_fly.flight.dry_run import StartFault
 from flight_harness import default_factory, fly
 
 from pathlib import Path
@@ -221,6 +222,29 @@ def test_a_drone_failing_its_preflight_stays_on_the_ground_and_the_others_fly(tm
     assert any("cf2 stay on the ground" in m for m in flight.logged_events())
     metrics = metrics_of(flight.log)  # the review reads a flight with a drone that never planned
     assert metrics.reached == 2 and not metrics.success
+
+
+def test_a_drone_whose_supervisor_does_not_get_ready_to_fly_stays_on_the_ground(tmp_path, short_mission):
+    """The arming result counts: cf2's motor fails the arming spin-up check, so its supervisor never says it can
+    fly. It is disarmed and stays on the ground with the reason; the others take off and reach their goals.
+    (Before, the take-off went out after the arming request unchecked and the drone was counted as taking off.)"""
+    flight = fly(short_mission, tmp_path, start_faults={"cf2": StartFault(motor_fault=True)})
+    assert "supervisor was not ready to fly" in flight.report.reasons["cf2"]
+    assert "spin-up" in flight.report.reasons["cf2"] or "not armed" in flight.report.reasons["cf2"]
+    assert flight.report.outcomes["cf2"] == FlightOutcome.NOT_FLOWN
+    assert flight.report.outcomes["cf1"] == flight.report.outcomes["cf3"] == FlightOutcome.REACHED
+    truth = flight.log.messages("/truth/cf2")
+    assert truth and not any(m.data["motors"] for m in truth)
+    assert max(m.data["position"]["z"] for m in truth) < 0.01
+    assert any("cf2 stay on the ground" in m for m in flight.logged_events())
+
+
+def test_a_drone_lying_tumbled_fails_its_preflight(tmp_path, short_mission):
+    flight = fly(short_mission, tmp_path, start_faults={"cf3": StartFault(upside_down=True)})
+    assert "tumbled" in flight.report.reasons["cf3"] and "preflight" in flight.report.reasons["cf3"]
+    assert flight.report.outcomes["cf3"] == FlightOutcome.NOT_FLOWN
+    assert flight.report.outcomes["cf1"] == flight.report.outcomes["cf2"] == FlightOutcome.REACHED
+    assert not any(m.data["motors"] for m in flight.log.messages("/truth/cf3"))
 
 
 def test_simulated_mocap_source_flies_too(tmp_path, short_mission):
