@@ -38,6 +38,18 @@ def _resolve_server(mission, mission_path: Path) -> None:  # type: ignore[no-unt
         raise fail(f"{mission_path}:0: mocap.server: {err}")
 
 
+def _check_radio_budget(mission, mission_path: Path) -> list:  # type: ignore[no-untyped-def]
+    """Refuse a mission that asks a dongle for more than it carries (one line, exit 2, before anything connects),
+    unless it says ``radio.allow_over_budget: true``; the per-dongle loads otherwise (docs/radio.md)."""
+    from rpf_fly.radio.budget import over_budget_message, radio_loads
+
+    loads = radio_loads(mission)
+    over = [load for load in loads if load.over]
+    if over and not mission.radio.allow_over_budget:
+        raise fail(f"{mission_path}:0: radio: {over_budget_message(over[0])}")
+    return loads
+
+
 def _planner_factory(mission, mission_path: Path):  # type: ignore[no-untyped-def]
     """Each drone gets its own planner instance (its own ONNX session for learned planners)."""
     from rpf_fly.planning.onnx_policy import PolicyError
@@ -66,6 +78,7 @@ def fly(
     if faults is not None and not dry_run:
         raise fail(f"--faults: {faults}: faults are injected into simulated drones only; add --dry-run")
     schedule = _load_faults(faults, loaded) if faults is not None else None
+    _check_radio_budget(loaded, mission)
     factory = _planner_factory(loaded, mission)
     if not dry_run and loaded.mocap.kind != "natnet":
         raise fail(f"{mission}:0: mocap.kind: 'sim' can only fly with --dry-run (real drones need motion capture)")
@@ -238,6 +251,12 @@ def check(
     factory = _planner_factory(loaded, mission)
     if preflight and not dry_run and loaded.mocap.kind == "natnet":
         _resolve_server(loaded, mission)
+    from rpf_fly.radio.budget import budget_table, radio_loads
+
+    typer.echo("radio budget (packets a second per dongle):")
+    for line in budget_table(radio_loads(loaded)):
+        typer.echo(f"  {line}")
+    _check_radio_budget(loaded, mission)
     typer.echo(f"{mission}: valid mission '{loaded.name}' with {len(loaded.drones)} drones, planner {loaded.planner.kind}")
     if not preflight:
         return

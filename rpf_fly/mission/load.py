@@ -328,6 +328,9 @@ RADIO_SPEC: dict[str, tuple[str, Reader]] = {
     "min_battery_v": ("min_battery_v", _num(POSITIVE)),
     "extpos": ("extpos", _choice(("extpos", "extpose"))),
     "extpos_rate_hz": ("extpos_rate_hz", _num(POSITIVE)),
+    "dongle_type": ("dongle_type", _choice(("crazyradio_pa", "crazyradio_2"))),
+    "budget_packets_s": ("budget_packets_s", _num(POSITIVE)),
+    "allow_over_budget": ("allow_over_budget", lambda c, n: c.boolean(n)),
 }
 SAFETY_SPEC: dict[str, tuple[str, Reader]] = {
     "pose_timeout_s": ("pose_timeout_s", _num(POSITIVE)),

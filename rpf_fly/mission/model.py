@@ -111,6 +111,12 @@ class RadioSettings:
     extpos_rate_hz: float = 30.0
     """How often each drone's mocap pose is forwarded to its estimator (cflib has no broadcast: every drone costs
     radio packets; 20-50 Hz is plenty for the Kalman filter)."""
+    dongle_type: Literal["crazyradio_pa", "crazyradio_2"] = "crazyradio_pa"
+    """The Crazyradio model, for its budget (``rpf_fly.radio.budget.DONGLE_BUDGETS``)."""
+    budget_packets_s: Optional[float] = None
+    """Transactions a second one dongle carries (None: the dongle type's figure); a lab's own measurement."""
+    allow_over_budget: bool = False
+    """Fly even when a dongle is asked for more than its budget (the radio then delays setpoints and extpos)."""
 
 
 @dataclass(frozen=True)
