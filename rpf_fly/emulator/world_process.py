@@ -333,6 +333,13 @@ class WorldProcess:
     def radio_counters(self, address: int) -> RadioCounters:
         return self.call("radio_counters", address)
 
+    def radio_bursts(self, address: int, start_s: float, end_s: float) -> list[tuple[float, float]]:
+        return self.call("radio_bursts", address, start_s, end_s)
+
+    def time_s(self) -> float:
+        """The child world's clock (seconds since it started)."""
+        return self.call("time_s")
+
     def snapshot(self, address: int) -> FirmwareSnapshot:
         return self.call("snapshot", address)
 
@@ -488,7 +495,8 @@ def serve(settings: dict[str, Any], out: Any) -> None:
             "blackout": tracked.blackout,
             # fault hooks of a campaign (same names and arguments as on FakeWorld and SimulatedBodies)
             "packet_loss": world.packet_loss, "gust": world.gust, "estimator_divergence": world.estimator_divergence,
-            "radio_counters": world.radio_counters, "pose_jump": tracked.pose_jump,
+            "radio_counters": world.radio_counters, "radio_bursts": world.radio_bursts, "time_s": world.time_s,
+            "pose_jump": tracked.pose_jump,
             "mocap_delay": tracked.mocap_delay,
         }
         with conn:
