@@ -93,7 +93,7 @@ def _load_faults(path: Path, mission):  # type: ignore[no-untyped-def]
 
 def _run_flight(mission, factory, dry_run: bool, mocap_kind: str, log_path: Path, console: bool,  # type: ignore[no-untyped-def]
                 schedule=None, radio_loss: bool = True) -> int:
-    from rpf_fly.flight.dry_run import RADIO_LOSS, DryRun
+    from rpf_fly.flight.dry_run import RADIO_LOSS, DryRun, world_exit_report_for
     from rpf_fly.flight.fault_injection import FaultInjection
     from rpf_fly.flight.session import run_flight
 
@@ -116,7 +116,8 @@ def _run_flight(mission, factory, dry_run: bool, mocap_kind: str, log_path: Path
             if dry_run:
                 start_faults = injection.start_faults() if injection is not None else None
                 with DryRun(mission, mocap=mocap_kind, start_faults=start_faults,
-                            radio_loss=RADIO_LOSS if radio_loss else None) as rig:
+                            radio_loss=RADIO_LOSS if radio_loss else None,
+                            world_exit_report=world_exit_report_for(log_path)) as rig:
                     rig_holder["rig"] = rig
                     if injection is not None:
                         FaultInjection.wrap(rig)
