@@ -131,7 +131,8 @@ def test_sigkill_the_drones_fall_by_the_firmware_watchdog_and_the_log_is_salvage
     assert exited is not None, "the simulated drones' process outlived its cap"
     report = json.loads(world_exit_report_for(log).read_text())
     assert report["all_down"] and not report["capped"] and report["world_pid"] == world
-    assert report["detected_by"] == "the control connection closed without a close call"
+    assert report["detected_by"] in ("the control connection closed without a close call",  # whichever is first
+                                     "the parent process is gone (the child was re-parented)")
     assert report["parent_death_monotonic_s"] - killed < 0.5  # noticed at once
     assert exited < report["elapsed_s"] + 1.5  # and exited right after the last drone came down
     assert set(report["drones"]) == {"cf1", "cf2", "cf3"}
