@@ -72,6 +72,8 @@ def fly(
     mocap: str = typer.Option("natnet", "--mocap", help="Dry run only: natnet (emulator over UDP) or sim."),
     console: bool = typer.Option(True, "--console/--no-console", help="Live status table while flying."),
     faults: Optional[Path] = typer.Option(None, "--faults", help="Dry run only: a fault schedule (docs/faults.md)."),
+    radio_loss: bool = typer.Option(True, "--radio-loss/--no-radio-loss",
+                                    help="Dry run only: bursty radio loss on every link (docs/radio.md)."),
 ) -> None:
     """Fly MISSION: NatNet mocap and cflib radios as the mission says, or simulated drones with --dry-run."""
     loaded = _load(mission)
@@ -88,7 +90,7 @@ def fly(
         raise fail(f"--mocap: expected natnet or sim, got {mocap!r}")
     log_path = log or Path("flights") / f"{loaded.name}-{datetime.now():%Y%m%d-%H%M%S}.mcap"
     log_path.parent.mkdir(parents=True, exist_ok=True)
-    code = _run_flight(loaded, factory, dry_run, mocap, log_path, console, schedule)
+    code = _run_flight(loaded, factory, dry_run, mocap, log_path, console, schedule, radio_loss)
     raise typer.Exit(code)
 
 
@@ -103,8 +105,8 @@ def _load_faults(path: Path, mission):  # type: ignore[no-untyped-def]
 
 
 def _run_flight(mission, factory, dry_run: bool, mocap_kind: str, log_path: Path, console: bool,  # type: ignore[no-untyped-def]
-                schedule=None) -> int:
-    from rpf_fly.flight.dry_run import DryRun
+                schedule=None, radio_loss: bool = True) -> int:
+    from rpf_fly.flight.dry_run import RADIO_LOSS, DryRun, world_exit_report_for
     from rpf_fly.flight.fault_injection import FaultInjection
     from rpf_fly.flight.session import run_flight
 
@@ -126,7 +128,9 @@ def _run_flight(mission, factory, dry_run: bool, mocap_kind: str, log_path: Path
         with (live if live is not None else _nothing()):
             if dry_run:
                 start_faults = injection.start_faults() if injection is not None else None
-                with DryRun(mission, mocap=mocap_kind, start_faults=start_faults) as rig:
+                with DryRun(mission, mocap=mocap_kind, start_faults=start_faults,
+                            radio_loss=RADIO_LOSS if radio_loss else None,
+                            world_exit_report=world_exit_report_for(log_path)) as rig:
                     rig_holder["rig"] = rig
                     if injection is not None:
                         FaultInjection.wrap(rig)

@@ -9,9 +9,10 @@ Each link runs a thread that emulates cflib's Crazyradio driver with safelink (s
 - every transaction carries one uplink packet (or an empty poll every 10 ms when idle, back to back while the drone
   has data queued) and is acknowledged with at most one downlink packet;
 - a transaction fails when the drone does not answer (unknown address, wrong channel, link dropped, drone powered
-  off) or when each of its 4 attempts is lost (`LinkFaults.packet_loss`); a failed transaction is retried with the
-  same packet after 1 ms, and 100 failures in a row call cflib's link-error callback with "Too many packets lost"
-  (so an unknown address fails to connect after about 0.1 s instead of hanging);
+  off) or when each of its 4 attempts is lost (`LinkFaults.packet_loss`, bursts of `LinkFaults.burst`, a runtime
+  `packet_loss` fault); a failed transaction is retried with the same packet after 1 ms, and 100 failures in a
+  row call cflib's link-error callback with "Too many packets lost" (so an unknown address fails to connect after
+  about 0.1 s instead of hanging);
 - successful transactions feed cflib's own `RadioLinkStatistics` with the attempt count as the retry count and the
   drone's RSSI in empty acks, so link quality, RSSI, rates and congestion reach `cf.link_statistics` as with a
   Crazyradio; cflib's latency pings are answered by the firmware's echo;

@@ -15,7 +15,13 @@ no real flight sees. So the dry run starts them here, in a child process, and re
   `multiprocessing.connection` to 127.0.0.1 (:class:`WorldProcess`).
 
 The child ignores SIGINT (a Ctrl-C in a terminal reaches the whole process group: the drones must stay up while
-the flight lands them) and exits when its parent goes away (the connection closes, even after a SIGKILL).
+the flight lands them) and exits when the parent closes it (`WorldProcess.close`: at once, the parent landed the
+drones). When the parent dies without closing it (SIGKILL, a crash), the control connection reaches its end (the
+kernel closes a dead process's sockets) or the parent pid changes (the child was re-parented); the drones are
+then where real ones would be: no ground station, no more setpoints. The child keeps simulating them in real time
+until every drone's motors are off and it rests on the floor (a streaming drone: levels out 0.5 s after its last
+setpoint, motors cut at 2 s, falls; a drone flying a high-level plan flies it on, as the firmware does, and hovers
+at its end), at most `ORPHAN_CAP_S`, writes an exit report (JSON, `exit_report`) and exits.
 
 Radio wire format, little-endian: request ``op u8, seq u32, address u64, channel u8, flags u8`` then, for a
 transaction with an uplink packet (flags bit 0), the CRTP header byte and payload; reply ``seq u32, ok u8, retry
@@ -28,9 +34,11 @@ from __future__ import annotations
 import json
 import logging
 import math
+import os
 import pickle
 import queue
 import secrets
+import select
 import signal
 import socket
 import struct
@@ -60,6 +68,20 @@ the margin is for a loaded machine, because a reply given up on is lost with the
 real radio's safelink loses none). A child that died fails at once instead: the closed port answers the connected
 socket with ECONNREFUSED."""
 START_TIMEOUT_S = 60.0
+ORPHAN_CAP_S = 10.0
+"""The longest the child simulates its drones after its parent died without closing it: the firmware's watchdog
+cuts a streaming drone's motors 2 s after its last setpoint and a fall from 3 m takes 0.8 s, so every streaming
+drone lies on the floor well within it; a drone flying a high-level plan hovers on (the firmware's high-level
+commander has no watchdog) and would never come down: the cap bounds how long an orphaned process lingers."""
+PARENT_POLL_S = 0.1
+"""How often the child checks that its parent is still the process that started it (a death the control
+connection did not show: while the child still waits for the parent to connect)."""
+ORPHAN_POLL_S = 0.05
+"""How often an orphaned child reads the world's truth samples to see whether every drone is down (the samples
+carry each step's time, so the report's figures have the world step's resolution, not this one's)."""
+ORPHAN_KILL_MARGIN_S = 5.0
+"""Beyond the cap, a last timer ends the child whatever it is doing (a report write blocked on a full disk or
+pipe): an orphan must never linger."""
 
 Pose = tuple[tuple[float, float, float], tuple[float, float, float, float], bool]
 TruePoses = dict[int, tuple[tuple[float, float, float], tuple[float, float, float, float]]]
@@ -269,12 +291,20 @@ class WorldProcess:
         seed: int = 0,
         natnet: Optional[Mapping[str, Any]] = None,
         obstacles: Sequence[Obstacle] = (),
+        names: Optional[Mapping[int, str]] = None,
+        exit_report: Optional[str | os.PathLike[str]] = None,
+        orphan_cap_s: float = ORPHAN_CAP_S,
     ) -> None:
+        """``names``: the drones' names (radio address -> name) for the exit report (else their addresses).
+        ``exit_report``: where the child writes its exit report if this process dies without closing it (None:
+        no report); ``orphan_cap_s``: how long it simulates the drones at most then (`ORPHAN_CAP_S`)."""
         self._lock = threading.Lock()
         self._conn: Any = None
         key = secrets.token_bytes(32)
         settings = {"drones": dict(drones), "bodies": dict(bodies), "seed": seed, "obstacles": tuple(obstacles),
-                    "natnet": dict(natnet) if natnet else None, "authkey": key}
+                    "natnet": dict(natnet) if natnet else None, "authkey": key, "names": dict(names or {}),
+                    "exit_report": os.fspath(exit_report) if exit_report is not None else None,
+                    "orphan_cap_s": float(orphan_cap_s)}
         self._process = subprocess.Popen(
             [sys.executable, "-m", "rpf_fly.emulator.world_process"], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
         )
@@ -292,6 +322,8 @@ class WorldProcess:
         except BaseException:
             self.close()
             raise
+        self.pid: int = self._process.pid
+        """The child's process id (a test watches it outlive a killed parent)."""
         self.radio: tuple[str, int] = (ready["radio"][0], ready["radio"][1])
         self.natnet_command_port: Optional[int] = ready["natnet_command_port"]
         self.addresses: tuple[int, ...] = tuple(drones)
@@ -332,6 +364,13 @@ class WorldProcess:
 
     def radio_counters(self, address: int) -> RadioCounters:
         return self.call("radio_counters", address)
+
+    def radio_bursts(self, address: int, start_s: float, end_s: float) -> list[tuple[float, float]]:
+        return self.call("radio_bursts", address, start_s, end_s)
+
+    def time_s(self) -> float:
+        """The child world's clock (seconds since it started)."""
+        return self.call("time_s")
 
     def snapshot(self, address: int) -> FirmwareSnapshot:
         return self.call("snapshot", address)
@@ -455,10 +494,157 @@ class _RadioServer:
         return _REPLY.pack(seq, ok, retry, more, 1) + bytes((down[0] & 0xFF, down[1] & 0xFF)) + bytes(down[2])
 
 
+class _Orphan:
+    """What the child does once its parent died without closing it (module doc): simulate on until every drone is
+    down or `ORPHAN_CAP_S` passed, then write the exit report. The first caller (the control connection's end, or
+    the parent watch) runs it; a second one waits until it is done."""
+
+    def __init__(self, world: FakeWorld, parent_pid: int, names: Mapping[int, str], report: Optional[str],
+                 cap_s: float) -> None:
+        self._world = world
+        self._parent_pid = parent_pid
+        self._names = dict(names)
+        self._report = report
+        self._cap_s = cap_s
+        self._lock = threading.Lock()
+        self._started = False
+        self._done = threading.Event()
+
+    def watch_parent(self) -> None:
+        """Start the thread that notices a parent that is gone before the control connection says so."""
+        threading.Thread(target=self._watch, name="parent-watch", daemon=True).start()
+
+    def _watch(self) -> None:
+        while os.getppid() == self._parent_pid:
+            time.sleep(PARENT_POLL_S)
+        if self.run("the parent process is gone (the child was re-parented)"):
+            os._exit(0)  # the main thread may still wait for the parent to connect: nothing else ends it
+
+    def closing(self) -> None:
+        """The parent closes the child (it landed the drones): no orphan from now on, whatever the parent does."""
+        with self._lock:
+            self._started = True
+        self._done.set()
+
+    def run(self, how: str) -> bool:
+        """Simulate the drones down and write the report; False if another caller already did (after waiting)."""
+        with self._lock:
+            first, self._started = not self._started, True
+        if not first:
+            self._done.wait()
+            return False
+        try:
+            last_resort = threading.Timer(self._cap_s + ORPHAN_KILL_MARGIN_S, os._exit, (3,))
+            last_resort.daemon = True  # never what keeps the process up
+            last_resort.start()
+            report = self._fall(how)
+            self._write(report)
+        finally:
+            self._done.set()
+        return True
+
+    def _fall(self, how: str) -> dict[str, Any]:
+        """Follow every world step (the world's truth samples: motors and true height at each 10 ms step, whenever
+        this thread gets to read them) until every drone's motors are off and it rests on its floor, or the cap;
+        what each drone did, in seconds from the parent's death."""
+        world = self._world
+        world.truth_samples()  # the parent's log no longer takes them: from now on they are this report's
+        dead_at, dead_world_s = time.monotonic(), world.time_s()
+        addresses = world.addresses
+        at_death = {a: world.snapshot(a) for a in addresses}
+        floors = {a: world.firmware(a).vehicle.floor_z for a in addresses}
+        motors_off = {a: 0.0 for a in addresses if not at_death[a].motors_on}
+        cut_z = {a: at_death[a].position[2] for a in motors_off}
+        at_rest = {a: 0.0 for a in addresses if not world.firmware(a).body().airborne}
+        while True:
+            for stamp, states in world.truth_samples():
+                after = max(0.0, stamp - dead_at)
+                for address, (position, _yaw, motors, _crashed, _estimate) in states.items():
+                    if address not in floors:
+                        continue
+                    if motors:
+                        motors_off.pop(address, None)  # spinning again (a high-level plan): not off yet
+                    elif address not in motors_off:
+                        motors_off[address], cut_z[address] = after, position[2]
+                    if motors or position[2] > floors[address] + 1e-6:
+                        at_rest.pop(address, None)
+                    else:
+                        at_rest.setdefault(address, after)
+            elapsed = time.monotonic() - dead_at
+            down = len(at_rest) == len(addresses)
+            if down or elapsed >= self._cap_s:
+                break
+            time.sleep(ORPHAN_POLL_S)
+        drones = {}
+        for address in addresses:
+            snap, before = world.snapshot(address), at_death[address]
+            setpoint = before.last_crtp_setpoint_s
+            drones[self._names.get(address, f"{address:010X}")] = {
+                "address": f"{address:010X}",
+                "position": list(snap.position),
+                "z": snap.position[2],
+                "floor_z": floors[address],
+                "motors_on": snap.motors_on,
+                "at_rest": address in at_rest,
+                "crashed": snap.crashed,
+                "supervisor_state": snap.supervisor_state,
+                "locked": snap.locked,
+                "flying": snap.flying,
+                "control_source": snap.control_source,
+                "hl_state": snap.hl_state,
+                "motors_on_at_death": before.motors_on,
+                "z_at_death": before.position[2],
+                "control_source_at_death": before.control_source,
+                "setpoint_age_at_death_s": None if setpoint is None else dead_world_s - setpoint,
+                "motors_off_after_s": motors_off.get(address),
+                "z_at_motors_off": cut_z.get(address),
+                "at_rest_after_s": at_rest.get(address),
+            }
+        return {
+            "what": "the simulated drones after the flight's process died without closing the dry run",
+            "detected_by": how,
+            "parent_pid": self._parent_pid,
+            "world_pid": os.getpid(),
+            "parent_death_monotonic_s": dead_at,
+            "parent_death_world_s": dead_world_s,
+            "cap_s": self._cap_s,
+            "capped": not down,
+            "elapsed_s": elapsed,
+            "all_down": down,
+            "drones": drones,
+        }
+
+    def _write(self, report: dict[str, Any]) -> None:
+        """Write the report whole (a reader never sees half of it), then tell the terminal in one line: only if
+        stderr can take it at once, as nobody may read that pipe any more."""
+        where = "no report path given"
+        if self._report is not None:
+            partial = f"{self._report}.partial"
+            try:
+                with open(partial, "w", encoding="utf-8") as f:
+                    json.dump(report, f, indent=2)
+                    f.write("\n")
+                os.replace(partial, self._report)
+                where = f"report {self._report}"
+            except OSError as err:
+                where = f"report not written: {err}"
+        down = sum(d["at_rest"] for d in report["drones"].values())
+        line = (f"rpf-fly dry run: the flight's process died; {down} of {len(report['drones'])} simulated drones "
+                f"down after {report['elapsed_s']:.1f} s ({where})\n")
+        try:
+            if select.select([], [2], [], 0.5)[1]:
+                os.write(2, line.encode()[:4096])  # a pipe that polls writable takes 4096 bytes without blocking
+        except (OSError, ValueError):
+            pass
+
+
 def serve(settings: dict[str, Any], out: Any) -> None:
     """The child process: world, radio server, NatNet server; reports its ports as one JSON line on ``out``, then
-    answers the parent's calls until it closes them or goes away."""
+    answers the parent's calls until it closes them, or until it goes away (then `_Orphan`)."""
     world = FakeWorld(settings["drones"], seed=settings["seed"], obstacles=settings.get("obstacles", ())).start()
+    orphan = _Orphan(world, os.getppid(), settings.get("names", {}), settings.get("exit_report"),
+                     settings.get("orphan_cap_s", ORPHAN_CAP_S))
+    orphan.watch_parent()
     bodies = settings["bodies"]
     tracked = SimulatedBodies(world, bodies)
     radio = _RadioServer(world).start()
@@ -488,7 +674,8 @@ def serve(settings: dict[str, Any], out: Any) -> None:
             "blackout": tracked.blackout,
             # fault hooks of a campaign (same names and arguments as on FakeWorld and SimulatedBodies)
             "packet_loss": world.packet_loss, "gust": world.gust, "estimator_divergence": world.estimator_divergence,
-            "radio_counters": world.radio_counters, "pose_jump": tracked.pose_jump,
+            "radio_counters": world.radio_counters, "radio_bursts": world.radio_bursts, "time_s": world.time_s,
+            "pose_jump": tracked.pose_jump,
             "mocap_delay": tracked.mocap_delay,
         }
         with conn:
@@ -496,8 +683,10 @@ def serve(settings: dict[str, Any], out: Any) -> None:
                 try:
                     method, args = conn.recv()
                 except (EOFError, OSError):
+                    orphan.run("the control connection closed without a close call")
                     return  # the parent is gone
                 if method == "close":
+                    orphan.closing()
                     conn.send(("ok", None))
                     return
                 try:

@@ -11,6 +11,11 @@ The simulated drones and the NatNet emulator run in a process of their own (``pr
 the flight's process they would hold its GIL at moments no real flight sees. ``process=False`` keeps them in this
 process (debugging, packet observers).
 
+Every link loses packets in bursts (``radio_loss``, default `RADIO_LOSS`: a Gilbert-Elliott channel per link,
+docs/radio.md, "Bursty loss"), as a 2.4 GHz link does. If this process dies without closing the dry run (SIGKILL),
+the simulated drones' process lets them fall by their firmware's watchdog, as real drones would, and writes an exit
+report (``world_exit_report``, `world_exit_report_for` a log) before it exits.
+
 The simulated drones crash on contact with each other or with the mission's obstacles
 (:mod:`rpf_fly.emulator.fake_contact`), and their true states reach the flight log as ``/truth/<drone>``
 (:meth:`DryRun.truth_samples`, :mod:`rpf_fly.flight.truth`).
@@ -20,7 +25,8 @@ in seconds from the call; each behaves as the real thing would, see docs/radio.m
 - mocap: :meth:`DryRun.hide` (a rigid body untracked for a while), :meth:`DryRun.blackout` (no body tracked at
   all), :meth:`DryRun.pose_jump` (a body reported in the wrong place, as tracked), :meth:`DryRun.mocap_delay`
   (every pose late);
-- radio: :meth:`DryRun.packet_loss` (lossy link for a while);
+- radio: :meth:`DryRun.packet_loss` (lossy link for a while, replacing the bursty loss every dry-run link has
+  by default: ``radio_loss``, `RADIO_LOSS`);
 - drone: :meth:`DryRun.gust` (an external push its controller fights), :meth:`DryRun.estimator_divergence` (the
   estimate runs away, the true drone the other way), :meth:`DryRun.reboot` (a brown-out: falls, radio silent,
   fresh firmware on the floor);
@@ -31,6 +37,7 @@ in seconds from the call; each behaves as the real thing would, see docs/radio.m
 
 from __future__ import annotations
 
+import os
 import tempfile
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -38,13 +45,29 @@ from typing import Any, Mapping, Optional
 
 from rpf_fly.mission.model import Mission
 from rpf_fly.mocap.frame import MocapSource
-from rpf_fly.emulator.fake_world import FakeDroneConfig, FakeWorld, RadioTiming
+from rpf_fly.emulator.fake_world import BurstLoss, FakeDroneConfig, FakeWorld, RadioTiming
 
 
 AIR_TIME_S = 0.001
 """Air time of one radio transaction on a dry run's dongle: a Crazyradio carries about 1000 transactions a second,
 shared by every link on it (../shared/reference: crazyradio2-firmware issues #9, #16, #22), so a dry run shows what a
 full radio does to latency. Each fake link holds its dongle's lock that long per transaction."""
+
+RADIO_LOSS = BurstLoss()
+"""The dry run's radio loss on every link: bursty (a Gilbert-Elliott channel, `BurstLoss`), a Crazyradio PA in a
+lab: 1 % of attempts lost between bursts, 60 % within them, a 30 ms burst about once a second, 2.7 % in the long
+run (docs/radio.md, "Bursty loss", for each figure's source). ``DryRun(radio_loss=None)`` turns it off."""
+
+
+def default_world_exit_report() -> Path:
+    """Where the simulated drones' process writes its exit report when the dry run has no other path for it:
+    ``<temp dir>/rpf-fly-world-exit-<pid of the flight's process>.json``."""
+    return Path(tempfile.gettempdir()) / f"rpf-fly-world-exit-{os.getpid()}.json"
+
+
+def world_exit_report_for(log_path: Path) -> Path:
+    """The exit report next to a flight log: ``<log>.world-exit.json`` (``rpf-fly fly --dry-run``)."""
+    return log_path.with_name(log_path.name + ".world-exit.json")
 
 
 def fake_uri(uri: str) -> str:
@@ -94,11 +117,18 @@ class DryRun:
         process: bool = True,
         truth: bool = True,
         air_time_s: Optional[float] = None,
+        radio_loss: Optional[BurstLoss] = RADIO_LOSS,
+        world_exit_report: Optional[Path] = None,
     ):
         """``truth``: the flight log of a flight on this rig gets the world's truth (``/truth/<drone>``); False only
         to measure what that costs (tools/bench_flight.py ``--no-truth``). ``air_time_s``: how long each radio
         transaction holds its dongle, shared by every link on it (default ``AIR_TIME_S``, a Crazyradio's; 0: an
-        infinitely fast radio, only to measure what the radio costs)."""
+        infinitely fast radio, only to measure what the radio costs). ``radio_loss``: the bursty loss of every
+        drone's link (default `RADIO_LOSS`; None: a lossless radio, for tests that count exact retries); a drone of
+        ``drone_configs`` whose `LinkFaults.burst` is set keeps its own. ``world_exit_report``: where the simulated
+        drones' process writes what became of the drones if this process dies without closing the dry run
+        (SIGKILL: they fall by the firmware's watchdog; `rpf_fly.emulator.world_process`); default
+        `default_world_exit_report()`; a stale report there is removed at the start."""
         if mocap not in ("natnet", "sim"):
             raise ValueError(f"dry-run mocap must be 'natnet' or 'sim', not {mocap!r}")
         self.mission = mission
@@ -117,10 +147,15 @@ class DryRun:
         for d in mission.drones:
             default = FakeDroneConfig.at(d.start[0], d.start[1], 0.0, positioning="extpos")
             config = configs.get(d.name, default)
+            if radio_loss is not None and config.faults.burst is None:
+                config = replace(config, faults=replace(config.faults, burst=radio_loss))
             self.drone_configs[self.addresses[d.name]] = _with_start_fault(config, faults.get(d.name))
         self._names = {address: name for name, address in self.addresses.items()}
         self.seed = seed
         self.timing = RadioTiming(transaction_s=AIR_TIME_S if air_time_s is None else float(air_time_s))
+        self.radio_loss = radio_loss
+        self.world_exit_report = Path(world_exit_report) if world_exit_report is not None else \
+            default_world_exit_report()
         self.in_process = not process
         self.truth = truth
         self.world: Any = None  # a FakeWorld, or the WorldProcess speaking to one (same hook names)
@@ -163,9 +198,11 @@ class DryRun:
                 ).start()
                 command_port = self.server.command_port
         else:
+            self.world_exit_report.unlink(missing_ok=True)  # a report there is about an earlier run
             self.world = self._bodies = WorldProcess(
                 self.drone_configs, body_of_address, seed=self.seed,
                 natnet=natnet if self.mocap_kind == "natnet" else None, obstacles=self.mission.obstacles,
+                names=self._names, exit_report=self.world_exit_report,
             )
             fake_radio.register(RemoteWorld(self.world.radio, tuple(self.drone_configs), self.timing))
             command_port = self.world.natnet_command_port

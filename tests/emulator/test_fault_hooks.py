@@ -36,8 +36,10 @@ START = {"cf1": (0.5, -0.5, 0.0), "cf2": (-0.5, 0.5, 0.0)}
 
 @pytest.fixture(params=[False, True], ids=["in-process", "child-process"])
 def rig(request: pytest.FixtureRequest, toc_cache: Path) -> Iterator[DryRun]:
-    """A dry run of two drones on the ground at their starts, mocap over NatNet on loopback."""
-    with DryRun(parse_mission(MISSION), process=request.param, cache_dir=toc_cache) as dry_run:
+    """A dry run of two drones on the ground at their starts, mocap over NatNet on loopback; a lossless radio
+    (``radio_loss=None``), so each hook's figures are its own: the packet-loss test counts every lost attempt, and
+    a burst would lower the link quality it expects back at 100 % (the hook over bursts: test_burst_loss.py)."""
+    with DryRun(parse_mission(MISSION), process=request.param, cache_dir=toc_cache, radio_loss=None) as dry_run:
         yield dry_run
 
 

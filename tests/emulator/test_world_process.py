@@ -4,6 +4,7 @@ parent or a Ctrl-C."""
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import subprocess
@@ -143,6 +144,93 @@ def test_the_child_exits_when_its_parent_is_killed() -> None:
     finally:
         if parent.poll() is None:
             parent.kill()
+
+
+HOVERING_PARENT = """
+import sys, time
+from cflib.crazyflie import Crazyflie
+from cflib.crazyflie.syncCrazyflie import SyncCrazyflie
+from rpf_fly.emulator import fake_radio
+from rpf_fly.emulator.fake_world import FakeDroneConfig
+from rpf_fly.emulator.world_process import RemoteWorld, WorldProcess
+A1 = 0xE7E7E7E701
+process = WorldProcess({A1: FakeDroneConfig.at(0.0, 0.0)}, {A1: "cf1"}, natnet=None, names={A1: "cf1"},
+                       exit_report=sys.argv[1], orphan_cap_s=float(sys.argv[2]))
+fake_radio.register(RemoteWorld(process.radio, process.addresses))
+scf = SyncCrazyflie("fake://0/80/2M/E7E7E7E701", cf=Crazyflie(rw_cache=sys.argv[3]))
+scf.open_link()
+scf.cf.high_level_commander.takeoff(0.5, 1.0)  # a high-level plan: no setpoint watchdog
+while process.snapshot(A1).position[2] < 0.45:
+    time.sleep(0.05)
+print(process.pid, flush=True)
+time.sleep(60)
+"""
+
+
+def test_an_orphan_whose_drone_hovers_on_a_high_level_plan_exits_at_its_cap(tmp_path: Path) -> None:
+    """The firmware's high-level commander has no watchdog: a drone that took off with it hovers on after its
+    ground station died. The orphaned child must not linger for that: it reports the hovering drone at its cap and
+    exits."""
+    report = tmp_path / "exit.json"
+    cap_s = 2.0
+    parent = subprocess.Popen([sys.executable, "-c", HOVERING_PARENT, str(report), str(cap_s), str(tmp_path)],
+                              stdout=subprocess.PIPE, text=True)
+    try:
+        pid = int(parent.stdout.readline())  # type: ignore[union-attr]
+        os.kill(parent.pid, signal.SIGKILL)
+        killed = time.monotonic()
+        parent.wait(5)
+        assert wait_for(lambda: not _alive(pid), cap_s + 3.0), "the orphaned simulated drones outlived their cap"
+        gone = time.monotonic() - killed
+    finally:
+        if parent.poll() is None:
+            parent.kill()
+    assert cap_s <= gone < cap_s + 1.5
+    data = json.loads(report.read_text())
+    assert data["capped"] and not data["all_down"] and data["cap_s"] == cap_s and data["elapsed_s"] >= cap_s
+    drone = data["drones"]["cf1"]
+    assert drone["motors_on"] and not drone["at_rest"] and drone["motors_off_after_s"] is None
+    assert abs(drone["z"] - 0.5) < 0.02 and drone["control_source"] == "high-level"
+    assert drone["supervisor_state"] == "Flying" and not drone["locked"]
+
+
+FORKING_PARENT = """
+import os, sys, time
+from rpf_fly.emulator.fake_world import FakeDroneConfig
+from rpf_fly.emulator.world_process import WorldProcess
+process = WorldProcess({0xE7E7E7E701: FakeDroneConfig.at(0.0, 0.0)}, {0xE7E7E7E701: "cf1"}, natnet=None,
+                       exit_report=sys.argv[1])
+holder = os.fork()
+if holder == 0:  # inherits the control connection: the parent's death does not close it
+    time.sleep(30)
+    os._exit(0)
+print(process.pid, holder, flush=True)
+time.sleep(60)
+"""
+
+
+def test_an_orphan_notices_its_parent_is_gone_when_the_connection_stays_open(tmp_path: Path) -> None:
+    """A helper the flight's process forked holds the control connection open after the parent was killed: the
+    child notices by its parent pid instead, reports the drones (on the floor: at once) and exits."""
+    report = tmp_path / "exit.json"
+    parent = subprocess.Popen([sys.executable, "-c", FORKING_PARENT, str(report)], stdout=subprocess.PIPE, text=True)
+    holder = 0
+    try:
+        pid, holder = map(int, parent.stdout.readline().split())  # type: ignore[union-attr]
+        os.kill(parent.pid, signal.SIGKILL)
+        parent.wait(5)
+        assert wait_for(lambda: not _alive(pid), 3.0), "the orphan did not notice its parent was gone"
+        assert _alive(holder)  # the connection was still open
+    finally:
+        if parent.poll() is None:
+            parent.kill()
+        if holder:
+            os.kill(holder, signal.SIGKILL)
+    data = json.loads(report.read_text())
+    assert data["detected_by"] == "the parent process is gone (the child was re-parented)"
+    assert data["all_down"] and data["elapsed_s"] < 0.1
+    drone = data["drones"]["E7E7E7E701"]  # no names given: by address
+    assert drone["at_rest"] and drone["motors_off_after_s"] == 0.0 and drone["at_rest_after_s"] == 0.0
 
 
 def _alive(pid: int) -> bool:

@@ -1,30 +1,83 @@
-"""``rpf-fly fly --dry-run`` as a process: Ctrl-C lands everyone and closes the log; SIGKILL leaves a salvageable log."""
+"""``rpf-fly fly --dry-run`` as a process: Ctrl-C lands everyone and closes the log; SIGKILL leaves a salvageable log
+and the simulated drones fall by their firmware's watchdog, as real ones would; the simulated drones' process never
+outlives the flight for long."""
 
 from __future__ import annotations
 
+import json
+import math
 import os
 import signal
 import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import Optional
 
 from flight_harness import SHORT_MISSION
 from mcap.reader import make_reader
 
+from rpf_fly.emulator.world_process import ORPHAN_CAP_S
+from rpf_fly.flight.dry_run import world_exit_report_for
 from rpf_fly.log.reader import read_log, salvage
 
+WORLD_MODULE = "rpf_fly.emulator.world_process"
 
-def start_flight(tmp_path: Path) -> tuple[subprocess.Popen, Path]:
+
+def start_flight(tmp_path: Path, *, goal_x: float = 1.5, timeout_s: int = 60,
+                 stderr: Optional[Path] = None) -> tuple[subprocess.Popen, Path]:
+    """``rpf-fly fly`` of the short mission (its goals at ``goal_x``) as a subprocess; stderr piped, or to a file."""
     mission = tmp_path / "short.yaml"
-    mission.write_text(SHORT_MISSION.replace("timeout_s: 30", "timeout_s: 60").replace("goal: [1.0,", "goal: [1.5,"))
+    mission.write_text(SHORT_MISSION.replace("timeout_s: 30", f"timeout_s: {timeout_s}")
+                       .replace("goal: [1.0,", f"goal: [{goal_x},"))
     log = tmp_path / "flight.mcap"
     env = dict(os.environ, PYTHONUNBUFFERED="1")
+    err = open(stderr, "w") if stderr is not None else subprocess.PIPE  # noqa: SIM115 - the child owns it
     proc = subprocess.Popen(
         [sys.executable, "-m", "rpf_fly", "fly", str(mission), "--dry-run", "--no-console", "--log", str(log)],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=tmp_path,
+        stdout=subprocess.PIPE if stderr is None else subprocess.DEVNULL, stderr=err, text=True, env=env,
+        cwd=tmp_path,
     )
+    if stderr is not None:
+        err.close()  # type: ignore[union-attr]
     return proc, log
+
+
+def world_process_of(parent: int, timeout_s: float = 30.0) -> int:
+    """The pid of the simulated drones' process the flight ``parent`` started (from /proc, while it runs)."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        for entry in Path("/proc").iterdir():
+            if not entry.name.isdigit():
+                continue
+            try:
+                stat = (entry / "stat").read_text()
+                cmdline = (entry / "cmdline").read_bytes().replace(b"\0", b" ").decode()
+            except OSError:
+                continue
+            if int(stat.rpartition(")")[2].split()[1]) == parent and WORLD_MODULE in cmdline:
+                return int(entry.name)
+        time.sleep(0.05)
+    raise AssertionError(f"process {parent} started no {WORLD_MODULE}")
+
+
+def alive(pid: int) -> bool:
+    """True while ``pid`` runs (a zombie, dead but not yet reaped by whoever adopted it, counts as gone)."""
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return False
+    return stat.rpartition(")")[2].split()[0] != "Z"
+
+
+def wait_gone(pid: int, timeout_s: float) -> Optional[float]:
+    """Seconds until ``pid`` is gone, None if it still runs after ``timeout_s``."""
+    start = time.monotonic()
+    while time.monotonic() - start < timeout_s:
+        if not alive(pid):
+            return time.monotonic() - start
+        time.sleep(0.02)
+    return None
 
 
 def wait_until_flying(proc: subprocess.Popen, timeout_s: float = 60.0) -> list[str]:
@@ -42,11 +95,14 @@ def wait_until_flying(proc: subprocess.Popen, timeout_s: float = 60.0) -> list[s
 
 def test_sigint_lands_every_drone_and_closes_the_log(tmp_path):
     proc, log = start_flight(tmp_path)
+    world = world_process_of(proc.pid)
     wait_until_flying(proc)
     time.sleep(1.0)
     proc.send_signal(signal.SIGINT)
     out, err = proc.communicate(timeout=60)
     assert proc.returncode == 130, err
+    assert not alive(world)  # closed by the flight (its stderr pipe is closed too: communicate waited for it) ...
+    assert not world_exit_report_for(log).exists()  # ... not orphaned
     data = read_log(log)
     assert not data.truncated  # finished file: summary and footer written
     with open(log, "rb") as f:
@@ -60,12 +116,41 @@ def test_sigint_lands_every_drone_and_closes_the_log(tmp_path):
     assert "landed_early" in out
 
 
-def test_sigkill_leaves_a_salvageable_log(tmp_path):
+def test_sigkill_the_drones_fall_by_the_firmware_watchdog_and_the_log_is_salvageable(tmp_path):
+    """A real Crazyflie whose ground station is SIGKILLed gets no more setpoints: it levels out 0.5 s after the last
+    one and cuts its motors at 2 s, then falls. The simulated drones' process notices its parent's death, keeps
+    simulating until every drone lies on the floor, writes its exit report next to the log and exits by itself."""
     proc, log = start_flight(tmp_path)
-    wait_until_flying(proc)
+    world = world_process_of(proc.pid)
+    wait_until_flying(proc)  # the planning phase: every drone streams position setpoints
     time.sleep(2.5)
     proc.send_signal(signal.SIGKILL)
+    killed = time.monotonic()
     proc.wait(timeout=10)
+    exited = wait_gone(world, ORPHAN_CAP_S + 3.0)
+    assert exited is not None, "the simulated drones' process outlived its cap"
+    report = json.loads(world_exit_report_for(log).read_text())
+    assert report["all_down"] and not report["capped"] and report["world_pid"] == world
+    assert report["detected_by"] in ("the control connection closed without a close call",  # whichever is first
+                                     "the parent process is gone (the child was re-parented)")
+    assert report["parent_death_monotonic_s"] - killed < 0.5  # noticed at once
+    assert exited < report["elapsed_s"] + 1.5  # and exited right after the last drone came down
+    assert set(report["drones"]) == {"cf1", "cf2", "cf3"}
+    for name, drone in report["drones"].items():
+        assert drone["motors_on_at_death"] and drone["z_at_death"] > 0.4, (name, drone)
+        assert drone["control_source_at_death"].startswith("crtp-"), (name, drone)  # streamed setpoints
+        assert not drone["motors_on"] and drone["at_rest"] and not drone["crashed"], (name, drone)
+        assert drone["z"] == drone["floor_z"] == 0.0, (name, drone)
+        assert drone["supervisor_state"] == "Locked" and drone["locked"], (name, drone)  # the watchdog's lock
+        # the firmware's watchdog, not an instant cut: 2 s after the last setpoint (sent up to 0.1 s before death)
+        assert 0.5 < drone["motors_off_after_s"] < 2.5, (name, drone)
+        assert drone["motors_off_after_s"] + drone["setpoint_age_at_death_s"] > 1.9, (name, drone)
+        # then a free fall from where it was: not quite 0.5 m, as without extpos the estimate it held drifted for
+        # those 2 s (docs/radio.md: 12-21 cm), and the true height with it
+        cut_z = drone["z_at_motors_off"]
+        assert 0.25 < cut_z < 0.75, (name, drone)
+        fall = drone["at_rest_after_s"] - drone["motors_off_after_s"]
+        assert abs(fall - math.sqrt(2.0 * cut_z / 9.81)) < 0.03, (name, drone)  # to the world step (10 ms)
     data = read_log(log)
     assert data.truncated
     poses = data.messages("/mocap/cf1")
@@ -80,6 +165,18 @@ def test_sigkill_leaves_a_salvageable_log(tmp_path):
     assert summary.statistics.message_count == data.message_count
     assert read_log(fixed).messages("/mocap/cf1")[-1].sequence == sequences[-1]
     assert result is not None
+
+
+def test_a_normal_exit_closes_the_simulated_drones_process(tmp_path):
+    """A flight that ends by itself closes its world process before it exits: nothing left running, no report."""
+    stderr = tmp_path / "stderr.txt"
+    proc, log = start_flight(tmp_path, goal_x=-0.6, timeout_s=30, stderr=stderr)
+    world = world_process_of(proc.pid)
+    assert proc.wait(timeout=60) == 0, stderr.read_text()
+    gone = wait_gone(world, 1.0)
+    assert gone is not None and gone < 0.5, "the simulated drones' process outlived a normal exit"
+    assert not world_exit_report_for(log).exists()
+    assert "rpf-fly dry run: the flight's process died" not in stderr.read_text()
 
 
 def test_sigint_twice_stops_every_motor_and_closes_the_log(tmp_path):
