@@ -72,6 +72,12 @@ def fly(
     mocap: str = typer.Option("natnet", "--mocap", help="Dry run only: natnet (emulator over UDP) or sim."),
     console: bool = typer.Option(True, "--console/--no-console", help="Live status table while flying."),
     faults: Optional[Path] = typer.Option(None, "--faults", help="Dry run only: a fault schedule (docs/faults.md)."),
+    foxglove: bool = typer.Option(False, "--foxglove", help="Serve the flight live to Foxglove over WebSocket "
+                                  "(ws://localhost:8765; the live extra; docs/foxglove.md)."),
+    foxglove_port: Optional[int] = typer.Option(None, "--foxglove-port", help="Port of the live view (default 8765; "
+                                                "0: any free port). Implies --foxglove."),
+    foxglove_host: Optional[str] = typer.Option(None, "--foxglove-host", help="Address the live view listens on "
+                                                "(default 127.0.0.1; 0.0.0.0: every network). Implies --foxglove."),
 ) -> None:
     """Fly MISSION: NatNet mocap and cflib radios as the mission says, or simulated drones with --dry-run."""
     loaded = _load(mission)
@@ -88,7 +94,15 @@ def fly(
         raise fail(f"--mocap: expected natnet or sim, got {mocap!r}")
     log_path = log or Path("flights") / f"{loaded.name}-{datetime.now():%Y%m%d-%H%M%S}.mcap"
     log_path.parent.mkdir(parents=True, exist_ok=True)
-    code = _run_flight(loaded, factory, dry_run, mocap, log_path, console, schedule)
+    from rpf_fly.cli.live_opts import start_live
+
+    live = start_live(foxglove, foxglove_port, foxglove_host)
+    try:
+        code = _run_flight(loaded, factory, dry_run, mocap, log_path, console, schedule, live_view=live)
+    finally:
+        if live is not None:
+            live.close()
+            typer.echo(live.summary())
     raise typer.Exit(code)
 
 
@@ -103,7 +117,7 @@ def _load_faults(path: Path, mission):  # type: ignore[no-untyped-def]
 
 
 def _run_flight(mission, factory, dry_run: bool, mocap_kind: str, log_path: Path, console: bool,  # type: ignore[no-untyped-def]
-                schedule=None) -> int:
+                schedule=None, live_view=None) -> int:
     from rpf_fly.flight.dry_run import DryRun
     from rpf_fly.flight.fault_injection import FaultInjection
     from rpf_fly.flight.session import run_flight
@@ -121,7 +135,7 @@ def _run_flight(mission, factory, dry_run: bool, mocap_kind: str, log_path: Path
     if injection is not None:
         factory = injection.planner_factory(factory)
     kwargs = dict(status_hook=live.update if live else None, event_sinks=(live.event if live else _print_event,),
-                  on_loop=on_loop)
+                  on_loop=on_loop, live=live_view)
     try:
         with (live if live is not None else _nothing()):
             if dry_run:
