@@ -8,7 +8,8 @@ its own process (as the Foxglove app would be) connects before the drones do, su
 advertises and reads every message until the flight ends. Measured by the flight loop itself (``LoopStats``, as
 bench_flight measures it): latency from a mocap frame's receipt to each setpoint handed to the radio driver, p50 and
 p99; tick jitter p99; overruns. Also: the writer thread's CPU time (it now hands every message to the server, so the
-live view's own cost on our side shows there), and the messages the client received against those served.
+live view's own cost on our side shows there), the flight process's CPU time (with the server's own threads), the client's, and the
+messages the client received against those served.
 
 The dry run's radio air time is off by default (``--air-time-ms 0``): at a Crazyradio's 1 ms a transaction, 10 drones
 at 100 Hz ask one dongle for more than it carries, extpos reaches some drones late and their supervisors cut their
@@ -68,7 +69,8 @@ async def main(port):
                 size += len(frame)
     except websockets.ConnectionClosed:
         pass
-    print(json.dumps({"messages": messages, "bytes": size, "channels": len(channels)}), flush=True)
+    print(json.dumps({"messages": messages, "bytes": size, "channels": len(channels),
+                      "cpu_s": time.process_time()}), flush=True)
 
 asyncio.run(main(int(sys.argv[1])))
 """
@@ -88,10 +90,10 @@ def run_once(drones: int, rate: float, planner: str, live: bool, air_time_s: flo
         assert client.stdout is not None and client.stdout.readline().strip() == "connected"
     try:
         with tempfile.TemporaryDirectory() as tmp, DryRun(mission, air_time_s=air_time_s) as rig:
-            wall0 = time.perf_counter()
+            wall0, cpu0 = time.perf_counter(), time.process_time()
             report = run_flight(mission, lambda d: make_planner(mission.planner, obstacles), Path(tmp) / "bench.mcap",
                                 rig=rig, on_loop=loops.append, live=view)
-            wall = time.perf_counter() - wall0
+            wall, cpu = time.perf_counter() - wall0, time.process_time() - cpu0
     finally:
         if view is not None:
             view.close()
@@ -102,11 +104,13 @@ def run_once(drones: int, rate: float, planner: str, live: bool, air_time_s: flo
         "latency_p99_ms": summary["latency_p99_s"] * 1e3, "tick_jitter_p99_ms": summary["tick_jitter_p99_s"] * 1e3,
         "overruns": summary["overruns"], "ticks": summary["ticks"], "log_dropped": log.dropped,
         "writer_cpu_pct": 100 * log.writer_cpu_s / wall, "log_messages": log.written,
+        "process_cpu_pct": 100 * cpu / wall, "wall_s": wall,
     }
     if view is not None and client is not None:
         out, _ = client.communicate(timeout=30)
         received = json.loads(out.strip().splitlines()[-1])
         result.update(live_published=view.published, live_received=received["messages"],
+                      client_cpu_pct=100 * received["cpu_s"] / wall, live_bytes=received["bytes"],
                       live_channels=received["channels"], live_slow_client_reports=view.slow_client_reports,
                       live_failed=view.failed)
     return result
@@ -139,17 +143,26 @@ def main() -> int:
         return 0
     print(f"{args.drones} drones, planning at {args.rate:g} Hz, planner {args.planner}, radio air time "
           f"{args.air_time_ms:g} ms, {args.pairs} interleaved pairs; latency: mocap frame -> setpoint handed to the radio")
-    print("| run | --foxglove | p50 | p99 | tick jitter p99 | overruns | writer thread | client received / served |")
-    print("|---|---|---|---|---|---|---|---|")
+    print("| pair | --foxglove | p50 | p99 | tick jitter p99 | overruns | all reached | writer thread | flight process "
+          "| client process | client received / served |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     for k, r in enumerate(runs):
-        client = f"{r['live_received']} / {r['live_published']}" if r["live"] else "-"
+        client = f"{r['client_cpu_pct']:.1f} % | {r['live_received']} / {r['live_published']}" if r["live"] else "- | -"
         print(f"| {k // 2 + 1} | {'yes' if r['live'] else 'no'} | {r['latency_p50_ms']:.3f} ms | "
               f"{r['latency_p99_ms']:.3f} ms | {r['tick_jitter_p99_ms']:.2f} ms | {r['overruns']} | "
-              f"{r['writer_cpu_pct']:.2f} % | {client} |")
+              f"{'yes' if r['success'] else 'no'} | {r['writer_cpu_pct']:.2f} % | {r['process_cpu_pct']:.1f} % | "
+              f"{client} |")
     for live in (False, True):
+        client = f"{med(live, 'client_cpu_pct'):.1f} % | " if live else "- | "
         print(f"| median | {'yes' if live else 'no'} | {med(live, 'latency_p50_ms'):.3f} ms | "
               f"{med(live, 'latency_p99_ms'):.3f} ms | {med(live, 'tick_jitter_p99_ms'):.2f} ms | "
-              f"{med(live, 'overruns'):.0f} | {med(live, 'writer_cpu_pct'):.2f} % | |")
+              f"{med(live, 'overruns'):.0f} | | {med(live, 'writer_cpu_pct'):.2f} % | "
+              f"{med(live, 'process_cpu_pct'):.1f} % | {client} |")
+    diffs = {key: [next(r for r in pair if r["live"])[key] - next(r for r in pair if not r["live"])[key]
+                   for pair in zip(runs[::2], runs[1::2])] for key in ("latency_p50_ms", "latency_p99_ms")}
+    for key, label in (("latency_p50_ms", "p50"), ("latency_p99_ms", "p99")):
+        print(f"{label} with minus without, per pair: {', '.join(f'{d:+.3f}' for d in diffs[key])} ms; "
+              f"median {statistics.median(diffs[key]):+.3f} ms")
     print(f"every run succeeded: {all(r['success'] for r in runs)}; log drops: {sum(r['log_dropped'] for r in runs)}; "
           f"slow-client reports: {sum(r.get('live_slow_client_reports', 0) for r in runs)}")
     return 0
