@@ -41,5 +41,6 @@ def start_live(enabled: bool, port: Optional[int], host: Optional[str]) -> Optio
                f"layout {LAYOUT})", err=True)
     if live.host not in ("127.0.0.1", "localhost", "::1"):
         typer.echo(f"live: warning: listening on {live.host}: anyone who can reach this machine on port {live.port} "
-                   "sees the flight (read only, no password; docs/foxglove.md)", err=True)
+                   f"sees the flight (read only, no password; docs/foxglove.md); from elsewhere connect to "
+                   f"ws://<this machine's address>:{live.port}", err=True)
     return live
