@@ -74,6 +74,12 @@ def fly(
     faults: Optional[Path] = typer.Option(None, "--faults", help="Dry run only: a fault schedule (docs/faults.md)."),
     radio_loss: bool = typer.Option(True, "--radio-loss/--no-radio-loss",
                                     help="Dry run only: bursty radio loss on every link (docs/radio.md)."),
+    foxglove: bool = typer.Option(False, "--foxglove", help="Serve the flight live to Foxglove over WebSocket "
+                                  "(ws://localhost:8765; the live extra; docs/foxglove.md)."),
+    foxglove_port: Optional[int] = typer.Option(None, "--foxglove-port", help="Port of the live view (default 8765; "
+                                                "0: any free port). Implies --foxglove."),
+    foxglove_host: Optional[str] = typer.Option(None, "--foxglove-host", help="Address the live view listens on "
+                                                "(default 127.0.0.1; 0.0.0.0: every network). Implies --foxglove."),
 ) -> None:
     """Fly MISSION: NatNet mocap and cflib radios as the mission says, or simulated drones with --dry-run."""
     loaded = _load(mission)
@@ -90,7 +96,15 @@ def fly(
         raise fail(f"--mocap: expected natnet or sim, got {mocap!r}")
     log_path = log or Path("flights") / f"{loaded.name}-{datetime.now():%Y%m%d-%H%M%S}.mcap"
     log_path.parent.mkdir(parents=True, exist_ok=True)
-    code = _run_flight(loaded, factory, dry_run, mocap, log_path, console, schedule, radio_loss)
+    from rpf_fly.cli.live_opts import start_live
+
+    live = start_live(foxglove, foxglove_port, foxglove_host)
+    try:
+        code = _run_flight(loaded, factory, dry_run, mocap, log_path, console, schedule, radio_loss, live_view=live)
+    finally:
+        if live is not None:
+            live.close()
+            typer.echo(live.summary())
     raise typer.Exit(code)
 
 
@@ -105,7 +119,7 @@ def _load_faults(path: Path, mission):  # type: ignore[no-untyped-def]
 
 
 def _run_flight(mission, factory, dry_run: bool, mocap_kind: str, log_path: Path, console: bool,  # type: ignore[no-untyped-def]
-                schedule=None, radio_loss: bool = True) -> int:
+                schedule=None, radio_loss: bool = True, live_view=None) -> int:
     from rpf_fly.flight.dry_run import RADIO_LOSS, DryRun, world_exit_report_for
     from rpf_fly.flight.fault_injection import FaultInjection
     from rpf_fly.flight.session import run_flight
@@ -123,7 +137,7 @@ def _run_flight(mission, factory, dry_run: bool, mocap_kind: str, log_path: Path
     if injection is not None:
         factory = injection.planner_factory(factory)
     kwargs = dict(status_hook=live.update if live else None, event_sinks=(live.event if live else _print_event,),
-                  on_loop=on_loop)
+                  on_loop=on_loop, live=live_view)
     try:
         with (live if live is not None else _nothing()):
             if dry_run:

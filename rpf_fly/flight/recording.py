@@ -3,7 +3,9 @@
 Converts the loop's monotonic seconds to nanoseconds since the Unix epoch (one offset taken at the start), and
 the loop's objects to the log's topics: poses and /tf at the mocap rate, planner steps and setpoints at the
 planning rate, status at 10 Hz, events as they happen, the scene once; in a dry run also the simulated world's
-truth (``/truth/<drone>``, every world step, fed by :class:`rpf_fly.flight.truth.TruthFeed`).
+truth (``/truth/<drone>``, every world step, fed by :class:`rpf_fly.flight.truth.TruthFeed`). With a ``sink`` (the
+live view, :class:`rpf_fly.log.live.LiveView`), every message written is also handed to it by the log's writer
+thread, the same bytes as the file's.
 """
 
 from __future__ import annotations
@@ -18,7 +20,7 @@ from rpf_fly.flight.events import FlightEvent
 from rpf_fly.flight.poses import TrackedPose
 from rpf_fly.flight.truth import TruthBatch, TruthFeed
 from rpf_fly.log import schemas as S
-from rpf_fly.log.writer import FlightLog
+from rpf_fly.log.writer import FlightLog, Sink
 from rpf_fly.mission.model import Mission
 from rpf_fly.planning.obstacles import FAR
 from rpf_fly.planning.planner import PlanStep
@@ -40,13 +42,16 @@ class McapRecorder:
 
     ``truth``: a dry run's truth source (:meth:`rpf_fly.flight.dry_run.DryRun.truth_samples`); its feed runs from
     here until :meth:`close`, so ``/truth`` covers the whole log and ends before the log does. None: no truth (a
-    real flight has none)."""
+    real flight has none).
+
+    ``sink``: the log's sink (:class:`~rpf_fly.log.writer.FlightLog`), e.g. :meth:`rpf_fly.log.live.LiveView.publish`:
+    it sees what the file holds, on the writer thread, so the loop's cost is unchanged."""
 
     def __init__(self, path: str | Path, mission: Mission, seed: int = 0, source: str = "flight",
-                 truth: Optional[Callable[[], TruthBatch]] = None):
+                 truth: Optional[Callable[[], TruthBatch]] = None, sink: Optional[Sink] = None):
         self.mission = mission
         self.log = FlightLog(path, S.mission_metadata(mission, seed, source=source), S.scenario_metadata(mission),
-                             poll_interval_s=POLL_FALLBACK_S)
+                             poll_interval_s=POLL_FALLBACK_S, sink=sink)
         self._last_drain_s = -math.inf
         self._offset_s = time.time() - time.monotonic()
         self._sensing = mission.planner.sensing_range

@@ -17,6 +17,7 @@ from rpf_fly.mocap.frame import MocapSource
 
 if TYPE_CHECKING:  # the dry run's emulators stay out of a real flight's imports
     from rpf_fly.flight.dry_run import DryRun
+    from rpf_fly.log.live import LiveView
 
 DEFAULT_TOC_CACHE = Path.home() / ".cache" / "rpf_fly" / "toc"
 
@@ -67,11 +68,15 @@ def run_flight(
     event_sinks: tuple[EventSink, ...] = (),
     on_loop: Optional[Callable[[FlightLoop], None]] = None,
     seed: int = 0,
+    live: Optional["LiveView"] = None,
 ) -> FlightReport:
     """Fly ``mission`` (on ``rig``'s simulated drones when given; the rig must be entered). ``on_loop`` receives the
-    loop before it runs (signal handlers, fault injection)."""
+    loop before it runs (signal handlers, fault injection). ``live``: a started live view, fed by the log's writer
+    thread with every message the log writes (needs ``log_path``; the caller closes it after the flight)."""
     from rpf_fly.radio.cflib_backend import CflibBackend
 
+    if live is not None and not log_path:
+        raise ValueError("the live view serves what the flight log writes: give a log path")
     if rig is not None:
         backend, source, uris = CflibBackend(cache_dir=rig.cache_dir), rig.mocap, rig.uris
     else:
@@ -79,7 +84,8 @@ def run_flight(
     recorder = None
     if log_path:
         truth = rig.truth_samples if rig is not None and rig.truth else None  # only a dry run has a truth
-        recorder = McapRecorder(log_path, mission, seed, source="dry-run" if rig else "flight", truth=truth)
+        recorder = McapRecorder(log_path, mission, seed, source="dry-run" if rig else "flight", truth=truth,
+                                sink=live.publish if live is not None else None)
     try:
         try:
             loop = FlightLoop(mission, backend, source, planner_factory, uris=uris, recorder=recorder,

@@ -22,6 +22,10 @@ fresh arrays). Timestamps are integer nanoseconds since the Unix epoch: ``t_ns``
 (when the data was created: mocap frame time, planner tick); the log time is the ``clock()`` at the call (when
 recorded), or ``t_ns`` itself with ``clock=None`` (simulated runs) and for ``/truth`` (its samples arrive in
 batches).
+
+A ``sink`` (the live view, :mod:`rpf_fly.log.live`) sees every message the writer wrote, right after it went into
+the file, on the writer thread: ``sink(topic, log_time, data)`` with the very bytes of the file. So whatever else
+serves the flight shows what the log holds (no second encoding), and the flight loop never waits on it.
 """
 
 from __future__ import annotations
@@ -48,6 +52,10 @@ POLL_INTERVAL_S = 0.05
 CHUNK_SIZE = 1 << 20
 
 encode = S.encode
+
+Sink = Callable[[str, int, bytes], None]
+"""``sink(topic, log_time_ns, data)``: called on the writer thread for each message written (see :class:`FlightLog`)."""
+
 
 def _strings(meta: Mapping[str, Any]) -> dict[str, str]:
     """Metadata values as strings (MCAP metadata is string to string): non-strings as JSON."""
@@ -78,6 +86,10 @@ class FlightLog:
     ``clock``: the log-time source (ns since the Unix epoch; None: log time = ``t_ns``). ``block_when_full``:
     wait for room instead of dropping, for offline writers (simulated runs) only, never in a flight.
     ``poll_interval_s``: how often the writer drains the queue by itself (see :meth:`drain_soon`).
+    ``sink``: called on the writer thread with each message written, ``(topic, log_time, data)``, the bytes of the
+    file (the live view). It must not block: it runs between writes. An exception it raises loses that message for
+    the sink only (counted in :attr:`sink_failed`, the first one logged), never the log. Messages the queue dropped,
+    and everything after a write error, never reach it.
     """
 
     def __init__(
@@ -93,6 +105,7 @@ class FlightLog:
         name: str = "rpf_fly",
         block_when_full: bool = False,
         poll_interval_s: float = POLL_INTERVAL_S,
+        sink: Optional[Sink] = None,
     ):
         from rpf_fly import __version__
 
@@ -105,6 +118,8 @@ class FlightLog:
         self.error: Optional[BaseException] = None
         self.written = 0
         self.failed = 0
+        self.sink_failed = 0
+        self._sink = sink
         self.writer_cpu_s = 0.0
         self.queue_peak = 0
         self._clock = clock
@@ -336,6 +351,18 @@ class FlightLog:
             self.written += 1
         except Exception as err:  # noqa: BLE001 - disk full, closed file: stop writing, never raise
             self._fail(err)
+            return
+        if self._sink is not None:
+            self._tee(topic, int(log_time), data)
+
+    def _tee(self, topic: str, log_time: int, data: bytes) -> None:
+        """Hand one written message to the sink; its failure loses the message for the sink only."""
+        try:
+            self._sink(topic, log_time, data)  # type: ignore[misc]
+        except Exception as err:  # noqa: BLE001 - the live view must never stop the log
+            self.sink_failed += 1
+            if self.sink_failed == 1:
+                logger.warning("flight log %s: the sink failed on a %s message: %s", self.path, topic, err)
 
     def _fail(self, err: BaseException) -> None:
         if self.error is None:
@@ -348,6 +375,7 @@ class FlightLog:
         pop = queue.popleft
         channels = self._channels
         add = self._writer.add_message
+        sink = self._sink
         written = 0
         try:
             while self.error is None:
@@ -372,12 +400,14 @@ class FlightLog:
                         self._malformed(topic, err)
                         continue
                     try:
-                        add(channels.get(topic) or self._channel(topic), int(t_ns if log_time is None else log_time),
-                            data, t_ns, sequence)
+                        at = int(t_ns if log_time is None else log_time)
+                        add(channels.get(topic) or self._channel(topic), at, data, t_ns, sequence)
                         written += 1
                     except Exception as err:  # noqa: BLE001 - disk full, closed file: stop writing, never raise
                         self._fail(err)
                         break
+                    if sink is not None:
+                        self._tee(topic, at, data)
             with self._push_lock:  # logging stopped after an error: discard, never grow
                 self._popped = self._pushed
                 queue.clear()
