@@ -286,6 +286,17 @@ def _planner_kind(c: _Checker, n: YNode) -> str:
     return c.choice(n, m.PLANNER_KINDS, what="planner kind")
 
 
+def _mocap_kind(c: _Checker, n: YNode) -> str:
+    """`natnet`, `sim` or `motioncapture`; a system the motioncapture package knows (`kind: vicon`) is pointed there."""
+    from rpf_fly.mocap.motioncapture_options import TYPES
+
+    kinds = ("natnet", "sim", "motioncapture")
+    if isinstance(n.value, str) and n.value in TYPES:
+        raise c.error(n, n.path, f"expected one of {_options(kinds)}, got {n.value!r} ({n.value} is a type of the "
+                      f"motioncapture package: kind: motioncapture, type: {n.value})")
+    return c.choice(n, kinds)
+
+
 # YAML key -> (dataclass field, reader)
 RATE_HZ = _Bound(
     f"at least {m.MIN_RATE_HZ:g} Hz, so the loop watchdog acts before the Crazyflie's "
@@ -309,7 +320,7 @@ PLANNER_SPEC: dict[str, tuple[str, Reader]] = {
     "lambda": ("lam", _num(NON_NEGATIVE)),
 }
 MOCAP_SPEC: dict[str, tuple[str, Reader]] = {
-    "kind": ("kind", _choice(("natnet", "sim"))),
+    "kind": ("kind", lambda c, n: _mocap_kind(c, n)),
     "server": ("server", lambda c, n: c.host(n)),
     "local_ip": ("local_ip", lambda c, n: c.ip(n)),
     "multicast": ("multicast", lambda c, n: c.boolean(n)),
@@ -322,7 +333,13 @@ MOCAP_SPEC: dict[str, tuple[str, Reader]] = {
     "rate_hz": ("rate_hz", _num(POSITIVE)),
     "dropout": ("dropout", _num(FRACTION)),
     "timeout_s": ("timeout_s", _num(POSITIVE)),
+    # kind motioncapture: read as they are here, checked against the library's table in _MissionParser.mocap
+    "type": ("system", lambda c, n: n),
+    "hostname": ("hostname", lambda c, n: n),
+    "options": ("options", lambda c, n: n),
 }
+MOTIONCAPTURE_KEYS = ("type", "hostname", "options")
+"""The `mocap` keys of kind `motioncapture` only."""
 RADIO_SPEC: dict[str, tuple[str, Reader]] = {
     "kind": ("kind", _choice(("cflib",))),
     "min_battery_v": ("min_battery_v", _num(POSITIVE)),
@@ -390,11 +407,50 @@ class _MissionParser(_Checker):
 
     def mocap(self, node: YNode) -> m.MocapSettings:
         settings: m.MocapSettings = self.settings(node, m.MocapSettings, MOCAP_SPEC)
+        entries: dict[str, YNode] = node.value  # type: ignore[assignment]
         if settings.command_port == settings.data_port:
-            entries: dict[str, YNode] = node.value  # type: ignore[assignment]
             at = entries.get("data_port") or entries["command_port"]
             raise self.error(at, at.path, f"command_port and data_port must differ, both are {settings.data_port}")
+        if settings.kind == "motioncapture":
+            return self.motioncapture(node, entries, settings)
+        for key in MOTIONCAPTURE_KEYS:
+            if key in entries:
+                raise self.error(entries[key].key_line, entries[key].path,
+                                 f"only for kind 'motioncapture' (this mocap is kind {settings.kind!r})")
         return settings
+
+    def motioncapture(self, node: YNode, entries: dict[str, YNode],
+                      settings: m.MocapSettings) -> m.MocapSettings:
+        """`type`, `hostname` and `options` of kind `motioncapture`, checked against libmotioncapture's own table
+        (rpf_fly/mocap/motioncapture_options.py): the library itself ignores unknown keys and misreads values."""
+        from rpf_fly.mocap import motioncapture_options as mc
+
+        if "type" not in entries:
+            raise self.error(node.key_line, child_path(node.path, "type"),
+                             f"missing required key: kind 'motioncapture' needs the system's type, one of "
+                             f"{', '.join(mc.TYPES)}")
+        system = self.choice(entries["type"], tuple(mc.TYPES), what="motioncapture type")
+        hostname = None
+        if "hostname" in entries:
+            at = entries["hostname"]
+            try:
+                hostname = mc.check_hostname(system, at.value)
+            except ValueError as err:
+                raise self.error(at, at.path, str(err)) from None
+        options: list[tuple[str, str]] = []
+        if "options" in entries:
+            at = entries["options"]
+            if not at.is_map:
+                raise self.bad(at, f"a mapping of {system} options")
+            for key, value in at.value.items():  # type: ignore[union-attr]
+                if value.is_map or value.is_seq:
+                    raise self.bad(value, "a scalar (text, number, true or false)")
+                try:
+                    options.append((key, mc.check_option(system, key, value.value)))
+                except ValueError as err:
+                    where = value.key_line if str(err).startswith(("unknown option", "give the host")) else value
+                    raise self.error(where, value.path, str(err)) from None
+        return dataclasses.replace(settings, system=system, hostname=hostname, options=tuple(options))
 
     def obstacles(self, node: YNode) -> tuple[m.Obstacle, ...]:
         if not node.is_seq:

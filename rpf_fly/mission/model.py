@@ -84,9 +84,11 @@ class PlannerSettings:
 
 @dataclass(frozen=True)
 class MocapSettings:
-    """Where poses come from. ``natnet``: an OptiTrack Motive server; ``sim``: simulated poses."""
+    """Where poses come from. ``natnet``: an OptiTrack Motive server; ``sim``: simulated poses; ``motioncapture``:
+    a system of the ``motioncapture`` package (libmotioncapture: Vicon, Qualisys, VRPN, OptiTrack, a mock), run in a
+    child process (docs/mocap.md)."""
 
-    kind: Literal["natnet", "sim"] = "sim"
+    kind: Literal["natnet", "sim", "motioncapture"] = "sim"
     server: str = "127.0.0.1"
     local_ip: str = "0.0.0.0"
     multicast: bool = True
@@ -99,6 +101,12 @@ class MocapSettings:
     rate_hz: float = 100.0
     dropout: float = 0.0
     timeout_s: float = 0.5
+    system: Optional[str] = None
+    """``motioncapture``: the library's type (YAML key ``type``), e.g. ``vicon``; None for the other kinds."""
+    hostname: Optional[str] = None
+    """``motioncapture``: the system's host (None: the library's default, ``localhost``; ``mock`` has none)."""
+    options: tuple[tuple[str, str], ...] = ()
+    """``motioncapture``: the library's other options, checked and as the text its ``connect()`` gets."""
 
 
 @dataclass(frozen=True)

@@ -367,7 +367,9 @@ def test_unknown_planner_kind_case(fail):
     ("planner", "preset", "robus", "expected one of 'robust', 'paper', got 'robus' (did you mean 'robust'?)"),
     ("planner", "neighbour_aggregate", "average", "expected one of 'sum', 'mean', got 'average'"),
     ("mocap", "up_axis", "x", "expected one of 'y', 'z', got 'x'"),
-    ("mocap", "kind", "vicon", "expected one of 'natnet', 'sim', got 'vicon'"),
+    ("mocap", "kind", "vicon", "expected one of 'natnet', 'sim', 'motioncapture', got 'vicon' (vicon is a type of the "
+     "motioncapture package: kind: motioncapture, type: vicon)"),
+    ("mocap", "kind", "vrpm", "expected one of 'natnet', 'sim', 'motioncapture', got 'vrpm'"),
     ("radio", "kind", "crazyradio", "expected one of 'cflib', got 'crazyradio'"),
     ("radio", "extpos", "pose", "expected one of 'extpos', 'extpose', got 'pose'"),
 ])
