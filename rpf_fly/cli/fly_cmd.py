@@ -35,7 +35,16 @@ def _resolve_server(mission, mission_path: Path) -> None:  # type: ignore[no-unt
     try:
         resolve_mocap_server(mission)
     except UnresolvableServer as err:
-        raise fail(f"{mission_path}:0: mocap.server: {err}")
+        raise fail(f"{mission_path}:0: {err.field}: {err}")
+
+
+def _require_library(mission, dry_run: bool, mocap: Optional[str] = None) -> None:  # type: ignore[no-untyped-def]
+    """A flight that needs the optional motioncapture package and lacks it: one line naming the extra, exit 1."""
+    from rpf_fly.flight.session import motioncapture_missing
+
+    missing = motioncapture_missing(mission, dry_run, mocap)
+    if missing:
+        raise fail(f"mocap: {missing}", code=1)
 
 
 def _check_radio_budget(mission, mission_path: Path) -> list:  # type: ignore[no-untyped-def]
@@ -69,7 +78,10 @@ def fly(
     mission: Path = typer.Argument(..., help="Mission YAML file."),
     dry_run: bool = typer.Option(False, "--dry-run", help="Simulated drones through the same stack (fake radio)."),
     log: Optional[Path] = typer.Option(None, "--log", help="MCAP flight log (default flights/<mission>-<time>.mcap)."),
-    mocap: str = typer.Option("natnet", "--mocap", help="Dry run only: natnet (emulator over UDP) or sim."),
+    mocap: Optional[str] = typer.Option(
+        None, "--mocap", help="Dry run only: natnet (emulator over UDP), motioncapture (the emulator read by the "
+        "motioncapture package in a child process) or sim. Default: motioncapture for mocap.kind motioncapture, "
+        "else natnet."),
     console: bool = typer.Option(True, "--console/--no-console", help="Live status table while flying."),
     faults: Optional[Path] = typer.Option(None, "--faults", help="Dry run only: a fault schedule (docs/faults.md)."),
     radio_loss: bool = typer.Option(True, "--radio-loss/--no-radio-loss",
@@ -88,12 +100,15 @@ def fly(
     schedule = _load_faults(faults, loaded) if faults is not None else None
     _check_radio_budget(loaded, mission)
     factory = _planner_factory(loaded, mission)
-    if not dry_run and loaded.mocap.kind != "natnet":
-        raise fail(f"{mission}:0: mocap.kind: 'sim' can only fly with --dry-run (real drones need motion capture)")
+    from rpf_fly.flight.session import real_flight_problem
+
+    if not dry_run and real_flight_problem(loaded):
+        raise fail(f"{mission}:0: {real_flight_problem(loaded)}")
     if not dry_run:
         _resolve_server(loaded, mission)
-    if mocap not in ("natnet", "sim"):
-        raise fail(f"--mocap: expected natnet or sim, got {mocap!r}")
+    if mocap not in (None, "natnet", "sim", "motioncapture"):
+        raise fail(f"--mocap: expected natnet, motioncapture or sim, got {mocap!r}")
+    _require_library(loaded, dry_run, mocap)
     log_path = log or Path("flights") / f"{loaded.name}-{datetime.now():%Y%m%d-%H%M%S}.mcap"
     log_path.parent.mkdir(parents=True, exist_ok=True)
     from rpf_fly.cli.live_opts import start_live
@@ -267,8 +282,12 @@ def check(
     """Validate MISSION; then connect to the drones and the mocap and run the preflight checks (nothing takes off)."""
     loaded = _load(mission)
     factory = _planner_factory(loaded, mission)
-    if preflight and not dry_run and loaded.mocap.kind == "natnet":
+    from rpf_fly.flight.session import real_flight_problem
+
+    if preflight and not dry_run and not real_flight_problem(loaded):
         _resolve_server(loaded, mission)
+    if preflight:
+        _require_library(loaded, dry_run)
     from rpf_fly.radio.budget import budget_table, radio_loads
 
     typer.echo("radio budget (packets a second per dongle):")
@@ -282,15 +301,15 @@ def check(
     from rpf_fly.flight.loop import FlightLoop
     from rpf_fly.radio.cflib_backend import CflibBackend
 
-    if not dry_run and loaded.mocap.kind != "natnet":
-        typer.echo("preflight skipped: mocap.kind is 'sim' (use --dry-run to preflight simulated drones)")
+    if not dry_run and real_flight_problem(loaded):
+        typer.echo(f"preflight skipped: {real_flight_problem(loaded)}")
         return
-    from rpf_fly.flight.session import DEFAULT_TOC_CACHE, natnet_source
+    from rpf_fly.flight.session import DEFAULT_TOC_CACHE, mocap_source
 
     rig = DryRun(loaded) if dry_run else None
     with (rig if rig is not None else _nothing()):
         try:
-            source = rig.mocap if rig is not None else natnet_source(loaded)
+            source = rig.mocap if rig is not None else mocap_source(loaded)
         except ConnectionError as err:
             raise fail(f"mocap: {err}", code=1)
         backend = CflibBackend(cache_dir=rig.cache_dir if rig is not None else DEFAULT_TOC_CACHE)

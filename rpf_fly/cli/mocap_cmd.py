@@ -1,4 +1,5 @@
-"""``rpf-fly mocap``: watch a NatNet stream, or emulate Motive so ``watch`` can be tried without one.
+"""``rpf-fly mocap``: watch a NatNet stream (or a system of the ``motioncapture`` package: ``--system``), or emulate
+Motive so ``watch`` can be tried without one.
 
 ``watch`` prints every rigid body as frames arrive, in the Z-up world frame (one line per frame, or one JSON
 object per line with ``--json``); it exits 0 after ``--frames`` frames and 1 with a one-line error when no server
@@ -76,8 +77,27 @@ def watch(
     frames: int = typer.Option(0, "--frames", min=0, help="Exit after this many frames (0: until Ctrl-C)."),
     json_output: bool = typer.Option(False, "--json", help="One JSON object per line per frame."),
     timeout: float = typer.Option(5.0, "--timeout", min=0.1, help="Seconds to wait for the server and for frames."),
+    system: str = typer.Option(
+        "natnet", "--system", help="natnet (our NatNet client, the default for OptiTrack) or a type of the "
+        "motioncapture package: optitrack, vicon, qualisys, vrpn, mock, ... (docs/mocap.md)."),
+    host: Optional[str] = typer.Option(
+        None, "--host", help="The system's host (--system natnet: the same as --natnet)."),
+    option: list[str] = typer.Option(
+        [], "--option", help="KEY=VALUE: an option of the motioncapture type (repeat for several), e.g. "
+        "--option 'rigid_bodies=cf1(0,0,0,1,0,0,0)' for mock."),
 ) -> None:
-    """Print rigid bodies as they arrive from a NatNet server (Z-up world frame, metres)."""
+    """Print rigid bodies as they arrive from a NatNet server, or from a system of the motioncapture package
+    (Z-up world frame, metres)."""
+    if system != "natnet":
+        from rpf_fly.cli.mocap_library import watch_library
+
+        return watch_library(system, host, option, local_ip=local_ip, command_port=command_port, up_axis=up_axis.value,
+                             frames=frames, json_output=json_output, timeout=timeout)
+    if host is not None:
+        natnet = host
+    if option:
+        typer.echo("error: --option is for the motioncapture systems (--system TYPE), not natnet", err=True)
+        raise typer.Exit(2)
     from rich.console import Console
 
     from rpf_fly.mocap.natnet_client import NatNetClient

@@ -276,7 +276,7 @@ class RemoteWorld:
 class WorldProcess:
     """Starts the child process and speaks to it: the fault hooks and snapshots of `FakeWorld` and
     `SimulatedBodies`, by the same names. ``natnet``: the NatNet server's settings (``version``, ``rate_hz``,
-    ``up_axis``), None for no NatNet server. ``obstacles``: the mission's obstacles, for the world's contacts.
+    ``up_axis``, optionally ``multicast``), None for no NatNet server. ``obstacles``: the mission's obstacles, for the world's contacts.
 
     The child is ``python -m rpf_fly.emulator.world_process``, not a multiprocessing spawn (which re-imports the
     caller's main script: a user's unguarded script would run again in it). It reads its settings as one pickle on
@@ -655,7 +655,8 @@ def serve(settings: dict[str, Any], out: Any) -> None:
             from rpf_fly.emulator.natnet_server import NatNetServer
 
             server = NatNetServer(
-                tracked.poses, version=natnet["version"], multicast=False, local_ip="127.0.0.1",
+                tracked.poses, version=natnet["version"], multicast=natnet.get("multicast", False),
+                local_ip="127.0.0.1",
                 rate_hz=natnet["rate_hz"], up_axis=natnet["up_axis"], bodies=list(bodies.values()),
                 extra_latency_s=tracked.extra_latency_s,
             ).start()

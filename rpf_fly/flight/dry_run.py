@@ -4,7 +4,13 @@ Every ``radio://`` URI of the mission becomes ``fake://`` with the same path, an
 the fake radio (:mod:`rpf_fly.emulator.fake_world`) standing at the drone's mission start. Their true poses are
 served by the NatNet server emulator over UDP on 127.0.0.1 in the mission's up-axis convention, and the real NatNet
 client receives them; so the flight loop, the NatNet client, the cflib backend and cflib itself all run for real.
-``mocap="sim"`` uses the simulated mocap source instead of the UDP round trip.
+``mocap="sim"`` uses the simulated mocap source instead of the UDP round trip. ``mocap="motioncapture"`` (the
+default for a mission of kind ``motioncapture``, whatever its ``type``) has the emulator multicast on 127.0.0.1 and
+reads it with the ``motioncapture`` package's OptiTrack decoder, in the child process of
+:class:`~rpf_fly.mocap.motioncapture_source.MotioncaptureSource`: the library, its process and the frame pipe
+fly for real, with the simulated drones' poses. The mission's ``type`` (Vicon, Qualisys, VRPN, the ``mock``'s fixed
+bodies) is not what the dry run reads, as Motive's address is not for kind ``natnet``: no emulator of those
+systems sees the simulated drones (docs/mocap.md, "Dry run").
 
 The simulated drones and the NatNet emulator run in a process of their own (``process=True``, the default;
 :mod:`rpf_fly.emulator.world_process`), as real drones and Motive are outside a real flight's process: on threads of
@@ -107,7 +113,7 @@ class DryRun:
         self,
         mission: Mission,
         *,
-        mocap: str = "natnet",
+        mocap: Optional[str] = None,
         natnet_version: str = "4.1",
         drone_configs: Optional[Mapping[str, FakeDroneConfig]] = None,
         start_faults: Optional[Mapping[str, StartFault]] = None,
@@ -129,8 +135,10 @@ class DryRun:
         drones' process writes what became of the drones if this process dies without closing the dry run
         (SIGKILL: they fall by the firmware's watchdog; `rpf_fly.emulator.world_process`); default
         `default_world_exit_report()`; a stale report there is removed at the start."""
-        if mocap not in ("natnet", "sim"):
-            raise ValueError(f"dry-run mocap must be 'natnet' or 'sim', not {mocap!r}")
+        if mocap is None:  # the mission's kind decides: its own client against the emulator
+            mocap = "motioncapture" if mission.mocap.kind == "motioncapture" else "natnet"
+        if mocap not in ("natnet", "sim", "motioncapture"):
+            raise ValueError(f"dry-run mocap must be 'natnet', 'motioncapture' or 'sim', not {mocap!r}")
         self.mission = mission
         self.mocap_kind = mocap
         self.natnet_version = natnet_version
@@ -181,18 +189,20 @@ class DryRun:
 
         up = self.mission.mocap.up_axis
         body_of_address = {self.addresses[n]: body for n, body in self.bodies.items()}
-        natnet = {"version": self.natnet_version, "rate_hz": self.rate_hz, "up_axis": up}
+        served = self.mocap_kind in ("natnet", "motioncapture")  # by the NatNet emulator
+        multicast = self.mocap_kind == "motioncapture"  # libmotioncapture receives no unicast frames (docs/mocap.md)
+        natnet = {"version": self.natnet_version, "rate_hz": self.rate_hz, "up_axis": up, "multicast": multicast}
         if self.in_process:
             self.world = FakeWorld(self.drone_configs, seed=self.seed, obstacles=self.mission.obstacles,
                                    timing=self.timing).start()
             self._bodies = SimulatedBodies(self.world, body_of_address)
             fake_radio.register(self.world)
             command_port = None
-            if self.mocap_kind == "natnet":
+            if served:
                 from rpf_fly.emulator.natnet_server import NatNetServer
 
                 self.server = NatNetServer(
-                    self._bodies.poses, version=self.natnet_version, multicast=False, local_ip="127.0.0.1",
+                    self._bodies.poses, version=self.natnet_version, multicast=multicast, local_ip="127.0.0.1",
                     rate_hz=self.rate_hz, up_axis=up, bodies=list(self.bodies.values()),
                     extra_latency_s=self._bodies.extra_latency_s,
                 ).start()
@@ -201,7 +211,7 @@ class DryRun:
             self.world_exit_report.unlink(missing_ok=True)  # a report there is about an earlier run
             self.world = self._bodies = WorldProcess(
                 self.drone_configs, body_of_address, seed=self.seed,
-                natnet=natnet if self.mocap_kind == "natnet" else None, obstacles=self.mission.obstacles,
+                natnet=natnet if served else None, obstacles=self.mission.obstacles,
                 names=self._names, exit_report=self.world_exit_report,
             )
             fake_radio.register(RemoteWorld(self.world.radio, tuple(self.drone_configs), self.timing))
@@ -216,6 +226,13 @@ class DryRun:
             self.mocap = client
             if not client.wait_for_server(5.0):
                 raise RuntimeError("dry run: the NatNet emulator did not answer within 5 s")
+        elif self.mocap_kind == "motioncapture":
+            from rpf_fly.mocap.motioncapture_source import MotioncaptureSource
+
+            self.mocap = MotioncaptureSource(
+                "optitrack", "127.0.0.1", {"interface_ip": "127.0.0.1", "port_command": str(command_port)},
+                up_axis=up, bodies=list(self.bodies.values()),
+            )
         else:
             from rpf_fly.emulator.simulated_mocap import SimulatedMocap
 

@@ -23,20 +23,81 @@ DEFAULT_TOC_CACHE = Path.home() / ".cache" / "rpf_fly" / "toc"
 
 
 class UnresolvableServer(ValueError):
-    """``mocap.server`` names no host this machine can resolve."""
+    """``mocap.server`` (or ``mocap.hostname``) names no host this machine can resolve. ``field`` names the key."""
+
+    field = "mocap.server"
 
 
 def resolve_mocap_server(mission: Mission) -> str:
     """The mission's NatNet server as an IP address; :class:`UnresolvableServer` with the reason if it has none.
-    Called before anything connects, so a typo never reaches a drone."""
+    Called before anything connects, so a typo never reaches a drone. For kind ``motioncapture`` the types whose
+    host the library takes as an IPv4 literal only (``optitrack``) are resolved the same way; the others' hosts
+    are the library's to resolve (Vicon and VRPN take ``host:port``), and the host itself is returned."""
     m = mission.mocap
+    host, port, family, field, what = m.server, m.command_port, 0, "mocap.server", "the PC running Motive"
+    if m.kind == "motioncapture":
+        from rpf_fly.mocap.motioncapture_options import TYPES
+
+        if m.system is None or TYPES[m.system].hostname != "ip":
+            return m.hostname or ""
+        host, port, family = m.hostname or "localhost", None, socket.AF_INET
+        field, what = "mocap.hostname", f"the {m.system} server"
     try:
-        infos = socket.getaddrinfo(m.server, m.command_port, type=socket.SOCK_DGRAM)
+        infos = socket.getaddrinfo(host, port, family, type=socket.SOCK_DGRAM)
     except (socket.gaierror, UnicodeError) as err:
         reason = err.strerror if isinstance(err, socket.gaierror) and err.strerror else str(err)
-        raise UnresolvableServer(f"cannot resolve {m.server!r} ({reason}): expected the IP address or host name "
-                                 "of the PC running Motive") from None
+        error = UnresolvableServer(f"cannot resolve {host!r} ({reason}): expected the IP address or host name of "
+                                   f"{what}")
+        error.field = field
+        raise error from None
     return str(infos[0][4][0])
+
+
+def real_flight_problem(mission: Mission) -> Optional[str]:
+    """Why the mission's mocap cannot fly real drones (``FIELD: problem``), or None. ``sim`` and the library's
+    ``mock`` serve poses that are not the drones': real drones would take off on them and fly blind."""
+    m = mission.mocap
+    if m.kind == "sim":
+        return "mocap.kind: 'sim' can only fly with --dry-run (real drones need motion capture)"
+    if m.kind == "motioncapture" and m.system == "mock":
+        return ("mocap.type: 'mock' serves fixed poses from its options, not the drones': it can only fly with "
+                "--dry-run (which serves the simulated drones' poses, docs/mocap.md)")
+    return None
+
+
+def motioncapture_missing(mission: Mission, dry_run: bool, dry_run_mocap: Optional[str] = None) -> Optional[str]:
+    """The one line naming the extra when this flight needs the ``motioncapture`` package and it is missing (a real
+    flight of kind ``motioncapture``, or a dry run whose mocap is ``motioncapture``: ``dry_run_mocap`` or, if None,
+    the mission's kind); None otherwise. Checked before anything starts, without importing the C++ library."""
+    if dry_run:
+        needed = (dry_run_mocap or ("motioncapture" if mission.mocap.kind == "motioncapture" else "natnet")) \
+            == "motioncapture"
+    else:
+        needed = mission.mocap.kind == "motioncapture"
+    if not needed:
+        return None
+    from rpf_fly.mocap.motioncapture_options import MISSING_LIBRARY
+    from rpf_fly.mocap.motioncapture_source import library_installed
+
+    return None if library_installed() else MISSING_LIBRARY
+
+
+def motioncapture_source(mission: Mission, timeout_s: float = 5.0) -> MocapSource:
+    """The mission's ``motioncapture`` system, its library running in a child process, connected (raises
+    :class:`~rpf_fly.mocap.motioncapture_source.MotioncaptureUnavailable`, a ConnectionError, otherwise)."""
+    from rpf_fly.mocap.motioncapture_source import MotioncaptureSource
+
+    m = mission.mocap
+    assert m.system is not None
+    return MotioncaptureSource(m.system, m.hostname, dict(m.options), up_axis=m.up_axis,
+                               bodies=[d.rigid_body for d in mission.drones], connect_timeout_s=timeout_s)
+
+
+def mocap_source(mission: Mission, timeout_s: float = 5.0) -> MocapSource:
+    """The mission's real mocap, connected: the NatNet client, or a ``motioncapture`` system."""
+    if mission.mocap.kind == "motioncapture":
+        return motioncapture_source(mission, timeout_s)
+    return natnet_source(mission, timeout_s)
 
 
 def natnet_source(mission: Mission, timeout_s: float = 5.0) -> MocapSource:
@@ -80,7 +141,7 @@ def run_flight(
     if rig is not None:
         backend, source, uris = CflibBackend(cache_dir=rig.cache_dir), rig.mocap, rig.uris
     else:
-        backend, source, uris = CflibBackend(cache_dir=DEFAULT_TOC_CACHE), natnet_source(mission), None
+        backend, source, uris = CflibBackend(cache_dir=DEFAULT_TOC_CACHE), mocap_source(mission), None
     recorder = None
     if log_path:
         truth = rig.truth_samples if rig is not None and rig.truth else None  # only a dry run has a truth
