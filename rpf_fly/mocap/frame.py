@@ -5,10 +5,10 @@ rotating body coordinates into world coordinates. Sources convert from their nat
 default) before filling these objects, so nothing downstream ever sees another frame.
 
 The :class:`MocapSource` protocol is deliberately small (newest frame or None, close, stats) so that the NatNet
-client, the simulated source and, later, a wrapper around the ``motioncapture`` package (Vicon, Qualisys, VRPN;
-blocking ``waitForNextFrame()`` without frame numbers or latency) can all implement it: fields a backend cannot
-know are optional (``latency_s``) or can be synthesised (``frame_number`` as a counter, ``capture_time_s`` as the
-receive time).
+client, the simulated source and the source over the ``motioncapture`` package (Vicon, Qualisys, VRPN; blocking
+``waitForNextFrame()`` without frame numbers or latency: ``motioncapture_source.py``) can all implement it: fields a
+backend cannot know are optional (``latency_s``) or are synthesised (``frame_number`` as a counter,
+``capture_time_s`` as the receive time).
 """
 
 from __future__ import annotations

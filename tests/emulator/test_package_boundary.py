@@ -10,6 +10,7 @@ REAL_FLIGHT_MODULES = (
     "rpf_fly.flight.session",
     "rpf_fly.radio.cflib_backend",
     "rpf_fly.mocap.natnet_client",
+    "rpf_fly.mocap.motioncapture_source",
     "rpf_fly.cli",
 )
 

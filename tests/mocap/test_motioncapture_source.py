@@ -14,6 +14,7 @@ import subprocess
 import sys
 import textwrap
 import time
+from pathlib import Path
 
 import pytest
 
@@ -227,3 +228,23 @@ def test_a_package_that_fails_to_import_in_the_child_is_the_same_line(tmp_path, 
     with pytest.raises(MotioncaptureUnavailable) as info:
         MotioncaptureSource("mock")
     assert str(info.value) == MISSING_LIBRARY
+
+
+def test_the_extra_is_installed_where_the_tests_run():
+    """The motioncapture tests need the real package: CI installs the extra, so a missing wheel fails here, loudly,
+    with the reason, instead of as a skip."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        installed = version("motioncapture")
+    except PackageNotFoundError:
+        pytest.fail("the motioncapture package is missing: pip install -e '.[dev,train,live,motioncapture]'")
+    assert installed == "1.1"
+    assert source_module.library_installed()
+
+
+def test_ci_and_the_readme_install_the_extra():
+    root = Path(__file__).resolve().parents[2]
+    assert '-e ".[dev,train,live,motioncapture]"' in (root / ".ci" / "run").read_text()
+    assert 'pip install -e ".[dev,train,live,motioncapture]" && python -m pytest' in (root / "README.md").read_text()
+    assert 'motioncapture = ["motioncapture==1.1"]' in (root / "pyproject.toml").read_text()
