@@ -141,14 +141,15 @@ class MotioncaptureSource:
             raise ValueError(f"up_axis must be 'y' or 'z', not {up_axis!r}")
         spec = system_type(system)
         config = {key: check_option(system, key, value) for key, value in (options or {}).items()}
+        if hostname is None and spec.hostname == "ip":
+            hostname = spec.hostname_default  # the library's own default, `localhost`, is no IPv4 literal
         if hostname is not None:
             hostname = check_hostname(system, hostname)
             if spec.hostname == "ip":
                 hostname = _resolve_ipv4(hostname)
             config["hostname"] = hostname
-        if system == "optitrack" and "interface_ip" not in config:
-            host = hostname or "localhost"
-            if ipaddress.IPv4Address(_resolve_ipv4(host)).is_loopback:
+        if system == "optitrack" and "interface_ip" not in config and hostname is not None:
+            if ipaddress.IPv4Address(hostname).is_loopback:
                 config["interface_ip"] = "127.0.0.1"
         self.system = system
         self.config: dict[str, str] = config

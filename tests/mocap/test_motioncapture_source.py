@@ -90,6 +90,23 @@ def test_a_body_the_library_stops_reporting_is_invalid_at_its_last_pose():
     assert not second.bodies["cf2"].valid and second.bodies["cf2"].position == (1.0, 1.0, 0.5)
 
 
+def test_optitrack_without_a_host_reads_localhost_and_ctrl_c_does_not_stop_the_child():
+    """The library's default host `localhost` is no IPv4 literal for its OptiTrack backend: it is resolved here.
+    A Ctrl-C reaches the whole process group: the child ignores it, the drones keep their poses while landing."""
+    poses = {"cf1": ((0.5, 0.25, 1.0), (0.0, 0.0, 0.0, 1.0), True)}
+    with NatNetServer(lambda: poses, version="4.1", multicast=True, rate_hz=100, up_axis="z") as server:
+        with MotioncaptureSource("optitrack", options={"port_command": server.command_port}) as source:
+            assert source.config["hostname"] == "127.0.0.1" and source.config["interface_ip"] == "127.0.0.1"
+            assert source.receive(2.0) is not None
+            os.kill(source.pid, signal.SIGINT)
+            time.sleep(0.2)
+            while source.receive(0.0) is not None:
+                pass
+            frame = source.receive(1.0)
+            assert frame is not None and frame.bodies["cf1"].position == (0.5, 0.25, 1.0)
+            assert source.alive
+
+
 def test_a_killed_child_is_no_frames_never_an_exception():
     with MotioncaptureSource("mock", options=MOCK) as source:
         assert source.receive(1.0) is not None
@@ -201,8 +218,9 @@ def test_a_crash_while_connecting_is_one_line():
 def test_a_type_this_build_lacks_is_one_line_naming_the_wheels_types(system):
     with pytest.raises(MotioncaptureUnavailable) as info:
         MotioncaptureSource(system, connect_timeout_s=2.0)
+    where = f"motioncapture {system}" + (" at 127.0.0.1" if system == "optitrack_closed_source" else "")
     assert str(info.value) == (
-        f"motioncapture {system}: this motioncapture build has no {system!r} (the PyPI wheel of 1.1 has "
+        f"{where}: this motioncapture build has no {system!r} (the PyPI wheel of 1.1 has "
         f"{', '.join(WHEEL_TYPES)}): RuntimeError: Unknown motion capture type!")
 
 
