@@ -18,8 +18,8 @@ Same semantics as the NatNet client, as far as the library lets them be:
 - **up axis**: ``up_axis="y"`` converts exactly as the NatNet client does: (x, y, z) -> (x, -z, y), (qx, qy, qz)
   -> (qx, -qz, qy), qw unchanged. The library passes its system's axes through.
 - **names**: the library keys bodies by name from its system's model definitions (OptiTrack: MODELDEF, read once at
-  connect). It does not report ids, so a body it has no name for comes as ``""``: such bodies are dropped (and
-  counted in ``stats.dropped``), since no drone can be flown on them. ``RigidBodyPose.id`` is -1.
+  connect). It does not report ids, so a body it has no name for comes as ``""``: such bodies are left out (and
+  counted in :attr:`MotioncaptureSource.unnamed_bodies`), since no drone can be flown on them. ``RigidBodyPose.id`` is -1.
 - **frames**: the library reports neither frame numbers nor timestamps nor latency (in its Python API):
   ``frame_number`` is the child's frame counter, ``capture_time_s`` and ``receive_time_s`` are the child's
   ``time.monotonic()`` when ``waitForNextFrame()`` returned (so the pipe's delay counts in the flight's
@@ -167,6 +167,7 @@ class MotioncaptureSource:
         self._failure: Optional[str] = None
         self._error_record: Optional[str] = None
         self._warned_unnamed = False
+        self._unnamed = 0
         self._seen: set[int] = set()  # kinds of the non-frame records received
         self.library_version: Optional[str] = None
         self._process: Optional[subprocess.Popen[bytes]] = None
@@ -305,8 +306,13 @@ class MotioncaptureSource:
     @property
     def stats(self) -> MocapStats:
         """A snapshot of the counters: ``packets`` are records from the child, ``messages`` its non-frame records,
-        ``dropped`` counts bodies the library gave no name."""
+        ``dropped`` (= ``malformed``) records that did not decode; ``packets == frames + messages + dropped``."""
         return dataclasses.replace(self._stats)
+
+    @property
+    def unnamed_bodies(self) -> int:
+        """Bodies left out of delivered frames because the library gave them no name (no model definition)."""
+        return self._unnamed
 
     # ------------------------------------------------------------------------------------- MocapSource
 
@@ -366,7 +372,7 @@ class MotioncaptureSource:
         seen: dict[str, RigidBodyPose] = {}
         for name, (x, y, z, qx, qy, qz, qw) in raw:
             if not name:
-                self._stats.dropped += 1
+                self._unnamed += 1
                 if not self._warned_unnamed:
                     self._warned_unnamed = True
                     _log.warning("%s: a rigid body without a name (the library has no model definition for it) "

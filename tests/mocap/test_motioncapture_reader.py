@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import random
 import struct
+import time
 
 import pytest
 
@@ -108,3 +109,23 @@ def test_bitstream_4_2_with_two_rigid_bodies_crashes_the_library_in_its_child_no
         with pytest.raises(MotioncaptureUnavailable) as info:
             MotioncaptureSource("optitrack", "127.0.0.1", {"port_command": server.command_port})
     assert "the library's process died while connecting (killed by SIGSEGV)" in str(info.value)
+
+
+def test_a_body_added_after_connect_is_named_by_our_client_only():
+    """Where the readers differ by design: the library reads MODELDEF once, at connect, and ignores the
+    models-changed bit; a body added later reaches it without a name, and the source leaves it out (no drone can
+    fly on it). Our client asks for the definitions again and names it."""
+    poses = {name: ((0.1 * i, 0.2, 0.3), (0.0, 0.0, 0.0, 1.0), True) for i, name in enumerate(("cf1", "cf2"))}
+    with NatNetServer(lambda: poses, version="4.1", multicast=True, rate_hz=0, bodies=["cf1"]) as server:
+        with NatNetClient("127.0.0.1", multicast=True, local_ip="127.0.0.1", command_port=server.command_port,
+                          data_port=None) as ours, \
+                MotioncaptureSource("optitrack", "127.0.0.1", {"port_command": server.command_port}) as library:
+            assert ours.wait_for_server(5.0)
+            server.set_bodies(["cf1", "cf2"])
+            for _ in range(5):
+                server.send_frame()
+                ours_frame, library_frame = ours.receive(2.0), library.receive(2.0)
+                time.sleep(0.05)  # our client's MODELDEF request is answered meanwhile
+            assert ours_frame is not None and library_frame is not None
+            assert sorted(ours_frame.bodies) == ["cf1", "cf2"]
+            assert sorted(library_frame.bodies) == ["cf1"] and library.unnamed_bodies == 5

@@ -70,7 +70,8 @@ def test_mock_bodies_arrive_z_up_with_names_and_validity():
     assert cf2.position == (-0.5, -0.75, 0.25) and cf2.quaternion == (0.0, -q, 0.0, q)
     # cf3 is expected but the library never reported it: untracked, at the origin (never flown on).
     assert not cf3.valid and cf3.position == (0.0, 0.0, 0.0)
-    assert stats.packets == stats.frames + stats.messages and stats.messages == 2  # STARTED, READY
+    assert stats.packets == stats.frames + stats.messages + stats.dropped and stats.messages == 2  # STARTED, READY
+    assert stats.dropped == stats.malformed == 0
     assert stats.delivered == 3 and stats.body_dropouts == 3
 
 
