@@ -198,8 +198,11 @@ class MotioncaptureSource:
                 pass  # capped by /proc/sys/fs/pipe-max-size: the default size works, with less slack
         os.set_blocking(self._fd, False)
         settings = {"type": self.system, "options": self.config}
-        self._process.stdin.write((json.dumps(settings) + "\n").encode())
-        self._process.stdin.flush()  # stdin stays open: the child's lifeline
+        try:
+            self._process.stdin.write((json.dumps(settings) + "\n").encode())
+            self._process.stdin.flush()  # stdin stays open: the child's lifeline
+        except BrokenPipeError:
+            pass  # the child is already gone: its end of the record pipe says why, below
         if not self._await(STARTED, start_timeout_s):
             raise MotioncaptureUnavailable(
                 self._why_not("did not start") or f"{self._where}: the library's process did not start within "
