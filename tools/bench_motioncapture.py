@@ -34,7 +34,8 @@ def _percentiles(samples: list[float]) -> dict[str, float]:
     return {"p50_us": statistics.median(ordered) * 1e6, "p90_us": pick(0.9) * 1e6, "p99_us": pick(0.99) * 1e6}
 
 
-def _run(server: NatNetServer, receive: Callable[[float], Any], frames: int, rate: float) -> list[tuple[float, float, float]]:
+def _run(server: NatNetServer, receive: Callable[[float], Any], frames: int,
+         rate: float) -> list[tuple[float, float, float]]:
     """(sent, library-side receipt, returned) per frame, monotonic seconds."""
     out = []
     period = 1.0 / rate

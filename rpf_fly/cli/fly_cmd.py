@@ -109,6 +109,7 @@ def fly(
     if mocap not in (None, "natnet", "sim", "motioncapture"):
         raise fail(f"--mocap: expected natnet, motioncapture or sim, got {mocap!r}")
     _require_library(loaded, dry_run, mocap)
+    mocap = mocap or ("motioncapture" if loaded.mocap.kind == "motioncapture" else "natnet")
     log_path = log or Path("flights") / f"{loaded.name}-{datetime.now():%Y%m%d-%H%M%S}.mcap"
     log_path.parent.mkdir(parents=True, exist_ok=True)
     from rpf_fly.cli.live_opts import start_live

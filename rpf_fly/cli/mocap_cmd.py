@@ -91,8 +91,8 @@ def watch(
     if system != "natnet":
         from rpf_fly.cli.mocap_library import watch_library
 
-        return watch_library(system, host, option, local_ip=local_ip, command_port=command_port, up_axis=up_axis.value,
-                             frames=frames, json_output=json_output, timeout=timeout)
+        return watch_library(system, host, option, local_ip=local_ip, command_port=command_port,
+                             up_axis=up_axis.value, frames=frames, json_output=json_output, timeout=timeout)
     if host is not None:
         natnet = host
     if option:

@@ -276,7 +276,8 @@ class RemoteWorld:
 class WorldProcess:
     """Starts the child process and speaks to it: the fault hooks and snapshots of `FakeWorld` and
     `SimulatedBodies`, by the same names. ``natnet``: the NatNet server's settings (``version``, ``rate_hz``,
-    ``up_axis``, optionally ``multicast``), None for no NatNet server. ``obstacles``: the mission's obstacles, for the world's contacts.
+    ``up_axis``, optionally ``multicast``), None for no NatNet server. ``obstacles``: the mission's obstacles, for
+    the world's contacts.
 
     The child is ``python -m rpf_fly.emulator.world_process``, not a multiprocessing spawn (which re-imports the
     caller's main script: a user's unguarded script would run again in it). It reads its settings as one pickle on

@@ -19,7 +19,8 @@ Same semantics as the NatNet client, as far as the library lets them be:
   -> (qx, -qz, qy), qw unchanged. The library passes its system's axes through.
 - **names**: the library keys bodies by name from its system's model definitions (OptiTrack: MODELDEF, read once at
   connect). It does not report ids, so a body it has no name for comes as ``""``: such bodies are left out (and
-  counted in :attr:`MotioncaptureSource.unnamed_bodies`), since no drone can be flown on them. ``RigidBodyPose.id`` is -1.
+  counted in :attr:`MotioncaptureSource.unnamed_bodies`), since no drone can be flown on them.
+  ``RigidBodyPose.id`` is -1.
 - **frames**: the library reports neither frame numbers nor timestamps nor latency (in its Python API):
   ``frame_number`` is the child's frame counter, ``capture_time_s`` and ``receive_time_s`` are the child's
   ``time.monotonic()`` when ``waitForNextFrame()`` returned (so the pipe's delay counts in the flight's

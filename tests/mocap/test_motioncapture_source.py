@@ -77,7 +77,8 @@ def test_mock_bodies_arrive_z_up_with_names_and_validity():
 
 def test_a_body_the_library_stops_reporting_is_invalid_at_its_last_pose():
     """The library leaves untracked bodies out of a frame; the source reports them as NatNet does: invalid."""
-    poses = {"cf1": ((0.5, 0.25, 1.0), (0.0, 0.0, 0.0, 1.0), True), "cf2": ((1.0, 1.0, 0.5), (0.0, 0.0, 0.0, 1.0), True)}
+    poses = {"cf1": ((0.5, 0.25, 1.0), (0.0, 0.0, 0.0, 1.0), True),
+             "cf2": ((1.0, 1.0, 0.5), (0.0, 0.0, 0.0, 1.0), True)}
     with NatNetServer(lambda: poses, version="4.1", multicast=True, rate_hz=0, up_axis="z") as server:
         with MotioncaptureSource("optitrack", "127.0.0.1", {"port_command": server.command_port}) as source:
             server.send_frame()
