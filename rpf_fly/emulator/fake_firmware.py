@@ -11,7 +11,8 @@ Services answered, as crazyflie-firmware 2026.08 (CRTP protocol version 12) answ
 - log (5): TOC v2 with a stable CRC, reset, block create/append (v1 and v2), start, stop, delete, periodic data;
 - param (2): TOC v2, read (``[id, 0, value]``), write (echo; read-only: no answer), set-by-name, extended types,
   default values and persistent-state queries;
-- memory (4): zero memories;
+- memory (4): the memories of a Crazyflie 2.1 without decks (`fake_memory`): EEPROM, trajectory memory (the
+  high-level commander's), memory tester, deck memory, deck-controller DFU memory;
 - commander (3, 7), high-level commander (8), localization (6), supervisor (9): decoded and acted on.
 """
 
@@ -28,6 +29,10 @@ from dataclasses import dataclass
 from types import MappingProxyType
 from typing import NamedTuple
 
+from .fake_memory import (
+    MEM_TYPE_EEPROM, MEM_TYPE_TRAJ, BufferMemory, DeckCtrlDfuMemory, DeckMemory, MemorySubsystem, MemoryTester,
+    eeprom_image,
+)
 from .fake_setpoint import decode_generic, decode_rpyt, wrap_angle
 from .fake_supervisor import Transition
 from .fake_toc import EXTENDED_TYPE_PERSISTENT, LOG_TYPE_NAMES, Toc, make_toc, pack_value, unpack_value, value_size
@@ -80,6 +85,7 @@ _LOG_VARIABLES: tuple[tuple[str, str, Callable[[FakeFirmware], float]], ...] = (
     ("stabilizer.pitch", "float", lambda f: 0.0),
     ("stabilizer.yaw", "float", lambda f: math.degrees(f.vehicle.estimate_yaw)),
     ("stabilizer.thrust", "float", lambda f: 36000.0 if f.vehicle.motors_on else 0.0),
+    ("memTst.errCntW", "uint32_t", lambda f: f.memory_tester.write_errors),
 )
 
 # (name, ctype, default, read_only, persistent). Names and defaults of the firmware's groups that cflib programs and
@@ -124,6 +130,7 @@ _PARAMS: tuple[tuple[str, str, float, bool, bool], ...] = (
     ("pid_rate.yaw_kp", "float", 120.0, False, True),
     ("pid_rate.yaw_ki", "float", 16.7, False, True),
     ("pid_rate.yaw_kd", "float", 0.0, False, True),
+    ("memTst.resetW", "uint8_t", 0, False, False),
     ("firmware.revision0", "uint32_t", 0x2026_0800, True, False),
     ("firmware.modified", "uint8_t", 0, True, False),
 )
@@ -184,8 +191,13 @@ class FirmwareSnapshot:
     """The estimator's yaw (`stateEstimate.yaw`); `yaw_deg` is the true one."""
     setpoint_source: str
     setpoint_position: tuple[float, float, float]
+    setpoint_velocity: tuple[float, float, float]
+    """The commander's setpoint velocity (m/s): a high-level trajectory's derivative, its feed-forward."""
+    setpoint_yaw_deg: float
     control_source: str
     hl_state: str
+    hl_plan_start_s: float | None
+    """World time the high-level commander's current plan (take-off, go-to, uploaded trajectory...) began."""
     vbat_v: float
     pm_state: int
     variance_m2: float
@@ -220,8 +232,9 @@ class FakeFirmware:
     rssi: int
 
     def __init__(self, config: VehicleConfig | None = None, *, now_s: float = 0.0, rssi: int = 35,
-                 seed: int = 0) -> None:
-        """`seed` draws the drone's IMU bias and noise (`fake_vehicle`): give each drone of a world its own."""
+                 seed: int = 0, radio_address: int = 0xE7E7E7E7E7, radio_channel: int = 80) -> None:
+        """`seed` draws the drone's IMU bias and noise (`fake_vehicle`): give each drone of a world its own.
+        `radio_address` and `radio_channel` go into the EEPROM's config block, as a real drone's do."""
         self.config = config or VehicleConfig()
         self.rssi = rssi
         self.seed = seed
@@ -235,6 +248,20 @@ class FakeFirmware:
         self._toc_item_requests = 0
         self._booting_until: float | None = None
         self._boots = 0
+        self._eeprom = eeprom_image(radio_channel, 2, radio_address)
+        """Survives reboots (it is the EEPROM); everything else on the memory port is RAM."""
+        self._memories = self._memory_subsystem()
+
+    def _memory_subsystem(self) -> MemorySubsystem:
+        """The memory table of a fresh flight stack, in the firmware's registration order (`fake_memory`)."""
+        self.memory_tester = MemoryTester(on_reset=lambda: self._params.__setitem__("memTst.resetW", 0.0))
+        return MemorySubsystem([
+            BufferMemory(MEM_TYPE_EEPROM, lambda: self._eeprom),
+            BufferMemory(MEM_TYPE_TRAJ, lambda: self.vehicle.hl.trajectory_memory),
+            self.memory_tester,
+            DeckMemory(),
+            DeckCtrlDfuMemory(),
+        ])
 
     # Public API -----------------------------------------------------------------------------------------------
 
@@ -273,6 +300,7 @@ class FakeFirmware:
         self.vehicle.gust(old.gust_accel, old.gust_until_s)  # the wind does not care
         self._params = dict(_PARAM_DEFAULTS)
         self._blocks.clear()
+        self._memories = self._memory_subsystem()
         self._boot_s = self._now_s = max(self._now_s, now_s)
         self._booting_until = None
         self._boots += 1
@@ -378,8 +406,11 @@ class FakeFirmware:
                 estimate_yaw_deg=math.degrees(v.estimate_yaw),
                 setpoint_source=v.setpoint.source,
                 setpoint_position=v.setpoint.position,
+                setpoint_velocity=v.setpoint.velocity,
+                setpoint_yaw_deg=v.setpoint.yaw_deg,
                 control_source=v.control_setpoint.source,
                 hl_state=v.hl.state.name,
+                hl_plan_start_s=v.hl.plan_start_s,
                 vbat_v=v.battery.vbat_v,
                 pm_state=v.battery.pm_state,
                 variance_m2=v.variance_m2,
@@ -416,9 +447,7 @@ class FakeFirmware:
         return []
 
     def _mem(self, channel: int, data: bytes, now_s: float) -> list[Packet]:
-        if channel == 0 and data and data[0] == 1:
-            return [(PORT_MEM, 0, bytes([1, 0]))]
-        return []
+        return self._memories.handle(channel, data)
 
     # Log ------------------------------------------------------------------------------------------------------
 
@@ -575,6 +604,8 @@ class FakeFirmware:
             v.low_voltage_v = float(value)
         elif full_name == "pm.criticalLowVoltage":
             v.critical_voltage_v = float(value)
+        elif full_name == "memTst.resetW":
+            self.memory_tester.reset_requested = bool(value)
 
     # Flight ---------------------------------------------------------------------------------------------------
 

@@ -107,7 +107,7 @@ def test_link_platform_and_memory_answers() -> None:
     ping = struct.pack("<Bd", 0, 123.5)
     assert fw.handle(15, 0, ping, 0.0) == [(15, 0, ping)]
     assert fw.handle(13, 1, bytes([0]), 0.0) == [(13, 1, bytes([0, PROTOCOL_VERSION]))]
-    assert fw.handle(4, 0, bytes([1]), 0.0) == [(4, 0, bytes([1, 0]))]
+    assert fw.handle(4, 0, bytes([1]), 0.0) == [(4, 0, bytes([1, 5]))]  # the memories of a deckless CF2.1
     assert fw.handle(5, 1, bytes([5]), 0.0) == [(5, 1, bytes([5, 0, 0]))]
 
 
