@@ -44,6 +44,8 @@ Packet = tuple[int, int, bytes]
 """(port, channel, payload) of one CRTP packet."""
 
 PROTOCOL_VERSION = 12
+PERSISTENT_NOT_STORED, PERSISTENT_STORED = 0, 1
+"""`PARAM_PERSISTENT_NOT_STORED` / `_STORED` of param.h."""
 FIRMWARE_VERSION = "rpf-fake-2026.08"
 LOG_MAX_BLOCKS = 16
 LOG_MAX_PAYLOAD = 26
@@ -72,6 +74,9 @@ _LOG_VARIABLES: tuple[tuple[str, str, Callable[[FakeFirmware], float]], ...] = (
     ("sys.canfly", "uint8_t", lambda f: f.vehicle.supervisor.motors_allowed),
     ("sys.isFlying", "uint8_t", lambda f: f.vehicle.supervisor.is_flying),
     ("sys.isTumbled", "uint8_t", lambda f: f.vehicle.supervisor.tumbled),
+    ("kalman.stateX", "float", lambda f: f.vehicle.estimate[0]),
+    ("kalman.stateY", "float", lambda f: f.vehicle.estimate[1]),
+    ("kalman.stateZ", "float", lambda f: f.vehicle.estimate[2]),
     ("kalman.varPX", "float", lambda f: f.vehicle.variance_m2),
     ("kalman.varPY", "float", lambda f: f.vehicle.variance_m2),
     ("kalman.varPZ", "float", lambda f: f.vehicle.variance_m2),
@@ -131,6 +136,25 @@ _PARAMS: tuple[tuple[str, str, float, bool, bool], ...] = (
     ("pid_rate.yaw_ki", "float", 16.7, False, True),
     ("pid_rate.yaw_kd", "float", 0.0, False, True),
     ("memTst.resetW", "uint8_t", 0, False, False),
+    # deck drivers of the default build register their parameters whether or not their deck is there
+    # (ledring12.c: effect 6, CONFIG_DECK_LEDRING_DEFAULT_EFFECT, neffect 18; activeMarkerDeck.c: ids 1 3 4 2, mode 3
+    # Qualisys); deck.bc*: 1 when that deck was found and initialised, so 0 on a deckless drone
+    ("ring.effect", "uint8_t", 6, False, True),
+    ("ring.neffect", "uint32_t", 18, True, False),
+    ("activeMarker.front", "uint8_t", 1, False, True),
+    ("activeMarker.back", "uint8_t", 3, False, True),
+    ("activeMarker.left", "uint8_t", 4, False, True),
+    ("activeMarker.right", "uint8_t", 2, False, True),
+    ("activeMarker.mode", "uint8_t", 3, False, True),
+    ("activeMarker.poll", "uint8_t", 0, False, False),
+    *((f"deck.{flag}", "uint8_t", 0, True, False) for flag in (
+        "bcActiveMarker", "bcAI", "bcBuzzer", "bcDWM1000", "bcFlow", "bcFlow2", "bcLedRing", "bcLighthouse4",
+        "bcLoco", "bcMultiranger", "bcUSD", "bcZRanger", "bcZRanger2")),
+    # system.c: the MCU's flash size in kB (STM32F405: 1024) and unique id
+    ("cpu.flash", "uint16_t", 1024, True, False),
+    ("cpu.id0", "uint32_t", 0x0033_0047, True, False),
+    ("cpu.id1", "uint32_t", 0x3236_5104, True, False),
+    ("cpu.id2", "uint32_t", 0x3038_3533, True, False),
     ("firmware.revision0", "uint32_t", 0x2026_0800, True, False),
     ("firmware.modified", "uint8_t", 0, True, False),
 )
@@ -243,6 +267,9 @@ class FakeFirmware:
         self._now_s = now_s
         self.vehicle = Vehicle(self.config, now_s, seed)
         self._params: dict[str, float] = dict(_PARAM_DEFAULTS)
+        self._stored: dict[str, float] = {}
+        """Persistent parameters stored (the firmware's storage in EEPROM): they survive reboots and are applied at
+        boot."""
         self._blocks: dict[int, _LogBlock] = {}
         self._counts: Counter[tuple[int, int]] = Counter()
         self._toc_item_requests = 0
@@ -299,6 +326,8 @@ class FakeFirmware:
         self.vehicle = Vehicle(self.config, now_s, self.seed)
         self.vehicle.gust(old.gust_accel, old.gust_until_s)  # the wind does not care
         self._params = dict(_PARAM_DEFAULTS)
+        for name, value in self._stored.items():  # paramInit: stored persistent values replace the defaults
+            self._param_set(name, value)
         self._blocks.clear()
         self._memories = self._memory_subsystem()
         self._boot_s = self._now_s = max(self._now_s, now_s)
@@ -575,10 +604,19 @@ class FakeFirmware:
             return [(PORT_PARAM, 3, head + (bytes([ext]) if cmd == 2 else bytes([0, ext])))]
         if cmd in (6, 8):  # default value (v1, v2)
             return [(PORT_PARAM, 3, head + (default if cmd == 6 else b"\0" + default))]
-        if cmd == 4:  # persistent state: never stored
-            return [(PORT_PARAM, 3, head + (b"\0" + default if entry.persistent else bytes([errno.ENOENT])))]
-        if cmd in (3, 5):  # persistent store / clear
-            return [(PORT_PARAM, 3, head + bytes([0 if entry.persistent else errno.ENOENT]))]
+        if cmd == 4:  # persistent state (paramPersistentGetState): stored flag, default value, stored value
+            stored = self._stored.get(entry.full_name)
+            if stored is None:
+                return [(PORT_PARAM, 3, head + bytes([PERSISTENT_NOT_STORED]) + default)]
+            return [(PORT_PARAM, 3, head + bytes([PERSISTENT_STORED]) + default + pack_value(entry.ctype, stored))]
+        if cmd == 3:  # persistent store: the current value, for persistent parameters only
+            if not entry.persistent:
+                return [(PORT_PARAM, 3, head + bytes([errno.ENOENT]))]
+            self._stored[entry.full_name] = self._params[entry.full_name]
+            return [(PORT_PARAM, 3, head + b"\0")]
+        if cmd == 5:  # persistent clear
+            self._stored.pop(entry.full_name, None)
+            return [(PORT_PARAM, 3, head + b"\0")]
         return []
 
     def _param_set(self, full_name: str, value: float) -> None:
