@@ -77,6 +77,11 @@ def watch():
         time.sleep(0.05)
 threading.Thread(target=watch, daemon=True).start()
 def report():
+    deadline = time.monotonic() + 1.0  # a drone whose motors just stopped is still falling: let it land
+    while time.monotonic() < deadline and any(not s.motors_on and any(s.velocity)
+                                              for s in world.snapshots().values()):
+        time.sleep(0.02)
+    time.sleep(0.1)  # one more sample of the watch
     with open(os.environ["RPF_FAKE_REPORT"], "w") as out:
         json.dump({f"{a:010X}": f for a, f in flights.items()}, out)
 atexit.register(report)
@@ -177,11 +182,16 @@ def fetch_examples(cache: Path, version: str) -> Path:
                    "--no-deps", "--quiet", "-d", str(cache)]
         done = subprocess.run(command, capture_output=True, text=True)
         if done.returncode != 0 or not archive.exists():
-            raise SystemExit(f"error: could not download the cflib {version} sdist with pip: "
-                             f"{(done.stderr or done.stdout).strip().splitlines()[-1:]}")
+            last = ((done.stderr or done.stdout).strip().splitlines() or ["no output"])[-1]
+            raise SystemExit(f"error: could not download the cflib {version} sdist with pip ({last}); "
+                             f"give a local copy with --examples DIR")
     with tarfile.open(archive) as tar:
-        members = [m for m in tar.getmembers() if m.name.startswith(f"cflib-{version}/examples/")]
-        tar.extractall(cache, members=members, filter="data")
+        members = [m for m in tar.getmembers() if m.name.startswith(f"cflib-{version}/examples/")
+                   and ".." not in Path(m.name).parts and (m.isfile() or m.isdir())]
+        try:
+            tar.extractall(cache, members=members, filter="data")
+        except TypeError:  # Python before 3.10.12 / 3.11.4: no extraction filters (the names were checked above)
+            tar.extractall(cache, members=members)
     if not examples.is_dir():
         raise SystemExit(f"error: the cflib {version} sdist has no examples/ directory")
     return examples

@@ -10,7 +10,8 @@ Services answered, as crazyflie-firmware 2026.08 (CRTP protocol version 12) answ
 - platform (13): protocol version 12, firmware version string; legacy arming and crash recovery;
 - log (5): TOC v2 with a stable CRC, reset, block create/append (v1 and v2), start, stop, delete, periodic data;
 - param (2): TOC v2, read (``[id, 0, value]``), write (echo; read-only: no answer), set-by-name, extended types,
-  default values and persistent-state queries;
+  default values, persistent store / state / clear (stored values survive a reboot and apply at boot, as the
+  firmware's storage does);
 - memory (4): the memories of a Crazyflie 2.1 without decks (`fake_memory`): EEPROM, trajectory memory (the
   high-level commander's), memory tester, deck memory, deck-controller DFU memory;
 - commander (3, 7), high-level commander (8), localization (6), supervisor (9): decoded and acted on.
