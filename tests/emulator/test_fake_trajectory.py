@@ -314,3 +314,20 @@ def test_a_trajectory_started_on_the_floor_takes_off_along_it() -> None:
     snap = sim.fw.snapshot()
     assert snap.flying and snap.position[2] == pytest.approx(0.15 * 4 + 0.05 * 8, abs=0.01)
     assert np.isclose(snap.setpoint_position[2], 1.0)
+
+
+def test_a_shorter_compressed_upload_flies_on_into_the_remains_of_a_longer_one() -> None:
+    """cflib writes no terminating piece: a compressed trajectory ends at the first zero duration after it."""
+    sim = Sim()
+    sim.hover(0.5)
+    first = CompressedStart(0.0, 0.0, 0.5, 0.0).pack() + CompressedSegment(1.0, [0.1], [], [], []).pack()
+    longer = first + CompressedSegment(2.0, [0.2], [], [], []).pack()
+    assert sim.write(0, longer) == [0] * math.ceil(len(longer) / 24)
+    assert sim.write(0, first) == [0]  # the same first piece again: the second is still there after it
+    assert sim.hl(define(0, 0, 1, kind=1)) == 0 and sim.hl(start(0)) == 0
+    sim.run(3.2)
+    assert sim.fw.snapshot().setpoint_position[0] == pytest.approx(0.2, abs=1e-6)
+    assert sim.write(len(first), bytes(3)) == [0]  # a zero header and duration end it after the first piece
+    assert sim.hl(start(0)) == 0
+    sim.run(1.5)
+    assert sim.fw.snapshot().setpoint_position[0] == pytest.approx(0.1, abs=1e-6)
