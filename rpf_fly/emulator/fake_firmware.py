@@ -10,8 +10,10 @@ Services answered, as crazyflie-firmware 2026.08 (CRTP protocol version 12) answ
 - platform (13): protocol version 12, firmware version string; legacy arming and crash recovery;
 - log (5): TOC v2 with a stable CRC, reset, block create/append (v1 and v2), start, stop, delete, periodic data;
 - param (2): TOC v2, read (``[id, 0, value]``), write (echo; read-only: no answer), set-by-name, extended types,
-  default values and persistent-state queries;
-- memory (4): zero memories;
+  default values, persistent store / state / clear (stored values survive a reboot and apply at boot, as the
+  firmware's storage does);
+- memory (4): the memories of a Crazyflie 2.1 without decks (`fake_memory`): EEPROM, trajectory memory (the
+  high-level commander's), memory tester, deck memory, deck-controller DFU memory;
 - commander (3, 7), high-level commander (8), localization (6), supervisor (9): decoded and acted on.
 """
 
@@ -28,6 +30,10 @@ from dataclasses import dataclass
 from types import MappingProxyType
 from typing import NamedTuple
 
+from .fake_memory import (
+    MEM_TYPE_EEPROM, MEM_TYPE_TRAJ, BufferMemory, DeckCtrlDfuMemory, DeckMemory, MemorySubsystem, MemoryTester,
+    eeprom_image,
+)
 from .fake_setpoint import decode_generic, decode_rpyt, wrap_angle
 from .fake_supervisor import Transition
 from .fake_toc import EXTENDED_TYPE_PERSISTENT, LOG_TYPE_NAMES, Toc, make_toc, pack_value, unpack_value, value_size
@@ -39,6 +45,8 @@ Packet = tuple[int, int, bytes]
 """(port, channel, payload) of one CRTP packet."""
 
 PROTOCOL_VERSION = 12
+PERSISTENT_NOT_STORED, PERSISTENT_STORED = 0, 1
+"""`PARAM_PERSISTENT_NOT_STORED` / `_STORED` of param.h."""
 FIRMWARE_VERSION = "rpf-fake-2026.08"
 LOG_MAX_BLOCKS = 16
 LOG_MAX_PAYLOAD = 26
@@ -67,6 +75,9 @@ _LOG_VARIABLES: tuple[tuple[str, str, Callable[[FakeFirmware], float]], ...] = (
     ("sys.canfly", "uint8_t", lambda f: f.vehicle.supervisor.motors_allowed),
     ("sys.isFlying", "uint8_t", lambda f: f.vehicle.supervisor.is_flying),
     ("sys.isTumbled", "uint8_t", lambda f: f.vehicle.supervisor.tumbled),
+    ("kalman.stateX", "float", lambda f: f.vehicle.estimate[0]),
+    ("kalman.stateY", "float", lambda f: f.vehicle.estimate[1]),
+    ("kalman.stateZ", "float", lambda f: f.vehicle.estimate[2]),
     ("kalman.varPX", "float", lambda f: f.vehicle.variance_m2),
     ("kalman.varPY", "float", lambda f: f.vehicle.variance_m2),
     ("kalman.varPZ", "float", lambda f: f.vehicle.variance_m2),
@@ -80,6 +91,7 @@ _LOG_VARIABLES: tuple[tuple[str, str, Callable[[FakeFirmware], float]], ...] = (
     ("stabilizer.pitch", "float", lambda f: 0.0),
     ("stabilizer.yaw", "float", lambda f: math.degrees(f.vehicle.estimate_yaw)),
     ("stabilizer.thrust", "float", lambda f: 36000.0 if f.vehicle.motors_on else 0.0),
+    ("memTst.errCntW", "uint32_t", lambda f: f.memory_tester.write_errors),
 )
 
 # (name, ctype, default, read_only, persistent). Names and defaults of the firmware's groups that cflib programs and
@@ -124,6 +136,26 @@ _PARAMS: tuple[tuple[str, str, float, bool, bool], ...] = (
     ("pid_rate.yaw_kp", "float", 120.0, False, True),
     ("pid_rate.yaw_ki", "float", 16.7, False, True),
     ("pid_rate.yaw_kd", "float", 0.0, False, True),
+    ("memTst.resetW", "uint8_t", 0, False, False),
+    # deck drivers of the default build register their parameters whether or not their deck is there
+    # (ledring12.c: effect 6, CONFIG_DECK_LEDRING_DEFAULT_EFFECT, neffect 18; activeMarkerDeck.c: ids 1 3 4 2, mode 3
+    # Qualisys); deck.bc*: 1 when that deck was found and initialised, so 0 on a deckless drone
+    ("ring.effect", "uint8_t", 6, False, True),
+    ("ring.neffect", "uint32_t", 18, True, False),
+    ("activeMarker.front", "uint8_t", 1, False, True),
+    ("activeMarker.back", "uint8_t", 3, False, True),
+    ("activeMarker.left", "uint8_t", 4, False, True),
+    ("activeMarker.right", "uint8_t", 2, False, True),
+    ("activeMarker.mode", "uint8_t", 3, False, True),
+    ("activeMarker.poll", "uint8_t", 0, False, False),
+    *((f"deck.{flag}", "uint8_t", 0, True, False) for flag in (
+        "bcActiveMarker", "bcAI", "bcBuzzer", "bcDWM1000", "bcFlow", "bcFlow2", "bcLedRing", "bcLighthouse4",
+        "bcLoco", "bcMultiranger", "bcUSD", "bcZRanger", "bcZRanger2")),
+    # system.c: the MCU's flash size in kB (STM32F405: 1024) and unique id
+    ("cpu.flash", "uint16_t", 1024, True, False),
+    ("cpu.id0", "uint32_t", 0x0033_0047, True, False),
+    ("cpu.id1", "uint32_t", 0x3236_5104, True, False),
+    ("cpu.id2", "uint32_t", 0x3038_3533, True, False),
     ("firmware.revision0", "uint32_t", 0x2026_0800, True, False),
     ("firmware.modified", "uint8_t", 0, True, False),
 )
@@ -184,8 +216,13 @@ class FirmwareSnapshot:
     """The estimator's yaw (`stateEstimate.yaw`); `yaw_deg` is the true one."""
     setpoint_source: str
     setpoint_position: tuple[float, float, float]
+    setpoint_velocity: tuple[float, float, float]
+    """The commander's setpoint velocity (m/s): a high-level trajectory's derivative, its feed-forward."""
+    setpoint_yaw_deg: float
     control_source: str
     hl_state: str
+    hl_plan_start_s: float | None
+    """World time the high-level commander's current plan (take-off, go-to, uploaded trajectory...) began."""
     vbat_v: float
     pm_state: int
     variance_m2: float
@@ -220,8 +257,9 @@ class FakeFirmware:
     rssi: int
 
     def __init__(self, config: VehicleConfig | None = None, *, now_s: float = 0.0, rssi: int = 35,
-                 seed: int = 0) -> None:
-        """`seed` draws the drone's IMU bias and noise (`fake_vehicle`): give each drone of a world its own."""
+                 seed: int = 0, radio_address: int = 0xE7E7E7E7E7, radio_channel: int = 80) -> None:
+        """`seed` draws the drone's IMU bias and noise (`fake_vehicle`): give each drone of a world its own.
+        `radio_address` and `radio_channel` go into the EEPROM's config block, as a real drone's do."""
         self.config = config or VehicleConfig()
         self.rssi = rssi
         self.seed = seed
@@ -230,11 +268,28 @@ class FakeFirmware:
         self._now_s = now_s
         self.vehicle = Vehicle(self.config, now_s, seed)
         self._params: dict[str, float] = dict(_PARAM_DEFAULTS)
+        self._stored: dict[str, float] = {}
+        """Persistent parameters stored (the firmware's storage in EEPROM): they survive reboots and are applied at
+        boot."""
         self._blocks: dict[int, _LogBlock] = {}
         self._counts: Counter[tuple[int, int]] = Counter()
         self._toc_item_requests = 0
         self._booting_until: float | None = None
         self._boots = 0
+        self._eeprom = eeprom_image(radio_channel, 2, radio_address)
+        """Survives reboots (it is the EEPROM); everything else on the memory port is RAM."""
+        self._memories = self._memory_subsystem()
+
+    def _memory_subsystem(self) -> MemorySubsystem:
+        """The memory table of a fresh flight stack, in the firmware's registration order (`fake_memory`)."""
+        self.memory_tester = MemoryTester(on_reset=lambda: self._params.__setitem__("memTst.resetW", 0.0))
+        return MemorySubsystem([
+            BufferMemory(MEM_TYPE_EEPROM, lambda: self._eeprom),
+            BufferMemory(MEM_TYPE_TRAJ, lambda: self.vehicle.hl.trajectory_memory),
+            self.memory_tester,
+            DeckMemory(),
+            DeckCtrlDfuMemory(),
+        ])
 
     # Public API -----------------------------------------------------------------------------------------------
 
@@ -273,7 +328,10 @@ class FakeFirmware:
         self.vehicle = Vehicle(self.config, now_s, self.seed)
         self.vehicle.gust(old.gust_accel, old.gust_until_s)  # the wind does not care
         self._params = dict(_PARAM_DEFAULTS)
+        for name, value in self._stored.items():  # paramInit: stored persistent values replace the defaults
+            self._param_set(name, value)
         self._blocks.clear()
+        self._memories = self._memory_subsystem()
         self._boot_s = self._now_s = max(self._now_s, now_s)
         self._booting_until = None
         self._boots += 1
@@ -379,8 +437,11 @@ class FakeFirmware:
                 estimate_yaw_deg=math.degrees(v.estimate_yaw),
                 setpoint_source=v.setpoint.source,
                 setpoint_position=v.setpoint.position,
+                setpoint_velocity=v.setpoint.velocity,
+                setpoint_yaw_deg=v.setpoint.yaw_deg,
                 control_source=v.control_setpoint.source,
                 hl_state=v.hl.state.name,
+                hl_plan_start_s=v.hl.plan_start_s,
                 vbat_v=v.battery.vbat_v,
                 pm_state=v.battery.pm_state,
                 variance_m2=v.variance_m2,
@@ -417,9 +478,7 @@ class FakeFirmware:
         return []
 
     def _mem(self, channel: int, data: bytes, now_s: float) -> list[Packet]:
-        if channel == 0 and data and data[0] == 1:
-            return [(PORT_MEM, 0, bytes([1, 0]))]
-        return []
+        return self._memories.handle(channel, data)
 
     # Log ------------------------------------------------------------------------------------------------------
 
@@ -547,10 +606,19 @@ class FakeFirmware:
             return [(PORT_PARAM, 3, head + (bytes([ext]) if cmd == 2 else bytes([0, ext])))]
         if cmd in (6, 8):  # default value (v1, v2)
             return [(PORT_PARAM, 3, head + (default if cmd == 6 else b"\0" + default))]
-        if cmd == 4:  # persistent state: never stored
-            return [(PORT_PARAM, 3, head + (b"\0" + default if entry.persistent else bytes([errno.ENOENT])))]
-        if cmd in (3, 5):  # persistent store / clear
-            return [(PORT_PARAM, 3, head + bytes([0 if entry.persistent else errno.ENOENT]))]
+        if cmd == 4:  # persistent state (paramPersistentGetState): stored flag, default value, stored value
+            stored = self._stored.get(entry.full_name)
+            if stored is None:
+                return [(PORT_PARAM, 3, head + bytes([PERSISTENT_NOT_STORED]) + default)]
+            return [(PORT_PARAM, 3, head + bytes([PERSISTENT_STORED]) + default + pack_value(entry.ctype, stored))]
+        if cmd == 3:  # persistent store: the current value, for persistent parameters only
+            if not entry.persistent:
+                return [(PORT_PARAM, 3, head + bytes([errno.ENOENT]))]
+            self._stored[entry.full_name] = self._params[entry.full_name]
+            return [(PORT_PARAM, 3, head + b"\0")]
+        if cmd == 5:  # persistent clear
+            self._stored.pop(entry.full_name, None)
+            return [(PORT_PARAM, 3, head + b"\0")]
         return []
 
     def _param_set(self, full_name: str, value: float) -> None:
@@ -576,6 +644,8 @@ class FakeFirmware:
             v.low_voltage_v = float(value)
         elif full_name == "pm.criticalLowVoltage":
             v.critical_voltage_v = float(value)
+        elif full_name == "memTst.resetW":
+            self.memory_tester.reset_requested = bool(value)
 
     # Flight ---------------------------------------------------------------------------------------------------
 

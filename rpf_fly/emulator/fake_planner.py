@@ -1,4 +1,4 @@
-"""The fake Crazyflie's high-level commander (CRTP port 8): take-off, land, go-to, stop, setpoints and setpoint types.
+"""The fake Crazyflie's high-level commander (CRTP port 8): take-off, land, go-to, stop, uploaded trajectories.
 
 Mirrors `crtp_commander_high_level.c` and `planner.c` of crazyflie-firmware 2026.08:
 - plan states IDLE (stopped: it asks for motors off), FLYING, LANDING and DISABLED;
@@ -9,10 +9,25 @@ Mirrors `crtp_commander_high_level.c` and `planner.c` of crazyflie-firmware 2026
   high-level commander (the firmware documents the same); when IDLE it produces a null setpoint (motors off);
 - every command is answered with ``[command, data0, data1, errno]`` like the firmware.
 
-Trajectories are rest-to-rest: "smooth" is the 7th-order polynomial with zero velocity, acceleration and jerk at
-both ends (the firmware's shape when starting from hover), "linear" is linear interpolation. Unlike the firmware,
-a go-to started while moving ignores the current velocity. Uploaded trajectories and spirals are not supported
-(answer ENOEXEC).
+Planned trajectories (take-off, land, go-to) are rest-to-rest: "smooth" is the 7th-order polynomial with zero
+velocity, acceleration and jerk at both ends (the firmware's shape when starting from hover), "linear" is linear
+interpolation. Unlike the firmware, a go-to started while moving ignores the current velocity. Spirals are not
+supported (answer ENOEXEC).
+
+Uploaded trajectories (`fake_trajectory`), as the firmware handles them:
+- the trajectory memory is this commander's `trajectory_memory` (4096 bytes of RAM, cleared by a reboot), written
+  and read through the memory subsystem (`fake_memory`, memory 1, type 0x12);
+- define (command 6, ``<BBBIB``: id, location, type, offset, pieces): stores the description for ids 0-30
+  (`NUM_TRAJECTORY_DEFINITIONS` 31), ENOEXEC for a larger id; nothing is checked against the memory;
+- start (commands 5 and 13): EBUSY while blocked; not in the group, an id over 30, an undefined id or a location or
+  type the firmware does not know: answered 0, nothing happens; poly4d (type 0): flies from now with the time
+  scale, reversed or not, shifted to start at the current setpoint when relative (and, with relative yaw, rotated to
+  start at the current yaw; command 5 has no relative yaw); compressed (type 1): ENOEXEC unless the time scale is
+  exactly 1 and not reversed, else flown, shifted when relative. Starting needs no state: from IDLE on the floor
+  (armed) the drone takes off along the trajectory;
+- a finished trajectory keeps the plan FLYING and hovers at its end (zero velocity) with the "trajectory finished"
+  bit of `supervisor.info` set, until the next command; an invalid evaluation (NaN, pieces outside the memory)
+  disables the planner, as the firmware does.
 
 Units: metres, seconds, radians (the high-level protocol uses radians for yaw).
 """
@@ -26,7 +41,10 @@ import math
 import struct
 from dataclasses import dataclass
 
+from .fake_memory import TRAJECTORY_MEMORY_SIZE
 from .fake_setpoint import AxisMode, Setpoint, Vec3, null_setpoint, wrap_angle
+from .fake_trajectory import CompressedTrajectory, PiecewiseTrajectory, shortest_signed_angle_radians, \
+    normalize_radians
 
 logger = logging.getLogger(__name__)
 
@@ -47,6 +65,22 @@ COMMAND_START_TRAJECTORY_2 = 13
 
 DEFAULT_TAKEOFF_VELOCITY_M_S = 0.5
 DEFAULT_LANDING_VELOCITY_M_S = 0.5
+
+NUM_TRAJECTORY_DEFINITIONS = 31
+TRAJECTORY_LOCATION_INVALID = 0
+TRAJECTORY_LOCATION_MEM = 1
+TRAJECTORY_TYPE_POLY4D = 0
+TRAJECTORY_TYPE_POLY4D_COMPRESSED = 1
+
+
+@dataclass(frozen=True)
+class TrajectoryDescription:
+    """One defined trajectory (`struct trajectoryDescription`): where it lies in the trajectory memory."""
+
+    location: int
+    kind: int
+    offset: int
+    n_pieces: int
 
 
 class PlanState(enum.IntEnum):
@@ -93,12 +127,19 @@ class Trajectory:
         return now_s >= self.t0_s + self.duration_s
 
 
+Plan = Trajectory | PiecewiseTrajectory | CompressedTrajectory
+"""What the planner flies: a planned segment or an uploaded trajectory (each has `evaluate`, `finished`, `t0_s`)."""
+
+
 class HighLevelCommander:
     """One drone's high-level commander. Not thread-safe: the owning vehicle serialises calls."""
 
     def __init__(self, position: Vec3, yaw_rad: float) -> None:
         self.state = PlanState.IDLE
-        self.trajectory: Trajectory | None = None
+        self.trajectory: Plan | None = None
+        self.trajectory_memory = bytearray(TRAJECTORY_MEMORY_SIZE)
+        """`trajectories_memory`: RAM the memory subsystem writes uploads into (memory id 1)."""
+        self.definitions: list[TrajectoryDescription | None] = [None] * NUM_TRAJECTORY_DEFINITIONS
         self.group_mask = 0
         self.blocked = False
         self.pos: Vec3 = position
@@ -130,12 +171,18 @@ class HighLevelCommander:
         self.trajectory = Trajectory(now_s, max(duration_s, 0.0), start, end, yaw_start, goal_yaw, linear)
 
     def _current_goal(self, now_s: float) -> tuple[Vec3, Vec3, float] | None:
+        """`plan_current_goal`: None when there is no goal or the evaluation is invalid."""
         if self.state is PlanState.LANDING and self.trajectory is not None and self.trajectory.finished(now_s):
             self.state = PlanState.IDLE
             return self.trajectory.evaluate(now_s)
         if self.state in (PlanState.FLYING, PlanState.LANDING) and self.trajectory is not None:
             return self.trajectory.evaluate(now_s)
         return None
+
+    @property
+    def plan_start_s(self) -> float | None:
+        """When the current plan (segment or trajectory) began, on the caller's clock; None before the first."""
+        return self.trajectory.t0_s if self.trajectory is not None else None
 
     # CRTP -----------------------------------------------------------------------------------------------------
 
@@ -163,12 +210,14 @@ class HighLevelCommander:
                 self.stop()
             return 0
         if cmd == COMMAND_DEFINE_TRAJECTORY:
-            return 0
-        if cmd in (COMMAND_START_TRAJECTORY, COMMAND_START_TRAJECTORY_2, COMMAND_SPIRAL):
+            return self._define_trajectory(body)
+        if cmd == COMMAND_SPIRAL:
             logger.warning("fake high-level commander: command %d is not supported", cmd)
             return errno.EBUSY if self.blocked else errno.ENOEXEC
         if self.blocked:
             return errno.EBUSY
+        if cmd in (COMMAND_START_TRAJECTORY, COMMAND_START_TRAJECTORY_2):
+            return self._start_trajectory(cmd, body, now_s)
         if cmd in (COMMAND_TAKEOFF, COMMAND_TAKEOFF_2, COMMAND_TAKEOFF_WITH_VELOCITY):
             return self._takeoff(cmd, body, now_s)
         if cmd in (COMMAND_LAND, COMMAND_LAND_2, COMMAND_LAND_WITH_VELOCITY):
@@ -232,10 +281,57 @@ class HighLevelCommander:
         self.state = PlanState.FLYING
         return 0
 
+    def _define_trajectory(self, body: bytes) -> int:
+        trajectory_id, location, kind, offset, n_pieces = struct.unpack("<BBBIB", body[:8])
+        if trajectory_id >= NUM_TRAJECTORY_DEFINITIONS:
+            return errno.ENOEXEC
+        self.definitions[trajectory_id] = TrajectoryDescription(location, kind, offset, n_pieces)
+        return 0
+
+    def _start_trajectory(self, cmd: int, body: bytes, now_s: float) -> int:
+        if cmd == COMMAND_START_TRAJECTORY:
+            group, relative, reversed_, trajectory_id, timescale = struct.unpack("<BBBBf", body[:8])
+            relative_yaw = 0
+        else:
+            group, relative, relative_yaw, reversed_, trajectory_id, timescale = struct.unpack("<BBBBBf", body[:9])
+        if not self._in_group(group) or trajectory_id >= NUM_TRAJECTORY_DEFINITIONS:
+            return 0
+        description = self.definitions[trajectory_id]
+        if description is None or description.location != TRAJECTORY_LOCATION_MEM:
+            return 0
+        if description.kind == TRAJECTORY_TYPE_POLY4D:
+            trajectory = PiecewiseTrajectory(self.trajectory_memory, description.offset, description.n_pieces, now_s,
+                                             timescale, bool(reversed_))
+            if relative:  # plan_start_trajectory: shift the start onto the last setpoint
+                start = trajectory.evaluate(now_s)
+                if start is not None:
+                    trajectory.shift = tuple(p - s for p, s in zip(self.pos, start[0]))  # type: ignore[assignment]
+                    if relative_yaw:
+                        trajectory.shift_yaw = shortest_signed_angle_radians(normalize_radians(start[2]),
+                                                                             normalize_radians(self.yaw))
+                else:  # an invalid start: the firmware's shift is NaN, so is every evaluation
+                    trajectory.shift = (math.nan, math.nan, math.nan)
+            self.trajectory = trajectory
+        elif description.kind == TRAJECTORY_TYPE_POLY4D_COMPRESSED:
+            if timescale != 1.0 or reversed_:
+                return errno.ENOEXEC
+            compressed = CompressedTrajectory(self.trajectory_memory, description.offset, now_s)
+            if relative:
+                start = compressed.evaluate(now_s)
+                shift = (math.nan,) * 3 if start is None else tuple(p - s for p, s in zip(self.pos, start[0]))
+                compressed.shift = shift  # type: ignore[assignment]
+            self.trajectory = compressed
+        else:
+            return 0
+        self.state = PlanState.FLYING
+        return 0
+
     # Stabilizer tick ------------------------------------------------------------------------------------------
 
     def get_setpoint(self, now_s: float, est_pos: Vec3, est_vel: Vec3, est_yaw: float) -> Setpoint | None:
         """The setpoint this tick (None: leave the commander's setpoint alone). Called only when flying is allowed."""
+        if self.trajectory is not None:  # a plan is never evaluated before it began (a command within the tick)
+            now_s = max(now_s, self.trajectory.t0_s)
         goal = self._current_goal(now_s)
         if self.state in (PlanState.IDLE, PlanState.DISABLED):
             self.pos, self.vel, self.yaw = est_pos, est_vel, est_yaw

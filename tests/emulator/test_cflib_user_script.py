@@ -1,6 +1,6 @@
-"""Contract: any cflib 0.1.34 program using Swarm, SyncCrazyflie, HighLevelCommander, Commander, extpos,
-supervisor arming and emergency stop, SyncLogger/LogConfig and param set/get works unchanged against ``fake://``
-URIs for at least 10 drones.
+"""Contract: any cflib 0.1.34 program using Swarm, SyncCrazyflie, HighLevelCommander (with uploaded trajectories),
+Commander, extpos, supervisor arming and emergency stop, SyncLogger/LogConfig, param set/get and the trajectory
+memory works unchanged against ``fake://`` URIs for at least 10 drones.
 
 The middle of the test is a plain user script (as in Bitcraze's swarm examples); only the URIs are fake, and the
 assertions read the fake world afterwards."""
@@ -8,6 +8,7 @@ assertions read the fake world afterwards."""
 from __future__ import annotations
 
 import itertools
+import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -176,3 +177,88 @@ def test_register_without_a_world_serves_any_unchanged_cflib_program(toc_cache: 
     finally:
         driver.world.close()
         fake_radio.unregister()
+
+
+def test_plain_cflib_swarm_script_uploads_and_flies_trajectories(make_world: Callable[..., FakeWorld],
+                                                                 toc_cache: Path) -> None:
+    """Contract: the trajectory part of cflib (trajectory memory upload with `write_data_sync`, `define_trajectory`,
+    `start_trajectory` relative) works unchanged for 10 drones, as in cflib's autonomous_sequence_high_level
+    example. The figure is this test's own (`trajectory_shapes.figure_eight`), given as the rows of coefficients a
+    user script carries."""
+    from cflib.crazyflie.mem import MemoryElement, Poly4D
+    from trajectory_shapes import figure_eight, reference
+
+    world = make_world(10)
+    uris = [world.uri(a) for a in world.addresses]
+    address_of = {world.uri(a): a for a in world.addresses}
+    # duration, x^0..x^7, y^0..y^7, z^0..z^7, yaw^0..yaw^7 (the layout of cflib's example tables)
+    figure8 = [[p.duration, *p.polys[0], *p.polys[1], *p.polys[2], *p.polys[3]] for p in figure_eight(height=0.0)]
+    uploaded: dict[str, float] = {}
+    samples: list[dict[int, object]] = []
+    stop_sampling = threading.Event()
+
+    def sample() -> None:
+        while not stop_sampling.is_set():
+            samples.append(world.snapshots())
+            time.sleep(0.05)
+
+    # ------------------------------------------ the user script ------------------------------------------
+    def upload_trajectory(scf: SyncCrazyflie) -> None:
+        cf = scf.cf
+        trajectory_mem = cf.mem.get_mems(MemoryElement.TYPE_TRAJ)[0]
+        trajectory_mem.trajectory = []
+        total_duration = 0.0
+        for row in figure8:
+            duration = row[0]
+            x = Poly4D.Poly(row[1:9])
+            y = Poly4D.Poly(row[9:17])
+            z = Poly4D.Poly(row[17:25])
+            yaw = Poly4D.Poly(row[25:33])
+            trajectory_mem.trajectory.append(Poly4D(duration, x, y, z, yaw))
+            total_duration += duration
+        if not trajectory_mem.write_data_sync():
+            raise RuntimeError("upload failed")
+        cf.high_level_commander.define_trajectory(1, 0, len(trajectory_mem.trajectory))
+        uploaded[cf.link_uri] = total_duration
+
+    def take_off(scf: SyncCrazyflie) -> None:
+        scf.cf.supervisor.send_arming_request(True)
+        scf.cf.high_level_commander.takeoff(0.5, 1.0)
+        time.sleep(1.3)
+
+    def fly_figure(scf: SyncCrazyflie) -> None:
+        scf.cf.high_level_commander.start_trajectory(1, 1.0, relative_position=True)
+        time.sleep(uploaded[scf.cf.link_uri] + 0.2)
+
+    def land(scf: SyncCrazyflie) -> None:
+        scf.cf.high_level_commander.land(0.0, 1.0)
+        time.sleep(1.2)
+        scf.cf.high_level_commander.stop()
+
+    sampler = threading.Thread(target=sample, daemon=True)
+    with Swarm(uris, factory=CachedCfFactory(rw_cache=str(toc_cache))) as swarm:
+        swarm.parallel_safe(upload_trajectory)
+        swarm.parallel_safe(take_off)
+        sampler.start()
+        swarm.parallel_safe(fly_figure)
+        stop_sampling.set()
+        swarm.parallel_safe(land)
+    # -------------------------------------------- end of script --------------------------------------------
+    sampler.join()
+    pieces = figure_eight(height=0.0)
+    duration = sum(p.duration for p in pieces)
+    assert sorted(uploaded) == sorted(uris) and all(v == pytest.approx(duration) for v in uploaded.values())
+    for uri in uris:
+        address = address_of[uri]
+        x0, y0 = 0.5 * (address - world.addresses[0]), 0.0
+        snaps = [s[address] for s in samples]
+        plan_start = snaps[-1].hl_plan_start_s  # type: ignore[attr-defined]
+        flown = [s for s in snaps if s.hl_plan_start_s == plan_start]  # type: ignore[attr-defined]
+        assert len(flown) > 0.7 * duration / 0.05
+        for snap in flown:
+            t = snap.time_s - plan_start  # type: ignore[attr-defined]
+            x, y, z = reference(pieces, t)[0]
+            assert snap.position == pytest.approx((x0 + x, y0 + y, 0.5 + z), abs=0.01), (uri, t)  # type: ignore[attr-defined]
+        landed = world.snapshot(address)
+        assert landed.position[2] == pytest.approx(0.0, abs=1e-6) and not landed.crashed
+        assert landed.packets_received[(4, 2)] == 44  # 8 pieces of 132 bytes, 24 bytes a packet

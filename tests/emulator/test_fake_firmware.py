@@ -107,7 +107,7 @@ def test_link_platform_and_memory_answers() -> None:
     ping = struct.pack("<Bd", 0, 123.5)
     assert fw.handle(15, 0, ping, 0.0) == [(15, 0, ping)]
     assert fw.handle(13, 1, bytes([0]), 0.0) == [(13, 1, bytes([0, PROTOCOL_VERSION]))]
-    assert fw.handle(4, 0, bytes([1]), 0.0) == [(4, 0, bytes([1, 0]))]
+    assert fw.handle(4, 0, bytes([1]), 0.0) == [(4, 0, bytes([1, 5]))]  # the memories of a deckless CF2.1
     assert fw.handle(5, 1, bytes([5]), 0.0) == [(5, 1, bytes([5, 0, 0]))]
 
 
@@ -599,3 +599,29 @@ def test_a_reboot_in_flight_cuts_the_motors_falls_is_silent_then_boots_fresh_on_
     assert falling.snap().booting and falling.snap().position[2] > 0.0  # still falling: it boots where it lands
     falling.run(0.2)
     assert not falling.snap().booting and falling.snap().position[2] == 0.0
+
+
+def test_persistent_parameters_are_stored_survive_a_reboot_and_clear() -> None:
+    """paramPersistentStore / GetState / Clear of param_logic.c: the state answer is [4, id, stored, default
+    (, stored value)]; stored values are applied at boot."""
+    sim = Sim()
+    effect = PARAM_TOC.by_name["ring.effect"]
+    assert effect.persistent and effect.ctype == "uint8_t"
+    ident = struct.pack("<H", effect.ident)
+    assert sim.send(2, 3, bytes([4]) + ident)[0][2][3:] == bytes([0, 6])  # not stored, default 6
+    sim.send(2, 2, ident + bytes([10]))
+    assert sim.send(2, 3, bytes([3]) + ident)[0][2][3] == 0
+    assert sim.send(2, 3, bytes([4]) + ident)[0][2][3:] == bytes([1, 6, 10])  # stored 10, default still 6
+    sim.send(2, 2, ident + bytes([12]))
+    sim.fw.reboot(sim.t)
+    sim.run(2.0)
+    assert sim.snap().boots == 1 and sim.snap().params["ring.effect"] == 10  # the stored value, not 12 or 6
+    assert sim.send(2, 3, bytes([5]) + ident)[0][2][3] == 0
+    assert sim.send(2, 3, bytes([4]) + ident)[0][2][3:] == bytes([0, 6])
+    not_persistent = struct.pack("<H", PARAM_TOC.by_name["stabilizer.estimator"].ident)
+    assert sim.send(2, 3, bytes([3]) + not_persistent)[0][2][3] == errno.ENOENT
+    # the parameters of the default build's deck drivers are there, saying no deck is attached
+    for name in ("deck.bcFlow2", "deck.bcLighthouse4", "deck.bcLoco", "deck.bcLedRing", "deck.bcAI"):
+        assert PARAM_TOC.by_name[name].read_only and sim.snap().params[name] == 0
+    assert sim.snap().params["cpu.flash"] == 1024 and PARAM_TOC.by_name["cpu.flash"].ctype == "uint16_t"
+    assert {"kalman.stateX", "kalman.stateY", "kalman.stateZ"} <= set(LOG_TOC.by_name)
