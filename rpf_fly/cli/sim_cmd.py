@@ -10,15 +10,16 @@ import typer
 
 from rpf_fly.cli import app
 from rpf_fly.cli.errors import fail
+from rpf_fly.mission.model import PLANNER_KINDS, POLICY_KINDS
 
 
 @app.command()
 def sim(
     mission: Path = typer.Argument(..., help="Mission YAML file."),
     planner: Optional[str] = typer.Option(
-        None, "--planner", help="Override the mission's planner: apf, apf-paper, rpf, rpf-mean, ppo."
+        None, "--planner", help=f"Override the mission's planner: {', '.join(PLANNER_KINDS)}."
     ),
-    policy: Optional[Path] = typer.Option(None, "--policy", help="ONNX policy for rpf, rpf-mean or ppo."),
+    policy: Optional[Path] = typer.Option(None, "--policy", help=f"ONNX policy for {', '.join(POLICY_KINDS)}."),
     no_wall_following: bool = typer.Option(
         False, "--no-wall-following", help="Vanilla APF direction: no wall-following, no soft rule."
     ),

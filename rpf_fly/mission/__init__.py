@@ -4,8 +4,9 @@
     mission = load_mission("missions/circle-8-r3.yaml")   # or MissionError: "FILE:LINE: FIELD: problem"
 """
 
+from typing import Any
+
 from .errors import MissionError
-from .load import expand_formation, load_mission, parse_mission, parse_uri, with_planner
 from .model import (
     PLANNER_KINDS,
     POLICY_KINDS,
@@ -49,3 +50,16 @@ __all__ = [
     "SimSettings",
     "Vec2",
 ]
+
+
+_LOADER = ("expand_formation", "load_mission", "parse_mission", "parse_uri", "with_planner")
+
+
+def __getattr__(name: str) -> Any:
+    """The loader (numpy, yaml) is imported on first use: the CLI's help reads the planner kinds of ``model``
+    without paying for it."""
+    if name in _LOADER:
+        from . import load
+
+        return getattr(load, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
