@@ -31,14 +31,11 @@ def train(
         None, "--obstacle-radius", help="Arena A obstacle radius (default 0.5 m; 0.1 m for the ppo baseline)."
     ),
     missions_dir: Path = typer.Option(Path("missions"), "--missions", help="Paper missions for the evaluation."),
+    force: bool = typer.Option(False, "--force", help="Overwrite an existing policy, model card and curves at --out."),
 ) -> None:
-    """Train a policy with PPO from the paper's reward, export it to ONNX (parity-checked) and write its model card."""
-    try:
-        import torch  # noqa: F401
-    except ImportError:
-        raise fail("rpf-fly train needs torch: pip install -e '.[train]' (torch==2.13.0, CPU build)")
-    from rpf_fly.learn.ppo import PPOConfig, Trainer
+    """Train a policy with PPO from the paper's reward, export it to ONNX (parity-checked) and write its model card.
 
+    An existing policy (or its model card or curves) at --out is never overwritten without --force."""
     if no_attention:
         kind = "rpf-mean"
     if kind not in ("rpf", "rpf-mean", "ppo"):
@@ -47,6 +44,16 @@ def train(
         raise fail(f"--arena: expected a, b or both, got {arena!r}")
     if out.suffix != ".onnx":
         raise fail(f"--out: expected a path ending in .onnx, got {str(out)!r}")
+    existing = [p for p in written_files(out) if p.exists()]
+    if existing and not force:
+        raise fail(f"--out: refusing to overwrite {', '.join(str(p) for p in existing)}: choose another --out, or "
+                   "add --force")
+    try:
+        import torch  # noqa: F401
+    except ImportError:
+        raise fail("rpf-fly train needs torch: pip install -e '.[train]' (torch==2.13.0, CPU build)")
+    from rpf_fly.learn.ppo import PPOConfig, Trainer
+
     radius = obstacle_radius if obstacle_radius is not None else (0.1 if kind == "ppo" else 0.5)
     config = PPOConfig(seed=seed, kind=kind, arena=arena, episodes=episodes, n_arenas=arenas, obstacle_radius=radius)  # type: ignore[arg-type]
     run_dir = out.with_suffix(".run")
@@ -62,6 +69,11 @@ def train(
     started = time.time()
     _train_with_progress(trainer)
     _finish(trainer, out, command, eval_seeds, missions_dir, time.time() - started, commit)
+
+
+def written_files(out: Path) -> tuple[Path, ...]:
+    """What a training run writes beside its run folder: the policy, its model card and its curves."""
+    return (out, out.with_suffix(".yaml"), out.with_suffix(".curve.csv"), out.with_suffix(".curve.png"))
 
 
 def _train_with_progress(trainer) -> None:  # type: ignore[no-untyped-def]

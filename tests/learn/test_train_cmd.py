@@ -1,0 +1,53 @@
+"""``rpf-fly train`` never overwrites a policy or its model card without ``--force`` (the README's own example
+names the shipped ``policies/rpf.onnx``)."""
+
+import hashlib
+import shutil
+from pathlib import Path
+
+from typer.testing import CliRunner
+
+from rpf_fly.cli import get_app
+
+ROOT = Path(__file__).resolve().parents[2]
+runner = CliRunner()
+
+
+def digest(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def shipped_copy(tmp_path: Path) -> Path:
+    folder = tmp_path / "policies"
+    folder.mkdir()
+    for suffix in (".onnx", ".yaml", ".curve.csv", ".curve.png"):
+        shutil.copy(ROOT / "policies" / f"rpf{suffix}", folder / f"rpf{suffix}")
+    return folder / "rpf.onnx"
+
+
+def test_an_existing_policy_is_refused_with_one_line_and_left_alone(tmp_path):
+    out = shipped_copy(tmp_path)
+    before = {p.name: digest(p) for p in out.parent.iterdir()}
+    result = runner.invoke(get_app(), ["train", "--out", str(out), "--episodes", "1", "--eval-seeds", "0"])
+    assert result.exit_code == 2, result.output
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and "--force" in lines[0] and str(out) in lines[0], result.stderr
+    assert str(out.with_suffix(".yaml")) in lines[0]  # the model card is named too
+    assert {p.name: digest(p) for p in out.parent.iterdir()} == before
+    assert not out.with_suffix(".run").exists()  # nothing started
+
+
+def test_a_lone_model_card_is_protected_too(tmp_path):
+    out = tmp_path / "mine.onnx"
+    out.with_suffix(".yaml").write_text("policy: mine.onnx\n")
+    result = runner.invoke(get_app(), ["train", "--out", str(out)])
+    assert result.exit_code == 2 and "mine.yaml" in result.stderr
+    assert out.with_suffix(".yaml").read_text() == "policy: mine.onnx\n"
+
+
+def test_force_goes_past_the_check(tmp_path):
+    out = shipped_copy(tmp_path)
+    # --resume without a checkpoint fails after the overwrite check (and before any training).
+    result = runner.invoke(get_app(), ["train", "--out", str(out), "--force", "--resume"])
+    assert result.exit_code == 2, result.output
+    assert "--resume: no checkpoint" in result.stderr and "refusing" not in result.stderr
