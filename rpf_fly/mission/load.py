@@ -14,6 +14,7 @@ import dataclasses
 import difflib
 import ipaddress
 import math
+import os
 import re
 from pathlib import Path
 from typing import Any, Callable, Iterable, NamedTuple, Optional, Sequence
@@ -129,19 +130,30 @@ def _options(choices: Iterable[str]) -> str:
     return ", ".join(repr(c) for c in choices)
 
 
+PROJECT_POLICIES = Path(__file__).resolve().parents[2] / "policies"
+"""The project's shipped policies: the ``policies/`` folder beside the ``rpf_fly`` package (a source checkout or an
+editable install). A relative policy path inside a ``policies/`` folder falls back to it by file name, so a mission
+copied out of ``missions/`` keeps its ``../policies/rpf.onnx`` (docs/mission-format.md, *Policy paths*)."""
+
+
 def _search_dirs(base_dir: Optional[Path], cwd_first: bool = False) -> list[Path]:
     dirs = [d for d in (base_dir, Path.cwd()) if d is not None]
     return dirs[::-1] if cwd_first else dirs
 
 
 def _find_file(raw: str, dirs: Sequence[Path]) -> tuple[Optional[Path], list[Path]]:
-    """The first existing file among ``raw`` (absolute) or ``raw`` under each of ``dirs``; and where it looked."""
+    """The first existing file among ``raw`` (absolute) or ``raw`` under each of ``dirs``, then, for a path inside
+    a ``policies/`` folder, the project's :data:`PROJECT_POLICIES` by file name; and every place it looked, each
+    once (absolute, ``..`` folded)."""
     path = Path(raw).expanduser()
     candidates = [path] if path.is_absolute() else [d / path for d in dirs]
-    for c in candidates:
-        if c.is_file():
-            return c.resolve(), candidates
-    return None, [c.absolute() for c in candidates]
+    if not path.is_absolute() and path.parent.name == "policies" and PROJECT_POLICIES.is_dir():
+        candidates.append(PROJECT_POLICIES / path.name)
+    places = list(dict.fromkeys(Path(os.path.abspath(c)) for c in candidates))
+    for place in places:
+        if place.is_file():
+            return place.resolve(), places
+    return None, places
 
 
 def _looked(candidates: Sequence[Path]) -> str:
@@ -737,7 +749,7 @@ def with_planner(mission: m.Mission, kind: str, policy: str | Path | None = None
 
     ``policy`` is looked up as an absolute path, else relative to the current directory, else to the mission's
     directory. Without it, the mission's policy is kept when ``kind`` is the mission's kind; a policy kind
-    otherwise looks for ``policies/<kind>.onnx`` (mission directory, then current directory); other kinds drop it.
+    otherwise looks for ``policies/<kind>.onnx`` (mission directory, current directory, the shipped ``policies/``); other kinds drop it.
     """
     file = str(mission.source) if mission.source is not None else STRING_SOURCE
     check = _Checker(file)

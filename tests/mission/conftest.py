@@ -19,6 +19,14 @@ def workdir(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
 
 
 @pytest.fixture
+def no_shipped_policies(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """As if rpf_fly were installed without the project's ``policies/`` folder (a wheel): no fallback."""
+    import rpf_fly.mission.load
+
+    monkeypatch.setattr(rpf_fly.mission.load, "PROJECT_POLICIES", tmp_path / "no-shipped-policies")
+
+
+@pytest.fixture
 def load(workdir: Path) -> Callable[[str], Mission]:
     """Load YAML text (dedented) written to ``m.yaml`` in the working directory."""
 

@@ -421,7 +421,7 @@ def test_missing_policy_file(fail, workdir):
     assert str(workdir / "policies" / "nope.onnx") in err.message
 
 
-def test_missing_default_policy(fail, workdir):
+def test_missing_default_policy(fail, workdir, no_shipped_policies):
     err = fail(BASE + "planner: {kind: rpf-mean}\n",
                "m.yaml:5: planner.policy: planner kind 'rpf-mean' needs a policy and none is given; "
                "the default 'policies/rpf-mean.onnx' was not found")

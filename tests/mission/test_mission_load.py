@@ -272,7 +272,7 @@ def test_kind_without_policy_keeps_a_given_policy(workdir):
     assert load_mission("m.yaml").planner.policy == gains.resolve()
 
 
-def test_policy_directory_is_not_a_policy(workdir, fail):
+def test_policy_directory_is_not_a_policy(workdir, fail, no_shipped_policies):
     (workdir / "policies" / "rpf.onnx").mkdir(parents=True)
     fail(BASE + "planner: {kind: rpf}\n", "m.yaml:5: planner.policy: planner kind 'rpf' needs a policy")
 
@@ -318,7 +318,7 @@ def test_with_planner_unknown_kind(lab):
     assert str(info.value).startswith("missions/m.yaml:0: --planner: unknown planner kind 'rfp' (did you mean 'rpf'?)")
 
 
-def test_with_planner_policy_kind_without_a_default(lab):
+def test_with_planner_policy_kind_without_a_default(lab, no_shipped_policies):
     with pytest.raises(MissionError) as info:
         with_planner(lab, "ppo")
     assert str(info.value).startswith("missions/m.yaml:0: --planner: planner kind 'ppo' needs a policy: give --policy")
