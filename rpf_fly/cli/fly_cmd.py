@@ -59,6 +59,15 @@ def _check_radio_budget(mission, mission_path: Path) -> list:  # type: ignore[no
     return loads
 
 
+def _check_radios(mission) -> None:  # type: ignore[no-untyped-def]
+    """Every ``radio://`` drone's Crazyradio on USB, before any link is tried: else one line, exit 2."""
+    from rpf_fly.radio.dongles import radio_problem
+
+    problem = radio_problem(d.uri for d in mission.drones)
+    if problem:
+        raise fail(problem)
+
+
 def _planner_factory(mission, mission_path: Path):  # type: ignore[no-untyped-def]
     """Each drone gets its own planner instance (its own ONNX session for learned planners)."""
     from rpf_fly.planning.onnx_policy import PolicyError
@@ -92,6 +101,8 @@ def fly(
                                                 "0: any free port). Implies --foxglove."),
     foxglove_host: Optional[str] = typer.Option(None, "--foxglove-host", help="Address the live view listens on "
                                                 "(default 127.0.0.1; 0.0.0.0: every network). Implies --foxglove."),
+    verbose: bool = typer.Option(False, "--verbose", help="Also print the libraries' log records (cflib) on stderr; "
+                                                          "they always go to LOG.log beside the flight log."),
 ) -> None:
     """Fly MISSION: NatNet mocap and cflib radios as the mission says, or simulated drones with --dry-run."""
     loaded = _load(mission)
@@ -106,6 +117,7 @@ def fly(
         raise fail(f"{mission}:0: {real_flight_problem(loaded)}")
     if not dry_run:
         _resolve_server(loaded, mission)
+        _check_radios(loaded)
     if mocap not in (None, "natnet", "sim", "motioncapture"):
         raise fail(f"--mocap: expected natnet, motioncapture or sim, got {mocap!r}")
     _require_library(loaded, dry_run, mocap)
@@ -113,15 +125,29 @@ def fly(
     log_path = log or Path("flights") / f"{loaded.name}-{datetime.now():%Y%m%d-%H%M%S}.mcap"
     log_path.parent.mkdir(parents=True, exist_ok=True)
     from rpf_fly.cli.live_opts import start_live
+    from rpf_fly.cli.logs import route_logging
 
     live = start_live(foxglove, foxglove_port, foxglove_host)
     try:
-        code = _run_flight(loaded, factory, dry_run, mocap, log_path, console, schedule, radio_loss, live_view=live)
+        with route_logging(text_log_path(log_path), verbose) as logs:
+            code = _run_flight(loaded, factory, dry_run, mocap, log_path, console, schedule, radio_loss,
+                               live_view=live)
     finally:
         if live is not None:
             live.close()
             typer.echo(live.summary())
+    if logs.warnings and logs.path is not None and not verbose:
+        typer.echo(f"({logs.warnings} warning(s) from cflib and rpf_fly: {logs.path})", err=True)
     raise typer.Exit(code)
+
+
+def text_log_path(log_path: Path) -> Path:
+    """The libraries' log records of a flight: beside its MCAP log, ``.log`` for ``.mcap``."""
+    return log_path.with_suffix(".log") if log_path.suffix != ".log" else log_path.with_name(log_path.name + ".txt")
+
+
+CHECK_LOG = Path("~/.cache/rpf_fly/check.log")
+"""The libraries' log records of the last ``rpf-fly check`` (overwritten each time)."""
 
 
 def _load_faults(path: Path, mission):  # type: ignore[no-untyped-def]
@@ -279,13 +305,16 @@ def check(
     mission: Path = typer.Argument(..., help="Mission YAML file."),
     dry_run: bool = typer.Option(False, "--dry-run", help="Preflight the simulated drones instead of hardware."),
     preflight: bool = typer.Option(True, "--preflight/--no-preflight", help="Connect and run the preflight checks."),
+    verbose: bool = typer.Option(False, "--verbose", help="Also print the libraries' log records (cflib) on stderr; "
+                                                          "they always go to ~/.cache/rpf_fly/check.log."),
 ) -> None:
     """Validate MISSION; then connect to the drones and the mocap and run the preflight checks (nothing takes off)."""
     loaded = _load(mission)
     factory = _planner_factory(loaded, mission)
     from rpf_fly.flight.session import real_flight_problem
 
-    if preflight and not dry_run and not real_flight_problem(loaded):
+    hardware = preflight and not dry_run and not real_flight_problem(loaded)
+    if hardware:
         _resolve_server(loaded, mission)
     if preflight:
         _require_library(loaded, dry_run)
@@ -295,16 +324,31 @@ def check(
     for line in budget_table(radio_loads(loaded)):
         typer.echo(f"  {line}")
     _check_radio_budget(loaded, mission)
-    typer.echo(f"{mission}: valid mission '{loaded.name}' with {len(loaded.drones)} drones, planner {loaded.planner.kind}")
+    policy = f" ({loaded.planner.policy})" if loaded.planner.policy is not None else ""
+    typer.echo(f"{mission}: valid mission '{loaded.name}' with {len(loaded.drones)} drones, planner "
+               f"{loaded.planner.kind}{policy}")
     if not preflight:
         return
-    from rpf_fly.flight.dry_run import DryRun
-    from rpf_fly.flight.loop import FlightLoop
-    from rpf_fly.radio.cflib_backend import CflibBackend
-
     if not dry_run and real_flight_problem(loaded):
         typer.echo(f"preflight skipped: {real_flight_problem(loaded)}")
         return
+    if not dry_run:
+        _check_radios(loaded)
+    from rpf_fly.cli.logs import route_logging
+
+    with route_logging(CHECK_LOG.expanduser(), verbose) as logs:
+        problems = _preflight(loaded, factory, dry_run)
+    for name, problem in problems.items():
+        typer.echo(f"{name}: {'ok' if not problem else problem}")
+    if logs.warnings and logs.path is not None and not verbose:
+        typer.echo(f"({logs.warnings} warning(s) from cflib and rpf_fly: {logs.path})", err=True)
+    raise typer.Exit(0 if not any(problems.values()) else 1)
+
+
+def _preflight(loaded, factory, dry_run: bool) -> dict[str, str]:  # type: ignore[no-untyped-def]
+    from rpf_fly.flight.dry_run import DryRun
+    from rpf_fly.flight.loop import FlightLoop
+    from rpf_fly.radio.cflib_backend import CflibBackend
     from rpf_fly.flight.session import DEFAULT_TOC_CACHE, mocap_source
 
     rig = DryRun(loaded) if dry_run else None
@@ -318,6 +362,4 @@ def check(
         problems = loop.preflight_only()
         if rig is None:
             source.close()
-    for name, problem in problems.items():
-        typer.echo(f"{name}: {'ok' if not problem else problem}")
-    raise typer.Exit(0 if not any(problems.values()) else 1)
+    return problems

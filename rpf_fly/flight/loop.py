@@ -224,7 +224,8 @@ class FlightLoop:
         self._set_phase(SwarmPhase.CONNECTING)
         failures = self.backend.connect(self.uris)
         for name, why in failures.items():
-            self.commander.fail(self.agents[name], f"connection failed: {why}")
+            why = (why.strip().splitlines() or ["no reason given"])[0]  # cflib appends a traceback to its reason
+            self.commander.fail(self.agents[name], why if why.startswith("connection") else f"connection failed: {why}")
         if failures:
             self._abort(f"{len(failures)} drone(s) failed to connect: no drone takes off")
             return False
