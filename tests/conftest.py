@@ -78,3 +78,86 @@ def toc_cache(tmp_path_factory: pytest.TempPathFactory) -> Path:
         world.close()
     assert len(list(path.glob("*.json"))) == 2
     return path
+
+
+# --------------------------------------------------------------------------- real flights through the real CLI
+
+CLI_MISSION = """\
+name: short-3
+arena: {x: [-2.0, 2.0], y: [-2.0, 2.0], z: [0.0, 1.5]}
+flight: {height: 0.5, speed: 0.5, rate_hz: 10, goal_tolerance: 0.1, takeoff_s: 1.0, land_s: 1.0, timeout_s: 60}
+planner: {kind: apf}
+mocap: {kind: sim, rate_hz: 100}
+obstacles:
+  - {shape: circle, center: [0.0, 0.9], radius: 0.1}
+drones:
+  - {name: cf1, uri: radio://0/80/2M/E7E7E7E701, start: [-1.0, -0.6], goal: [1.5, -0.6]}
+  - {name: cf2, uri: radio://0/80/2M/E7E7E7E702, start: [-1.0, 0.0], goal: [1.5, 0.0]}
+  - {name: cf3, uri: radio://0/80/2M/E7E7E7E703, start: [-1.0, 0.6], goal: [1.5, 0.6]}
+"""
+"""Three drones, 2.5 m each, one pole: a dry run of about 15 s through ``python -m rpf_fly fly``."""
+
+
+class CliFlight:
+    """A dry run of ``rpf-fly fly`` in a real process (stdout and stderr piped: not a terminal) and its log."""
+
+    def __init__(self, returncode: int, stdout: str, stderr: str, log: Path):
+        self.returncode, self.stdout, self.stderr, self.log = returncode, stdout, stderr, log
+
+
+def fly_cli(folder: Path, *, interrupts: int = 0, kill: bool = False, args: tuple[str, ...] = ()) -> CliFlight:
+    """Fly :data:`CLI_MISSION` with ``--dry-run``; ``interrupts`` SIGINTs (0.2 s apart) or a SIGKILL 2.5 s after the
+    swarm starts flying."""
+    import os
+    import signal
+    import subprocess
+    import time
+
+    mission = folder / "short.yaml"
+    mission.write_text(CLI_MISSION)
+    log = folder / "flight.mcap"
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    proc = subprocess.Popen([sys.executable, "-m", "rpf_fly", "fly", str(mission), "--dry-run", "--log", str(log),
+                             *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=folder)
+    if interrupts or kill:
+        lines = []
+        deadline = time.monotonic() + 90
+        while time.monotonic() < deadline:
+            line = proc.stderr.readline()
+            if not line:
+                break
+            lines.append(line)
+            if "swarm: flying" in line:
+                break
+        else:
+            proc.kill()
+            raise AssertionError("the flight never started:\n" + "".join(lines))
+        time.sleep(2.5 if kill else 1.0)
+        if kill:
+            proc.send_signal(signal.SIGKILL)
+        for _ in range(interrupts):
+            proc.send_signal(signal.SIGINT)
+            time.sleep(0.2)
+        out, err = proc.communicate(timeout=90)
+        err = "".join(lines) + err
+    else:
+        out, err = proc.communicate(timeout=120)
+    return CliFlight(proc.returncode, out, err, log)
+
+
+@pytest.fixture(scope="session")
+def clean_cli_flight(tmp_path_factory: pytest.TempPathFactory) -> CliFlight:
+    """Every drone reaches its goal and lands."""
+    return fly_cli(tmp_path_factory.mktemp("clean-flight"))
+
+
+@pytest.fixture(scope="session")
+def stopped_cli_flight(tmp_path_factory: pytest.TempPathFactory) -> CliFlight:
+    """Ctrl-C twice in flight: every motor cut (emergency stop), exit 130."""
+    return fly_cli(tmp_path_factory.mktemp("stopped-flight"), interrupts=2)
+
+
+@pytest.fixture(scope="session")
+def killed_cli_flight(tmp_path_factory: pytest.TempPathFactory) -> CliFlight:
+    """SIGKILL in flight: a log without its summary and footer."""
+    return fly_cli(tmp_path_factory.mktemp("killed-flight"), kill=True)

@@ -80,6 +80,7 @@ def _cells(row: Mapping[str, Any]) -> dict[str, str]:
 def print_report(results: Mapping[str, Any], console: Any = None) -> None:
     """Print the table (successful-run figures on the first line of a cell, all-run ones below) and the claims."""
     from rich.console import Console
+    from rich.markup import escape
     from rich.table import Table
 
     console = console or Console()
@@ -92,7 +93,7 @@ def print_report(results: Mapping[str, Any], console: Any = None) -> None:
     for column in ("scene", "planner", "success", "collisions", "reached", "travel [m]", "smoothness",
                    "makespan [s]", "failed c/s/t"):
         left = column in ("scene", "planner")
-        table.add_column(column, justify="left" if left else "right", no_wrap=left or column == "success")
+        table.add_column(escape(column), justify="left" if left else "right", no_wrap=left or column == "success")
     reasons: dict[str, str] = {}
     for row in results["rows"]:
         if row["status"] != "ok":
@@ -120,12 +121,13 @@ def print_report(results: Mapping[str, Any], console: Any = None) -> None:
 
 def print_claims(claims: Sequence[Claim], console: Any = None) -> None:
     from rich.console import Console
+    from rich.markup import escape
     from rich.table import Table
 
     console = console or Console()
     table = Table(title="the paper's claims", show_lines=True)
     for column in ("", "claim", "verdict", "numbers"):
-        table.add_column(column)
+        table.add_column(escape(column))
     colour = {"held": "green", "not held": "red", "not evaluated": "yellow"}
     for claim in claims:
         table.add_row(

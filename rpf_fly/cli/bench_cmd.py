@@ -38,8 +38,6 @@ def bench(
 
     A learned planner whose policy file is absent or unusable gets 'missing' rows with the reason; the rest runs.
     """
-    from rich.console import Console
-
     from rpf_fly.bench.runner import BenchConfig, BenchError, prepare, run_bench
 
     paths = {}
@@ -63,10 +61,10 @@ def bench(
         plan = prepare(config)
     except BenchError as err:
         raise fail(f"rpf-fly bench: {err}")
-    console = Console()
-    if not console.is_terminal:
-        console = Console(width=140)  # a log file or pipe: keep the wide table readable
-    errors = Console(stderr=True)
+    from rpf_fly.cli.output import console as make_console
+
+    console = make_console()
+    errors = make_console(stderr=True)
     for reason in dict.fromkeys(plan.missing.values()):
         errors.print(f"[yellow]missing: {reason}[/yellow]")
     result = _run_with_progress(plan, run_bench, errors)
@@ -109,6 +107,18 @@ def _figure(results, result, path: Path) -> Path:  # type: ignore[no-untyped-def
 def _run_with_progress(plan, run_bench, console):  # type: ignore[no-untyped-def]
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
+    from rpf_fly.cli.output import ProgressLines
+
+    if not console.is_terminal:  # piped: a plain line every 10 s instead of a bar
+        lines = ProgressLines("bench", plan.total_runs, "runs", stream=console.file)
+        done = [0]
+
+        def line(record) -> None:  # type: ignore[no-untyped-def]
+            done[0] += 1
+            verdict = "ok" if record.success else (record.failure or "failed")
+            lines.update(done[0], f"{record.planner} {record.scene} seed {record.seed}: {verdict}")
+
+        return run_bench(plan, line)
     with Progress(
         TextColumn("[bold]bench[/bold]"),
         BarColumn(),

@@ -76,17 +76,19 @@ def _fmt(value, unit: str = "", digits: int = 2) -> str:  # type: ignore[no-unty
 
 
 def _print_summary(result, plot: Optional[Path], csv_dir: Optional[Path]) -> None:  # type: ignore[no-untyped-def]
-    from rich.console import Console
+    from rich.markup import escape
     from rich.table import Table
 
-    console = Console()
+    from rpf_fly.cli.output import console as make_console
+
+    console = make_console()
     head = f"{result.mission or result.path.name}: planner {result.planner or '?'}, seed {result.seed}"
     console.print(f"[bold]{head}[/bold]  duration {result.duration_s:.1f} s, {len(result.drones)} drones"
                   + ("  [yellow](truncated)[/yellow]" if result.truncated else ""))
 
     topics = Table(title="topics")
     for column in ("topic", "schema", "messages", "rate [Hz]", "gaps", "longest gap [s]", "missing"):
-        topics.add_column(column, justify="left" if column in ("topic", "schema") else "right",
+        topics.add_column(escape(column), justify="left" if column in ("topic", "schema") else "right",
                           no_wrap=column == "topic")
     for t in result.topics:
         topics.add_row(t.topic, t.schema, str(t.count), _fmt(t.rate_hz, "", 1), str(len(t.gaps)),
@@ -104,7 +106,7 @@ def _print_summary(result, plot: Optional[Path], csv_dir: Optional[Path]) -> Non
     else:
         drones = Table(title="metrics")
         for column in ("drone", "outcome", "reached", "collided", "travel [m]", "time to goal [s]", "smoothness"):
-            drones.add_column(column, justify="left" if column in ("drone", "outcome") else "right")
+            drones.add_column(escape(column), justify="left" if column in ("drone", "outcome") else "right")
         for row in m.per_drone:
             drones.add_row(row.name, result.outcomes.get(row.name) or "-", "yes" if row.reached else "no",
                            "yes" if row.collided else "no", f"{row.travel_distance_m:.2f}",

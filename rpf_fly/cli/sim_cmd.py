@@ -78,13 +78,15 @@ def sim(
 
 
 def _print_table(metrics, result, plot: Optional[Path]) -> None:  # type: ignore[no-untyped-def]
-    from rich.console import Console
+    from rich.markup import escape
     from rich.table import Table
 
-    console = Console()
+    from rpf_fly.cli.output import console as make_console
+
+    console = make_console()
     table = Table(title=f"{metrics.mission}: {metrics.planner}, seed {metrics.seed}")
     for column in ("drone", "outcome", "collided", "travel [m]", "time to goal [s]", "smoothness"):
-        table.add_column(column, justify="left" if column in ("drone", "outcome") else "right")
+        table.add_column(escape(column), justify="left" if column in ("drone", "outcome") else "right")
     for row, outcome in zip(metrics.per_drone, result.outcomes):
         table.add_row(
             row.name,

@@ -76,10 +76,30 @@ def written_files(out: Path) -> tuple[Path, ...]:
     return (out, out.with_suffix(".yaml"), out.with_suffix(".curve.csv"), out.with_suffix(".curve.png"))
 
 
+def _stats(log) -> str:  # type: ignore[no-untyped-def]
+    return (f"return {log.mean_return:7.1f}  success {log.success_rate:4.0%}  kl {log.approx_kl:.4f}  "
+            f"{log.steps_per_s:6.0f} steps/s")
+
+
 def _train_with_progress(trainer) -> None:  # type: ignore[no-untyped-def]
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
+    from rpf_fly.cli.output import ProgressLines, console
+
     target = trainer.config.episodes
+    out = console()
+    if not out.is_terminal:  # piped: a plain line every 10 s instead of a bar
+        lines = ProgressLines("train", target, "episodes")
+        last: list = []
+
+        def line(log) -> None:  # type: ignore[no-untyped-def]
+            last[:] = [log]
+            lines.update(min(log.episodes, target), " ".join(_stats(log).split()))
+
+        trainer.run(line)
+        if last:
+            lines.update(min(last[0].episodes, target), " ".join(_stats(last[0]).split()), final=True)
+        return
     with Progress(
         TextColumn("[bold]train[/bold]"),
         BarColumn(),
@@ -87,16 +107,13 @@ def _train_with_progress(trainer) -> None:  # type: ignore[no-untyped-def]
         TextColumn("episodes"),
         TimeElapsedColumn(),
         TextColumn("{task.fields[stats]}"),
+        console=out,
         transient=False,
     ) as progress:
         task = progress.add_task("train", total=target, completed=len(trainer.episodes), stats="")
 
         def update(log) -> None:  # type: ignore[no-untyped-def]
-            stats = (
-                f"return {log.mean_return:7.1f}  success {log.success_rate:4.0%}  "
-                f"kl {log.approx_kl:.4f}  {log.steps_per_s:6.0f} steps/s"
-            )
-            progress.update(task, completed=min(log.episodes, target), stats=stats)
+            progress.update(task, completed=min(log.episodes, target), stats=_stats(log))
 
         trainer.run(update)
 

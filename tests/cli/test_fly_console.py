@@ -1,0 +1,46 @@
+"""``rpf-fly fly``'s console, piped (not a terminal) as CI and ``| tee`` see it: the final table holds every drone's
+final state, is not cut, and ends with its newline."""
+
+from __future__ import annotations
+
+
+def final_table(stderr: str) -> list[str]:
+    """The lines of the last table on stderr (from its title to its bottom border)."""
+    lines = stderr.splitlines()
+    bottom = max(i for i, line in enumerate(lines) if line.startswith("└"))
+    top = max(i for i, line in enumerate(lines[:bottom]) if line.startswith("┏"))
+    return lines[top - 1:bottom + 1]
+
+
+def rows(table: list[str]) -> dict[str, list[str]]:
+    return {cells[0]: cells for cells in ([c.strip() for c in line.strip("│").split("│")]
+                                          for line in table if line.startswith("│"))}
+
+
+def test_a_clean_flight_ends_with_every_drone_landed(clean_cli_flight):
+    flight = clean_cli_flight
+    assert flight.returncode == 0, flight.stderr
+    table = final_table(flight.stderr)
+    assert table[0].strip() == "short-3: done"
+    header = " ".join(table[2].split())
+    assert "state" in header and "outcome" in header and "to goal [m]" in header and "battery [V]" in header
+    found = rows(table)
+    assert set(found) == {"cf1", "cf2", "cf3"}
+    for cells in found.values():
+        assert cells[1:3] == ["landed", "reached"], cells
+        assert float(cells[5]) < 0.1  # z: on the floor
+    assert "…" not in flight.stderr
+    assert flight.stderr.endswith("┘\n")  # the last border has its newline: nothing is glued to it
+    assert all(line.endswith("┃") or line.endswith("│") or not line.startswith(("┃", "│")) for line in table)
+
+
+def test_an_emergency_stop_ends_with_every_drone_stopped(stopped_cli_flight):
+    flight = stopped_cli_flight
+    assert flight.returncode == 130, flight.stderr
+    table = final_table(flight.stderr)
+    found = rows(table)
+    assert set(found) == {"cf1", "cf2", "cf3"}
+    for cells in found.values():
+        assert cells[1:3] == ["stopped", "emergency"], cells
+    assert "landing" not in "\n".join(table)
+    assert "second Ctrl-C" in flight.stderr
