@@ -1,9 +1,11 @@
 """``rpf-fly mocap``: watch a NatNet stream (or a system of the ``motioncapture`` package: ``--system``), or emulate
 Motive so ``watch`` can be tried without one.
 
-``watch`` prints every rigid body as frames arrive, in the Z-up world frame (one line per frame, or one JSON
-object per line with ``--json``); it exits 0 after ``--frames`` frames and 1 with a one-line error when no server
-answers (or no frames arrive) within ``--timeout`` seconds. ``emulate`` runs :class:`NatNetServer` with bodies
+``watch`` shows every rigid body as frames arrive, in the Z-up world frame: on a terminal one table redrawn in
+place, piped a header and at most ``--rate`` lines a second, with ``--json`` one JSON object per frame per line;
+then a summary (frames, rate, frames missed, each body's valid %) on exit, Ctrl-C or ``--duration`` (on stderr
+with ``--json``). It exits 0 after ``--frames`` frames, ``--duration`` seconds or Ctrl-C, and 1 with a one-line
+error when no server answers (or no frames arrive) within ``--timeout`` seconds. ``emulate`` runs :class:`NatNetServer` with bodies
 ``cf1..cfN`` flying circles.
 """
 
@@ -62,6 +64,83 @@ def _frame_line(frame) -> str:  # noqa: ANN001 - MocapFrame, imported lazily
     return "  |  ".join(parts)
 
 
+class WatchStats:
+    """What ``watch`` saw: frames, their rate, frame numbers the server skipped (frames lost on the way), and per
+    body how often it was tracked. Fed one frame at a time; :meth:`summary` is the closing report."""
+
+    def __init__(self) -> None:
+        self.frames = 0
+        self.first_s: float | None = None
+        self.last_s: float | None = None
+        self.first_number: int | None = None
+        self.last_number: int | None = None
+        self.missed = 0
+        self.seen: dict[str, int] = {}
+        self.valid: dict[str, int] = {}
+        self.latencies: list[float] = []
+
+    def add(self, frame) -> None:  # noqa: ANN001 - MocapFrame
+        self.frames += 1
+        self.first_s = frame.receive_time_s if self.first_s is None else self.first_s
+        self.last_s = frame.receive_time_s
+        if self.last_number is not None and frame.frame_number > self.last_number + 1:
+            self.missed += frame.frame_number - self.last_number - 1
+        if self.first_number is None:
+            self.first_number = frame.frame_number
+        self.last_number = frame.frame_number if self.last_number is None else max(self.last_number,
+                                                                                   frame.frame_number)
+        for name, pose in frame.bodies.items():
+            self.seen[name] = self.seen.get(name, 0) + 1
+            self.valid[name] = self.valid.get(name, 0) + bool(pose.valid)
+        if frame.latency_s is not None:
+            self.latencies.append(frame.latency_s)
+
+    @property
+    def rate_hz(self) -> float | None:
+        if self.frames < 2 or self.first_s is None or self.last_s is None or self.last_s <= self.first_s:
+            return None
+        return (self.frames - 1) / (self.last_s - self.first_s)
+
+    def valid_pct(self, name: str) -> float:
+        return 100.0 * self.valid.get(name, 0) / self.frames if self.frames else 0.0
+
+    def summary(self, elapsed_s: float, stats=None) -> list[str]:  # noqa: ANN001 - MocapStats
+        """The closing report: frames, rate, frames missed, packets dropped, latency; per body its valid %."""
+        rate = self.rate_hz
+        head = f"summary: {self.frames} frames in {elapsed_s:.1f} s"
+        head += f", {rate:.1f} Hz" if rate is not None else ""
+        head += f"; {self.missed} missed (frame numbers skipped)"
+        if stats is not None:
+            head += f", {stats.superseded} not shown (newer frame waiting), {stats.dropped} packets dropped"
+        if self.latencies:
+            ordered = sorted(self.latencies)
+            head += f"; latency p50 {ordered[len(ordered) // 2] * 1e3:.1f} ms, max {ordered[-1] * 1e3:.1f} ms"
+        lines = [head]
+        for name in sorted(self.seen):
+            lines.append(f"  {name}: valid {self.valid_pct(name):5.1f} % ({self.valid.get(name, 0)}/{self.frames})")
+        if not self.seen:
+            lines.append("  no rigid bodies")
+        return lines
+
+
+def _watch_table(frame, stats: WatchStats):  # noqa: ANN001, ANN202 - MocapFrame, rich Table
+    from rich.table import Table
+
+    rate = stats.rate_hz
+    latency = f"{frame.latency_s * 1000:.1f} ms" if frame.latency_s is not None else "n/a"
+    table = Table(caption=f"frame {frame.frame_number}, {stats.frames} frames, "
+                                       f"{'-' if rate is None else f'{rate:.1f}'} Hz, latency {latency}, "
+                                       f"{stats.missed} missed  (Ctrl-C: stop)")
+    for column, justify in (("body", "left"), ("x", "right"), ("y", "right"), ("z", "right"), ("tracked", "left"),
+                            ("valid %", "right")):
+        table.add_column(column, justify=justify)  # type: ignore[arg-type]
+    for name, pose in sorted(frame.bodies.items()):
+        x, y, z = pose.position
+        table.add_row(name, f"{x:+.3f}", f"{y:+.3f}", f"{z:+.3f}", "[green]ok[/]" if pose.valid else "[red]LOST[/]",
+                      f"{stats.valid_pct(name):.1f}")
+    return table
+
+
 @mocap_app.command("watch")
 def watch(
     natnet: str = typer.Option("127.0.0.1", "--natnet", help="Motive (NatNet server) host name or IPv4 address."),
@@ -75,7 +154,11 @@ def watch(
     ),
     up_axis: UpAxis = typer.Option(UpAxis.z, "--up-axis", help="Up axis Motive streams; output is always Z-up."),
     frames: int = typer.Option(0, "--frames", min=0, help="Exit after this many frames (0: until Ctrl-C)."),
-    json_output: bool = typer.Option(False, "--json", help="One JSON object per line per frame."),
+    duration: float = typer.Option(0.0, "--duration", min=0.0, help="Exit after this many seconds (0: until Ctrl-C)."),
+    rate: float = typer.Option(
+        10.0, "--rate", min=0.0, help="Lines a second when piped, table redraws a second on a terminal (0: a line for "
+                                      "every frame). --json prints every frame."),
+    json_output: bool = typer.Option(False, "--json", help="One JSON object per line per frame (summary on stderr)."),
     timeout: float = typer.Option(5.0, "--timeout", min=0.1, help="Seconds to wait for the server and for frames."),
     system: str = typer.Option(
         "natnet", "--system", help="natnet (our NatNet client, the default for OptiTrack) or a type of the "
@@ -86,8 +169,11 @@ def watch(
         [], "--option", help="KEY=VALUE: an option of the motioncapture type (repeat for several), e.g. "
         "--option 'rigid_bodies=cf1(0,0,0,1,0,0,0)' for mock."),
 ) -> None:
-    """Print rigid bodies as they arrive from a NatNet server, or from a system of the motioncapture package
-    (Z-up world frame, metres)."""
+    """Show rigid bodies as they arrive from a NatNet server, or from a system of the motioncapture package
+    (Z-up world frame, metres).
+
+    NatNet: on a terminal one table is redrawn in place; piped, a header, at most --rate lines a second; then the
+    summary (frames, rate, frames missed, each body's valid %) on exit, Ctrl-C or --duration."""
     if system != "natnet":
         from rpf_fly.cli.mocap_library import watch_library
 
@@ -98,11 +184,10 @@ def watch(
     if option:
         typer.echo("error: --option is for the motioncapture systems (--system TYPE), not natnet", err=True)
         raise typer.Exit(2)
-    from rich.console import Console
-
+    from rpf_fly.cli.output import console as make_console
     from rpf_fly.mocap.natnet_client import NatNetClient
 
-    console = Console(highlight=False, soft_wrap=True)
+    console = make_console(highlight=False)
     try:
         client = NatNetClient(
             natnet,
@@ -115,6 +200,9 @@ def watch(
     except (OSError, ValueError) as exc:
         typer.echo(f"error: cannot listen for NatNet from {natnet}: {exc}", err=True)
         raise typer.Exit(1) from None
+    stats = WatchStats()
+    started = time.monotonic()
+    live = None
     with client:
         try:
             if not client.wait_for_server(timeout, with_models=False):
@@ -132,10 +220,24 @@ def watch(
                     )
                 raise typer.Exit(1)
             client.wait_for_server(min(timeout, 1.0), with_models=True)  # names for the first lines
-            count = 0
+            title = _watch_header(client, natnet, multicast, up_axis.value)
+            if json_output:
+                pass
+            elif console.is_terminal:
+                from rich.live import Live
+
+                console.print(title)
+                live = Live(console=console, auto_refresh=False, transient=False)
+                live.__enter__()
+            else:
+                every = f"at most {rate:g} lines a second (--rate)" if rate > 0 else "every frame"
+                console.print(f"{title}; printing {every}")
+            started = time.monotonic()
+            end = started + duration if duration > 0 else math.inf
             last_frame = time.monotonic()
-            while frames == 0 or count < frames:
-                frame = client.receive(0.2)
+            next_line = 0.0
+            while (frames == 0 or stats.frames < frames) and time.monotonic() < end:
+                frame = client.receive(min(0.2, max(0.0, end - time.monotonic())))
                 if frame is None:
                     if time.monotonic() - last_frame > timeout:
                         mode = f"multicast (local ip {local_ip})" if multicast else "unicast"
@@ -147,13 +249,34 @@ def watch(
                         raise typer.Exit(1)
                     continue
                 last_frame = time.monotonic()
-                count += 1
+                stats.add(frame)
                 if json_output:
                     typer.echo(_frame_json(frame))
-                else:
+                elif live is not None:
+                    if last_frame >= next_line:  # one redraw per 1/rate s (at most 30 a second)
+                        next_line = last_frame + 1.0 / min(rate or 30.0, 30.0)
+                        live.update(_watch_table(frame, stats), refresh=True)
+                elif rate <= 0 or last_frame >= next_line:
+                    next_line = last_frame + (1.0 / rate if rate > 0 else 0.0)
                     console.print(_frame_line(frame))
         except KeyboardInterrupt:
             pass
+        finally:
+            if live is not None:
+                live.__exit__(None, None, None)
+        lines = stats.summary(time.monotonic() - started, client.stats)
+    for line in lines:
+        typer.echo(line, err=json_output)
+
+
+def _watch_header(client, natnet: str, multicast: bool, up_axis: str) -> str:  # noqa: ANN001 - NatNetClient
+    info = client.server_info
+    server = f"{info.app_name} {'.'.join(map(str, info.app_version[:3]))}, NatNet {info.version[0]}." \
+             f"{info.version[1]}" if info is not None else "NatNet"
+    names = sorted(client.rigid_body_names.values())
+    bodies = f", {len(names)} rigid bodies ({', '.join(names)})" if names else ""
+    transport = "multicast" if multicast else "unicast"
+    return f"{server} at {natnet}, {transport}, streaming {up_axis}-up (shown Z-up){bodies}"
 
 
 def _circle_poses(n_bodies: int, radius: float, speed: float, t0: float):  # noqa: ANN202

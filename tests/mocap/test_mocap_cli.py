@@ -34,11 +34,12 @@ def watch_args(server: NatNetServer, multicast: bool, *extra: str) -> list[str]:
 def test_watch_prints_the_emulator_bodies(version, transport):
     multicast = TRANSPORTS[transport]
     with NatNetServer(lambda: POSES, version=version, multicast=multicast, rate_hz=200, up_axis="y") as server:
-        result = runner.invoke(app, watch_args(server, multicast, "--frames", "3"))
+        result = runner.invoke(app, watch_args(server, multicast, "--frames", "3", "--rate", "0"))
     assert result.exit_code == 0, result.output
     lines = result.stdout.splitlines()
-    assert len(lines) == 3
-    for line in lines:
+    assert "NatNet" in lines[0] and "printing every frame" in lines[0]  # the header
+    assert lines[4].startswith("summary: 3 frames")
+    for line in lines[1:4]:
         assert line.startswith("frame ")
         assert "cf1 (+1.000, +2.000, +0.500) ok" in line
         assert "cf2 (-0.250, +0.750, +1.500) ok" in line
@@ -120,3 +121,75 @@ def test_emulate_rejects_unknown_versions():
     result = runner.invoke(app, ["mocap", "emulate", "--version", "2.9", "--duration", "0.1"])
     assert result.exit_code != 0
     assert "2.9" in result.output
+
+
+def summary_of(text: str) -> tuple[str, dict[str, float]]:
+    """The summary's head line and each body's valid %."""
+    lines = text.splitlines()
+    start = next(i for i, line in enumerate(lines) if "summary: " in line)
+    lines[start] = lines[start][lines[start].index("summary: "):]  # after a terminal's cursor codes
+    valid = {}
+    for line in lines[start + 1:]:
+        name, rest = line.strip().split(": valid ")
+        valid[name] = float(rest.split("%")[0])
+    return lines[start], valid
+
+
+def test_watch_piped_prints_a_header_at_most_rate_lines_a_second_and_a_summary():
+    with NatNetServer(lambda: POSES, version=(4, 1), multicast=False, rate_hz=200, up_axis="y") as server:
+        result = runner.invoke(app, watch_args(server, False, "--duration", "1.5", "--rate", "4"))
+    assert result.exit_code == 0, result.output
+    lines = result.stdout.splitlines()
+    assert lines[0].startswith("NatNet") or "NatNet 4.1" in lines[0]
+    assert "3 rigid bodies (cf1, cf2, cf3)" in lines[0] and "at most 4 lines a second" in lines[0]
+    frame_lines = [line for line in lines if line.startswith("frame ")]
+    assert 4 <= len(frame_lines) <= 8  # 1.5 s at 4 lines a second, not 300 lines at 200 Hz
+    head, valid = summary_of(result.stdout)
+    frames = int(head.split()[1])
+    assert frames > 150 and " Hz; " in head and "missed" in head
+    assert valid == {"cf1": 100.0, "cf2": 100.0, "cf3": 0.0}
+
+
+def test_watch_json_keeps_every_frame_on_stdout_and_the_summary_on_stderr():
+    with NatNetServer(lambda: POSES, version=(4, 1), multicast=False, rate_hz=200, up_axis="y") as server:
+        result = runner.invoke(app, watch_args(server, False, "--duration", "0.5", "--json"))
+    assert result.exit_code == 0, result.output
+    objects = [json.loads(line) for line in result.stdout.splitlines()]
+    head, valid = summary_of(result.stderr)
+    assert len(objects) == int(head.split()[1]) > 50
+    assert valid["cf3"] == 0.0
+
+
+def test_watch_on_a_terminal_redraws_one_table():
+    with NatNetServer(lambda: POSES, version=(4, 1), multicast=False, rate_hz=200, up_axis="y") as server:
+        result = runner.invoke(app, watch_args(server, False, "--duration", "1.0"),
+                               env={"TTY_COMPATIBLE": "1", "COLUMNS": "120"})
+    assert result.exit_code == 0, result.output
+    out = result.stdout
+    assert "\x1b[" in out  # cursor control: the table is redrawn in place
+    assert not [line for line in out.splitlines() if line.startswith("frame ")]  # no line per frame
+    assert "valid %" in out and "cf3" in out
+    head, valid = summary_of(out)
+    assert valid["cf1"] == 100.0
+
+
+def test_watch_stops_on_ctrl_c_with_the_summary():
+    import signal
+    import time
+
+    command = [sys.executable, "-m", "rpf_fly", "mocap", "watch"]
+    with NatNetServer(lambda: POSES, version=(4, 1), multicast=False, rate_hz=100, up_axis="y") as server:
+        proc = subprocess.Popen(command + watch_args(server, False)[2:], stdout=subprocess.PIPE,
+                                stderr=subprocess.PIPE, text=True)
+        try:
+            header = proc.stdout.readline()
+            assert "rigid bodies" in header, header + proc.stderr.read()
+            time.sleep(1.0)
+            proc.send_signal(signal.SIGINT)
+            out, err = proc.communicate(timeout=30)
+        finally:
+            proc.kill()
+    assert proc.returncode == 0, err
+    assert "Traceback" not in err
+    head, valid = summary_of(out)
+    assert int(head.split()[1]) > 50 and valid["cf2"] == 100.0
