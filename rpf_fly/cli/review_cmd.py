@@ -15,7 +15,8 @@ from rpf_fly.cli.errors import fail
 @app.command()
 def review(
     log: Path = typer.Argument(..., help="Flight log (.mcap) written by `rpf-fly fly --log` or `rpf-fly sim --log`."),
-    json_output: bool = typer.Option(False, "--json", help="Print the metrics JSON (docs/metrics.md) only."),
+    json_output: bool = typer.Option(False, "--json", help="Print the review as JSON: the metrics JSON "
+                                                           "(docs/metrics.md) and everything the summary says."),
     plot: Optional[Path] = typer.Option(None, "--plot", help="Write the review figure (tracks, altitude, tracking, "
                                                              "separation, battery, events) to a PNG."),
     csv_dir: Optional[Path] = typer.Option(None, "--csv", help="Write one CSV per topic into this directory."),
@@ -66,7 +67,7 @@ def review(
             raise fail(f"{csv_dir}: cannot write CSV: {err.strerror or err}")
     if json_output:
         assert result.metrics is not None
-        typer.echo(json.dumps(result.metrics.to_json_dict()))
+        typer.echo(json.dumps(result.to_json_dict()))
         return
     _print_summary(result, plot, csv_dir)
 
@@ -83,8 +84,12 @@ def _print_summary(result, plot: Optional[Path], csv_dir: Optional[Path]) -> Non
 
     console = make_console()
     head = f"{result.mission or result.path.name}: planner {result.planner or '?'}, seed {result.seed}"
-    console.print(f"[bold]{head}[/bold]  duration {result.duration_s:.1f} s, {len(result.drones)} drones"
-                  + ("  [yellow](truncated)[/yellow]" if result.truncated else ""))
+    source = f", {result.source}" if result.source else ""
+    console.print(f"[bold]{escape(head)}[/bold]  duration {result.duration_s:.1f} s, {len(result.drones)} drones"
+                  f"{source}" + ("  [yellow](truncated)[/yellow]" if result.truncated else ""))
+    for cut in result.interruptions:
+        at = f" at {cut.t_s:.1f} s" if cut.t_s is not None else ""
+        console.print(f"[bold red]interrupted[/bold red] ({cut.how}){at}: {escape(cut.message)}")
 
     topics = Table(title="topics")
     for column in ("topic", "schema", "messages", "rate [Hz]", "gaps", "longest gap [s]", "missing"):
@@ -96,9 +101,20 @@ def _print_summary(result, plot: Optional[Path], csv_dir: Optional[Path]) -> Non
     console.print(topics)
     levels = ", ".join(f"{name} {count}" for name, count in result.events_by_level.items() if count)
     console.print(f"events: {levels or 'none'}")
-    for t, level, message, _ in result.events:
-        if level >= 3:
-            console.print(f"  [{'red' if level >= 4 else 'yellow'}]{t:8.2f} s  {message}[/]")
+    for event in result.events:
+        if event.level >= 3:
+            who = f"{event.name}: " if event.name and event.name not in ("flight", "sim") else ""
+            console.print(f"  [{'red' if event.level >= 4 else 'yellow'}]{event.t_s:8.2f} s  "
+                          f"{escape(who + event.message)}[/]")
+    if result.tracking:
+        overall = result.tracking.get("all", (None, None))
+        per = ", ".join(f"{name} {_fmt(rms, '', 3)}/{_fmt(peak, '', 3)}" for name, (rms, peak) in result.tracking.items()
+                        if name != "all")
+        console.print(f"setpoint tracking error |setpoint - pose|: RMS {_fmt(overall[0], ' m', 3)}, max "
+                      f"{_fmt(overall[1], ' m', 3)} (RMS/max per drone: {per})")
+    if result.battery:
+        console.print("battery: " + ", ".join(f"{name} {a:.2f} -> {c:.2f} V (lowest {b:.2f})"
+                                                for name, (a, b, c) in result.battery.items()))
 
     m = result.metrics
     if m is None:

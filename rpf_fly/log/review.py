@@ -21,7 +21,7 @@ import csv
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Optional
+from typing import Any, NamedTuple, Optional
 
 import numpy as np
 
@@ -57,6 +57,32 @@ class TopicStats:
         return max((g[1] for g in self.gaps), default=None)
 
 
+class ReviewEvent(NamedTuple):
+    """One ``/events`` message: seconds from the start of the log, level (1 debug .. 5 fatal), message, who (a drone,
+    ``flight`` or ``sim``) and kind (the flight event's kind, ``phase``, ``interrupt``, ``error``, ...; the
+    ``foxglove.Log`` ``file`` field, empty in logs that have none)."""
+
+    t_s: float
+    level: int
+    message: str
+    name: str
+    kind: str = ""
+
+
+@dataclass(frozen=True)
+class Interruption:
+    """Why a flight did not end as planned: ``signal`` (Ctrl-C, SIGTERM, a KeyboardInterrupt: every drone landed),
+    ``error`` (an exception in the flight loop: every drone landed) or ``killed`` (the recording process died: the
+    log ends before its footer, or a salvaged copy without the flight's clean end)."""
+
+    how: str
+    t_s: Optional[float]
+    message: str
+
+    def to_json_dict(self) -> dict[str, Any]:
+        return {"how": self.how, "t_s": self.t_s, "message": self.message}
+
+
 @dataclass
 class Series:
     """Time series of one drone (seconds from the start of the log)."""
@@ -79,11 +105,55 @@ class Review:
     seed: Optional[int]
     topics: list[TopicStats]
     events_by_level: dict[str, int]
-    events: list[tuple[float, int, str, str]]
+    events: list[ReviewEvent]
     metrics: Optional[Metrics]
     metrics_error: str
     scenario: Optional[dict[str, Any]]
     outcomes: dict[str, Optional[str]] = field(default_factory=dict)
+    source: str = ""
+    """``mission.source`` of the metadata: ``flight``, ``dry-run`` or ``sim`` ("" when the log has none)."""
+    clean_end: Optional[bool] = None
+    """The recording ended as a finished run ends (a flight: every drone's final status with its outcome; a
+    simulation: its end event); None when the log says nothing of its source."""
+    interruptions: list[Interruption] = field(default_factory=list)
+    tracking: dict[str, tuple[Optional[float], Optional[float]]] = field(default_factory=dict)
+    """Per drone, and ``all``: RMS and max setpoint tracking error (m); only drones with setpoints and poses."""
+    battery: dict[str, tuple[float, float, float]] = field(default_factory=dict)
+    """Per drone with battery telemetry: first, lowest and last voltage (V)."""
+
+    @property
+    def interrupted(self) -> bool:
+        return bool(self.interruptions)
+
+    def to_json_dict(self) -> dict[str, Any]:
+        """Everything the text summary says: the metrics JSON of docs/metrics.md with its keys where they are (None
+        without metrics), extended by the review's own keys (docs/log-format.md, *Review*)."""
+        doc: dict[str, Any] = self.metrics.to_json_dict() if self.metrics is not None else {}
+        doc.update({
+            "log": {"path": str(self.path), "source": self.source, "duration_s": self.duration_s,
+                    "truncated": self.truncated, "clean_end": self.clean_end, "start_ns": self.start_ns},
+            "interrupted": self.interrupted,
+            "interruptions": [i.to_json_dict() for i in self.interruptions],
+            "outcomes": dict(self.outcomes),
+            "topics": [
+                {"topic": t.topic, "schema": t.schema, "messages": t.count, "rate_hz": t.rate_hz,
+                 "gaps": len(t.gaps), "longest_gap_s": t.longest_gap_s, "missing": t.missing}
+                for t in self.topics
+            ],
+            "events": {
+                "by_level": dict(self.events_by_level),
+                "warnings": [
+                    {"t_s": e.t_s, "level": LOG_LEVELS.get(e.level, str(e.level)), "kind": e.kind, "name": e.name,
+                     "message": e.message}
+                    for e in self.events if e.level >= 3
+                ],
+            },
+            "tracking": {name: {"rms_m": rms, "max_m": peak} for name, (rms, peak) in self.tracking.items()},
+            "battery": {name: {"first_v": a, "min_v": b, "last_v": c} for name, (a, b, c) in self.battery.items()},
+        })
+        if self.metrics is None:
+            doc["metrics_error"] = self.metrics_error
+        return doc
 
 
 # ---------------------------------------------------------------------------------------------- metadata
@@ -240,13 +310,13 @@ def review(data: LogData) -> Review:
     except ReviewError as err:
         error = str(err)
     events = [
-        ((m.log_time - start) / 1e9, int(m.data.get("level", 0)), str(m.data.get("message", "")),
-         str(m.data.get("name", "")))
+        ReviewEvent((m.log_time - start) / 1e9, int(m.data.get("level", 0)), str(m.data.get("message", "")),
+                    str(m.data.get("name", "")), str(m.data.get("file", "") or ""))
         for m in data.messages("/events")
     ]
     by_level = {name: 0 for name in LOG_LEVELS.values()}
-    for _, level, _, _ in events:
-        key = LOG_LEVELS.get(level, "unknown")
+    for event in events:
+        key = LOG_LEVELS.get(event.level, "unknown")
         by_level[key] = by_level.get(key, 0) + 1
     drones = drones_of(data)
     outcomes: dict[str, Optional[str]] = {}
@@ -257,6 +327,22 @@ def review(data: LogData) -> Review:
         seed: Optional[int] = int(mission["seed"])
     except (KeyError, ValueError):
         seed = None
+    source = str(mission.get("source", ""))
+    clean = clean_end(data, drones, source, events)
+    tracking: dict[str, tuple[Optional[float], Optional[float]]] = {}
+    errors = []
+    for name in drones:
+        e = tracking_error(data, name, start)
+        if e.t.size:
+            tracking[name] = rms_max(e.values)
+            errors.append(e.values)
+    if errors:
+        tracking["all"] = rms_max(np.concatenate(errors))
+    battery = {}
+    for name in drones:
+        b = battery_series(data, name, start)
+        if b.t.size:
+            battery[name] = (float(b.values[0]), float(b.values.min()), float(b.values[-1]))
     return Review(
         path=data.path,
         truncated=data.truncated,
@@ -273,7 +359,53 @@ def review(data: LogData) -> Review:
         metrics_error=error,
         scenario=scenario,
         outcomes=outcomes,
+        source=source,
+        clean_end=clean,
+        interruptions=interruptions_of(data, events, clean, (end - start) / 1e9),
+        tracking=tracking,
+        battery=battery,
     )
+
+
+FLIGHT_SOURCES = ("flight", "dry-run")
+
+
+def clean_end(data: LogData, drones: list[str], source: str, events: list[ReviewEvent]) -> Optional[bool]:
+    """Whether the log ends as a finished run ends: a flight's last status of every drone carries its outcome
+    (written after every drone is down, right before the log is closed); a simulation has its ``sim end`` event.
+    None for a log that does not say what wrote it."""
+    if data.truncated:
+        return False
+    if source in FLIGHT_SOURCES:
+        for name in drones:
+            statuses = data.messages(f"/{name}/status")
+            if not statuses or not statuses[-1].data.get("outcome"):
+                return False
+        return True
+    if source == "sim":
+        return any(e.name == "sim" and e.message.startswith("sim end") for e in events)
+    return None
+
+
+def interruptions_of(data: LogData, events: list[ReviewEvent], clean: Optional[bool],
+                     duration_s: float) -> list[Interruption]:
+    """What interrupted the flight, in time order: the flight's ``interrupt`` events (a signal or a
+    KeyboardInterrupt), its ``flight loop failed`` errors, and a log without a clean end (a kill)."""
+    found = []
+    for e in events:
+        if e.kind == "interrupt":
+            found.append(Interruption("signal", e.t_s, e.message))
+        elif e.kind == "error" and e.level >= 5 and e.message.startswith("flight loop failed"):
+            found.append(Interruption("error", e.t_s, e.message))
+    if data.truncated:
+        found.append(Interruption("killed", duration_s, "the log ends before its footer: the recording process was "
+                                                       "killed (SIGKILL, a crash, power lost); `--salvage` writes a "
+                                                       "finished copy"))
+    elif clean is False:
+        found.append(Interruption("killed", duration_s, "the log has no clean end (the drones' final status is "
+                                                       "missing): the recording process was killed; this is a "
+                                                       "salvaged or cut copy"))
+    return found
 
 
 # ---------------------------------------------------------------------------------------------- series

@@ -150,7 +150,7 @@ def plot_review(data: LogData, result: R.Review, path: str | Path) -> Path:
             ax_ev.broken_barh([(t0, max(t1 - t0, 1e-3))], (-row - 1.4, 0.8),
                               facecolors=STATE_COLOURS.get(state, "#e0e0e0"))
             seen_states[state] = None
-    for t, level, _message, _name in result.events:
+    for t, level, *_ in result.events:
         ax_ev.plot(t, level, "v", ms=7, color=LEVEL_COLOURS.get(level, "0.3"))
     ax_ev.set_yticks(list(range(1, 6)) + [-row - 1 for row in range(len(drones))])
     ax_ev.set_yticklabels(["debug", "info", "warning", "error", "fatal"] + list(drones), fontsize=7)

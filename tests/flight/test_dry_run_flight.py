@@ -199,6 +199,9 @@ def test_unhandled_exception_lands_everyone_and_closes_the_log(tmp_path, short_m
     assert all(landed(s) for s in flight.snapshots.values())
     assert not flight.log.truncated
     assert any("flight loop failed" in m for m in flight.logged_events())
+    from rpf_fly.log.review import review
+
+    assert [i.how for i in review(flight.log).interruptions] == ["error"]  # the review names it
 
 
 def test_preflight_failure_arms_nothing_when_the_mission_says_abort(tmp_path, short_mission):
