@@ -41,11 +41,16 @@ def claims_of(results: Mapping[str, Any]) -> list[Claim]:
 
 
 def fmt_stat(s: Optional[Mapping[str, float]], digits: int = 2, n: bool = False, sep: str = " ± ") -> str:
-    """``mean ± std`` (and the count with ``n``), ``-`` when undefined."""
+    """``mean ± std`` (and the count with ``n``), ``-`` when undefined; the mean alone over one value (a standard
+    deviation of one run is no spread)."""
     if s is None:
         return "-"
-    text = f"{s['mean']:.{digits}f}{sep}{s['std']:.{digits}f}"
+    text = f"{s['mean']:.{digits}f}" if s["n"] <= 1 else f"{s['mean']:.{digits}f}{sep}{s['std']:.{digits}f}"
     return f"{text} ({s['n']})" if n else text
+
+
+REPORT_WIDTH = 100
+"""Columns the bench's table and claims are laid out for (a narrower console wraps them further)."""
 
 
 def _rate(value: Optional[float]) -> str:
@@ -57,6 +62,8 @@ def _label(planner: str) -> str:
 
 
 METRIC_DIGITS = {"travel_distance_m": 2, "smoothness": 4, "makespan_s": 1}
+TABLE_DIGITS = {"travel_distance_m": 2, "smoothness": 3, "makespan_s": 1}
+"""The console table's digits (the Markdown and JSON keep :data:`METRIC_DIGITS` and full precision)."""
 
 
 def _cells(row: Mapping[str, Any]) -> dict[str, str]:
@@ -77,45 +84,66 @@ def _cells(row: Mapping[str, Any]) -> dict[str, str]:
     return cells
 
 
+def _metric_cell(row: Mapping[str, Any], metric: str, digits: int) -> str:
+    """Over the successful runs; below it, dim, over all runs where defined (count), unless that is the same."""
+    ok, every = row[metric]["successful"], row[metric]["all"]
+    first = fmt_stat(ok, digits, sep="±")
+    if every is None or (ok is not None and ok["n"] == every["n"] and ok["mean"] == every["mean"]):
+        return first
+    return f"{first}\n[dim]{fmt_stat(every, digits, n=every['n'] != row['runs'], sep='±')}[/dim]"
+
+
 def print_report(results: Mapping[str, Any], console: Any = None) -> None:
-    """Print the table (successful-run figures on the first line of a cell, all-run ones below) and the claims."""
+    """Print the table and the claims, laid out for :data:`REPORT_WIDTH` columns: one block of rows per scene,
+    path metrics over the successful runs (and, dim below, over all runs where that differs), no spread where a
+    figure comes from one run."""
+    from rich import box
     from rich.console import Console
     from rich.markup import escape
     from rich.table import Table
 
     console = console or Console()
+    one = results["episodes"] <= 1
+    spread = "" if one else "mean±std "
+    note = (f"success: successful runs / runs. travel, smoothness, makespan: {spread}over successful runs"
+                + ("" if one else "; dim below: over all runs where defined (the count when not every run), where it "
+                                     "differs")
+                + ". coll.: drone-drone (dd), drone-obstacle (do). failed c/s/t: runs by cause collision/stalled/"
+                  "timeout")
     table = Table(
-        title=f"rpf-fly bench: {results['episodes']} seeds per scene",
-        caption="travel, smoothness, makespan: mean±std over successful runs; dim second line: over all runs where "
-        "defined (count). failed runs by cause: collision/stalled/timeout",
-        show_lines=True,
+        title=f"rpf-fly bench: {results['episodes']} seed{'' if one else 's'} per scene",
+        box=box.SIMPLE_HEAD,
+        pad_edge=False,
+        collapse_padding=True,
     )
-    for column in ("scene", "planner", "success", "collisions", "reached", "travel [m]", "smoothness",
-                   "makespan [s]", "failed c/s/t"):
+    for column in ("scene", "planner", "success", "coll.", "reached", "travel\n[m]", "smoothness", "makespan\n[s]",
+                   "failed\nc/s/t"):
         left = column in ("scene", "planner")
-        table.add_column(escape(column), justify="left" if left else "right", no_wrap=left or column == "success")
+        table.add_column(escape(column), justify="left" if left else "right", no_wrap=left)
     reasons: dict[str, str] = {}
-    for row in results["rows"]:
+    rows = list(results["rows"])
+    for k, row in enumerate(rows):
+        last_of_scene = k + 1 == len(rows) or rows[k + 1]["scene"] != row["scene"]
         if row["status"] != "ok":
             reasons.setdefault(str(row["reason"]), _label(row["planner"]))
-            table.add_row(row["scene"], _label(row["planner"]), "[yellow]missing[/yellow]")
+            table.add_row(row["scene"], _label(row["planner"]), "[yellow]missing[/yellow]", end_section=last_of_scene)
             continue
-        c = _cells(row)
+        c = row["collisions"]
+        f = row["failed_runs"]
         table.add_row(
             row["scene"],
             _label(row["planner"]),
-            c["success"],
-            c["collisions"],
-            c["reached"],
-            *(
-                f"{fmt_stat(row[m]['successful'], d, sep='±')}\n[dim]{fmt_stat(row[m]['all'], d, n=True, sep='±')}[/dim]"
-                for m, d in METRIC_DIGITS.items()
-            ),
-            c["failed"],
+            f"{row['successes']}/{row['runs']}",
+            f"{c['total']} ({c['drone_drone']}dd {c['drone_obstacle']}do)" if c["total"] else "0",
+            _rate(row["reached_rate"]),
+            *(_metric_cell(row, m, d) for m, d in TABLE_DIGITS.items()),
+            f"{f['collision']}/{f['stalled']}/{f['timeout']}",
+            end_section=last_of_scene,
         )
     console.print(table)
+    console.print(note, style="dim", width=min(REPORT_WIDTH, console.width))
     for reason, planner in reasons.items():
-        console.print(f"[yellow]{planner} missing: {reason}[/yellow]")
+        console.print(f"[yellow]{escape(planner)} missing: {escape(reason)}[/yellow]")
     print_claims(claims_of(results), console)
 
 
@@ -125,16 +153,16 @@ def print_claims(claims: Sequence[Claim], console: Any = None) -> None:
     from rich.table import Table
 
     console = console or Console()
-    table = Table(title="the paper's claims", show_lines=True)
-    for column in ("", "claim", "verdict", "numbers"):
-        table.add_column(escape(column))
+    table = Table(title="the paper's claims", show_lines=True, width=min(REPORT_WIDTH, console.width))
+    for column, ratio in (("", None), ("claim", 3), ("verdict", None), ("numbers", 4)):
+        table.add_column(escape(column), ratio=ratio, no_wrap=ratio is None)
     colour = {"held": "green", "not held": "red", "not evaluated": "yellow"}
     for claim in claims:
         table.add_row(
             f"({claim.id})",
-            claim.statement,
+            escape(claim.statement),
             f"[{colour[claim.status]}]{claim.status}[/{colour[claim.status]}]",
-            _numbers_text(claim),
+            escape(_numbers_text(claim)),
         )
     console.print(table)
 

@@ -63,7 +63,9 @@ def bench(
         raise fail(f"rpf-fly bench: {err}")
     from rpf_fly.cli.output import console as make_console
 
-    console = make_console()
+    from rpf_fly.bench.report import REPORT_WIDTH
+
+    console = make_console(pipe_width=REPORT_WIDTH)  # piped: the report as laid out, 100 columns
     errors = make_console(stderr=True)
     for reason in dict.fromkeys(plan.missing.values()):
         errors.print(f"[yellow]missing: {reason}[/yellow]")

@@ -20,14 +20,15 @@ PIPE_PROGRESS_S = 10.0
 """Seconds between two progress lines when the output is not a terminal."""
 
 
-def console(stderr: bool = False, **kwargs: Any):  # type: ignore[no-untyped-def]
-    """A rich Console on stdout (or stderr): the terminal's own, or a plain wide one when not a terminal."""
+def console(stderr: bool = False, pipe_width: int = PIPE_WIDTH, **kwargs: Any):  # type: ignore[no-untyped-def]
+    """A rich Console on stdout (or stderr): the terminal's own, or a plain one ``pipe_width`` columns wide when not
+    a terminal."""
     from rich.console import Console
 
     made = Console(stderr=stderr, **kwargs)
     if made.is_terminal:
         return made
-    return Console(stderr=stderr, width=PIPE_WIDTH, force_terminal=False, no_color=True, highlight=False,
+    return Console(stderr=stderr, width=pipe_width, force_terminal=False, no_color=True, highlight=False,
                    soft_wrap=False, **{k: v for k, v in kwargs.items() if k not in ("width", "highlight")})
 
 
