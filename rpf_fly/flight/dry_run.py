@@ -56,7 +56,7 @@ from rpf_fly.emulator.fake_world import BurstLoss, FakeDroneConfig, FakeWorld, R
 
 AIR_TIME_S = 0.001
 """Air time of one radio transaction on a dry run's dongle: a Crazyradio carries about 1000 transactions a second,
-shared by every link on it (../shared/reference: crazyradio2-firmware issues #9, #16, #22), so a dry run shows what a
+shared by every link on it (bitcraze/crazyradio2-firmware issues #9, #16, #22; docs/radio.md), so a dry run shows what a
 full radio does to latency. Each fake link holds its dongle's lock that long per transaction."""
 
 RADIO_LOSS = BurstLoss()

@@ -6,7 +6,7 @@ heading change ``a`` (the vanilla-PPO baseline), the APF of :mod:`rpf_fly.planni
 ``apf_step``, exactly what the simulator and the flight loop call) turns gains into a direction, and the kinematic
 :class:`~rpf_fly.sim.World` moves the drones. No second APF exists.
 
-Reward per robot (paper Section IV-B, DESIGN.md 4.4):
+Reward per robot (paper Section IV-B; docs/learning.md, *Environment*):
 
 - ``R_m = 300 - 100 d_a/d_s`` on reaching the goal (``d_a`` path flown, ``d_s`` straight distance);
 - ``R_s = -5`` when the heading turns more than 45 degrees in one step;

@@ -1,6 +1,6 @@
 """The actor-critic: attention (or mean) embedding of the neighbours, 256-256 MLP heads, squashed gains.
 
-Embedding (paper Section IV-A, DESIGN.md 4.4), per neighbour ``j`` of a drone with local observation ``o_loc``:
+Embedding (paper Section IV-A; docs/learning.md, *Network*), per neighbour ``j`` of a drone with local observation ``o_loc``:
 ``e_j = relu(W_e [o_loc, w_j])``, ``h_j = relu(W_h e_j)``, score ``b_j = MLP_b([e_j, e_m])`` with ``e_m`` the masked
 mean of ``e`` (a ReLU layer, then a linear score), ``c = sum_j softmax(b)_j h_j`` over the visible neighbours (zero
 when there are none). RPF-2 replaces the attention by the plain masked mean of ``h``. ``[o_loc, c]`` feeds a

@@ -1,6 +1,6 @@
 """What every motion-capture source delivers: rigid-body poses in the Z-up world frame, and the source protocol.
 
-Conventions (DESIGN.md section 3): right-handed world, Z up, metres, seconds; quaternions are (qx, qy, qz, qw),
+Conventions (docs/architecture.md, *Conventions*): right-handed world, Z up, metres, seconds; quaternions are (qx, qy, qz, qw),
 rotating body coordinates into world coordinates. Sources convert from their native axes (NatNet streams Y-up by
 default) before filling these objects, so nothing downstream ever sees another frame.
 

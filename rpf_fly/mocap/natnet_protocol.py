@@ -1,8 +1,9 @@
 """NatNet wire format: pure encode/decode of OptiTrack Motive's streaming packets (no sockets, no clocks).
 
 Covers the bitstream versions 3.x, 4.0, 4.1 and 4.2 (4.3+ is decoded with the 4.2 layout, which the SDK samples
-treat as current). Everything is little-endian. Facts are from ``shared/reference/natnet.md``; the layouts that
-change between versions:
+treat as current). Everything is little-endian. Facts are from OptiTrack's NatNet SDK 4.3 samples (PythonClient,
+PacketClient.cpp, NatNetTypes.h), checked against real Motive captures (``tests/data/natnet``) and libmotioncapture
+(docs/mocap.md); the layouts that change between versions:
 
 * 4.0 adds marker names to rigid-body descriptions (MODELDEF).
 * 4.1 adds an int32 byte count after every FRAMEOFDATA section count and after every MODELDEF dataset type, the

@@ -1,7 +1,7 @@
 """Planner parameters and the two presets: ``paper`` (the formulas as printed) and ``robust`` (the default).
 
-DESIGN.md 4.2 lists what the literal formulas do in practice (side flips, mode-B collisions, livelock on symmetric
-swaps); 4.3 closes each gap with one option. Every option is a field here so the bench can compare them one by one.
+docs/algorithm.md lists what the literal formulas do in practice (*What the literal formulas do*: side flips,
+mode-B collisions, livelock on symmetric swaps); *Presets* closes each gap with one option. Every option is a field here so the bench can compare them one by one.
 Units: metres, metres per second, radians unless a name says degrees.
 """
 
@@ -48,12 +48,12 @@ class PlannerConfig:
 
     @staticmethod
     def robust(**overrides: object) -> "PlannerConfig":
-        """The default preset (DESIGN.md 4.3): the paper's method with its gaps closed."""
+        """The default preset (docs/algorithm.md, *Presets*): the paper's method with its gaps closed."""
         return replace(PlannerConfig(), **overrides)  # type: ignore[arg-type]
 
     @staticmethod
     def paper(**overrides: object) -> "PlannerConfig":
-        """The formulas as printed in the paper (DESIGN.md 4.1), kept for reproduction."""
+        """The formulas as printed in the paper (docs/algorithm.md, *Forces*, *Heading*), kept for reproduction."""
         base = PlannerConfig(
             soft_keeps_inter_robot=False,
             side_from_tangential_force=False,

@@ -1,6 +1,6 @@
 """Obstacle geometry: the nearest obstacle surface point for many robots at once.
 
-The APF repels from the single nearest obstacle, measured to its *surface* (paper eq. 2 with DESIGN.md 4.1:
+The APF repels from the single nearest obstacle, measured to its *surface* (paper eq. 2; docs/algorithm.md, *Forces*:
 ``d_o`` is the distance from the robot centre to the surface, ``p_o`` the nearest surface point). Obstacles are
 vertical circles (cylinders) and axis-aligned boxes in the planning plane.
 

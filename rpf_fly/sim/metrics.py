@@ -1,7 +1,7 @@
 """Metrics of a trajectory, computed from positions sampled at the planning step (docs/metrics.md).
 
 The same function scores a simulated rollout and a logged flight (the review resamples logged poses at ``dt``),
-so ``review --json`` reproduces ``sim --json``. Definitions (DESIGN.md 4.5):
+so ``review --json`` reproduces ``sim --json``. Definitions (docs/metrics.md):
 
 - arrival: the first sample with goal distance below the tolerance; ``T_i`` is that sample's index;
 - travel distance ``l_i = sum_{t < T_i} |p(t+1) - p(t)|`` (the whole track for a drone that never arrived); the
@@ -41,7 +41,7 @@ class DroneMetrics:
 
 @dataclass(frozen=True)
 class Metrics:
-    """The metrics JSON of DESIGN.md section 5 (``to_json_dict`` gives its exact shape)."""
+    """The metrics JSON of docs/metrics.md (``to_json_dict`` gives its exact shape)."""
 
     mission: str
     planner: str

@@ -1,6 +1,6 @@
 """From a mission's planner settings to a :class:`~rpf_fly.planning.Planner` (used by sim, bench and flight).
 
-``apf`` is the vanilla APF with the robust preset, ``apf-paper`` the literal formulas (DESIGN.md 4.3); both use
+``apf`` is the vanilla APF with the robust preset, ``apf-paper`` the literal formulas (docs/algorithm.md, *Presets*); both use
 fixed gains (eta, lambda from the mission; the paper's 0.05 and 2 by default). ``rpf`` and ``rpf-mean`` take their
 gains from an ONNX policy every step; ``ppo`` is the vanilla-PPO baseline that turns the heading with no APF.
 """
