@@ -25,7 +25,8 @@ def sim(
     ),
     seed: int = typer.Option(0, "--seed", help="Seed of the mission's start jitter (sim section)."),
     json_output: bool = typer.Option(False, "--json", help="Print the metrics JSON (docs/metrics.md) only."),
-    plot: Optional[Path] = typer.Option(None, "--plot", help="Write XY trajectories with planner modes to a PNG."),
+    plot: Optional[Path] = typer.Option(None, "--plot", help="Write the XY tracks to a PNG: a colour per drone, the "
+                                                             "planner mode as the line style."),
     log: Optional[Path] = typer.Option(None, "--log", help="Write the run as an MCAP flight log (rpf-fly review)."),
 ) -> None:
     """Simulate MISSION with its planner (no radio, no mocap) and report success, collisions and path quality."""

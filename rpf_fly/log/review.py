@@ -468,6 +468,19 @@ def min_separation(data: LogData, drones: list[str], start_ns: int) -> Series:
     return Series(base[keep], low[keep])
 
 
+def obstacle_clearance(data: LogData, drone: str, start_ns: int, scenario: Optional[dict[str, Any]]) -> Series:
+    """Planar distance from the drone's centre (``/mocap``) to the nearest obstacle surface over time (metres,
+    negative inside; what the metrics' ``min_obstacle_clearance_m`` and a collision, ``< r``, are measured on).
+    Empty without obstacles."""
+    if not scenario or not scenario.get("obstacles"):
+        return Series(np.zeros(0), np.zeros(0))
+    poses = pose_series(data, drone, start_ns)
+    if poses.t.size == 0:
+        return Series(poses.t, np.zeros(0))
+    points = poses.values[:, 0] + 1j * poses.values[:, 1]
+    return Series(poses.t, np.asarray(obstacle_set_of(scenario).signed_distance(points), dtype=float))
+
+
 def battery_series(data: LogData, drone: str, start_ns: int) -> Series:
     msgs = [m for m in data.messages(f"/{drone}/status") if m.data.get("battery_v") is not None]
     return Series(_seconds(msgs, start_ns), np.array([m.data["battery_v"] for m in msgs], dtype=float))
