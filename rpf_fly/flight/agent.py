@@ -31,7 +31,7 @@ from dataclasses import dataclass
 from typing import Callable, Optional, Protocol
 
 from rpf_fly.flight.phases import DronePhase, FlightOutcome
-from rpf_fly.mission.model import Arena, Drone
+from rpf_fly.mission.model import Arena, Drone, Mission
 from rpf_fly.planning.planner import PlanStep, plan_row
 from rpf_fly.planning.view import LocalView
 
@@ -154,8 +154,21 @@ class DroneAgent:
         self.stale_since_s: Optional[float] = None
         self.landing_until_s: Optional[float] = None
         self._worker: Optional[PlannerWorker] = None
+        self.planned_from: complex = self.start
+        """The reference its newest planning step planned from (its own position in that view), for the log:
+        a replay restarts a drone's planning from it (rpf_fly/flight/replay.py)."""
         self.last_setpoint: Optional[complex] = None
         """The last position setpoint streamed to it (x + iy), for the supervisor's tracking check."""
+
+    @classmethod
+    def for_mission(cls, drone: Drone, planner: PlannerLike, mission: Mission, **overrides: object) -> "DroneAgent":
+        """The agent the flight loop flies ``drone`` with (height, speed, step, arena, budget and body radius from
+        the mission); ``overrides`` replace keyword arguments (``rpf-fly replay`` lifts the time budget)."""
+        flight = mission.flight
+        kwargs: dict = dict(height=flight.height, speed=flight.speed, dt=flight.dt, arena=mission.arena,
+                            budget_s=mission.safety.planner_budget_s, body_radius_m=mission.planner.safety_radius)
+        kwargs.update(overrides)
+        return cls(drone, planner, **kwargs)
 
     # ------------------------------------------------------------------------------------------ phases
 
@@ -219,6 +232,7 @@ class DroneAgent:
     ) -> PlanResult:
         """Take a checked planning result (from :meth:`plan`, or row ``row`` of a batched call): turn the heading
         and move the reference."""
+        self.planned_from = self.reference
         if abs(direction) > 0:
             self.heading = direction / abs(direction)
         return PlanResult(self.advance(direction, measured), seconds, step, row)

@@ -32,7 +32,7 @@ from rpf_fly.flight.preflight import estimate_problem, preflight_problem, yaw_of
 from rpf_fly.flight.recorder import NullRecorder, PlannerRecord, Recorder
 from rpf_fly.flight.report import FlightReport, LoopStats
 from rpf_fly.flight.supervisor import Finding, Supervisor
-from rpf_fly.flight.swarm_plan import Neighbourhood, SwarmPlanner
+from rpf_fly.flight.swarm_plan import Neighbourhood, SwarmPlanner, in_the_way
 from rpf_fly.flight.ticks import TickSchedule
 from rpf_fly.flight.watchdog import LoopWatchdog, stall_timeout_s
 from rpf_fly.mission.model import Drone, Mission
@@ -84,13 +84,8 @@ class FlightLoop:
         self.events = EventBus(clock)
         self.events.subscribe(self._record_event)
         flight = mission.flight
-        self.agents: dict[str, DroneAgent] = {
-            d.name: DroneAgent(
-                d, planner_factory(d), height=flight.height, speed=flight.speed, dt=flight.dt, arena=mission.arena,
-                budget_s=mission.safety.planner_budget_s, body_radius_m=mission.planner.safety_radius,
-            )
-            for d in mission.drones
-        }
+        self.agents: dict[str, DroneAgent] = {d.name: DroneAgent.for_mission(d, planner_factory(d), mission)
+                                              for d in mission.drones}
         self.commander = Commander(backend, self.agents, self.events, clock, land_s=flight.land_s,
                                    land_settle_s=self.LAND_SETTLE_S, floor_z=0.0)
         self.obstacles = obstacle_set(mission.obstacles)
@@ -535,9 +530,7 @@ class FlightLoop:
         """Whether a drone is in the other drones' views: airborne near the planning plane; a drone nobody
         commands any more (link lost, motors cut) until mocap shows it on the floor, since it may still hover,
         drift or fall there for up to 2 s."""
-        if agent.phase in (DronePhase.LINK_LOST, DronePhase.EMERGENCY):
-            return pose.position[2] > ON_FLOOR_Z_M
-        return pose.position[2] > 0.5 * self.mission.flight.height and not agent.phase.terminal
+        return in_the_way(agent.phase, pose.position[2], self.mission.flight.height)
 
     def _plan_tick(self, now: float, frame: Optional[MocapFrame]) -> None:
         """Plan and send every drone's setpoint; the log records are written after the last send."""
@@ -574,12 +567,7 @@ class FlightLoop:
             # Plan on the commanded geometry (see flight/agent.py): each drone from its own reference, with each
             # neighbour predicted ahead by that drone's observed tracking lag; batched where planners allow
             # (flight/swarm_plan.py).
-            names = list(airborne_poses)
-            world = Neighbourhood(
-                names,
-                np.array([airborne_poses[n].xy for n in names], dtype=complex),
-                np.array([airborne_poses[n].velocity for n in names], dtype=complex),
-            )
+            world = Neighbourhood.of(airborne_poses)
             outcomes = self._swarm_planner.plan([(a, p.xy) for a, p in requests], world)
             for agent, pose in requests:
                 outcome = outcomes[agent.name]

@@ -9,6 +9,12 @@ swap, a reflection taken for a marker) is not followed. The body's pose freezes 
 the drone) until the track jumps back near the frozen pose, or until the new track has been consistent for
 ``REACQUIRE_S`` (the drone really is there: it was pushed, or Motive fixed its model). The raw samples are compared
 frame to frame, so a swap is caught however long it lasts, and so is the swap back.
+
+Times on a 1 us grid (2026-12, for ``rpf-fly replay``): the tracker rounds every receive time to a whole
+microsecond before it uses it (:func:`stamp_on_grid`). The flight log's times are integer nanoseconds; with the
+stamps on this grid the log carries them exactly (:func:`stamp_us`), so a replay feeds the same floats to the same
+code and rebuilds the same velocities bit for bit (docs/replay.md). Half a microsecond is far below the receive
+jitter of any mocap frame (tens of microseconds and more), so the velocity estimate does not notice.
 """
 
 from __future__ import annotations
@@ -23,7 +29,7 @@ from rpf_fly.mocap.frame import MocapFrame
 @dataclass
 class TrackedPose:
     """Newest valid pose of one drone: position (x, y, z) metres, quaternion (qx, qy, qz, qw), planar velocity
-    (complex, m/s), ``stamp_s`` (monotonic receive time of that sample), ``frame_number``, and whether the newest
+    (complex, m/s), ``stamp_s`` (monotonic receive time of that sample, on the 1 us grid), ``frame_number``, and whether the newest
     frame tracked it (``valid``)."""
 
     position: tuple[float, float, float]
@@ -46,6 +52,25 @@ JUMP_TOLERANCE_M = 0.05
 
 REACQUIRE_S = 0.5
 """A jumped track consistent for this long is taken as the drone's real pose."""
+
+STAMP_GRID_PER_S = 1_000_000
+"""The tracker's time grid: whole microseconds (module docstring)."""
+
+
+def stamp_us(t_s: float) -> int:
+    """A tracker time (seconds, on the grid) as whole microseconds: exact for any time on the grid."""
+    return round(t_s * STAMP_GRID_PER_S)
+
+
+def stamp_from_us(t_us: int) -> float:
+    """The tracker time of ``t_us`` whole microseconds: the float :func:`stamp_on_grid` gives (the inverse of
+    :func:`stamp_us`, bit for bit)."""
+    return t_us / STAMP_GRID_PER_S
+
+
+def stamp_on_grid(t_s: float) -> float:
+    """``t_s`` rounded to the tracker's 1 us grid; idempotent (a time on the grid stays the same float)."""
+    return stamp_from_us(stamp_us(t_s))
 
 
 class PoseTracker:
@@ -104,7 +129,8 @@ class PoseTracker:
 
     def update(self, frame: MocapFrame) -> None:
         """Take the frame's poses of our drones (Z-up world frame)."""
-        self.last_frame_s = frame.receive_time_s
+        t = stamp_on_grid(frame.receive_time_s)
+        self.last_frame_s = t
         self.latency_s = frame.latency_s
         for name, body_name in self.bodies.items():
             body = frame.bodies.get(body_name)
@@ -115,13 +141,13 @@ class PoseTracker:
                 continue
             position = tuple(body.position)
             jumped = name in self.glitching
-            if not self._accept(name, position, frame.receive_time_s, frame.capture_time_s, previous):  # type: ignore[arg-type]
+            if not self._accept(name, position, t, frame.capture_time_s, previous):  # type: ignore[arg-type]
                 continue
             if jumped:
                 previous = None  # a re-acquired track: no velocity across the jump
             velocity = 0j
             if previous is not None:
-                dt = frame.receive_time_s - previous.stamp_s
+                dt = t - previous.stamp_s
                 if dt > 1e-4:
                     raw = (complex(body.position[0], body.position[1]) - previous.xy) / dt
                     blend = min(dt / self.velocity_tau_s, 1.0) if previous.valid else 1.0
@@ -129,7 +155,7 @@ class PoseTracker:
                 else:
                     velocity = previous.velocity
             self.poses[name] = TrackedPose(
-                position, tuple(body.quaternion), velocity, frame.receive_time_s, frame.frame_number  # type: ignore[arg-type]
+                position, tuple(body.quaternion), velocity, t, frame.frame_number  # type: ignore[arg-type]
             )
 
     def get(self, name: str) -> Optional[TrackedPose]:

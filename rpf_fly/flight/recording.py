@@ -17,7 +17,7 @@ from typing import Any, Callable, Optional
 
 from rpf_fly.flight.agent import DroneAgent
 from rpf_fly.flight.events import FlightEvent
-from rpf_fly.flight.poses import TrackedPose
+from rpf_fly.flight.poses import TrackedPose, stamp_us
 from rpf_fly.flight.truth import TruthBatch, TruthFeed
 from rpf_fly.log import schemas as S
 from rpf_fly.log.writer import FlightLog, Sink
@@ -50,10 +50,13 @@ class McapRecorder:
     def __init__(self, path: str | Path, mission: Mission, seed: int = 0, source: str = "flight",
                  truth: Optional[Callable[[], TruthBatch]] = None, sink: Optional[Sink] = None):
         self.mission = mission
-        self.log = FlightLog(path, S.mission_metadata(mission, seed, source=source), S.scenario_metadata(mission),
-                             poll_interval_s=POLL_FALLBACK_S, sink=sink)
+        self._offset_ns = time.time_ns() - time.monotonic_ns()
+        """Unix-epoch ns minus the loop's monotonic ns, an integer: logged (``mission.monotonic_offset_ns``) so that
+        a replay gets the loop's own times back from the log, exactly for the tracker's stamps."""
+        meta = S.mission_metadata(mission, seed, source=source)
+        meta["monotonic_offset_ns"] = str(self._offset_ns)
+        self.log = FlightLog(path, meta, S.scenario_metadata(mission), poll_interval_s=POLL_FALLBACK_S, sink=sink)
         self._last_drain_s = -math.inf
-        self._offset_s = time.time() - time.monotonic()
         self._sensing = mission.planner.sensing_range
         self._last_tf_s = -math.inf
         now = self._ns(time.monotonic())
@@ -67,10 +70,14 @@ class McapRecorder:
         return self.log.path
 
     def _ns(self, t_s: float) -> int:
-        return int(round((t_s + self._offset_s) * 1e9))
+        return round(t_s * 1e9) + self._offset_ns
 
     def poses(self, t_s: float, poses: dict[str, TrackedPose]) -> None:
-        t = self._ns(t_s)
+        """One frame's fresh poses, stamped with the frame's receive time as the tracker holds it (the poses of
+        one frame share it; ``t_s``, the loop's time at the call, only when there are none): the replay feeds
+        them back to a tracker at exactly that time (stamps on the tracker's 1 us grid, so in integer ns)."""
+        stamp = next(iter(poses.values())).stamp_s if poses else None
+        t = stamp_us(stamp) * 1000 + self._offset_ns if stamp is not None else self._ns(t_s)
         items = {name: (pose.position, pose.quaternion) for name, pose in poses.items()}
         self.log.poses(t, items)
         if items and t_s - self._last_tf_s >= TF_PERIOD_S:
@@ -81,15 +88,18 @@ class McapRecorder:
                       records: list[tuple[DroneAgent, Optional[TrackedPose], Optional[PlanStep], str]]) -> None:
         """One tick's planner records. Only references cross to the writer thread (poses, goals and headings are
         immutable values, a step's fields numpy scalars); :meth:`_planner_message` builds the messages there."""
-        steps = {agent.name: (tick, pose.position, agent.goal, agent.heading, step, mode)
+        steps = {agent.name: (tick, pose.position, agent.goal, agent.heading, step, mode,
+                              agent.planned_from if step is not None else None)
                  for agent, pose, step, mode in records if pose is not None}
         self.log.planner_steps(self._ns(t_s), steps, self._planner_message)
 
     def _planner_message(self, t_ns: int, value: tuple) -> bytes:
         """Writer thread: one ``rpf_fly.PlannerStep`` from what :meth:`planner_steps` handed over."""
-        tick, position, goal, heading, step, mode = value
+        tick, position, goal, heading, step, mode, reference = value
         fields: dict = dict(tick=tick, position=position, goal=goal, heading=math.atan2(heading.imag, heading.real),
                             goal_distance=abs(goal - complex(position[0], position[1])), mode=mode)
+        if reference is not None:
+            fields["reference"] = reference
         if step is None:
             fields.update(eta=None, lam=None)
         else:

@@ -20,11 +20,14 @@ from __future__ import annotations
 import dataclasses
 import time
 from dataclasses import dataclass, field
-from typing import Callable, Sequence, Union
+from typing import Callable, Mapping, Sequence, Union
 
 import numpy as np
 
 from rpf_fly.flight.agent import MAX_DIRECTION_NORM, DroneAgent, PlannerFault, PlanResult
+from rpf_fly.flight.commander import ON_FLOOR_Z_M
+from rpf_fly.flight.phases import DronePhase
+from rpf_fly.flight.poses import TrackedPose
 from rpf_fly.planning.gains import FixedGains
 from rpf_fly.planning.obstacles import ObstacleSet
 from rpf_fly.planning.onnx_policy import OnnxGains
@@ -57,6 +60,16 @@ def same_function(a: object, b: object) -> bool:
     )
 
 
+def in_the_way(phase: DronePhase, z: float, flight_height: float) -> bool:
+    """Whether a drone in ``phase`` whose mocap height is ``z`` is in the other drones' views: airborne near the
+    planning plane (above half the flight height: a drone on the floor is in nobody's way); a drone nobody commands
+    any more (link lost, motors cut) until mocap shows it on the floor, since it may still hover, drift or fall
+    there for up to 2 s. Pure, so the flight loop and ``rpf-fly replay`` decide it by the same code."""
+    if phase in (DronePhase.LINK_LOST, DronePhase.EMERGENCY):
+        return z > ON_FLOOR_Z_M
+    return z > 0.5 * flight_height and not phase.terminal
+
+
 @dataclass
 class Neighbourhood:
     """Every airborne drone's name, measured planar position and velocity (complex): what the mocap sees."""
@@ -64,6 +77,17 @@ class Neighbourhood:
     names: list[str]
     xy: np.ndarray
     velocity: np.ndarray
+
+    @classmethod
+    def of(cls, poses: Mapping[str, TrackedPose]) -> "Neighbourhood":
+        """The neighbourhood of these tracked poses (the drones in the others' way), in their order: the order
+        is the order of every drone's neighbours in its view, so the flight and a replay build it the same."""
+        names = list(poses)
+        return cls(
+            names,
+            np.array([poses[n].xy for n in names], dtype=complex),
+            np.array([poses[n].velocity for n in names], dtype=complex),
+        )
 
     def others_of(self, agent: DroneAgent) -> tuple[np.ndarray, np.ndarray]:
         """The others as ``agent`` plans with them: positions predicted by its own tracking lag, velocities."""

@@ -334,7 +334,11 @@ PLANNER_STEP: dict[str, Any] = _obj(
         "neighbours": {"type": "integer", "minimum": 0, "description": "Neighbours that exerted a force"},
         "obstacle_distance": _nullable_num("Distance to the nearest visible obstacle surface (m); null if none"),
         "goal_distance": _num("Distance to the goal (m)"),
+        "reference": _vector2("Where the drone planned from: its reference (its own position in its view) before "
+                              "the step (m); only on ticks it planned (2026-12, for rpf-fly replay)"),
     },
+    required=("timestamp", "tick", "position", "goal", "eta", "lambda", "f_a", "f_r", "f_in", "direction", "mode",
+              "heading", "neighbours", "obstacle_distance", "goal_distance"),
     title="rpf_fly.PlannerStep",
     description="One planning tick of one drone",
 )
@@ -482,16 +486,17 @@ def log_message(t_ns: int, level: int, message: str, name: str = "rpf_fly", file
 
 
 PLANNER_FIELDS = ("tick", "position", "goal", "eta", "lambda", "f_a", "f_r", "f_in", "direction", "mode", "heading",
-                  "neighbours", "obstacle_distance", "goal_distance")
+                  "neighbours", "obstacle_distance", "goal_distance", "reference")
 
 
 def planner_step(t_ns: int, tick: int, position: Any, goal: Any, mode: Any, eta: Any = None, lam: Any = None,
                  f_a: Any = 0j, f_r: Any = 0j, f_in: Any = 0j, direction: Any = 0j, heading: float = 0.0,
                  neighbours: int = 0, obstacle_distance: Any = None, goal_distance: Any = None,
-                 **extra: Any) -> dict[str, Any]:
+                 reference: Any = None, **extra: Any) -> dict[str, Any]:
     """A ``rpf_fly.PlannerStep``. ``mode`` is a name or a mode code (0 apf, 1 wall, 2 soft, -1 arrived); ``lam``
     (or ``lambda`` through ``**extra``) and ``eta`` may be NaN or None (no gains); ``goal_distance`` defaults to the
-    distance from ``position`` to ``goal``."""
+    distance from ``position`` to ``goal``; ``reference`` (where the drone planned from) is written only when
+    given."""
     if "lambda" in extra:
         lam = extra.pop("lambda")
     if extra:
@@ -504,7 +509,7 @@ def planner_step(t_ns: int, tick: int, position: Any, goal: Any, mode: Any, eta:
     g = xy(goal)
     if goal_distance is None:
         goal_distance = math.hypot(g["x"] - p["x"], g["y"] - p["y"])
-    return {
+    out = {
         "timestamp": stamp(t_ns),
         "tick": int(tick),
         "position": p,
@@ -521,6 +526,9 @@ def planner_step(t_ns: int, tick: int, position: Any, goal: Any, mode: Any, eta:
         "obstacle_distance": _opt(obstacle_distance),
         "goal_distance": float(goal_distance),
     }
+    if reference is not None:
+        out["reference"] = xy(reference)
+    return out
 
 
 def drone_status(t_ns: int, state: str, battery_v: Any = None, link_quality: Any = None, latency_ms: Any = None,
@@ -706,7 +714,7 @@ def planner_json(t_ns: int, fields: Mapping[str, Any]) -> bytes:
         gd = f.get("goal_distance")
         gd = math.hypot(goal["x"] - x, goal["y"] - y) if gd is None else float(gd)
         sec, nsec = divmod(int(t_ns), 1_000_000_000)
-        return _dumps({
+        message = {
             "timestamp": {"sec": sec, "nsec": nsec}, "tick": int(f["tick"]), "position": {"x": x, "y": y, "z": z},
             "goal": goal, "eta": _opt_float(f.get("eta")),
             "lambda": _opt_float(f["lambda"] if "lambda" in f else f.get("lam")),
@@ -714,7 +722,11 @@ def planner_json(t_ns: int, fields: Mapping[str, Any]) -> bytes:
             "direction": _xy_dict(f.get("direction", 0j)), "mode": mode, "heading": float(f.get("heading", 0.0)),
             "neighbours": int(f.get("neighbours", 0)), "obstacle_distance": _opt_float(f.get("obstacle_distance")),
             "goal_distance": gd,
-        })
+        }
+        reference = f.get("reference")
+        if reference is not None:
+            message["reference"] = _xy_dict(reference)
+        return _dumps(message)
     except (TypeError, ValueError, KeyError, IndexError):
         return encode(planner_step(t_ns, **fields))
 

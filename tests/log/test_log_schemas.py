@@ -146,9 +146,25 @@ def test_fast_pose_encoder_equals_the_builder(position, quaternion):
      "lambda": 2.0, "goal_distance": np.float64(3.0)},
     dict(tick=0, position=1 + 1j, goal=(1, 0), mode="hold"),
     dict(tick=0, position=(0, 0, 0), goal=(1, 0), mode="apf", obstacle_distance=float("inf")),
+    dict(tick=5, position=(0.1, 0.2, 0.5), goal=(1, 0), mode="soft", direction=0.6 + 0.8j, reference=0.15 + 0.2j),
+    dict(tick=5, position=(0.1, 0.2, 0.5), goal=(1, 0), mode="apf", reference=(np.float64(0.3), 0.1)),
 ])
 def test_fast_planner_encoder_equals_the_builder(fields):
     assert S.planner_json(T, fields) == S.encode(S.planner_step(T, **fields))
+
+
+def test_planner_reference_is_optional_exact_and_valid():
+    """``reference`` (where the drone planned from, for rpf-fly replay) is written only when given, as the exact
+    doubles, and validates against the schema either way."""
+    validator = jsonschema.Draft7Validator(SCHEMAS["rpf_fly.PlannerStep"])
+    without = json.loads(S.planner_json(T, dict(tick=0, position=(0, 0, 0.5), goal=(1, 0), mode="hold")))
+    assert "reference" not in without
+    validator.validate(without)
+    ref = complex(0.1 + 0.2, -1 / 3)
+    with_ref = json.loads(S.planner_json(T, dict(tick=1, position=(0, 0, 0.5), goal=(1, 0), mode="apf",
+                                                 reference=ref)))
+    assert complex(with_ref["reference"]["x"], with_ref["reference"]["y"]) == ref
+    validator.validate(with_ref)
 
 
 @pytest.mark.parametrize("state", [
