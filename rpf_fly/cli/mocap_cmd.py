@@ -15,6 +15,7 @@ import json
 import math
 import time
 from enum import Enum
+from pathlib import Path
 from typing import Optional
 
 import typer
@@ -310,8 +311,14 @@ def emulate(
     radius: float = typer.Option(1.0, "--radius", min=0.1, help="Radius of the innermost circle, metres."),
     speed: float = typer.Option(0.5, "--speed", min=0.0, help="Speed along the circles, m/s."),
     duration: float = typer.Option(0.0, "--duration", min=0.0, help="Stop after this many seconds (0: Ctrl-C)."),
+    replay: Optional[Path] = typer.Option(
+        None, "--replay", help="Serve a flight log's /mocap poses at their logged times instead of circles "
+                               "(--bodies, --rate, --radius and --speed do not apply)."),
+    replay_speed: float = typer.Option(1.0, "--replay-speed", min=0.01, help="With --replay: playback speed "
+                                                                              "(2: twice as fast)."),
 ) -> None:
-    """Run a NatNet server emulator streaming bodies on circles, so `mocap watch` can be tried without Motive."""
+    """Run a NatNet server emulator streaming bodies on circles (or a flight log's mocap with --replay), so `mocap
+    watch` and any NatNet client can be tried without Motive."""
     from rpf_fly.mocap.natnet_protocol import SUPPORTED_VERSIONS, parse_version
     from rpf_fly.emulator.natnet_server import NatNetServer
 
@@ -321,6 +328,9 @@ def emulate(
         parsed = (-1, -1)
     if parsed not in SUPPORTED_VERSIONS:
         raise typer.BadParameter(f"{version} is not one of 3.0, 4.0, 4.1, 4.2", param_hint="--version")
+    if replay is not None:
+        _emulate_replay(replay, replay_speed, parsed, multicast, local_ip, command_port, data_port, up_axis, duration)
+        return
     try:
         server = NatNetServer(
             _circle_poses(bodies, radius, speed, time.monotonic()),
@@ -353,3 +363,70 @@ def emulate(
                 time.sleep(min(0.2, max(0.0, end - time.monotonic())))
         except KeyboardInterrupt:
             pass
+
+
+def _emulate_replay(log: Path, speed: float, version: tuple[int, int], multicast: bool, local_ip: str,  # noqa: PLR0913
+                    command_port: int, data_port: int, up_axis: UpAxis, duration: float) -> None:
+    """``emulate --replay LOG``: the log's mocap frames over NatNet at their logged times (relative timing kept);
+    exits when the last frame is sent (or after ``duration``, or on Ctrl-C)."""
+    import threading
+
+    from rpf_fly.cli.errors import fail
+    from rpf_fly.emulator.log_playback import PosePlayback
+    from rpf_fly.emulator.natnet_server import NatNetServer
+    from rpf_fly.log.mocap_frames import mocap_frames
+    from rpf_fly.log.reader import LogError, read_log
+
+    try:
+        data = read_log(log)
+    except LogError as err:
+        raise fail(f"{log}: {err}")
+    except OSError as err:
+        raise fail(f"{log}: {err.strerror or err}")
+    frames = mocap_frames(data)
+    if not frames:
+        raise fail(f"{log}: no mocap poses (/mocap/<drone>) to serve")
+    if data.truncated:
+        typer.echo(f"{log}: warning: the log ends before its footer; serving the {len(frames)} frames of its "
+                   "complete chunks", err=True)
+    playback = PosePlayback([(f.t_ns / 1e9, f.poses) for f in frames], speed)
+    bodies = playback.bodies
+    try:
+        server = NatNetServer(playback.poses, version=version, multicast=multicast, local_ip=local_ip,
+                              command_port=command_port, data_port=data_port, rate_hz=0, up_axis=up_axis.value,
+                              bodies=bodies)
+    except OSError as exc:
+        typer.echo(f"error: cannot start the emulator on {local_ip}: {exc}", err=True)
+        raise typer.Exit(1) from None
+    with server:
+        transport = "multicast 239.255.42.99" if multicast else "unicast"
+        span = (frames[-1].t_ns - frames[0].t_ns) / 1e9
+        typer.echo(
+            f"NatNet emulator: replaying {log} ({len(frames)} frames of {', '.join(bodies)} over {span:.1f} s, "
+            f"x{speed:g}): bitstream {version[0]}.{version[1]}, {transport}, {up_axis.value}-up on {local_ip} "
+            f"(command port {server.command_port}, data port {server.data_port})"
+        )
+        flag = "" if multicast else " --unicast"
+        typer.echo(
+            f"try: rpf-fly mocap watch --natnet {local_ip} --command-port {server.command_port}{flag}"
+            f" --up-axis {up_axis.value}   (Ctrl-C to stop)", nl=True,
+        )
+        import sys
+
+        sys.stdout.flush()
+        stop = threading.Event()
+        if duration > 0:
+            timer = threading.Timer(duration, stop.set)
+            timer.daemon = True
+            timer.start()
+        try:
+            if not multicast:  # unicast frames go to connected clients only: start when the first one connects
+                typer.echo("waiting for a client to connect (unicast) ...")
+                sys.stdout.flush()
+                while not server.clients and not stop.wait(0.05):
+                    pass
+            sent = playback.play(server, stop)
+        except KeyboardInterrupt:
+            sent = len(playback.sent)
+        typer.echo(f"replay done: {sent} of {len(frames)} frames sent (latest {playback.max_late_s * 1e3:.1f} ms "
+                   "behind its time)")

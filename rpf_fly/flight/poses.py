@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Mapping, Optional
+from typing import Collection, Mapping, Optional
 
 from rpf_fly.mocap.frame import MocapFrame
 
@@ -127,8 +127,10 @@ class PoseTracker:
             previous.valid = False
         return False
 
-    def update(self, frame: MocapFrame) -> None:
-        """Take the frame's poses of our drones (Z-up world frame)."""
+    def update(self, frame: MocapFrame, reacquired: Collection[str] = ()) -> None:
+        """Take the frame's poses of our drones (Z-up world frame). ``reacquired``: drones whose sample in this
+        frame ends a glitch the tracker did not see (a replay learns it from the log's ``pose_glitch`` events,
+        since refused samples are not logged): no velocity across the jump, as for a glitch it saw itself."""
         t = stamp_on_grid(frame.receive_time_s)
         self.last_frame_s = t
         self.latency_s = frame.latency_s
@@ -140,7 +142,7 @@ class PoseTracker:
                     previous.valid = False
                 continue
             position = tuple(body.position)
-            jumped = name in self.glitching
+            jumped = name in self.glitching or name in reacquired
             if not self._accept(name, position, t, frame.capture_time_s, previous):  # type: ignore[arg-type]
                 continue
             if jumped:

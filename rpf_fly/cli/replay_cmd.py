@@ -1,0 +1,100 @@
+"""``rpf-fly replay``: feed a flight log's poses back through the planners and say where the decisions differ.
+
+With the flight's own planner and policy (the default, from the log's mission metadata) the replay gives the logged
+directions and modes back; with ``--planner`` or ``--policy`` it shows what that planner would have decided on
+the same poses, open loop. docs/replay.md; the work is :mod:`rpf_fly.flight.replay`.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+from rpf_fly.cli import app
+from rpf_fly.cli.errors import fail
+
+
+@app.command()
+def replay(
+    log: Path = typer.Argument(..., help="Flight log (.mcap) written by `rpf-fly fly [--dry-run] --log`."),
+    planner: Optional[str] = typer.Option(None, "--planner", help="Replay with this planner kind (default: the "
+                                                                  "one flown, from the log's mission)."),
+    policy: Optional[Path] = typer.Option(None, "--policy", help="ONNX policy for a learned planner (default: the "
+                                                                 "mission's, checked against the flown SHA-256)."),
+    json_output: bool = typer.Option(False, "--json", help="Print the replay JSON (docs/replay.md) only."),
+    plot: Optional[Path] = typer.Option(None, "--plot", help="Write logged vs replayed headings per drone to a PNG."),
+    tolerance: Optional[float] = typer.Option(
+        None, "--tolerance", min=0.0, help="Direction difference (unit-vector distance) above which a tick diverges "
+                                           "(default 1e-6; 1e-5 for ONNX policies, their parity tolerance)."),
+) -> None:
+    """Replay LOG's mocap poses through the planners, each drone on the view it had; report divergences."""
+    from rpf_fly.flight.replay import ReplayError, replay_log, replay_setup
+    from rpf_fly.log.reader import LogError, read_log
+
+    try:
+        data = read_log(log)
+    except LogError as err:
+        raise fail(f"{log}: {err}")
+    except OSError as err:
+        raise fail(f"{log}: {err.strerror or err}")
+    try:
+        setup = replay_setup(data, planner, policy, tolerance)
+        result = replay_log(data, setup.mission, setup.factory, tolerance=setup.tolerance,
+                            planner=setup.mission.planner.kind, policy=setup.mission.planner.policy,
+                            same_as_flown=setup.same_as_flown)
+    except ReplayError as err:
+        raise fail(str(err))
+    result.warnings[:0] = setup.warnings
+    if data.truncated:
+        result.warnings.insert(0, f"the log ends before its footer ({data.stop_reason or 'writer killed?'}); "
+                                  f"replaying the {result.ticks} planning ticks of its complete chunks")
+    for warning in result.warnings:
+        typer.echo(f"{log}: warning: {warning}", err=True)
+    for name, drone in result.drones.items():
+        if drone.note:
+            typer.echo(f"{log}: {drone.note}", err=True)
+    if plot is not None:
+        from rpf_fly.flight.replay_plot import plot_replay
+
+        try:
+            plot_replay(result, plot, title=f"{log.name}: {result.flown_planner or '?'} flown, {result.planner} "
+                                            "replayed")
+        except OSError as err:
+            raise fail(f"{plot}: cannot write the plot: {err.strerror or err}")
+    if json_output:
+        typer.echo(json.dumps(result.to_json()))
+        return
+    _print(result, log, plot)
+
+
+def _print(result, log: Path, plot: Optional[Path]) -> None:  # type: ignore[no-untyped-def]
+    from rich.console import Console
+    from rich.table import Table
+
+    console = Console(highlight=False)
+    flown = result.flown_planner or "?"
+    what = "the flight's own planner" if result.same_as_flown else f"open loop against the flown {flown}"
+    policy = f" ({result.policy})" if result.policy is not None else ""
+    console.print(f"[bold]{log.name}[/bold]: replayed {result.planner}{policy}, {what}; {result.ticks} planning "
+                  f"ticks, {result.seconds_per_tick * 1e3:.2f} ms a tick")
+    table = Table(title=f"decisions: max diff = largest |d_replay - d_log| (unit vectors), diverging above "
+                        f"{result.tolerance:g}; max deg = largest angle; mode diffs = ticks whose mode differs")
+    for column in ("drone", "ticks", "first div.", "max diff", "max deg", "mode diffs", "restarts"):
+        table.add_column(column, justify="left" if column == "drone" else "right")
+    for name, d in result.drones.items():
+        first = d.first_divergence_tick
+        table.add_row(name, str(len(d.ticks)), "-" if first is None else f"tick {first}",
+                      f"{d.max_direction_diff:.3g}", f"{d.max_angle_diff_rad * 57.29577951308232:.3g}",
+                      str(d.mode_changes), str(d.restarts))
+    console.print(table)
+    diverged = [n for n, d in result.drones.items() if d.first_divergence_tick is not None]
+    if not diverged:
+        console.print("[green]every decision reproduced[/green]" if result.same_as_flown
+                      else "[yellow]no decision differs from the flown planner's[/yellow]")
+    else:
+        console.print(f"[{'red' if result.same_as_flown else 'yellow'}]diverged: {', '.join(diverged)}[/]")
+    if plot is not None:
+        console.print(f"plot: {plot}")

@@ -1,0 +1,86 @@
+"""The replay's figure (``rpf-fly replay --plot``): per drone, the heading of the logged and of the replayed
+direction over time, and the direction difference on a log scale beneath. Only draws (Agg backend); the numbers
+come from :mod:`rpf_fly.flight.replay`.
+
+Headings are the angle of each planning tick's direction (degrees, counter-clockwise from +x), unwrapped per
+stretch so a turn through +-180 degrees stays one line; a zero direction (stalled, faulted) leaves a gap. Ticks
+whose replayed mode is not the logged one are marked with a cross, the first divergence with a vertical line.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from rpf_fly.flight.replay import ReplayResult, TickComparison
+
+FLOOR = 1e-17
+"""Direction differences are drawn on a log axis; an exact match (0) sits on this floor."""
+
+
+def _heading_deg(direction: complex) -> float:
+    return math.degrees(math.atan2(direction.imag, direction.real)) if abs(direction) > 0 else math.nan
+
+
+def _unwrapped(values: list[float]) -> np.ndarray:
+    """Unwrap degrees across finite runs (NaN gaps stay gaps)."""
+    out = np.array(values, dtype=float)
+    finite = np.isfinite(out)
+    if finite.any():
+        out[finite] = np.degrees(np.unwrap(np.radians(out[finite])))
+    return out
+
+
+def plot_replay(result: ReplayResult, path: str | Path, title: str = "") -> Path:
+    """Draw ``result`` into a PNG at ``path``: one row per replayed drone (headings above, difference below)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    drones = [d for d in result.drones.values() if d.ticks]
+    rows = max(1, len(drones))
+    fig, axes = plt.subplots(rows, 2, figsize=(13, 2.6 * rows + 0.8), squeeze=False,
+                             gridspec_kw={"width_ratios": [3, 2]})
+    starts = [c.t_ns for d in drones for c in d.ticks]
+    t0 = min(starts) if starts else 0
+    for (ax, ax_diff), drone in zip(axes, drones):
+        ticks: list[TickComparison] = drone.ticks
+        t = np.array([(c.t_ns - t0) / 1e9 for c in ticks])
+        logged = _unwrapped([_heading_deg(c.logged_direction) for c in ticks])
+        replayed = _unwrapped([_heading_deg(c.replayed_direction) for c in ticks])
+        ax.plot(t, logged, "-", color="#1f77b4", lw=2.2, label="logged")
+        ax.plot(t, replayed, "--", color="#ff7f0e", lw=1.4, label=f"replayed ({result.planner})")
+        changed = [i for i, c in enumerate(ticks) if c.replayed_mode != c.logged_mode]
+        if changed:
+            ax.plot(t[changed], replayed[changed], "x", color="#d62728", ms=6, label="mode differs")
+        first = drone.first_divergence_tick
+        if first is not None:
+            at = next(c.t_ns for c in ticks if c.tick == first)
+            for a in (ax, ax_diff):
+                a.axvline((at - t0) / 1e9, color="#d62728", lw=0.8, ls=":")
+        ax.set_ylabel(f"{drone.name}\nheading [deg]")
+        ax.grid(alpha=0.3)
+        ax.legend(loc="best", fontsize=8)
+        diff = np.maximum([c.direction_diff for c in ticks], FLOOR)
+        ax_diff.semilogy(t, diff, ".", color="#2ca02c", ms=3)
+        ax_diff.axhline(result.tolerance, color="0.4", lw=0.8, ls="--", label=f"tolerance {result.tolerance:g}")
+        ax_diff.set_ylim(FLOOR / 2, 4)
+        ax_diff.set_ylabel("|d_replay - d_log|")
+        ax_diff.grid(alpha=0.3, which="both")
+        ax_diff.legend(loc="upper left", fontsize=8)
+        verdict = "reproduced" if first is None else f"first divergence at tick {first}"
+        ax_diff.set_title(f"max {drone.max_direction_diff:.2g}, {drone.mode_changes} mode changes: {verdict}",
+                          fontsize=9)
+    if not drones:
+        axes[0][0].text(0.5, 0.5, "no planning ticks to compare", ha="center", va="center")
+    axes[-1][0].set_xlabel("time since the first planning tick [s]")
+    axes[-1][1].set_xlabel("time since the first planning tick [s]")
+    fig.suptitle(title or f"replay: {result.planner}")
+    fig.tight_layout()
+    out = Path(path)
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+    return out
