@@ -60,8 +60,9 @@ def replay(
         from rpf_fly.flight.replay_plot import plot_replay
 
         try:
-            plot_replay(result, plot, title=f"{log.name}: {result.flown_planner or '?'} flown, {result.planner} "
-                                            "replayed")
+            policy = f" ({result.policy.name})" if result.policy is not None else ""
+            plot_replay(result, plot, title=f"{log.name}: {result.flown_planner or '?'} flown, {result.planner}"
+                                            f"{policy} replayed")
         except OSError as err:
             raise fail(f"{plot}: cannot write the plot: {err.strerror or err}")
     if json_output:

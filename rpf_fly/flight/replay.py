@@ -355,8 +355,9 @@ def replay_log(
     times = _Clock(int(offset) if offset not in (None, "") else None, frames[0].t_ns)
     if not times.exact:
         warnings.append("the log has no mission.monotonic_offset_ns (written before rpf-fly replay existed): "
-                        "neighbour velocities are rebuilt from nanosecond times, not the flight's own; expect "
-                        "directions to agree to about 1e-6, not exactly")
+                        "its pose times are not the tracker's, so neighbour velocities are rebuilt only "
+                        "approximately: a guide, not a check (two such dry runs differed by up to 2e-4 and 0.12 "
+                        "from their third tick on, docs/replay.md)")
     for topic in [f"/mocap/{n}" for n in names] + [f"/{n}/planner" for n in names]:
         missing = _missing_sequences(data, topic)
         if missing:
@@ -365,7 +366,8 @@ def replay_log(
     if any("reference" not in (m.data or {}) for n in names for m in data.topics.get(f"/{n}/planner", ())[:1]
            if isinstance(m.data, dict) and m.data.get("mode") in PLANNING_MODES):
         warnings.append("planner rows without `reference` (a log from before rpf-fly replay): each planning "
-                        "stretch restarts from the drone's measured position, not its reference")
+                        "stretch restarts from the drone's pose one frame before, not the reference the flight "
+                        "restarted from (exact for the take-off, a guess after a hold)")
 
     inf = math.inf
     agents = {d.name: DroneAgent.for_mission(d, planner_factory(d), mission, budget_s=inf) for d in mission.drones}
@@ -383,10 +385,12 @@ def replay_log(
     reacquired = _reacquisitions(data, frames)
     height = mission.flight.height
     next_frame = 0
+    before: dict[str, complex] = {}
     started = clock()
     try:
         for tick in ticks:
             while next_frame < len(frames) and frames[next_frame].t_ns <= tick.t_ns + FRAME_SLACK_NS:
+                before = {n: p.xy for n, p in tracker.poses.items()}
                 tracker.update(_mocap_frame(next_frame + 1, frames[next_frame], times),
                                reacquired.get(next_frame, ()))
                 next_frame += 1
@@ -411,7 +415,10 @@ def replay_log(
                     results[name].pose_mismatches += 1
                 agent = agents[name]
                 if _restarts(row, last_planned.get(name), previous_mode.get(name), shadow[name]):
-                    agent.begin_planning(row.reference if row.reference is not None else pose.xy, 0.0)
+                    # A log without references: the take-off's restart planned from the pose before the frame
+                    # that fired this tick (the loop begins planning, then its first tick fires on the next frame).
+                    start = row.reference if row.reference is not None else before.get(name, pose.xy)
+                    agent.begin_planning(start, 0.0)
                     results[name].restarts += 1
                 requests.append((agent, pose.xy))
                 last_planned[name] = row

@@ -2,8 +2,10 @@
 direction over time, and the direction difference on a log scale beneath. Only draws (Agg backend); the numbers
 come from :mod:`rpf_fly.flight.replay`.
 
-Headings are the angle of each planning tick's direction (degrees, counter-clockwise from +x), unwrapped per
-stretch so a turn through +-180 degrees stays one line; a zero direction (stalled, faulted) leaves a gap. Ticks
+Headings are the angle of each planning tick's direction (degrees, counter-clockwise from +x), the logged one
+unwrapped so a turn through +-180 degrees stays one line, the replayed one drawn at the logged one plus the angle
+between them (wrapped to +-180), so the gap on the plot is the difference of the decisions; a zero direction
+(stalled, faulted) leaves a gap. Ticks
 whose replayed mode is not the logged one are marked with a cross, the first divergence with a vertical line.
 """
 
@@ -50,9 +52,16 @@ def plot_replay(result: ReplayResult, path: str | Path, title: str = "") -> Path
         ticks: list[TickComparison] = drone.ticks
         t = np.array([(c.t_ns - t0) / 1e9 for c in ticks])
         logged = _unwrapped([_heading_deg(c.logged_direction) for c in ticks])
-        replayed = _unwrapped([_heading_deg(c.replayed_direction) for c in ticks])
+        # the replayed heading drawn as the logged one plus their difference wrapped to (-180, 180]: the gap on the
+        # plot is the angle between the two decisions (where the logged heading is zero, unwrapped on its own)
+        gap = np.array([_heading_deg(c.replayed_direction) for c in ticks]) - np.array(
+            [_heading_deg(c.logged_direction) for c in ticks])
+        gap = (gap + 180.0) % 360.0 - 180.0
+        replayed = np.where(np.isfinite(logged), logged + gap,
+                            _unwrapped([_heading_deg(c.replayed_direction) for c in ticks]))
         ax.plot(t, logged, "-", color="#1f77b4", lw=2.2, label="logged")
-        ax.plot(t, replayed, "--", color="#ff7f0e", lw=1.4, label=f"replayed ({result.planner})")
+        what = result.planner + (f", {result.policy.name}" if result.policy is not None else "")
+        ax.plot(t, replayed, "--", color="#ff7f0e", lw=1.4, label=f"replayed ({what})")
         changed = [i for i, c in enumerate(ticks) if c.replayed_mode != c.logged_mode]
         if changed:
             ax.plot(t[changed], replayed[changed], "x", color="#d62728", ms=6, label="mode differs")
@@ -65,12 +74,12 @@ def plot_replay(result: ReplayResult, path: str | Path, title: str = "") -> Path
         ax.grid(alpha=0.3)
         ax.legend(loc="best", fontsize=8)
         diff = np.maximum([c.direction_diff for c in ticks], FLOOR)
-        ax_diff.semilogy(t, diff, ".", color="#2ca02c", ms=3)
+        ax_diff.semilogy(t, diff, ".", color="#2ca02c", ms=3, label=f"per tick (0 drawn at {FLOOR:g})")
         ax_diff.axhline(result.tolerance, color="0.4", lw=0.8, ls="--", label=f"tolerance {result.tolerance:g}")
         ax_diff.set_ylim(FLOOR / 2, 4)
         ax_diff.set_ylabel("|d_replay - d_log|")
         ax_diff.grid(alpha=0.3, which="both")
-        ax_diff.legend(loc="upper left", fontsize=8)
+        ax_diff.legend(loc="best", fontsize=7, framealpha=0.6)
         verdict = "reproduced" if first is None else f"first divergence at tick {first}"
         ax_diff.set_title(f"max {drone.max_direction_diff:.2g}, {drone.mode_changes} mode changes: {verdict}",
                           fontsize=9)

@@ -321,3 +321,20 @@ def test_the_replay_rebuilds_the_flight_trackers_velocities_exactly(apf_log: Pat
     planned = [m.data for m in data.topics["/cf1/planner"] if m.data["mode"] in PLANNING_MODES]
     assert planned and all("reference" in row for row in planned)
     assert not any("reference" in m.data for m in data.topics["/cf1/planner"] if m.data["mode"] not in PLANNING_MODES)
+
+
+def test_a_log_from_before_the_replay_is_replayed_with_two_warnings(apf_log: Path) -> None:
+    """Without the clock offset and the references (logs written before rpf-fly replay) the replay says so, and
+    still starts each drone where the flight did at take-off: from its pose one frame before its first tick."""
+    data = read_log(apf_log)
+    del data.metadata["mission"]["monotonic_offset_ns"]
+    for name in ("cf1", "cf2", "cf3"):
+        topic = data.topics[f"/{name}/planner"]
+        topic[:] = [m._replace(data={k: v for k, v in m.data.items() if k != "reference"}) for m in topic]
+    setup = replay_setup(data)
+    result = replay_log(data, setup.mission, setup.factory, tolerance=setup.tolerance)
+    assert not result.exact_times
+    assert any("monotonic_offset_ns" in w for w in result.warnings)
+    assert any("without `reference`" in w for w in result.warnings)
+    for name, drone in result.drones.items():  # this log's pose times are still the tracker's: only 1e-12 off
+        assert drone.first_divergence_tick is None and drone.max_direction_diff < 1e-9, (name, drone.to_json())
