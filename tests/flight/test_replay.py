@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -19,6 +20,7 @@ from mcap.writer import CompressionType, Writer
 from typer.testing import CliRunner
 
 from rpf_fly.cli import get_app
+from rpf_fly.emulator.log_playback import PosePlayback
 from rpf_fly.flight.replay import PLANNING_MODES, replay_log, replay_setup
 from rpf_fly.log.mocap_frames import mocap_frames
 from rpf_fly.log.reader import LogMessage, read_log
@@ -261,7 +263,9 @@ def test_the_flown_policy_is_found_by_its_hash_when_its_relative_path_does_not_r
 # ------------------------------------------------------------------------------------- mocap emulate --replay
 
 
-def test_emulate_replay_serves_the_logged_poses_over_natnet_at_their_logged_times(apf_log: Path) -> None:
+@pytest.mark.parametrize("up_axis", ["z", "y"])
+def test_emulate_replay_serves_the_logged_poses_over_natnet_at_their_logged_times(apf_log: Path,
+                                                                                  up_axis: str) -> None:
     """`rpf-fly mocap emulate --replay LOG` on 127.0.0.1 (its own process, unicast), read back with our NatNet
     client: every frame received is the logged frame of that number, to the float32 of the wire (a dry run's
     poses came in as float32, so exactly), and the frames keep their logged spacing (at 4x speed)."""
@@ -269,7 +273,7 @@ def test_emulate_replay_serves_the_logged_poses_over_natnet_at_their_logged_time
     speed = 4.0
     proc = subprocess.Popen(
         [sys.executable, "-m", "rpf_fly", "mocap", "emulate", "--replay", str(apf_log), "--unicast",
-         "--command-port", "0", "--data-port", "0", "--replay-speed", str(speed)],
+         "--command-port", "0", "--data-port", "0", "--replay-speed", str(speed), "--up-axis", up_axis],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
     )
     received: list[tuple[int, float, dict]] = []
@@ -277,7 +281,8 @@ def test_emulate_replay_serves_the_logged_poses_over_natnet_at_their_logged_time
         first = proc.stdout.readline()
         assert "command port" in first, first + proc.stderr.read()
         port = int(first.split("command port ")[1].split(",")[0])
-        with NatNetClient("127.0.0.1", multicast=False, command_port=port, up_axis="z", keepalive_s=0.2) as client:
+        with NatNetClient("127.0.0.1", multicast=False, command_port=port, up_axis=up_axis,
+                          keepalive_s=0.2) as client:
             assert client.wait_for_server(10.0)
             deadline = time.monotonic() + 60
             while proc.poll() is None and time.monotonic() < deadline:
@@ -338,3 +343,31 @@ def test_a_log_from_before_the_replay_is_replayed_with_two_warnings(apf_log: Pat
     assert any("without `reference`" in w for w in result.warnings)
     for name, drone in result.drones.items():  # this log's pose times are still the tracker's: only 1e-12 off
         assert drone.first_divergence_tick is None and drone.max_direction_diff < 1e-9, (name, drone.to_json())
+
+
+def test_pose_playback_sends_each_frame_at_its_time_and_stops_when_asked() -> None:
+    """The pacing alone, on a fake clock: frame k goes out at start + (t_k - t_0) / speed, never skipped when late,
+    with the frame's poses (all tracked; absent bodies are the server's to stream untracked)."""
+    now = [100.0]
+    sent: list[tuple[float, dict]] = []
+    frames = [(5.0, {"cf1": ((0.0, 0.0, 0.5), (0, 0, 0, 1))}), (5.5, {"cf1": ((0.1, 0.0, 0.5), (0, 0, 0, 1))}),
+              (6.5, {"cf2": ((1.0, 1.0, 0.5), (0, 0, 0, 1))})]
+    playback = PosePlayback(frames, speed=2.0)
+
+    class Server:
+        def send_frame(self) -> int:
+            sent.append((now[0], playback.poses()))
+            return len(sent) + 40
+
+    def sleep(s: float) -> None:
+        now[0] += s
+
+    assert playback.play(Server(), clock=lambda: now[0], sleep=sleep) == 3
+    assert [round(t - 100.0, 9) for t, _ in sent] == [0.0, 0.25, 0.75]
+    assert sent[2][1] == {"cf2": ((1.0, 1.0, 0.5), (0, 0, 0, 1), True)}
+    assert playback.sent == [41, 42, 43] and playback.bodies == ["cf1", "cf2"] and playback.duration_s == 0.75
+    stop = threading.Event()
+    stop.set()
+    assert PosePlayback(frames).play(Server(), stop, clock=lambda: now[0], sleep=sleep) == 0
+    with pytest.raises(ValueError):
+        PosePlayback(frames, speed=0)
