@@ -526,6 +526,17 @@ def find_flown_policy(text: str, kind: str, log: Path, sha256: str) -> Optional[
     return None
 
 
+def _shipped_policy(kind: str, log: Path) -> Optional[Path]:
+    """``policies/<kind>.onnx`` for a policy kind named with ``--planner`` alone: here, next to the log, or in
+    this checkout (None: let the mission loader say where it looked)."""
+    checkout = Path(__file__).resolve().parents[2]
+    for folder in (Path.cwd(), log.parent, checkout):
+        candidate = folder / "policies" / f"{kind}.onnx"
+        if candidate.is_file():
+            return candidate.resolve()
+    return None
+
+
 def _logged_mission(meta: dict[str, str], log: Path, kind: Optional[str], policy: Optional[Path]) -> Mission:
     """The mission of the log's metadata, its policy resolved (see :func:`find_flown_policy`)."""
     from rpf_fly.mission import MissionError, parse_mission
@@ -555,6 +566,7 @@ def replay_setup(data: LogData, kind: Optional[str] = None, policy: Optional[Pat
     the planner factory the flight loop would have used. Raises :class:`ReplayError` (one line)."""
     from rpf_fly.log.schemas import file_sha256
     from rpf_fly.mission import MissionError, with_planner
+    from rpf_fly.mission.model import POLICY_KINDS
     from rpf_fly.planning.gains import FixedGains
     from rpf_fly.planning.onnx_policy import PolicyError
     from rpf_fly.planning.planner import Planner
@@ -574,6 +586,8 @@ def replay_setup(data: LogData, kind: Optional[str] = None, policy: Optional[Pat
     mission = _logged_mission(meta, log, kind, policy)
     warnings: list[str] = []
     kind = kind or flown_kind or mission.planner.kind
+    if policy is None and kind != mission.planner.kind and kind in POLICY_KINDS:
+        policy = _shipped_policy(kind, log)
     try:
         mission = with_planner(mission, kind, policy)
     except MissionError as err:
@@ -588,7 +602,7 @@ def replay_setup(data: LogData, kind: Optional[str] = None, policy: Optional[Pat
     try:
         probe = make_planner(mission.planner, obstacles)
     except (UnsupportedPlanner, PolicyError) as err:
-        raise ReplayError(f"planner.policy: {err}") from None
+        raise ReplayError(f"{'--policy' if policy is not None else 'planner.policy'}: {err}") from None
     fixed = isinstance(probe, Planner) and isinstance(probe.gains, FixedGains)
     default_tolerance = FIXED_GAINS_TOLERANCE if fixed or mission.planner.policy is None else ONNX_TOLERANCE
     settings = mission.planner
