@@ -174,12 +174,14 @@ def watch(
     (Z-up world frame, metres).
 
     NatNet: on a terminal one table is redrawn in place; piped, a header, at most --rate lines a second; then the
-    summary (frames, rate, frames missed, each body's valid %) on exit, Ctrl-C or --duration."""
+    summary (frames, rate, frames missed, each body's valid %) on exit, Ctrl-C or --duration. A motioncapture
+    system: a header, at most --rate lines a second, the same summary."""
     if system != "natnet":
         from rpf_fly.cli.mocap_library import watch_library
 
         return watch_library(system, host, option, local_ip=local_ip, command_port=command_port,
-                             up_axis=up_axis.value, frames=frames, json_output=json_output, timeout=timeout)
+                             up_axis=up_axis.value, frames=frames, json_output=json_output, timeout=timeout,
+                             rate=rate, duration=duration)
     if host is not None:
         natnet = host
     if option:

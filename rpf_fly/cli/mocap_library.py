@@ -47,13 +47,15 @@ def watch_library(
     frames: int,
     json_output: bool,
     timeout: float,
+    rate: float = 10.0,
+    duration: float = 0.0,
 ) -> None:
     """The ``watch`` loop over a motioncapture system; exits 0 after ``frames`` frames, 1 with one line when the
     system does not answer, the library fails or crashes, or no frame comes for ``timeout`` seconds, 2 for bad
     options."""
     from rich.console import Console
 
-    from rpf_fly.cli.mocap_cmd import _frame_json, _frame_line
+    from rpf_fly.cli.mocap_cmd import WatchStats, _frame_json, _frame_line
     from rpf_fly.mocap.motioncapture_options import check_hostname, system_type
     from rpf_fly.mocap.motioncapture_source import MotioncaptureSource
 
@@ -77,11 +79,18 @@ def watch_library(
     if system == "mock" and "rigid_bodies" not in options:
         typer.echo("note: the mock has no rigid bodies unless given, e.g. --option 'rigid_bodies=cf1(0,0,0.5,1,0,0,0)'"
                    " (name(x,y,z,qw,qx,qy,qz))", err=True)
+    stats = WatchStats()
+    if not json_output:
+        every = f"at most {rate:g} lines a second (--rate)" if rate > 0 else "every frame"
+        console.print(f"motioncapture {system} at {host or 'its default host'}, shown Z-up; printing {every}")
+    started = time.monotonic()
+    end = started + duration if duration > 0 else float("inf")
+    next_line = 0.0
     with source:
         try:
             count = 0
             last_frame = time.monotonic()
-            while frames == 0 or count < frames:
+            while (frames == 0 or count < frames) and time.monotonic() < end:
                 frame = source.receive(0.2)
                 if frame is None:
                     if not source.alive:
@@ -95,9 +104,13 @@ def watch_library(
                     continue
                 last_frame = time.monotonic()
                 count += 1
+                stats.add(frame)
                 if json_output:
                     typer.echo(_frame_json(frame))
-                else:
+                elif rate <= 0 or last_frame >= next_line:
+                    next_line = last_frame + (1.0 / rate if rate > 0 else 0.0)
                     console.print(_frame_line(frame))
         except KeyboardInterrupt:
             pass
+    for line in stats.summary(time.monotonic() - started):
+        typer.echo(line, err=json_output)

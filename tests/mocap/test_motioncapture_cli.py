@@ -61,10 +61,25 @@ def test_watch_mock_prints_its_bodies_and_frames():
     assert objects[0]["frame"] < objects[1]["frame"] and all(math.isfinite(o["timestamp"]) for o in objects)
 
 
-def test_watch_mock_without_bodies_still_streams_and_says_how_to_add_them():
-    result = runner.invoke(app, ["mocap", "watch", "--system", "mock", "--frames", "2"])
+def test_watch_mock_piped_prints_at_most_rate_lines_a_second_and_a_summary():
+    result = runner.invoke(app, ["mocap", "watch", "--system", "mock", "--duration", "1.5", "--rate", "4",
+                                 "--option", "rigid_bodies=cf1(1,2,0.5,1,0,0,0)", "--option", "frequency=100"])
     assert result.exit_code == 0, result.output
-    assert [line.endswith("no rigid bodies") for line in result.stdout.splitlines()] == [True, True]
+    lines = result.stdout.splitlines()
+    assert lines[0].startswith("motioncapture mock") and "at most 4 lines a second" in lines[0]
+    shown = [line for line in lines if line.startswith("frame")]
+    summary = next(line for line in lines if line.startswith("summary:"))
+    frames = int(summary.split()[1])
+    assert 1 <= len(shown) <= 1.5 * 4 + 2 and frames > 3 * len(shown)  # 100 Hz in, 4 lines a second out
+    assert "cf1: valid 100.0 %" in result.stdout
+
+
+def test_watch_mock_without_bodies_still_streams_and_says_how_to_add_them():
+    result = runner.invoke(app, ["mocap", "watch", "--system", "mock", "--frames", "2", "--rate", "0"])
+    assert result.exit_code == 0, result.output
+    shown = [line for line in result.stdout.splitlines() if line.startswith("frame")]
+    assert [line.endswith("no rigid bodies") for line in shown] == [True, True]
+    assert "summary: 2 frames" in result.stdout
     assert "--option 'rigid_bodies=" in result.stderr
 
 
