@@ -11,7 +11,9 @@ not trust the stack: it reads the flight log with the mcap library itself and ju
 - no drone crashed; no two airborne drones' true centres closer than 0.13 m; no true position outside the arena
   by more than the safety radius; at the end every drone's motors off and it on the floor;
 - drones the fault does not name reach their goals (single-drone faults); a drone the fault makes unsafe to fly
-  (start_offset beyond the tolerance) never leaves the floor;
+  (start_offset beyond the tolerance, upside_down, motor_fault) never leaves the floor, and neither does a drone
+  whose start or goal is within 2r of where it stands (it could not take off or land there: in a circle swap, the
+  antipodal drone), which is therefore not asked to reach its goal;
 - the fault leaves an event of level warning or above naming the drone (or mocap / loop) within 1 s of its effect
   (the injection's own info event marks the effect; power-on faults: before the planning phase);
 - the log reviews (``rpf-fly review --json``); the process exits by itself within the flight timeout plus 10 s
@@ -178,13 +180,25 @@ def judge(kind: str, mission_path: Path, workdir: Path, timeout_extra_s: float =
     goals = {d.name: d.goal for d in mission.drones}
     reached = {n: math.dist((truth[n][-1][1]["position"]["x"], truth[n][-1][1]["position"]["y"]), goals[n]) < GOAL_M
                and verdict.outcomes.get(n) == "reached" for n in names}
+    # A drone kept on the floor leaves its spot occupied: a drone whose start or goal is within 2r of where it truly
+    # stands could neither take off nor land there, so it stays down too (docs/flight.md, the preflight's ground
+    # rule). In a circle swap that is the antipodal drone. Those are judged as the named drone is: on the floor.
+    kept_down: set[str] = set()
+    notes: list[str] = []
+    if kind in UNSAFE_TO_FLY and drone is not None:
+        spot = truth[drone][0][1]["position"]
+        for d in mission.drones:
+            if d.name != drone and min(math.dist(p, (spot["x"], spot["y"])) for p in (d.start, d.goal)) < 2 * r:
+                kept_down.add(d.name)
     if kind not in SWARM_KINDS:
-        missed = [n for n in names if n != drone and not reached[n]]
+        missed = [n for n in names if n != drone and n not in kept_down and not reached[n]]
         if missed:
             fail("did not reach their goals: " + ", ".join(missed))
-    if kind in UNSAFE_TO_FLY and drone is not None:
-        if max(m["position"]["z"] for _, m in truth[drone]) > ON_FLOOR_M or any(m["motors"] for _, m in truth[drone]):
-            fail(f"{drone} left the floor")
+    for n in sorted(kept_down | ({drone} if kind in UNSAFE_TO_FLY and drone is not None else set())):
+        if max(m["position"]["z"] for _, m in truth[n]) > ON_FLOOR_M or any(m["motors"] for _, m in truth[n]):
+            fail(f"{n} left the floor")
+        elif n in kept_down:
+            notes.append(f"{n} kept down: its start or goal is within 2r of {drone}")
     expected = 0 if all(reached.values()) else 1
     if done.returncode != expected:
         fail(f"exit code {done.returncode}, expected {expected}")
@@ -204,7 +218,7 @@ def judge(kind: str, mission_path: Path, workdir: Path, timeout_extra_s: float =
     else:
         window = [(t, m) for t, m in events if injected <= t <= injected + EVENT_WINDOW_S * 1e9]
     found = [m for t, m in window if m.get("level", 0) >= 3 and names_target(m)]
-    verdict.events = [f"{m.get('file')}: {m.get('message')}" for m in found][:3]
+    verdict.events = [f"{m.get('file')}: {m.get('message')}" for m in found][:3] + notes
     if not found:
         fail(f"no warning naming {target} within {EVENT_WINDOW_S:g} s of the fault")
     verdict.passed = not verdict.failures
