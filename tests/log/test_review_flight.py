@@ -14,6 +14,10 @@ from rpf_fly.cli import get_app
 from rpf_fly.log.reader import read_log
 from rpf_fly.log.review import review
 
+# Its module and session fixtures fly once: the tests sharing them run on one xdist worker (pyproject: --dist
+# loadgroup).
+pytestmark = pytest.mark.xdist_group("cli_flights")
+
 runner = CliRunner()
 METRIC_KEYS = ["mission", "planner", "seed", "drones", "reached", "success", "collisions", "min_separation_m",
                "min_obstacle_clearance_m", "travel_distance_m", "smoothness", "makespan_s", "per_drone"]
