@@ -40,13 +40,13 @@ SIM = SimParams()
 """Kinematics of every family run: 0.5 m/s, 10 Hz, goal tolerance 0.1 m, 100 s."""
 
 
-def guidance_modes() -> tuple[str, ...]:
+def guidance_modes(settings_type: type = PlannerSettings) -> tuple[str, ...]:
     """The guidance modes the planner settings offer: the ``Literal`` values of ``PlannerSettings.guidance``
     (``none`` first), or ``("none",)`` while there is no such field."""
-    fields = {f.name: f for f in dataclasses.fields(PlannerSettings)}
+    fields = {f.name: f for f in dataclasses.fields(settings_type)}
     if "guidance" not in fields:
         return ("none",)
-    hint = typing.get_type_hints(PlannerSettings).get("guidance")
+    hint = typing.get_type_hints(settings_type).get("guidance")
     values = tuple(str(v) for v in typing.get_args(hint)) if typing.get_origin(hint) is typing.Literal else ()
     if not values:
         default = fields["guidance"].default
@@ -56,7 +56,7 @@ def guidance_modes() -> tuple[str, ...]:
 
 def with_guidance(settings: PlannerSettings, mode: str) -> PlannerSettings:
     """The settings flown with guidance ``mode`` (unchanged for ``none`` while the field does not exist)."""
-    if any(f.name == "guidance" for f in dataclasses.fields(PlannerSettings)):
+    if any(f.name == "guidance" for f in dataclasses.fields(settings)):
         return replace(settings, guidance=mode)  # type: ignore[call-arg]
     if mode != "none":
         raise BenchError(f"guidance {mode!r}: the planner settings have no guidance field")
@@ -201,7 +201,7 @@ def summarise_family(
     """The bench row (rpf_fly.bench.runner.summarise_runs) plus guidance, separation and clearance."""
     row = summarise_runs(planner, family, runs)
     row["guidance"] = mode
-    sep_bar, clear_bar = 2 * safety_radius + margin, safety_radius + margin
+    sep_bar, clear_bar = round(2 * safety_radius + margin, 9), round(safety_radius + margin, 9)  # 0.1 + 0.05
     seps = [r.min_separation_m for r in runs if r.min_separation_m is not None]
     clears = [r.min_obstacle_clearance_m for r in runs if r.min_obstacle_clearance_m is not None]
     row["margin_m"] = margin
@@ -278,7 +278,8 @@ def to_markdown(results: Mapping[str, Any]) -> str:
         "# rpf-fly bench: scene families",
         "",
         f"{seeds['count']} seeds per family from the `{results['split']}` stream (seeds {seeds['first']}.."
-        f"{seeds['first'] + seeds['count'] - 1}; training draws from `train`: docs/bench.md, *Scene families*).",
+        f"{seeds['first'] + seeds['count'] - 1}; training draws from",
+        "`train`: docs/bench.md, *Scene families*).",
         f"Guidance modes: {', '.join(modes)}. Default planner: `{results['default_kind']}`. "
         f"Wall time: {results['wall_s']:.0f} s.",
     ]
@@ -302,10 +303,10 @@ def to_markdown(results: Mapping[str, Any]) -> str:
                 r = by_key.get((planner, f, mode))
                 cells.append("miss." if r is None or r["status"] != "ok" else f"{r['successes']}/{r['runs']}")
             lines.append("| " + " | ".join(cells) + " |")
-    lines += ["", "Per family: **safety** (coll.: collision events dd/do; failed: runs by cause collision/stalled/"
-              "timeout; sep: smallest drone-drone distance of any run, `<2r+m`: runs below it; clr: smallest "
-              "obstacle clearance, `<r+m`: runs below it) and **paths** (means ± std over successful runs; "
-              "travel, all: over every run where a drone arrived).", ""]
+    lines += ["", "Per family: **safety** (coll.: collision events drone-drone/drone-obstacle; failed: runs by cause",
+              "collision/stalled/timeout; sep: smallest drone-drone distance of any run, `<2r+m`: runs below",
+              "2r + margin; clr: smallest obstacle clearance, `<r+m`: runs below r + margin) and **paths** (means",
+              "± std over successful runs; travel, all: over every run where a drone arrived).", ""]
     for f in fams:
         lines += [f"### {f}", "", f"{results.get('family_about', {}).get(f, '')}", ""]
         head = ["planner", "guid.", "success", "reached", "coll. dd/do", "failed c/s/t", "sep [m]", "<2r+m",

@@ -76,6 +76,19 @@ def _box(x0: float, x1: float, y0: float, y1: float) -> BoxObstacle:
     return BoxObstacle((min(x0, x1), min(y0, y1)), (max(x0, x1), max(y0, y1)))
 
 
+ROOM_WALL = 0.2
+"""m: thickness of the room walls around the walled families (just outside the arena)."""
+
+
+def _room(h: float) -> list[Obstacle]:
+    """The walls of a square room ``[-h, h]^2`` (outside it, touching the geofence). A wall across the arena with
+    a door makes a dead end against the geofence, which no planner senses: the room's walls make it an obstacle
+    the planners see, as a lab's walls or net are."""
+    w = ROOM_WALL
+    return [_box(-h - w, h + w, h, h + w), _box(-h - w, h + w, -h - w, -h),
+            _box(h, h + w, -h, h), _box(-h - w, -h, -h, h)]
+
+
 def _scatter(
     rng: np.random.Generator, n: int, x: tuple[float, float], y: tuple[float, float], spacing: float = SPACING,
     keep: Optional[Callable[[complex], bool]] = None,
@@ -126,14 +139,14 @@ def _pair_up(rng: np.random.Generator, starts: np.ndarray, goals: np.ndarray) ->
 # --------------------------------------------------------------------------------------------- families
 
 def _corridor(rng: np.random.Generator, n: int, r: float) -> Scenario:
-    """A long slot through a barrier that spans the arena: the only way from the starts (one side) to the goals
-    (the other side). Width 1.0-1.6 m, length 2.5-5 m."""
+    """Two rooms joined by a long slot through the barrier between them: the only way from the starts (one room)
+    to the goals (the other). Width 1.0-1.6 m, length 2.5-5 m; the rooms' walls are obstacles (:func:`_room`)."""
     h = 6.0
     width = rng.uniform(1.0, 1.6)
     length = rng.uniform(2.5, 5.0)
     y0 = rng.uniform(-2.0, 2.0)
     t = length / 2
-    shapes: list[Obstacle] = [_box(-t, t, y0 + width / 2, h), _box(-t, t, -h, y0 - width / 2)]
+    shapes: list[Obstacle] = [_box(-t, t, y0 + width / 2, h), _box(-t, t, -h, y0 - width / 2)] + _room(h)
     starts = _scatter(rng, n, (-h + 0.4, -t - 0.8), (-h + 0.4, h - 0.4))
     goals = _scatter(rng, n, (t + 0.8, h - 0.4), (-h + 0.4, h - 0.4))
     if starts is None or goals is None:
@@ -142,8 +155,8 @@ def _corridor(rng: np.random.Generator, n: int, r: float) -> Scenario:
 
 
 def _doorway(rng: np.random.Generator, n: int, r: float) -> Scenario:
-    """A thin wall across the arena with one door (0.7-1.2 m) at a random place; starts on one side, goals on
-    the other."""
+    """Two rooms: a thin wall across the arena with one door (0.7-1.2 m) at a random place; starts on one side,
+    goals on the other; the rooms' walls are obstacles."""
     h = 5.0
     x0 = rng.uniform(-1.0, 1.0)
     thick = rng.uniform(0.15, 0.3)
@@ -152,7 +165,7 @@ def _doorway(rng: np.random.Generator, n: int, r: float) -> Scenario:
     shapes: list[Obstacle] = [
         _box(x0 - thick / 2, x0 + thick / 2, g0 + gap / 2, h),
         _box(x0 - thick / 2, x0 + thick / 2, -h, g0 - gap / 2),
-    ]
+    ] + _room(h)
     starts = _scatter(rng, n, (-h + 0.4, x0 - 1.0), (-h + 0.4, h - 0.4))
     goals = _scatter(rng, n, (x0 + 1.0, h - 0.4), (-h + 0.4, h - 0.4))
     if starts is None or goals is None:
@@ -194,7 +207,7 @@ def _pillars(rng: np.random.Generator, n: int, r: float) -> Scenario:
     for _ in range(50 * count):
         if len(centres) == count:
             break
-        c = complex(rng.uniform(-3.0, 3.0), rng.uniform(-h + 0.3, h - 0.3))
+        c = complex(rng.uniform(-3.0, 3.0), rng.uniform(-h + 0.8, h - 0.8))  # a lane along the geofence
         rad = rng.uniform(0.15, 0.35)
         if all(abs(c - o) >= rad + ro + gap for o, ro in zip(centres, radii)):
             centres.append(c)
@@ -247,13 +260,13 @@ def _arena_b(rng: np.random.Generator, n: int, r: float) -> Scenario:
 
 def _passage(rng: np.random.Generator, n: int, r: float) -> Scenario:
     """Two groups facing each other through one narrow passage in a wall (width 1.0-1.6 m, 0.3-1.5 m long):
-    each group starts near the passage on its side and flies through it to the other side."""
+    each group starts near the passage on its side and flies through it to the other side. Walled room."""
     h = 5.0
     gap = rng.uniform(1.0, 1.6)
     thick = rng.uniform(0.3, 1.5)
     g0 = rng.uniform(-2.0, 2.0)
     t = thick / 2
-    shapes: list[Obstacle] = [_box(-t, t, g0 + gap / 2, h), _box(-t, t, -h, g0 - gap / 2)]
+    shapes: list[Obstacle] = [_box(-t, t, g0 + gap / 2, h), _box(-t, t, -h, g0 - gap / 2)] + _room(h)
     left = n - n // 2
     right = n // 2
     band = (max(-h + 0.4, g0 - 2.0), min(h - 0.4, g0 + 2.0))
@@ -286,15 +299,15 @@ class _Redraw(Exception):
 FAMILIES: dict[str, Family] = {
     f.name: f
     for f in (
-        Family("corridor", _corridor, 6, 0, 2, "a 1.0-1.6 m wide, 2.5-5 m long slot through a barrier"),
-        Family("doorway", _doorway, 6, 0, 2, "a thin wall with one 0.7-1.2 m door"),
+        Family("corridor", _corridor, 6, 0, 6, "two rooms joined by a 1.0-1.6 m wide, 2.5-5 m long slot"),
+        Family("doorway", _doorway, 6, 0, 6, "two rooms, a thin wall with one 0.7-1.2 m door"),
         Family("u-trap", _u_trap, 4, 0, 3, "a U open toward the starts, its back toward the goals"),
         Family("pillars", _pillars, 6, 30, 0, "14-30 pillars of 0.15-0.35 m, surfaces 0.5 m apart"),
         Family("crossing", _crossing, 8, 0, 0, "two lines abreast crossing at right angles"),
         Family("circle", _circle, 16, 0, 0, "a circle swap of 8-24 drones on 3-5 m", (8, 24)),
         Family("arena-a", _arena_a, 6, 12, 0, "the paper's arena A: 12 pillars of 0.5 m, random starts and goals"),
         Family("arena-b", _arena_b, 6, 0, 0, "the paper's arena B: a 2 m circle swap with jitter"),
-        Family("passage", _passage, 6, 0, 2, "two groups facing through one 1.0-1.6 m passage"),
+        Family("passage", _passage, 6, 0, 6, "two groups facing through one 1.0-1.6 m passage in a walled room"),
     )
 }
 """Every scene family by name (the bench's order)."""
