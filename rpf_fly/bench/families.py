@@ -153,42 +153,77 @@ def prepare_families(config: FamiliesConfig) -> FamiliesPlan:
     return FamiliesPlan(config, settings, policies, missing)
 
 
-def run_families(plan: FamiliesPlan, on_run: Optional[Callable[[RunRecord], None]] = None) -> FamiliesResult:
-    """Every (family, planner, guidance, seed); ``on_run`` after each run (progress)."""
+def run_families(
+    plan: FamiliesPlan, on_run: Optional[Callable[[RunRecord], None]] = None, jobs: int = 1
+) -> FamiliesResult:
+    """Every (family, planner, guidance, seed); ``on_run`` after each run (progress). ``jobs > 1`` runs the
+    (family, planner, guidance) groups in that many worker processes (spawned); the results are the same, in the
+    same order (every run is independent and seeded)."""
+    config = plan.config
+    started = time.perf_counter()
+    seeds = config.seed_list()
+    tasks: list[tuple[str, str, str]] = [(f, p, m) for f in config.families for p in config.planners
+                                         for m in config.modes()]
+    done: dict[int, tuple[list[RunRecord], Optional[str]]] = {}
+    todo = [(k, t) for k, t in enumerate(tasks) if t[1] not in plan.missing]
+
+    def finished(k: int, outcome: tuple[list[RunRecord], Optional[str]], report: bool) -> None:
+        done[k] = outcome
+        if report and on_run is not None:
+            for record in outcome[0]:
+                on_run(record)
+
+    if jobs <= 1:
+        for k, (family, planner, mode) in todo:
+            finished(k, _run_group(family, seeds, plan.settings[planner], planner, mode, on_run), False)
+    else:
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor, as_completed
+
+        with ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
+            futures = {pool.submit(_run_group, family, seeds, plan.settings[planner], planner, mode): k
+                       for k, (family, planner, mode) in todo}
+            for future in as_completed(futures):
+                finished(futures[future], future.result(), True)
+    runs: list[tuple[str, RunRecord]] = []
+    rows: list[dict[str, Any]] = []
+    margins: dict[str, float] = {}
+    for k, (family, planner, mode) in enumerate(tasks):
+        if planner in plan.missing:
+            rows.append(_missing(planner, family, mode, plan.missing[planner]))
+            continue
+        records, error = done[k]
+        runs += [(mode, r) for r in records]
+        if error is not None:
+            rows.append(_missing(planner, family, mode, error))
+            continue
+        settings = with_guidance(plan.settings[planner], mode)
+        margins[planner] = margin_of(settings)
+        rows.append(summarise_family(planner, family, mode, records, settings.safety_radius, margin_of(settings)))
+    return FamiliesResult(config, runs, rows, dict(plan.policies), time.perf_counter() - started, margins)
+
+
+def _run_group(
+    family: str, seeds: Sequence[int], base: PlannerSettings, planner: str, mode: str,
+    on_run: Optional[Callable[[RunRecord], None]] = None,
+) -> tuple[list[RunRecord], Optional[str]]:
+    """The runs of one (family, planner, guidance) over the seeds, or the reason it cannot run."""
     from rpf_fly.planning.onnx_policy import PolicyError
     from rpf_fly.sim.evaluate import run_scenario
     from rpf_fly.sim.planners import UnsupportedPlanner
 
-    config = plan.config
-    started = time.perf_counter()
-    runs: list[tuple[str, RunRecord]] = []
-    rows: list[dict[str, Any]] = []
-    margins: dict[str, float] = {}
-    seeds = config.seed_list()
-    for family in config.families:
-        scenes = [generate(family, seed, split=SPLIT) for seed in seeds]
-        for planner in config.planners:
-            for mode in config.modes():
-                if planner in plan.missing:
-                    rows.append(_missing(planner, family, mode, plan.missing[planner]))
-                    continue
-                settings = with_guidance(plan.settings[planner], mode)
-                margins[planner] = margin_of(settings)
-                records: list[RunRecord] = []
-                try:
-                    for seed, scene in zip(seeds, scenes):
-                        run = run_scenario(scene, settings, SIM, seed, family, keep=True)
-                        record = _record(run, planner, family)
-                        records.append(record)
-                        runs.append((mode, record))
-                        if on_run is not None:
-                            on_run(record)
-                except (UnsupportedPlanner, PolicyError) as err:
-                    rows.append(_missing(planner, family, mode, str(err)))
-                    continue
-                rows.append(summarise_family(planner, family, mode, records, settings.safety_radius,
-                                             margin_of(settings)))
-    return FamiliesResult(config, runs, rows, dict(plan.policies), time.perf_counter() - started, margins)
+    settings = with_guidance(base, mode)
+    records: list[RunRecord] = []
+    try:
+        for seed in seeds:
+            run = run_scenario(generate(family, seed, split=SPLIT), settings, SIM, seed, family, keep=True)
+            record = _record(run, planner, family)
+            records.append(record)
+            if on_run is not None:
+                on_run(record)
+    except (UnsupportedPlanner, PolicyError) as err:
+        return records, str(err)
+    return records, None
 
 
 def _missing(planner: str, family: str, mode: str, reason: str) -> dict[str, Any]:

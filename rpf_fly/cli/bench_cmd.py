@@ -28,6 +28,7 @@ def bench(
     ),
     scenes: str = typer.Option(_SCENES, "--scenes", help="Comma-separated scenes: paper missions and arena-a-fresh."),
     families: Optional[str] = typer.Option(None, "--families", help="families suite: comma-separated families (all)."),
+    jobs: int = typer.Option(1, "--jobs", help="families suite: worker processes (same results; default 1)."),
     guidance: Optional[str] = typer.Option(
         None, "--guidance", help="families suite: comma-separated guidance modes (every mode the planner offers)."
     ),
@@ -66,10 +67,11 @@ def bench(
     if unknown:
         raise fail(f"--policy: {unknown[0]!r} is not a learned planner kind (rpf, rpf-mean, ppo)")
     if suite == "families":
-        _families(episodes, planners, families, guidance, policies, paths, json_output, json_file, markdown, figure, out)
+        _families(episodes, planners, families, guidance, policies, paths, json_output, json_file, markdown, figure, out,
+                  jobs)
         return
-    if families is not None or guidance is not None:
-        raise fail("--families and --guidance belong to --suite families")
+    if families is not None or guidance is not None or jobs != 1:
+        raise fail("--families, --guidance and --jobs belong to --suite families")
     config = BenchConfig(
         planners=_split(planners or _PLANNERS),
         scenes=_split(scenes),
@@ -118,7 +120,7 @@ def bench(
 
 
 def _families(episodes, planners, families, guidance, policies, paths, json_output, json_file, markdown, figure,  # type: ignore[no-untyped-def]
-              out) -> None:
+              out, jobs) -> None:
     """``--suite families``: run, print the Markdown report (at most 110 columns), write what was asked for."""
     from rpf_fly.bench.families import FAMILY_PLANNERS, FamiliesConfig, prepare_families, results_json, run_families
     from rpf_fly.bench.families import to_markdown
@@ -145,7 +147,11 @@ def _families(episodes, planners, families, guidance, policies, paths, json_outp
     errors = make_console(stderr=True)
     for reason in dict.fromkeys(plan.missing.values()):
         errors.print(f"[yellow]missing: {reason}[/yellow]")
-    result = _run_with_progress(plan, run_families, errors)
+    if jobs < 1:
+        raise fail(f"--jobs: expected at least 1, got {jobs}")
+    import functools
+
+    result = _run_with_progress(plan, functools.partial(run_families, jobs=jobs), errors)
     command = f"rpf-fly bench --suite families --seeds {config.seeds}"
     if config.families != tuple(FAMILIES):
         command += f" --families {','.join(config.families)}"
@@ -154,6 +160,8 @@ def _families(episodes, planners, families, guidance, policies, paths, json_outp
     if config.guidance is not None:
         command += f" --guidance {','.join(config.guidance)}"
     command += "".join(f" --policy {k}={v}" for k, v in paths.items())
+    if jobs != 1:
+        command += f" --jobs {jobs}"
     results = results_json(result, command)
     text = to_markdown(results)
     written = []

@@ -31,6 +31,7 @@ from typing import Callable, Optional
 import numpy as np
 
 from rpf_fly.mission.model import BoxObstacle, CircleObstacle, Obstacle
+from rpf_fly.planning.obstacles import ObstacleSet
 from rpf_fly.sim.scenario import Scenario, arena_a, arena_b, make_scenario
 
 SPLITS = {"train": 0, "bench": 1}
@@ -414,7 +415,23 @@ def free_grid(scene: Scenario, clearance: float, cell: float = FEASIBILITY_CELL)
     centres = xs[None, :] + 1j * ys[:, None]
     if scene.obstacles.is_empty:
         return centres, np.ones(centres.shape, dtype=bool)
-    return centres, scene.obstacles.signed_distance(centres) >= clearance + cell / 2
+    return centres, grid_distance(xs, ys, scene.obstacles) >= clearance + cell / 2
+
+
+def grid_distance(xs: np.ndarray, ys: np.ndarray, obstacles: ObstacleSet) -> np.ndarray:
+    """``(len(ys), len(xs))`` signed distance to the nearest obstacle surface at the grid points, as
+    ``ObstacleSet.signed_distance`` gives it (circles and the box distance field), computed per axis."""
+    out = np.full((ys.shape[0], xs.shape[0]), np.inf)
+    for c, rad in zip(obstacles.centers.reshape(-1), obstacles.radii.reshape(-1)):
+        d = np.sqrt((xs[None, :] - c.real) ** 2 + (ys[:, None] - c.imag) ** 2) - rad
+        np.minimum(out, d, out=out)
+    for c, hx, hy in zip(obstacles.box_center.reshape(-1), obstacles.box_half_x.reshape(-1),
+                         obstacles.box_half_y.reshape(-1)):
+        qx = (np.abs(xs - c.real) - hx)[None, :]
+        qy = (np.abs(ys - c.imag) - hy)[:, None]
+        d = np.hypot(np.maximum(qx, 0.0), np.maximum(qy, 0.0)) + np.minimum(np.maximum(qx, qy), 0.0)
+        np.minimum(out, d, out=out)
+    return out
 
 
 def reachable(scene: Scenario, clearance: float, cell: float = FEASIBILITY_CELL) -> np.ndarray:

@@ -167,3 +167,12 @@ def test_cli_families_suite_writes_json_and_markdown(tmp_path):
     assert bad.exit_code == 2 and "maze" in bad.stderr
     wrong = CliRunner().invoke(get_app(), ["bench", "--guidance", "none", "--episodes", "1"])
     assert wrong.exit_code == 2 and "--suite families" in wrong.stderr
+
+
+def test_worker_processes_give_the_same_runs_in_the_same_order():
+    config = FamiliesConfig(planners=("apf", "orca"), families=("arena-b", "crossing"), seeds=1)
+    one = run_families(prepare_families(config))
+    seen = []
+    two = run_families(prepare_families(config), seen.append, jobs=2)
+    assert [(m, r.to_json_dict()) for m, r in one.runs] == [(m, r.to_json_dict()) for m, r in two.runs]
+    assert one.rows == two.rows and len(seen) == 4
