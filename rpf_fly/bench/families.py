@@ -8,15 +8,16 @@ smoothness; the paper's claims (a)-(e) re-judged on the families (:data:`FAMILY_
 
 Guidance is an axis of planner settings: the modes are read from the ``guidance`` field of
 :class:`~rpf_fly.mission.model.PlannerSettings` (its ``Literal`` values; ``("none",)`` while the field does not
-exist), and a run with mode ``m`` flies ``replace(settings, guidance=m)``. The margin is the settings' ``margin``
-field where it exists, else :data:`~rpf_fly.sim.generators.DEFAULT_MARGIN`. Computation only; the Markdown is in
-:func:`to_markdown`. No torch.
+exist), and a run with mode ``m`` flies ``replace(settings, guidance=m)``. Separation and clearance are counted
+against one bar for every planner, :data:`BENCH_MARGIN` (0.05 m, ``planner.margin``'s default); each planner's own
+margin is reported beside it. Computation only; the Markdown is in :func:`to_markdown`. No torch.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import time
+import types
 import typing
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -41,17 +42,22 @@ SIM = SimParams()
 
 
 def guidance_modes(settings_type: type = PlannerSettings) -> tuple[str, ...]:
-    """The guidance modes the planner settings offer: the ``Literal`` values of ``PlannerSettings.guidance``
-    (``none`` first), or ``("none",)`` while there is no such field."""
-    fields = {f.name: f for f in dataclasses.fields(settings_type)}
-    if "guidance" not in fields:
+    """The guidance modes the planner settings offer: the ``Literal`` values of the ``guidance`` field (also
+    inside an ``Optional``), ``none`` first; ``("none",)`` while there is no such field."""
+    if not any(f.name == "guidance" for f in dataclasses.fields(settings_type)):
         return ("none",)
-    hint = typing.get_type_hints(settings_type).get("guidance")
-    values = tuple(str(v) for v in typing.get_args(hint)) if typing.get_origin(hint) is typing.Literal else ()
+    values = [str(v) for v in _literal_values(typing.get_type_hints(settings_type)["guidance"]) if v is not None]
     if not values:
-        default = fields["guidance"].default
-        values = ("none",) if default in ("none", dataclasses.MISSING) else ("none", str(default))
-    return tuple(dict.fromkeys(("none",) + values if "none" in values else values))
+        raise BenchError(f"{settings_type.__name__}.guidance has no Literal values to bench")
+    return tuple(dict.fromkeys(["none", *values] if "none" in values else values))
+
+
+def _literal_values(hint: Any) -> list[Any]:
+    if typing.get_origin(hint) is typing.Literal:
+        return list(typing.get_args(hint))
+    if typing.get_origin(hint) in (typing.Union, types.UnionType):
+        return [v for arg in typing.get_args(hint) for v in _literal_values(arg)]
+    return []
 
 
 def with_guidance(settings: PlannerSettings, mode: str) -> PlannerSettings:
@@ -63,8 +69,17 @@ def with_guidance(settings: PlannerSettings, mode: str) -> PlannerSettings:
     return settings
 
 
-def margin_of(settings: PlannerSettings) -> float:
-    return float(getattr(settings, "margin", DEFAULT_MARGIN))
+BENCH_MARGIN = DEFAULT_MARGIN
+"""m: the margin every planner's separation and clearance are counted against (``planner.margin``'s default, the
+issue's bar), whatever margin the planner itself keeps (reported beside it)."""
+
+
+def planner_margin(settings: PlannerSettings) -> Optional[float]:
+    """The margin the planner keeps by its own settings (``margin_m``, else ``margin``), None where it has none."""
+    value = getattr(settings, "margin_m", None)
+    if value is None:
+        value = getattr(settings, "margin", None)
+    return None if value is None else float(value)
 
 
 def default_kind() -> str:
@@ -118,7 +133,8 @@ class FamiliesResult:
     rows: list[dict[str, Any]]
     policies: dict[str, PolicyInfo]
     wall_s: float
-    margins: dict[str, float]
+    margins: dict[str, Optional[float]]
+    """Each planner's own margin (None: it has none)."""
 
 
 def prepare_families(config: FamiliesConfig) -> FamiliesPlan:
@@ -187,7 +203,7 @@ def run_families(
                 finished(futures[future], future.result(), True)
     runs: list[tuple[str, RunRecord]] = []
     rows: list[dict[str, Any]] = []
-    margins: dict[str, float] = {}
+    margins: dict[str, Optional[float]] = {}
     for k, (family, planner, mode) in enumerate(tasks):
         if planner in plan.missing:
             rows.append(_missing(planner, family, mode, plan.missing[planner]))
@@ -198,8 +214,9 @@ def run_families(
             rows.append(_missing(planner, family, mode, error))
             continue
         settings = with_guidance(plan.settings[planner], mode)
-        margins[planner] = margin_of(settings)
-        rows.append(summarise_family(planner, family, mode, records, settings.safety_radius, margin_of(settings)))
+        margins[planner] = planner_margin(settings)
+        row = summarise_family(planner, family, mode, records, settings.safety_radius, BENCH_MARGIN)
+        rows.append({**row, "planner_margin_m": planner_margin(settings)})
     return FamiliesResult(config, runs, rows, dict(plan.policies), time.perf_counter() - started, margins)
 
 
@@ -268,6 +285,8 @@ def results_json(result: FamiliesResult, command: str = "") -> dict[str, Any]:
         "planners": list(c.planners),
         "default_kind": default_kind(),
         "guidance": list(c.modes()),
+        "bench_margin_m": BENCH_MARGIN,
+        "planner_margins_m": dict(result.margins),
         "sim": dataclasses.asdict(SIM),
         "policies": {kind: info.to_json_dict() for kind, info in result.policies.items()},
         "rows": result.rows,
@@ -317,6 +336,7 @@ def to_markdown(results: Mapping[str, Any]) -> str:
         "`train`: docs/bench.md, *Scene families*).",
         f"Guidance modes: {', '.join(modes)}. Default planner: `{results['default_kind']}`. "
         f"Wall time: {results['wall_s']:.0f} s.",
+        f"Margin m of the counts: {results.get('bench_margin_m', 0.05):g} m for every planner (r = 0.1 m).",
     ]
     if results.get("command"):
         lines += ["", "```", results["command"], "```"]

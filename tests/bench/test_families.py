@@ -4,7 +4,7 @@ guidance axis read from the settings dataclass, the margin counts, the claims ju
 import json
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal
+from typing import Literal, Optional
 
 import pytest
 from typer.testing import CliRunner
@@ -12,7 +12,7 @@ from typer.testing import CliRunner
 from rpf_fly.bench.claims import FAMILY_CLAIMS, HELD, NOT_EVALUATED, NOT_HELD, evaluate_claims
 from rpf_fly.bench.families import (
     FAMILY_PLANNERS, FamiliesConfig, guidance_modes, prepare_families, results_json, run_families,
-    summarise_family, to_markdown, with_guidance,
+    planner_margin, summarise_family, to_markdown, with_guidance,
 )
 from rpf_fly.bench.runner import BenchError, RunRecord, summarise_runs
 from rpf_fly.cli import get_app
@@ -83,6 +83,17 @@ class WithGuidance:
 
 
 @dataclass(frozen=True)
+class OptionalGuidance:
+    kind: str = "apf"
+    guidance: Optional[Literal["none", "path"]] = None
+    margin: Optional[float] = None
+
+    @property
+    def margin_m(self) -> float:
+        return 0.05 if self.margin is None else self.margin
+
+
+@dataclass(frozen=True)
 class GuidanceReversed:
     guidance: Literal["path", "none", "visibility"] = "none"
 
@@ -98,6 +109,10 @@ def test_guidance_modes_come_from_the_settings_dataclass():
             with_guidance(PlannerSettings(), "path")
     assert guidance_modes(WithGuidance) == ("none", "path")
     assert guidance_modes(GuidanceReversed) == ("none", "path", "visibility")
+    assert guidance_modes(OptionalGuidance) == ("none", "path")  # the guidance branch's shape: None = kind default
+    assert with_guidance(OptionalGuidance(), "path").guidance == "path"
+    assert planner_margin(OptionalGuidance()) == 0.05 and planner_margin(OptionalGuidance(margin=0.0)) == 0.0
+    assert planner_margin(PlannerSettings()) == getattr(PlannerSettings(), "margin_m", None)
     assert with_guidance(WithGuidance(), "none") == WithGuidance(guidance="none")
 
 
