@@ -24,7 +24,7 @@ POLICIES = ROOT / "policies"
 
 @pytest.fixture(scope="module")
 def smoke():
-    config = FamiliesConfig(families=("arena-a", "crossing"), seeds=1, policies_dir=POLICIES)
+    config = FamiliesConfig(families=("arena-a", "arena-b"), seeds=1, policies_dir=POLICIES)
     plan = prepare_families(config)
     seen = []
     result = run_families(plan, seen.append)
@@ -35,23 +35,26 @@ def test_smoke_runs_every_planner_on_both_families(smoke):
     plan, result, seen, doc = smoke
     assert not plan.missing and set(plan.policies) == {"rpf", "rpf-mean", "ppo"}
     assert all(info.sha256 for info in plan.policies.values())
-    assert plan.total_runs == len(FAMILY_PLANNERS) * 2 == len(seen) == len(result.runs)
+    modes = guidance_modes()  # ("none",) until planner.guidance lands, then every mode it offers
+    assert plan.config.modes() == modes and modes[0] == "none"
+    assert plan.total_runs == len(FAMILY_PLANNERS) * 2 * len(modes) == len(seen) == len(result.runs)
     keys = {(r["planner"], r["scene"], r["guidance"]) for r in result.rows}
-    assert keys == {(p, f, "none") for p in FAMILY_PLANNERS for f in ("arena-a", "crossing")}
+    assert keys == {(p, f, m) for p in FAMILY_PLANNERS for f in ("arena-a", "arena-b") for m in modes}
     for row in result.rows:
         assert row["status"] == "ok" and row["runs"] == 1
-        run = next(r for m, r in result.runs if r.planner == row["planner"] and r.scene == row["scene"])
+        run = next(r for m, r in result.runs
+                   if r.planner == row["planner"] and r.scene == row["scene"] and m == row["guidance"])
         assert row["min_separation_m"]["min"] == run.min_separation_m
         bar = row["below_margin"]["separation_bar_m"]
         assert bar == pytest.approx(0.25)
         assert row["below_margin"]["runs_separation"] == int(run.min_separation_m < bar)
-        if row["scene"] == "crossing":
+        if row["scene"] == "arena-b":
             assert row["min_obstacle_clearance_m"] is None
         else:
             assert row["below_margin"]["runs_clearance"] == int(run.min_obstacle_clearance_m < 0.15)
     # the product's default is PlannerSettings().kind: flown exactly as that kind
-    default = {r.scene: r for m, r in result.runs if r.planner == "default"}
-    same = {r.scene: r for m, r in result.runs if r.planner == PlannerSettings().kind}
+    default = {(m, r.scene): r for m, r in result.runs if r.planner == "default"}
+    same = {(m, r.scene): r for m, r in result.runs if r.planner == PlannerSettings().kind}
     assert {s: r.travel_distance_m for s, r in default.items()} == {s: r.travel_distance_m for s, r in same.items()}
 
 
@@ -60,16 +63,19 @@ def test_smoke_json_markdown_and_claims(smoke):
     text = json.dumps(doc)
     back = json.loads(text)
     assert back["split"] == "bench" and back["seeds"] == {"first": 0, "count": 1}
-    assert back["guidance"] == ["none"] and len(back["runs"]) == len(seen)
-    assert all(run["guidance"] == "none" for run in back["runs"])
+    assert back["guidance"] == list(guidance_modes()) and len(back["runs"]) == len(seen)
+    assert {run["guidance"] for run in back["runs"]} == set(guidance_modes())
+    assert set(back["claims"]) == set(guidance_modes())
     claims = {c["id"]: c for c in back["claims"]["none"]}
     assert set(claims) == set("abcde")
-    assert claims["a"]["status"] == NOT_EVALUATED and claims["b"]["status"] == NOT_EVALUATED  # no swap family ran
+    assert claims["b"]["status"] == NOT_EVALUATED  # the circle family did not run
+    assert claims["a"]["status"] in (HELD, NOT_HELD) and set(claims["a"]["numbers"]) == {"arena-b"}
+    assert "not run: circle" in claims["a"]["note"]
     assert claims["c"]["status"] in (HELD, NOT_HELD) and "arena-a" in claims["c"]["numbers"]
     assert claims["e"]["status"] in (HELD, NOT_HELD) and claims["e"]["numbers"]["runs"] == 1
     assert claims["d"]["numbers"]["runs"] == 2
     md = to_markdown(back)
-    assert "### arena-a" in md and "### crossing" in md and "default (APF)" in md
+    assert "### arena-a" in md and "### arena-b" in md and "default (APF)" in md
     assert "rpf-fly bench --suite families --seeds 1" in md
     for line in md.splitlines():
         if not line.startswith("| ("):  # the claims' numbers are one long cell
@@ -127,7 +133,7 @@ def test_prepare_refuses_bad_names_and_marks_a_missing_policy(tmp_path):
         prepare_families(FamiliesConfig(guidance=("teleport",)))
     plan = prepare_families(FamiliesConfig(planners=("rpf", "apf"), families=("arena-b",), seeds=1,
                                            policy_paths={"rpf": tmp_path / "none.onnx"}))
-    assert "no policy file" in plan.missing["rpf"] and plan.total_runs == 1
+    assert "no policy file" in plan.missing["rpf"] and plan.total_runs == len(guidance_modes())
     result = run_families(plan)
     rows = {r["planner"]: r for r in result.rows}
     assert rows["rpf"]["status"] == "missing" and rows["apf"]["status"] == "ok"
@@ -190,4 +196,4 @@ def test_worker_processes_give_the_same_runs_in_the_same_order():
     seen = []
     two = run_families(prepare_families(config), seen.append, jobs=2)
     assert [(m, r.to_json_dict()) for m, r in one.runs] == [(m, r.to_json_dict()) for m, r in two.runs]
-    assert one.rows == two.rows and len(seen) == 4
+    assert one.rows == two.rows and len(seen) == 4 * len(guidance_modes())
