@@ -44,7 +44,8 @@ def bench(
     markdown: Optional[Path] = typer.Option(None, "--markdown", help="Write the results as Markdown."),
     figure: Optional[Path] = typer.Option(None, "--figure", help="Write the comparison figure (PNG)."),
     out: Optional[Path] = typer.Option(
-        None, "--out", help="Write results.json, results.md and comparison.png into this folder."
+        None, "--out", help="Write results.json, results.md and comparison.png into this folder (families suite: "
+        "families.json and families.md)."
     ),
 ) -> None:
     """Run every planner on every scene for each seed; print success, collisions, path metrics and the paper's claims.
