@@ -17,6 +17,9 @@ Each link runs a thread that emulates cflib's Crazyradio driver with safelink (s
   drone's RSSI in empty acks, so link quality, RSSI, rates and congestion reach `cf.link_statistics` as with a
   Crazyradio; cflib's latency pings are answered by the firmware's echo;
 - `LinkFaults.latency_s` delays both directions;
+- the links of one dongle number take turns on its air (`fake_world.DongleAir`): each transaction holds the dongle
+  for `RadioTiming.transaction_s` only, the drone's answer being computed outside that slot (a dry run's UDP
+  round trip to the world process is emulation, not radio);
 - closing a link first transmits the uplink packets already queued, so the zero-thrust setpoint that cflib's
   `close_link` sends always reaches the drone (with a Crazyradio it is a race): the fake takes the pessimistic side.
 Empty acks are not queued to cflib (the real driver queues them as port-15 channel-3 packets, which cflib ignores).
@@ -39,7 +42,7 @@ from cflib.crtp.crtpstack import CRTPPacket
 from cflib.crtp.exceptions import WrongUriType
 from cflib.crtp.radio_link_statistics import RadioLinkStatistics
 
-from .fake_world import DronePort, LinkFaults, RadioTiming
+from .fake_world import DongleAir, DronePort, LinkFaults, RadioTiming
 
 logger = logging.getLogger(__name__)
 
@@ -58,7 +61,7 @@ class RadioWorld(Protocol):
     def addresses(self) -> tuple[int, ...]: ...
     def start(self) -> Any: ...
     def port(self, address: int) -> DronePort | None: ...
-    def dongle_lock(self, devid: int) -> threading.Lock: ...
+    def dongle(self, devid: int) -> DongleAir: ...
     def uri(self, address: int) -> str: ...
 
 
@@ -120,7 +123,7 @@ class FakeLink:
         self._faults = self._drone.faults if self._drone else LinkFaults()
         self._rssi = self._drone.rssi_dbm if self._drone else 0
         self._timing = world.timing
-        self._dongle = world.dongle_lock(uri.devid)
+        self._dongle = world.dongle(uri.devid)
         self._stats = RadioLinkStatistics(stats_callback) if stats_callback else None
         self._error_callback = error_callback
         self._in: queue.Queue[CRTPPacket | None] = queue.Queue()
@@ -188,8 +191,7 @@ class FakeLink:
         while self._up and self._drone is not None:
             _, header, payload = self._up.popleft()
             for _ in range(3):
-                with self._dongle:
-                    ok, _retry, _down = self._drone.transact(self._uri.channel, (header, payload))
+                ok, _retry, _down = self._transact((header, payload))
                 if ok:
                     break
 
@@ -212,16 +214,9 @@ class FakeLink:
                 continue
             item = self._up[0] if up_due else None
             last_tx = now
-            down = None
-            with self._dongle:
-                if self._drone is None:  # nobody at this address: the radio's attempts all go unanswered
-                    ok, retry = False, timing.arc_retries
-                else:
-                    ok, retry, down = self._drone.transact(self._uri.channel, (item[1], item[2]) if item else None)
-                    if ok and item is not None:
-                        self._up.popleft()
-                if timing.transaction_s > 0.0:
-                    time.sleep(timing.transaction_s)
+            ok, retry, down = self._transact((item[1], item[2]) if item else None)
+            if ok and item is not None:
+                self._up.popleft()
             if not ok:
                 lost += 1
                 if lost >= timing.max_lost_acks:
@@ -231,6 +226,22 @@ class FakeLink:
                 continue
             lost = 0
             self._deliver(down, item is not None, retry)
+
+    def _transact(self, uplink: tuple[int, bytes] | None) -> tuple[bool, int, tuple[int, int, bytes] | None]:
+        """One radio transaction through the dongle: wait for its air slot (`DongleAir.reserve`), reach the drone
+        (outside the slot: other links' slots run meanwhile), and hand the ack back no earlier than the slot's end."""
+        air_s = self._timing.transaction_s
+        end = 0.0
+        if air_s > 0.0:
+            start, end = self._dongle.reserve(air_s, time.monotonic())
+            _sleep_until(start)
+        if self._drone is None:  # nobody at this address: the radio's attempts all go unanswered
+            result: tuple[bool, int, tuple[int, int, bytes] | None] = (False, self._timing.arc_retries, None)
+        else:
+            result = self._drone.transact(self._uri.channel, uplink)
+        if air_s > 0.0:
+            _sleep_until(end)
+        return result
 
     def _deliver(self, down: tuple[int, int, bytes] | None, had_uplink: bool, retry: int) -> None:
         if down is None:
@@ -259,6 +270,12 @@ class FakeLink:
             self._drone.detach(self._wake)
         if callback is not None:
             callback(message)
+
+
+def _sleep_until(t_s: float) -> None:
+    delay = t_s - time.monotonic()
+    if delay > 0.0:
+        time.sleep(delay)
 
 
 class FakeRadioDriver(CRTPDriver):

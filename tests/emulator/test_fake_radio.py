@@ -296,3 +296,40 @@ def test_links_on_one_dongle_share_its_air_time(make_world: MakeWorld) -> None:
     counts = [b - a for a, b in zip(before, after)]
     assert sum(counts[:3]) <= 0.5 / 0.01 + 3  # three links polling through one dongle
     assert sum(counts[3:]) >= 2 * sum(counts[:3])  # one dongle each
+
+
+def test_a_dongle_is_held_for_the_air_time_only_not_for_a_slow_drone_answer(make_world: MakeWorld,
+                                                                             toc_cache: Path) -> None:
+    """Two cflib links on one dongle (1 ms of air a transaction); one drone's answer takes 4 ms (as a loaded world
+    process's round trip can): the other link keeps the dongle's air to itself meanwhile, so it gets its 150 extpos
+    through while the slow one gets about one in five. Held for the whole round trip (the emulator before
+    2026-12-01), the dongle alternated and both links crawled at the slow one's pace."""
+    world = make_world(2, timing=RadioTiming(transaction_s=0.001))
+    slow, fast = address(0), address(1)
+    got: dict[int, list[float]] = {slow: [], fast: []}
+
+    def observer(drone: int, delay_s: float) -> Callable[[int, int, bytes, float], None]:
+        def seen(port: int, channel: int, payload: bytes, stamp: float) -> None:
+            if port == 6:
+                got[drone].append(stamp)
+            if delay_s:
+                time.sleep(delay_s)  # the drone's answer is late; the radio's air is not busy meanwhile
+        return seen
+
+    cache = str(toc_cache)
+    with SyncCrazyflie(world.uri(slow), cf=Crazyflie(rw_cache=cache)) as slow_scf, \
+            SyncCrazyflie(world.uri(fast), cf=Crazyflie(rw_cache=cache)) as fast_scf:
+        world.add_packet_observer(slow, observer(slow, 0.004))
+        world.add_packet_observer(fast, observer(fast, 0.0))
+        air = world.dongle(0)
+        before = air.transactions
+        for _ in range(150):
+            slow_scf.cf.extpos.send_extpos(0.0, 0.0, 0.0)
+            fast_scf.cf.extpos.send_extpos(0.5, 0.0, 0.0)
+        assert world.wait_until(lambda w: len(got[fast]) >= 150, 10.0)
+        slow_then = len(got[slow])
+        assert world.wait_until(lambda w: len(got[slow]) >= 150, 10.0)  # the slow one is not starved either
+        slots = air.transactions - before
+    assert slow_then < 0.6 * 150, f"the slow drone got {slow_then} of 150 while the fast one got all of its own"
+    assert slow_then >= 5  # both links took turns from the start (first come, first served)
+    assert slots >= 300  # every packet took a slot of the dongle's air (polls too)
