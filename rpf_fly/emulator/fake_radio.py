@@ -20,6 +20,10 @@ Each link runs a thread that emulates cflib's Crazyradio driver with safelink (s
 - the links of one dongle number take turns on its air (`fake_world.DongleAir`): each transaction holds the dongle
   for `RadioTiming.transaction_s` only, the drone's answer being computed outside that slot (a dry run's UDP
   round trip to the world process is emulation, not radio);
+- the link holds at most `DRIVER_PACKETS` (2) uplink packets, as cflib's radio driver does (an out queue of one,
+  one in the radio thread's transaction): a further `send` blocks the sender until the radio has taken one (a
+  radio over its budget slows the sender down, never builds an ever-longer queue of stale setpoints), and fails
+  the link after `SEND_TIMEOUT_S` (2 s), with cflib's message;
 - closing a link first transmits the uplink packets already queued, so the zero-thrust setpoint that cflib's
   `close_link` sends always reaches the drone (with a Crazyradio it is a race): the fake takes the pessimistic side.
 Empty acks are not queued to cflib (the real driver queues them as port-15 channel-3 packets, which cflib ignores).
@@ -49,6 +53,15 @@ logger = logging.getLogger(__name__)
 SCHEME = "fake://"
 DEFAULT_ADDRESS = 0xE7E7E7E7E7
 DATARATES = ("250K", "1M", "2M")
+
+DRIVER_PACKETS = 2
+"""Uplink packets one link's driver holds before `send` blocks: cflib's radio driver has an out queue of one
+packet (``RadioDriver.out_queue = Queue(1)``) and its radio thread one more in its transaction (retried there until
+acknowledged)."""
+
+SEND_TIMEOUT_S = 2.0
+"""How long `send` waits for room before failing the link, as cflib's ``RadioDriver.send_packet`` does
+(``out_queue.put(pk, True, 2)``, then the link error "RadioDriver: Could not send packet to copter")."""
 
 
 class RadioWorld(Protocol):
@@ -130,6 +143,8 @@ class FakeLink:
         self._up: deque[tuple[float, int, bytes]] = deque()
         self._down_delayed: deque[tuple[float, CRTPPacket]] = deque()
         self._wake = threading.Event()
+        self._room = threading.Condition()
+        """Notified when an uplink packet leaves `_up` or the link closes (a blocked `send` waits on it)."""
         self._closed = threading.Event()
         self._flush_on_close = False
         if self._drone is not None:
@@ -140,12 +155,41 @@ class FakeLink:
     # Called by cflib ------------------------------------------------------------------------------------------
 
     def send(self, pk: CRTPPacket) -> bool:
-        """Queue one uplink packet (never blocks)."""
+        """Queue one uplink packet; blocks while the driver holds `DRIVER_PACKETS` already (packets still in their
+        `LinkFaults.latency_s` are on their way, not waiting), for `SEND_TIMEOUT_S` at most: then the link fails with
+        cflib's "RadioDriver: Could not send packet to copter" and False is returned, as cflib's radio driver does."""
         if self._closed.is_set():
             return False
-        self._up.append((time.monotonic() + self._faults.latency_s, pk.header, bytes(pk.data)))
+        deadline = time.monotonic() + SEND_TIMEOUT_S
+        with self._room:
+            while self._waiting(time.monotonic()) >= DRIVER_PACKETS and not self._closed.is_set():
+                left = deadline - time.monotonic()
+                if left <= 0.0:
+                    break
+                self._room.wait(left)
+            full = self._waiting(time.monotonic()) >= DRIVER_PACKETS
+            if not self._closed.is_set() and not full:
+                self._up.append((time.monotonic() + self._faults.latency_s, pk.header, bytes(pk.data)))
+        if self._closed.is_set():
+            return False
+        if full:
+            self._fail("RadioDriver: Could not send packet to copter")
+            return False
         self._wake.set()
         return True
+
+    def _waiting(self, now: float) -> int:
+        """Uplink packets due and not yet acknowledged (the head may be in its transaction)."""
+        n = 0
+        for due, _, _ in self._up:
+            if due > now or n >= DRIVER_PACKETS:
+                break
+            n += 1
+        return n
+
+    def _taken(self) -> None:
+        with self._room:
+            self._room.notify_all()
 
     def receive(self, wait: float) -> CRTPPacket | None:
         """Next downlink packet; `wait` 0 polls, < 0 blocks until one arrives or the link closes, > 0 is a timeout.
@@ -164,6 +208,7 @@ class FakeLink:
         Safe from the link's own thread, as cflib closes from the error callback (then nothing is flushed)."""
         self._flush_on_close = threading.current_thread() is not self._thread
         self._closed.set()
+        self._taken()
         self._wake.set()
         self._in.put(None)  # wakes a receive() blocked in cflib's receive thread
         self._error_callback = None
@@ -217,6 +262,7 @@ class FakeLink:
             ok, retry, down = self._transact((item[1], item[2]) if item else None)
             if ok and item is not None:
                 self._up.popleft()
+                self._taken()
             if not ok:
                 lost += 1
                 if lost >= timing.max_lost_acks:
@@ -265,6 +311,7 @@ class FakeLink:
         callback = self._error_callback
         logger.info("fake link %010X: %s", self._uri.address, message)
         self._closed.set()
+        self._taken()
         self._in.put(None)
         if self._drone is not None:
             self._drone.detach(self._wake)
