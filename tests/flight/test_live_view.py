@@ -153,7 +153,11 @@ def test_a_live_client_receives_every_topic_as_the_log_has_it_and_a_stalled_one_
         assert (channel["encoding"], channel["schemaEncoding"]) == (S.MESSAGE_ENCODING, S.SCHEMA_ENCODING)
         assert json.loads(channel["schema"]) == S.SCHEMAS[log.schemas[topic]]
     topics = {topic for topic, _, _ in received}
-    assert topics == EXPECTED_TOPICS == set(log.topics)
+    advertised = {c["topic"]: c["id"] for c in channels.values()}
+    missing = {t: (f"channel {advertised[t]}" if t in advertised else "never advertised", len(log.messages(t)))
+               for t in set(log.topics) - topics}
+    assert topics == EXPECTED_TOPICS == set(log.topics), f"not received live (how advertised, messages logged): " \
+                                                         f"{missing}; channels {sorted(advertised)}"
 
     # One source of truth: each live message is the log's message of that topic at that log time.
     by_time: dict[tuple[str, int], list] = {}
