@@ -118,6 +118,9 @@ class Coordinator:
         self.bus: Optional[FlightBus] = None
         self.logger_process: Optional[subprocess.Popen] = None
         self.logger_alive = False
+        self.logger_info: dict[str, Any] = {}
+        self.started_s: Optional[float] = None
+        self.ended_s: Optional[float] = None
         self.rig: Any = None
         self.recorder: Any = None
 
@@ -162,6 +165,9 @@ class Coordinator:
 
     def _worker_info(self, sample: Any) -> None:
         info = json.loads(sample.payload.to_bytes())
+        if info.get("name") == LOGGER:
+            self.logger_info = info
+            return
         worker = self.workers.get(str(info.get("name")))
         if worker is None:
             return
@@ -234,8 +240,10 @@ class Coordinator:
             bus.put_json("runtime", json.dumps({"flight_id": self.flight, "workers": [
                 {k: w.info.get(k) for k in ("name", "dongle", "host", "pid", "drones")} for w in
                 self.workers.values()]}).encode())
+            self.started_s = time.monotonic()
             self._fly()
             self._end_workers()
+            self.ended_s = time.monotonic()
         finally:
             self._close()
         return self._exit_code()
@@ -245,6 +253,9 @@ class Coordinator:
 
         self.rig = DryRun(self.mission, radio_loss=RADIO_LOSS if self.radio_loss else None,
                           world_exit_report=world_exit_report_for(self.log_path)).__enter__()
+        if self.rig.mocap is not None:  # the workers receive the mocap; the coordinator needs none
+            self.rig.mocap.close()
+            self.rig.mocap = None
         bus._handles.append(bus.session.declare_queryable(bus.keys.rig, self._serve_rig))  # noqa: SLF001
 
     def _start_logger(self) -> None:

@@ -119,6 +119,10 @@ def main(argv: list[str] | None = None) -> int:
                     break
         finally:
             flight_logger.close()
+            bus.put_json(f"workers/{LOGGER}", json.dumps({
+                "name": LOGGER, "state": "done", "cpu_s": time.process_time(), "written": flight_logger.received,
+                "dropped": flight_logger.dropped}).encode())
+            time.sleep(0.1)
             bus.close()
         logger.info("logger: %d messages written, %d malformed dropped", flight_logger.received,
                     flight_logger.dropped)
