@@ -117,7 +117,7 @@ def distributed(path: Path, out: Path, kill: str = "") -> dict:
            if "cpu_s" in w.info}
     if "cpu_s" in coordinator.logger_info:
         cpu["logger"] = round(100 * coordinator.logger_info["cpu_s"] / flight_s, 1)
-    cpu["coordinator (with the simulated drones' client)"] = round(
+    cpu["coordinator (+ truth feed)"] = round(
         100 * (time.process_time() - cpu0) / flight_s, 1)
     row = {"mode": "distributed", "drones": len(mission.drones),
            "reached": sum(v.outcome == "reached" for v in coordinator.drones.values()),
@@ -167,6 +167,8 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--drones", default="10,20,40")
     parser.add_argument("--kill", choices=("worker", "coordinator", "logger"))
+    parser.add_argument("--mission", type=Path, default=None,
+                        help="--kill: fly this mission (its dongle 1's worker is the one killed) instead")
     parser.add_argument("--json", action="store_true")
     parser.add_argument("--out", type=Path, default=None, help="where the logs go (default: a temporary folder)")
     args = parser.parse_args()
@@ -174,10 +176,11 @@ def main() -> int:
     out = args.out or Path(tempfile.mkdtemp(prefix="rpf-bench-distributed-"))
     out.mkdir(parents=True, exist_ok=True)
     rows = []
+    target = args.mission.resolve() if args.mission else None
     if args.kill == "coordinator":
-        rows.append(kill_coordinator(mission_file(max(sizes), out), out))
+        rows.append(kill_coordinator(target or mission_file(max(sizes), out), out))
     elif args.kill:
-        rows.append(distributed(mission_file(max(sizes), out), out, kill=args.kill))
+        rows.append(distributed(target or mission_file(max(sizes), out), out, kill=args.kill))
     else:
         for n in sizes:
             path = mission_file(n, out)

@@ -351,7 +351,13 @@ class Coordinator:
                 self.phase = "landing"
                 break
             states = self._states(live)
-            if self.phase == "preflight" and all(s in PREFLIGHT_STATES for s in states):
+            gone = [w.name for w in self.workers.values() if w.done or w.lost]
+            if self.phase == "preflight" and gone:
+                # As a single-process flight aborts when a drone fails to connect: a worker that ended (its links
+                # failed, it aborted) or died before take-off grounds the whole swarm.
+                self._command("abort", f"{', '.join(gone)} ended before take-off: no drone takes off")
+                self.phase = "aborted"
+            elif self.phase == "preflight" and all(s in PREFLIGHT_STATES for s in states):
                 failed = [n for w in live for n in w.drones if self.drones[n].state == "failed"]
                 if len(failed) == len(states) or (failed and self.mission.safety.on_preflight_failure == "abort"):
                     self._command("abort", f"preflight failed for {', '.join(failed)}: no drone takes off")
