@@ -23,6 +23,8 @@ import time
 from pathlib import Path
 from typing import Any
 
+import orjson
+
 from rpf_fly.runtime.keys import COORDINATOR, LOGGER, STAMPS, suffix_topic
 
 logger = logging.getLogger(__name__)
@@ -62,7 +64,10 @@ class FlightLogger:
             if attachment is None:
                 raise ValueError("no stamps")
             log_time, t_ns = STAMPS.unpack(attachment.to_bytes())
-            self.log.message(topic, t_ns, log_time, sample.payload.to_bytes())
+            data = sample.payload.to_bytes()
+            if type(orjson.loads(data)) is not dict:  # the log holds JSON objects only (a foreign session's junk)
+                raise ValueError("not a JSON object")
+            self.log.message(topic, t_ns, log_time, data)
             self.received += 1
         except Exception as err:  # noqa: BLE001 - a malformed message is dropped and counted
             self.dropped += 1

@@ -88,6 +88,9 @@ def test_remote_worker_tap_and_foreign_commands(tmp_path):
         forged, _ = sign("not the flight's secret" * 3, coordinator.flight, "emergency_stop", 99)
         foreign.put(key, json.dumps({"command": "land", "seq": 1, "flight": coordinator.flight}).encode())
         foreign.put(key, forged, attachment=b"00" * 32)
+        prefix = f"rpf_fly/{coordinator.flight}"  # junk on the message keys: dropped and counted, never logged
+        foreign.put(f"{prefix}/setpoint/cf1", b"not json", attachment=b"\0" * 16)
+        foreign.put(f"{prefix}/status/cf1", b"{bad")
         thread.join(120)
         assert not thread.is_alive()
         out = remote.communicate(timeout=30)[0].decode()
@@ -103,7 +106,7 @@ def test_remote_worker_tap_and_foreign_commands(tmp_path):
         assert seen[kind] == names, (kind, seen[kind])
     assert names <= seen["events"], seen["events"]
     log = read_log(log_path)
-    assert not log.truncated
+    assert not log.truncated and log.undecodable == 0
     for name in names:
         status = [m.data for m in log.messages(f"/{name}/status")]
         assert status[-1]["state"] == "landed" and status[-1]["outcome"] == "reached", name
