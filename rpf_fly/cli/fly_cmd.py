@@ -59,11 +59,22 @@ def _check_radio_budget(mission, mission_path: Path) -> list:  # type: ignore[no
     return loads
 
 
-def _check_radios(mission) -> None:  # type: ignore[no-untyped-def]
-    """Every ``radio://`` drone's Crazyradio on USB, before any link is tried: else one line, exit 2."""
+def _remote(text: Optional[str]) -> tuple[int, ...]:
+    from rpf_fly.cli.worker_cmd import _dongles
+
+    return _dongles(text)
+
+
+def _check_radios(mission, skip_dongles: tuple[int, ...] = (), only_dongle: Optional[int] = None) -> None:  # type: ignore[no-untyped-def]
+    """Every ``radio://`` drone's Crazyradio on USB, before any link is tried: else one line, exit 2. A distributed
+    flight checks the dongles of this host only: not ``skip_dongles`` (remote workers'), or ``only_dongle`` (a
+    worker's)."""
+    from rpf_fly.radio.budget import dongle_of
     from rpf_fly.radio.dongles import radio_problem
 
-    problem = radio_problem(d.uri for d in mission.drones)
+    drones = [d for d in mission.drones if dongle_of(d.uri) not in skip_dongles
+              and (only_dongle is None or dongle_of(d.uri) == only_dongle)]
+    problem = radio_problem(d.uri for d in drones)
     if problem:
         raise fail(problem)
 
@@ -127,7 +138,7 @@ def fly(
         raise fail(f"{mission}:0: {real_flight_problem(loaded)}")
     if not dry_run:
         _resolve_server(loaded, mission)
-        _check_radios(loaded)
+        _check_radios(loaded, _remote(remote_dongles) if distributed else ())
     if mocap not in (None, "natnet", "sim", "motioncapture"):
         raise fail(f"--mocap: expected natnet, motioncapture or sim, got {mocap!r}")
     _require_library(loaded, dry_run, mocap)
