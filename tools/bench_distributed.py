@@ -9,8 +9,11 @@ in this process, one ``rpf-fly worker`` process per dongle and the logger proces
 
 - latency: a mocap frame's receipt by the NatNet client to each setpoint handed to the radio driver, p50 and p99
   over every drone and tick (the loop's own `LoopStats.latencies`; distributed: every worker's, merged);
-- CPU: the single process's CPU time in percent of a core over the flight; distributed: each worker's and the
-  logger's process CPU time (`time.process_time()`, reported by each as it ends) over the coordinator's flight time;
+- CPU: the single process's CPU time in percent of a core over the whole flight (connection included);
+  distributed: each worker's process CPU time from the coordinator's go to its end, and the logger's from its first
+  message to its end (`time.process_time()`, reported by each as it ends), in percent of a core; and within each
+  worker, its log writer thread's (the messages' encoding and Zenoh puts; its whole life over the same span, so
+  an upper bound);
 - outcome: drones that reached their goals.
 
 ``--kill worker``: a distributed run of the largest N only, SIGKILLing dongle 1's worker once its drones plan;
@@ -113,10 +116,12 @@ def distributed(path: Path, out: Path, kill: str = "") -> dict:
     thread.join()
     flight_s = (coordinator.ended_s or time.monotonic()) - (coordinator.started_s or 0.0)
     latencies = [v * 1e-6 for w in coordinator.workers.values() for v in w.info.get("latencies_us", [])]
-    cpu = {w.name: round(100 * w.info["cpu_s"] / flight_s, 1) for w in coordinator.workers.values()
-           if "cpu_s" in w.info}
+    cpu = {w.name: w.info.get("cpu_pct") for w in coordinator.workers.values() if "cpu_s" in w.info}
+    for w in coordinator.workers.values():
+        if w.info.get("publish_cpu_pct") is not None:
+            cpu[f"{w.name}: its log writer thread (encode + publish)"] = w.info["publish_cpu_pct"]
     if "cpu_s" in coordinator.logger_info:
-        cpu["logger"] = round(100 * coordinator.logger_info["cpu_s"] / flight_s, 1)
+        cpu["logger"] = coordinator.logger_info.get("cpu_pct")
     cpu["coordinator (+ truth feed)"] = round(
         100 * (time.process_time() - cpu0) / flight_s, 1)
     row = {"mode": "distributed", "drones": len(mission.drones),

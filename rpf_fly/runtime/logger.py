@@ -45,6 +45,8 @@ class FlightLogger:
         self.coordinator_seen = False
         self.changed = threading.Event()
         self._runtime_written = False
+        self.first_at: tuple[float, float] | None = None
+        """(monotonic s, process CPU s) at the first message: its CPU share is measured from there."""
         keys = bus.keys
         bus.session.declare_subscriber(keys.all, self._sample)
         bus.watch_alive(keys.alive_all, self._alive)
@@ -63,6 +65,8 @@ class FlightLogger:
             attachment = sample.attachment
             if attachment is None:
                 raise ValueError("no stamps")
+            if self.first_at is None:
+                self.first_at = (time.monotonic(), time.process_time())
             log_time, t_ns = STAMPS.unpack(attachment.to_bytes())
             data = sample.payload.to_bytes()
             if type(orjson.loads(data)) is not dict:  # the log holds JSON objects only (a foreign session's junk)
@@ -87,6 +91,13 @@ class FlightLogger:
 
     def close(self) -> None:
         self.recorder.close()
+
+
+def _share(since: tuple[float, float] | None) -> float | None:
+    """Percent of a core used since ``(monotonic s, process CPU s)``."""
+    if since is None or time.monotonic() <= since[0]:
+        return None
+    return round(100 * (time.process_time() - since[1]) / (time.monotonic() - since[0]), 1)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -126,6 +137,7 @@ def main(argv: list[str] | None = None) -> int:
             flight_logger.close()
             bus.put_json(f"workers/{LOGGER}", json.dumps({
                 "name": LOGGER, "state": "done", "cpu_s": time.process_time(), "written": flight_logger.received,
+                "cpu_pct": _share(flight_logger.first_at),
                 "dropped": flight_logger.dropped}).encode())
             time.sleep(0.1)
             bus.close()

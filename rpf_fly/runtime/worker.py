@@ -66,6 +66,8 @@ class CoordinatorLink:
         self._lock = threading.Lock()
         self.coordinator_seen = threading.Event()
         self.coordinator_lost = False
+        self.go_at: Optional[tuple[float, float]] = None
+        """(monotonic s, process CPU s) at the coordinator's go: the CPU share of the flight is measured from it."""
 
     # SwarmLink
     def preflight_done(self, loop: FlightLoop) -> None:
@@ -92,6 +94,8 @@ class CoordinatorLink:
                 return
         why = f"coordinator: {command.reason}" if command.reason else f"coordinator: {command.command}"
         if command.command == "go":
+            if self._verdict is None:
+                self.go_at = (time.monotonic(), time.process_time())
             self._verdict = self._verdict or "go"
         elif command.command == "abort":
             self._verdict = "abort"
@@ -181,8 +185,12 @@ class WorkerRun:
             if self.on_loop is not None:
                 self.on_loop(loop)
             report = loop.run()
+            wall0, cpu0 = link.go_at or (time.monotonic(), time.process_time())
+            flown_s = time.monotonic() - wall0
             info("done", outcomes={n: o.value for n, o in report.outcomes.items()},
                  latency=report.stats.summary(), cpu_s=time.process_time(),
+                 cpu_pct=round(100 * (time.process_time() - cpu0) / flown_s, 1) if flown_s > 0 else None,
+                 publish_cpu_pct=round(100 * recorder.log.writer_cpu_s / flown_s, 2) if flown_s > 0 else None,
                  latencies_us=[round(v * 1e6) for v in report.stats.latencies])
             time.sleep(0.2)  # the last messages leave before the session closes
             return report
