@@ -69,7 +69,8 @@ def worker(
     mission: Path = typer.Argument(..., help="Mission YAML file (the coordinator's)."),
     dongle: int = typer.Option(..., "--dongle", help="The radio dongle whose drones this worker flies (the URIs' "
                                "first number)."),
-    flight: str = typer.Option(..., "--flight", help="The flight id the coordinator printed (its log's stem)."),
+    flight: Optional[str] = typer.Option(None, "--flight", help="The flight id the coordinator printed (its log's "
+                                         "stem); default: the one flight whose coordinator --connect reaches."),
     dry_run: bool = typer.Option(False, "--dry-run", help="The coordinator's simulated drones (its dry run)."),
     connect: Optional[list[str]] = typer.Option(None, "--connect", help="The coordinator's Zenoh endpoint, e.g. "
                                                 "tcp/HOST:7447 (default: the mission's runtime.zenoh.connect)."),
@@ -95,7 +96,8 @@ def worker(
         raise fail(f"{SECRET_ENV}: the flight's secret is missing (the coordinator prints the worker's command "
                    "line with it)")
     try:
-        check_flight_id(flight)
+        if flight is not None:
+            check_flight_id(flight)
     except ValueError as err:
         raise fail(f"--flight: {err}")
     endpoints = _endpoints(tuple(connect or ()), "--connect")
@@ -124,7 +126,7 @@ def worker(
     previous = {sig: signal.signal(sig, on_interrupt) for sig in (signal.SIGINT, signal.SIGTERM)}
     run = WorkerRun(loaded, dongle, flight, secret, factory, dry_run=dry_run, connect=endpoints,
                     event_sinks=(say,), on_loop=lambda loop: holder.update(loop=loop))
-    text_log = Path(os.environ.get("RPF_FLY_WORKER_LOG", f"rpf-fly-worker-{flight}-dongle-{dongle}.log"))
+    text_log = Path(os.environ.get("RPF_FLY_WORKER_LOG", f"rpf-fly-worker-{flight or 'flight'}-dongle-{dongle}.log"))
     try:
         with route_logging(text_log, verbose):
             try:

@@ -126,13 +126,33 @@ class CoordinatorLink:
             loop.request_stop("coordinator lost: landing every drone")
 
 
+def discover_flight(session: Any, timeout_s: float = COORDINATOR_WAIT_S) -> str:
+    """The flight id of the one coordinator this session reaches (its ``alive/coordinator`` token);
+    :class:`WorkerError` when there is none, or several (then ``--flight`` must say which)."""
+    deadline = time.monotonic() + timeout_s
+    while True:
+        flights = set()
+        for reply in session.liveliness().get(f"rpf_fly/*/alive/{COORDINATOR}", timeout=1.0):
+            if reply.ok is not None:
+                flights.add(str(reply.ok.key_expr).split("/")[1])
+        if len(flights) == 1:
+            return flights.pop()
+        if len(flights) > 1:
+            raise WorkerError(f"several flights reachable ({', '.join(sorted(flights))}): give --flight")
+        if time.monotonic() > deadline:
+            raise WorkerError(f"no coordinator reachable within {timeout_s:.0f} s (start `rpf-fly fly MISSION "
+                              "--distributed` first; is --connect right?)")
+        time.sleep(0.2)
+
+
 @dataclass
 class WorkerRun:
     """What a worker needs besides its mission: built by ``rpf-fly worker`` (and by tests)."""
 
     mission: Mission
     dongle: int
-    flight: str
+    flight: Optional[str]
+    """None: the one flight whose coordinator the session reaches (:func:`discover_flight`)."""
     secret: str
     planner_factory: PlannerFactory
     dry_run: bool = False
@@ -155,6 +175,13 @@ class WorkerRun:
             raise WorkerError(f"--dongle {self.dongle}: no drone of the mission is on it (its dongles: "
                               f"{', '.join(map(str, dongles))})")
         session = self.session or open_session(self.mission.runtime.zenoh, connect=self.connect)
+        if not self.flight:
+            try:
+                self.flight = discover_flight(session)
+            except WorkerError:
+                if self.session is None:
+                    session.close()
+                raise
         name = worker_name(self.dongle)
         bus = FlightBus(session, self.flight, name)
         try:

@@ -66,8 +66,8 @@ def test_remote_worker_tap_and_foreign_commands(tmp_path):
     thread, result = _start(coordinator)
     assert _wait(lambda: any("waiting for dongle 1" in line for line in lines), 60), lines
     remote = subprocess.Popen(
-        [sys.executable, "-m", "rpf_fly", "worker", str(MISSION), "--dongle", "1", "--flight", coordinator.flight,
-         "--connect", endpoint, "--dry-run"],
+        [sys.executable, "-m", "rpf_fly", "worker", str(MISSION), "--dongle", "1", "--connect", endpoint,
+         "--dry-run"],  # no --flight: the one flight its --connect reaches
         env=dict(_env(), **{SECRET_ENV: coordinator.secret, "RPF_FLY_WORKER_LOG": str(tmp_path / "remote.log")}),
         stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
     seen: dict[str, set[str]] = defaultdict(set)
