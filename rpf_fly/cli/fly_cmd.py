@@ -59,11 +59,22 @@ def _check_radio_budget(mission, mission_path: Path) -> list:  # type: ignore[no
     return loads
 
 
-def _check_radios(mission) -> None:  # type: ignore[no-untyped-def]
-    """Every ``radio://`` drone's Crazyradio on USB, before any link is tried: else one line, exit 2."""
+def _remote(text: Optional[str]) -> tuple[int, ...]:
+    from rpf_fly.cli.worker_cmd import _dongles
+
+    return _dongles(text)
+
+
+def _check_radios(mission, skip_dongles: tuple[int, ...] = (), only_dongle: Optional[int] = None) -> None:  # type: ignore[no-untyped-def]
+    """Every ``radio://`` drone's Crazyradio on USB, before any link is tried: else one line, exit 2. A distributed
+    flight checks the dongles of this host only: not ``skip_dongles`` (remote workers'), or ``only_dongle`` (a
+    worker's)."""
+    from rpf_fly.radio.budget import dongle_of
     from rpf_fly.radio.dongles import radio_problem
 
-    problem = radio_problem(d.uri for d in mission.drones)
+    drones = [d for d in mission.drones if dongle_of(d.uri) not in skip_dongles
+              and (only_dongle is None or dongle_of(d.uri) == only_dongle)]
+    problem = radio_problem(d.uri for d in drones)
     if problem:
         raise fail(problem)
 
@@ -103,9 +114,19 @@ def fly(
                                                 "(default 127.0.0.1; 0.0.0.0: every network). Implies --foxglove."),
     verbose: bool = typer.Option(False, "--verbose", help="Also print the libraries' log records (cflib) on stderr; "
                                                           "they always go to LOG.log beside the flight log."),
+    distributed: bool = typer.Option(False, "--distributed", help="One worker process per radio dongle, a "
+                                     "coordinator and a logger, on Zenoh (docs/distributed.md)."),
+    remote_dongles: Optional[str] = typer.Option(None, "--remote-dongles", help="With --distributed: dongles "
+                                                 "(K[,K...]) whose workers run on other hosts (`rpf-fly worker`); "
+                                                 "waits for them before any drone arms."),
+    listen: Optional[list[str]] = typer.Option(None, "--listen", help="With --distributed: the Zenoh endpoint the "
+                                               "coordinator listens on (default 127.0.0.1 only, e.g. "
+                                               "tcp/0.0.0.0:7447 for remote workers)."),
 ) -> None:
     """Fly MISSION: NatNet mocap and cflib radios as the mission says, or simulated drones with --dry-run."""
     loaded = _load(mission)
+    if (remote_dongles or listen) and not distributed:
+        raise fail("--remote-dongles and --listen go with --distributed")
     if faults is not None and not dry_run:
         raise fail(f"--faults: {faults}: faults are injected into simulated drones only; add --dry-run")
     schedule = _load_faults(faults, loaded) if faults is not None else None
@@ -117,13 +138,21 @@ def fly(
         raise fail(f"{mission}:0: {real_flight_problem(loaded)}")
     if not dry_run:
         _resolve_server(loaded, mission)
-        _check_radios(loaded)
+        _check_radios(loaded, _remote(remote_dongles) if distributed else ())
     if mocap not in (None, "natnet", "sim", "motioncapture"):
         raise fail(f"--mocap: expected natnet, motioncapture or sim, got {mocap!r}")
     _require_library(loaded, dry_run, mocap)
     mocap = mocap or ("motioncapture" if loaded.mocap.kind == "motioncapture" else "natnet")
     log_path = log or Path("flights") / f"{loaded.name}-{datetime.now():%Y%m%d-%H%M%S}.mcap"
     log_path.parent.mkdir(parents=True, exist_ok=True)
+    if distributed:
+        from rpf_fly.cli.worker_cmd import fly_distributed
+
+        if faults is not None or foxglove or foxglove_port is not None or foxglove_host is not None or \
+                mocap not in ("natnet", "motioncapture"):
+            raise fail("--distributed flies without --faults, --foxglove or --mocap sim (docs/distributed.md)")
+        fly_distributed(loaded, mission, log_path, dry_run, remote_dongles, tuple(listen or ()), radio_loss,
+                        verbose)
     from rpf_fly.cli.live_opts import start_live
     from rpf_fly.cli.logs import route_logging
 

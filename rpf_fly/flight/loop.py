@@ -18,7 +18,7 @@ import math
 import signal
 import threading
 import time
-from typing import Callable, Optional
+from typing import Callable, Collection, Optional, Protocol
 
 import numpy as np
 
@@ -32,7 +32,7 @@ from rpf_fly.flight.preflight import estimate_problem, preflight_problem, yaw_of
 from rpf_fly.flight.recorder import NullRecorder, PlannerRecord, Recorder
 from rpf_fly.flight.report import FlightReport, LoopStats
 from rpf_fly.flight.supervisor import Finding, Supervisor
-from rpf_fly.flight.swarm_plan import Neighbourhood, SwarmPlanner, in_the_way
+from rpf_fly.flight.swarm_plan import Neighbourhood, SwarmPlanner, foreign_in_the_way, in_the_way
 from rpf_fly.flight.ticks import TickSchedule
 from rpf_fly.flight.watchdog import LoopWatchdog, stall_timeout_s
 from rpf_fly.mission.model import Drone, Mission
@@ -47,6 +47,22 @@ __all__ = ["FlightLoop", "FlightReport", "LoopStats", "NullRecorder", "PlannerFa
 
 PlannerFactory = Callable[[Drone], PlannerLike]
 
+
+class SwarmLink(Protocol):
+    """What a loop that flies part of a swarm (a distributed flight's worker: rpf_fly/runtime/worker.py) asks of
+    the swarm's coordinator. Without one the loop flies its drones alone: it takes off right after its preflight
+    and ends once every drone arrived (``safety.arrival_hold_s``)."""
+
+    def preflight_done(self, loop: "FlightLoop") -> None:
+        """This loop's drones passed (or failed) their preflight: tell the coordinator."""
+
+    def verdict(self) -> Optional[str]:
+        """``go`` (take off), ``abort`` (nothing takes off) or None (not yet)."""
+
+
+GO_TIMEOUT_S = 60.0
+"""How long a loop with a :class:`SwarmLink` waits for its coordinator's go after its preflight, drones on the
+ground, before it gives up (nothing takes off)."""
 
 ARM_CONFIRM_TIMEOUT_S = 3.0
 """How long a drone's supervisor may take from the arming request to ready-to-fly: immediate for a Crazyflie 2.x
@@ -74,11 +90,22 @@ class FlightLoop:
         recorder: Optional[Recorder] = None,
         status_hook: Optional[Callable[["FlightLoop"], None]] = None,
         clock: Callable[[], float] = time.monotonic,
+        drones: Optional[Collection[str]] = None,
+        swarm: Optional[SwarmLink] = None,
     ):
+        """``drones``: the names of the drones this loop flies (default: all of the mission's); the others are only
+        seen, from mocap, as every drone sees its neighbours (a distributed flight's worker flies one dongle's).
+        ``swarm``: the coordinator this loop waits for before take-off and whose ``finish`` ends it
+        (:class:`SwarmLink`, :meth:`end`)."""
         self.mission = mission
         self.backend = backend
         self.mocap = mocap
-        self.uris = uris or {d.name: d.uri for d in mission.drones}
+        own = {d.name for d in mission.drones} if drones is None else set(drones)
+        unknown = sorted(own - {d.name for d in mission.drones})
+        if unknown or not own:
+            raise ValueError(f"drones not in the mission: {', '.join(unknown)}" if unknown else "no drone to fly")
+        self.swarm = swarm
+        self.uris = {n: u for n, u in (uris or {d.name: d.uri for d in mission.drones}).items() if n in own}
         self.recorder: Recorder = recorder or NullRecorder()
         self.status_hook = status_hook
         self.clock = clock
@@ -86,7 +113,9 @@ class FlightLoop:
         self.events.subscribe(self._record_event)
         flight = mission.flight
         self.agents: dict[str, DroneAgent] = {d.name: DroneAgent.for_mission(d, planner_factory(d), mission)
-                                              for d in mission.drones}
+                                              for d in mission.drones if d.name in own}
+        self.others: tuple[str, ...] = tuple(d.name for d in mission.drones if d.name not in own)
+        """The mission's drones this loop does not fly: in its drones' views from mocap only."""
         self.commander = Commander(backend, self.agents, self.events, clock, land_s=flight.land_s,
                                    land_settle_s=self.LAND_SETTLE_S, floor_z=0.0)
         self.obstacles = obstacle_set(mission.obstacles)
@@ -137,6 +166,12 @@ class FlightLoop:
             self._estop_done = True
             self.commander.emergency_stop(self._estop_reason or "emergency stop requested")
 
+    def end(self, reason: str) -> None:
+        """End the flight normally: every drone lands (a distributed flight's coordinator: the mission is over).
+        Safe from any thread: it only sets flags."""
+        self._end_reason = reason
+        self._stop.set()
+
     # ------------------------------------------------------------------------------------------------ run
 
     def run(self) -> FlightReport:
@@ -149,7 +184,7 @@ class FlightLoop:
         self._watchdog.start()
         try:
             try:
-                if self._connect() and self._preflight() and not self._stop.is_set():
+                if self._connect() and self._preflight() and self._await_go() and not self._stop.is_set():
                     self._gc.start()  # from here on the collector runs in the gaps between frames (gc_pacing.py)
                     self._takeoff()
                     self._fly()
@@ -261,6 +296,26 @@ class FlightLoop:
             grounded = sorted(n for n, a in self.agents.items() if a.phase == DronePhase.FAILED)
             self.events.emit(ERROR, "preflight", f"{', '.join(grounded)} stay on the ground; the others fly")
         return True
+
+    def _await_go(self) -> bool:
+        """With a :class:`SwarmLink`: report the preflight and wait, drones on the ground, for the coordinator's go
+        (mocap and telemetry keep flowing); its abort, a stop or the timeout: nothing takes off."""
+        if self.swarm is None:
+            return True
+        self.swarm.preflight_done(self)
+        deadline = self.clock() + GO_TIMEOUT_S
+        while not self._stop.is_set():
+            verdict = self.swarm.verdict()
+            if verdict == "go":
+                return True
+            if verdict == "abort":
+                break
+            if self.clock() > deadline:
+                self.events.emit(ERROR, "swarm", f"no go from the coordinator within {GO_TIMEOUT_S:.0f} s")
+                break
+            self._spin_once(self.clock() + 0.05)
+        self._abort("the swarm does not take off" + (f" ({self._stop_reason})" if self._stop_reason else ""))
+        return False
 
     def _ground_neighbours(self, grounded: set[str]) -> None:
         """``safety.on_preflight_failure: ground``: a drone whose start or goal is within 2r of where a grounded
@@ -402,7 +457,7 @@ class FlightLoop:
                 if not flying:
                     self._end_reason = "no drone is flying its mission any more"
                     break
-                if all(a.phase == DronePhase.ARRIVED for a in flying):
+                if self.swarm is None and all(a.phase == DronePhase.ARRIVED for a in flying):
                     all_arrived_at = all_arrived_at if all_arrived_at is not None else now
                     if now - all_arrived_at >= self.mission.safety.arrival_hold_s:
                         self.events.emit(INFO, "arrived", "every flying drone is at its goal")
@@ -493,7 +548,7 @@ class FlightLoop:
         self._states = self.backend.states()
         if frame is not None:
             self._on_frame(frame, now)
-        self._apply(self.supervisor.check(now, self.agents.values(), self.tracker, self._states), now)
+        self._apply(self.supervisor.check(now, self.agents.values(), self.tracker, self._states, self.others), now)
         self._finish_landings(now)
         if now - self._last_status_s >= self.STATUS_PERIOD_S:
             self._last_status_s = now
@@ -506,9 +561,11 @@ class FlightLoop:
             self.recorder.after_tick(now)  # the log writer's burst goes in the gap before the next frame
 
     def _on_frame(self, frame: MocapFrame, now: float) -> None:
-        """Record the frame's poses and forward them to the drones' estimators, each drone in its own extpos slots
-        (``radio.extpos_rate_hz``, phased across the drones of a dongle: rpf_fly/radio/schedule.py)."""
-        fresh = {n: p for n, p in self.tracker.poses.items() if p.frame_number == frame.frame_number and p.valid}
+        """Record the frame's poses of the drones this loop flies and forward them to their estimators, each drone
+        in its own extpos slots (``radio.extpos_rate_hz``, phased across the drones of a dongle:
+        rpf_fly/radio/schedule.py)."""
+        fresh = {n: p for n, p in self.tracker.poses.items()
+                 if p.frame_number == frame.frame_number and p.valid and n in self.agents}
         self.recorder.poses(now, fresh)
         extpose = self.mission.radio.extpos == "extpose"
         for name, pose in fresh.items():
@@ -539,7 +596,9 @@ class FlightLoop:
         self._watchdog.beat()
         flight = self.mission.flight
         stale_after = self.mission.safety.pose_timeout_s
-        airborne_poses = {n: p for n, p in self.tracker.poses.items() if self._in_the_way(self.agents[n], p)}
+        agents = self.agents
+        airborne_poses = {n: p for n, p in self.tracker.poses.items()
+                          if (self._in_the_way(agents[n], p) if n in agents else foreign_in_the_way(p.position[2]))}
         records: list[PlannerRecord] = []
         sent: list[tuple[str, tuple[float, float, float], float]] = []
         requests: list[tuple[DroneAgent, TrackedPose]] = []

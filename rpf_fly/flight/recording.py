@@ -13,7 +13,7 @@ from __future__ import annotations
 import math
 import time
 from pathlib import Path
-from typing import Any, Callable, Mapping, Optional
+from typing import Any, Callable, Iterable, Mapping, Optional
 
 from rpf_fly.flight.agent import DroneAgent
 from rpf_fly.flight.events import FlightEvent
@@ -21,7 +21,7 @@ from rpf_fly.flight.poses import TrackedPose, stamp_us
 from rpf_fly.flight.radio_load import RadioLoadFeed
 from rpf_fly.flight.truth import TruthBatch, TruthFeed
 from rpf_fly.log import schemas as S
-from rpf_fly.log.writer import FlightLog, Sink
+from rpf_fly.log.writer import FlightLog, Out, Sink
 from rpf_fly.mission.model import Mission
 from rpf_fly.planning.obstacles import FAR
 from rpf_fly.planning.planner import PlanStep
@@ -48,18 +48,23 @@ class McapRecorder:
     real flight has none).
 
     ``sink``: the log's sink (:class:`~rpf_fly.log.writer.FlightLog`), e.g. :meth:`rpf_fly.log.live.LiveView.publish`:
-    it sees what the file holds, on the writer thread, so the loop's cost is unchanged."""
+    it sees what the file holds, on the writer thread, so the loop's cost is unchanged.
+
+    ``out``: no file; every message goes to ``out`` instead (a distributed flight's worker and coordinator publish
+    them on Zenoh for the logger: rpf_fly/runtime/bus.py)."""
 
     def __init__(self, path: str | Path, mission: Mission, seed: int = 0, source: str = "flight",
                  truth: Optional[Callable[[], TruthBatch]] = None, sink: Optional[Sink] = None,
-                 radio: Optional[Callable[[], Mapping[str, LinkCount]]] = None, radio_period_s: Optional[float] = None):
+                 radio: Optional[Callable[[], Mapping[str, LinkCount]]] = None, radio_period_s: Optional[float] = None,
+                 out: Optional[Out] = None, radio_dongles: Optional[Iterable[int]] = None):
         self.mission = mission
         self._offset_ns = time.time_ns() - time.monotonic_ns()
         """Unix-epoch ns minus the loop's monotonic ns, an integer: logged (``mission.monotonic_offset_ns``) so that
         a replay gets the loop's own times back from the log, exactly for the tracker's stamps."""
         meta = S.mission_metadata(mission, seed, source=source)
         meta["monotonic_offset_ns"] = str(self._offset_ns)
-        self.log = FlightLog(path, meta, S.scenario_metadata(mission), poll_interval_s=POLL_FALLBACK_S, sink=sink)
+        self.log = FlightLog(path, meta, S.scenario_metadata(mission), poll_interval_s=POLL_FALLBACK_S, sink=sink,
+                             out=out)
         self._last_drain_s = -math.inf
         self._sensing = mission.planner.sensing_range
         self._last_tf_s = -math.inf
@@ -71,7 +76,8 @@ class McapRecorder:
         self._plan = {load.dongle: load for load in radio_loads(mission)}
         self.radio_feed = None
         if radio is not None:  # /radio/<dongle>: the measured load of each dongle (rpf_fly/flight/radio_load.py)
-            feed = RadioLoadFeed(radio, self._radio, self._plan, **({} if radio_period_s is None
+            dongles = self._plan if radio_dongles is None else set(radio_dongles)  # a worker: its own dongle's
+            feed = RadioLoadFeed(radio, self._radio, dongles, **({} if radio_period_s is None
                                                                      else {"period_s": radio_period_s}))
             self.radio_feed = feed.start()
 

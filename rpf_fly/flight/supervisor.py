@@ -117,8 +117,11 @@ class Supervisor:
         self._late_mocap = False
 
     def check(
-        self, now_s: float, agents: Iterable[DroneAgent], tracker: PoseTracker, states: dict[str, DroneState]
+        self, now_s: float, agents: Iterable[DroneAgent], tracker: PoseTracker, states: dict[str, DroneState],
+        others: Iterable[str] = (),
     ) -> list[Finding]:
+        """``others``: drones another process flies (a distributed flight's other workers): in the separation check
+        at their mocap pose while off the floor; a finding names only this process's drones."""
         everyone = list(agents)
         agents = [a for a in everyone if a.phase.airborne]
         uncommanded = [a for a in everyone if a.phase in (DronePhase.LINK_LOST, DronePhase.EMERGENCY)
@@ -128,7 +131,8 @@ class Supervisor:
         findings += self._glitches(agents, tracker)
         findings += self._poses(now_s, agents, tracker)
         findings += self._geofence(agents, tracker)
-        findings += self._separation(agents + uncommanded, tracker)
+        foreign = [n for n in others if (p := tracker.get(n)) is not None and p.position[2] > ON_FLOOR_Z_M]
+        findings += self._separation(agents + uncommanded, tracker, foreign)
         findings += self._obstacles(agents, tracker)
         findings += self._battery(agents, states)
         findings += self._telemetry(now_s, agents, states)
@@ -189,12 +193,17 @@ class Supervisor:
                                    a.name, "land"))
         return out
 
-    def _separation(self, agents: list[DroneAgent], tracker: PoseTracker) -> list[Finding]:
+    def _separation(self, agents: list[DroneAgent], tracker: PoseTracker, foreign: list[str] = ()) -> list[Finding]:
         out = []
         close_now: set[tuple[str, str]] = set()
-        tracked = [(a.name, tracker.get(a.name)) for a in agents]
-        tracked = [(n, p) for n, p in tracked if p is not None]
+        own = len(agents)
+        tracked = [(a.name, tracker.get(a.name)) for a in agents] + [(n, tracker.get(n)) for n in foreign]
+        tracked = [(n, p) for n, p in tracked[:own] if p is not None] + \
+            [(n, p) for n, p in tracked[own:] if p is not None]
+        mine = {n for n, _ in tracked} - set(foreign)
         for i, (ni, pi) in enumerate(tracked):
+            if ni not in mine:
+                break  # two drones of other processes: theirs to check
             for nj, pj in tracked[i + 1 :]:
                 d = sum((u - v) ** 2 for u, v in zip(pi.position, pj.position)) ** 0.5
                 if d < 2 * self.r:
@@ -204,11 +213,11 @@ class Supervisor:
                         response = self.safety.on_separation
                         message = f"separation {d:.3f} m from {nj} is below 2r = {2 * self.r:.2f} m"
                         out.append(Finding("separation", ERROR, message, ni, response))
-                        if response != "warn":
+                        if response != "warn" and nj in mine:
                             out.append(Finding("separation", ERROR, f"separation {d:.3f} m from {ni}", nj, response))
         if self.safety.on_separation == "hold":
             still_close = {n for pair in close_now for n in pair}
-            for name in {n for pair in self._close_pairs - close_now for n in pair} - still_close:
+            for name in {n for pair in self._close_pairs - close_now for n in pair if n in mine} - still_close:
                 out.append(Finding("separation", INFO, "separation restored: resuming", name, "resume"))
         self._close_pairs = close_now
         return out

@@ -70,6 +70,13 @@ def in_the_way(phase: DronePhase, z: float, flight_height: float) -> bool:
     return z > 0.5 * flight_height and not phase.terminal
 
 
+def foreign_in_the_way(z: float) -> bool:
+    """Whether a drone another process flies (a distributed flight's other worker) is in this one's drones' views:
+    its phase is not known here, only what mocap sees, so it counts whenever it is off the floor (taking off,
+    flying, landing, falling after its worker died). Pure, as :func:`in_the_way`."""
+    return z > ON_FLOOR_Z_M
+
+
 @dataclass
 class Neighbourhood:
     """Every airborne drone's name, measured planar position and velocity (complex): what the mocap sees."""

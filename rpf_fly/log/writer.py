@@ -56,10 +56,45 @@ encode = S.encode
 Sink = Callable[[str, int, bytes], None]
 """``sink(topic, log_time_ns, data)``: called on the writer thread for each message written (see :class:`FlightLog`)."""
 
+Out = Callable[[str, int, int, bytes], None]
+"""``out(topic, log_time_ns, publish_time_ns, data)``: where a :class:`FlightLog` built with ``out`` sends each
+message instead of a file (a distributed flight's worker publishes them on Zenoh: rpf_fly/runtime/bus.py)."""
+
+
+class _OutWriter:
+    """The part of ``mcap.writer.Writer`` that :class:`FlightLog` uses, handing each message to ``out``."""
+
+    def __init__(self, out: Out):
+        self._out = out
+        self._topics: list[str] = []
+
+    def start(self, **_: object) -> None: ...
+    def add_metadata(self, *_: object) -> None: ...
+    def flush(self) -> None: ...
+    def finish(self) -> None: ...
+
+    def register_schema(self, *_: object) -> int:
+        return 0
+
+    def register_channel(self, topic: str, *_: object) -> int:
+        self._topics.append(topic)
+        return len(self._topics) - 1
+
+    def add_message(self, channel: int, log_time: int, data: bytes, publish_time: int, sequence: int = 0) -> None:
+        self._out(self._topics[channel], log_time, publish_time, data)
+
+
+class _NoFile:
+    def close(self) -> None: ...
+
 
 def _strings(meta: Mapping[str, Any]) -> dict[str, str]:
     """Metadata values as strings (MCAP metadata is string to string): non-strings as JSON."""
     return {str(k): v if isinstance(v, str) else json.dumps(v) for k, v in meta.items()}
+
+
+def _raw_message(t_ns: int, data: bytes) -> bytes:
+    return data
 
 
 def _status_message(t_ns: int, fields: dict[str, Any]) -> dict[str, Any]:
@@ -106,6 +141,7 @@ class FlightLog:
         block_when_full: bool = False,
         poll_interval_s: float = POLL_INTERVAL_S,
         sink: Optional[Sink] = None,
+        out: Optional[Out] = None,
     ):
         from rpf_fly import __version__
 
@@ -141,11 +177,12 @@ class FlightLog:
         self._truth: dict[str, tuple[str, Any]] = {}
         self._radio: dict[str, tuple[str, Any]] = {}
         self._fixed = {name: (name, itertools.count()) for name in ("/scene", "/tf", "/events")}
+        self._raw: dict[str, tuple[str, Any]] = {}
         self._channels: dict[str, int] = {}
         self._schema_ids: dict[str, int] = {}
-        self._file = open(self.path, "wb")
+        self._file: Any = _NoFile() if out is not None else open(self.path, "wb")
         try:
-            self._writer = Writer(self._file, chunk_size=chunk_size, compression=CompressionType.ZSTD)
+            self._writer: Any = _OutWriter(out) if out is not None else Writer(self._file, chunk_size=chunk_size, compression=CompressionType.ZSTD)
             self._writer.start(profile="", library=f"rpf_fly {__version__}")
             self._writer.add_metadata("mission", _strings(mission_meta))
             self._writer.add_metadata("scenario", _strings(scenario_meta))
@@ -251,6 +288,22 @@ class FlightLog:
         """``/events``: a ``foxglove.Log`` (level 1 debug, 2 info, 3 warning, 4 error, 5 fatal)."""
         self._put(self._fixed["/events"], t_ns, S.log_message, (level, message, name, file, line),
                   priority=True)
+
+    def message(self, topic: str, t_ns: int, log_time: int, data: bytes) -> None:
+        """A message already encoded (the logger of a distributed flight: the bytes a worker published), with its
+        own publish and log times; its topic's sequence is this log's."""
+        entry = self._raw.get(topic) or self._raw.setdefault(topic, (topic, itertools.count()))
+        sequence = next(entry[1])
+        if self._closed or not self._room(1, topic == "/events"):
+            self._count_drop()
+            return
+        self._enqueue(1, (topic, sequence, int(t_ns), int(log_time), _raw_message, (data,)))
+
+    def metadata(self, name: str, values: Mapping[str, Any]) -> None:
+        """A metadata record written by the writer thread in queue order (values as in ``mission_meta``)."""
+        if self._closed:
+            return
+        self._enqueue(1, (None, 0, 0, 0, None, (name, _strings(values))))
 
     def drain_soon(self) -> None:
         """Wake the writer thread to drain the queue now rather than at its next poll.
@@ -392,6 +445,13 @@ class FlightLog:
                     topic, sequence, t_ns, log_time, build, args = pop()
                 except IndexError:
                     return
+                if topic is None:  # a metadata record (:meth:`metadata`)
+                    self._popped += 1
+                    try:
+                        self._writer.add_metadata(*args)
+                    except Exception as err:  # noqa: BLE001 - a closed file: stop writing, never raise
+                        self._fail(err)
+                    continue
                 if type(topic) is str:
                     self._popped += 1
                     items: Any = ((topic, sequence, t_ns, args),)

@@ -38,7 +38,8 @@ URI_FORM = ("radio://DONGLE/CHANNEL/RATE/ADDRESS[?key=value] (e.g. radio://0/80/
 DEFAULT_POLICY = "policies/{kind}.onnx"
 """Where a policy kind looks for its policy when the mission names none (resolved like ``planner.policy``)."""
 
-TOP_KEYS = ("name", "arena", "flight", "planner", "mocap", "radio", "sim", "safety", "obstacles", "drones", "formation")
+TOP_KEYS = ("name", "arena", "flight", "planner", "mocap", "radio", "sim", "safety", "obstacles", "drones", "formation",
+            "runtime")
 DRONE_KEYS = ("name", "uri", "rigid_body", "start", "goal")
 FORMATION_KEYS = ("kind", "count", "radius", "center", "uri_base", "name_prefix", "phase_deg")
 FORMATION_KINDS = ("circle_swap",)
@@ -464,6 +465,29 @@ class _MissionParser(_Checker):
                     raise self.error(where, value.path, str(err)) from None
         return dataclasses.replace(settings, system=system, hostname=hostname, options=tuple(options))
 
+    def runtime(self, node: YNode) -> m.RuntimeSettings:
+        entries = self.mapping(node, ("zenoh",))
+        if "zenoh" not in entries:
+            return m.RuntimeSettings()
+        z = self.mapping(entries["zenoh"], ("mode", "connect", "listen"))
+        mode = self.choice(z["mode"], ("client", "peer")) if "mode" in z else "client"
+        lists: dict[str, tuple[str, ...]] = {}
+        for key in ("connect", "listen"):
+            if key not in z:
+                continue
+            value = z[key]
+            items = value.value if value.is_seq else [value]
+            endpoints = tuple(self.endpoint(item) for item in items)
+            lists[key] = endpoints
+        return m.RuntimeSettings(zenoh=m.ZenohSettings(mode=mode, **lists))  # type: ignore[arg-type]
+
+    def endpoint(self, node: YNode) -> str:
+        text = self.string(node)
+        proto, sep, rest = text.partition("/")
+        if not sep or proto not in ("tcp", "udp", "tls", "quic") or ":" not in rest:
+            raise self.error(node, node.path, f"expected a Zenoh endpoint such as tcp/127.0.0.1:7447, got {text!r}")
+        return text
+
     def obstacles(self, node: YNode) -> tuple[m.Obstacle, ...]:
         if not node.is_seq:
             raise self.bad(node, "a list of obstacles (write [] for none)")
@@ -590,6 +614,7 @@ class _MissionParser(_Checker):
             "radio": lambda n: self.settings(n, m.RadioSettings, RADIO_SPEC),
             "sim": lambda n: self.settings(n, m.SimSettings, SIM_SPEC),
             "safety": lambda n: self.settings(n, m.SafetySettings, SAFETY_SPEC),
+            "runtime": self.runtime,
         }
         for key, node in entries.items():  # document order
             parts[key] = readers[key](node)

@@ -128,6 +128,27 @@ class RadioSettings:
 
 
 @dataclass(frozen=True)
+class ZenohSettings:
+    """The Zenoh sessions of a distributed flight (docs/distributed.md). The coordinator is always a router (it
+    routes between its workers, the logger and any tap); ``mode`` is the workers' and the logger's. Defaults: no
+    multicast scouting, the coordinator listening on loopback only (a free port, or 7447 with
+    ``--remote-dongles``), no router to run beside it."""
+
+    mode: Literal["client", "peer"] = "client"
+    connect: tuple[str, ...] = ()
+    """Endpoints to connect to (``tcp/HOST:7447``): where a worker finds its coordinator."""
+    listen: tuple[str, ...] = ()
+    """Endpoints the coordinator listens on (empty: loopback only)."""
+
+
+@dataclass(frozen=True)
+class RuntimeSettings:
+    """How the processes of a distributed flight talk (``rpf-fly fly --distributed``, ``rpf-fly worker``)."""
+
+    zenoh: ZenohSettings = field(default_factory=ZenohSettings)
+
+
+@dataclass(frozen=True)
 class SafetySettings:
     """What the flight supervisor checks every tick and how it responds (docs/flight.md)."""
 
@@ -225,6 +246,7 @@ class Mission:
     drones: tuple[Drone, ...]
     formation: Optional[Formation] = None
     safety: SafetySettings = field(default_factory=SafetySettings)
+    runtime: RuntimeSettings = field(default_factory=RuntimeSettings)
     source: Optional[Path] = None
     text: str = field(default="", repr=False)
     """The file's text as loaded (logged into flight records as metadata)."""

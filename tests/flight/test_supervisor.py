@@ -100,3 +100,22 @@ def test_a_drone_nobody_commands_stays_in_the_separation_check_until_it_is_on_th
     see(tracker, 2, 0.4, fallen)
     found = [f for f in supervisor.check(0.4, agents.values(), tracker, states) if f.kind == "separation"]
     assert found == []
+
+
+def test_another_workers_drone_is_in_the_separation_check_and_only_own_drones_are_named():
+    """A distributed flight's worker flies cf1 and cf3; cf2 is another worker's (``others``): a pair with it is
+    found for cf1 only (cf2's own worker names cf2), even when the response is not ``warn``; on the floor it is in
+    nobody's check."""
+    mission, agents, tracker, _ = setup()
+    mission = replace(mission, safety=replace(mission.safety, on_separation="hold"))
+    supervisor = Supervisor(mission, obstacle_set(mission.obstacles))
+    own = {n: a for n, a in agents.items() if n != "cf2"}
+    close = dict(POSITIONS, cf1=(-1.0, -0.1, 0.5), cf3=(-1.0, 0.1, 0.5))
+    see(tracker, 1, 0.0, close)
+    states = {n: state(n, 0.0) for n in own}
+    found = [f for f in supervisor.check(0.0, own.values(), tracker, states, ("cf2",)) if f.kind == "separation"]
+    assert sorted(f.drone for f in found) == ["cf1", "cf3"] and all(f.response == "hold" for f in found)
+    assert all("cf2" in f.message for f in found)
+    see(tracker, 2, 0.1, dict(close, cf2=(-1.0, 0.0, 0.02)))
+    found = [f for f in supervisor.check(0.1, own.values(), tracker, states, ("cf2",)) if f.kind == "separation"]
+    assert all(f.response == "resume" for f in found) and sorted(f.drone for f in found) == ["cf1", "cf3"]

@@ -324,3 +324,38 @@ def test_a_bad_value_in_a_batch_loses_that_message_only(tmp_path):
     assert log.failed == 1 and log.written == 2
     data = read_log(path)
     assert [len(data.messages(f"/{d}/planner")) for d in ("cf1", "cf2", "cf3")] == [1, 0, 1]
+
+
+def test_a_log_with_out_hands_every_message_over_and_writes_no_file(tmp_path):
+    """``FlightLog(out=...)`` (a distributed flight's worker): each message goes to ``out`` with its topic, log time,
+    publish time and the very bytes a file would hold; nothing is written at the path."""
+    got: list[tuple[str, int, int, bytes]] = []
+    path = tmp_path / "published.mcap"
+    with FlightLog(path, MISSION, SCENARIO, clock=None, out=lambda *m: got.append(m)) as log:
+        log.pose("cf1", T0, (1.0, 2.0, 0.5), (0.0, 0.0, 0.0, 1.0))
+        log.status("cf1", T0 + MS, state="planning", battery_v=3.9)
+        log.event(T0 + 2 * MS, 3, "hello", name="cf1", file="kind")
+    assert not path.exists()
+    reference = write_flight(tmp_path / "file.mcap", drones=("cf1",), ticks=1).path
+    written = {t: msgs[0].data for t, msgs in read_log(reference).topics.items()}
+    topics = [m[0] for m in got]
+    assert topics == ["/mocap/cf1", "/cf1/status", "/events"]
+    assert got[0][1] == got[0][2] == T0 and got[1][2] == T0 + MS
+    import json
+
+    assert json.loads(got[0][3]).keys() == written["/mocap/cf1"].keys()
+
+
+def test_raw_messages_and_a_late_metadata_record_are_written(tmp_path):
+    """The distributed flight's logger: :meth:`FlightLog.message` writes bytes already encoded with their own times;
+    :meth:`FlightLog.metadata` adds a record in queue order."""
+    path = tmp_path / "raw.mcap"
+    with FlightLog(path, MISSION, SCENARIO) as log:
+        log.message("/cf1/setpoint", T0, T0 + 5, b'{"a": 1}')
+        log.message("/cf1/setpoint", T0 + MS, T0 + MS + 5, b'{"a": 2}')
+        log.metadata("runtime", {"flight_id": "f1", "workers": [{"name": "dongle-0"}]})
+    data = read_log(path)
+    msgs = data.messages("/cf1/setpoint")
+    assert [m.data["a"] for m in msgs] == [1, 2] and [m.sequence for m in msgs] == [0, 1]
+    assert msgs[0].publish_time == T0 and msgs[0].log_time == T0 + 5
+    assert data.metadata["runtime"]["flight_id"] == "f1" and "dongle-0" in data.metadata["runtime"]["workers"]

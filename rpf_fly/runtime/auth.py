@@ -1,0 +1,72 @@
+"""The coordinator's commands, signed with the flight's secret (docs/distributed.md, "Who may command").
+
+A Zenoh endpoint is open to anyone who reaches it; a worker obeys only commands signed by its own flight's
+coordinator. Each flight draws a fresh 256-bit secret; the coordinator hands it to its local workers in their
+environment (``RPF_FLY_SECRET``, not their command line: ``ps`` shows command lines to every user) and prints how
+to give it to a remote one. A command is a JSON object ``{"command", "seq", "reason", "t_ns", "flight"}`` whose
+attachment is the HMAC-SHA256 of its bytes under the secret (hex). The secret itself never crosses the network, so
+a subscriber on ``rpf_fly/**`` cannot learn it; a replayed command is refused by its sequence number (each
+coordinator counts up from 1; a worker takes each number once, in order).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import hmac
+import json
+import secrets
+import time
+from dataclasses import dataclass
+from typing import Optional
+
+SECRET_ENV = "RPF_FLY_SECRET"
+COMMANDS = ("go", "abort", "finish", "land", "emergency_stop")
+"""go: take off (every worker passed its preflight); abort: land or stay down before take-off; finish: the mission
+is over (every drone at its goal), land normally; land: the operator's first Ctrl-C; emergency_stop: motors off."""
+
+
+def new_secret() -> str:
+    return secrets.token_hex(32)
+
+
+@dataclass(frozen=True)
+class Command:
+    command: str
+    seq: int
+    reason: str = ""
+
+
+def sign(secret: str, flight: str, command: str, seq: int, reason: str = "") -> tuple[bytes, bytes]:
+    """The payload and its signature (the sample's attachment) of one command."""
+    payload = json.dumps({"command": command, "seq": int(seq), "reason": reason, "t_ns": time.time_ns(),
+                          "flight": flight}, separators=(",", ":")).encode()
+    return payload, hmac.new(secret.encode(), payload, hashlib.sha256).hexdigest().encode()
+
+
+class CommandVerifier:
+    """Checks commands for one flight: signature, flight, known command, sequence number. Not thread-safe (one
+    subscriber callback at a time)."""
+
+    def __init__(self, secret: str, flight: str):
+        self._key = secret.encode()
+        self._flight = flight
+        self._last_seq = 0
+
+    def verify(self, payload: bytes, attachment: Optional[bytes]) -> tuple[Optional[Command], str]:
+        """(the command, "") if it is the coordinator's, else (None, why it is refused)."""
+        if not attachment:
+            return None, "unsigned command (no signature)"
+        good = hmac.new(self._key, payload, hashlib.sha256).hexdigest().encode()
+        if not hmac.compare_digest(good, bytes(attachment)):
+            return None, "command with a wrong signature (not this flight's secret)"
+        try:
+            body = json.loads(payload)
+            command, seq, reason, flight = body["command"], int(body["seq"]), str(body.get("reason", "")), body["flight"]
+        except (ValueError, KeyError, TypeError):
+            return None, "malformed command"
+        if flight != self._flight or command not in COMMANDS:
+            return None, f"command {command!r} for flight {flight!r} refused"
+        if seq <= self._last_seq:
+            return None, f"replayed command {command!r} (sequence {seq} after {self._last_seq})"
+        self._last_seq = seq
+        return Command(command, seq, reason), ""

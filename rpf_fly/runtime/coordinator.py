@@ -1,0 +1,450 @@
+"""A distributed flight's coordinator: the swarm's phases, Ctrl-C, the watchdog over the workers, the console
+(docs/distributed.md).
+
+It opens the flight's Zenoh session (listening on loopback by default), declares ``alive/coordinator``, starts the
+logger process and one local worker process per dongle (``python -m rpf_fly worker MISSION --dongle K ...``: ``ps``
+shows which process flies which dongle; the flight's secret goes in their environment), and waits until every
+dongle's worker is alive, remote ones included, before any drone arms. Then, from the drones' status messages:
+
+- preflight: once every live worker's drones are ready or failed, ``go`` (or ``abort`` when none can fly, or one
+  failed under ``safety.on_preflight_failure: abort``);
+- flying: once every live worker's drones are at their goals (or down) for ``safety.arrival_hold_s``, ``finish``;
+- a worker whose liveliness token vanishes (killed, its host lost) is an event naming it and its drones; its drones
+  are left to their firmware's watchdog and stay in the others' views from mocap; the others fly on;
+- Ctrl-C once: ``land``; twice: ``emergency_stop``.
+
+In a dry run it also owns the simulated drones (the world process) and serves where they are on the ``rig`` key, so a
+worker on another "host" reaches them through its fake radio; their truth goes to the logger on ``truth/<drone>``.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Optional
+
+from rpf_fly.flight.events import ERROR, FATAL, INFO, WARNING, EventBus, FlightEvent
+from rpf_fly.mission.model import Mission
+from rpf_fly.radio.budget import dongle_of
+from rpf_fly.runtime.auth import SECRET_ENV, new_secret
+from rpf_fly.runtime.bus import FlightBus
+from rpf_fly.runtime.keys import COORDINATOR, LOGGER, worker_name
+from rpf_fly.runtime.session import DEFAULT_PORT, free_loopback_endpoint, open_session
+
+logger = logging.getLogger(__name__)
+
+LOCAL_WAIT_S = 60.0
+"""How long the coordinator waits for its local workers' tokens (each imports cflib and the planners)."""
+REMOTE_WAIT_S = 120.0
+"""How long it waits for the remote workers (``--remote-dongles``) before it gives up, nothing armed."""
+LOGGER_WAIT_S = 30.0
+PREFLIGHT_STATES = {"ready", "failed"}
+DOWN_STATES = {"landed", "failed", "emergency", "link_lost", "landing"}
+END_WAIT_S = 30.0
+"""After the finish or a land command: how long the coordinator waits for the workers to land and exit."""
+
+
+@dataclass
+class DroneView:
+    state: str = "connecting"
+    outcome: Optional[str] = None
+
+
+@dataclass
+class WorkerView:
+    name: str
+    dongle: int
+    drones: list[str]
+    remote: bool
+    alive: bool = False
+    seen: bool = False
+    done: bool = False
+    lost: bool = False
+    info: dict[str, Any] = field(default_factory=dict)
+    process: Optional[subprocess.Popen] = None
+
+
+class Coordinator:
+    """One distributed flight, from the coordinator's process."""
+
+    def __init__(self, mission: Mission, mission_path: Path, log_path: Path, *, dry_run: bool,
+                 remote_dongles: tuple[int, ...] = (), listen: tuple[str, ...] = (),
+                 say: Callable[[str], None] = print, radio_loss: bool = True,
+                 remote_wait_s: float = REMOTE_WAIT_S, worker_args: tuple[str, ...] = ()):
+        self.mission = mission
+        self.mission_path = Path(mission_path)
+        self.log_path = Path(log_path)
+        self.flight = self.log_path.stem
+        self.dry_run = dry_run
+        self.say = say
+        self.radio_loss = radio_loss
+        self.remote_wait_s = remote_wait_s
+        self.worker_args = worker_args
+        self.secret = new_secret()
+        dongles = sorted({dongle_of(d.uri) for d in mission.drones})
+        unknown = sorted(set(remote_dongles) - set(dongles))
+        if unknown:
+            raise ValueError(f"--remote-dongles: the mission has no dongle {', '.join(map(str, unknown))} (its "
+                             f"dongles: {', '.join(map(str, dongles))})")
+        self.workers = {worker_name(k): WorkerView(worker_name(k), k, [d.name for d in mission.drones
+                                                                       if dongle_of(d.uri) == k], k in remote_dongles)
+                        for k in dongles}
+        if listen:
+            self.listen = tuple(listen)
+        elif mission.runtime.zenoh.listen:
+            self.listen = mission.runtime.zenoh.listen
+        elif remote_dongles:
+            self.listen = (f"tcp/127.0.0.1:{DEFAULT_PORT}",)
+        else:
+            self.listen = (free_loopback_endpoint(),)
+        self.local_endpoint = self.listen[0].replace("0.0.0.0", "127.0.0.1").replace("[::]", "[::1]")
+        self.drones = {d.name: DroneView() for d in mission.drones}
+        self.events = EventBus(time.monotonic)
+        self.events.subscribe(self._print_event)
+        self.phase = "starting"
+        self._lock = threading.Lock()
+        self._stop_reason = ""
+        self._estop = False
+        self._interrupts = 0
+        self._wake = threading.Event()
+        self.bus: Optional[FlightBus] = None
+        self.logger_process: Optional[subprocess.Popen] = None
+        self.logger_alive = False
+        self.logger_info: dict[str, Any] = {}
+        self.started_s: Optional[float] = None
+        self.ended_s: Optional[float] = None
+        self.rig: Any = None
+        self.recorder: Any = None
+
+    # ------------------------------------------------------------------------------------------ console
+
+    def _print_event(self, event: FlightEvent) -> None:
+        if event.level >= WARNING or event.drone is None:
+            who = f"{event.drone}: " if event.drone else ""
+            self.say(f"[{event.kind}] {who}{event.message}")
+
+    def _worker_event(self, sample: Any) -> None:
+        """The workers' events: the console shows warnings and errors, and the swarm-wide lines."""
+        message = json.loads(sample.payload.to_bytes())
+        level, name = int(message.get("level", 2)), message.get("name", "")
+        if level >= WARNING:
+            if name == "flight" or not name:
+                name = ""
+            self.say(f"[{message.get('file', '')}] {name + ': ' if name else ''}{message.get('message', '')}")
+
+    # ------------------------------------------------------------------------------------------ signals
+
+    def interrupt(self) -> None:
+        """Ctrl-C: once lands every drone, twice stops every motor (safe from a signal handler: flags only)."""
+        self._interrupts += 1
+        if self._interrupts == 1:
+            self._stop_reason = "interrupted: landing every drone (Ctrl-C again: emergency stop)"
+        else:
+            self._estop = True
+        self._wake.set()
+
+    # ------------------------------------------------------------------------------------------ callbacks
+
+    def _status(self, sample: Any) -> None:
+        drone = str(sample.key_expr).rsplit("/", 1)[-1]
+        view = self.drones.get(drone)
+        if view is None:
+            return
+        message = json.loads(sample.payload.to_bytes())
+        view.state = str(message["state"])
+        view.outcome = message.get("outcome") or view.outcome
+        self._wake.set()
+
+    def _worker_info(self, sample: Any) -> None:
+        info = json.loads(sample.payload.to_bytes())
+        if info.get("name") == LOGGER:
+            self.logger_info = info
+            return
+        worker = self.workers.get(str(info.get("name")))
+        if worker is None:
+            return
+        worker.info = info
+        if info.get("state") == "done":
+            worker.done = True
+            for name, outcome in (info.get("outcomes") or {}).items():
+                if name in self.drones:
+                    self.drones[name].outcome = outcome
+        self._wake.set()
+
+    def _alive(self, name: str, alive: bool) -> None:
+        if name == LOGGER:
+            self.logger_alive = alive
+            if not alive and self.phase not in ("done",):
+                self.events.emit(ERROR, "logger", "the logger is gone: the flight goes on, the log ends here "
+                                 f"(rpf-fly review --salvage {self.log_path})")
+            self._wake.set()
+            return
+        worker = self.workers.get(name)
+        if worker is None:
+            return
+        if alive:
+            worker.alive = worker.seen = True
+        else:
+            worker.alive = False
+            if not worker.done:
+                worker.lost = True
+                pid = worker.info.get("pid", "?")
+                host = worker.info.get("host", "?")
+                self.events.emit(FATAL, "worker_lost",
+                                 f"worker {name} (dongle {worker.dongle}, pid {pid} on {host}) is gone: its drones "
+                                 f"{', '.join(worker.drones)} are left to their firmware's watchdog; the others fly on")
+        self._wake.set()
+
+    def _serve_rig(self, query: Any) -> None:
+        world = self.rig.world
+        query.reply(query.key_expr, json.dumps({
+            "radio": list(world.radio), "natnet_command_port": world.natnet_command_port,
+            "air_time_s": self.rig.timing.transaction_s}).encode())
+
+    # ------------------------------------------------------------------------------------------ the flight
+
+    def run(self) -> int:
+        """Fly the mission; the exit code (0 every drone reached its goal, 1 otherwise, 130 interrupted)."""
+        from rpf_fly.flight.recording import McapRecorder
+
+        session = open_session(self.mission.runtime.zenoh, listen=self.listen, mode="router")  # ZenohUnavailable: nothing armed
+        self.bus = bus = FlightBus(session, self.flight, COORDINATOR)
+        keys = bus.keys
+        self.events.subscribe(lambda e: self.recorder.event(e) if self.recorder is not None else None)
+        try:
+            bus.subscribe(keys.key("status/*"), self._status)
+            bus.subscribe(keys.workers_all, self._worker_info)
+            bus.subscribe(keys.events, self._worker_event, remote_only=True)
+            bus.watch_alive(keys.alive_all, self._alive)
+            bus.token(COORDINATOR)
+            self.say(f"flight {self.flight}: zenoh on {', '.join(self.listen)}; log {self.log_path}")
+            if self.dry_run:
+                self._start_rig(bus)
+            truth = self.rig.truth_samples if self.rig is not None and self.rig.truth else None
+            self.recorder = McapRecorder(Path(f"zenoh-{self.flight}-coordinator"), self.mission,
+                                         source="dry-run" if self.dry_run else "flight", truth=truth, out=bus.out)
+            self._start_logger()
+            self._start_workers()
+            if not self._wait_workers():
+                self._command("abort", "not every worker is alive: nothing takes off")
+                self._end_workers()
+                return 1
+            bus.put_json("runtime", json.dumps({"flight_id": self.flight, "workers": [
+                {k: w.info.get(k) for k in ("name", "dongle", "host", "pid", "drones")} for w in
+                self.workers.values()]}).encode())
+            self.started_s = time.monotonic()
+            self._fly()
+            self._end_workers()
+            self.ended_s = time.monotonic()
+        finally:
+            self._close()
+        return self._exit_code()
+
+    def _start_rig(self, bus: FlightBus) -> None:
+        from rpf_fly.flight.dry_run import RADIO_LOSS, DryRun, world_exit_report_for
+
+        self.rig = DryRun(self.mission, radio_loss=RADIO_LOSS if self.radio_loss else None,
+                          world_exit_report=world_exit_report_for(self.log_path)).__enter__()
+        if self.rig.mocap is not None:  # the workers receive the mocap; the coordinator needs none
+            self.rig.mocap.close()
+            self.rig.mocap = None
+        bus._handles.append(bus.session.declare_queryable(bus.keys.rig, self._serve_rig))  # noqa: SLF001
+
+    def _start_logger(self) -> None:
+        cmd = [sys.executable, "-m", "rpf_fly.runtime.logger", str(self.mission_path), "--flight", self.flight,
+               "--log", str(self.log_path), "--connect", self.local_endpoint,
+               "--source", "dry-run" if self.dry_run else "flight"]
+        self.logger_process = subprocess.Popen(cmd, stdin=subprocess.DEVNULL)
+        deadline = time.monotonic() + LOGGER_WAIT_S
+        while not self.logger_alive and time.monotonic() < deadline:
+            if self.logger_process.poll() is not None:
+                raise RuntimeError(f"the logger exited at start (code {self.logger_process.returncode})")
+            self._wake.wait(0.1)
+            self._wake.clear()
+        if not self.logger_alive:
+            raise RuntimeError(f"the logger did not come up within {LOGGER_WAIT_S:.0f} s")
+
+    def worker_command(self, dongle: int, endpoint: str) -> list[str]:
+        return ["worker", str(self.mission_path), "--dongle", str(dongle), "--flight", self.flight,
+                "--connect", endpoint] + (["--dry-run"] if self.dry_run else []) + list(self.worker_args)
+
+    def _start_workers(self) -> None:
+        for worker in self.workers.values():
+            if worker.remote:
+                self.say(f"waiting for dongle {worker.dongle} ({', '.join(worker.drones)}): on its host run  "
+                         f"{SECRET_ENV}={self.secret} rpf-fly "
+                         + " ".join(self.worker_command(worker.dongle, "tcp/<this host>:" +
+                                                        self.listen[0].rsplit(':', 1)[-1])))
+                continue
+            out = self.log_path.with_name(f"{self.log_path.stem}.{worker.name}.log")
+            env = dict(os.environ, **{SECRET_ENV: self.secret, "RPF_FLY_WORKER_LOG": str(
+                self.log_path.with_name(f"{self.log_path.stem}.{worker.name}.records.log"))})
+            with open(out, "ab") as handle:
+                worker.process = subprocess.Popen(
+                    [sys.executable, "-m", "rpf_fly", *self.worker_command(worker.dongle, self.local_endpoint)],
+                    env=env, stdin=subprocess.DEVNULL, stdout=handle, stderr=subprocess.STDOUT)
+
+    def _wait_workers(self) -> bool:
+        start = time.monotonic()
+        while True:
+            missing = [w for w in self.workers.values() if not (w.seen and w.info)]
+            if not missing:
+                return True
+            for w in missing:
+                if w.process is not None and w.process.poll() is not None:
+                    self.events.emit(ERROR, "worker", f"worker {w.name} exited at start (code {w.process.returncode}"
+                                     f"; see {self.log_path.stem}.{w.name}.log)")
+                    return False
+            waited = time.monotonic() - start
+            local = [w for w in missing if not w.remote]
+            if (local and waited > LOCAL_WAIT_S) or (not local and waited > self.remote_wait_s) or self._stop_reason:
+                names = ", ".join(f"dongle {w.dongle}" for w in missing)
+                why = self._stop_reason or f"no worker alive for {names} within {waited:.0f} s"
+                self.events.emit(ERROR, "worker", f"{why}: nothing takes off")
+                return False
+            self._wake.wait(0.2)
+            self._wake.clear()
+
+    def _command(self, command: str, reason: str = "") -> None:
+        assert self.bus is not None
+        self.events.emit(INFO if command in ("go", "finish") else WARNING, "command", f"{command}"
+                         f"{': ' + reason if reason else ''}")
+        self.bus.command(self.secret, command, reason)
+
+    def _live(self) -> list[WorkerView]:
+        return [w for w in self.workers.values() if w.alive and not w.done]
+
+    def _states(self, workers: list[WorkerView]) -> list[str]:
+        return [self.drones[n].state for w in workers for n in w.drones]
+
+    def _fly(self) -> None:
+        self.phase = "preflight"
+        self.events.emit(INFO, "phase", "swarm: preflight")
+        arrived_since: Optional[float] = None
+        sent_stop = sent_estop = False
+        timeout = self.mission.flight.timeout_s + 120.0
+        start = time.monotonic()
+        while True:
+            self._wake.wait(0.1)
+            self._wake.clear()
+            now = time.monotonic()
+            live = self._live()
+            if self._estop and not sent_estop:
+                sent_estop = True
+                self._command("emergency_stop", "second Ctrl-C: emergency stop, motors off")
+            if self._stop_reason and not sent_stop:
+                sent_stop = True
+                self._command("land", self._stop_reason)
+                self.phase = "landing"
+            if not live:
+                break
+            if now - start > timeout:
+                self._command("land", "the coordinator's flight timeout")
+                self.phase = "landing"
+                break
+            states = self._states(live)
+            gone = [w.name for w in self.workers.values() if w.done or w.lost]
+            if self.phase == "preflight" and gone:
+                # As a single-process flight aborts when a drone fails to connect: a worker that ended (its links
+                # failed, it aborted) or died before take-off grounds the whole swarm.
+                self._command("abort", f"{', '.join(gone)} ended before take-off: no drone takes off")
+                self.phase = "aborted"
+            elif self.phase == "preflight" and all(s in PREFLIGHT_STATES for s in states):
+                failed = [n for w in live for n in w.drones if self.drones[n].state == "failed"]
+                if len(failed) == len(states) or (failed and self.mission.safety.on_preflight_failure == "abort"):
+                    self._command("abort", f"preflight failed for {', '.join(failed)}: no drone takes off")
+                    self.phase = "aborted"
+                else:
+                    self._command("go", "every worker passed its preflight")
+                    self.phase = "flying"
+                    self.events.emit(INFO, "phase", "swarm: flying")
+            elif self.phase == "flying":
+                if states and all(s == "arrived" or s in DOWN_STATES for s in states) and "arrived" in states:
+                    arrived_since = arrived_since if arrived_since is not None else now
+                    if now - arrived_since >= self.mission.safety.arrival_hold_s:
+                        self._command("finish", "every drone of the swarm is at its goal")
+                        self.phase = "landing"
+                        self.events.emit(INFO, "phase", "swarm: landing")
+                else:
+                    arrived_since = None
+        self.phase = "done" if self.phase != "aborted" else self.phase
+
+    def _end_workers(self) -> None:
+        """Wait for the local workers to land and exit (a stuck one: land, then SIGTERM, then SIGKILL)."""
+        deadline = time.monotonic() + END_WAIT_S
+        for worker in self.workers.values():
+            process = worker.process
+            if process is None:
+                continue
+            while process.poll() is None and time.monotonic() < deadline:
+                if self._estop:
+                    assert self.bus is not None
+                    self.bus.command(self.secret, "emergency_stop", "second Ctrl-C")
+                    self._estop = False
+                time.sleep(0.1)
+            if process.poll() is None:
+                self.events.emit(ERROR, "worker", f"worker {worker.name} did not exit: terminating it (it lands)")
+                process.terminate()
+                try:
+                    process.wait(15.0)
+                except subprocess.TimeoutExpired:
+                    process.kill()
+                    process.wait(5.0)
+        remote_deadline = time.monotonic() + 10.0
+        while any(w.alive for w in self.workers.values() if w.remote) and time.monotonic() < remote_deadline:
+            time.sleep(0.1)
+
+    def _close(self) -> None:
+        if self.recorder is not None:
+            try:
+                self.recorder.close()  # the last truth samples and events go out
+            except Exception:  # noqa: BLE001
+                logger.exception("coordinator: closing its recorder failed")
+            time.sleep(0.3)
+        if self.logger_process is not None:
+            self.logger_process.send_signal(signal.SIGTERM)
+            try:
+                self.logger_process.wait(30.0)
+            except subprocess.TimeoutExpired:
+                self.logger_process.kill()
+        for worker in self.workers.values():  # an exception above: no worker outlives its coordinator
+            if worker.process is not None and worker.process.poll() is None:
+                worker.process.terminate()
+                try:
+                    worker.process.wait(15.0)
+                except subprocess.TimeoutExpired:
+                    worker.process.kill()
+        if self.bus is not None:
+            self.bus.close()
+        if self.rig is not None:
+            self.rig.close()
+
+    def _exit_code(self) -> int:
+        if self._interrupts:
+            return 130
+        ok = all(v.outcome == "reached" for v in self.drones.values()) and not any(
+            w.lost for w in self.workers.values())
+        return 0 if ok else 1
+
+    def summary(self) -> list[str]:
+        lines = []
+        for name, view in self.drones.items():
+            lines.append(f"{name}: {view.outcome or view.state}")
+        for w in self.workers.values():
+            latency = (w.info.get("latency") or {})
+            if latency.get("latency_p50_s") is not None:
+                lines.append(f"{w.name}: mocap-to-setpoint latency p50 {latency['latency_p50_s'] * 1e3:.2f} ms "
+                             f"p99 {latency['latency_p99_s'] * 1e3:.2f} ms"
+                             + (" (lost)" if w.lost else ""))
+            elif w.lost:
+                lines.append(f"{w.name}: lost")
+        lines.append(f"log: {self.log_path}  (rpf-fly review {self.log_path})")
+        return lines

@@ -1,0 +1,65 @@
+"""Opening a flight's Zenoh session from the mission's ``runtime.zenoh`` and the command line (docs/distributed.md).
+
+Defaults: the coordinator a router listening on 127.0.0.1 only, its workers and logger clients connecting to it
+(measured with zenoh 1.10.2: peers that do not listen themselves get nothing from each other through a peer, a
+router routes between everyone connected to it), multicast scouting off (nothing on the lab network hears of the
+flight, and nothing there is joined by chance). The link lease is
+1 s (keep-alive every 250 ms), so a worker whose host vanishes without closing its socket is noticed within about
+1 s too (a killed process is seen at once: its kernel closes the socket).
+"""
+
+from __future__ import annotations
+
+import json
+import socket
+from typing import Any, Optional, Sequence
+
+from rpf_fly.mission.model import ZenohSettings
+
+LEASE_MS = 1000
+KEEP_ALIVE = 4
+DEFAULT_PORT = 7447
+
+
+class ZenohUnavailable(ConnectionError):
+    """The session could not open (no endpoint reachable, a port taken): one line for the user."""
+
+
+def free_loopback_endpoint() -> str:
+    """``tcp/127.0.0.1:<a free port>`` (the coordinator's default when no remote worker must find it)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return f"tcp/127.0.0.1:{s.getsockname()[1]}"
+
+
+def zenoh_config(settings: ZenohSettings, *, connect: Sequence[str] = (), listen: Sequence[str] = (),
+                 mode: Optional[str] = None) -> Any:
+    """A ``zenoh.Config``: the mission's settings, with the command line's endpoints replacing its own."""
+    import zenoh
+
+    config = zenoh.Config()
+    config.insert_json5("mode", json.dumps(mode or settings.mode))
+    config.insert_json5("scouting/multicast/enabled", "false")
+    config.insert_json5("transport/link/tx/lease", str(LEASE_MS))
+    config.insert_json5("transport/link/tx/keep_alive", str(KEEP_ALIVE))
+    connect = list(connect) or list(settings.connect)
+    listen = list(listen) or list(settings.listen)
+    config.insert_json5("connect/endpoints", json.dumps(connect))
+    config.insert_json5("listen/endpoints", json.dumps(listen))
+    if connect:  # a worker must reach its coordinator: fail at start instead of retrying for ever
+        config.insert_json5("connect/timeout_ms", "2000")
+        config.insert_json5("connect/exit_on_failure", "true")
+    return config
+
+
+def open_session(settings: ZenohSettings, *, connect: Sequence[str] = (), listen: Sequence[str] = (),
+                 mode: Optional[str] = None) -> Any:
+    """Open the session; :class:`ZenohUnavailable` with one line if it cannot (nothing has been armed)."""
+    import zenoh
+
+    try:
+        return zenoh.open(zenoh_config(settings, connect=connect, listen=listen, mode=mode))
+    except zenoh.ZError as err:
+        where = ", ".join(list(connect) or list(settings.connect) or list(listen) or list(settings.listen))
+        first = str(err).split(" at /")[0].strip()
+        raise ZenohUnavailable(f"zenoh: cannot open a session ({where or 'no endpoint'}): {first}") from None

@@ -1,0 +1,272 @@
+"""A distributed flight's worker: the drones of one radio dongle, flown by the same :class:`FlightLoop` as a
+single-process flight (docs/distributed.md).
+
+The worker receives mocap itself (NatNet multicast reaches every worker; unicast NatNet serves each client that
+connects), so its drones plan from what they sense: every other drone of the mission is a mocap body in their
+views (:attr:`FlightLoop.others`), never a message from another worker's planner. It publishes what its loop logs
+(setpoints, planner steps, status, events, its drones' mocap) on the flight's keys, holds its liveliness token
+``alive/dongle-K``, waits for the coordinator's signed ``go`` after its preflight and obeys only signed commands
+(rpf_fly/runtime/auth.py). Its coordinator's token vanishing (the coordinator died, its host or the network went)
+lands every drone it flies.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import socket
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Optional
+
+from rpf_fly.flight.events import ERROR, WARNING, FlightEvent
+from rpf_fly.flight.loop import FlightLoop, FlightReport, PlannerFactory
+from rpf_fly.mission.model import Mission
+from rpf_fly.radio.budget import dongle_of
+from rpf_fly.runtime.auth import Command
+from rpf_fly.runtime.bus import FlightBus
+from rpf_fly.runtime.keys import COORDINATOR, worker_name
+
+logger = logging.getLogger(__name__)
+
+COORDINATOR_WAIT_S = 10.0
+"""How long a worker waits for its coordinator's liveliness token at start."""
+RIG_WAIT_S = 10.0
+DRY_RUN_TOC_CACHE = Path.home() / ".cache" / "rpf_fly" / "toc-dry-run"
+"""The simulated Crazyflies' TOC cache of a dry-run worker, kept between flights (cflib keys each TOC by its CRC,
+and the fake firmware's never changes): ten drones downloading their TOCs at once through one simulated dongle, on
+a loaded machine, miss the 10 s connection deadline (measured with 40 drones on 4 dongles on 2 busy cores)."""
+
+
+class WorkerError(RuntimeError):
+    """The worker cannot fly (no such dongle, no coordinator, no rig): one line, exit 2, nothing armed."""
+
+
+def dongle_drones(mission: Mission, dongle: int) -> list[str]:
+    return [d.name for d in mission.drones if dongle_of(d.uri) == dongle]
+
+
+def worker_info(mission: Mission, dongle: int, state: str, **extra: Any) -> dict[str, Any]:
+    return {"name": worker_name(dongle), "dongle": dongle, "host": socket.gethostname(), "pid": os.getpid(),
+            "drones": dongle_drones(mission, dongle), "state": state, **extra}
+
+
+class CoordinatorLink:
+    """The loop's :class:`~rpf_fly.flight.loop.SwarmLink` to its coordinator, fed by the bus's command callback."""
+
+    def __init__(self, bus: FlightBus, info: Callable[[str], None]):
+        self._bus = bus
+        self._info = info
+        self._verdict: Optional[str] = None
+        self.loop: Optional[FlightLoop] = None
+        self._pending: list[Command] = []
+        self._lock = threading.Lock()
+        self.coordinator_seen = threading.Event()
+        self.coordinator_lost = False
+        self.go_at: Optional[tuple[float, float]] = None
+        """(monotonic s, process CPU s) at the coordinator's go: the CPU share of the flight is measured from it."""
+
+    # SwarmLink
+    def preflight_done(self, loop: FlightLoop) -> None:
+        self._info("ready")
+
+    def verdict(self) -> Optional[str]:
+        return self._verdict
+
+    # the bus
+    def attach(self, loop: FlightLoop) -> None:
+        with self._lock:
+            self.loop = loop
+            pending, self._pending = self._pending, []
+        for command in pending:
+            self.obey(command)
+        if self.coordinator_lost:
+            loop.request_stop("coordinator lost: landing every drone")
+
+    def obey(self, command: Command) -> None:
+        with self._lock:
+            loop = self.loop
+            if loop is None:
+                self._pending.append(command)
+                return
+        why = f"coordinator: {command.reason}" if command.reason else f"coordinator: {command.command}"
+        if command.command == "go":
+            if self._verdict is None:
+                self.go_at = (time.monotonic(), time.process_time())
+            self._verdict = self._verdict or "go"
+        elif command.command == "abort":
+            self._verdict = "abort"
+            loop.request_stop(why)
+        elif command.command == "finish":
+            loop.end(command.reason or "every drone of the swarm is at its goal")
+        elif command.command == "land":
+            loop.request_stop(why)
+        elif command.command == "emergency_stop":
+            loop.emergency_stop(why)
+
+    def refuse(self, why: str) -> None:
+        logger.warning("ignored a command on %s: %s", self._bus.keys.command, why)
+        loop = self.loop
+        if loop is not None:
+            loop.events.emit(WARNING, "command", f"ignored a command that is not this flight's coordinator's: {why}")
+
+    def alive_changed(self, worker: str, alive: bool) -> None:
+        if worker != COORDINATOR:
+            return
+        if alive:
+            self.coordinator_seen.set()
+            return
+        self.coordinator_lost = True
+        loop = self.loop
+        if loop is not None:
+            loop.events.emit(ERROR, "coordinator", "the coordinator's liveliness token is gone: landing every drone")
+            loop.request_stop("coordinator lost: landing every drone")
+
+
+def discover_flight(session: Any, timeout_s: float = COORDINATOR_WAIT_S) -> str:
+    """The flight id of the one coordinator this session reaches (its ``alive/coordinator`` token);
+    :class:`WorkerError` when there is none, or several (then ``--flight`` must say which)."""
+    deadline = time.monotonic() + timeout_s
+    while True:
+        flights = set()
+        for reply in session.liveliness().get(f"rpf_fly/*/alive/{COORDINATOR}", timeout=1.0):
+            if reply.ok is not None:
+                flights.add(str(reply.ok.key_expr).split("/")[1])
+        if len(flights) == 1:
+            return flights.pop()
+        if len(flights) > 1:
+            raise WorkerError(f"several flights reachable ({', '.join(sorted(flights))}): give --flight")
+        if time.monotonic() > deadline:
+            raise WorkerError(f"no coordinator reachable within {timeout_s:.0f} s (start `rpf-fly fly MISSION "
+                              "--distributed` first; is --connect right?)")
+        time.sleep(0.2)
+
+
+@dataclass
+class WorkerRun:
+    """What a worker needs besides its mission: built by ``rpf-fly worker`` (and by tests)."""
+
+    mission: Mission
+    dongle: int
+    flight: Optional[str]
+    """None: the one flight whose coordinator the session reaches (:func:`discover_flight`)."""
+    secret: str
+    planner_factory: PlannerFactory
+    dry_run: bool = False
+    connect: tuple[str, ...] = ()
+    event_sinks: tuple[Callable[[FlightEvent], None], ...] = ()
+    on_loop: Optional[Callable[[FlightLoop], None]] = None
+    session: Any = None
+    """An open Zenoh session to use (tests); None: open one from the mission and ``connect``."""
+    _closers: list[Callable[[], None]] = field(default_factory=list)
+
+    def run(self) -> FlightReport:
+        """Fly this dongle's drones in the coordinator's flight; raises :class:`WorkerError` or
+        :class:`~rpf_fly.runtime.session.ZenohUnavailable` before anything is armed."""
+        from rpf_fly.flight.recording import McapRecorder
+        from rpf_fly.runtime.session import open_session
+
+        names = dongle_drones(self.mission, self.dongle)
+        if not names:
+            dongles = sorted({dongle_of(d.uri) for d in self.mission.drones})
+            raise WorkerError(f"--dongle {self.dongle}: no drone of the mission is on it (its dongles: "
+                              f"{', '.join(map(str, dongles))})")
+        session = self.session or open_session(self.mission.runtime.zenoh, connect=self.connect)
+        if not self.flight:
+            try:
+                self.flight = discover_flight(session)
+            except WorkerError:
+                if self.session is None:
+                    session.close()
+                raise
+        name = worker_name(self.dongle)
+        bus = FlightBus(session, self.flight, name)
+        try:
+            def info(state: str, **extra: Any) -> None:
+                bus.put_json(f"workers/{name}", json.dumps(worker_info(self.mission, self.dongle, state,
+                                                                       **extra)).encode())
+
+            link = CoordinatorLink(bus, info)
+            bus.watch_alive(bus.keys.alive(COORDINATOR), link.alive_changed)
+            if not link.coordinator_seen.wait(COORDINATOR_WAIT_S):
+                raise WorkerError(f"no coordinator of flight {self.flight!r} within {COORDINATOR_WAIT_S:.0f} s "
+                                  f"(start `rpf-fly fly MISSION --distributed` first; is --connect right?)")
+            bus.on_commands(self.secret, link.obey, link.refuse)
+            backend, source, uris = self._rig(bus)
+            recorder = McapRecorder(Path(f"zenoh-{self.flight}-{name}"), self.mission,
+                                    source="dry-run" if self.dry_run else "flight", out=bus.out,
+                                    radio=backend.radio_counts, radio_dongles=(self.dongle,))
+            try:
+                loop = FlightLoop(self.mission, backend, source, self.planner_factory, uris=uris,
+                                  recorder=recorder, drones=names, swarm=link)
+            except BaseException:
+                recorder.close()
+                raise
+            for sink in self.event_sinks:
+                loop.events.subscribe(sink)
+            info("connecting")
+            bus.token(name)
+            link.attach(loop)
+            if self.on_loop is not None:
+                self.on_loop(loop)
+            report = loop.run()
+            wall0, cpu0 = link.go_at or (time.monotonic(), time.process_time())
+            flown_s = time.monotonic() - wall0
+            info("done", outcomes={n: o.value for n, o in report.outcomes.items()},
+                 latency=report.stats.summary(), cpu_s=time.process_time(),
+                 cpu_pct=round(100 * (time.process_time() - cpu0) / flown_s, 1) if flown_s > 0 else None,
+                 publish_cpu_pct=round(100 * recorder.log.writer_cpu_s / flown_s, 2) if flown_s > 0 else None,
+                 latencies_us=[round(v * 1e6) for v in report.stats.latencies])
+            time.sleep(0.2)  # the last messages leave before the session closes
+            return report
+        finally:
+            for close in reversed(self._closers):
+                try:
+                    close()
+                except Exception:  # noqa: BLE001
+                    logger.exception("worker: closing failed")
+            bus.close()
+
+    def _rig(self, bus: FlightBus) -> tuple[Any, Any, Optional[dict[str, str]]]:
+        """The backend, the mocap source and the URIs: the coordinator's simulated drones (a dry run: their radio
+        server and NatNet emulator, found on the ``rig`` key) or the real radios and mocap."""
+        from rpf_fly.radio.cflib_backend import CflibBackend
+
+        if not self.dry_run:
+            from rpf_fly.flight.session import DEFAULT_TOC_CACHE, mocap_source
+
+            source = mocap_source(self.mission)
+            self._closers.append(source.close)
+            return CflibBackend(cache_dir=DEFAULT_TOC_CACHE), source, None
+        from rpf_fly.emulator import fake_radio
+        from rpf_fly.emulator.fake_world import RadioTiming
+        from rpf_fly.emulator.world_process import RemoteWorld
+        from rpf_fly.flight.dry_run import AIR_TIME_S, fake_uri, uri_address
+        from rpf_fly.mocap.natnet_client import NatNetClient
+
+        rig = None
+        deadline = time.monotonic() + RIG_WAIT_S
+        while rig is None and time.monotonic() < deadline:
+            for reply in bus.session.get(bus.keys.rig, timeout=2.0):
+                if reply.ok is not None:
+                    rig = json.loads(reply.ok.payload.to_bytes())
+            if rig is None:
+                time.sleep(0.2)
+        if rig is None:
+            raise WorkerError(f"flight {self.flight!r}: the coordinator serves no dry-run rig (is it a dry run? "
+                              "start the worker with --dry-run only for one)")
+        addresses = tuple(uri_address(d.uri) for d in self.mission.drones)
+        fake_radio.register(RemoteWorld((rig["radio"][0], int(rig["radio"][1])), addresses,
+                                        RadioTiming(transaction_s=float(rig.get("air_time_s", AIR_TIME_S)))))
+        self._closers.append(fake_radio.unregister)
+        client = NatNetClient(rig["radio"][0], multicast=False, local_ip="127.0.0.1",
+                              command_port=int(rig["natnet_command_port"]), data_port=None,
+                              up_axis=self.mission.mocap.up_axis)
+        self._closers.append(client.close)
+        if not client.wait_for_server(5.0):
+            raise WorkerError("dry run: the coordinator's NatNet emulator did not answer within 5 s")
+        uris = {d.name: fake_uri(d.uri) for d in self.mission.drones}
+        return CflibBackend(cache_dir=DRY_RUN_TOC_CACHE), client, uris

@@ -1,0 +1,165 @@
+"""Distributed dry runs on Zenoh (docs/distributed.md): real sessions on 127.0.0.1, worker and logger processes,
+cflib over the fake radio to the coordinator's simulated drones, the MCAP log read back.
+
+Two flights of four drones on two dongles, each a few seconds: one with a remote worker started by itself
+(``--connect`` to the coordinator's ``--listen``), a tap on ``rpf_fly/**`` and a foreign session commanding land
+and emergency stop; one whose worker is killed mid-flight.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from collections import defaultdict
+from pathlib import Path
+
+from rpf_fly.log.reader import read_log
+from rpf_fly.mission import load_mission
+from rpf_fly.runtime.auth import SECRET_ENV, sign
+from rpf_fly.runtime.coordinator import Coordinator
+from rpf_fly.runtime.session import free_loopback_endpoint, open_session
+
+HERE = Path(__file__).resolve().parent
+MISSION = HERE / "two-dongles.yaml"
+ROOT = HERE.parents[1]
+
+
+def _env() -> dict[str, str]:
+    return dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+
+
+def _wait(predicate, timeout_s: float) -> bool:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if predicate():
+            return True
+        time.sleep(0.05)
+    return False
+
+
+def _start(coordinator: Coordinator) -> tuple[threading.Thread, dict]:
+    result: dict = {}
+
+    def run() -> None:
+        result["code"] = coordinator.run()
+
+    thread = threading.Thread(target=run, daemon=True)
+    thread.start()
+    return thread, result
+
+
+def test_remote_worker_tap_and_foreign_commands(tmp_path):
+    """A worker started by itself with --connect flies dongle 1 in the coordinator's flight; a subscriber on
+    rpf_fly/** sees every drone's setpoints, status and events; a foreign session's land and emergency stop on the
+    command key change nothing and leave a warning in the log."""
+    mission = load_mission(MISSION)
+    endpoint = free_loopback_endpoint()
+    lines: list[str] = []
+    log_path = tmp_path / "remote.mcap"
+    coordinator = Coordinator(mission, MISSION, log_path, dry_run=True, remote_dongles=(1,), listen=(endpoint,),
+                              say=lines.append, remote_wait_s=60.0)
+    thread, result = _start(coordinator)
+    assert _wait(lambda: any("waiting for dongle 1" in line for line in lines), 60), lines
+    remote = subprocess.Popen(
+        [sys.executable, "-m", "rpf_fly", "worker", str(MISSION), "--dongle", "1", "--connect", endpoint,
+         "--dry-run"],  # no --flight: the one flight its --connect reaches
+        env=dict(_env(), **{SECRET_ENV: coordinator.secret, "RPF_FLY_WORKER_LOG": str(tmp_path / "remote.log")}),
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+    seen: dict[str, set[str]] = defaultdict(set)
+    tap = open_session(mission.runtime.zenoh, connect=(endpoint,))
+    foreign = open_session(mission.runtime.zenoh, connect=(endpoint,))
+    try:
+        def sample(s) -> None:  # noqa: ANN001
+            parts = str(s.key_expr).split("/")
+            if parts[2] == "events":
+                name = json.loads(s.payload.to_bytes()).get("name")
+                seen["events"].add(name)
+            elif len(parts) == 4:
+                seen[parts[2]].add(parts[3])
+
+        tap.declare_subscriber(f"rpf_fly/{coordinator.flight}/**", sample)
+        assert _wait(lambda: coordinator.phase == "flying", 90), lines
+        key = f"rpf_fly/{coordinator.flight}/command"
+        forged, _ = sign("not the flight's secret" * 3, coordinator.flight, "emergency_stop", 99)
+        foreign.put(key, json.dumps({"command": "land", "seq": 1, "flight": coordinator.flight}).encode())
+        foreign.put(key, forged, attachment=b"00" * 32)
+        prefix = f"rpf_fly/{coordinator.flight}"  # junk on the message keys: dropped and counted, never logged
+        foreign.put(f"{prefix}/setpoint/cf1", b"not json", attachment=b"\0" * 16)
+        foreign.put(f"{prefix}/status/cf1", b"{bad")
+        thread.join(120)
+        assert not thread.is_alive()
+        out = remote.communicate(timeout=30)[0].decode()
+    finally:
+        tap.close()
+        foreign.close()
+        if remote.poll() is None:
+            remote.kill()
+    assert result["code"] == 0, (lines, out)
+    assert remote.returncode == 0, out
+    names = {d.name for d in mission.drones}
+    for kind in ("setpoint", "status", "planner", "mocap"):
+        assert seen[kind] == names, (kind, seen[kind])
+    assert names <= seen["events"], seen["events"]
+    log = read_log(log_path)
+    assert not log.truncated and log.undecodable == 0
+    for name in names:
+        status = [m.data for m in log.messages(f"/{name}/status")]
+        assert status[-1]["state"] == "landed" and status[-1]["outcome"] == "reached", name
+        assert all(not m.data["crashed"] for m in log.messages(f"/truth/{name}")), name
+    for dongle in (0, 1):  # each worker logs its own dongle's measured load, the coordinator's log holds both
+        loads = [m.data for m in log.messages(f"/radio/{dongle}")]
+        assert loads and max(load["packets_per_s"] for load in loads) > 0, dongle
+    warnings = [m.data["message"] for m in log.messages("/events") if m.data["level"] == 3
+                and "ignored a command" in m.data["message"]]
+    assert len(warnings) >= 4, warnings  # two refused commands, at each of the two workers
+    runtime = log.metadata["runtime"]
+    assert runtime["flight_id"] == coordinator.flight
+    workers = json.loads(runtime["workers"])
+    assert sorted(w["dongle"] for w in workers) == [0, 1] and all(w["pid"] for w in workers)
+    assert any(w["pid"] == remote.pid for w in workers)
+
+
+def test_a_killed_worker_is_noticed_and_the_others_fly_on(tmp_path):
+    """SIGKILL of dongle 1's worker mid-flight: an event names it and its drones within 1 s of the kill; dongle
+    0's drones reach their goals and land; the log closes."""
+    mission = load_mission(MISSION)
+    lines: list[str] = []
+    log_path = tmp_path / "killed.mcap"
+    coordinator = Coordinator(mission, MISSION, log_path, dry_run=True, say=lines.append)
+    thread, result = _start(coordinator)
+    assert _wait(lambda: coordinator.drones["cf3"].state == "planning", 90), lines
+    time.sleep(0.5)
+    victim = coordinator.workers["dongle-1"].process
+    assert victim is not None
+    killed_at = time.monotonic()
+    os.kill(victim.pid, signal.SIGKILL)
+    thread.join(120)
+    assert not thread.is_alive()
+    lost = [e for e in coordinator.events.history if e.kind == "worker_lost"]
+    assert len(lost) == 1 and "dongle-1" in lost[0].message and "cf3, cf4" in lost[0].message
+    assert lost[0].time_s - killed_at < 1.0
+    assert result["code"] == 1  # a worker was lost
+    assert coordinator.drones["cf1"].outcome == "reached" and coordinator.drones["cf2"].outcome == "reached"
+    log = read_log(log_path)
+    assert not log.truncated
+    assert any("worker dongle-1" in m.data["message"] for m in log.messages("/events"))
+    for name in ("cf1", "cf2"):
+        assert log.messages(f"/{name}/status")[-1].data["state"] == "landed"
+        assert all(not m.data["crashed"] for m in log.messages(f"/truth/{name}")), name
+
+
+def test_zenoh_unreachable_at_start_is_one_line_and_exit_2(tmp_path):
+    endpoint = free_loopback_endpoint()  # nobody listens there
+    done = subprocess.run(
+        [sys.executable, "-m", "rpf_fly", "worker", str(MISSION), "--dongle", "0", "--flight", "nobody",
+         "--connect", endpoint, "--dry-run"],
+        env=dict(_env(), **{SECRET_ENV: "0" * 64, "RPF_FLY_WORKER_LOG": str(tmp_path / "w.log")}),
+        capture_output=True, text=True, timeout=60)
+    assert done.returncode == 2
+    assert done.stderr.count("\n") == 1 and "zenoh: cannot open a session" in done.stderr, done.stderr
+    assert done.stdout == ""

@@ -1,0 +1,57 @@
+"""The flight's keys and the coordinator's signed commands (rpf_fly/runtime/keys.py, auth.py)."""
+
+from __future__ import annotations
+
+import pytest
+
+from rpf_fly.runtime.auth import CommandVerifier, new_secret, sign
+from rpf_fly.runtime.keys import FlightKeys, check_flight_id, suffix_topic, topic_suffix
+
+
+@pytest.mark.parametrize("topic, suffix", [
+    ("/mocap/cf1", "mocap/cf1"), ("/cf1/setpoint", "setpoint/cf1"), ("/cf1/planner", "planner/cf1"),
+    ("/cf1/status", "status/cf1"), ("/events", "events"), ("/truth/cf1", "truth/cf1"), ("/radio/2", "radio/2")])
+def test_log_topics_and_keys_map_both_ways(topic, suffix):
+    assert topic_suffix(topic, "dongle-0") == suffix
+    assert suffix_topic(suffix) == topic
+
+
+def test_tf_is_per_publisher_and_the_scene_is_not_published():
+    assert topic_suffix("/tf", "dongle-2") == "tf/dongle-2" and suffix_topic("tf/dongle-2") == "/tf"
+    assert topic_suffix("/scene", "dongle-0") is None
+    for suffix in ("command", "alive/dongle-0", "workers/dongle-0", "rig", "setpoint/a/b", "nonsense/cf1"):
+        assert suffix_topic(suffix) is None, suffix
+
+
+def test_flight_keys():
+    keys = FlightKeys("lab-3-20261201-101010")
+    assert keys.key("setpoint/cf1") == "rpf_fly/lab-3-20261201-101010/setpoint/cf1"
+    assert keys.suffix_of("rpf_fly/lab-3-20261201-101010/status/cf2") == "status/cf2"
+    assert keys.suffix_of("rpf_fly/other/status/cf2") is None
+    with pytest.raises(ValueError):
+        check_flight_id("a/b")
+
+
+def test_a_signed_command_is_taken_once():
+    secret = new_secret()
+    verifier = CommandVerifier(secret, "f1")
+    payload, signature = sign(secret, "f1", "land", 1, "operator")
+    command, why = verifier.verify(payload, signature)
+    assert command is not None and command.command == "land" and command.reason == "operator" and why == ""
+    again, why = verifier.verify(payload, signature)
+    assert again is None and "replayed" in why
+
+
+@pytest.mark.parametrize("case", ["unsigned", "other secret", "other flight", "tampered", "unknown"])
+def test_commands_that_are_not_the_coordinators_are_refused(case):
+    secret = new_secret()
+    verifier = CommandVerifier(secret, "f1")
+    payload, signature = sign(secret if case != "other secret" else new_secret(),
+                              "f1" if case != "other flight" else "f2",
+                              "emergency_stop" if case != "unknown" else "self_destruct", 1)
+    if case == "unsigned":
+        signature = None
+    if case == "tampered":
+        payload = payload.replace(b"emergency_stop", b"go")
+    command, why = verifier.verify(payload, signature)
+    assert command is None and why
