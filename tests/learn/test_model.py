@@ -85,7 +85,7 @@ def test_ppo_update_survives_a_one_sample_minibatch(tmp_path):
     """A rollout whose valid-sample count leaves a remainder of 1 must not turn the weights into NaN."""
     from rpf_fly.learn.ppo import PPOConfig, Trainer
 
-    trainer = Trainer(PPOConfig(n_arenas=2, rollout_steps=8, minibatch_size=4, eval_every=10**9), tmp_path)
+    trainer = Trainer(PPOConfig(n_arenas=2, rollout_steps=8, minibatch_size=4, eval_every=10**9, threads=1), tmp_path)
     batch = trainer._collect()
     keep = 4 * ((batch["local"].shape[0] - 1) // 4) + 1  # a remainder of exactly one sample
     assert keep % 4 == 1 and keep > 1
@@ -99,7 +99,7 @@ def test_training_resumes_from_its_checkpoint(tmp_path):
     """A run stopped after 2 updates continues from the checkpoint: weights, optimiser, counters and curve."""
     from rpf_fly.learn.ppo import PPOConfig, Trainer
 
-    config = PPOConfig(n_arenas=2, rollout_steps=16, minibatch_size=64, eval_every=10**9, checkpoint_every=1,
+    config = PPOConfig(n_arenas=2, rollout_steps=16, minibatch_size=64, eval_every=10**9, checkpoint_every=1, threads=1,
                        episodes=10**9, max_updates=2)
     first = Trainer(config, tmp_path)
     first.run()
