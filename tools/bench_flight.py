@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import statistics
 import tempfile
 import time
@@ -43,8 +44,27 @@ from rpf_fly.sim.scenario import obstacle_set
 ROOT = Path(__file__).resolve().parents[1]
 
 
+PER_DRONE_PACKETS_S = 10.0 + 30.0  # cflib's ping and the extpos at 30 Hz, beside the setpoints (radio/budget.py)
+DONGLE_BUDGET_S = 1000.0
+
+
+def dongles_for(drones: int, rate: float) -> int:
+    """As many dongles as keep each within a Crazyradio's ~1000 transactions a second (rpf_fly/radio/budget.py):
+    10 drones at 100 Hz need 1400 a second, two dongles. A faithful radio blocks cflib's send when a dongle is
+    over (docs/radio.md), so an over-budget bench would measure the radio's queue, not the stack."""
+    return max(1, math.ceil(drones * (rate + PER_DRONE_PACKETS_S) / DONGLE_BUDGET_S))
+
+
 def mission_text(drones: int, rate: float, planner: str) -> str:
+    """A circle swap of radius 3 m (as `formation: circle_swap`), its drones spread over `dongles_for` dongles."""
     policy = f", policy: {ROOT / 'policies' / 'rpf.onnx'}" if planner == "rpf" else ""
+    dongles = dongles_for(drones, rate)
+    rows = []
+    for i in range(drones):
+        t = 2.0 * math.pi * i / drones
+        dx, dy = 3.0 * math.cos(t), 3.0 * math.sin(t)
+        rows.append(f"  - {{name: cf{i + 1}, uri: radio://{i % dongles}/80/2M/E7E7E7E7{i + 1:02X}, "
+                    f"start: [{dx:.4f}, {dy:.4f}], goal: [{-dx:.4f}, {-dy:.4f}]}}")
     return f"""
 name: bench-{drones}
 arena: {{x: [-4.5, 4.5], y: [-4.5, 4.5], z: [0.0, 2.0]}}
@@ -52,8 +72,8 @@ flight: {{height: 1.0, speed: 0.5, rate_hz: {rate}, goal_tolerance: 0.1, takeoff
 planner: {{kind: {planner}{policy}}}
 mocap: {{kind: sim, rate_hz: 100}}
 radio: {{extpos_rate_hz: 30}}
-formation: {{kind: circle_swap, count: {drones}, radius: 3.0}}
-"""
+drones:
+""" + "\n".join(rows) + "\n"
 
 
 def floor_once(drones: int, rate: float, air_time_s: float, seconds: float = 8.0) -> dict:

@@ -37,6 +37,7 @@ import threading
 import time
 from collections import deque
 from dataclasses import dataclass
+from itertools import islice
 from typing import Any, ClassVar, Protocol
 from urllib.parse import urlparse
 
@@ -179,9 +180,11 @@ class FakeLink:
         return True
 
     def _waiting(self, now: float) -> int:
-        """Uplink packets due and not yet acknowledged (the head may be in its transaction)."""
+        """Uplink packets due and not yet acknowledged (the head may be in its transaction). Reads a copy of the
+        queue's head taken in one C call: the transaction thread pops it without `_room`, and a Python loop over the
+        deque itself raised "deque mutated during iteration" in cflib's send (a 10-drone dry run, 2026-12-01)."""
         n = 0
-        for due, _, _ in self._up:
+        for due, _, _ in tuple(islice(self._up, DRIVER_PACKETS)):
             if due > now or n >= DRIVER_PACKETS:
                 break
             n += 1
