@@ -37,7 +37,6 @@ import threading
 import time
 from collections import deque
 from dataclasses import dataclass
-from itertools import islice
 from typing import Any, ClassVar, Protocol
 from urllib.parse import urlparse
 
@@ -181,10 +180,10 @@ class FakeLink:
 
     def _waiting(self, now: float) -> int:
         """Uplink packets due and not yet acknowledged (the head may be in its transaction). Reads a copy of the
-        queue's head taken in one C call: the transaction thread pops it without `_room`, and a Python loop over the
-        deque itself raised "deque mutated during iteration" in cflib's send (a 10-drone dry run, 2026-12-01)."""
+        queue taken in one C call (``deque.copy``): the transaction thread pops it without `_room`, and iterating
+        the deque itself raised "deque mutated during iteration" in cflib's send (a 10-drone dry run, 2026-12-01)."""
         n = 0
-        for due, _, _ in tuple(islice(self._up, DRIVER_PACKETS)):
+        for due, _, _ in self._up.copy():
             if due > now or n >= DRIVER_PACKETS:
                 break
             n += 1
