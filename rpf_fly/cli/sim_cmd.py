@@ -44,7 +44,7 @@ def sim(
         raise fail(str(err))
     scenario = scenario_from_mission(loaded, seed)
     try:
-        chosen = make_planner(loaded.planner, scenario.obstacles)
+        chosen = make_planner(loaded.planner, scenario.obstacles, (scenario.arena_x, scenario.arena_y), scenario.goals)
     except (UnsupportedPlanner, PolicyError) as err:
         raise fail(f"{mission}:0: planner.policy: {err}")
     params = SimParams(loaded.flight.speed, loaded.flight.dt, loaded.flight.goal_tolerance, loaded.sim.time_limit_s)
