@@ -186,44 +186,79 @@ def cost_to_go(goals: np.ndarray, nodes: np.ndarray, pairs: np.ndarray, inf: Inf
     return (leg[..., :, None] + pairs).min(axis=-2)
 
 
+CANDIDATES = 6
+"""Nodes tested per drone and tick: those of smallest ``|p - v| + c_g(v)`` (a lower bound of the path through ``v``
+that ignores whether ``v`` is in sight). The first of them in sight is the answer; a drone that sees none of them
+(rare: deep in a cluttered corner) is tested against every node."""
+
+
+def _visible(position: np.ndarray, goal: np.ndarray, targets: np.ndarray, inf: Inflated, wide: Inflated) -> np.ndarray:
+    """``S + (T,)``: which targets (the goal first) each drone sees. Obstacles holding the drone are ignored for
+    every target, those holding the goal for the goal only."""
+    p_in = inf.inside(position.real, position.imag)
+    g_in = inf.inside(goal.real, goal.imag)
+    n = targets.shape[-1] - 1
+    t_in = tuple(np.concatenate([gi[..., None, :], np.zeros(gi.shape[:-1] + (n, gi.shape[-1]), bool)], axis=-2)
+                 for gi in g_in)
+    return ~blocked(position[..., None], targets, wide, tuple(pi[..., None, :] for pi in p_in), t_in)
+
+
 def next_waypoint(
     position: np.ndarray, goal: np.ndarray, nodes: np.ndarray, cost: np.ndarray, inf: Inflated,
-    wide: Inflated | None = None,
+    wide: Inflated | None = None, candidates: int | None = CANDIDATES,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The waypoint each drone should fly to (complex ``S``) and its remaining path length (metres, ``S``).
 
     ``nodes`` ``(V,)`` or ``S + (V,)`` (per arena, padded with FAR nodes whose cost is inf), ``cost`` ``S + (V,)``
     each drone's cost-to-go row for its goal; ``inf`` broadcasts as ``S + (M,)`` (``wide``: ``inf.axis()``, when the
-    caller keeps it). The goal when it is in sight, or
-    when no node leads there. One visibility test of ``T = V + 1`` targets (the goal first) against every obstacle."""
+    caller keeps it). The goal when it is in sight, or when no node leads there. Each drone tests the goal and its
+    ``candidates`` best nodes (:data:`CANDIDATES`; None: every node) against every obstacle."""
     position = np.asarray(position, dtype=complex)
     goal = np.asarray(goal, dtype=complex)
     direct = abs(goal - position)
     if nodes.shape[-1] == 0:
         return (complex(goal), float(direct)) if goal.ndim == 0 else (goal, direct)
-    lead = np.broadcast_shapes(position.shape, goal.shape)
-    targets = np.concatenate(
-        [np.broadcast_to(goal, lead)[..., None], np.broadcast_to(nodes, lead + nodes.shape[-1:])], axis=-1
-    )
     wide = inf.axis() if wide is None else wide
-    p_in = inf.inside(position.real, position.imag)
-    g_in = inf.inside(goal.real, goal.imag)
-    # Obstacles holding the drone are ignored for every target, those holding the goal for the goal only.
-    t_in = tuple(np.concatenate([gi[..., None, :], np.zeros(gi.shape[:-1] + (nodes.shape[-1], gi.shape[-1]), bool)],
-                                axis=-2) for gi in g_in)
-    seen = ~blocked(position[..., None], targets, wide, tuple(pi[..., None, :] for pi in p_in), t_in)
-    goal_seen = seen[..., 0]
-    to_node = abs(targets[..., 1:] - position[..., None])
-    key = np.where(seen[..., 1:] & (to_node > 1e-9), to_node + cost, UNREACHABLE)
-    best = key.argmin(axis=-1)[..., None]
-    best_key = np.take_along_axis(key, best, -1)[..., 0]
-    node = np.take_along_axis(targets[..., 1:], best, -1)[..., 0]
-    use_node = ~goal_seen & np.isfinite(best_key)
-    waypoint = np.where(use_node, node, goal)
-    remaining = np.where(use_node, best_key, direct)
+    lead = np.broadcast_shapes(position.shape, goal.shape)
+    position = np.broadcast_to(position, lead)
+    goal = np.broadcast_to(goal, lead)
+    all_nodes = np.broadcast_to(nodes, lead + nodes.shape[-1:])
+    to_node = abs(all_nodes - position[..., None])
+    bound = np.where(to_node > 1e-9, to_node + cost, UNREACHABLE)  # S + (V,)
+    if candidates is not None and candidates < bound.shape[-1]:
+        pick = np.argpartition(bound, candidates - 1, axis=-1)[..., :candidates]
+    else:
+        pick = np.broadcast_to(np.arange(bound.shape[-1]), bound.shape)
+    waypoint, remaining, unresolved = _choose(position, goal, direct, all_nodes, bound, pick, inf, wide)
+    if unresolved.any() and pick.shape[-1] < bound.shape[-1]:
+        rows = np.nonzero(unresolved)
+        full = np.broadcast_to(np.arange(bound.shape[-1]), (rows[0].shape[0], bound.shape[-1]))
+        sub = Inflated(*(np.broadcast_to(a, lead + a.shape[-1:])[rows] for a in dataclasses.astuple(inf)))
+        w2, r2, _ = _choose(position[rows], goal[rows], direct[rows], all_nodes[rows], bound[rows], full, sub, sub.axis())
+        waypoint = waypoint.copy()
+        remaining = remaining.copy()
+        waypoint[rows] = w2
+        remaining[rows] = r2
     if waypoint.ndim == 0:
         return complex(waypoint), float(remaining)
     return waypoint, remaining
+
+
+def _choose(position, goal, direct, nodes, bound, pick, inf, wide):  # type: ignore[no-untyped-def]
+    """Waypoint and remaining length among the goal and the ``pick``ed nodes; ``unresolved``: the goal is hidden
+    and no picked node with a finite bound is in sight."""
+    chosen = np.take_along_axis(nodes, pick, -1)
+    keys = np.take_along_axis(bound, pick, -1)
+    targets = np.concatenate([goal[..., None], chosen], axis=-1)
+    seen = _visible(position, goal, targets, inf, wide)
+    goal_seen = seen[..., 0]
+    key = np.where(seen[..., 1:], keys, UNREACHABLE)
+    best = key.argmin(axis=-1)[..., None]
+    best_key = np.take_along_axis(key, best, -1)[..., 0]
+    node = np.take_along_axis(chosen, best, -1)[..., 0]
+    use_node = ~goal_seen & np.isfinite(best_key)
+    unresolved = ~goal_seen & ~np.isfinite(best_key) & np.isfinite(keys).any(axis=-1)
+    return np.where(use_node, node, goal), np.where(use_node, best_key, direct), unresolved
 
 
 def _inside_one(x: float, y: float, circles: list, boxes: list) -> tuple[set, set]:

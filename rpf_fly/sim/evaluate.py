@@ -44,6 +44,7 @@ def run_scenario(
     metrics = compute_metrics(
         result.positions, scenario.goals, params.dt, params.goal_tolerance, settings.safety_radius,
         scenario.obstacles, scenario.names, mission=label, planner=settings.kind, seed=seed,
+        margin=settings.margin_m,
     )
     return Run(label, settings.kind, seed, metrics, result if keep else None)
 

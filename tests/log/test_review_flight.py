@@ -15,7 +15,7 @@ from rpf_fly.log.reader import read_log
 from rpf_fly.log.review import review
 
 runner = CliRunner()
-METRIC_KEYS = ["mission", "planner", "seed", "drones", "reached", "success", "collisions", "min_separation_m",
+METRIC_KEYS = ["mission", "planner", "seed", "drones", "reached", "success", "collisions", "margin", "min_separation_m",
                "min_obstacle_clearance_m", "travel_distance_m", "smoothness", "makespan_s", "per_drone"]
 
 
