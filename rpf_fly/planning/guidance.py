@@ -278,11 +278,19 @@ def _free_one(ax: float, ay: float, bx: float, by: float, circles: list, boxes: 
         ex, ey = wx - t * dx, wy - t * dy
         if ex * ex + ey * ey < r2 and k not in skip[0]:
             return False
+    if not boxes:
+        return True
+    lo_x, hi_x = (ax, bx) if ax < bx else (bx, ax)
+    lo_y, hi_y = (ay, by) if ay < by else (by, ay)
     q = dx * ay - dy * ax
     for k, (x0, x1, y0, y1) in enumerate(boxes):
-        if max(ax, bx) > x0 and min(ax, bx) < x1 and max(ay, by) > y0 and min(ay, by) < y1:
+        if hi_x > x0 and lo_x < x1 and hi_y > y0 and lo_y < y1:
             u0, u1, v0, v1 = dx * y0, dx * y1, dy * x0, dy * x1
-            if min(u0, u1) - max(v0, v1) - q < 0.0 < max(u0, u1) - min(v0, v1) - q and k not in skip[1]:
+            if u0 > u1:
+                u0, u1 = u1, u0
+            if v0 > v1:
+                v0, v1 = v1, v0
+            if u0 - v1 - q < 0.0 < u1 - v0 - q and k not in skip[1]:
                 return False
     return True
 
@@ -343,6 +351,8 @@ class Guidance:
 
     def waypoint(self, position: np.ndarray | complex, goal: np.ndarray | complex) -> tuple[np.ndarray, np.ndarray]:
         """Next visible waypoint and remaining path length for every drone (shapes of ``position``)."""
+        if isinstance(position, (complex, float, int)) and isinstance(goal, (complex, float, int)):
+            return self._waypoint_one(complex(position), complex(goal))
         if np.ndim(position) == 0 and np.ndim(goal) == 0:
             return self._waypoint_one(complex(position), complex(goal))
         return next_waypoint(position, goal, self.nodes, self.rows(goal), self.inflated, self._wide)

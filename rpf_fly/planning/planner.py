@@ -79,10 +79,13 @@ def apf_step(
     lam: np.ndarray | float,
     config: PlannerConfig,
     observation: Observation | None = None,
+    waypoint: np.ndarray | None = None,
+    goal_distance: np.ndarray | None = None,
 ) -> PlanStep:
     """The APF with (soft) wall-following for given gains (``observation``, when the gains came from one, is kept
     in the result for the log). ``view.goal`` is what the attraction pulls toward: the goal, or with guidance the
-    drone's waypoint. ``nearest`` is the true nearest obstacle; the forces see it ``config.margin`` closer."""
+    drone's ``waypoint`` (then ``goal_distance`` is the distance to the goal itself, for the log). ``nearest`` is
+    the true nearest obstacle; the forces see it ``config.margin`` closer."""
     f_a, d_g = attractive(view.position, view.goal)
     seen = perceived(nearest, config)
     f_r = repulsive(seen, eta, config)
@@ -98,8 +101,9 @@ def apf_step(
         lam=lam,
         neighbours=count,
         obstacle_distance=nearest.distance,
-        goal_distance=d_g,
+        goal_distance=d_g if goal_distance is None else goal_distance,
         observation=observation,
+        waypoint=waypoint,
     )
 
 
@@ -117,7 +121,9 @@ def guided_view(view: LocalView, guidance: Guidance | None) -> tuple[LocalView, 
     if guidance is None:
         return view, None, None
     waypoint, remaining = guidance.waypoint(view.position, view.goal)
-    return dataclasses.replace(view, goal=waypoint), waypoint, remaining
+    guided = LocalView(view.position, waypoint, view.heading, view.neighbour_position, view.neighbour_velocity,
+                       view.neighbour_mask)
+    return guided, waypoint, remaining
 
 
 class Planner:
@@ -152,7 +158,7 @@ class Planner:
         if self.gains.needs_observation:
             observation = build_observation(guided, nearest, self.config, self.gains.max_neighbours, remaining)
         eta, lam = self.gains.gains(observation)
-        step = apf_step(guided, nearest, lambda_mask, eta, lam, self.config, observation)
         if waypoint is None:
-            return step
-        return dataclasses.replace(step, goal_distance=abs(view.goal - view.position), waypoint=waypoint)
+            return apf_step(view, nearest, lambda_mask, eta, lam, self.config, observation)
+        return apf_step(guided, nearest, lambda_mask, eta, lam, self.config, observation, waypoint,
+                        abs(view.goal - view.position))
