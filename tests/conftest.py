@@ -4,6 +4,7 @@ a hang guard (autouse in tests/emulator and tests/radio, through their conftest)
 from __future__ import annotations
 
 import faulthandler
+import signal
 import sys
 from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
@@ -28,6 +29,18 @@ def address(index: int) -> int:
 
 def fake_drivers() -> list[type]:
     return [c for c in cflib.crtp.CLASSES if isinstance(c, type) and issubclass(c, fake_radio.FakeRadioDriver)]
+
+
+@pytest.fixture(autouse=True)
+def sigint_handler_left_as_found() -> Iterator[None]:
+    """Every test leaves Python's SIGINT handler as it found it: a handler left behind by one test (a flight's
+    Ctrl-C hook) would take the next test's Ctrl-C, and that flight would never hear it."""
+    before = signal.getsignal(signal.SIGINT)
+    yield
+    after = signal.getsignal(signal.SIGINT)
+    if after is not before:
+        signal.signal(signal.SIGINT, before)
+        pytest.fail(f"the test left SIGINT handled by {after!r} (it found {before!r})")
 
 
 @pytest.fixture

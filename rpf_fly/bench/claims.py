@@ -17,7 +17,7 @@ policy is missing), with the numbers it was judged on. Rules (docs/bench.md):
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Mapping, Optional
 
 from rpf_fly.bench.runner import FRESH_SCENE, PAPER_MISSIONS, PLANNER_LABELS
@@ -61,10 +61,87 @@ STATEMENTS = {
 }
 
 
-def evaluate_claims(results: Mapping[str, Any]) -> list[Claim]:
+@dataclass(frozen=True)
+class ClaimScenes:
+    """Where each claim is judged. (a), (b), (c) on each scene of their tuple (held when held on every one that
+    ran, judged per scene); (d) pooled over its scenes; (e) pooled over its scenes. ``statements`` as printed.
+    ``only_run``: judge on the listed scenes that ran (the families suite may run a subset); else every listed
+    scene is needed (the paper suite)."""
+
+    a: tuple[str, ...]
+    b: tuple[str, ...]
+    c: tuple[str, ...]
+    d: tuple[str, ...]
+    e: tuple[str, ...]
+    statements: Mapping[str, str]
+    only_run: bool = False
+
+
+PAPER_CLAIMS = ClaimScenes(("circle-8-r3",), ("circle-8-r8",), ("lab-3",), PAPER_MISSIONS, (FRESH_SCENE,), STATEMENTS)
+"""The paper suite: each claim on the scene the paper states it for."""
+
+SWAP_FAMILIES = ("circle", "arena-b")
+OBSTACLE_FAMILIES = ("corridor", "doorway", "u-trap", "pillars", "passage", "arena-a")
+ALL_FAMILIES = ("corridor", "doorway", "u-trap", "pillars", "crossing", "circle", "arena-a", "arena-b", "passage")
+FAMILY_CLAIMS = ClaimScenes(
+    a=SWAP_FAMILIES,
+    b=("circle",),
+    c=OBSTACLE_FAMILIES,
+    d=ALL_FAMILIES,
+    e=("arena-a",),
+    statements={
+        "a": "circle swaps (circle, arena-b): RPF-1 beats RPF-2 and APF on travel distance and smoothness",
+        "b": "circle swaps of 8-24 drones: PPO fails (collision or timeout) where RPF-1 succeeds",
+        "c": "obstacle families (corridor, doorway, u-trap, pillars, passage, arena-a): RPF-1 has the best travel "
+             "distance and smoothness among the successful planners",
+        "d": f"RPF-1 succeeds on >= {SUCCESS_TARGET:.0%} of the runs of all families pooled, zero collisions",
+        "e": f"RPF-1 succeeds on >= {SUCCESS_TARGET:.0%} of the fresh arena-A family scenes, zero collisions",
+    },
+    only_run=True,
+)
+"""The families suite (docs/bench.md, *Scene families*): (a) on the swap families, (b) on the large circle swaps
+(the paper's circle-8-r8), (c) on every obstacle family (the paper's lab-3 is one cluttered scene), (d) on all
+families pooled, (e) on the arena-A family."""
+
+
+def evaluate_claims(results: Mapping[str, Any], scenes: ClaimScenes = PAPER_CLAIMS) -> list[Claim]:
     """Judge claims (a)-(e) on a results dict (``rows``: summary rows; ``runs``: per-run records)."""
     table = _Rows(results)
-    return [_claim_a(table), _claim_b(table), _claim_c(table), _claim_d(table), _claim_e(table)]
+    if scenes == PAPER_CLAIMS:
+        return [_claim_a(table), _claim_b(table), _claim_c(table), _claim_d(table), _claim_e(table)]
+    out = []
+    for claim, judge in (("a", _claim_a), ("b", _claim_b), ("c", _claim_c)):
+        out.append(_per_scene(table, claim, getattr(scenes, claim), scenes, judge))
+    for claim in ("d", "e"):
+        wanted = getattr(scenes, claim)
+        ran = [s for s in wanted if table.row("rpf", s) is not None] if scenes.only_run else list(wanted)
+        if not ran:
+            out.append(Claim(claim, scenes.statements[claim], NOT_EVALUATED, note="RPF-1 ran on none of "
+                             + ", ".join(wanted)))
+            continue
+        judged = _success_claim(table, claim, tuple(ran))
+        note = judged.note + ("" if len(ran) == len(wanted) else f"; judged on {', '.join(ran)} only")
+        out.append(replace(judged, statement=scenes.statements[claim], note=note))
+    return out
+
+
+def _per_scene(t: "_Rows", claim: str, wanted: tuple[str, ...], scenes: ClaimScenes, judge) -> Claim:  # type: ignore[no-untyped-def]
+    """A scene claim judged on every wanted scene: held when held on each that was evaluated."""
+    parts = {scene: judge(t, scene) for scene in wanted}
+    if scenes.only_run:
+        parts = {s: c for s, c in parts.items() if c.status != NOT_EVALUATED} or parts
+    statement = scenes.statements[claim]
+    statuses = {c.status for c in parts.values()}
+    if NOT_EVALUATED in statuses:
+        return Claim(claim, statement, NOT_EVALUATED, note="; ".join(f"{s}: {c.note}" for s, c in parts.items()
+                                                                    if c.status == NOT_EVALUATED))
+    status = HELD if statuses == {HELD} else NOT_HELD
+    numbers = {s: c.numbers for s, c in parts.items()}
+    note = "; ".join(f"{s}: {c.status}" + (f" ({c.note})" if c.note else "") for s, c in parts.items())
+    missing = [s for s in wanted if s not in parts]
+    if missing:
+        note += f"; not run: {', '.join(missing)}"
+    return Claim(claim, statement, status, numbers, note)
 
 
 class _Rows:
@@ -97,8 +174,7 @@ def _not_evaluated(claim: str, reasons: list[str]) -> Claim:
     return Claim(claim, STATEMENTS[claim], NOT_EVALUATED, note="; ".join(reasons))
 
 
-def _claim_a(t: _Rows) -> Claim:
-    scene = "circle-8-r3"
+def _claim_a(t: _Rows, scene: str = "circle-8-r3") -> Claim:
     needed = ("rpf", "rpf-mean", "apf")
     absent = [t.why_missing(p, scene) for p in needed if t.row(p, scene) is None]
     if absent:
@@ -127,8 +203,7 @@ def _claim_a(t: _Rows) -> Claim:
     return Claim("a", STATEMENTS["a"], HELD if held else NOT_HELD, numbers, "; ".join(notes))
 
 
-def _claim_b(t: _Rows) -> Claim:
-    scene = "circle-8-r8"
+def _claim_b(t: _Rows, scene: str = "circle-8-r8") -> Claim:
     absent = [t.why_missing(p, scene) for p in ("rpf", "ppo") if t.row(p, scene) is None]
     if absent:
         return _not_evaluated("b", absent)
@@ -158,8 +233,7 @@ PAPER_PLANNERS = ("rpf", "rpf-mean", "ppo", "apf")
 """The planners of the paper's comparison; others (ORCA) are reported beside claim (c), not judged in it."""
 
 
-def _claim_c(t: _Rows) -> Claim:
-    scene = "lab-3"
+def _claim_c(t: _Rows, scene: str = "lab-3") -> Claim:
     if t.row("rpf", scene) is None:
         return _not_evaluated("c", [t.why_missing("rpf", scene)])
     everyone = t.planners(scene)
@@ -174,7 +248,7 @@ def _claim_c(t: _Rows) -> Claim:
     }
     successful = [name for name, n in numbers.items() if n["success_rate"] >= MAJORITY]
     if "RPF-1" not in successful:
-        return Claim("c", STATEMENTS["c"], NOT_HELD, numbers, f"RPF-1 succeeds on fewer than {MAJORITY:.0%} of lab-3 runs")
+        return Claim("c", STATEMENTS["c"], NOT_HELD, numbers, f"RPF-1 succeeds on fewer than {MAJORITY:.0%} of {scene} runs")
     notes, held = [f"successful planners: {', '.join(successful)}"], True
     for metric in ("travel_distance_m", "smoothness"):
         best = min(successful, key=lambda name: numbers[name][metric])

@@ -16,9 +16,22 @@ _SCENES = "arena-a-6,arena-b-6,circle-8-r3,circle-8-r8,lab-3,arena-a-fresh"
 
 @app.command()
 def bench(
+    suite: str = typer.Option(
+        "paper", "--suite", help="paper: the paper missions and arena-a-fresh; families: the generated scene families."
+    ),
     episodes: int = typer.Option(20, "--episodes", help="Seeds per scene (start jitter 0..N-1; fresh arena-A seeds 1000000..)."),
-    planners: str = typer.Option(_PLANNERS, "--planners", help="Comma-separated planner kinds."),
+    seeds: Optional[int] = typer.Option(
+        None, "--seeds", help="Seeds per scene or family (overrides --episodes; families: bench-stream seeds 0..N-1)."
+    ),
+    planners: Optional[str] = typer.Option(
+        None, "--planners", help=f"Comma-separated planner kinds (paper: {_PLANNERS}; families: also default)."
+    ),
     scenes: str = typer.Option(_SCENES, "--scenes", help="Comma-separated scenes: paper missions and arena-a-fresh."),
+    families: Optional[str] = typer.Option(None, "--families", help="families suite: comma-separated families (all)."),
+    jobs: int = typer.Option(1, "--jobs", help="families suite: worker processes (same results; default 1)."),
+    guidance: Optional[str] = typer.Option(
+        None, "--guidance", help="families suite: comma-separated guidance modes (every mode the planner offers)."
+    ),
     policies: Path = typer.Option(Path("policies"), "--policies", help="Folder of <kind>.onnx policies."),
     policy: list[str] = typer.Option(
         [], "--policy", help="KIND=PATH: a policy for one learned kind (rpf, rpf-mean, ppo); repeatable."
@@ -31,7 +44,8 @@ def bench(
     markdown: Optional[Path] = typer.Option(None, "--markdown", help="Write the results as Markdown."),
     figure: Optional[Path] = typer.Option(None, "--figure", help="Write the comparison figure (PNG)."),
     out: Optional[Path] = typer.Option(
-        None, "--out", help="Write results.json, results.md and comparison.png into this folder."
+        None, "--out", help="Write results.json, results.md and comparison.png into this folder (families suite: "
+        "families.json and families.md)."
     ),
 ) -> None:
     """Run every planner on every scene for each seed; print success, collisions, path metrics and the paper's claims.
@@ -40,23 +54,33 @@ def bench(
     """
     from rpf_fly.bench.runner import BenchConfig, BenchError, prepare, run_bench
 
+    if suite not in ("paper", "families"):
+        raise fail(f"--suite: expected paper or families, got {suite!r}")
+    if seeds is not None:
+        episodes = seeds
     paths = {}
     for item in policy:
         kind, sep, raw = item.partition("=")
         if not sep or not kind or not raw:
             raise fail(f"--policy: expected KIND=PATH, got {item!r}")
         paths[kind.strip()] = Path(raw)
+    unknown = [k for k in paths if k not in ("rpf", "rpf-mean", "ppo")]
+    if unknown:
+        raise fail(f"--policy: {unknown[0]!r} is not a learned planner kind (rpf, rpf-mean, ppo)")
+    if suite == "families":
+        _families(episodes, planners, families, guidance, policies, paths, json_output, json_file, markdown, figure, out,
+                  jobs)
+        return
+    if families is not None or guidance is not None or jobs != 1:
+        raise fail("--families, --guidance and --jobs belong to --suite families")
     config = BenchConfig(
-        planners=_split(planners),
+        planners=_split(planners or _PLANNERS),
         scenes=_split(scenes),
         episodes=episodes,
         policies_dir=policies,
         policy_paths=paths,
         missions_dir=missions,
     )
-    unknown = [k for k in paths if k not in ("rpf", "rpf-mean", "ppo")]
-    if unknown:
-        raise fail(f"--policy: {unknown[0]!r} is not a learned planner kind (rpf, rpf-mean, ppo)")
     try:
         plan = prepare(config)
     except BenchError as err:
@@ -92,6 +116,72 @@ def bench(
             errors.print(f"wrote {path}")
         return
     print_report(results, console)
+    for path in written:
+        console.print(f"wrote {path}")
+
+
+def _families(episodes, planners, families, guidance, policies, paths, json_output, json_file, markdown, figure,  # type: ignore[no-untyped-def]
+              out, jobs) -> None:
+    """``--suite families``: run, print the Markdown report (at most 110 columns), write what was asked for."""
+    from rpf_fly.bench.families import FAMILY_PLANNERS, FamiliesConfig, prepare_families, results_json, run_families
+    from rpf_fly.bench.families import to_markdown
+    from rpf_fly.bench.report import dumps, write_json
+    from rpf_fly.bench.runner import BenchError
+    from rpf_fly.cli.output import console as make_console
+    from rpf_fly.sim.generators import FAMILIES
+
+    if figure is not None:
+        raise fail("--figure: the families suite draws no figure (its tables are in the Markdown)")
+    config = FamiliesConfig(
+        planners=_split(planners) if planners else FAMILY_PLANNERS,
+        families=_split(families) if families else tuple(FAMILIES),
+        seeds=episodes,
+        guidance=_split(guidance) if guidance else None,
+        policies_dir=policies,
+        policy_paths=paths,
+    )
+    try:
+        plan = prepare_families(config)
+    except BenchError as err:
+        raise fail(f"rpf-fly bench: {err}")
+    console = make_console(pipe_width=110)
+    errors = make_console(stderr=True)
+    for reason in dict.fromkeys(plan.missing.values()):
+        errors.print(f"[yellow]missing: {reason}[/yellow]")
+    if jobs < 1:
+        raise fail(f"--jobs: expected at least 1, got {jobs}")
+    import functools
+
+    result = _run_with_progress(plan, functools.partial(run_families, jobs=jobs), errors)
+    command = f"rpf-fly bench --suite families --seeds {config.seeds}"
+    if config.families != tuple(FAMILIES):
+        command += f" --families {','.join(config.families)}"
+    if config.planners != FAMILY_PLANNERS:
+        command += f" --planners {','.join(config.planners)}"
+    if config.guidance is not None:
+        command += f" --guidance {','.join(config.guidance)}"
+    command += "".join(f" --policy {k}={v}" for k, v in paths.items())
+    if jobs != 1:
+        command += f" --jobs {jobs}"
+    results = results_json(result, command)
+    text = to_markdown(results)
+    written = []
+    if out is not None:
+        written.append(write_json(results, out / "families.json"))
+        (out / "families.md").write_text(text + "\n")
+        written.append(out / "families.md")
+    if json_file is not None:
+        written.append(write_json(results, json_file))
+    if markdown is not None:
+        markdown.parent.mkdir(parents=True, exist_ok=True)
+        markdown.write_text(text + "\n")
+        written.append(markdown)
+    if json_output:
+        typer.echo(dumps(results))
+        for path in written:
+            errors.print(f"wrote {path}")
+        return
+    console.print(text, markup=False, highlight=False, soft_wrap=True)
     for path in written:
         console.print(f"wrote {path}")
 

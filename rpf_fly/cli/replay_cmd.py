@@ -14,7 +14,7 @@ from typing import Optional
 import typer
 
 from rpf_fly.cli import app
-from rpf_fly.cli.errors import fail
+from rpf_fly.cli.errors import fail, read_log_or_fail
 
 
 @app.command()
@@ -32,14 +32,8 @@ def replay(
 ) -> None:
     """Replay LOG's mocap poses through the planners, each drone on the view it had; report divergences."""
     from rpf_fly.flight.replay import ReplayError, replay_log, replay_setup
-    from rpf_fly.log.reader import LogError, read_log
 
-    try:
-        data = read_log(log)
-    except LogError as err:
-        raise fail(f"{log}: {err}")
-    except OSError as err:
-        raise fail(f"{log}: {err.strerror or err}")
+    data = read_log_or_fail(log)
     try:
         setup = replay_setup(data, planner, policy, tolerance)
         result = replay_log(data, setup.mission, setup.factory, tolerance=setup.tolerance,

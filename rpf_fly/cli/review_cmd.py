@@ -9,7 +9,7 @@ from typing import Optional
 import typer
 
 from rpf_fly.cli import app
-from rpf_fly.cli.errors import fail
+from rpf_fly.cli.errors import fail, read_log_or_fail
 
 
 @app.command()
@@ -25,15 +25,10 @@ def review(
                                 "by a kill, with the summary and footer indexed readers need."),
 ) -> None:
     """Review a flight log: message rates and gaps per topic, events, the mission's metrics; plots and CSV."""
-    from rpf_fly.log.reader import LogError, read_log, salvage
+    from rpf_fly.log.reader import LogError, salvage
     from rpf_fly.log.review import export_csv, review as compute_review
 
-    try:
-        data = read_log(log)
-    except LogError as err:
-        raise fail(f"{log}: {err}")
-    except OSError as err:
-        raise fail(f"{log}: {err.strerror or err}")
+    data = read_log_or_fail(log)
     if salvage_to is not None:
         try:
             saved = salvage(log, salvage_to)
@@ -115,6 +110,9 @@ def _print_summary(result, plot: Optional[Path], csv_dir: Optional[Path]) -> Non
     if result.battery:
         console.print("battery: " + ", ".join(f"{name} {a:.2f} -> {c:.2f} V (lowest {b:.2f})"
                                                 for name, (a, b, c) in result.battery.items()))
+
+    for dongle in result.radio:
+        console.print(escape(dongle.line()))
 
     m = result.metrics
     if m is None:

@@ -22,6 +22,10 @@ def train(
     kind: str = typer.Option("rpf", "--kind", help="rpf (attention), rpf-mean (RPF-2) or ppo (heading baseline)."),
     no_attention: bool = typer.Option(False, "--no-attention", help="Same as --kind rpf-mean."),
     arena: str = typer.Option("both", "--arena", help="Training arenas: a, b or both."),
+    curriculum: str = typer.Option(
+        "", "--curriculum", help="Comma-separated scene families to train on instead of --arena (all: every family; "
+        "training seed stream, docs/bench.md)."
+    ),
     episodes: int = typer.Option(4000, "--episodes", help="Stop after this many finished arena episodes."),
     seed: int = typer.Option(0, "--seed", help="Seed of the weights, the scenes and the sampling."),
     arenas: int = typer.Option(48, "--arenas", help="Parallel arenas (6 drones each)."),
@@ -42,6 +46,13 @@ def train(
         raise fail(f"--kind: expected rpf, rpf-mean or ppo, got {kind!r}")
     if arena not in ("a", "b", "both"):
         raise fail(f"--arena: expected a, b or both, got {arena!r}")
+    from rpf_fly.sim.generators import FAMILIES
+
+    families = tuple(FAMILIES) if curriculum.strip() == "all" else tuple(
+        f.strip() for f in curriculum.split(",") if f.strip())
+    unknown = [f for f in families if f not in FAMILIES]
+    if unknown:
+        raise fail(f"--curriculum: unknown scene family {unknown[0]!r} (expected all or some of {', '.join(FAMILIES)})")
     if out.suffix != ".onnx":
         raise fail(f"--out: expected a path ending in .onnx, got {str(out)!r}")
     existing = [p for p in written_files(out) if p.exists()]
@@ -55,7 +66,8 @@ def train(
     from rpf_fly.learn.ppo import PPOConfig, Trainer
 
     radius = obstacle_radius if obstacle_radius is not None else (0.1 if kind == "ppo" else 0.5)
-    config = PPOConfig(seed=seed, kind=kind, arena=arena, episodes=episodes, n_arenas=arenas, obstacle_radius=radius)  # type: ignore[arg-type]
+    config = PPOConfig(seed=seed, kind=kind, arena=arena, curriculum=families, episodes=episodes, n_arenas=arenas,  # type: ignore[arg-type]
+                       obstacle_radius=radius)
     run_dir = out.with_suffix(".run")
     command = "rpf-fly train " + " ".join(shlex.quote(a) for a in sys.argv[2:]) if len(sys.argv) > 2 else "rpf-fly train"
     from rpf_fly.learn.card import git_commit

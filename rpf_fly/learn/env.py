@@ -27,6 +27,12 @@ distances (a drone is not punished for leaving a U-trap). With ``margin > 0`` th
 every surface ``margin`` closer (``PlannerConfig.margin``) and the reward knows it: ``-margin_penalty`` each step a
 drone is closer than ``r + margin`` to an obstacle or ``2r + margin`` to another drone without colliding.
 
+Scenes: the paper's arenas A and B (``arena``), or, with ``curriculum`` set, the scene families of
+:mod:`rpf_fly.sim.generators` drawn uniformly, each at a seed drawn from the environment's generator in the
+*training* seed stream (``split="train"``): the bench's families suite draws from the ``bench`` stream, so no bench
+scene is ever trained on. Family scenes have ``n_robots`` drones, and their boxes (walls) are padded into the
+per-arena obstacle arrays like the circles.
+
 A robot is done when it arrives or collides (a collided drone halts where it is and stays visible to the others).
 An arena resets with a freshly generated scene when all its robots are done or after ``max_steps``; the robots
 still flying then end as truncated (treated as terminal).
@@ -83,6 +89,9 @@ class EnvConfig:
     """Clearance beyond contact the planner keeps and the reward asks for (metres; the product flies 0.05)."""
     margin_penalty: float = 20.0
     """Per step inside ``r + margin`` of an obstacle or ``2r + margin`` of a drone (with ``margin > 0``)."""
+    curriculum: tuple[str, ...] = ()
+    """Scene families (rpf_fly.sim.generators.FAMILIES) to draw from, uniformly, instead of ``arena``; empty: the
+    paper's arenas A and B."""
 
     def planner_config(self) -> PlannerConfig:
         return PlannerConfig.preset(
@@ -130,12 +139,20 @@ class SwarmEnv:
         self.rng = np.random.default_rng(seed)
         self.planner = config.planner_config()
         b, n = config.n_arenas, config.n_robots
-        m = config.n_obstacles
+        m, k = self._capacity()
         self.centers = np.full((b, 1, m), FAR + 0j)
         self.radii = np.full((b, 1, m), 0.1)
-        empty = np.zeros((0,))
-        self.obstacles = ObstacleSet(self.centers, self.radii, empty.astype(complex), empty, empty)
+        if k:
+            self.box_center = np.full((b, 1, k), FAR + 0j)
+            self.box_half_x = np.full((b, 1, k), 0.1)
+            self.box_half_y = np.full((b, 1, k), 0.1)
+        else:
+            self.box_center = np.zeros((0,), complex)
+            self.box_half_x = self.box_half_y = np.zeros((0,))
+        self.obstacles = ObstacleSet(self.centers, self.radii, self.box_center, self.box_half_x, self.box_half_y)
         self.kinds = ["a"] * b
+        self.scene_seeds: list[tuple[str, int] | None] = [None] * b
+        """Per arena, the (family, training seed) of its current scene (None for the paper's arenas)."""
         self.world = World(
             np.zeros((b, n), complex), np.ones((b, n), complex), config.speed, config.dt, 0.0,
             np.tile([-1.0, 1.0], (b, 1)), np.tile([-1.0, 1.0], (b, 1)),
@@ -151,7 +168,7 @@ class SwarmEnv:
         self.t = np.zeros(b, dtype=int)
         self.guided = config.guidance == "path"
         if self.guided:  # per arena: corner nodes (padded far away, never chosen) and each drone's cost-to-go
-            v = m * CIRCLE_SIDES
+            v = m * CIRCLE_SIDES + 4 * k
             self.node = np.full((b, 1, v), FAR * (1 + 1j))
             self.cost = np.full((b, n, v), np.inf)
             self.start_path = np.zeros((b, n))
@@ -161,8 +178,29 @@ class SwarmEnv:
 
     # -------------------------------------------------------------------------------------------- scenes
 
+    def _capacity(self) -> tuple[int, int]:
+        """Circles and boxes an arena's padded obstacle arrays hold."""
+        c = self.config
+        if not c.curriculum:
+            return c.n_obstacles, 0
+        from rpf_fly.sim.generators import FAMILIES, GeneratorError
+
+        unknown = [f for f in c.curriculum if f not in FAMILIES]
+        if unknown:
+            raise GeneratorError(f"unknown scene family {unknown[0]!r} (expected some of {', '.join(FAMILIES)})")
+        return (max(FAMILIES[f].max_circles for f in c.curriculum),
+                max(FAMILIES[f].max_boxes for f in c.curriculum))
+
     def _scene(self) -> tuple[str, Scenario]:
         c = self.config
+        if c.curriculum:
+            from rpf_fly.sim.generators import generate
+
+            family = c.curriculum[int(self.rng.integers(len(c.curriculum)))]
+            seed = int(self.rng.integers(2**31))
+            self._scene_seed = (family, seed)
+            return family, generate(family, seed, split="train", n_drones=c.n_robots, safety_radius=c.safety_radius)
+        self._scene_seed = None
         kind = c.arena if c.arena != "both" else ("a" if self.rng.random() < 0.5 else "b")
         if kind == "a":
             scene = arena_a(
@@ -175,11 +213,22 @@ class SwarmEnv:
     def _reset_arena(self, b: int) -> None:
         kind, scene = self._scene()
         self.kinds[b] = kind
+        self.scene_seeds[b] = self._scene_seed
         m = scene.obstacles.n_circles
+        k = scene.obstacles.n_boxes
+        if m > self.centers.shape[-1] or k > (self.box_center.shape[-1] if self.box_center.ndim == 3 else 0):
+            raise ValueError(f"{kind} scene with {m} circles and {k} boxes exceeds the arena's obstacle arrays")
         self.centers[b, 0, :] = FAR + 0j
         self.centers[b, 0, :m] = scene.obstacles.centers
         self.radii[b, 0, :] = 0.1
         self.radii[b, 0, :m] = scene.obstacles.radii
+        if self.box_center.ndim == 3:
+            self.box_center[b, 0, :] = FAR + 0j
+            self.box_center[b, 0, :k] = scene.obstacles.box_center
+            self.box_half_x[b, 0, :] = 0.1
+            self.box_half_x[b, 0, :k] = scene.obstacles.box_half_x
+            self.box_half_y[b, 0, :] = 0.1
+            self.box_half_y[b, 0, :k] = scene.obstacles.box_half_y
         w = self.world
         w.position[b] = scene.starts
         w.goal[b] = scene.goals

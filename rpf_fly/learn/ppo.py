@@ -39,6 +39,9 @@ class PPOConfig:
     kind: Literal["rpf", "rpf-mean", "ppo"] = "rpf"
     """rpf: attention + gains; rpf-mean: mean embedding + gains (RPF-2); ppo: attention + heading change."""
     arena: Literal["a", "b", "both"] = "both"
+    curriculum: tuple[str, ...] = ()
+    """Scene families of rpf_fly.sim.generators (training seed stream) drawn instead of ``arena``; empty: the
+    paper's arenas."""
     episodes: int = 4000
     """Stop after this many finished arena episodes (each arena episode is one of the paper's episodes)."""
     max_updates: int = 10_000
@@ -88,6 +91,7 @@ class PPOConfig:
         return EnvConfig(
             n_arenas=self.n_arenas,
             arena=self.arena,
+            curriculum=tuple(self.curriculum),
             action="heading" if self.kind == "ppo" else "gains",
             gamma=self.gamma,
             max_neighbours=self.max_neighbours,

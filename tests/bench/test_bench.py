@@ -12,6 +12,10 @@ from rpf_fly.bench.report import print_report, results_json, to_markdown, write_
 from rpf_fly.bench.runner import BenchConfig, BenchError, prepare, run_bench
 from rpf_fly.cli import get_app
 
+# Its module and session fixtures fly once: the tests sharing them run on one xdist worker (pyproject: --dist
+# loadgroup).
+pytestmark = pytest.mark.xdist_group("bench_runs")
+
 ROOT = Path(__file__).resolve().parents[2]
 MISSIONS = ROOT / "missions"
 

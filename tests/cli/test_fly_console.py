@@ -3,6 +3,12 @@ final state, is not cut, and ends with its newline."""
 
 from __future__ import annotations
 
+import pytest
+
+# Its module and session fixtures fly once: the tests sharing them run on one xdist worker (pyproject: --dist
+# loadgroup).
+pytestmark = pytest.mark.xdist_group("cli_flights")
+
 
 def final_table(stderr: str) -> list[str]:
     """The lines of the last table on stderr (from its title to its bottom border)."""

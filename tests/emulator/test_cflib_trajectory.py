@@ -97,7 +97,10 @@ def test_figure_eights_are_flown_on_the_polynomial(make_world: MakeWorld, toc_ca
 
     Tolerance: the commands take effect at the start of the fake's 10 ms tick they arrive in, so a drone starts up
     to 10 ms early (up to 9 mm at the figure's 0.9 m/s), an error that decays with the 0.25 s tracking time
-    constant; after that it stays within 4 mm (the one-tick lag of the velocity feed-forward and the tracking)."""
+    constant; after that it stays within 4 mm (the one-tick lag of the velocity feed-forward and the tracking).
+    The world steps on the wall clock, so a step that wakes late adds its lateness times the speed (B flies at up
+    to 1.2 m/s: 2 ms late is 2.4 mm; CI once saw 4.1 mm): 12 mm at the start, 6 mm after. A wrong polynomial, time
+    scale or relative frame is off by centimetres."""
     world = make_world({A: FakeDroneConfig.at(0.0, 0.0), B: FakeDroneConfig.at(0.0, 2.0)})
     pieces = figure_eight(height=0.5)
     small = figure_eight(a=0.3, b=0.15, height=0.5)
@@ -141,7 +144,7 @@ def test_figure_eights_are_flown_on_the_polynomial(make_world: MakeWorld, toc_ca
                   for snap in flying]
         start_error = max(e for t, e in errors if t < 0.25)
         later_error = max(e for t, e in errors if t >= 0.25)
-        assert start_error < 0.009 and later_error < 0.004, f"{address:X}: {start_error * 1000:.1f} mm, " \
+        assert start_error < 0.012 and later_error < 0.006, f"{address:X}: {start_error * 1000:.1f} mm, " \
                                                             f"{later_error * 1000:.1f} mm off the polynomial"
         # it went round the figure: 0.4 m (A) or 0.3 m (B) either side of the start
         spread = max(math.dist(snap.position[:2], flying[0].position[:2]) for snap in flying)

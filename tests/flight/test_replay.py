@@ -27,6 +27,10 @@ from rpf_fly.log.reader import LogMessage, read_log
 from rpf_fly.mission import parse_mission
 from rpf_fly.mocap.natnet_client import NatNetClient
 
+# Its module and session fixtures fly once: the tests sharing them run on one xdist worker (pyproject: --dist
+# loadgroup).
+pytestmark = pytest.mark.xdist_group("replay_logs")
+
 ROOT = Path(__file__).resolve().parents[2]
 RPF_POLICY = ROOT / "policies" / "rpf.onnx"
 runner = CliRunner()

@@ -51,3 +51,11 @@ def test_force_goes_past_the_check(tmp_path):
     result = runner.invoke(get_app(), ["train", "--out", str(out), "--force", "--resume"])
     assert result.exit_code == 2, result.output
     assert "--resume: no checkpoint" in result.stderr and "refusing" not in result.stderr
+
+
+def test_an_unknown_curriculum_family_is_refused_before_training(tmp_path):
+    out = tmp_path / "p.onnx"
+    result = runner.invoke(get_app(), ["train", "--out", str(out), "--curriculum", "corridor,maze", "--episodes", "1"])
+    assert result.exit_code == 2, result.output
+    assert "maze" in result.stderr and "corridor" in result.stderr
+    assert not out.with_suffix(".run").exists()

@@ -1,5 +1,8 @@
 """A short training run learns: the deterministic policy's return on fixed scenes rises clearly above the
-untrained policy's, and the exported ONNX policy matches torch (about a minute on 2 cores)."""
+untrained policy's, and the exported ONNX policy matches torch (about 15 s on 2 cores).
+
+Sized for the suite's time: 20 updates of 8 arenas (seed 0) raise the mean return from 34 to 153 and the success
+rate from 0.79 to 0.88 (2026-12-01); the assertion asks for +40."""
 
 import dataclasses
 
@@ -10,12 +13,12 @@ from rpf_fly.learn.export import check_parity, export_onnx
 from rpf_fly.learn.ppo import PPOConfig, Trainer
 from rpf_fly.planning.onnx_policy import OnnxPolicy
 
-UPDATES = 40
+UPDATES = 20
 
 
 def test_short_training_raises_return_and_exports_with_parity(tmp_path):
     config = PPOConfig(
-        seed=0, arena="both", n_arenas=16, episodes=10**9, max_updates=UPDATES, eval_every=10**9,
+        seed=0, arena="both", n_arenas=8, episodes=10**9, max_updates=UPDATES, eval_every=10**9,
         checkpoint_every=10**9,
     )
     trainer = Trainer(config, tmp_path / "run")

@@ -15,6 +15,10 @@ from mcap.reader import make_reader
 
 from rpf_fly.log.reader import read_log, salvage
 
+# Its module and session fixtures fly once: the tests sharing them run on one xdist worker (pyproject: --dist
+# loadgroup).
+pytestmark = pytest.mark.xdist_group("crash_log")
+
 CHILD = textwrap.dedent(
     """
     import sys, time

@@ -14,7 +14,7 @@ from mcap.writer import Writer
 from rpf_fly.log.reader import read_log
 from rpf_fly.log.review import review
 
-from conftest import MISSIONS, run_cli, sim_log
+from sim_logs import MISSIONS, run_cli, sim_log
 
 
 def assert_close(a, b, path="$"):  # type: ignore[no-untyped-def]
