@@ -99,7 +99,7 @@ CLI_MISSION = """\
 name: short-3
 arena: {x: [-2.0, 2.0], y: [-2.0, 2.0], z: [0.0, 1.5]}
 flight: {height: 0.5, speed: 0.5, rate_hz: 10, goal_tolerance: 0.1, takeoff_s: 1.0, land_s: 1.0, timeout_s: 60}
-planner: {kind: apf}
+planner: {kind: apf, margin: 0}
 mocap: {kind: sim, rate_hz: 100}
 obstacles:
   - {shape: circle, center: [0.0, 0.9], radius: 0.1}

@@ -19,11 +19,14 @@ from rpf_fly.mission import parse_mission
 from rpf_fly.sim.planners import make_planner
 from rpf_fly.sim.scenario import obstacle_set
 
+# margin 0: with the product's 0.05 m (planner.margin) the outer drones of this line of goals 0.6 m apart circle
+# their goals before they settle (arrived drones repel as if 5 cm closer), and the flight takes 17.5 s instead of
+# 7.5 s. That is issue #11's open settling problem (docs/algorithm.md), not what these flight tests are about.
 SHORT_MISSION = """\
 name: short-3
 arena: {x: [-2.0, 2.0], y: [-2.0, 2.0], z: [0.0, 1.5]}
 flight: {height: 0.5, speed: 0.5, rate_hz: 10, goal_tolerance: 0.1, takeoff_s: 1.0, land_s: 1.0, timeout_s: 30}
-planner: {kind: apf}
+planner: {kind: apf, margin: 0}
 mocap: {kind: sim, rate_hz: 100}
 obstacles:
   - {shape: circle, center: [0.0, 0.9], radius: 0.1}

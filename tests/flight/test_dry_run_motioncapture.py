@@ -24,7 +24,7 @@ MOCK_MISSION = """\
 name: mock-3
 arena: {x: [-2.0, 2.0], y: [-2.0, 2.0], z: [0.0, 1.5]}
 flight: {height: 0.5, speed: 0.5, rate_hz: 10, goal_tolerance: 0.1, takeoff_s: 1.0, land_s: 1.0, timeout_s: 30}
-planner: {kind: apf}
+planner: {kind: apf, margin: 0}
 mocap: {kind: motioncapture, type: mock, up_axis: y}
 obstacles:
   - {shape: circle, center: [0.0, 0.9], radius: 0.1}

@@ -47,7 +47,7 @@ def apf_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
 @pytest.fixture(scope="module")
 def rpf_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """The same mission flown with the shipped RPF-1 policy (onnxruntime, batched in the loop)."""
-    text = SHORT_MISSION.replace("planner: {kind: apf}", f"planner: {{kind: rpf, policy: {RPF_POLICY}}}")
+    text = SHORT_MISSION.replace("planner: {kind: apf, margin: 0}", f"planner: {{kind: rpf, policy: {RPF_POLICY}}}")
     flight = fly(parse_mission(text), tmp_path_factory.mktemp("rpf"))
     assert set(flight.report.outcomes.values()) == {"reached"}
     return flight.log_path

@@ -75,7 +75,7 @@ def test_stale_telemetry_of_a_linked_drone_is_an_event():
 
 
 def test_a_separation_hold_resumes_when_the_pair_is_clear_again():
-    mission_text = SHORT_MISSION.replace("planner: {kind: apf}", "planner: {kind: apf}\nsafety: {on_separation: hold}")
+    mission_text = SHORT_MISSION.replace("planner: {kind: apf, margin: 0}", "planner: {kind: apf, margin: 0}\nsafety: {on_separation: hold}")
     _, agents, tracker, supervisor = setup(mission_text)
     close = dict(POSITIONS, cf2=(-1.0, -0.45, 0.5))  # 0.15 m from cf1 < 2r = 0.2 m
     see(tracker, 1, 0.0, close)
