@@ -3,8 +3,10 @@
     python tools/bench_planner.py [--repeats 15] [--json out.json]
     python tools/bench_planner.py --cadence      # the flight tick's cold start at the flight's cadence
 
-1. Per-drone plan step (fixed gains): one drone planned from its own view, as the flight loop does, on views taken
-   mid-flight from the paper missions. Median over repeats of the mean time per call.
+1. Per-drone plan step (fixed gains, the apf kind's defaults: guidance path, margin 0.05): one drone planned from
+   its own view, as the flight loop does, on views taken mid-flight from the paper missions. Median over repeats of
+   the mean time per call. Then RPF's step with guidance beside the same step without and the onnxruntime call
+   alone (docs/algorithm.md, *Global guidance*).
 2. One tick for 10 and 100 drones: every drone planned from its own view, (a) one call per drone as the flight
    loop does, view building included, and (b) all drones in one batched call.
 3. Batched simulation: many arenas stepped together (views, plan, advance), in robot-steps per second.
@@ -83,6 +85,38 @@ def bench_per_drone(repeats: int, kind: str = "apf") -> dict[str, float]:
             planner = make_planner(settings, planner.obstacles)
         per_view = [timed(lambda v=v: planner.step(v), 300, repeats) for v in views]
         out[name] = statistics.median(per_view)
+    return out
+
+
+def bench_guidance(repeats: int) -> dict[str, dict[str, float]]:
+    """Per-drone plan step of RPF (policies/rpf.onnx) with guidance path and margin 0.05, beside the same step
+    without guidance and the onnxruntime call alone (``OnnxPolicy.act`` on the step's observation), on each
+    mission's mid-flight views (u-trap: the U-shaped trap, where the goal is hidden)."""
+    from dataclasses import replace
+
+    from rpf_fly.planning.observation import build_observation
+    from rpf_fly.planning.planner import sense_obstacles
+
+    out: dict[str, dict[str, float]] = {}
+    for name in ("lab-3", "arena-a-6", "u-trap"):
+        _, views = midflight_views(name)
+        mission = load_mission(ROOT / "missions" / f"{name}.yaml")
+        scenario = scenario_from_mission(mission, 0)
+        base = replace(mission.planner, kind="rpf", policy=ROOT / "policies" / "rpf.onnx")
+        bounds = (scenario.arena_x, scenario.arena_y)
+        guided = make_planner(replace(base, guidance="path", margin=0.05), scenario.obstacles, bounds, scenario.goals)
+        plain = make_planner(replace(base, guidance="none", margin=0.05), scenario.obstacles, bounds, scenario.goals)
+        policy = guided.gains.policy
+        observations = [build_observation(v, sense_obstacles(v, guided.obstacles, guided.config)[0], guided.config,
+                                          policy.max_neighbours) for v in views]
+        hidden = sum(guided.step(v).waypoint != v.goal for v in views)
+        out[name] = {
+            "with_guidance": statistics.median(timed(lambda v=v: guided.step(v), 300, repeats) for v in views),
+            "without_guidance": statistics.median(timed(lambda v=v: plain.step(v), 300, repeats) for v in views),
+            "onnxruntime_alone": statistics.median(timed(lambda o=o: policy.act(o), 300, repeats) for o in observations),
+            "guided_views": float(hidden),
+            "views": float(len(views)),
+        }
     return out
 
 
@@ -244,6 +278,7 @@ def main(argv: list[str] | None = None) -> int:
 
     per_drone = bench_per_drone(args.repeats)
     per_drone_rpf = bench_per_drone(args.repeats, "rpf")
+    guidance = bench_guidance(args.repeats)
     ticks = {n: bench_tick(n, args.repeats) for n in (10, 100)}
     sim = bench_batched_sim(args.repeats)
     flight_tick = bench_flight_tick(args.repeats)
@@ -254,6 +289,13 @@ def main(argv: list[str] | None = None) -> int:
     print("per-drone plan step, ONNX policy policies/rpf.onnx (median; goal <= 100 us)")
     for name, s in per_drone_rpf.items():
         print(f"  {name:14s} {s * 1e6:8.1f} us")
+    print("per-drone plan step of RPF with guidance path + margin 0.05, beside the onnxruntime call alone (median)")
+    for name, g in guidance.items():
+        print(
+            f"  {name:14s} with guidance {g['with_guidance'] * 1e6:7.1f} us, without {g['without_guidance'] * 1e6:7.1f} us,"
+            f" onnxruntime alone {g['onnxruntime_alone'] * 1e6:6.1f} us: {g['with_guidance'] / g['onnxruntime_alone']:.2f}x"
+            f" ({g['guided_views']:.0f} of {g['views']:.0f} drones with a hidden goal)"
+        )
     print("one tick, every drone from its own view (goal: 100 drones <= 5 ms)")
     for n, t in ticks.items():
         print(
@@ -275,6 +317,7 @@ def main(argv: list[str] | None = None) -> int:
                 {
                     "per_drone_step_s": per_drone,
                     "per_drone_step_rpf_onnx_s": per_drone_rpf,
+                    "per_drone_step_rpf_guidance_s": guidance,
                     "tick_s": {str(n): t for n, t in ticks.items()},
                     "flight_tick_10_drones_s": flight_tick,
                     "batched_sim_robot_steps_per_s": sim,

@@ -71,15 +71,15 @@ def _check_radios(mission) -> None:  # type: ignore[no-untyped-def]
 def _planner_factory(mission, mission_path: Path):  # type: ignore[no-untyped-def]
     """Each drone gets its own planner instance (its own ONNX session for learned planners)."""
     from rpf_fly.planning.onnx_policy import PolicyError
-    from rpf_fly.sim.planners import UnsupportedPlanner, make_planner
+    from rpf_fly.sim.planners import UnsupportedPlanner, mission_planner
     from rpf_fly.sim.scenario import obstacle_set
 
     obstacles = obstacle_set(mission.obstacles)
     try:
-        make_planner(mission.planner, obstacles)  # fail early, before anything connects
+        mission_planner(mission, obstacles=obstacles)  # fail early, before anything connects
     except (UnsupportedPlanner, PolicyError) as err:
         raise fail(f"{mission_path}:0: planner.policy: {err}")
-    return lambda drone: make_planner(mission.planner, obstacles)
+    return lambda drone: mission_planner(mission, obstacles=obstacles)
 
 
 @app.command()

@@ -23,6 +23,10 @@ def sim(
     no_wall_following: bool = typer.Option(
         False, "--no-wall-following", help="Vanilla APF direction: no wall-following, no soft rule."
     ),
+    guidance: Optional[str] = typer.Option(
+        None, "--guidance", help="Override planner.guidance: none, or path (global guidance around the obstacles)."
+    ),
+    margin: Optional[float] = typer.Option(None, "--margin", help="Override planner.margin (m)."),
     seed: int = typer.Option(0, "--seed", help="Seed of the mission's start jitter (sim section)."),
     json_output: bool = typer.Option(False, "--json", help="Print the metrics JSON (docs/metrics.md) only."),
     plot: Optional[Path] = typer.Option(None, "--plot", help="Write the XY tracks to a PNG: a colour per drone, the "
@@ -37,14 +41,18 @@ def sim(
 
     try:
         loaded = load_mission(mission)
-        overrides = {"wall_following": False} if no_wall_following else {}
+        overrides: dict[str, object] = {"wall_following": False} if no_wall_following else {}
+        if guidance is not None:
+            overrides["guidance"] = guidance
+        if margin is not None:
+            overrides["margin"] = margin
         if planner is not None or policy is not None or overrides:
             loaded = with_planner(loaded, planner or loaded.planner.kind, policy, **overrides)
     except MissionError as err:
         raise fail(str(err))
     scenario = scenario_from_mission(loaded, seed)
     try:
-        chosen = make_planner(loaded.planner, scenario.obstacles)
+        chosen = make_planner(loaded.planner, scenario.obstacles, (scenario.arena_x, scenario.arena_y), scenario.goals)
     except (UnsupportedPlanner, PolicyError) as err:
         raise fail(f"{mission}:0: planner.policy: {err}")
     params = SimParams(loaded.flight.speed, loaded.flight.dt, loaded.flight.goal_tolerance, loaded.sim.time_limit_s)
@@ -60,6 +68,7 @@ def sim(
         mission=loaded.name,
         planner=loaded.planner.kind,
         seed=seed,
+        margin=loaded.planner.margin_m,
     )
     if log is not None:
         from rpf_fly.log.sim_log import write_sim_log
@@ -75,10 +84,10 @@ def sim(
     if json_output:
         typer.echo(json.dumps(metrics.to_json_dict()))
         return
-    _print_table(metrics, result, plot)
+    _print_table(metrics, result, plot, loaded.planner.guidance_mode)
 
 
-def _print_table(metrics, result, plot: Optional[Path]) -> None:  # type: ignore[no-untyped-def]
+def _print_table(metrics, result, plot: Optional[Path], guidance: str = "none") -> None:  # type: ignore[no-untyped-def]
     from rich.markup import escape
     from rich.table import Table
 
@@ -112,6 +121,16 @@ def _print_table(metrics, result, plot: Optional[Path]) -> None:  # type: ignore
         f"makespan {fmt(metrics.makespan_s, ' s', 1)}, min separation {fmt(metrics.min_separation_m, ' m', 3)}, "
         f"min obstacle clearance {fmt(metrics.min_obstacle_clearance_m, ' m', 3)}"
     )
+    if metrics.margin_m > 0:
+        breaches = metrics.margin_breaches_drone_drone + metrics.margin_breaches_drone_obstacle
+        console.print(
+            f"guidance {guidance}, margin {metrics.margin_m:g} m: "
+            + ("held" if metrics.margin_held else f"[yellow]broken {breaches} times[/yellow] "
+               f"(pairs within 2r + margin {metrics.margin_breaches_drone_drone}, "
+               f"obstacles within r + margin {metrics.margin_breaches_drone_obstacle})")
+        )
+    else:
+        console.print(f"guidance {guidance}, margin 0")
     clamped = [f"{name} ({count} steps)" for name, count in zip(metrics_names(metrics), result.geofence_clamps) if count]
     if clamped:
         console.print(f"[yellow]geofence: held at the arena boundary: {', '.join(clamped)}[/yellow]")

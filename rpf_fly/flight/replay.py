@@ -570,7 +570,7 @@ def replay_setup(data: LogData, kind: Optional[str] = None, policy: Optional[Pat
     from rpf_fly.planning.gains import FixedGains
     from rpf_fly.planning.onnx_policy import PolicyError
     from rpf_fly.planning.planner import Planner
-    from rpf_fly.sim.planners import UnsupportedPlanner, make_planner
+    from rpf_fly.sim.planners import UnsupportedPlanner, mission_planner
     from rpf_fly.sim.scenario import obstacle_set
 
     log = data.path
@@ -600,11 +600,11 @@ def replay_setup(data: LogData, kind: Optional[str] = None, policy: Optional[Pat
                         "flight's own planner; give --policy with the flown file")
     obstacles = obstacle_set(mission.obstacles)
     try:
-        probe = make_planner(mission.planner, obstacles)
+        probe = mission_planner(mission, obstacles=obstacles)
     except (UnsupportedPlanner, PolicyError) as err:
         raise ReplayError(f"{'--policy' if policy is not None else 'planner.policy'}: {err}") from None
     fixed = isinstance(probe, Planner) and isinstance(probe.gains, FixedGains)
     default_tolerance = FIXED_GAINS_TOLERANCE if fixed or mission.planner.policy is None else ONNX_TOLERANCE
     settings = mission.planner
-    return ReplaySetup(mission, lambda drone: make_planner(settings, obstacles), same,
+    return ReplaySetup(mission, lambda drone: mission_planner(mission, settings, obstacles), same,
                        default_tolerance if tolerance is None else tolerance, warnings)

@@ -25,6 +25,14 @@ Scenes: the paper's arenas A and B (``arena``), or, with ``curriculum`` set, the
 scene is ever trained on. Family scenes have ``n_robots`` drones, and their boxes (walls) are padded into the
 per-arena obstacle arrays like the circles.
 
+Guidance and margin (``EnvConfig.guidance``, ``EnvConfig.margin``; both off by default, the paper's environment):
+with ``guidance="path"`` each arena's visibility graph is built at its reset (the obstacles are static), every
+step pulls each drone toward its next visible waypoint exactly as :class:`~rpf_fly.planning.Planner` does, and
+``d_g`` in ``R_p`` and ``d_s`` in ``R_m`` are path lengths around the inflated obstacles instead of straight
+distances (a drone is not punished for leaving a U-trap). With ``margin > 0`` the planner and the observation see
+every surface ``margin`` closer (``PlannerConfig.margin``) and the reward knows it: ``-margin_penalty`` each step a
+drone is closer than ``r + margin`` to an obstacle or ``2r + margin`` to another drone without colliding.
+
 A robot is done when it arrives or collides (a collided drone halts where it is and stays visible to the others).
 An arena resets with a freshly generated scene when all its robots are done or after ``max_steps``; the robots
 still flying then end as truncated (treated as terminal).
@@ -32,12 +40,13 @@ still flying then end as truncated (treated as terminal).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Literal
 
 import numpy as np
 
 from rpf_fly.planning.config import PlannerConfig
+from rpf_fly.planning.guidance import CIRCLE_SIDES, Guidance, Inflated, next_waypoint
 from rpf_fly.planning.obstacles import FAR, ObstacleSet, nearest_obstacle
 from rpf_fly.planning.observation import Observation, build_observation
 from rpf_fly.planning.planner import apf_step, sense_obstacles
@@ -77,6 +86,12 @@ class EnvConfig:
     curriculum: tuple[str, ...] = ()
     """Scene families (rpf_fly.sim.generators.FAMILIES) to draw from, uniformly, instead of ``arena``; empty: the
     paper's arenas A and B."""
+    guidance: Literal["none", "path"] = "none"
+    """``path``: the attraction pulls at each drone's next visible waypoint (graphs built per arena at reset)."""
+    margin: float = 0.0
+    """Clearance beyond contact the planner keeps and the reward asks for (metres; the product flies 0.05)."""
+    margin_penalty: float = 20.0
+    """Per step inside ``r + margin`` of an obstacle or ``2r + margin`` of a drone (with ``margin > 0``)."""
 
     def planner_config(self) -> PlannerConfig:
         return PlannerConfig.preset(
@@ -84,6 +99,8 @@ class EnvConfig:
             safety_radius=self.safety_radius,
             sensing_range=self.sensing_range,
             influence_range=self.influence_range,
+            guidance=self.guidance,
+            margin=self.margin,
         )
 
 
@@ -149,6 +166,12 @@ class SwarmEnv:
         self.collided = np.zeros((b, n), dtype=bool)
         self.returns = np.zeros((b, n))
         self.t = np.zeros(b, dtype=int)
+        self.guided = config.guidance == "path"
+        if self.guided:  # per arena: corner nodes (padded far away, never chosen) and each drone's cost-to-go
+            v = m * CIRCLE_SIDES + 4 * k  # a polygon per circle, four corners per box (wall)
+            self.node = np.full((b, 1, v), FAR * (1 + 1j))
+            self.cost = np.full((b, n, v), np.inf)
+            self.start_path = np.zeros((b, n))
         for arena in range(b):
             self._reset_arena(arena)
         self._observe()
@@ -217,6 +240,15 @@ class SwarmEnv:
         w._lo_x[b], w._hi_x[b] = scene.arena_x
         w._lo_y[b], w._hi_y[b] = scene.arena_y
         self.start[b] = scene.starts
+        if self.guided:
+            self.inflated = None  # rebuilt from the new obstacles at the next observation
+            guide = Guidance(scene.obstacles, self.planner.safety_radius + self.planner.margin, (scene.arena_x, scene.arena_y))
+            v = guide.nodes.shape[0]
+            self.node[b, 0, :] = FAR * (1 + 1j)
+            self.node[b, 0, :v] = guide.nodes
+            self.cost[b] = np.inf
+            self.cost[b, :, :v] = guide.rows(scene.goals)
+            self.start_path[b] = guide.waypoint(scene.starts, scene.goals)[1]
         self.path[b] = 0.0
         self.done[b] = False
         self.collided[b] = False
@@ -225,13 +257,28 @@ class SwarmEnv:
 
     # ------------------------------------------------------------------------------------------ stepping
 
-    def _observe(self) -> None:
+    def _waypoints(self, position: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Each drone's next visible waypoint and remaining path length (guidance on)."""
+        if self.inflated is None:
+            self.inflated = Inflated.of(self.obstacles, self.planner.safety_radius + self.planner.margin)
+            self.wide = self.inflated.axis()
+        return next_waypoint(position, self.world.goal, self.node, self.cost, self.inflated, self.wide)
+
+    def _observe(self, guided: tuple[np.ndarray, np.ndarray] | None = None) -> None:
+        """The views and observations of the current state (``guided``: its waypoints, already computed)."""
         self.view = self.world.views(self.config.sensing_range)
         self.nearest, self.lambda_mask = sense_obstacles(self.view, self.obstacles, self.planner)
-        self.observation = build_observation(self.view, self.nearest, self.planner, self.config.max_neighbours)
+        remaining = None
+        if self.guided:
+            waypoint, remaining = guided if guided is not None else self._waypoints(self.world.position)
+            self.view = replace(self.view, goal=waypoint)
+            self.remaining = remaining
+        self.observation = build_observation(
+            self.view, self.nearest, self.planner, self.config.max_neighbours, remaining
+        )
 
-    def _potential(self, position: np.ndarray) -> np.ndarray:
-        d_g = abs(self.world.goal - position)
+    def _potential(self, position: np.ndarray, d_g: np.ndarray | None = None) -> np.ndarray:
+        d_g = abs(self.world.goal - position) if d_g is None else d_g
         return np.maximum(1.0 - d_g / self.config.d_m, 0.0)
 
     def directions(self, action: np.ndarray) -> np.ndarray:
@@ -250,25 +297,31 @@ class SwarmEnv:
         valid = ~self.done
         before = w.position.copy()
         heading_before = w.heading.copy()
-        potential_before = self._potential(before)
+        potential_before = self._potential(before, self.remaining if self.guided else None)
         w.advance(self.directions(action))
         moved = w.position - before
         self.path += abs(moved)
 
         r = c.safety_radius
         arrived_now = valid & w.arrived
-        straight = np.maximum(abs(w.goal - self.start), 1e-6)
+        straight = np.maximum(self.start_path if self.guided else abs(w.goal - self.start), 1e-6)
         reward = np.where(arrived_now, 300.0 - 100.0 * self.path / straight, 0.0)
         turned = (abs(moved) > 0) & (dot(heading_before, w.heading) < np.cos(np.pi / 4))
         reward -= 5.0 * turned
         clearance = nearest_obstacle(w.position, self.obstacles).distance
         reward -= np.where(clearance < r, c.collision_penalty, np.where(clearance < 2 * r, 20.0, 0.0))
-        hit_robot = nearest_neighbour_distance(w.position) < 2 * r
+        separation = nearest_neighbour_distance(w.position)
+        hit_robot = separation < 2 * r
         reward -= c.collision_penalty * hit_robot
+        if c.margin > 0:  # the margin the planner keeps, asked of the gains too
+            near = ((clearance >= r) & (clearance < r + c.margin)) | (~hit_robot & (separation < 2 * r + c.margin))
+            reward -= c.margin_penalty * near
+        after = self._waypoints(w.position) if self.guided else None
+        d_after = None if after is None else after[1]
         if c.progress_reward == "potential":
-            reward += c.gamma * self._potential(w.position) - potential_before
+            reward += c.gamma * self._potential(w.position, d_after) - potential_before
         else:
-            d_g = abs(w.goal - w.position)
+            d_g = abs(w.goal - w.position) if d_after is None else d_after
             reward += np.where(d_g < c.d_m, 1.0 - d_g / c.d_m, 0.0)
         reward = reward * valid
 
@@ -294,5 +347,5 @@ class SwarmEnv:
                 )
             )
             self._reset_arena(b)
-        self._observe()
+        self._observe(after if len(finished) == 0 else None)
         return StepResult(self.observation, reward, done, valid, episodes)

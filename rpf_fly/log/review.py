@@ -265,6 +265,7 @@ def metrics_of(data: LogData) -> Metrics:
         mission=mission.get("name", ""),
         planner=mission.get("planner", ""),
         seed=seed,
+        margin=float(scenario.get("margin", 0.0)),  # logs written before planner.margin: none
     )
 
 

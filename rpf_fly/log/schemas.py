@@ -798,6 +798,7 @@ def scenario_metadata(mission: Any, scenario: Any = None) -> dict[str, str]:
         "dt": float(mission.flight.dt),
         "goal_tolerance": float(mission.flight.goal_tolerance),
         "safety_radius": float(mission.planner.safety_radius),
+        "margin": float(mission.planner.margin_m),
         "speed": float(mission.flight.speed),
         "height": float(mission.flight.height),
     }

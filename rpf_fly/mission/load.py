@@ -330,6 +330,8 @@ PLANNER_SPEC: dict[str, tuple[str, Reader]] = {
     "neighbour_aggregate": ("neighbour_aggregate", _choice(("sum", "mean"))),
     "eta": ("eta", _num(NON_NEGATIVE)),
     "lambda": ("lam", _num(NON_NEGATIVE)),
+    "guidance": ("guidance", _choice(m.GUIDANCE_MODES)),
+    "margin": ("margin", _num(NON_NEGATIVE)),
 }
 MOCAP_SPEC: dict[str, tuple[str, Reader]] = {
     "kind": ("kind", lambda c, n: _mocap_kind(c, n)),

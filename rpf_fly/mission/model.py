@@ -20,6 +20,29 @@ PLANNER_KINDS = ("apf", "apf-paper", "rpf", "rpf-mean", "ppo", "orca")
 
 POLICY_KINDS = ("rpf", "rpf-mean", "ppo")
 
+GUIDANCE_MODES = ("none", "path")
+"""``planner.guidance``: ``none`` (the attraction pulls at the goal) or ``path`` (at the next visible waypoint of the
+shortest path around the inflated obstacles: docs/algorithm.md, *Global guidance*)."""
+
+PAPER_KINDS = ("apf-paper", "rpf", "rpf-mean", "ppo")
+"""The planners as the paper wrote them (RPF-1, RPF-2, the PPO baseline, the literal APF): kept for reproduction,
+so without guidance and margin unless a mission asks (as is a planner with ``preset: paper``)."""
+
+PRODUCT_MARGIN_M = 0.05
+"""``planner.margin`` of every other planner: a Crazyflie tracks its setpoint within 2-5 cm."""
+
+
+def default_guidance(kind: str, preset: str = "robust") -> str:
+    """``path`` for the product's fixed-gain planner (``apf``, robust preset), ``none`` for the paper's planners and
+    the ORCA baseline (the bench turns it on with ``planner.guidance``)."""
+    return "path" if kind == "apf" and preset == "robust" else "none"
+
+
+def default_margin(kind: str, preset: str = "robust") -> float:
+    """0 for the paper's planners (bit-identical reproduction), :data:`PRODUCT_MARGIN_M` otherwise (ORCA kept its
+    0.05 m before the key existed)."""
+    return 0.0 if kind in PAPER_KINDS or preset == "paper" else PRODUCT_MARGIN_M
+
 
 @dataclass(frozen=True)
 class Arena:
@@ -80,6 +103,20 @@ class PlannerSettings:
     neighbour_aggregate: Literal["sum", "mean"] = "sum"
     eta: float = 0.05
     lam: float = 2.0
+    guidance: Optional[Literal["none", "path"]] = None
+    """``planner.guidance``; None: the kind's default (:func:`default_guidance`), see :attr:`guidance_mode`."""
+    margin: Optional[float] = None
+    """``planner.margin`` (m); None: the kind's default (:func:`default_margin`), see :attr:`margin_m`."""
+
+    @property
+    def guidance_mode(self) -> str:
+        """The guidance this planner flies with: the mission's, else its kind's default."""
+        return self.guidance if self.guidance is not None else default_guidance(self.kind, self.preset)
+
+    @property
+    def margin_m(self) -> float:
+        """The margin this planner keeps (metres): the mission's, else its kind's default."""
+        return self.margin if self.margin is not None else default_margin(self.kind, self.preset)
 
 
 @dataclass(frozen=True)

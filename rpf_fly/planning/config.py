@@ -45,6 +45,14 @@ class PlannerConfig:
     0.05-0.1 m/s as mocap sees it; moving drones fly at the mission speed (0.5 m/s)."""
     min_distance: float = 1.0e-3
     """Distances are clamped to this (metres) inside the force formulas so overlaps give a finite, outward push."""
+    margin: float = 0.0
+    """Clearance kept beyond contact (metres): the forces, the soft rule, the bend of mode A and the observation see
+    every obstacle surface and every other drone ``margin`` closer than it is, so the planner keeps drones
+    ``2r + margin`` apart and ``r + margin`` from obstacles where it kept ``2r`` and ``r`` (docs/algorithm.md,
+    *Margin*). 0 is the paper's planner, bit for bit."""
+    guidance: Literal["none", "path"] = "none"
+    """``path``: the attraction pulls toward the next waypoint of the shortest path around the obstacles inflated by
+    ``r + margin`` that the drone can see, instead of straight at the goal (:mod:`rpf_fly.planning.guidance`)."""
 
     @staticmethod
     def robust(**overrides: object) -> "PlannerConfig":

@@ -6,6 +6,10 @@
   outward surface normal;
 - inter-robot, ``F_in = sum_j (0.5 - lambda/d_ji) (p_j - p) / d_ji`` over the visible neighbours (``d_ji < d_r``).
 
+With ``config.margin`` ``m > 0`` the planner measures from surfaces grown by ``m``: ``d_o - m`` in the repulsion
+(the caller passes the shifted :class:`NearestObstacle`, :func:`perceived`) and ``d_ji - m`` in the inter-robot
+coefficient (the direction stays the true one).
+
 Gains ``eta`` and ``lambda`` broadcast against the leading shape, so a policy can set them per robot.
 """
 
@@ -26,6 +30,13 @@ def attractive(position: np.ndarray, goal: np.ndarray) -> tuple[np.ndarray, np.n
     delta = goal - position
     d_g = abs(delta)
     return delta / (d_g + TINY), d_g
+
+
+def perceived(nearest: NearestObstacle, config: PlannerConfig) -> NearestObstacle:
+    """The nearest obstacle as the forces see it: ``margin`` closer (the same object when the margin is 0)."""
+    if not config.margin:
+        return nearest
+    return NearestObstacle(nearest.distance - config.margin, nearest.normal)
 
 
 def repulsive(nearest: NearestObstacle, eta: np.ndarray | float, config: PlannerConfig) -> np.ndarray:
@@ -62,7 +73,10 @@ def inter_robot(
     d_true = abs(delta)
     mask = neighbour_mask & (d_true < config.sensing_range)
     d = np.maximum(d_true, config.min_distance)
-    coefficient = 0.5 - per_item(lam) / d
+    if config.margin:  # the neighbour seen margin closer: its repulsion ranges shift outward by the margin
+        coefficient = 0.5 - per_item(lam) / np.maximum(d_true - config.margin, config.min_distance)
+    else:
+        coefficient = 0.5 - per_item(lam) / d
     if config.repulsive_only:
         coefficient = np.minimum(coefficient, 0.0)
     force = plain(((mask * coefficient / d) * delta).sum(axis=-1))

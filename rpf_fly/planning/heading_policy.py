@@ -13,7 +13,8 @@ from rpf_fly.planning.forces import attractive
 from rpf_fly.planning.observation import build_observation
 from rpf_fly.planning.obstacles import ObstacleSet
 from rpf_fly.planning.onnx_policy import OnnxPolicy, PolicyError
-from rpf_fly.planning.planner import PlanStep, sense_obstacles
+from rpf_fly.planning.guidance import Bounds
+from rpf_fly.planning.planner import PlanStep, guided_view, make_guidance, sense_obstacles
 from rpf_fly.planning.vectors import unit
 from rpf_fly.planning.view import LocalView
 
@@ -21,16 +22,24 @@ from rpf_fly.planning.view import LocalView
 class HeadingPolicyPlanner:
     """Same interface as :class:`~rpf_fly.planning.Planner`; forces in the diagnostics are the attraction only."""
 
-    def __init__(self, obstacles: ObstacleSet, config: PlannerConfig, policy: OnnxPolicy):
+    def __init__(self, obstacles: ObstacleSet, config: PlannerConfig, policy: OnnxPolicy, bounds: Bounds | None = None):
         if policy.action != "heading":
             raise PolicyError(f"{policy.path}: a {policy.action!r} policy cannot steer the heading")
         self.obstacles = obstacles
         self.config = config
         self.policy = policy
+        self.guidance = make_guidance(obstacles, config, bounds)
+
+    def prepare(self, goals: np.ndarray) -> None:
+        """Precompute the guidance of these goals (as :meth:`Planner.prepare`)."""
+        if self.guidance is not None:
+            self.guidance.prepare(goals)
 
     def step(self, view: LocalView) -> PlanStep:
         nearest, lambda_mask = sense_obstacles(view, self.obstacles, self.config)
-        observation = build_observation(view, nearest, self.config, self.policy.max_neighbours)
+        goal = view.goal
+        view, waypoint, remaining = guided_view(view, self.guidance)
+        observation = build_observation(view, nearest, self.config, self.policy.max_neighbours, remaining)
         a = self.policy.act(observation)[..., 0].astype(float)
         if a.ndim == 0:
             a = float(a)
@@ -48,6 +57,7 @@ class HeadingPolicyPlanner:
             lam=np.nan,
             neighbours=count,
             obstacle_distance=nearest.distance,
-            goal_distance=d_g,
+            goal_distance=d_g if waypoint is None else abs(goal - view.position),
             observation=observation,
+            waypoint=waypoint,
         )

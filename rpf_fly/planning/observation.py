@@ -44,24 +44,33 @@ def _along_last_axis(order: np.ndarray) -> np.ndarray | tuple[np.ndarray, ...]:
 
 
 def build_observation(
-    view: LocalView, nearest: NearestObstacle, config: PlannerConfig, max_neighbours: int
+    view: LocalView,
+    nearest: NearestObstacle,
+    config: PlannerConfig,
+    max_neighbours: int,
+    goal_distance: np.ndarray | float | None = None,
 ) -> Observation:
     """Observation of every drone in ``view``, from the same nearest obstacle the APF uses.
 
-    Bearings use ``phase(v * conj(h))``: the angle of ``v`` in the frame of the unit heading ``h``.
+    Bearings use ``phase(v * conj(h))``: the angle of ``v`` in the frame of the unit heading ``h``. With guidance
+    ``view.goal`` is the drone's waypoint (``phi_g`` its bearing) and ``goal_distance`` the remaining path length
+    (``d_g``); without, ``d_g = |goal - p|``. With ``config.margin`` ``m > 0`` the distances ``d_o`` and ``d_ji``
+    are measured from surfaces grown by ``m`` (clamped at 0): the policy sees the world the forces see.
     """
     h_conj = np.conj(view.heading) if isinstance(view.heading, np.ndarray) else view.heading.conjugate()
-    visible = nearest.distance <= config.sensing_range
-    d_o = visible * maximum(nearest.distance, 0.0) + (1 - visible) * config.sensing_range
+    surface = nearest.distance - config.margin if config.margin else nearest.distance
+    visible = surface <= config.sensing_range
+    d_o = visible * maximum(surface, 0.0) + (1 - visible) * config.sensing_range
     phi_o = visible * phase(-nearest.normal * h_conj)
     to_goal = view.goal - view.position
     phi_g = phase(to_goal * h_conj)
+    d_g = abs(to_goal) if goal_distance is None else goal_distance
     if isinstance(d_o, np.ndarray):
         local = np.empty(np.broadcast_shapes(np.shape(d_o), np.shape(to_goal)) + (LOCAL_SIZE,), np.float32)
-        for j, value in enumerate((d_o, phi_o, abs(to_goal), phi_g)):
+        for j, value in enumerate((d_o, phi_o, d_g, phi_g)):
             local[..., j] = value
     else:
-        local = np.array([d_o, phi_o, abs(to_goal), phi_g], dtype=np.float32)
+        local = np.array([d_o, phi_o, d_g, phi_g], dtype=np.float32)
 
     lead = local.shape[:-1]
     k = view.neighbour_position.shape[-1]
@@ -83,6 +92,8 @@ def build_observation(
     # Fill preallocated slots (np.stack + np.pad cost 20 us a drone).
     used = dist.shape[-1]
     feats = np.zeros(lead + (max_neighbours, NEIGHBOUR_SIZE), np.float32)
+    if config.margin:
+        dist = np.maximum(dist - config.margin, 0.0)
     feats[..., :used, 0] = dist * mask
     feats[..., :used, 1] = phi * mask
     feats[..., :used, 2] = psi * mask

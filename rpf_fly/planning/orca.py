@@ -35,14 +35,17 @@ obstacles, 150 us with 30 neighbours); a batch loops over drones.
 
 from __future__ import annotations
 
+import dataclasses
 import math
+from dataclasses import replace
 from typing import Sequence
 
 import numpy as np
 
 from rpf_fly.planning.config import PlannerConfig
 from rpf_fly.planning.obstacles import ObstacleSet
-from rpf_fly.planning.planner import PlanStep, sense_obstacles
+from rpf_fly.planning.guidance import Bounds
+from rpf_fly.planning.planner import PlanStep, guided_view, make_guidance, sense_obstacles
 from rpf_fly.planning.view import LocalView
 
 HalfPlane = tuple[complex, complex]
@@ -249,6 +252,7 @@ class OrcaPlanner:
         margin: float = 0.05,
         responsibility: float = 0.5,
         remember_velocity: bool = True,
+        bounds: Bounds | None = None,
     ):
         if time_horizon <= 0 or obstacle_time_horizon <= 0 or speed <= 0 or time_step <= 0:
             raise ValueError("time horizons, speed and time step must be positive")
@@ -262,6 +266,9 @@ class OrcaPlanner:
         self.responsibility = float(responsibility)
         self.remember_velocity = remember_velocity
         self._memory: dict[tuple[int, ...], tuple[np.ndarray, np.ndarray]] = {}
+        # planner.guidance path: the preferred velocity points at the next visible waypoint (the obstacles
+        # inflated by r + margin), not at the goal.
+        self.guidance = make_guidance(obstacles, replace(self.config, margin=self.margin), bounds)
         r = self.config.safety_radius
         # Obstacles farther than this (surface distance) cannot constrain a velocity within the speed disc.
         self._obstacle_range = min(self.config.sensing_range, self.obstacle_time_horizon * self.speed + r + self.margin)
@@ -349,8 +356,21 @@ class OrcaPlanner:
 
     # -- the planner interface -----------------------------------------------------------------------------------------
 
+    def prepare(self, goals: np.ndarray) -> None:
+        """Precompute the guidance of these goals (as :meth:`Planner.prepare`)."""
+        if self.guidance is not None:
+            self.guidance.prepare(goals)
+
     def step(self, view: LocalView) -> PlanStep:
         """Plan every drone of ``view`` (leading shape ``()`` or ``S``) from its own local view."""
+        if self.guidance is None:
+            return self._step(view)
+        goal = view.goal
+        guided, waypoint, _ = guided_view(view, self.guidance)
+        step = self._step(guided)
+        return dataclasses.replace(step, goal_distance=abs(goal - view.position), waypoint=waypoint)
+
+    def _step(self, view: LocalView) -> PlanStep:
         nearest, _ = sense_obstacles(view, self.obstacles, self.config)
         if not isinstance(view.position, np.ndarray) or view.position.ndim == 0:
             return self._step_one(view, nearest.distance)

@@ -13,8 +13,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from rpf_fly.planning.config import PlannerConfig
-from rpf_fly.planning.forces import attractive, inter_robot, repulsive
+from rpf_fly.planning.forces import attractive, inter_robot, perceived, repulsive
 from rpf_fly.planning.gains import FixedGains, GainsPolicy
+from rpf_fly.planning.guidance import Bounds, Guidance
 from rpf_fly.planning.obstacles import NearestObstacle, ObstacleSet, nearest_obstacle
 from rpf_fly.planning.observation import Observation, build_observation
 from rpf_fly.planning.view import LocalView
@@ -42,6 +43,8 @@ class PlanStep:
     obstacle_distance: np.ndarray
     goal_distance: np.ndarray
     observation: Observation | None = None
+    waypoint: np.ndarray | None = None
+    """With guidance: the point the attraction pulled toward (complex; the goal once it is in sight)."""
 
 
 def plan_row(step: PlanStep, i: int) -> PlanStep:
@@ -76,13 +79,18 @@ def apf_step(
     lam: np.ndarray | float,
     config: PlannerConfig,
     observation: Observation | None = None,
+    waypoint: np.ndarray | None = None,
+    goal_distance: np.ndarray | None = None,
 ) -> PlanStep:
     """The APF with (soft) wall-following for given gains (``observation``, when the gains came from one, is kept
-    in the result for the log)."""
+    in the result for the log). ``view.goal`` is what the attraction pulls toward: the goal, or with guidance the
+    drone's ``waypoint`` (then ``goal_distance`` is the distance to the goal itself, for the log). ``nearest`` is
+    the true nearest obstacle; the forces see it ``config.margin`` closer."""
     f_a, d_g = attractive(view.position, view.goal)
-    f_r = repulsive(nearest, eta, config)
+    seen = perceived(nearest, config)
+    f_r = repulsive(seen, eta, config)
     f_in, count = inter_robot(view.position, view.neighbour_position, lambda_mask, lam, config)
-    direction, mode = select_heading(f_a, f_r, f_in, view.heading, nearest.distance, config)
+    direction, mode = select_heading(f_a, f_r, f_in, view.heading, seen.distance, config)
     return PlanStep(
         direction=direction,
         mode=mode,
@@ -93,24 +101,64 @@ def apf_step(
         lam=lam,
         neighbours=count,
         obstacle_distance=nearest.distance,
-        goal_distance=d_g,
+        goal_distance=d_g if goal_distance is None else goal_distance,
         observation=observation,
+        waypoint=waypoint,
     )
 
 
-class Planner:
-    """APF planner whose gains come from a :class:`GainsPolicy` (fixed gains: vanilla APF; ONNX policy: RPF)."""
+def make_guidance(obstacles: ObstacleSet, config: PlannerConfig, bounds: Bounds | None = None) -> Guidance | None:
+    """The visibility graph of ``obstacles`` inflated by ``r + margin`` when ``config.guidance`` is ``path`` (None
+    without guidance or without obstacles: the attraction then pulls at the goal)."""
+    if config.guidance != "path" or obstacles.is_empty:
+        return None
+    return Guidance(obstacles, config.safety_radius + config.margin, bounds)
 
-    def __init__(self, obstacles: ObstacleSet, config: PlannerConfig | None = None, gains: GainsPolicy | None = None):
+
+def guided_view(view: LocalView, guidance: Guidance | None) -> tuple[LocalView, np.ndarray | None, np.ndarray | None]:
+    """``view`` with its goal replaced by each drone's next visible waypoint, the waypoints and the remaining path
+    lengths (the view itself and None without guidance)."""
+    if guidance is None:
+        return view, None, None
+    waypoint, remaining = guidance.waypoint(view.position, view.goal)
+    guided = LocalView(view.position, waypoint, view.heading, view.neighbour_position, view.neighbour_velocity,
+                       view.neighbour_mask)
+    return guided, waypoint, remaining
+
+
+class Planner:
+    """APF planner whose gains come from a :class:`GainsPolicy` (fixed gains: vanilla APF; ONNX policy: RPF).
+
+    With ``config.guidance == "path"`` it builds the visibility graph of its obstacles once (``bounds``: the arena,
+    where corners may lie) and every step pulls each drone toward its next visible waypoint; :meth:`prepare` with
+    the mission's goals computes their cost-to-go at load time, so a tick costs one visibility test per drone."""
+
+    def __init__(
+        self,
+        obstacles: ObstacleSet,
+        config: PlannerConfig | None = None,
+        gains: GainsPolicy | None = None,
+        bounds: Bounds | None = None,
+    ):
         self.obstacles = obstacles
         self.config = config or PlannerConfig()
         self.gains = gains or FixedGains()
+        self.guidance = make_guidance(obstacles, self.config, bounds)
+
+    def prepare(self, goals: np.ndarray) -> None:
+        """Precompute the guidance of these goals (nothing without guidance; other goals are computed on first use)."""
+        if self.guidance is not None:
+            self.guidance.prepare(goals)
 
     def step(self, view: LocalView) -> PlanStep:
         """Plan every drone of ``view`` from its own local view."""
         nearest, lambda_mask = sense_obstacles(view, self.obstacles, self.config)
+        guided, waypoint, remaining = guided_view(view, self.guidance)
         observation = None
         if self.gains.needs_observation:
-            observation = build_observation(view, nearest, self.config, self.gains.max_neighbours)
+            observation = build_observation(guided, nearest, self.config, self.gains.max_neighbours, remaining)
         eta, lam = self.gains.gains(observation)
-        return apf_step(view, nearest, lambda_mask, eta, lam, self.config, observation)
+        if waypoint is None:
+            return apf_step(view, nearest, lambda_mask, eta, lam, self.config, observation)
+        return apf_step(guided, nearest, lambda_mask, eta, lam, self.config, observation, waypoint,
+                        abs(view.goal - view.position))

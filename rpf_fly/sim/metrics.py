@@ -10,7 +10,9 @@ so ``review --json`` reproduces ``sim --json``. Definitions (docs/metrics.md):
   (steps where the drone did not move are skipped); the swarm figure is the mean over the drones that arrived;
 - a collision is an event, counted once each time a pair enters ``d_ji < 2r`` or a drone enters ``d_o < r``;
 - success: every drone arrived and no collision; makespan: time of the last arrival (null unless all arrived);
-- minimum separation (centre to centre) and minimum obstacle clearance (centre to surface; null without obstacles).
+- minimum separation (centre to centre) and minimum obstacle clearance (centre to surface; null without obstacles);
+- the margin the planner keeps (``planner.margin`` m): events of a pair entering ``d_ji < 2r + m`` or a drone
+  entering ``d_o < r + m`` (collisions included), counted as collisions are; ``held`` when there are none.
 """
 
 from __future__ import annotations
@@ -57,6 +59,14 @@ class Metrics:
     smoothness: Optional[float]
     makespan_s: Optional[float]
     per_drone: tuple[DroneMetrics, ...]
+    margin_m: float = 0.0
+    margin_breaches_drone_drone: int = 0
+    margin_breaches_drone_obstacle: int = 0
+
+    @property
+    def margin_held(self) -> bool:
+        """No pair came within ``2r + margin`` and no drone within ``r + margin`` of an obstacle."""
+        return self.margin_breaches_drone_drone == 0 and self.margin_breaches_drone_obstacle == 0
 
     def to_json_dict(self) -> dict[str, Any]:
         """The contract shape: ``collisions`` nested, ``per_drone`` a list of rows."""
@@ -70,6 +80,12 @@ class Metrics:
             "collisions": {
                 "drone_drone": self.collisions_drone_drone,
                 "drone_obstacle": self.collisions_drone_obstacle,
+            },
+            "margin": {
+                "m": self.margin_m,
+                "held": self.margin_held,
+                "drone_drone": self.margin_breaches_drone_drone,
+                "drone_obstacle": self.margin_breaches_drone_obstacle,
             },
             "min_separation_m": self.min_separation_m,
             "min_obstacle_clearance_m": self.min_obstacle_clearance_m,
@@ -97,8 +113,10 @@ def compute_metrics(
     mission: str = "",
     planner: str = "",
     seed: int = 0,
+    margin: float = 0.0,
 ) -> Metrics:
-    """Metrics of a trajectory ``positions`` ``(T+1, N)`` complex sampled every ``dt`` seconds."""
+    """Metrics of a trajectory ``positions`` ``(T+1, N)`` complex sampled every ``dt`` seconds; ``margin`` (m) the
+    clearance beyond contact the planner was asked to keep."""
     positions = np.asarray(positions, dtype=complex)
     samples, n = positions.shape
     goals = np.asarray(goals, dtype=complex)
@@ -123,6 +141,10 @@ def compute_metrics(
     obstacle_events = np.zeros(n, dtype=int)
     prev_pairs = np.zeros((n, n), dtype=bool)
     prev_obst = np.zeros(n, dtype=bool)
+    margin_pairs = np.zeros((n, n), dtype=int)
+    margin_obstacle = np.zeros(n, dtype=int)
+    prev_margin_pairs = np.zeros((n, n), dtype=bool)
+    prev_margin_obst = np.zeros(n, dtype=bool)
     min_sep = np.inf
     min_clear = np.inf
     for start in range(0, samples, _CHUNK):
@@ -131,6 +153,16 @@ def compute_metrics(
         pair_events += _entries(pairs, prev_pairs)
         obstacle_events += _entries(obst, prev_obst)
         prev_pairs, prev_obst = pairs[-1], obst[-1]
+        if margin > 0:  # the same geometry with every surface margin/2 (pairs) and margin (obstacles) farther
+            near_pairs, near_obst = collision_flags(chunk, obstacles, safety_radius + margin / 2)
+            near_obst = near_obst if obstacles.is_empty else obstacles.signed_distance(chunk) < safety_radius + margin
+            margin_pairs += _entries(near_pairs, prev_margin_pairs)
+            margin_obstacle += _entries(near_obst, prev_margin_obst)
+            prev_margin_pairs, prev_margin_obst = near_pairs[-1], near_obst[-1]
+        else:
+            margin_pairs += _entries(pairs, prev_margin_pairs)
+            margin_obstacle += _entries(obst, prev_margin_obst)
+            prev_margin_pairs, prev_margin_obst = pairs[-1], obst[-1]
         if n > 1:
             min_sep = min(min_sep, float(pair_distances(chunk).min()))
         if not obstacles.is_empty:
@@ -166,4 +198,7 @@ def compute_metrics(
         smoothness=float(smooth[reached].mean()) if n_reached else None,
         makespan_s=float(arrival.max() * dt) if n_reached == n else None,
         per_drone=rows,
+        margin_m=float(margin),
+        margin_breaches_drone_drone=int(np.triu(margin_pairs, 1).sum()),
+        margin_breaches_drone_obstacle=int(margin_obstacle.sum()),
     )

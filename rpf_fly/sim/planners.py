@@ -7,9 +7,12 @@ gains from an ONNX policy every step; ``ppo`` is the vanilla-PPO baseline that t
 
 from __future__ import annotations
 
-from rpf_fly.mission.model import PlannerSettings
+import numpy as np
+
+from rpf_fly.mission.model import Mission, PlannerSettings
 from rpf_fly.planning.config import PlannerConfig
 from rpf_fly.planning.gains import FixedGains
+from rpf_fly.planning.guidance import Bounds
 from rpf_fly.planning.heading_policy import HeadingPolicyPlanner
 from rpf_fly.planning.onnx_policy import OnnxGains, OnnxPolicy
 from rpf_fly.planning.obstacles import ObstacleSet
@@ -31,23 +34,53 @@ def planner_config(settings: PlannerSettings) -> PlannerConfig:
         wall_following=settings.wall_following,
         wall_threshold=settings.wall_threshold,
         neighbour_aggregate=settings.neighbour_aggregate,
+        guidance=settings.guidance_mode,
+        margin=settings.margin_m,
     )
 
 
-def make_planner(settings: PlannerSettings, obstacles: ObstacleSet) -> Planner | HeadingPolicyPlanner:
-    """The planner a mission asks for. Raises :class:`PolicyError` for an unusable policy file."""
-    config = planner_config(settings)
+def make_planner(
+    settings: PlannerSettings,
+    obstacles: ObstacleSet,
+    bounds: Bounds | None = None,
+    goals: np.ndarray | None = None,
+) -> Planner | HeadingPolicyPlanner:
+    """The planner a mission asks for. Raises :class:`PolicyError` for an unusable policy file.
+
+    With guidance, ``bounds`` (the arena's ((x_lo, x_hi), (y_lo, y_hi))) keeps the path's corners inside the
+    geofence and ``goals`` (the mission's) are prepared now rather than at the first tick."""
+    planner = _make(settings, obstacles, planner_config(settings), bounds)
+    if goals is not None and hasattr(planner, "prepare"):
+        planner.prepare(np.asarray(goals, dtype=complex))
+    return planner
+
+
+def mission_planner(mission: Mission, settings: PlannerSettings | None = None, obstacles: ObstacleSet | None = None):  # type: ignore[no-untyped-def]
+    """The planner of a mission as the flight, its dry run and its replay build it: the mission's obstacles, its arena
+    as the guidance bounds and every drone's goal prepared at load time (the flight's tick then only looks up the
+    next visible waypoint)."""
+    from rpf_fly.sim.scenario import obstacle_set
+
+    return make_planner(
+        settings or mission.planner,
+        obstacles if obstacles is not None else obstacle_set(mission.obstacles),
+        (mission.arena.x, mission.arena.y),
+        np.array([complex(*d.goal) for d in mission.drones]),
+    )
+
+
+def _make(settings: PlannerSettings, obstacles: ObstacleSet, config: PlannerConfig, bounds: Bounds | None):  # type: ignore[no-untyped-def]
     if settings.kind in ("apf", "apf-paper"):
-        return Planner(obstacles, config, FixedGains(settings.eta, settings.lam))
+        return Planner(obstacles, config, FixedGains(settings.eta, settings.lam), bounds)
     if settings.kind == "orca":
         from rpf_fly.planning.orca import OrcaPlanner
 
-        return OrcaPlanner(obstacles, config)
+        return OrcaPlanner(obstacles, config, margin=settings.margin_m, bounds=bounds)
     if settings.policy is None:
         raise UnsupportedPlanner(f"planner kind {settings.kind!r} needs an ONNX policy")
     policy = OnnxPolicy(settings.policy)
     if settings.kind in ("rpf", "rpf-mean"):
-        return Planner(obstacles, config, OnnxGains(policy))
+        return Planner(obstacles, config, OnnxGains(policy), bounds)
     if settings.kind == "ppo":
-        return HeadingPolicyPlanner(obstacles, config, policy)
+        return HeadingPolicyPlanner(obstacles, config, policy, bounds)
     raise UnsupportedPlanner(f"planner kind {settings.kind!r} is not available")

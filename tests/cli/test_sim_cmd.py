@@ -60,10 +60,13 @@ drones:
 def test_no_wall_following_is_the_vanilla_apf(tmp_path):
     mission = tmp_path / "wall.yaml"
     mission.write_text(WALL_MISSION)
-    with_wf = json.loads(run(mission, "--json").stdout)
-    without = json.loads(run(mission, "--json", "--no-wall-following").stdout)
+    # without guidance (the apf kind's default is path: docs/algorithm.md, *Global guidance*)
+    with_wf = json.loads(run(mission, "--json", "--guidance", "none").stdout)
+    without = json.loads(run(mission, "--json", "--no-wall-following", "--guidance", "none").stdout)
     assert with_wf["success"] and not without["success"]
     assert without["reached"] == 0 and without["per_drone"][0]["time_to_goal_s"] is None
+    # the path around the wall gets the vanilla APF past it too
+    assert json.loads(run(mission, "--json", "--no-wall-following").stdout)["success"]
 
 
 VALID = WALL_MISSION

@@ -32,6 +32,42 @@ def test_env_steps_the_planner_apf():
     assert got == pytest.approx(expected, abs=1e-12)
 
 
+def test_guided_env_steps_the_guided_planner():
+    """With guidance and margin the env pulls each drone toward the waypoint Planner.step picks (graphs per arena,
+    padded), and its observation's d_g is the remaining path length."""
+    env = make_env(arena="a", guidance="path", margin=0.05)
+    half = env.config.arena_half_size
+    w = env.world
+    for _ in range(30):
+        env.step(gains(env))
+    for b in range(env.config.n_arenas):
+        m = int((env.centers[b, 0].real < 1e5).sum())
+        obstacles = ObstacleSet(env.centers[b, 0, :m], env.radii[b, 0, :m], np.zeros(0, complex), np.zeros(0), np.zeros(0))
+        planner = Planner(obstacles, env.planner, FixedGains(0.04, 1.5), ((-half, half), (-half, half)))
+        step = planner.step(views_from_states(w.position[b], w.velocity[b], w.goal[b], w.heading[b], 6.0))
+        assert env.view.goal[b] == pytest.approx(step.waypoint, abs=1e-12)
+        assert env.directions(gains(env, 0.04, 1.5))[b] == pytest.approx(step.direction, abs=1e-12)
+        _, remaining = planner.guidance.waypoint(w.position[b], w.goal[b])
+        assert env.observation.local[b, :, 2] == pytest.approx(remaining.astype(np.float32))
+    assert (env.view.goal != w.goal).any()  # some drone is guided around an obstacle
+
+
+def test_margin_penalty_only_with_a_margin():
+    """A drone between r and r + margin of an obstacle pays margin_penalty; the paper's env (margin 0) does not."""
+    penalties = []
+    for margin in (0.0, 0.05):
+        env = make_env(arena="a", margin=margin)
+        w = env.world
+        c, radius = env.centers[0, 0, 0], env.radii[0, 0, 0]
+        # robot 0 of arena 0 held 0.12 m from the surface (r < 0.12 < r + margin; no other term changes)
+        w.position[0, 0] = c + (radius + 0.12) * 1j
+        w.halted[0, 0] = True
+        action = gains(env)
+        reward = env.step(action).reward[0, 0]
+        penalties.append(reward)
+    assert penalties[0] - penalties[1] == pytest.approx(env.config.margin_penalty, abs=1.0)
+
+
 def test_arrival_reward_and_termination():
     env = make_env(arena="b")
     w = env.world

@@ -19,7 +19,7 @@ from rpf_fly.log.review import review
 pytestmark = pytest.mark.xdist_group("cli_flights")
 
 runner = CliRunner()
-METRIC_KEYS = ["mission", "planner", "seed", "drones", "reached", "success", "collisions", "min_separation_m",
+METRIC_KEYS = ["mission", "planner", "seed", "drones", "reached", "success", "collisions", "margin", "min_separation_m",
                "min_obstacle_clearance_m", "travel_distance_m", "smoothness", "makespan_s", "per_drone"]
 
 

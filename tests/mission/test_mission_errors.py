@@ -524,3 +524,12 @@ def test_formation_start_inside_an_obstacle(fail):
     fail("arena: {x: [-3, 3], y: [-3, 3]}\nobstacles: [{shape: box, min: [-0.2, 0.9], max: [0.2, 1.1]}]\n"
          "formation: {kind: circle_swap, count: 4, radius: 1}\n",
          "m.yaml:3: formation: drones[1].start (cf2): (6.12323e-17, 1) is inside obstacles[0]")
+
+
+def test_guidance_choice(fail):
+    fail(BASE + "planner: {guidance: astar}\n",
+         "m.yaml:5: planner.guidance: expected one of 'none', 'path', got 'astar'")
+
+
+def test_margin_not_negative(fail):
+    fail(BASE + "planner: {margin: -0.1}\n", "m.yaml:5: planner.margin: must be non-negative, got -0.1")

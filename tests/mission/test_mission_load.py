@@ -386,3 +386,36 @@ def test_safety_section_rejects_unknown_response():
     )
     with _pytest.raises(MissionError, match=r"<string>:2: safety.on_obstacle: .*panic"):
         parse_mission(text)
+
+
+# ------------------------------------------------------------------------------- guidance and margin
+
+
+@pytest.mark.parametrize(
+    "kind, guidance, margin",
+    [("apf", "path", 0.05), ("orca", "none", 0.05), ("apf-paper", "none", 0.0), ("rpf", "none", 0.0),
+     ("rpf-mean", "none", 0.0), ("ppo", "none", 0.0)],
+)
+def test_guidance_and_margin_default_by_kind(kind, guidance, margin):
+    """On for the product's planner; the paper's planners stay as the paper wrote them."""
+    from rpf_fly.mission.model import PlannerSettings
+
+    settings = PlannerSettings(kind=kind)
+    assert settings.guidance_mode == guidance and settings.margin_m == margin
+    assert PlannerSettings(kind="apf", preset="paper").guidance_mode == "none"
+
+
+def test_guidance_and_margin_keys(load):
+    mission = load(
+        """\
+        arena: {x: [-2, 2], y: [-2, 2]}
+        planner: {kind: apf-paper, guidance: path, margin: 0.1}
+        drones:
+          - {name: cf1, uri: radio://0/80/2M/E7E7E7E701, start: [-1.5, 0], goal: [1.5, 0]}
+        """
+    )
+    assert mission.planner.guidance_mode == "path" and mission.planner.margin_m == 0.1
+    from rpf_fly.mission.load import with_planner
+
+    other = with_planner(mission, "apf", guidance="none", margin=0)
+    assert other.planner.guidance_mode == "none" and other.planner.margin_m == 0

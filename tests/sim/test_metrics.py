@@ -87,7 +87,7 @@ def test_success_and_makespan_when_all_arrive():
 def test_json_shape_matches_contract():
     d = two_drone_case().to_json_dict()
     assert list(d) == [
-        "mission", "planner", "seed", "drones", "reached", "success", "collisions", "min_separation_m",
+        "mission", "planner", "seed", "drones", "reached", "success", "collisions", "margin", "min_separation_m",
         "min_obstacle_clearance_m", "travel_distance_m", "smoothness", "makespan_s", "per_drone",
     ]
     assert d["collisions"] == {"drone_drone": 1, "drone_obstacle": 1}
@@ -99,3 +99,16 @@ def test_single_drone_has_no_separation():
     positions = np.array([[0j], [0.5 + 0j]])
     m = compute_metrics(positions, np.array([0.5 + 0j]), 0.1, 0.1, 0.1, ObstacleSet.empty(), ["a"])
     assert m.min_separation_m is None and m.success
+
+
+def test_margin_breaches_are_counted_beyond_contact():
+    """Two drones passing 0.22 m apart beside a pole 0.13 m away: no collision at r 0.1; with margin 0.05 one pair
+    breach (< 2r + m = 0.25) and one obstacle breach (< r + m = 0.15); with margin 0.01 the margin holds."""
+    positions = np.array([[-1 + 0j, -1 + 0.22j], [0j, 0.22j], [1 + 0j, 1 + 0.22j]])
+    pole = ObstacleSet.from_shapes(circles=[((0.0, -0.23), 0.1)])
+    goals = np.array([1 + 0j, 1 + 0.22j])
+    m = compute_metrics(positions, goals, 0.1, 0.1, 0.1, pole, ["a", "b"], margin=0.05)
+    assert m.collisions_drone_drone == 0 and m.collisions_drone_obstacle == 0
+    assert (m.margin_breaches_drone_drone, m.margin_breaches_drone_obstacle) == (1, 1) and not m.margin_held
+    assert m.to_json_dict()["margin"] == {"m": 0.05, "held": False, "drone_drone": 1, "drone_obstacle": 1}
+    assert compute_metrics(positions, goals, 0.1, 0.1, 0.1, pole, ["a", "b"], margin=0.01).margin_held

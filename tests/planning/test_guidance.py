@@ -1,0 +1,128 @@
+"""Global guidance: the visibility test, the shortest path around inflated obstacles, the next visible waypoint."""
+
+import math
+
+import numpy as np
+import pytest
+
+from rpf_fly.planning import FixedGains, ObstacleSet, Planner, PlannerConfig, build_observation, views_from_states
+from rpf_fly.planning.forces import inter_robot, perceived, repulsive
+from rpf_fly.planning.guidance import Guidance, Inflated, blocked, path_length
+from rpf_fly.planning.obstacles import nearest_obstacle
+
+U_TRAP = ObstacleSet.from_shapes(boxes=[((0.0, -1.0), (0.2, 1.0)), ((-1.4, 0.8), (0.2, 1.0)), ((-1.4, -1.0), (0.2, -0.8))])
+MIXED = ObstacleSet.from_shapes(
+    circles=[((0.5, 0.5), 0.5), ((-2.0, 1.0), 0.1), ((2.5, -2.0), 0.3)],
+    boxes=[((-3.0, -3.0), (-1.0, -2.5)), ((1.0, 2.0), (1.2, 3.5))],
+)
+
+
+def test_segment_against_a_circle_and_a_box_by_hand():
+    inf = Inflated.of(ObstacleSet.from_shapes(circles=[((0.0, 0.0), 0.5)], boxes=[((2.0, -1.0), (3.0, 1.0))]), 0.1)
+    # through the circle (radius 0.6), grazing outside it, and through the box grown to x [1.9, 3.1]
+    assert blocked(-1 + 0j, 1 + 0j, inf)
+    assert not blocked(-1 + 0.61j, 1 + 0.61j, inf)
+    assert blocked(1.5 + 0j, 3.5 + 0.5j, inf)
+    assert not blocked(1.5 + 1.2j, 3.5 + 1.2j, inf)  # above the grown box (y <= 1.1)
+    assert not blocked(1.8 - 2j, 1.8 + 2j, inf)  # beside it
+    # a segment that starts inside an inflated obstacle ignores that one (the drone sees its way out)
+    assert not blocked(0.55 + 0j, 1.5 + 0j, inf)
+    assert not blocked(0.55 + 0j, -1.5 + 0j, inf)  # out through the far side is out too
+
+
+def test_u_trap_path_goes_out_of_the_mouth_and_around():
+    """From inside the U the shortest path leaves by the mouth (x = -1.4 - delta) and passes the outer corner; its
+    length is the sum of the legs between the grown boxes' corners."""
+    delta = 0.15
+    g = Guidance(U_TRAP, delta, ((-3.5, 3.5), (-2.5, 2.5)))
+    path = g.path(-0.5 + 0j, 2.2 + 0j)
+    corners = [complex(-1.4 - delta, -0.8 + delta), complex(-1.4 - delta, -1.0 - delta), complex(0.2 + delta, -1.0 - delta)]
+    mirrored = [c.conjugate() for c in corners]
+    inner = path[1:-1]
+    assert len(inner) == 3
+    assert np.allclose(inner, corners, atol=1e-5) or np.allclose(inner, mirrored, atol=1e-5)
+    expected = path_length([-0.5 + 0j, *corners, 2.2 + 0j])
+    assert path_length(path) == pytest.approx(expected, abs=1e-5)
+    # outside the mouth, straight ahead of it, the goal is still hidden and the path leads around an arm
+    w, remaining = g.waypoint(-2.5 + 0j, 2.2 + 0j)
+    assert abs(w.imag) > 1.0 and remaining > abs(2.2 + 2.5)
+
+
+def test_goal_in_sight_is_the_waypoint():
+    g = Guidance(MIXED, 0.15)
+    w, remaining = g.waypoint(-4 + 0j, -4 + 2j)
+    assert w == -4 + 2j and remaining == pytest.approx(2.0)
+
+
+def test_one_drone_call_equals_batched_call():
+    """The flight's one-drone path (plain Python, early exit) and the batched numpy path pick the same waypoint."""
+    rng = np.random.default_rng(5)
+    g = Guidance(MIXED, 0.15, ((-4.0, 4.0), (-4.0, 4.0)))
+    pos = rng.uniform(-4, 4, 300) + 1j * rng.uniform(-4, 4, 300)
+    goals = rng.uniform(-4, 4, 300) + 1j * rng.uniform(-4, 4, 300)
+    w, r = g.waypoint(pos, goals)
+    one = [g.waypoint(complex(p), complex(q)) for p, q in zip(pos, goals)]
+    assert np.allclose(w, [o[0] for o in one], atol=1e-12)
+    assert np.allclose(r, [o[1] for o in one], atol=1e-9)
+    assert np.mean(w != goals) > 0.2  # the test sees both cases
+
+
+def test_remaining_length_is_never_shorter_than_straight_and_paths_stay_out():
+    rng = np.random.default_rng(8)
+    g = Guidance(MIXED, 0.15)
+    inf = Inflated.of(MIXED, 0.15 - 1e-6)
+    for _ in range(30):
+        p, q = (complex(*rng.uniform(-4, 4, 2)) for _ in range(2))
+        if min(MIXED.signed_distance(np.array([p, q]))) < 0.2:
+            continue
+        path = g.path(p, q)
+        assert path_length(path) >= abs(q - p) - 1e-9
+        assert not blocked(np.array(path[:-1]), np.array(path[1:]), inf).any()
+
+
+def test_planner_guidance_is_off_unless_asked():
+    assert Planner(MIXED, PlannerConfig.robust()).guidance is None
+    assert Planner(MIXED, PlannerConfig.paper()).guidance is None
+    assert Planner(ObstacleSet.empty(), PlannerConfig.robust(guidance="path")).guidance is None
+    assert Planner(MIXED, PlannerConfig.robust(guidance="path")).guidance is not None
+
+
+def test_guided_planner_pulls_toward_the_waypoint():
+    planner = Planner(U_TRAP, PlannerConfig.robust(guidance="path", margin=0.05), FixedGains())
+    pos = np.array([-0.5 + 0j])
+    view = views_from_states(pos, np.zeros(1, complex), np.array([2.2 + 0j]), np.array([1 + 0j]), 6.0)
+    step = planner.step(view)
+    w, _ = planner.guidance.waypoint(pos, np.array([2.2 + 0j]))
+    assert step.waypoint[0] == w[0]
+    assert step.f_a[0] == pytest.approx((w[0] - pos[0]) / abs(w[0] - pos[0]))
+    assert step.goal_distance[0] == pytest.approx(2.7)
+
+
+def test_margin_shifts_every_distance_the_forces_see():
+    """With margin m the repulsion and the inter-robot coefficient at distance d equal those at d - m without it."""
+    m = 0.05
+    with_margin = PlannerConfig.robust(margin=m)
+    without = PlannerConfig.robust()
+    pos = np.array([0.9 + 0.1j, -1.5 + 0.2j])
+    nearest = nearest_obstacle(pos, MIXED)
+    shifted = type(nearest)(nearest.distance - m, nearest.normal)
+    assert np.array_equal(repulsive(perceived(nearest, with_margin), 0.05, with_margin), repulsive(shifted, 0.05, without))
+    assert perceived(nearest, without) is nearest
+    me, other = 0j, np.array([[0.4 + 0.3j]])
+    f_m, _ = inter_robot(np.array([me]), other, np.array([[True]]), 2.0, with_margin)
+    # the same force at distance 0.5 - m, along the true direction
+    f_0, _ = inter_robot(np.array([me]), other * (0.5 - m) / 0.5, np.array([[True]]), 2.0, without)
+    assert f_m[0] == pytest.approx(f_0[0])
+
+
+def test_observation_sees_the_margin():
+    m = 0.05
+    pos = np.array([0.9 + 0.1j, 1.5 + 0.1j])
+    view = views_from_states(pos, np.array([0.5, 0.5 + 0j]), np.array([3 + 0j, 3 + 1j]), np.array([1, 1 + 0j]), 6.0)
+    nearest = nearest_obstacle(pos, MIXED)
+    o0 = build_observation(view, nearest, PlannerConfig.robust(), 4)
+    om = build_observation(view, nearest, PlannerConfig.robust(margin=m), 4)
+    assert np.allclose(om.local[:, 0], o0.local[:, 0] - m, atol=1e-6)
+    assert np.allclose(om.neighbours[:, 0, 0], o0.neighbours[:, 0, 0] - m, atol=1e-6)
+    assert np.array_equal(om.local[:, 1:], o0.local[:, 1:])
+    assert math.isclose(float(o0.neighbours[0, 0, 0]), 0.6, abs_tol=1e-6)
