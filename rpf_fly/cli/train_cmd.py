@@ -26,9 +26,17 @@ def train(
         "", "--curriculum", help="Comma-separated scene families to train on instead of --arena (all: every family; "
         "training seed stream, docs/bench.md)."
     ),
+    guidance: str = typer.Option("none", "--guidance", help="none (the paper's environment) or path (global "
+                                 "guidance, as the product flies: RPF-3)."),
+    margin: float = typer.Option(0.0, "--margin", help="Clearance beyond contact (m) kept by the planner and asked "
+                                 "by the reward (RPF-3: 0.05)."),
     episodes: int = typer.Option(4000, "--episodes", help="Stop after this many finished arena episodes."),
+    max_updates: int = typer.Option(10_000, "--max-updates", help="Stop after this many PPO updates (whichever of "
+                                    "--episodes and --max-updates comes first)."),
     seed: int = typer.Option(0, "--seed", help="Seed of the weights, the scenes and the sampling."),
     arenas: int = typer.Option(48, "--arenas", help="Parallel arenas (6 drones each)."),
+    threads: int = typer.Option(2, "--threads", help="torch threads (1 on a machine shared with other jobs: two "
+                                "threads on two busy cores spin against each other)."),
     resume: bool = typer.Option(False, "--resume", help="Continue from the run folder's checkpoint."),
     eval_seeds: int = typer.Option(20, "--eval-seeds", help="Seeds per scene in the model card's evaluation (0: none)."),
     obstacle_radius: Optional[float] = typer.Option(
@@ -53,6 +61,10 @@ def train(
     unknown = [f for f in families if f not in FAMILIES]
     if unknown:
         raise fail(f"--curriculum: unknown scene family {unknown[0]!r} (expected all or some of {', '.join(FAMILIES)})")
+    if guidance not in ("none", "path"):
+        raise fail(f"--guidance: expected none or path, got {guidance!r}")
+    if not 0.0 <= margin < 1.0:
+        raise fail(f"--margin: expected metres in [0, 1), got {margin}")
     if out.suffix != ".onnx":
         raise fail(f"--out: expected a path ending in .onnx, got {str(out)!r}")
     existing = [p for p in written_files(out) if p.exists()]
@@ -66,8 +78,8 @@ def train(
     from rpf_fly.learn.ppo import PPOConfig, Trainer
 
     radius = obstacle_radius if obstacle_radius is not None else (0.1 if kind == "ppo" else 0.5)
-    config = PPOConfig(seed=seed, kind=kind, arena=arena, curriculum=families, episodes=episodes, n_arenas=arenas,  # type: ignore[arg-type]
-                       obstacle_radius=radius)
+    config = PPOConfig(seed=seed, kind=kind, arena=arena, curriculum=families, episodes=episodes, max_updates=max_updates, n_arenas=arenas,  # type: ignore[arg-type]
+                       obstacle_radius=radius, guidance=guidance, margin=margin, threads=threads)  # type: ignore[arg-type]
     run_dir = out.with_suffix(".run")
     command = "rpf-fly train " + " ".join(shlex.quote(a) for a in sys.argv[2:]) if len(sys.argv) > 2 else "rpf-fly train"
     from rpf_fly.learn.card import git_commit
