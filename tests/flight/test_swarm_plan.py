@@ -46,6 +46,18 @@ def learned() -> Planner:
     return Planner(OBSTACLES, PlannerConfig.robust(), OnnxGains(OnnxPolicy(ROOT / "policies" / "rpf.onnx")))
 
 
+GUIDED = PlannerConfig.robust(guidance="path", margin=0.05)
+
+
+def guided_fixed() -> Planner:
+    """The product's defaults: guidance path and margin 0.05 (drones cross the circle through the obstacles)."""
+    return Planner(OBSTACLES, GUIDED, FixedGains(), ((-4.0, 4.0), (-4.0, 4.0)))
+
+
+def guided_learned() -> Planner:
+    return Planner(OBSTACLES, GUIDED, OnnxGains(OnnxPolicy(ROOT / "policies" / "rpf.onnx")), ((-4.0, 4.0), (-4.0, 4.0)))
+
+
 def plan_twice(make_planner, **kw):  # type: ignore[no-untyped-def]
     """The same tick planned batched and alone, from identical agent states."""
     results = []
@@ -55,7 +67,9 @@ def plan_twice(make_planner, **kw):  # type: ignore[no-untyped-def]
     return results
 
 
-@pytest.mark.parametrize("make_planner, atol", [(fixed, 1e-12), (learned, 1e-5)])
+@pytest.mark.parametrize(
+    "make_planner, atol", [(fixed, 1e-12), (learned, 1e-5), (guided_fixed, 1e-12), (guided_learned, 1e-5)]
+)
 def test_batched_call_gives_each_drone_what_its_own_call_gives(make_planner, atol):
     batched, alone = plan_twice(make_planner)
     assert batched.keys() == alone.keys() and len(batched) == 6
@@ -68,6 +82,11 @@ def test_batched_call_gives_each_drone_what_its_own_call_gives(make_planner, ato
         for field in ("direction", "f_a", "f_r", "f_in", "eta", "lam", "obstacle_distance", "goal_distance"):
             assert complex(getattr(step, field)) == pytest.approx(complex(getattr(own_step, field)), abs=atol), field
         assert int(step.mode) == int(own_step.mode) and int(step.neighbours) == int(own_step.neighbours)
+        if own_step.waypoint is not None:
+            assert complex(step.waypoint) == pytest.approx(complex(own_step.waypoint), abs=1e-12)
+    if make_planner in (guided_fixed, guided_learned):  # some drone's goal is behind an obstacle
+        goals = {a.name: complex(a.goal) for a in swarm(make_planner)[0]}
+        assert any(complex(r.step.waypoint) != goals[name] for name, r in batched.items())
     modes = {int(r.step.mode) for r in batched.values()}
     counts = {int(r.step.neighbours) for r in batched.values()}
     assert len(counts) > 1 or len(modes) > 1  # the scene exercises more than one code path
