@@ -59,3 +59,12 @@ def test_an_unknown_curriculum_family_is_refused_before_training(tmp_path):
     assert result.exit_code == 2, result.output
     assert "maze" in result.stderr and "corridor" in result.stderr
     assert not out.with_suffix(".run").exists()
+
+
+def test_guidance_and_margin_are_checked_before_training(tmp_path):
+    out = tmp_path / "p.onnx"
+    result = runner.invoke(get_app(), ["train", "--out", str(out), "--guidance", "astar", "--episodes", "1"])
+    assert result.exit_code == 2 and "--guidance" in result.stderr and "astar" in result.stderr
+    result = runner.invoke(get_app(), ["train", "--out", str(out), "--guidance", "path", "--margin", "-0.1"])
+    assert result.exit_code == 2 and "--margin" in result.stderr
+    assert not out.with_suffix(".run").exists()
