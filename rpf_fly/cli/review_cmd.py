@@ -111,6 +111,9 @@ def _print_summary(result, plot: Optional[Path], csv_dir: Optional[Path]) -> Non
         console.print("battery: " + ", ".join(f"{name} {a:.2f} -> {c:.2f} V (lowest {b:.2f})"
                                                 for name, (a, b, c) in result.battery.items()))
 
+    for dongle in result.radio:
+        console.print(escape(dongle.line()))
+
     m = result.metrics
     if m is None:
         console.print(f"[yellow]metrics: not available: {result.metrics_error}[/yellow]")

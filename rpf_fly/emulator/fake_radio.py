@@ -17,6 +17,13 @@ Each link runs a thread that emulates cflib's Crazyradio driver with safelink (s
   drone's RSSI in empty acks, so link quality, RSSI, rates and congestion reach `cf.link_statistics` as with a
   Crazyradio; cflib's latency pings are answered by the firmware's echo;
 - `LinkFaults.latency_s` delays both directions;
+- the links of one dongle number take turns on its air (`fake_world.DongleAir`): each transaction holds the dongle
+  for `RadioTiming.transaction_s` only, the drone's answer being computed outside that slot (a dry run's UDP
+  round trip to the world process is emulation, not radio);
+- the link holds at most `DRIVER_PACKETS` (2) uplink packets, as cflib's radio driver does (an out queue of one,
+  one in the radio thread's transaction): a further `send` blocks the sender until the radio has taken one (a
+  radio over its budget slows the sender down, never builds an ever-longer queue of stale setpoints), and fails
+  the link after `SEND_TIMEOUT_S` (2 s), with cflib's message;
 - closing a link first transmits the uplink packets already queued, so the zero-thrust setpoint that cflib's
   `close_link` sends always reaches the drone (with a Crazyradio it is a race): the fake takes the pessimistic side.
 Empty acks are not queued to cflib (the real driver queues them as port-15 channel-3 packets, which cflib ignores).
@@ -39,13 +46,22 @@ from cflib.crtp.crtpstack import CRTPPacket
 from cflib.crtp.exceptions import WrongUriType
 from cflib.crtp.radio_link_statistics import RadioLinkStatistics
 
-from .fake_world import DronePort, LinkFaults, RadioTiming
+from .fake_world import DongleAir, DronePort, LinkFaults, RadioTiming
 
 logger = logging.getLogger(__name__)
 
 SCHEME = "fake://"
 DEFAULT_ADDRESS = 0xE7E7E7E7E7
 DATARATES = ("250K", "1M", "2M")
+
+DRIVER_PACKETS = 2
+"""Uplink packets one link's driver holds before `send` blocks: cflib's radio driver has an out queue of one
+packet (``RadioDriver.out_queue = Queue(1)``) and its radio thread one more in its transaction (retried there until
+acknowledged)."""
+
+SEND_TIMEOUT_S = 2.0
+"""How long `send` waits for room before failing the link, as cflib's ``RadioDriver.send_packet`` does
+(``out_queue.put(pk, True, 2)``, then the link error "RadioDriver: Could not send packet to copter")."""
 
 
 class RadioWorld(Protocol):
@@ -58,7 +74,7 @@ class RadioWorld(Protocol):
     def addresses(self) -> tuple[int, ...]: ...
     def start(self) -> Any: ...
     def port(self, address: int) -> DronePort | None: ...
-    def dongle_lock(self, devid: int) -> threading.Lock: ...
+    def dongle(self, devid: int) -> DongleAir: ...
     def uri(self, address: int) -> str: ...
 
 
@@ -120,13 +136,15 @@ class FakeLink:
         self._faults = self._drone.faults if self._drone else LinkFaults()
         self._rssi = self._drone.rssi_dbm if self._drone else 0
         self._timing = world.timing
-        self._dongle = world.dongle_lock(uri.devid)
+        self._dongle = world.dongle(uri.devid)
         self._stats = RadioLinkStatistics(stats_callback) if stats_callback else None
         self._error_callback = error_callback
         self._in: queue.Queue[CRTPPacket | None] = queue.Queue()
         self._up: deque[tuple[float, int, bytes]] = deque()
         self._down_delayed: deque[tuple[float, CRTPPacket]] = deque()
         self._wake = threading.Event()
+        self._room = threading.Condition()
+        """Notified when an uplink packet leaves `_up` or the link closes (a blocked `send` waits on it)."""
         self._closed = threading.Event()
         self._flush_on_close = False
         if self._drone is not None:
@@ -137,12 +155,41 @@ class FakeLink:
     # Called by cflib ------------------------------------------------------------------------------------------
 
     def send(self, pk: CRTPPacket) -> bool:
-        """Queue one uplink packet (never blocks)."""
+        """Queue one uplink packet; blocks while the driver holds `DRIVER_PACKETS` already (packets still in their
+        `LinkFaults.latency_s` are on their way, not waiting), for `SEND_TIMEOUT_S` at most: then the link fails with
+        cflib's "RadioDriver: Could not send packet to copter" and False is returned, as cflib's radio driver does."""
         if self._closed.is_set():
             return False
-        self._up.append((time.monotonic() + self._faults.latency_s, pk.header, bytes(pk.data)))
+        deadline = time.monotonic() + SEND_TIMEOUT_S
+        with self._room:
+            while self._waiting(time.monotonic()) >= DRIVER_PACKETS and not self._closed.is_set():
+                left = deadline - time.monotonic()
+                if left <= 0.0:
+                    break
+                self._room.wait(left)
+            full = self._waiting(time.monotonic()) >= DRIVER_PACKETS
+            if not self._closed.is_set() and not full:
+                self._up.append((time.monotonic() + self._faults.latency_s, pk.header, bytes(pk.data)))
+        if self._closed.is_set():
+            return False
+        if full:
+            self._fail("RadioDriver: Could not send packet to copter")
+            return False
         self._wake.set()
         return True
+
+    def _waiting(self, now: float) -> int:
+        """Uplink packets due and not yet acknowledged (the head may be in its transaction)."""
+        n = 0
+        for due, _, _ in self._up:
+            if due > now or n >= DRIVER_PACKETS:
+                break
+            n += 1
+        return n
+
+    def _taken(self) -> None:
+        with self._room:
+            self._room.notify_all()
 
     def receive(self, wait: float) -> CRTPPacket | None:
         """Next downlink packet; `wait` 0 polls, < 0 blocks until one arrives or the link closes, > 0 is a timeout.
@@ -161,6 +208,7 @@ class FakeLink:
         Safe from the link's own thread, as cflib closes from the error callback (then nothing is flushed)."""
         self._flush_on_close = threading.current_thread() is not self._thread
         self._closed.set()
+        self._taken()
         self._wake.set()
         self._in.put(None)  # wakes a receive() blocked in cflib's receive thread
         self._error_callback = None
@@ -188,8 +236,7 @@ class FakeLink:
         while self._up and self._drone is not None:
             _, header, payload = self._up.popleft()
             for _ in range(3):
-                with self._dongle:
-                    ok, _retry, _down = self._drone.transact(self._uri.channel, (header, payload))
+                ok, _retry, _down = self._transact((header, payload))
                 if ok:
                     break
 
@@ -212,16 +259,10 @@ class FakeLink:
                 continue
             item = self._up[0] if up_due else None
             last_tx = now
-            down = None
-            with self._dongle:
-                if self._drone is None:  # nobody at this address: the radio's attempts all go unanswered
-                    ok, retry = False, timing.arc_retries
-                else:
-                    ok, retry, down = self._drone.transact(self._uri.channel, (item[1], item[2]) if item else None)
-                    if ok and item is not None:
-                        self._up.popleft()
-                if timing.transaction_s > 0.0:
-                    time.sleep(timing.transaction_s)
+            ok, retry, down = self._transact((item[1], item[2]) if item else None)
+            if ok and item is not None:
+                self._up.popleft()
+                self._taken()
             if not ok:
                 lost += 1
                 if lost >= timing.max_lost_acks:
@@ -231,6 +272,22 @@ class FakeLink:
                 continue
             lost = 0
             self._deliver(down, item is not None, retry)
+
+    def _transact(self, uplink: tuple[int, bytes] | None) -> tuple[bool, int, tuple[int, int, bytes] | None]:
+        """One radio transaction through the dongle: wait for its air slot (`DongleAir.reserve`), reach the drone
+        (outside the slot: other links' slots run meanwhile), and hand the ack back no earlier than the slot's end."""
+        air_s = self._timing.transaction_s
+        end = 0.0
+        if air_s > 0.0:
+            start, end = self._dongle.reserve(air_s, time.monotonic())
+            _sleep_until(start)
+        if self._drone is None:  # nobody at this address: the radio's attempts all go unanswered
+            result: tuple[bool, int, tuple[int, int, bytes] | None] = (False, self._timing.arc_retries, None)
+        else:
+            result = self._drone.transact(self._uri.channel, uplink)
+        if air_s > 0.0:
+            _sleep_until(end)
+        return result
 
     def _deliver(self, down: tuple[int, int, bytes] | None, had_uplink: bool, retry: int) -> None:
         if down is None:
@@ -254,11 +311,18 @@ class FakeLink:
         callback = self._error_callback
         logger.info("fake link %010X: %s", self._uri.address, message)
         self._closed.set()
+        self._taken()
         self._in.put(None)
         if self._drone is not None:
             self._drone.detach(self._wake)
         if callback is not None:
             callback(message)
+
+
+def _sleep_until(t_s: float) -> None:
+    delay = t_s - time.monotonic()
+    if delay > 0.0:
+        time.sleep(delay)
 
 
 class FakeRadioDriver(CRTPDriver):

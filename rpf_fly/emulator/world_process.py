@@ -54,7 +54,7 @@ from typing import Any, Optional
 from rpf_fly.mission.model import Obstacle
 
 from .fake_firmware import FirmwareSnapshot, Packet
-from .fake_world import DronePort, FakeDroneConfig, FakeWorld, LinkFaults, RadioCounters, RadioTiming, TruthSample
+from .fake_world import DongleAir, DronePort, FakeDroneConfig, FakeWorld, LinkFaults, RadioCounters, RadioTiming, TruthSample
 
 logger = logging.getLogger(__name__)
 
@@ -247,7 +247,7 @@ class RemoteWorld:
         self._radio = radio
         self._addresses = tuple(addresses)
         self.timing = timing or RadioTiming()
-        self._dongles: dict[int, threading.Lock] = {}
+        self._dongles: dict[int, DongleAir] = {}
         self._lock = threading.Lock()
 
     @property
@@ -265,9 +265,9 @@ class RemoteWorld:
         except LookupError:
             return None
 
-    def dongle_lock(self, devid: int) -> threading.Lock:
+    def dongle(self, devid: int) -> DongleAir:
         with self._lock:
-            return self._dongles.setdefault(devid, threading.Lock())
+            return self._dongles.setdefault(devid, DongleAir())
 
     def uri(self, address: int) -> str:
         return f"fake://0/80/2M/{address:010X}"

@@ -39,6 +39,7 @@ from rpf_fly.mission.model import Drone, Mission
 from rpf_fly.mocap.frame import MocapFrame, MocapSource
 from rpf_fly.planning.wall_following import MODE_NAMES
 from rpf_fly.radio.backend import DroneBackend, DroneState
+from rpf_fly.radio.schedule import ExtposSchedule
 from rpf_fly.sim.scenario import obstacle_set
 
 __all__ = ["FlightLoop", "FlightReport", "LoopStats", "NullRecorder", "PlannerFactory", "Recorder"]
@@ -103,7 +104,7 @@ class FlightLoop:
         self._estop_reason = ""
         self._estop_lock = threading.Lock()
         self._estop_done = False
-        self._last_extpos: dict[str, float] = {}
+        self._extpos = ExtposSchedule.for_uris(mission.radio.extpos_rate_hz, self.uris)
         self._last_status_s = -math.inf
         self._states: dict[str, DroneState] = {}
         self._watchdog = LoopWatchdog(self._on_loop_stall, stall_timeout_s(flight.dt),
@@ -505,16 +506,15 @@ class FlightLoop:
             self.recorder.after_tick(now)  # the log writer's burst goes in the gap before the next frame
 
     def _on_frame(self, frame: MocapFrame, now: float) -> None:
-        """Record the frame's poses and forward them to the drones' estimators (rate-limited per drone)."""
+        """Record the frame's poses and forward them to the drones' estimators, each drone in its own extpos slots
+        (``radio.extpos_rate_hz``, phased across the drones of a dongle: rpf_fly/radio/schedule.py)."""
         fresh = {n: p for n, p in self.tracker.poses.items() if p.frame_number == frame.frame_number and p.valid}
         self.recorder.poses(now, fresh)
-        period = 1.0 / self.mission.radio.extpos_rate_hz
         extpose = self.mission.radio.extpos == "extpose"
         for name, pose in fresh.items():
             agent = self.agents[name]
-            if agent.phase.terminal or now - self._last_extpos.get(name, -math.inf) < period:
+            if agent.phase.terminal or not self._extpos.due(name, now):
                 continue
-            self._last_extpos[name] = now
             self.commander.extpos(agent, pose.position, pose.quaternion if extpose else None)
 
     def _finish_landings(self, now: float) -> None:

@@ -13,11 +13,12 @@ from __future__ import annotations
 import math
 import time
 from pathlib import Path
-from typing import Any, Callable, Optional
+from typing import Any, Callable, Mapping, Optional
 
 from rpf_fly.flight.agent import DroneAgent
 from rpf_fly.flight.events import FlightEvent
 from rpf_fly.flight.poses import TrackedPose, stamp_us
+from rpf_fly.flight.radio_load import RadioLoadFeed
 from rpf_fly.flight.truth import TruthBatch, TruthFeed
 from rpf_fly.log import schemas as S
 from rpf_fly.log.writer import FlightLog, Sink
@@ -25,6 +26,8 @@ from rpf_fly.mission.model import Mission
 from rpf_fly.planning.obstacles import FAR
 from rpf_fly.planning.planner import PlanStep
 from rpf_fly.radio.backend import DroneState
+from rpf_fly.radio.budget import radio_loads
+from rpf_fly.radio.schedule import LinkCount, MeasuredLoad
 
 
 TF_PERIOD_S = 0.05
@@ -48,7 +51,8 @@ class McapRecorder:
     it sees what the file holds, on the writer thread, so the loop's cost is unchanged."""
 
     def __init__(self, path: str | Path, mission: Mission, seed: int = 0, source: str = "flight",
-                 truth: Optional[Callable[[], TruthBatch]] = None, sink: Optional[Sink] = None):
+                 truth: Optional[Callable[[], TruthBatch]] = None, sink: Optional[Sink] = None,
+                 radio: Optional[Callable[[], Mapping[str, LinkCount]]] = None, radio_period_s: Optional[float] = None):
         self.mission = mission
         self._offset_ns = time.time_ns() - time.monotonic_ns()
         """Unix-epoch ns minus the loop's monotonic ns, an integer: logged (``mission.monotonic_offset_ns``) so that
@@ -64,6 +68,12 @@ class McapRecorder:
         goals = {d.name: complex(*d.goal) for d in mission.drones}
         self.log.scene(now, [S._obstacle_dict(o) for o in mission.obstacles], goals, arena, mission.flight.height)  # noqa: SLF001
         self.truth_feed = TruthFeed(truth, self._truth).start() if truth is not None else None
+        self._plan = {load.dongle: load for load in radio_loads(mission)}
+        self.radio_feed = None
+        if radio is not None:  # /radio/<dongle>: the measured load of each dongle (rpf_fly/flight/radio_load.py)
+            feed = RadioLoadFeed(radio, self._radio, self._plan, **({} if radio_period_s is None
+                                                                     else {"period_s": radio_period_s}))
+            self.radio_feed = feed.start()
 
     @property
     def path(self) -> Path:
@@ -114,6 +124,15 @@ class McapRecorder:
         """The feed's thread: one world sample (``time.monotonic()`` seconds, shared with this process)."""
         self.log.truth(self._ns(stamp_s), states)
 
+    def _radio(self, t_s: float, loads: list[MeasuredLoad]) -> None:
+        """The radio feed's thread: one window of every dongle's measured load."""
+        t = self._ns(t_s)
+        for load in loads:
+            plan = self._plan.get(load.dongle)
+            self.log.radio(t, load.dongle, drones=load.drones or (plan.drones if plan else ()), window_s=load.window_s,
+                           packets=load.packets, transactions=load.transactions,
+                           planned_per_s=plan.needed if plan else 0.0, budget_per_s=plan.budget if plan else 0.0)
+
     def after_tick(self, t_s: float) -> None:
         """The loop finished a planning tick and waits for the next frame: let the writer drain now (its GIL-holding
         burst then falls in that idle gap instead of delaying the next frame's setpoints)."""
@@ -139,6 +158,8 @@ class McapRecorder:
                        file=event.kind)
 
     def close(self) -> None:
+        if self.radio_feed is not None:
+            self.radio_feed.stop()
         if self.truth_feed is not None:
             self.truth_feed.stop()
         self.log.close()

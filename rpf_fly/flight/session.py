@@ -146,7 +146,7 @@ def run_flight(
     if log_path:
         truth = rig.truth_samples if rig is not None and rig.truth else None  # only a dry run has a truth
         recorder = McapRecorder(log_path, mission, seed, source="dry-run" if rig else "flight", truth=truth,
-                                sink=live.publish if live is not None else None)
+                                sink=live.publish if live is not None else None, radio=backend.radio_counts)
     try:
         try:
             loop = FlightLoop(mission, backend, source, planner_factory, uris=uris, recorder=recorder,

@@ -19,12 +19,6 @@ Reward per robot (paper Section IV-B; docs/learning.md, *Environment*):
   that potential, ``gamma Phi(s') - Phi(s)`` (the per-step form pays a drone for lingering near its goal instead of
   arriving; docs/learning.md).
 
-Scenes: the paper's arenas A and B (``arena``), or, with ``curriculum`` set, the scene families of
-:mod:`rpf_fly.sim.generators` drawn uniformly, each at a seed drawn from the environment's generator in the
-*training* seed stream (``split="train"``): the bench's families suite draws from the ``bench`` stream, so no bench
-scene is ever trained on. Family scenes have ``n_robots`` drones, and their boxes (walls) are padded into the
-per-arena obstacle arrays like the circles.
-
 Guidance and margin (``EnvConfig.guidance``, ``EnvConfig.margin``; both off by default, the paper's environment):
 with ``guidance="path"`` each arena's visibility graph is built at its reset (the obstacles are static), every
 step pulls each drone toward its next visible waypoint exactly as :class:`~rpf_fly.planning.Planner` does, and
@@ -32,6 +26,12 @@ step pulls each drone toward its next visible waypoint exactly as :class:`~rpf_f
 distances (a drone is not punished for leaving a U-trap). With ``margin > 0`` the planner and the observation see
 every surface ``margin`` closer (``PlannerConfig.margin``) and the reward knows it: ``-margin_penalty`` each step a
 drone is closer than ``r + margin`` to an obstacle or ``2r + margin`` to another drone without colliding.
+
+Scenes: the paper's arenas A and B (``arena``), or, with ``curriculum`` set, the scene families of
+:mod:`rpf_fly.sim.generators` drawn uniformly, each at a seed drawn from the environment's generator in the
+*training* seed stream (``split="train"``): the bench's families suite draws from the ``bench`` stream, so no bench
+scene is ever trained on. Family scenes have ``n_robots`` drones, and their boxes (walls) are padded into the
+per-arena obstacle arrays like the circles.
 
 A robot is done when it arrives or collides (a collided drone halts where it is and stays visible to the others).
 An arena resets with a freshly generated scene when all its robots are done or after ``max_steps``; the robots
@@ -83,15 +83,15 @@ class EnvConfig:
     progress_reward: Literal["potential", "paper"] = "potential"
     preset: Literal["robust", "paper"] = "robust"
     collision_penalty: float = 500.0
-    curriculum: tuple[str, ...] = ()
-    """Scene families (rpf_fly.sim.generators.FAMILIES) to draw from, uniformly, instead of ``arena``; empty: the
-    paper's arenas A and B."""
     guidance: Literal["none", "path"] = "none"
     """``path``: the attraction pulls at each drone's next visible waypoint (graphs built per arena at reset)."""
     margin: float = 0.0
     """Clearance beyond contact the planner keeps and the reward asks for (metres; the product flies 0.05)."""
     margin_penalty: float = 20.0
     """Per step inside ``r + margin`` of an obstacle or ``2r + margin`` of a drone (with ``margin > 0``)."""
+    curriculum: tuple[str, ...] = ()
+    """Scene families (rpf_fly.sim.generators.FAMILIES) to draw from, uniformly, instead of ``arena``; empty: the
+    paper's arenas A and B."""
 
     def planner_config(self) -> PlannerConfig:
         return PlannerConfig.preset(
@@ -168,7 +168,7 @@ class SwarmEnv:
         self.t = np.zeros(b, dtype=int)
         self.guided = config.guidance == "path"
         if self.guided:  # per arena: corner nodes (padded far away, never chosen) and each drone's cost-to-go
-            v = m * CIRCLE_SIDES + 4 * k  # a polygon per circle, four corners per box (wall)
+            v = m * CIRCLE_SIDES + 4 * k
             self.node = np.full((b, 1, v), FAR * (1 + 1j))
             self.cost = np.full((b, n, v), np.inf)
             self.start_path = np.zeros((b, n))
@@ -243,11 +243,11 @@ class SwarmEnv:
         if self.guided:
             self.inflated = None  # rebuilt from the new obstacles at the next observation
             guide = Guidance(scene.obstacles, self.planner.safety_radius + self.planner.margin, (scene.arena_x, scene.arena_y))
-            v = guide.nodes.shape[0]
+            k = guide.nodes.shape[0]
             self.node[b, 0, :] = FAR * (1 + 1j)
-            self.node[b, 0, :v] = guide.nodes
+            self.node[b, 0, :k] = guide.nodes
             self.cost[b] = np.inf
-            self.cost[b, :, :v] = guide.rows(scene.goals)
+            self.cost[b, :, :k] = guide.rows(scene.goals)
             self.start_path[b] = guide.waypoint(scene.starts, scene.goals)[1]
         self.path[b] = 0.0
         self.done[b] = False

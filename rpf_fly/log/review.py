@@ -120,6 +120,8 @@ class Review:
     """Per drone, and ``all``: RMS and max setpoint tracking error (m); only drones with setpoints and poses."""
     battery: dict[str, tuple[float, float, float]] = field(default_factory=dict)
     """Per drone with battery telemetry: first, lowest and last voltage (V)."""
+    radio: list[RadioSummary] = field(default_factory=list)
+    """Per dongle, its measured load (``/radio/<dongle>``; none in logs before 2026-12-01)."""
 
     @property
     def interrupted(self) -> bool:
@@ -150,6 +152,12 @@ class Review:
             },
             "tracking": {name: {"rms_m": rms, "max_m": peak} for name, (rms, peak) in self.tracking.items()},
             "battery": {name: {"first_v": a, "min_v": b, "last_v": c} for name, (a, b, c) in self.battery.items()},
+            "radio": {str(r.dongle): {"drones": list(r.drones), "windows": r.windows,
+                                      "mean_packets_per_s": r.mean_packets_per_s,
+                                      "peak_packets_per_s": r.peak_packets_per_s,
+                                      "peak_transactions_per_s": r.peak_transactions_per_s,
+                                      "planned_per_s": r.planned_per_s, "budget_per_s": r.budget_per_s}
+                      for r in self.radio},
         })
         if self.metrics is None:
             doc["metrics_error"] = self.metrics_error
@@ -175,7 +183,58 @@ def scenario_of(data: LogData) -> dict[str, Any]:
 
 
 DRONE_PREFIXES = ("mocap", "truth")
-"""Topics ``/<prefix>/<drone>``; every other two-part topic is ``/<drone>/<what>``."""
+"""Topics ``/<prefix>/<drone>``; every other two-part topic is ``/<drone>/<what>`` (but `NOT_DRONE_PREFIXES`)."""
+
+NOT_DRONE_PREFIXES = ("radio",)
+"""Two-part topics that name no drone: ``/radio/<dongle>``."""
+
+
+@dataclass(frozen=True)
+class RadioSummary:
+    """One dongle's measured load over the log (``/radio/<dongle>``): packets a second, mean over the windows
+    and the busiest window, against what the budget planned and what the dongle carries."""
+
+    dongle: int
+    drones: tuple[str, ...]
+    windows: int
+    packets: float
+    seconds: float
+    peak_packets_per_s: float
+    peak_transactions_per_s: float
+    planned_per_s: float
+    budget_per_s: float
+
+    @property
+    def mean_packets_per_s(self) -> float:
+        return self.packets / self.seconds if self.seconds > 0 else 0.0
+
+    def line(self) -> str:
+        """``rpf-fly review``'s line for this dongle."""
+        use = self.peak_packets_per_s / self.budget_per_s if self.budget_per_s > 0 else 0.0
+        over = "  OVER BUDGET" if self.peak_packets_per_s > self.budget_per_s > 0 else ""
+        return (f"radio dongle {self.dongle} ({len(self.drones)} drones): {self.peak_packets_per_s:.0f} packets/s "
+                f"in the busiest second, {self.mean_packets_per_s:.0f} on average; planned "
+                f"{self.planned_per_s:.0f}, budget {self.budget_per_s:.0f} ({use:.0%}); air in use "
+                f"{self.peak_transactions_per_s:.0f} transactions/s at most (polls included){over}")
+
+
+def radio_of(data: LogData) -> list[RadioSummary]:
+    """Every dongle of the log's ``/radio/<dongle>`` topics, in dongle order ([] for logs before 2026-12-01)."""
+    out = []
+    for topic in data.topics:
+        if not topic.startswith("/radio/"):
+            continue
+        msgs = [m.data for m in data.messages(topic)]
+        if not msgs:
+            continue
+        last = msgs[-1]
+        out.append(RadioSummary(
+            int(last.get("dongle", 0)), tuple(last.get("drones", ())), len(msgs),
+            sum(float(m.get("packets", 0.0)) for m in msgs), sum(float(m.get("window_s", 0.0)) for m in msgs),
+            max(float(m.get("packets_per_s", 0.0)) for m in msgs),
+            max(float(m.get("transactions_per_s", 0.0)) for m in msgs),
+            float(last.get("planned_per_s", 0.0)), float(last.get("budget_per_s", 0.0))))
+    return sorted(out, key=lambda r: r.dongle)
 
 
 def drones_of(data: LogData) -> list[str]:
@@ -189,6 +248,8 @@ def drones_of(data: LogData) -> list[str]:
     for topic in data.topics:
         parts = topic.strip("/").split("/")
         if len(parts) != 2:
+            continue
+        if parts[0] in NOT_DRONE_PREFIXES:
             continue
         name = parts[1] if parts[0] in DRONE_PREFIXES else parts[0]
         if name and name not in names:
@@ -365,6 +426,7 @@ def review(data: LogData) -> Review:
         interruptions=interruptions_of(data, events, clean, (end - start) / 1e9),
         tracking=tracking,
         battery=battery,
+        radio=radio_of(data),
     )
 
 

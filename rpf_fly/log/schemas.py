@@ -371,6 +371,26 @@ TRUTH_STATE: dict[str, Any] = _obj(
     description="One drone's true state in a dry run's simulated world (not measured: real flights have none)",
 )
 
+RADIO_LOAD: dict[str, Any] = _obj(
+    {
+        "timestamp": _time("End of the window"),
+        "dongle": {"type": "integer", "minimum": 0, "description": "The dongle number (the URI's first number)"},
+        "drones": {"type": "array", "items": {"type": "string"}, "description": "The drones on this dongle"},
+        "window_s": _num("Length of the window (s)"),
+        "packets": _num("Uplink packets acknowledged in the window: setpoints, extpos, commands, cflib's pings"),
+        "transactions": _num("Radio transactions acknowledged in the window, cflib's empty polls included"),
+        "packets_per_s": _num("packets / window_s: the dongle's measured load"),
+        "transactions_per_s": _num("transactions / window_s: the dongle's air in use (polls yield to packets)"),
+        "planned_per_s": _num("What the radio budget counts for this dongle while the drones stream setpoints "
+                              "(rpf_fly.radio.budget: setpoints + extpos + pings)"),
+        "budget_per_s": _num("What this dongle carries (radio.budget_packets_s or the dongle type's figure)"),
+    },
+    required=("timestamp", "dongle", "drones", "window_s", "packets", "transactions", "packets_per_s",
+              "transactions_per_s", "planned_per_s", "budget_per_s"),
+    title="rpf_fly.RadioLoad",
+    description="One dongle's measured radio load over one window, from cflib's link statistics",
+)
+
 SCHEMAS: dict[str, dict[str, Any]] = {
     "foxglove.PoseInFrame": POSE_IN_FRAME,
     "foxglove.SceneUpdate": SCENE_UPDATE,
@@ -379,6 +399,7 @@ SCHEMAS: dict[str, dict[str, Any]] = {
     "rpf_fly.PlannerStep": PLANNER_STEP,
     "rpf_fly.DroneStatus": DRONE_STATUS,
     "rpf_fly.TruthState": TRUTH_STATE,
+    "rpf_fly.RadioLoad": RADIO_LOAD,
 }
 """Every schema the log uses, by the schema name written into the file."""
 
@@ -397,6 +418,8 @@ def topic_schema(topic: str) -> str:
         return "foxglove.PoseInFrame"
     if topic.startswith("/truth/"):
         return "rpf_fly.TruthState"
+    if topic.startswith("/radio/"):
+        return "rpf_fly.RadioLoad"
     if topic.endswith("/planner"):
         return "rpf_fly.PlannerStep"
     if topic.endswith("/status"):
@@ -553,6 +576,24 @@ def truth_state(t_ns: int, position: Any, yaw: float, motors: bool, crashed: boo
         "motors": bool(motors),
         "crashed": bool(crashed),
         "estimate": xyz(estimate),
+    }
+
+
+def radio_load(t_ns: int, dongle: int, drones: Sequence[str], window_s: float, packets: float, transactions: float,
+               planned_per_s: float, budget_per_s: float) -> dict[str, Any]:
+    """A ``rpf_fly.RadioLoad`` (counts over ``window_s`` seconds ending at ``t_ns``)."""
+    window = float(window_s)
+    return {
+        "timestamp": stamp(t_ns),
+        "dongle": int(dongle),
+        "drones": [str(d) for d in drones],
+        "window_s": window,
+        "packets": float(packets),
+        "transactions": float(transactions),
+        "packets_per_s": float(packets) / window if window > 0 else 0.0,
+        "transactions_per_s": float(transactions) / window if window > 0 else 0.0,
+        "planned_per_s": float(planned_per_s),
+        "budget_per_s": float(budget_per_s),
     }
 
 

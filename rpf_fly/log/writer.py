@@ -139,6 +139,7 @@ class FlightLog:
         self._planner: dict[str, tuple[str, Any]] = {}
         self._status: dict[str, tuple[str, Any]] = {}
         self._truth: dict[str, tuple[str, Any]] = {}
+        self._radio: dict[str, tuple[str, Any]] = {}
         self._fixed = {name: (name, itertools.count()) for name in ("/scene", "/tf", "/events")}
         self._channels: dict[str, int] = {}
         self._schema_ids: dict[str, int] = {}
@@ -226,6 +227,14 @@ class FlightLog:
         """``/<drone>/status``: state, battery_v, link_quality, latency_ms, outcome."""
         self._put(self._status.get(drone) or self._topic(self._status, "/{}/status", drone), t_ns, _status_message,
                   (fields,))
+
+    def radio(self, t_ns: int, dongle: int, **fields: Any) -> None:
+        """``/radio/<dongle>``: one window of a dongle's measured load (fields of
+        :func:`rpf_fly.log.schemas.radio_load`: drones, window_s, packets, transactions, planned_per_s,
+        budget_per_s). Once a second per dongle: never dropped for a full queue (as events)."""
+        topic = self._radio.get(str(dongle)) or self._topic(self._radio, "/radio/{}", str(dongle))
+        self._put(topic, t_ns, S.radio_load, (dongle, *(fields[k] for k in (
+            "drones", "window_s", "packets", "transactions", "planned_per_s", "budget_per_s"))), priority=True)
 
     def scene(self, t_ns: int, obstacles: Sequence[Mapping[str, Any]] = (), goals: Optional[Mapping[str, Any]] = None,
               arena: Optional[Mapping[str, Sequence[float]]] = None, height: float = 0.0) -> None:

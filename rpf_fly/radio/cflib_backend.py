@@ -59,6 +59,8 @@ from cflib.crazyflie.swarm import CachedCfFactory, Swarm
 from cflib.crazyflie.syncCrazyflie import SyncCrazyflie
 from cflib.crtp.radiodriver import RadioDriver
 
+from rpf_fly.radio.schedule import LinkCount
+
 from .backend import (
     BatteryState,
     DroneState,
@@ -120,6 +122,14 @@ class _Drone:
     command_lock: threading.Lock = field(default_factory=threading.Lock)
     """Serialises this drone's commands and guards `streaming` and `last_setpoint`."""
     log_config: LogConfig | None = None
+    radio_transactions: float = 0.0
+    """Acknowledged transactions since the first window of cflib's link statistics (empty polls included)."""
+    radio_packets: float = 0.0
+    """... of them with an uplink packet."""
+    radio_window_at: float | None = None
+    """`time.monotonic()` when the last window of cflib's ``uplink_rate`` closed."""
+    radio_pending: float | None = None
+    """Transactions of the window just reported by ``uplink_rate``, waiting for its ``uplink_congestion``."""
 
 
 class CflibBackend:
@@ -266,6 +276,8 @@ class CflibBackend:
         stats = cf.link_statistics
         stats.link_quality_updated.add_callback(partial(self._on_quality, drone.name))
         stats.latency_updated.add_callback(partial(self._on_latency, drone.name))
+        stats.uplink_rate_updated.add_callback(partial(self._on_uplink_rate, drone.name))
+        stats.uplink_congestion_updated.add_callback(partial(self._on_uplink_congestion, drone.name))
         config = LogConfig(name="rpf_status", period_in_ms=self._status_period_ms)
         for variable, ctype in STATUS_VARIABLES:
             config.add_variable(variable, ctype)
@@ -447,6 +459,35 @@ class CflibBackend:
     def add_link_lost_callback(self, callback: LinkLostCallback) -> None:
         with self._lock:
             self._callbacks.append(callback)
+
+    def _on_uplink_rate(self, name: str, rate: float) -> None:
+        """cflib's link statistics close a window (at least 0.1 s) with its transactions a second; the window's
+        share of them carrying a packet follows at once (``uplink_congestion``, same call). The first window seen
+        started before the callback was registered and is not counted."""
+        now = time.monotonic()
+        with self._lock:
+            drone = self._drones.get(name)
+            if drone is None:
+                return
+            drone.radio_pending = rate * (now - drone.radio_window_at) if drone.radio_window_at is not None else None
+            drone.radio_window_at = now
+
+    def _on_uplink_congestion(self, name: str, congestion: float) -> None:
+        with self._lock:
+            drone = self._drones.get(name)
+            if drone is None or drone.radio_pending is None:
+                return
+            drone.radio_transactions += drone.radio_pending
+            drone.radio_packets += drone.radio_pending * congestion
+            drone.radio_pending = None
+
+    def radio_counts(self) -> dict[str, LinkCount]:
+        """Each connected drone's radio traffic so far, as cflib's link statistics measured it (acknowledged
+        transactions, and those with an uplink packet), by name; kept after `close` (the last window, under
+        0.1 s, is never reported by cflib)."""
+        with self._lock:
+            return {d.name: LinkCount(d.uri, d.radio_transactions, d.radio_packets)
+                    for d in self._drones.values() if d.radio_window_at is not None}
 
     # State ----------------------------------------------------------------------------------------------------
 

@@ -296,3 +296,62 @@ def test_links_on_one_dongle_share_its_air_time(make_world: MakeWorld) -> None:
     counts = [b - a for a, b in zip(before, after)]
     assert sum(counts[:3]) <= 0.5 / 0.01 + 3  # three links polling through one dongle
     assert sum(counts[3:]) >= 2 * sum(counts[:3])  # one dongle each
+
+
+def test_a_dongle_is_held_for_the_air_time_only_not_for_a_slow_drone_answer(make_world: MakeWorld,
+                                                                             toc_cache: Path) -> None:
+    """Two cflib links on one dongle (1 ms of air a transaction); one drone's answer takes 4 ms (as a loaded world
+    process's round trip can): the other link keeps the dongle's air to itself meanwhile, so it gets its 150 extpos
+    through while the slow one gets about one in five. Held for the whole round trip (the emulator before
+    2026-12-01), the dongle alternated and both links crawled at the slow one's pace."""
+    world = make_world(2, timing=RadioTiming(transaction_s=0.001))
+    slow, fast = address(0), address(1)
+    got: dict[int, list[float]] = {slow: [], fast: []}
+
+    def observer(drone: int, delay_s: float) -> Callable[[int, int, bytes, float], None]:
+        def seen(port: int, channel: int, payload: bytes, stamp: float) -> None:
+            if port == 6:
+                got[drone].append(stamp)
+            if delay_s:
+                time.sleep(delay_s)  # the drone's answer is late; the radio's air is not busy meanwhile
+        return seen
+
+    cache = str(toc_cache)
+    with SyncCrazyflie(world.uri(slow), cf=Crazyflie(rw_cache=cache)) as slow_scf, \
+            SyncCrazyflie(world.uri(fast), cf=Crazyflie(rw_cache=cache)) as fast_scf:
+        world.add_packet_observer(slow, observer(slow, 0.004))
+        world.add_packet_observer(fast, observer(fast, 0.0))
+        air = world.dongle(0)
+        before = air.transactions
+        senders = [threading.Thread(target=lambda cf=scf.cf: [cf.extpos.send_extpos(0.0, 0.0, 0.0) for _ in range(150)])
+                   for scf in (slow_scf, fast_scf)]  # one sender each: a full link holds its sender back
+        for sender in senders:
+            sender.start()
+        assert world.wait_until(lambda w: len(got[fast]) >= 150, 10.0)
+        slow_then = len(got[slow])
+        assert world.wait_until(lambda w: len(got[slow]) >= 150, 10.0)  # the slow one is not starved either
+        slots = air.transactions - before
+        for sender in senders:
+            sender.join(5.0)
+    assert slow_then < 0.6 * 150, f"the slow drone got {slow_then} of 150 while the fast one got all of its own"
+    assert slow_then >= 5  # both links took turns from the start (first come, first served)
+    assert slots >= 300  # every packet took a slot of the dongle's air (polls too)
+
+
+def test_a_link_holds_two_packets_at_most_and_then_holds_back_its_sender(make_world: MakeWorld,
+                                                                         toc_cache: Path) -> None:
+    """cflib's radio driver queues one packet a link (and its radio thread sends one): a sender faster than the
+    radio (here 10 ms of air a transaction) is held in ``send_packet`` instead of building a queue of stale
+    packets. After each send returns, the firmware has every extpos but the last two at most (the drone gets a
+    packet when its air slot starts, so usually all but the last one)."""
+    world = make_world(1, timing=RadioTiming(transaction_s=0.01))
+    got: list[float] = []
+    world.add_packet_observer(address(0), lambda port, ch, payload, stamp: got.append(port) if port == 6 else None)
+    behind = []
+    with SyncCrazyflie(world.uri(address(0)), cf=Crazyflie(rw_cache=str(toc_cache))) as scf:
+        for accepted in range(1, 31):
+            scf.cf.extpos.send_extpos(0.0, 0.0, 0.0)
+            behind.append(accepted - len(got))
+        assert world.wait_until(lambda w: len(got) == 30, 5.0)
+    assert max(behind) <= fake_radio.DRIVER_PACKETS, behind  # an unbounded queue: 29 behind at the end
+    assert max(behind) >= 1  # the sender did get ahead of the radio: it was held back, not lock-stepped

@@ -40,7 +40,7 @@ _require("websockets")
 import websockets  # noqa: E402
 
 DRONES = ("cf1", "cf2", "cf3")
-EXPECTED_TOPICS = {"/scene", "/tf", "/events"} | {
+EXPECTED_TOPICS = {"/scene", "/tf", "/events", "/radio/0"} | {
     topic for d in DRONES for topic in (f"/mocap/{d}", f"/{d}/setpoint", f"/{d}/planner", f"/{d}/status", f"/truth/{d}")
 }
 SUBPROTOCOL = "foxglove.sdk.v1"  # what foxglove-sdk 0.30 accepts (rust/foxglove/src/websocket/handshake.rs)

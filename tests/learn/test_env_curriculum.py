@@ -43,3 +43,28 @@ def test_without_a_curriculum_the_paper_arenas_are_unchanged():
 def test_unknown_family_is_refused():
     with pytest.raises(GeneratorError):
         SwarmEnv(EnvConfig(n_arenas=2, curriculum=("maze",)), seed=0)
+
+
+def test_guidance_on_family_scenes_with_walls():
+    """Guided training on the families (boxes padded like the circles): the env's waypoints are the planner's."""
+    import numpy as np
+    import pytest
+
+    from rpf_fly.planning import FixedGains, ObstacleSet, Planner, views_from_states
+
+    env = SwarmEnv(EnvConfig(n_arenas=6, curriculum=tuple(FAMILIES), guidance="path", margin=0.05), seed=4)
+    w = env.world
+    guided = 0
+    for b in range(env.config.n_arenas):
+        m = int((env.centers[b, 0].real < 1e5).sum())
+        k = int((env.box_center[b, 0].real < 1e5).sum()) if env.box_center.ndim == 3 else 0
+        obstacles = ObstacleSet(env.centers[b, 0, :m], env.radii[b, 0, :m], env.box_center[b, 0, :k],
+                                env.box_half_x[b, 0, :k], env.box_half_y[b, 0, :k]) if k else \
+            ObstacleSet(env.centers[b, 0, :m], env.radii[b, 0, :m], np.zeros(0, complex), np.zeros(0), np.zeros(0))
+        bounds = ((w._lo_x[b, 0], w._hi_x[b, 0]), (w._lo_y[b, 0], w._hi_y[b, 0]))
+        planner = Planner(obstacles, env.planner, FixedGains(), bounds)
+        step = planner.step(views_from_states(w.position[b], w.velocity[b], w.goal[b], w.heading[b], 6.0))
+        waypoint = step.waypoint if step.waypoint is not None else w.goal[b]
+        assert env.view.goal[b] == pytest.approx(waypoint, abs=1e-12)
+        guided += int((env.view.goal[b] != w.goal[b]).sum())
+    assert guided > 0

@@ -38,6 +38,9 @@ def write_flight(path, drones=("cf1", "cf2"), ticks=50):  # type: ignore[no-unty
             log.tf(t, {d: ((0.01 * k, float(i), 0.6), None) for i, d in enumerate(drones)})
             log.truth(t, {d: ((0.01 * k, float(i), 0.6), 0.1, True, False, (0.01 * k, float(i) + 0.01, 0.6))
                           for i, d in enumerate(drones)})
+            if k % 25 == 24:
+                log.radio(t, 0, drones=list(drones), window_s=0.25, packets=25.0 * len(drones),
+                          transactions=60.0 * len(drones), planned_per_s=100.0 * len(drones), budget_per_s=1000.0)
         log.event(T0 + ticks * 10 * MS, 3, "landing early")
     return log
 
@@ -57,14 +60,14 @@ def test_seeking_reader_reads_the_summary(tmp_path):
             **{f"/{d}/setpoint": 50 for d in ("cf1", "cf2")},
             **{f"/{d}/planner": 50 for d in ("cf1", "cf2")},
             **{f"/{d}/status": 5 for d in ("cf1", "cf2")},
-            **{f"/truth/{d}": 50 for d in ("cf1", "cf2")},
+            **{f"/truth/{d}": 50 for d in ("cf1", "cf2")}, "/radio/0": 2,
         }
         assert stats.message_count == sum(counts.values()) == log.written
         assert stats.message_start_time == T0 and stats.message_end_time == T0 + 500 * MS
         assert stats.chunk_count >= 1
         schemas = {summary.schemas[c.schema_id].name for c in summary.channels.values()}
         assert schemas == {"foxglove.PoseInFrame", "foxglove.SceneUpdate", "foxglove.FrameTransforms", "foxglove.Log",
-                           "rpf_fly.PlannerStep", "rpf_fly.DroneStatus", "rpf_fly.TruthState"}
+                           "rpf_fly.PlannerStep", "rpf_fly.DroneStatus", "rpf_fly.TruthState", "rpf_fly.RadioLoad"}
         assert all(s.encoding == "jsonschema" for s in summary.schemas.values())
         assert all(c.message_encoding == "json" for c in summary.channels.values())
         metadata = {m.name: m.metadata for m in reader.iter_metadata()}

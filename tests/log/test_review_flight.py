@@ -94,3 +94,23 @@ def test_a_simulated_log_ends_cleanly(lab_log):
     result = review(read_log(path))
     assert result.source == "sim" and result.clean_end is True and not result.interrupted
     assert result.battery == {}  # a simulation has no battery telemetry
+
+
+def test_a_dry_run_logs_each_dongles_measured_load_and_review_prints_it(clean_cli_flight):
+    """/radio/0 (three drones, setpoints at 10 Hz, extpos at 30 Hz, cflib's pings at 10 Hz: 150 packets/s planned):
+    a window a second, the busy ones near the plan; the review's line and JSON say the same."""
+    data = read_log(clean_cli_flight.log)
+    windows = [m.data for m in data.messages("/radio/0")]
+    assert len(windows) >= 10 and all(w["drones"] == ["cf1", "cf2", "cf3"] for w in windows)
+    assert all(w["planned_per_s"] == 150.0 and w["budget_per_s"] == 1000.0 for w in windows)
+    full = [w for w in windows if w["window_s"] > 0.9]
+    assert len(full) >= len(windows) - 2 and all(w["window_s"] < 1.5 for w in full)  # once a second
+    busy = sorted(w["packets_per_s"] for w in full)[len(full) // 2:]
+    assert 0.8 * 150 <= busy[len(busy) // 2] <= 1.2 * 150  # measured, not copied from the plan
+    assert all(w["transactions_per_s"] >= w["packets_per_s"] for w in windows)  # polls fill the gaps
+    text, doc = text_and_json(clean_cli_flight.log)
+    line = next(line for line in text.splitlines() if line.startswith("radio dongle 0"))
+    peak = max(w["packets_per_s"] for w in windows)
+    assert f"{peak:.0f} packets/s in the busiest second" in line and "planned 150, budget 1000" in line
+    assert doc["radio"]["0"]["peak_packets_per_s"] == pytest.approx(peak)
+    assert doc["radio"]["0"]["drones"] == ["cf1", "cf2", "cf3"]
