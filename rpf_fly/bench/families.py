@@ -35,6 +35,9 @@ from rpf_fly.sim.rollout import SimParams
 DEFAULT_PLANNER = "default"
 """The product's default planner: ``PlannerSettings()`` as a mission without a ``planner.kind`` gets it."""
 FAMILY_PLANNERS = ("rpf", "rpf-mean", "apf", "ppo", "orca", DEFAULT_PLANNER)
+"""The suite's planners by default (the product's default among them, as ``default``)."""
+KNOWN_PLANNERS = FAMILY_PLANNERS + ("rpf3",)
+"""What ``--planners`` may name: also RPF-3 (``rpf3``) by its own name."""
 SPLIT = "bench"
 """The seed stream of the suite; the trainer's curriculum draws from ``train``."""
 SIM = SimParams()
@@ -139,9 +142,9 @@ class FamiliesResult:
 
 def prepare_families(config: FamiliesConfig) -> FamiliesPlan:
     """Check names and policies; a planner whose policy is unusable gets ``missing`` rows."""
-    unknown = [p for p in config.planners if p not in FAMILY_PLANNERS]
+    unknown = [p for p in config.planners if p not in KNOWN_PLANNERS]
     if unknown:
-        raise BenchError(f"unknown planner {unknown[0]!r} (expected some of {', '.join(FAMILY_PLANNERS)})")
+        raise BenchError(f"unknown planner {unknown[0]!r} (expected some of {', '.join(KNOWN_PLANNERS)})")
     unknown = [f for f in config.families if f not in FAMILIES]
     if unknown:
         raise BenchError(f"unknown scene family {unknown[0]!r} (expected some of {', '.join(FAMILIES)})")

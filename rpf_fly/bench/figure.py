@@ -13,7 +13,7 @@ import numpy as np
 from rpf_fly.bench.runner import PLANNER_LABELS, Trajectory
 from rpf_fly.mission.model import BoxObstacle, CircleObstacle
 
-PLANNER_COLOURS = {"rpf": "#1f77b4", "rpf-mean": "#17becf", "apf": "#ff7f0e", "ppo": "#9467bd", "orca": "#2ca02c"}
+PLANNER_COLOURS = {"rpf": "#1f77b4", "rpf-mean": "#17becf", "apf": "#ff7f0e", "ppo": "#9467bd", "orca": "#2ca02c", "rpf3": "#d62728"}
 
 
 def plot_comparison(

@@ -27,7 +27,7 @@ from rpf_fly.sim.scenario import Scenario, arena_a, scenario_from_mission
 
 PLANNERS = ("rpf", "rpf-mean", "apf", "ppo", "orca")
 """Bench planner kinds, in table order."""
-PLANNER_LABELS = {"rpf": "RPF-1", "rpf-mean": "RPF-2", "apf": "APF", "ppo": "PPO", "orca": "ORCA"}
+PLANNER_LABELS = {"rpf": "RPF-1", "rpf-mean": "RPF-2", "apf": "APF", "ppo": "PPO", "orca": "ORCA", "rpf3": "RPF-3"}
 PAPER_MISSIONS = ("arena-a-6", "arena-b-6", "circle-8-r3", "circle-8-r8", "lab-3")
 FRESH_SCENE = "arena-a-fresh"
 SCENES = PAPER_MISSIONS + (FRESH_SCENE,)
@@ -35,7 +35,7 @@ FRESH_SEED_BASE = 1_000_000
 """Fresh arena-A scenes use seeds ``FRESH_SEED_BASE + i``: never used in training."""
 TRAJECTORY_SCENES = ("circle-8-r3", "circle-8-r8", "lab-3")
 """Scenes whose seed-0 trajectories the figure draws."""
-POLICY_ACTIONS = {"rpf": "gains", "rpf-mean": "gains", "ppo": "heading"}
+POLICY_ACTIONS = {"rpf": "gains", "rpf-mean": "gains", "ppo": "heading", "rpf3": "gains"}
 """Learned kinds and the action their ONNX policy must have."""
 
 

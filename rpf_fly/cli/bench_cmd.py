@@ -34,7 +34,7 @@ def bench(
     ),
     policies: Path = typer.Option(Path("policies"), "--policies", help="Folder of <kind>.onnx policies."),
     policy: list[str] = typer.Option(
-        [], "--policy", help="KIND=PATH: a policy for one learned kind (rpf, rpf-mean, ppo); repeatable."
+        [], "--policy", help="KIND=PATH: a policy for one learned kind (rpf, rpf-mean, ppo, rpf3); repeatable."
     ),
     missions: Path = typer.Option(Path("missions"), "--missions", help="Folder of the paper missions."),
     json_output: bool = typer.Option(
@@ -64,9 +64,11 @@ def bench(
         if not sep or not kind or not raw:
             raise fail(f"--policy: expected KIND=PATH, got {item!r}")
         paths[kind.strip()] = Path(raw)
-    unknown = [k for k in paths if k not in ("rpf", "rpf-mean", "ppo")]
+    from rpf_fly.bench.runner import POLICY_ACTIONS
+
+    unknown = [k for k in paths if k not in POLICY_ACTIONS]
     if unknown:
-        raise fail(f"--policy: {unknown[0]!r} is not a learned planner kind (rpf, rpf-mean, ppo)")
+        raise fail(f"--policy: {unknown[0]!r} is not a learned planner kind ({', '.join(POLICY_ACTIONS)})")
     if suite == "families":
         _families(episodes, planners, families, guidance, policies, paths, json_output, json_file, markdown, figure, out,
                   jobs)

@@ -26,9 +26,20 @@ def train(
         "", "--curriculum", help="Comma-separated scene families to train on instead of --arena (all: every family; "
         "training seed stream, docs/bench.md)."
     ),
+    guidance: str = typer.Option("none", "--guidance", help="none (the paper's environment) or path (global "
+                                 "guidance, as the product flies: RPF-3)."),
+    margin: float = typer.Option(0.0, "--margin", help="Clearance beyond contact (m) kept by the planner and asked "
+                                 "by the reward (RPF-3: 0.05)."),
     episodes: int = typer.Option(4000, "--episodes", help="Stop after this many finished arena episodes."),
+    collision_penalty: float = typer.Option(500.0, "--collision-penalty", help="Reward of a collision (negated)."),
+    margin_penalty: float = typer.Option(20.0, "--margin-penalty", help="Per step inside r + margin of an obstacle "
+                                         "or 2r + margin of a drone (negated; with --margin)."),
+    max_updates: int = typer.Option(10_000, "--max-updates", help="Stop after this many PPO updates (whichever of "
+                                    "--episodes and --max-updates comes first)."),
     seed: int = typer.Option(0, "--seed", help="Seed of the weights, the scenes and the sampling."),
     arenas: int = typer.Option(48, "--arenas", help="Parallel arenas (6 drones each)."),
+    threads: int = typer.Option(2, "--threads", help="torch threads (1 on a machine shared with other jobs: two "
+                                "threads on two busy cores spin against each other)."),
     resume: bool = typer.Option(False, "--resume", help="Continue from the run folder's checkpoint."),
     eval_seeds: int = typer.Option(20, "--eval-seeds", help="Seeds per scene in the model card's evaluation (0: none)."),
     obstacle_radius: Optional[float] = typer.Option(
@@ -53,6 +64,10 @@ def train(
     unknown = [f for f in families if f not in FAMILIES]
     if unknown:
         raise fail(f"--curriculum: unknown scene family {unknown[0]!r} (expected all or some of {', '.join(FAMILIES)})")
+    if guidance not in ("none", "path"):
+        raise fail(f"--guidance: expected none or path, got {guidance!r}")
+    if not 0.0 <= margin < 1.0:
+        raise fail(f"--margin: expected metres in [0, 1), got {margin}")
     if out.suffix != ".onnx":
         raise fail(f"--out: expected a path ending in .onnx, got {str(out)!r}")
     existing = [p for p in written_files(out) if p.exists()]
@@ -66,8 +81,9 @@ def train(
     from rpf_fly.learn.ppo import PPOConfig, Trainer
 
     radius = obstacle_radius if obstacle_radius is not None else (0.1 if kind == "ppo" else 0.5)
-    config = PPOConfig(seed=seed, kind=kind, arena=arena, curriculum=families, episodes=episodes, n_arenas=arenas,  # type: ignore[arg-type]
-                       obstacle_radius=radius)
+    config = PPOConfig(seed=seed, kind=kind, arena=arena, curriculum=families, episodes=episodes, max_updates=max_updates, n_arenas=arenas,  # type: ignore[arg-type]
+                       obstacle_radius=radius, guidance=guidance, margin=margin, threads=threads,
+                       collision_penalty=collision_penalty, margin_penalty=margin_penalty)  # type: ignore[arg-type]
     run_dir = out.with_suffix(".run")
     command = "rpf-fly train " + " ".join(shlex.quote(a) for a in sys.argv[2:]) if len(sys.argv) > 2 else "rpf-fly train"
     from rpf_fly.learn.card import git_commit
@@ -79,8 +95,10 @@ def train(
             raise fail(f"--resume: no checkpoint at {trainer.checkpoint_path}")
         trainer.load_checkpoint()
     started = time.time()
+    cpu_started = time.process_time()
     _train_with_progress(trainer)
-    _finish(trainer, out, command, eval_seeds, missions_dir, time.time() - started, commit)
+    cpu_s = time.process_time() - cpu_started
+    _finish(trainer, out, command, eval_seeds, missions_dir, time.time() - started, commit, cpu_s)
 
 
 def written_files(out: Path) -> tuple[Path, ...]:
@@ -130,7 +148,8 @@ def _train_with_progress(trainer) -> None:  # type: ignore[no-untyped-def]
         trainer.run(update)
 
 
-def _finish(trainer, out: Path, command: str, eval_seeds: int, missions_dir: Path, wall_s: float, commit: str) -> None:  # type: ignore[no-untyped-def]
+def _finish(trainer, out: Path, command: str, eval_seeds: int, missions_dir: Path, wall_s: float, commit: str,  # type: ignore[no-untyped-def]
+            cpu_s: Optional[float] = None) -> None:
     import dataclasses
 
     from rpf_fly.learn.card import machine, write_card
@@ -142,7 +161,8 @@ def _finish(trainer, out: Path, command: str, eval_seeds: int, missions_dir: Pat
     export_onnx(
         model,
         out,
-        {"rpf_fly.kind": config.kind, "rpf_fly.preset": "robust", "rpf_fly.seed": str(config.seed), "rpf_fly.commit": commit},
+        {"rpf_fly.kind": config.kind, "rpf_fly.preset": "robust", "rpf_fly.seed": str(config.seed), "rpf_fly.commit": commit,
+         "rpf_fly.guidance": config.guidance, "rpf_fly.margin": str(config.margin)},
     )
     parity = check_parity(model, out)
     curve_csv = out.with_suffix(".curve.csv")
@@ -158,6 +178,8 @@ def _finish(trainer, out: Path, command: str, eval_seeds: int, missions_dir: Pat
         "training": {
             "wall_time_s": round(trainer.wall_s, 1),
             "this_invocation_s": round(wall_s, 1),
+            "cpu_time_s": None if cpu_s is None else round(cpu_s, 1),
+            "load_average_at_end": _load_average(),
             "updates": trainer.update,
             "arena_episodes": len(trainer.episodes),
             "env_steps": trainer.env_steps,
@@ -180,6 +202,16 @@ def _finish(trainer, out: Path, command: str, eval_seeds: int, missions_dir: Pat
     write_card(out.with_suffix(".yaml"), card)
     typer.echo(f"policy: {out}  (parity max |ort - torch| = {parity:.2e})")
     typer.echo(f"model card: {out.with_suffix('.yaml')}  curves: {curve_png}")
+
+
+def _load_average() -> Optional[list[float]]:
+    """The 1, 5 and 15 minute load averages (the machine may be shared: wall time alone misleads)."""
+    import os
+
+    try:
+        return [round(x, 2) for x in os.getloadavg()]
+    except OSError:
+        return None
 
 
 def _evaluate(policy: Path, kind: str, seeds: int, missions_dir: Path) -> dict:

@@ -72,6 +72,11 @@ class PPOConfig:
     progress_reward: Literal["potential", "paper"] = "potential"
     collision_penalty: float = 500.0
     """The paper's -100 lets the policy trade collisions for shorter paths (docs/learning.md); 500 does not."""
+    guidance: Literal["none", "path"] = "none"
+    """``path``: train with the planner's global guidance (RPF-3); ``none``: the paper's environment."""
+    margin: float = 0.0
+    """Clearance beyond contact (m) the planner keeps and the reward asks for; RPF-3 trains with the product's 0.05."""
+    margin_penalty: float = 20.0
     threads: int = 2
     checkpoint_every: int = 10
     eval_every: int = 10
@@ -98,6 +103,9 @@ class PPOConfig:
             obstacle_radius=self.obstacle_radius,
             progress_reward=self.progress_reward,
             collision_penalty=self.collision_penalty,
+            guidance=self.guidance,
+            margin=self.margin,
+            margin_penalty=self.margin_penalty,
         )
 
 

@@ -15,10 +15,12 @@ from typing import Literal, Optional
 
 Vec2 = tuple[float, float]
 
-PLANNER_KINDS = ("apf", "apf-paper", "rpf", "rpf-mean", "ppo", "orca")
-"""Planner kinds a mission (or ``--planner``) may name. ``rpf``, ``rpf-mean`` and ``ppo`` need an ONNX policy."""
+PLANNER_KINDS = ("apf", "apf-paper", "rpf", "rpf-mean", "ppo", "rpf3", "orca")
+"""Planner kinds a mission (or ``--planner``) may name. ``rpf``, ``rpf-mean``, ``ppo`` and ``rpf3`` need an ONNX policy
+(``policies/<kind>.onnx`` by default). ``rpf3`` (RPF-3) is the attention policy trained with guidance and the margin
+on the scene families (docs/learning.md): the product's learned planner, with guidance and margin on by default."""
 
-POLICY_KINDS = ("rpf", "rpf-mean", "ppo")
+POLICY_KINDS = ("rpf", "rpf-mean", "ppo", "rpf3")
 
 GUIDANCE_MODES = ("none", "path")
 """``planner.guidance``: ``none`` (the attraction pulls at the goal) or ``path`` (at the next visible waypoint of the
@@ -33,9 +35,9 @@ PRODUCT_MARGIN_M = 0.05
 
 
 def default_guidance(kind: str, preset: str = "robust") -> str:
-    """``path`` for the product's fixed-gain planner (``apf``, robust preset), ``none`` for the paper's planners and
-    the ORCA baseline (the bench turns it on with ``planner.guidance``)."""
-    return "path" if kind == "apf" and preset == "robust" else "none"
+    """``path`` for the product's planners (``apf`` and ``rpf3``, robust preset: RPF-3 was trained with it), ``none``
+    for the paper's planners and the ORCA baseline (the bench turns it on with ``planner.guidance``)."""
+    return "path" if kind in ("apf", "rpf3") and preset == "robust" else "none"
 
 
 def default_margin(kind: str, preset: str = "robust") -> float:

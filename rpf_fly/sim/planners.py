@@ -1,8 +1,8 @@
 """From a mission's planner settings to a :class:`~rpf_fly.planning.Planner` (used by sim, bench and flight).
 
 ``apf`` is the vanilla APF with the robust preset, ``apf-paper`` the literal formulas (docs/algorithm.md, *Presets*); both use
-fixed gains (eta, lambda from the mission; the paper's 0.05 and 2 by default). ``rpf`` and ``rpf-mean`` take their
-gains from an ONNX policy every step; ``ppo`` is the vanilla-PPO baseline that turns the heading with no APF.
+fixed gains (eta, lambda from the mission; the paper's 0.05 and 2 by default). ``rpf``, ``rpf-mean`` and ``rpf3`` (RPF-3) take
+their gains from an ONNX policy every step; ``ppo`` is the vanilla-PPO baseline that turns the heading with no APF.
 """
 
 from __future__ import annotations
@@ -79,7 +79,7 @@ def _make(settings: PlannerSettings, obstacles: ObstacleSet, config: PlannerConf
     if settings.policy is None:
         raise UnsupportedPlanner(f"planner kind {settings.kind!r} needs an ONNX policy")
     policy = OnnxPolicy(settings.policy)
-    if settings.kind in ("rpf", "rpf-mean"):
+    if settings.kind in ("rpf", "rpf-mean", "rpf3"):
         return Planner(obstacles, config, OnnxGains(policy), bounds)
     if settings.kind == "ppo":
         return HeadingPolicyPlanner(obstacles, config, policy, bounds)

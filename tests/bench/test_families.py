@@ -196,3 +196,16 @@ def test_worker_processes_give_the_same_runs_in_the_same_order():
     two = run_families(prepare_families(config), seen.append, jobs=2)
     assert [(m, r.to_json_dict()) for m, r in one.runs] == [(m, r.to_json_dict()) for m, r in two.runs]
     assert one.rows == two.rows and len(seen) == 4 * len(guidance_modes())
+
+
+def test_rpf3_is_benched_by_name_with_its_guidance_and_margin():
+    """RPF-3 is not in the default planner list (it is not the default); named, it runs with its own policy,
+    guidance path and margin 0.05 (its kind's defaults)."""
+    assert "rpf3" not in FAMILY_PLANNERS
+    plan = prepare_families(FamiliesConfig(planners=("rpf3",), families=("arena-b",), seeds=1, policies_dir=POLICIES))
+    assert not plan.missing and plan.policies["rpf3"].sha256
+    settings = plan.settings["rpf3"]
+    assert settings.kind == "rpf3" and settings.guidance_mode == "path" and settings.margin_m == 0.05
+    assert settings.policy == (POLICIES / "rpf3.onnx").resolve()
+    with pytest.raises(BenchError):
+        prepare_families(FamiliesConfig(planners=("rpf4",), families=("arena-b",), seeds=1))

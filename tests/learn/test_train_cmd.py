@@ -59,3 +59,35 @@ def test_an_unknown_curriculum_family_is_refused_before_training(tmp_path):
     assert result.exit_code == 2, result.output
     assert "maze" in result.stderr and "corridor" in result.stderr
     assert not out.with_suffix(".run").exists()
+
+
+def test_guidance_and_margin_are_checked_before_training(tmp_path):
+    out = tmp_path / "p.onnx"
+    result = runner.invoke(get_app(), ["train", "--out", str(out), "--guidance", "astar", "--episodes", "1"])
+    assert result.exit_code == 2 and "--guidance" in result.stderr and "astar" in result.stderr
+    result = runner.invoke(get_app(), ["train", "--out", str(out), "--guidance", "path", "--margin", "-0.1"])
+    assert result.exit_code == 2 and "--margin" in result.stderr
+    assert not out.with_suffix(".run").exists()
+
+
+
+def test_the_card_of_a_guided_run_records_guidance_margin_cpu_time_and_load(tmp_path):
+    """What ``rpf-fly train`` writes after training (one tiny guided update, then the CLI's own export and card)."""
+    import yaml
+
+    from rpf_fly.cli.train_cmd import _finish
+    from rpf_fly.learn.ppo import PPOConfig, Trainer
+    from rpf_fly.planning.onnx_policy import OnnxPolicy
+
+    config = PPOConfig(n_arenas=1, rollout_steps=8, max_updates=1, episodes=10**9, curriculum=("arena-b",),
+                       guidance="path", margin=0.05, threads=1, epochs=1, minibatch_size=8, eval_every=10**9)
+    trainer = Trainer(config, tmp_path / "g.run")
+    trainer.run()
+    out = tmp_path / "g.onnx"
+    _finish(trainer, out, "rpf-fly train --guidance path --margin 0.05", 0, ROOT / "missions", 1.0, "0" * 40, 0.5)
+    card = yaml.safe_load(out.with_suffix(".yaml").read_text())
+    assert card["training"]["cpu_time_s"] == 0.5 and len(card["training"]["load_average_at_end"]) == 3
+    hyper = card["training"]["hyperparameters"]
+    assert hyper["guidance"] == "path" and hyper["margin"] == 0.05
+    meta = OnnxPolicy(out).metadata
+    assert meta["rpf_fly.guidance"] == "path" and float(meta["rpf_fly.margin"]) == 0.05

@@ -394,7 +394,7 @@ def test_safety_section_rejects_unknown_response():
 @pytest.mark.parametrize(
     "kind, guidance, margin",
     [("apf", "path", 0.05), ("orca", "none", 0.05), ("apf-paper", "none", 0.0), ("rpf", "none", 0.0),
-     ("rpf-mean", "none", 0.0), ("ppo", "none", 0.0)],
+     ("rpf-mean", "none", 0.0), ("ppo", "none", 0.0), ("rpf3", "path", 0.05)],
 )
 def test_guidance_and_margin_default_by_kind(kind, guidance, margin):
     """On for the product's planner; the paper's planners stay as the paper wrote them."""
