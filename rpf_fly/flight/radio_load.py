@@ -17,6 +17,7 @@ import threading
 import time
 from collections.abc import Callable, Iterable, Mapping
 
+from rpf_fly.flight.periodic import PeriodicFeed
 from rpf_fly.radio.schedule import LinkCount, MeasuredLoad, dongle_loads
 
 logger = logging.getLogger(__name__)
@@ -25,7 +26,7 @@ PERIOD_S = 1.0
 """One window a second per dongle: `rpf-fly review` compares packets a second with the budget."""
 
 
-class RadioLoadFeed:
+class RadioLoadFeed(PeriodicFeed):
     """Calls ``sink(monotonic_s, [MeasuredLoad per dongle])`` every ``period_s`` with the traffic since the previous
     sample of ``fetch()`` (drone -> :class:`LinkCount`). ``dongles``: the mission's dongles, reported from the first
     window (zeros until their links connect)."""
@@ -33,13 +34,11 @@ class RadioLoadFeed:
     def __init__(self, fetch: Callable[[], Mapping[str, LinkCount]],
                  sink: Callable[[float, list[MeasuredLoad]], None], dongles: Iterable[int] = (),
                  period_s: float = PERIOD_S) -> None:
+        super().__init__("radio-load", period_s)
         self._fetch = fetch
         self._sink = sink
         self._dongles = tuple(sorted(set(dongles)))
-        self.period_s = float(period_s)
-        self._stop = threading.Event()
         self._lock = threading.Lock()
-        self._thread = threading.Thread(target=self._run, name="radio-load", daemon=True)
         self._last: Mapping[str, LinkCount] = {}
         self._last_s = time.monotonic()
         self.windows = 0
@@ -47,26 +46,13 @@ class RadioLoadFeed:
 
     def start(self) -> "RadioLoadFeed":
         self._last, self._last_s = dict(self._fetch()), time.monotonic()
-        self._thread.start()
+        super().start()
         return self
 
-    def stop(self) -> None:
-        """Stop the thread, then record the last window (idempotent)."""
-        if self._stop.is_set():
-            return
-        self._stop.set()
-        if self._thread.is_alive() and self._thread is not threading.current_thread():
-            self._thread.join(timeout=5.0)
-        self._once()
-
-    def _run(self) -> None:
-        while not self._stop.wait(self.period_s):
-            self._once()
-
-    def _once(self) -> None:
+    def _once(self) -> bool:
         with self._lock:
             if self.error is not None:
-                return
+                return False
             try:
                 counts = dict(self._fetch())
                 now = time.monotonic()
@@ -77,3 +63,5 @@ class RadioLoadFeed:
             except Exception as err:  # noqa: BLE001 - the flight goes on without its radio figures
                 self.error = err
                 logger.warning("radio load feed stopped: %s: %s", type(err).__name__, err)
+                return False
+        return True

@@ -20,9 +20,9 @@ flight loop.
 from __future__ import annotations
 
 import logging
-import threading
-import time
 from typing import Any, Callable, Optional
+
+from rpf_fly.flight.periodic import PeriodicFeed
 
 logger = logging.getLogger(__name__)
 
@@ -33,44 +33,19 @@ TruthBatch = list[tuple[float, dict[str, Any]]]
 """``[(monotonic_s, {drone: (position, yaw, motors, crashed, estimate)})]``, oldest first."""
 
 
-class TruthFeed:
+class TruthFeed(PeriodicFeed):
     """Fetches truth samples with ``fetch()`` on a thread every ``period_s`` and calls ``sink(monotonic_s, states)``
     for each, oldest first. :meth:`stop` joins the thread and fetches one last time, so the log ends with the
-    world's last state before the log closes."""
+    world's last state before the log closes. ``cpu_s``: the thread's CPU time (fetch, unpickle, hand-over)."""
 
     def __init__(self, fetch: Callable[[], TruthBatch], sink: Callable[[float, dict[str, Any]], None],
                  period_s: float = FETCH_PERIOD_S) -> None:
+        super().__init__("truth-feed", period_s)
         self._fetch = fetch
         self._sink = sink
-        self.period_s = float(period_s)
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, name="truth-feed", daemon=True)
         self.fetches = 0
         self.samples = 0
-        self.cpu_s = 0.0
-        """CPU time of the feed's thread (fetch, unpickle, hand-over), set when it ends."""
         self.error: Optional[BaseException] = None
-
-    def start(self) -> "TruthFeed":
-        self._thread.start()
-        return self
-
-    def stop(self) -> None:
-        """Stop the thread, then fetch what is left (idempotent)."""
-        if self._stop.is_set():
-            return
-        self._stop.set()
-        if self._thread.is_alive() and self._thread is not threading.current_thread():
-            self._thread.join(timeout=5.0)
-        self._once()
-
-    def _run(self) -> None:
-        try:
-            while not self._stop.wait(self.period_s):
-                if not self._once():
-                    return
-        finally:
-            self.cpu_s = time.thread_time()
 
     def _once(self) -> bool:
         """One fetch and hand-over; False once fetching failed (the feed then stays silent)."""
