@@ -163,13 +163,14 @@ class Commander:
 
     # ---------------------------------------------------------------------------------------- commands
 
-    def stream(self, agent: DroneAgent, x: float, y: float, z: float) -> bool:
-        """Stream one position setpoint, only to a drone whose phase streams (never after ``land``)."""
+    def stream(self, agent: DroneAgent, x: float, y: float, z: float, origin_s: Optional[float] = None) -> bool:
+        """Stream one position setpoint, only to a drone whose phase streams (never after ``land``); ``origin_s``:
+        the receipt of the mocap frame it was planned from."""
         with self._locks[agent.name]:
             if agent.phase not in STREAMING:
                 return False
             agent.last_setpoint = complex(x, y)
-            return self.backend.send_position_setpoint(agent.name, x, y, z, 0.0)
+            return self.backend.send_position_setpoint(agent.name, x, y, z, 0.0, origin_s=origin_s)
 
     def extpos(self, agent: DroneAgent, position: Vec3, quaternion: Optional[Quaternion]) -> bool:
         """Forward a mocap pose to the drone's estimator (also while it lands: the landing needs it)."""

@@ -78,6 +78,8 @@ class FlightLoop:
     LAND_SETTLE_S = 0.5
     PREFLIGHT_TIMEOUT_S = 8.0
     STATUS_PERIOD_S = 0.1
+    SEND_WAIT_S = 0.002
+    """How long a tick waits for the backend's sender threads to hand its setpoints to cflib (see `_plan_tick`)."""
 
     def __init__(
         self,
@@ -123,6 +125,9 @@ class FlightLoop:
         self.supervisor = Supervisor(mission, self.obstacles)
         self.phase = SwarmPhase.CONNECTING
         self.stats = LoopStats()
+        self._take_latencies: Optional[Callable[[], list[float]]] = getattr(backend, "take_setpoint_latencies", None)
+        self._wait_sent: Optional[Callable[[Optional[list[str]], float], bool]] = getattr(backend, "wait_sent", None)
+        """Where the backend queues setpoints for threads of its own, it measures their latency to the radio."""
         self.tick = 0
         self._ticks = TickSchedule(mission.flight.dt, 0.0)
         self._last_tick_s: Optional[float] = None
@@ -518,6 +523,7 @@ class FlightLoop:
         finally:
             try:
                 self.backend.close()
+                self._collect_latencies()
             finally:
                 self.recorder.close()
 
@@ -593,6 +599,7 @@ class FlightLoop:
         """Plan and send every drone's setpoint; the log records are written after the last send."""
         self.stats.ticks += 1
         self.tick += 1
+        self._collect_latencies()  # the previous tick's, measured by the backend's sender threads
         self._watchdog.beat()
         flight = self.mission.flight
         stale_after = self.mission.safety.pose_timeout_s
@@ -642,6 +649,12 @@ class FlightLoop:
             for note in self._swarm_planner.notes:
                 self.events.emit(WARNING, "planner_batch", note)
             self._swarm_planner.notes.clear()
+        if sent and self._wait_sent is not None:
+            # The backend's sender threads hand the setpoints to cflib now: wait (releasing the interpreter) until
+            # they did, or SEND_WAIT_S at most, so the tick's records and checks come after them, not before (a
+            # running thread keeps Python's interpreter lock for up to 5 ms). A dying link's sender stays blocked
+            # in cflib; the loop does not wait for it longer than that.
+            self._wait_sent(None, self.SEND_WAIT_S)
         for agent, pose, outcome in planned:  # after the sends: a batched row is cut out only now
             step = outcome.step
             records.append((agent, pose, step, MODE_NAMES.get(int(step.mode), "apf")))
@@ -652,12 +665,18 @@ class FlightLoop:
               sent: list[tuple[str, tuple[float, float, float], float]]) -> None:
         z = agent.clamp_height(self.mission.flight.height)
         xy = agent.clamp(xy)
-        if not self.commander.stream(agent, xy.real, xy.imag, z):
+        origin = frame.receive_time_s if frame is not None else None
+        if not self.commander.stream(agent, xy.real, xy.imag, z, origin):
             return
         t = self.clock()
-        if frame is not None:
-            self.stats.latencies.append(t - frame.receive_time_s)
+        if origin is not None and self._take_latencies is None:  # a backend that sends at once
+            self.stats.latencies.append(t - origin)
         sent.append((agent.name, (xy.real, xy.imag, z), t))
+
+    def _collect_latencies(self) -> None:
+        """The latencies the backend measured to cflib's hand-over of each setpoint (its sender threads)."""
+        if self._take_latencies is not None:
+            self.stats.latencies.extend(self._take_latencies())
 
     # ---------------------------------------------------------------------------------------- findings
 

@@ -151,8 +151,10 @@ class DroneState:
 class DroneBackend(Protocol):
     """Per-drone radio operations used by the flight loop.
 
-    Commands return True when the command was handed to a live link and False when the drone is unknown to the
-    link (never connected, lost or closed); they do not wait for the drone. Swarm-wide operations return a mapping
+    Commands return True when the command was accepted for a live link and False when the drone is unknown to the
+    link (never connected, lost or closed); they do not wait for the drone, nor for the radio: a backend may queue
+    them (`CflibBackend` sends each drone's commands from a thread of that drone's own, in order, newest setpoint
+    only, so that one dying link holds back no other drone). The emergency stop is never queued. Swarm-wide operations return a mapping
     name -> error message holding only the drones that failed (empty when all succeeded).
     """
 
@@ -195,9 +197,12 @@ class DroneBackend(Protocol):
         """High-level go-to an absolute position and yaw (degrees) in `duration_s`."""
         ...
 
-    def send_position_setpoint(self, name: str, x: float, y: float, z: float, yaw_deg: float) -> bool:
+    def send_position_setpoint(self, name: str, x: float, y: float, z: float, yaw_deg: float,
+                               origin_s: float | None = None) -> bool:
         """Stream one low-level position setpoint (metres, yaw in degrees). Streaming takes priority over the
-        high-level commander; the firmware levels out 0.5 s after the last one and cuts the motors after 2 s."""
+        high-level commander; the firmware levels out 0.5 s after the last one and cuts the motors after 2 s.
+        ``origin_s``: the `time.monotonic()` of the data it was planned from (a mocap frame's receipt), for a
+        backend that measures the latency to the radio (``take_setpoint_latencies``, optional)."""
         ...
 
     def hand_over(self, name: str, hold_duration_s: float = 1.0) -> bool:

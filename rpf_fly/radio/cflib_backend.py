@@ -20,12 +20,18 @@ What it does per drone (cflib 0.1.34, firmware protocol 12):
   registered link-lost callbacks.
 
 Thread model: after `connect` returns, every public method may be called from any thread. One lock guards the
-backend's bookkeeping (telemetry, link state); each drone has its own command lock, so a slow link (cflib's radio
-driver blocks up to 2 s when its queue is full) delays only that drone; packets go through `Crazyflie.send_packet`,
-which holds cflib's own send lock. `emergency_stop` takes no command lock. Telemetry and link callbacks run on
-cflib's threads (the link's receive thread, the radio thread on link loss). `connect`, `reset_estimators` and
-`close` block and must not run concurrently with each other. Link-lost callbacks must be short and must not call
-`close`.
+backend's bookkeeping (telemetry, link state). Every command but the emergency stop and the estimator's parameter
+writes is queued in the drone's `Outbox` (rpf_fly/radio/outbox.py) and handed to cflib by a sender thread of that
+drone's own: the command methods return at once, and a dying link (cflib's radio driver blocks its caller up to 2 s
+when its queue is full) holds back only its own drone's commands, never the caller nor the other drones. The outbox
+keeps high-level commands in order, sends the newest setpoint and extpos only, and drops a waiting setpoint when a
+command that ends the stream (take-off, go-to, hand-over, land, stop) is queued after it, so no setpoint queued
+before a landing reaches the drone after it. `wait_sent` waits until the queued commands went out. Packets go
+through `Crazyflie.send_packet`, which holds cflib's own send lock. `emergency_stop` drops the drone's pending
+commands and sends from the caller's thread at once, one thread per drone when it stops several, so a blocked link
+delays no other drone's stop. Telemetry and link callbacks run on cflib's threads (the link's receive thread, the
+radio thread on link loss). `connect`, `reset_estimators` and `close` block and must not run concurrently with each
+other. Link-lost callbacks must be short and must not call `close`.
 
 Hand-over rule (crazyflie-firmware `commander.c`, `crtp_commander_high_level.c`): a streamed setpoint stops the
 high-level plan; notify-setpoint-stop relaxes the commander's priority, and at its next tick (100 Hz) the
@@ -59,6 +65,7 @@ from cflib.crazyflie.swarm import CachedCfFactory, Swarm
 from cflib.crazyflie.syncCrazyflie import SyncCrazyflie
 from cflib.crtp.radiodriver import RadioDriver
 
+from rpf_fly.radio.outbox import Action, Outbox
 from rpf_fly.radio.schedule import LinkCount
 
 from .backend import (
@@ -121,6 +128,8 @@ class _Drone:
     first_status: threading.Event = field(default_factory=threading.Event)
     command_lock: threading.Lock = field(default_factory=threading.Lock)
     """Serialises this drone's commands and guards `streaming` and `last_setpoint`."""
+    outbox: Outbox | None = None
+    """The drone's queued commands and their sender thread, from the end of its configuration."""
     log_config: LogConfig | None = None
     radio_transactions: float = 0.0
     """Acknowledged transactions since the first window of cflib's link statistics (empty polls included)."""
@@ -173,6 +182,8 @@ class CflibBackend:
         self._drones: dict[str, _Drone] = {}
         self._callbacks: list[LinkLostCallback] = []
         self._swarm: Swarm | None = None
+        self._latencies: list[float] = []
+        """Seconds from a setpoint's ``origin_s`` to its hand-over to cflib, not yet taken."""
 
     # Connection -----------------------------------------------------------------------------------------------
 
@@ -291,6 +302,7 @@ class CflibBackend:
         with self._lock:
             if drone.closing:
                 raise RuntimeError("given up while configuring")
+            drone.outbox = Outbox(drone.name, partial(self._send, drone))
             drone.up, drone.configured, drone.error = True, True, None
 
     def _set_param(self, cf: Any, name: str, value: float) -> None:
@@ -399,6 +411,8 @@ class CflibBackend:
                 drone.closing = True
 
         def close_one(drone: _Drone) -> None:
+            if drone.outbox is not None:  # what was queued (a disarm after touchdown) goes out first
+                drone.outbox.close(flush_s=1.0)
             # also for lost links: cflib keeps their receive thread until close_link (which sends nothing then)
             if drone.scf is not None:
                 drone.scf.cf.close_link()
@@ -534,18 +548,46 @@ class CflibBackend:
                 return None
             return drone.scf.cf
 
-    def _command(self, name: str, action: Callable[[Any, _Drone], None]) -> bool:
-        cf = self._live_cf(name)
-        if cf is None:
+    def _queue(self, name: str, action: Callable[[Any, _Drone], None], kind: str) -> bool:
+        """Queue one command in the drone's outbox (``kind``: ``setpoint``, ``extpos``, ``command`` or
+        ``ends_stream``); False when its link is not up (KeyError for an unknown name)."""
+        with self._lock:
+            drone = self._drones[name]
+            live = drone.up and drone.scf is not None and drone.scf.cf.link is not None
+            outbox = drone.outbox
+        if not live or outbox is None:
             return False
-        drone = self._drones[name]
+        bound: Action = partial(action, drone=drone)
+        if kind == "setpoint":
+            return outbox.setpoint(bound)
+        if kind == "extpos":
+            return outbox.extpos(bound)
+        return outbox.command(bound, ends_stream=kind == "ends_stream")
+
+    def _send(self, drone: _Drone, action: Action) -> None:
+        """The drone's sender thread: hand one queued command to cflib (dropped when the link went down since)."""
+        cf = self._live_cf(drone.name)
+        if cf is None:
+            return
         try:
             with drone.command_lock:
-                action(cf, drone)
-            return True
+                action(cf=cf)
         except Exception:  # one drone's failure must not propagate
-            logger.exception("drone %s: command failed", name)
-            return False
+            logger.exception("drone %s: command failed", drone.name)
+
+    def wait_sent(self, names: list[str] | None = None, timeout_s: float = 1.0) -> bool:
+        """Wait until every command queued so far to ``names`` (default: all) went out to cflib or was dropped;
+        False on timeout. Commands return once queued; tests and scripts that need the packet sent call this."""
+        deadline = time.monotonic() + timeout_s
+        with self._lock:
+            boxes = [d.outbox for n, d in self._drones.items() if d.outbox is not None and (names is None or n in names)]
+        return all(box.wait_idle(max(deadline - time.monotonic(), 0.0)) for box in boxes)
+
+    def take_setpoint_latencies(self) -> list[float]:
+        """Seconds from each setpoint's ``origin_s`` to the moment cflib had taken it, since the last call."""
+        with self._lock:
+            taken, self._latencies = self._latencies, []
+        return taken
 
     @staticmethod
     def _release_stream(cf: Any, drone: _Drone) -> None:
@@ -555,76 +597,104 @@ class CflibBackend:
             drone.streaming = False
 
     def arm(self, name: str, armed: bool = True) -> bool:
-        return self._command(name, lambda cf, d: cf.supervisor.send_arming_request(armed))
+        return self._queue(name, lambda cf, drone: cf.supervisor.send_arming_request(armed), "command")
 
     def takeoff(self, name: str, height_m: float, duration_s: float) -> bool:
-        def action(cf: Any, d: _Drone) -> None:
+        def action(cf: Any, drone: _Drone) -> None:
             cf.high_level_commander.takeoff(height_m, duration_s, yaw=None)
-            self._release_stream(cf, d)
+            self._release_stream(cf, drone)
 
-        return self._command(name, action)
+        return self._queue(name, action, "ends_stream")
 
     def go_to(self, name: str, position: Vec3, yaw_deg: float, duration_s: float) -> bool:
-        def action(cf: Any, d: _Drone) -> None:
+        def action(cf: Any, drone: _Drone) -> None:
             x, y, z = position
             cf.high_level_commander.go_to(x, y, z, math.radians(yaw_deg), duration_s)
-            self._release_stream(cf, d)
+            self._release_stream(cf, drone)
 
-        return self._command(name, action)
+        return self._queue(name, action, "ends_stream")
 
-    def send_position_setpoint(self, name: str, x: float, y: float, z: float, yaw_deg: float) -> bool:
-        def action(cf: Any, d: _Drone) -> None:
+    def send_position_setpoint(self, name: str, x: float, y: float, z: float, yaw_deg: float,
+                               origin_s: float | None = None) -> bool:
+        """Queue one streamed setpoint (latest wins). ``origin_s``: the `time.monotonic()` its data came from
+        (the mocap frame's receipt); the time from it to cflib taking the packet is kept for
+        `take_setpoint_latencies`."""
+        def action(cf: Any, drone: _Drone) -> None:
             cf.commander.send_position_setpoint(x, y, z, yaw_deg)
-            d.streaming = True
-            d.last_setpoint = (x, y, z, yaw_deg)
+            drone.streaming = True
+            drone.last_setpoint = (x, y, z, yaw_deg)
+            if origin_s is not None:
+                latency = time.monotonic() - origin_s
+                with self._lock:
+                    self._latencies.append(latency)
 
-        return self._command(name, action)
+        return self._queue(name, action, "setpoint")
 
     def hand_over(self, name: str, hold_duration_s: float = 1.0) -> bool:
-        def action(cf: Any, d: _Drone) -> None:
-            if not d.streaming or d.last_setpoint is None:
+        def action(cf: Any, drone: _Drone) -> None:
+            if not drone.streaming or drone.last_setpoint is None:
                 return
-            x, y, z, yaw_deg = d.last_setpoint
+            x, y, z, yaw_deg = drone.last_setpoint
             cf.high_level_commander.go_to(x, y, z, math.radians(yaw_deg), hold_duration_s)
-            self._release_stream(cf, d)
+            self._release_stream(cf, drone)
 
-        return self._command(name, action)
+        return self._queue(name, action, "ends_stream")
 
     def land(self, name: str, height_m: float = 0.0, duration_s: float = 2.0) -> bool:
-        def action(cf: Any, d: _Drone) -> None:
+        def action(cf: Any, drone: _Drone) -> None:
             cf.high_level_commander.land(height_m, duration_s, yaw=None)
-            self._release_stream(cf, d)
+            self._release_stream(cf, drone)
 
-        return self._command(name, action)
+        return self._queue(name, action, "ends_stream")
 
     def stop(self, name: str) -> bool:
-        def action(cf: Any, d: _Drone) -> None:
-            if d.streaming:
+        def action(cf: Any, drone: _Drone) -> None:
+            if drone.streaming:
                 cf.commander.send_stop_setpoint()
-            d.streaming = False
+            drone.streaming = False
             cf.high_level_commander.stop()
 
-        return self._command(name, action)
+        return self._queue(name, action, "ends_stream")
+
+    EMERGENCY_DEADLINE_S = 2.5
+    """How long `emergency_stop` of several drones waits for each one's packets: cflib's send blocks up to 2 s on a
+    link whose queue is full; the other drones' stops go out meanwhile, each from a thread of its own."""
 
     def emergency_stop(self, name: str | None = None, repeats: int = 3) -> dict[str, str]:
-        """Emergency stop (latched until reboot), sent `repeats` times (idempotent, safety critical). It does not
-        wait for other commands of the drone (no command lock): cflib's send lock alone orders the packets."""
+        """Emergency stop (latched until reboot), sent `repeats` times (idempotent, safety critical). It drops the
+        drone's queued commands and sends from the calling thread at once, not through the outbox (no command lock:
+        cflib's send lock alone orders the packets); several drones are stopped in parallel, so a blocked link
+        delays no other drone's stop."""
         targets = list(self._drones) if name is None else [self._drones[name].name]
-        errors = {}
-        for target in targets:
+
+        def stop_one(target: str) -> None:
+            outbox = self._drones[target].outbox
+            if outbox is not None:
+                outbox.clear()
             cf = self._live_cf(target)
+            if cf is None:
+                raise RuntimeError("link down")
+            for _ in range(repeats):
+                cf.supervisor.send_emergency_stop()
+
+        errors: dict[str, str] = {}
+        if len(targets) == 1:
             try:
-                if cf is None:
-                    raise RuntimeError("link down")
-                for _ in range(repeats):
-                    cf.supervisor.send_emergency_stop()
-            except Exception as exc:  # report per drone, keep stopping the others
-                errors[target] = f"emergency stop not delivered: {exc}"
-                logger.error("drone %s: emergency stop not delivered: %s", target, exc)
+                stop_one(targets[0])
+            except Exception as exc:
+                errors[targets[0]] = str(exc) or type(exc).__name__
+        else:
+            errors = self._parallel(lambda drone: stop_one(drone.name), [self._drones[t] for t in targets],
+                                    self.EMERGENCY_DEADLINE_S)
+        errors = {t: f"emergency stop not delivered: {why}" for t, why in errors.items()}
+        for target, why in errors.items():
+            logger.error("drone %s: %s", target, why)
         return errors
 
     def send_extpos(self, name: str, position: Vec3) -> bool:
-        return self._command(name, lambda cf, d: cf.extpos.send_extpos(*position))
+        """Queue a mocap position for the estimator (latest wins)."""
+        return self._queue(name, lambda cf, drone: cf.extpos.send_extpos(*position), "extpos")
 
     def send_extpose(self, name: str, position: Vec3, quaternion: Quaternion) -> bool:
-        return self._command(name, lambda cf, d: cf.extpos.send_extpose(*position, *quaternion))
+        """Queue a mocap pose for the estimator (latest wins)."""
+        return self._queue(name, lambda cf, drone: cf.extpos.send_extpose(*position, *quaternion), "extpos")

@@ -433,3 +433,76 @@ def test_estimate_drifts_without_extpos_and_recovers_when_it_resumes(make_world:
     stream(0.5, tick)  # the first extpos brings the estimate back; the drone then flies back to its setpoint
     snap = world.snapshot(address(0))
     assert math.dist(snap.estimate, snap.position) < 0.01 and snap.position == pytest.approx(hover, abs=0.01)
+
+
+def test_a_dying_link_holds_back_no_other_drone(make_world: MakeWorld, toc_cache: Path,
+                                                backends: Callable[..., CflibBackend]) -> None:
+    """One link dies in flight: cflib's send to it blocks (its driver's queue stays full while the radio retries,
+    until cflib gives up on the link), but each drone's commands go out from a thread of its own, so the caller
+    never waits and the other drones' setpoints keep flowing. With one thread sending for all, the stream of every
+    drone stopped for as long as the dead link's send blocked (0.4-0.6 s in the fault campaign; here 100 lost
+    attempts, each 1 ms plus its turn on a dongle of 2 ms transactions shared by three links)."""
+    world = make_world(3, timing=RadioTiming(transaction_s=0.002))
+    backend = backends(cache_dir=toc_cache)
+    assert backend.connect(names_to_uris(world)) == {}
+    for name in backend.names():
+        backend.takeoff(name, 0.5, 0.5)
+    assert world.wait_until(lambda w: all(s.position[2] > 0.45 for s in w.snapshots().values()), 2.0)
+    slowest = [0.0]
+
+    def send_all() -> None:
+        for i, name in enumerate(backend.names()):
+            t0 = time.monotonic()
+            backend.send_position_setpoint(name, 0.5 * i, 0.0, 0.5, 0.0)
+            slowest[0] = max(slowest[0], time.monotonic() - t0)
+
+    stream(0.3, send_all, 0.01)
+    before = {i: world.snapshot(address(i)).packets_received.get((7, 0), 0) for i in (0, 2)}
+    slowest[0] = 0.0
+    world.drop_link(address(1))
+    stream(0.6, send_all, 0.01)  # cflib declares the link lost after about 0.4-0.6 s of failed retries
+    received = {i: world.snapshot(address(i)).packets_received.get((7, 0), 0) - before[i] for i in (0, 2)}
+    assert slowest[0] < 0.1, f"a send blocked its caller for {slowest[0]:.3f} s"
+    assert all(n >= 30 for n in received.values()), f"setpoints received in 0.6 s at 100 Hz: {received}"
+    assert backend.land("cf0", 0.0, 0.5) and backend.land("cf2", 0.0, 0.5)
+    assert world.wait_until(lambda w: w.snapshot(address(0)).position[2] == 0.0
+                            and w.snapshot(address(2)).position[2] == 0.0, 2.0)
+
+
+def test_no_setpoint_reaches_a_drone_after_its_landing(make_world: MakeWorld, toc_cache: Path,
+                                                       backends: Callable[..., CflibBackend]) -> None:
+    """A slow radio (15 ms a transaction) and setpoints queued faster than it carries them: the newest setpoint
+    wins, and the landing queued after them drops the one still waiting, so the drone lands (a setpoint after the
+    land would take the priority back and hold it in the air)."""
+    world = make_world(1, timing=RadioTiming(transaction_s=0.015))
+    backend = backends(cache_dir=toc_cache)
+    assert backend.connect(names_to_uris(world)) == {}
+    backend.takeoff("cf0", 0.5, 0.5)
+    assert world.wait_until(lambda w: w.snapshot(address(0)).position[2] > 0.45, 3.0)
+    for _ in range(200):  # 1 ms apart: at most one in fifteen goes out
+        backend.send_position_setpoint("cf0", 0.1, 0.0, 0.5, 0.0)
+        time.sleep(0.001)
+    assert backend.land("cf0", 0.0, 1.0)
+    assert backend.wait_sent(timeout_s=2.0)
+    setpoints = world.snapshot(address(0)).packets_received.get((7, 0), 0)
+    assert setpoints < 100, f"{setpoints} of 200 setpoints sent over a radio carrying 1 in 15"
+    assert world.wait_until(lambda w: w.snapshot(address(0)).hl_state == "LANDING", 0.5)
+    time.sleep(0.3)
+    snap = world.snapshot(address(0))
+    assert snap.packets_received.get((7, 0), 0) == setpoints and snap.hl_state == "LANDING"
+    assert world.wait_until(lambda w: w.snapshot(address(0)).position[2] == 0.0, 2.0)
+
+
+def test_setpoint_latency_is_measured_to_cflibs_hand_over(make_world: MakeWorld, toc_cache: Path,
+                                                          backends: Callable[..., CflibBackend]) -> None:
+    world = make_world(1)
+    backend = backends(cache_dir=toc_cache)
+    assert backend.connect(names_to_uris(world)) == {}
+    origin = time.monotonic() - 0.25  # a frame received 250 ms ago
+    assert backend.send_position_setpoint("cf0", 0.0, 0.0, 0.0, 0.0, origin_s=origin)
+    assert backend.send_position_setpoint("cf0", 0.0, 0.0, 0.0, 0.0)  # no origin: not measured
+    assert backend.wait_sent(timeout_s=1.0)
+    latencies = backend.take_setpoint_latencies()
+    assert len(latencies) <= 1 and all(0.25 <= v < 1.0 for v in latencies)
+    assert backend.take_setpoint_latencies() == []
+    backend.stop("cf0")

@@ -58,7 +58,9 @@ def test_what_the_firmware_receives_is_the_schedule_and_the_budget(make_world: M
     """Five drones (four on dongle 0, one on dongle 1) through real cflib: one synthetic second of 100 Hz mocap
     frames, a setpoint to every drone at each 10 Hz tick and extpos on the schedule (its x carries the frame's
     index). Each firmware receives exactly the frames the schedule planned, at most two of dongle 0's drones a
-    frame, and per dongle the setpoints and extpos the budget counts for a mission of these rates."""
+    frame, and per dongle the setpoints and extpos the budget counts for a mission of these rates. The frames come
+    as fast as the radio carries them (the backend's outbox keeps only the newest setpoint and extpos of a drone
+    whose radio lags, rpf_fly/radio/outbox.py)."""
     world = make_world(5)
     uris = {f"cf{i}": world.uri(a, devid=0 if i < 4 else 1) for i, a in enumerate(world.addresses)}
     mission = parse_mission("name: sched\narena: {x: [-3, 3], y: [-3, 3]}\nflight: {rate_hz: 10}\n"
@@ -91,6 +93,7 @@ def test_what_the_firmware_receives_is_the_schedule_and_the_budget(make_world: M
                 if schedule.due(name, t):
                     planned[name].append(k)
                     assert backend.send_extpos(name, (float(k), 0.0, 0.0))
+            assert backend.wait_sent(timeout_s=2.0)  # each frame's packets out before the next, as at 100 Hz
         expected = sum(len(p) for p in planned.values()) + 10 * len(uris)
         assert world.wait_until(lambda w: sum(len(s) for s in seen.values()) >= expected, 10.0)
     finally:
