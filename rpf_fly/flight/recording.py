@@ -137,7 +137,8 @@ class McapRecorder:
             plan = self._plan.get(load.dongle)
             self.log.radio(t, load.dongle, drones=load.drones or (plan.drones if plan else ()), window_s=load.window_s,
                            packets=load.packets, transactions=load.transactions,
-                           planned_per_s=plan.needed if plan else 0.0, budget_per_s=plan.budget if plan else 0.0)
+                           planned_per_s=plan.needed if plan else 0.0, budget_per_s=plan.budget if plan else 0.0,
+                           setpoints_superseded=load.superseded)
 
     def after_tick(self, t_s: float) -> None:
         """The loop finished a planning tick and waits for the next frame: let the writer drain now (its GIL-holding

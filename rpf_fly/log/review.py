@@ -156,7 +156,8 @@ class Review:
                                       "mean_packets_per_s": r.mean_packets_per_s,
                                       "peak_packets_per_s": r.peak_packets_per_s,
                                       "peak_transactions_per_s": r.peak_transactions_per_s,
-                                      "planned_per_s": r.planned_per_s, "budget_per_s": r.budget_per_s}
+                                      "planned_per_s": r.planned_per_s, "budget_per_s": r.budget_per_s,
+                                      "setpoints_superseded": r.setpoints_superseded}
                       for r in self.radio},
         })
         if self.metrics is None:
@@ -203,6 +204,7 @@ class RadioSummary:
     peak_transactions_per_s: float
     planned_per_s: float
     budget_per_s: float
+    setpoints_superseded: float = 0.0
 
     @property
     def mean_packets_per_s(self) -> float:
@@ -212,10 +214,12 @@ class RadioSummary:
         """``rpf-fly review``'s line for this dongle."""
         use = self.peak_packets_per_s / self.budget_per_s if self.budget_per_s > 0 else 0.0
         over = "  OVER BUDGET" if self.peak_packets_per_s > self.budget_per_s > 0 else ""
+        lag = (f"; {self.setpoints_superseded:.0f} setpoints superseded before the radio took them (it lagged)"
+               if self.setpoints_superseded >= 0.5 else "")
         return (f"radio dongle {self.dongle} ({len(self.drones)} drones): {self.peak_packets_per_s:.0f} packets/s "
                 f"in the busiest second, {self.mean_packets_per_s:.0f} on average; planned "
                 f"{self.planned_per_s:.0f}, budget {self.budget_per_s:.0f} ({use:.0%}); air in use "
-                f"{self.peak_transactions_per_s:.0f} transactions/s at most (polls included){over}")
+                f"{self.peak_transactions_per_s:.0f} transactions/s at most (polls included){lag}{over}")
 
 
 def radio_of(data: LogData) -> list[RadioSummary]:
@@ -233,7 +237,8 @@ def radio_of(data: LogData) -> list[RadioSummary]:
             sum(float(m.get("packets", 0.0)) for m in msgs), sum(float(m.get("window_s", 0.0)) for m in msgs),
             max(float(m.get("packets_per_s", 0.0)) for m in msgs),
             max(float(m.get("transactions_per_s", 0.0)) for m in msgs),
-            float(last.get("planned_per_s", 0.0)), float(last.get("budget_per_s", 0.0))))
+            float(last.get("planned_per_s", 0.0)), float(last.get("budget_per_s", 0.0)),
+            sum(float(m.get("setpoints_superseded", 0.0)) for m in msgs)))
     return sorted(out, key=lambda r: r.dongle)
 
 

@@ -384,6 +384,9 @@ RADIO_LOAD: dict[str, Any] = _obj(
         "planned_per_s": _num("What the radio budget counts for this dongle while the drones stream setpoints "
                               "(rpf_fly.radio.budget: setpoints + extpos + pings)"),
         "budget_per_s": _num("What this dongle carries (radio.budget_packets_s or the dongle type's figure)"),
+        "setpoints_superseded": _num("Setpoints of this dongle's drones replaced by a newer one before the radio took "
+                                     "them (the radio lagged; rpf_fly/radio/outbox.py); absent in logs before "
+                                     "2026-12-02"),
     },
     required=("timestamp", "dongle", "drones", "window_s", "packets", "transactions", "packets_per_s",
               "transactions_per_s", "planned_per_s", "budget_per_s"),
@@ -580,7 +583,7 @@ def truth_state(t_ns: int, position: Any, yaw: float, motors: bool, crashed: boo
 
 
 def radio_load(t_ns: int, dongle: int, drones: Sequence[str], window_s: float, packets: float, transactions: float,
-               planned_per_s: float, budget_per_s: float) -> dict[str, Any]:
+               planned_per_s: float, budget_per_s: float, setpoints_superseded: float = 0.0) -> dict[str, Any]:
     """A ``rpf_fly.RadioLoad`` (counts over ``window_s`` seconds ending at ``t_ns``)."""
     window = float(window_s)
     return {
@@ -594,6 +597,7 @@ def radio_load(t_ns: int, dongle: int, drones: Sequence[str], window_s: float, p
         "transactions_per_s": float(transactions) / window if window > 0 else 0.0,
         "planned_per_s": float(planned_per_s),
         "budget_per_s": float(budget_per_s),
+        "setpoints_superseded": float(setpoints_superseded),
     }
 
 

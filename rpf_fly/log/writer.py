@@ -268,10 +268,12 @@ class FlightLog:
     def radio(self, t_ns: int, dongle: int, **fields: Any) -> None:
         """``/radio/<dongle>``: one window of a dongle's measured load (fields of
         :func:`rpf_fly.log.schemas.radio_load`: drones, window_s, packets, transactions, planned_per_s,
-        budget_per_s). Once a second per dongle: never dropped for a full queue (as events)."""
+        budget_per_s, optionally setpoints_superseded). Once a second per dongle: never dropped for a full queue
+        (as events)."""
         topic = self._radio.get(str(dongle)) or self._topic(self._radio, "/radio/{}", str(dongle))
         self._put(topic, t_ns, S.radio_load, (dongle, *(fields[k] for k in (
-            "drones", "window_s", "packets", "transactions", "planned_per_s", "budget_per_s"))), priority=True)
+            "drones", "window_s", "packets", "transactions", "planned_per_s", "budget_per_s")),
+            float(fields.get("setpoints_superseded", 0.0))), priority=True)
 
     def scene(self, t_ns: int, obstacles: Sequence[Mapping[str, Any]] = (), goals: Optional[Mapping[str, Any]] = None,
               arena: Optional[Mapping[str, Sequence[float]]] = None, height: float = 0.0) -> None:

@@ -497,10 +497,11 @@ class CflibBackend:
 
     def radio_counts(self) -> dict[str, LinkCount]:
         """Each connected drone's radio traffic so far, as cflib's link statistics measured it (acknowledged
-        transactions, and those with an uplink packet), by name; kept after `close` (the last window, under
-        0.1 s, is never reported by cflib)."""
+        transactions, and those with an uplink packet), and the setpoints its outbox superseded before the radio
+        took them, by name; kept after `close` (the last window, under 0.1 s, is never reported by cflib)."""
         with self._lock:
-            return {d.name: LinkCount(d.uri, d.radio_transactions, d.radio_packets)
+            return {d.name: LinkCount(d.uri, d.radio_transactions, d.radio_packets,
+                                      float(d.outbox.setpoints_replaced) if d.outbox is not None else 0.0)
                     for d in self._drones.values() if d.radio_window_at is not None}
 
     # State ----------------------------------------------------------------------------------------------------

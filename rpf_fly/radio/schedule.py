@@ -93,6 +93,8 @@ class LinkCount:
     uri: str
     transactions: float
     packets: float
+    superseded: float = 0.0
+    """Setpoints replaced by a newer one before the radio took them (the drone's outbox: the radio lagged)."""
 
 
 @dataclass(frozen=True)
@@ -104,6 +106,8 @@ class MeasuredLoad:
     window_s: float
     packets: float
     transactions: float
+    superseded: float = 0.0
+    """Setpoints of the dongle's drones superseded before the radio took them, in the window."""
 
     @property
     def packets_per_s(self) -> float:
@@ -119,12 +123,14 @@ def dongle_loads(before: Mapping[str, LinkCount], after: Mapping[str, LinkCount]
     """Each dongle's traffic between two samples of the links' counts (drone name -> :class:`LinkCount`), in dongle
     order; ``dongles``: dongles to report even with no link counted yet (zeros). A drone missing from ``before``
     counts from zero."""
-    per: dict[int, list[tuple[str, float, float]]] = {d: [] for d in dongles}
+    per: dict[int, list[tuple[str, float, float, float]]] = {d: [] for d in dongles}
     for name, now in after.items():
         then = before.get(name)
         packets = now.packets - (then.packets if then is not None else 0.0)
         transactions = now.transactions - (then.transactions if then is not None else 0.0)
-        per.setdefault(dongle_of(now.uri), []).append((name, max(0.0, packets), max(0.0, transactions)))
-    return [MeasuredLoad(dongle, tuple(n for n, _, _ in rows), window_s, sum(p for _, p, _ in rows),
-                       sum(t for _, _, t in rows))
+        superseded = now.superseded - (then.superseded if then is not None else 0.0)
+        per.setdefault(dongle_of(now.uri), []).append(
+            (name, max(0.0, packets), max(0.0, transactions), max(0.0, superseded)))
+    return [MeasuredLoad(dongle, tuple(row[0] for row in rows), window_s, sum(row[1] for row in rows),
+                         sum(row[2] for row in rows), sum(row[3] for row in rows))
             for dongle, rows in sorted(per.items())]

@@ -58,8 +58,14 @@ def test_the_logged_load_of_each_dongle_is_what_the_firmwares_received(tmp_path:
                 backend.send_extpos(name, (0.0, 0.0, 0.0))
                 if k % 5 == 0:
                     backend.send_position_setpoint(name, 0.0, 0.0, 0.0, 0.0)  # drones on the floor: harmless
+            assert backend.wait_sent(timeout_s=1.0)  # each round out before the next: nothing superseded
             k += 1
             time.sleep(0.02)
+        for _ in range(50):  # cf3: a burst faster than its radio (1 ms a transaction): the newest setpoint wins
+            backend.send_position_setpoint("cf3", 0.0, 0.0, 0.0, 0.0)
+        assert backend.wait_sent(timeout_s=1.0)
+        superseded = backend.radio_counts()["cf3"].superseded
+        assert superseded >= 25
         time.sleep(0.3)  # quiet again
         with lock:
             stop = dict(counted)
@@ -82,5 +88,7 @@ def test_the_logged_load_of_each_dongle_is_what_the_firmwares_received(tmp_path:
         assert all(w["transactions"] >= w["packets"] for w in windows)
         assert windows[0]["planned_per_s"] == len(members) * (10 + 50 + LINK_PING_HZ)
         assert windows[0]["budget_per_s"] == 1000.0
+        assert sum(w["setpoints_superseded"] for w in windows) == (superseded if dongle == 1 else 0)
     lines = [r.line() for r in review(data).radio]
     assert [line.split(":")[0] for line in lines] == ["radio dongle 0 (2 drones)", "radio dongle 1 (1 drones)"]
+    assert "superseded" not in lines[0] and f"{superseded:.0f} setpoints superseded before the radio" in lines[1]

@@ -486,6 +486,7 @@ def test_no_setpoint_reaches_a_drone_after_its_landing(make_world: MakeWorld, to
     assert backend.wait_sent(timeout_s=2.0)
     setpoints = world.snapshot(address(0)).packets_received.get((7, 0), 0)
     assert setpoints < 100, f"{setpoints} of 200 setpoints sent over a radio carrying 1 in 15"
+    assert backend.radio_counts()["cf0"].superseded == 200 - setpoints  # each one not sent is counted
     assert world.wait_until(lambda w: w.snapshot(address(0)).hl_state == "LANDING", 0.5)
     time.sleep(0.3)
     snap = world.snapshot(address(0))
