@@ -59,7 +59,8 @@ def replay(*args: object):  # noqa: ANN201 - click's Result
 
 def planning_rows(path: Path) -> dict[str, int]:
     data = read_log(path)
-    return {d: sum(m.data["mode"] in PLANNING_MODES for m in data.topics[f"/{d}/planner"]) for d in ("cf1", "cf2", "cf3")}
+    return {d: sum(m.data["mode"] in PLANNING_MODES for m in data.topics[f"/{d}/planner"])
+            for d in ("cf1", "cf2", "cf3")}
 
 
 # ---------------------------------------------------------------------------------------------- reproduction
@@ -144,6 +145,18 @@ def test_the_text_report_and_the_plot(apf_log: Path, tmp_path: Path) -> None:
     import matplotlib.image
 
     assert matplotlib.image.imread(png).shape[0] > 300
+
+
+def test_the_text_report_piped_is_plain_lines_not_wrapped_at_80_columns(apf_log: Path) -> None:
+    """Not a terminal (CliRunner, a pipe, CI): the header and the table's title are one line each, as `review`'s."""
+    result = replay(apf_log, "--planner", "orca")
+    assert result.exit_code == 0, result.output
+    lines = result.stdout.splitlines()
+    assert lines[0].startswith(f"{apf_log.name}: replayed orca, open loop against the flown apf; ")
+    assert lines[0].endswith(" ms a tick"), lines[:2]
+    assert lines[1].strip().startswith("decisions: ") and lines[1].strip().endswith("ticks whose mode differs")
+    assert result.stdout.endswith("\n") and "…" not in result.stdout
+    assert not any(line.endswith(" ") for line in lines), lines
 
 
 # -------------------------------------------------------------------------------------------- broken logs
