@@ -159,6 +159,26 @@ def test_the_text_report_piped_is_plain_lines_not_wrapped_at_80_columns(apf_log:
     assert not any(line.endswith(" ") for line in lines), lines
 
 
+def test_the_plot_has_one_time_axis_for_every_drone(apf_log: Path) -> None:
+    """Drones that arrive at different times still share the time axis (as the review figure's panels do)."""
+    import matplotlib.pyplot as plt
+
+    from rpf_fly.flight.replay_plot import replay_figure
+
+    data = read_log(apf_log)
+    setup = replay_setup(data, "orca")
+    result = replay_log(data, setup.mission, setup.factory, tolerance=setup.tolerance, planner="orca")
+    ends = {name: d.ticks[-1].t_ns for name, d in result.drones.items()}
+    assert len(set(ends.values())) > 1, ends  # the drones stop planning at different ticks
+    fig = replay_figure(result)
+    try:
+        limits = {tuple(ax.get_xlim()) for ax in fig.axes}
+        assert len(limits) == 1, limits
+        assert all("mode differs on " in ax.get_title() for ax in fig.axes[1::2])
+    finally:
+        plt.close(fig)
+
+
 # -------------------------------------------------------------------------------------------- broken logs
 
 
