@@ -31,11 +31,12 @@ def _load(mission_path: Path):  # type: ignore[no-untyped-def]
 def _resolve_server(mission, mission_path: Path) -> None:  # type: ignore[no-untyped-def]
     """An unresolvable ``mocap.server`` is an invalid mission: one line, exit 2, before anything connects."""
     from rpf_fly.flight.session import UnresolvableServer, resolve_mocap_server
+    from rpf_fly.mission import field_line
 
     try:
         resolve_mocap_server(mission)
     except UnresolvableServer as err:
-        raise fail(f"{mission_path}:0: {err.field}: {err}")
+        raise fail(f"{mission_path}:{field_line(mission_path, err.field)}: {err.field}: {err}")
 
 
 def _require_library(mission, dry_run: bool, mocap: Optional[str] = None) -> None:  # type: ignore[no-untyped-def]

@@ -140,5 +140,5 @@ def test_an_unresolvable_optitrack_host_is_one_line_and_exit_2(tmp_path):
     path = write(tmp_path, "{kind: motioncapture, type: optitrack, hostname: no-such-host.invalid}")
     result = runner.invoke(app, ["fly", str(path), "--no-console"])
     assert result.exit_code == 2
-    assert result.stderr.startswith(f"{path}:0: mocap.hostname: cannot resolve 'no-such-host.invalid' (")
+    assert result.stderr.startswith(f"{path}:2: mocap.hostname: cannot resolve 'no-such-host.invalid' (")
     assert result.stderr.strip().endswith("expected the IP address or host name of the optitrack server")
