@@ -346,6 +346,40 @@ def test_emulate_replay_serves_the_logged_poses_over_natnet_at_their_logged_time
     assert logged_span > 1.0 and abs((r1 - r0) - logged_span) < 0.1 * logged_span + 0.05, (r1 - r0, logged_span)
 
 
+def test_mocap_watch_reads_an_emulated_replay_back_to_1e_6(apf_log: Path) -> None:
+    """The acceptance's round trip with the commands a user types: `mocap emulate --replay LOG` in its own process,
+    `mocap watch --json` reading it; every frame watch prints is the logged frame of its number, to 1e-6."""
+    frames = mocap_frames(read_log(apf_log))
+    speed = 4.0
+    span_s = (frames[-1].t_ns - frames[0].t_ns) / 1e9 / speed
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "rpf_fly", "mocap", "emulate", "--replay", str(apf_log), "--unicast",
+         "--command-port", "0", "--data-port", "0", "--replay-speed", str(speed)],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )
+    try:
+        first = proc.stdout.readline()
+        assert "command port" in first, first + proc.stderr.read()
+        port = first.split("command port ")[1].split(",")[0]
+        watch = runner.invoke(get_app(), ["mocap", "watch", "--unicast", "--command-port", port, "--json",
+                                          "--duration", f"{span_s + 2.0:.1f}"])
+        proc.communicate(timeout=30)
+    finally:
+        proc.kill()
+    assert watch.exit_code == 0, watch.output
+    printed = [json.loads(line) for line in watch.stdout.splitlines()]
+    assert len(printed) > 0.5 * len(frames), (len(printed), len(frames))
+    worst = 0.0
+    for obj in printed:
+        logged = frames[obj["frame"] - 1].poses
+        assert {n for n, b in obj["bodies"].items() if b["valid"]} == set(logged), obj["frame"]
+        for name, (position, quaternion) in logged.items():
+            body = obj["bodies"][name]
+            worst = max(worst, float(np.max(np.abs(np.array(body["position"]) - np.asarray(position)))),
+                        float(np.max(np.abs(np.array(body["quaternion"]) - np.asarray(quaternion)))))
+    assert worst <= 1e-6, worst
+
+
 def test_emulate_replay_of_a_log_without_mocap_is_one_line(apf_log: Path, tmp_path: Path) -> None:
     log = copy_log(apf_log, tmp_path / "nomocap.mcap", drop={f"/mocap/cf{i}" for i in (1, 2, 3)})
     result = runner.invoke(get_app(), ["mocap", "emulate", "--replay", str(log), "--unicast", "--command-port", "0",
