@@ -118,7 +118,7 @@ def test_fly_and_check_refuse_real_drones_on_mock_poses(tmp_path):
     flown = runner.invoke(app, ["fly", str(path), "--no-console"])
     assert flown.exit_code == 2
     assert flown.stderr.strip() == (
-        f"{path}:0: mocap.type: 'mock' serves fixed poses from its options, not the drones': it can only fly with "
+        f"{path}:2: mocap.type: 'mock' serves fixed poses from its options, not the drones': it can only fly with "
         "--dry-run (which serves the simulated drones' poses, docs/mocap.md)")
     checked = runner.invoke(app, ["check", str(path)])
     assert checked.exit_code == 0 and "preflight skipped: mocap.type: 'mock' serves fixed poses" in checked.stdout
