@@ -51,6 +51,21 @@ def test_watch_optitrack_reads_the_emulator_through_the_library(up_axis):
             assert body["quaternion"] == pytest.approx(quaternion, abs=1e-6)
 
 
+def test_local_ip_is_the_librarys_interface_ip():
+    """`--local-ip` reaches the library as `interface_ip`: 127.0.0.1 reads the loopback multicast, an address this
+    host does not have makes the library's own multicast join fail (RFC 5737's TEST-NET-1)."""
+    with NatNetServer(lambda: POSES, version="4.1", multicast=True, rate_hz=200, up_axis="z") as server:
+        args = ["mocap", "watch", "--system", "optitrack", "--host", "127.0.0.1", "--command-port",
+                str(server.command_port), "--frames", "2", "--json", "--timeout", "3"]
+        read = runner.invoke(app, [*args, "--local-ip", "127.0.0.1"])
+        refused = runner.invoke(app, [*args, "--local-ip", "192.0.2.1"])
+    assert read.exit_code == 0, read.output
+    assert len(read.stdout.splitlines()) == 2
+    assert refused.exit_code == 1, refused.output
+    assert refused.stderr.startswith("error: motioncapture optitrack at 127.0.0.1: the library failed: ")
+    assert len(refused.stderr.strip().splitlines()) == 1
+
+
 def test_watch_mock_prints_its_bodies_and_frames():
     result = runner.invoke(app, ["mocap", "watch", "--system", "mock", "--frames", "2", "--json",
                                  "--option", "rigid_bodies=cf1(1,2,0.5,1,0,0,0)", "--option", "frequency=50"])
