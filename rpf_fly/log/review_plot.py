@@ -307,7 +307,11 @@ def review_figure(data: LogData, result: R.Review):  # type: ignore[no-untyped-d
             ax.plot(c.t, c.values, lw=1.0, color=colour[d])
         if r is not None:
             ax.axhline(r, color="#d62728", ls="--", lw=1.0, label=f"r = {r:g} m", gid="r")
-            ax.legend(fontsize=7, loc="upper right")
+            # named on its line, not in a legend: the panel is cut at the 95th percentile, so a legend at the top
+            # would sit on the clearances above it
+            ax.annotate(f"r = {r:g} m", (1.0, r), xycoords=("axes fraction", "data"), xytext=(-4, 2),
+                        textcoords="offset points", ha="right", va="bottom", fontsize=7, color="#d62728",
+                        gid="r-label")
         top = max(float(np.percentile(c.values, 95)) for c in clearances.values())
         ax.set_ylim(min(0.0, lowest - 0.05), max(top, 2.5 * (r or 0.1)) * 1.1)
         ax.set_title(f"obstacle clearance (centre to the nearest surface): min {lowest:.3f} m", fontsize=10)
