@@ -15,13 +15,15 @@ import typer
 
 from rpf_fly.cli import app
 from rpf_fly.cli.errors import fail, read_log_or_fail
+from rpf_fly.mission.model import PLANNER_KINDS
 
 
 @app.command()
 def replay(
     log: Path = typer.Argument(..., help="Flight log (.mcap) written by `rpf-fly fly [--dry-run] --log`."),
-    planner: Optional[str] = typer.Option(None, "--planner", help="Replay with this planner kind (default: the "
-                                                                  "one flown, from the log's mission)."),
+    planner: Optional[str] = typer.Option(None, "--planner", help=f"Replay with this planner kind: "
+                                          f"{', '.join(PLANNER_KINDS)} (default: the one flown, from the log's "
+                                          f"mission)."),
     policy: Optional[Path] = typer.Option(None, "--policy", help="ONNX policy for a learned planner (default: the "
                                                                  "mission's, checked against the flown SHA-256)."),
     json_output: bool = typer.Option(False, "--json", help="Print the replay JSON (docs/replay.md) only."),
