@@ -28,6 +28,14 @@ def _load(mission_path: Path):  # type: ignore[no-untyped-def]
         raise fail(str(err))
 
 
+def at(mission_path: Path, problem: str) -> str:
+    """``FILE:LINE: FIELD: problem`` for a problem of the mission's ``FIELD`` found after loading (``problem`` starts
+    with the field): the field's line in the file (docs/mission-format.md's convention), not 0, the command line's."""
+    from rpf_fly.mission import field_line
+
+    return f"{mission_path}:{field_line(mission_path, problem.split(':', 1)[0])}: {problem}"
+
+
 def _resolve_server(mission, mission_path: Path) -> None:  # type: ignore[no-untyped-def]
     """An unresolvable ``mocap.server`` is an invalid mission: one line, exit 2, before anything connects."""
     from rpf_fly.flight.session import UnresolvableServer, resolve_mocap_server
@@ -35,7 +43,7 @@ def _resolve_server(mission, mission_path: Path) -> None:  # type: ignore[no-unt
     try:
         resolve_mocap_server(mission)
     except UnresolvableServer as err:
-        raise fail(f"{mission_path}:0: {err.field}: {err}")
+        raise fail(at(mission_path, f"{err.field}: {err}"))
 
 
 def _require_library(mission, dry_run: bool, mocap: Optional[str] = None) -> None:  # type: ignore[no-untyped-def]
@@ -55,7 +63,7 @@ def _check_radio_budget(mission, mission_path: Path) -> list:  # type: ignore[no
     loads = radio_loads(mission)
     over = [load for load in loads if load.over]
     if over and not mission.radio.allow_over_budget:
-        raise fail(f"{mission_path}:0: radio: {over_budget_message(over[0])}")
+        raise fail(at(mission_path, f"radio: {over_budget_message(over[0])}"))
     return loads
 
 
@@ -89,7 +97,7 @@ def _planner_factory(mission, mission_path: Path):  # type: ignore[no-untyped-de
     try:
         mission_planner(mission, obstacles=obstacles)  # fail early, before anything connects
     except (UnsupportedPlanner, PolicyError) as err:
-        raise fail(f"{mission_path}:0: planner.policy: {err}")
+        raise fail(at(mission_path, f"planner.policy: {err}"))
     return lambda drone: mission_planner(mission, obstacles=obstacles)
 
 
@@ -135,7 +143,7 @@ def fly(
     from rpf_fly.flight.session import real_flight_problem
 
     if not dry_run and real_flight_problem(loaded):
-        raise fail(f"{mission}:0: {real_flight_problem(loaded)}")
+        raise fail(at(mission, real_flight_problem(loaded)))
     if not dry_run:
         _resolve_server(loaded, mission)
         _check_radios(loaded, _remote(remote_dongles) if distributed else ())

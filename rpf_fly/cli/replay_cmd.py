@@ -15,13 +15,15 @@ import typer
 
 from rpf_fly.cli import app
 from rpf_fly.cli.errors import fail, read_log_or_fail
+from rpf_fly.mission.model import PLANNER_KINDS
 
 
 @app.command()
 def replay(
     log: Path = typer.Argument(..., help="Flight log (.mcap) written by `rpf-fly fly [--dry-run] --log`."),
-    planner: Optional[str] = typer.Option(None, "--planner", help="Replay with this planner kind (default: the "
-                                                                  "one flown, from the log's mission)."),
+    planner: Optional[str] = typer.Option(None, "--planner", help=f"Replay with this planner kind: "
+                                          f"{', '.join(PLANNER_KINDS)} (default: the one flown, from the log's "
+                                          f"mission)."),
     policy: Optional[Path] = typer.Option(None, "--policy", help="ONNX policy for a learned planner (default: the "
                                                                  "mission's, checked against the flown SHA-256)."),
     json_output: bool = typer.Option(False, "--json", help="Print the replay JSON (docs/replay.md) only."),
@@ -66,17 +68,21 @@ def replay(
 
 
 def _print(result, log: Path, plot: Optional[Path]) -> None:  # type: ignore[no-untyped-def]
-    from rich.console import Console
+    from rich.markup import escape
     from rich.table import Table
 
-    console = Console(highlight=False)
+    from rpf_fly.cli.output import console as make_console
+
+    console = make_console(highlight=False)  # piped: plain and wide, not wrapped at 80 columns
     flown = result.flown_planner or "?"
     what = "the flight's own planner" if result.same_as_flown else f"open loop against the flown {flown}"
     policy = f" ({result.policy})" if result.policy is not None else ""
-    console.print(f"[bold]{log.name}[/bold]: replayed {result.planner}{policy}, {what}; {result.ticks} planning "
-                  f"ticks, {result.seconds_per_tick * 1e3:.2f} ms a tick")
-    table = Table(title=f"decisions: max diff = largest |d_replay - d_log| (unit vectors), diverging above "
-                        f"{result.tolerance:g}; max deg = largest angle; mode diffs = ticks whose mode differs")
+    console.print(f"[bold]{escape(log.name)}[/bold]: replayed {result.planner}{escape(policy)}, {what}; "
+                  f"{result.ticks} planning ticks, {result.seconds_per_tick * 1e3:.2f} ms a tick")
+    # one line above the table, not its title: rich wraps a title to the table's width
+    console.print(f"decisions: max diff = largest |d_replay - d_log| (unit vectors), diverging above "
+                  f"{result.tolerance:g}; max deg = largest angle; mode diffs = ticks whose mode differs")
+    table = Table()
     for column in ("drone", "ticks", "first div.", "max diff", "max deg", "mode diffs", "restarts"):
         table.add_column(column, justify="left" if column == "drone" else "right")
     for name, d in result.drones.items():
@@ -92,4 +98,4 @@ def _print(result, log: Path, plot: Optional[Path]) -> None:  # type: ignore[no-
     else:
         console.print(f"[{'red' if result.same_as_flown else 'yellow'}]diverged: {', '.join(diverged)}[/]")
     if plot is not None:
-        console.print(f"plot: {plot}")
+        console.print(f"plot: {escape(str(plot))}")

@@ -78,7 +78,7 @@ def worker(
 ) -> None:
     """Fly the drones of one dongle in a distributed flight (docs/distributed.md). The flight's secret comes in
     the environment, RPF_FLY_SECRET, as the coordinator printed it."""
-    from rpf_fly.cli.fly_cmd import _check_radio_budget, _check_radios, _load, _planner_factory, _resolve_server
+    from rpf_fly.cli.fly_cmd import _check_radio_budget, _check_radios, _load, _planner_factory, _resolve_server, at
     from rpf_fly.flight.session import real_flight_problem
     from rpf_fly.runtime.auth import SECRET_ENV
     from rpf_fly.runtime.keys import check_flight_id
@@ -88,7 +88,7 @@ def worker(
     factory = _planner_factory(loaded, mission)
     if not dry_run:
         if real_flight_problem(loaded):
-            raise fail(f"{mission}:0: {real_flight_problem(loaded)}")
+            raise fail(at(mission, real_flight_problem(loaded)))
         _resolve_server(loaded, mission)
         _check_radios(loaded, only_dongle=dongle)
     secret = os.environ.get(SECRET_ENV, "")

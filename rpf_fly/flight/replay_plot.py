@@ -1,5 +1,5 @@
 """The replay's figure (``rpf-fly replay --plot``): per drone, the heading of the logged and of the replayed
-direction over time, and the direction difference on a log scale beneath. Only draws (Agg backend); the numbers
+direction over time, and the direction difference on a log scale beside it. Only draws (Agg backend); the numbers
 come from :mod:`rpf_fly.flight.replay`.
 
 Headings are the angle of each planning tick's direction (degrees, counter-clockwise from +x), the logged one
@@ -36,7 +36,19 @@ def _unwrapped(values: list[float]) -> np.ndarray:
 
 
 def plot_replay(result: ReplayResult, path: str | Path, title: str = "") -> Path:
-    """Draw ``result`` into a PNG at ``path``: one row per replayed drone (headings above, difference below)."""
+    """Draw ``result`` into a PNG at ``path``: one row per replayed drone (headings left, difference right)."""
+    import matplotlib.pyplot as plt
+
+    fig = replay_figure(result, title)
+    out = Path(path)
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+    return out
+
+
+def replay_figure(result: ReplayResult, title: str = ""):  # type: ignore[no-untyped-def]
+    """The figure of :func:`plot_replay`, not yet saved. Every panel is on one time axis (the drones' rows can be
+    compared tick for tick, as the review figure's panels)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -44,7 +56,7 @@ def plot_replay(result: ReplayResult, path: str | Path, title: str = "") -> Path
 
     drones = [d for d in result.drones.values() if d.ticks]
     rows = max(1, len(drones))
-    fig, axes = plt.subplots(rows, 2, figsize=(13, 2.6 * rows + 0.8), squeeze=False,
+    fig, axes = plt.subplots(rows, 2, figsize=(13, 2.6 * rows + 0.8), squeeze=False, sharex=True,
                              gridspec_kw={"width_ratios": [3, 2]})
     starts = [c.t_ns for d in drones for c in d.ticks]
     t0 = min(starts) if starts else 0
@@ -81,15 +93,12 @@ def plot_replay(result: ReplayResult, path: str | Path, title: str = "") -> Path
         ax_diff.grid(alpha=0.3, which="both")
         ax_diff.legend(loc="best", fontsize=7, framealpha=0.6)
         verdict = "reproduced" if first is None else f"first divergence at tick {first}"
-        ax_diff.set_title(f"max {drone.max_direction_diff:.2g}, {drone.mode_changes} mode changes: {verdict}",
-                          fontsize=9)
+        ax_diff.set_title(f"max {drone.max_direction_diff:.2g}, mode differs on {drone.mode_changes} ticks: "
+                          f"{verdict}", fontsize=9)
     if not drones:
         axes[0][0].text(0.5, 0.5, "no planning ticks to compare", ha="center", va="center")
     axes[-1][0].set_xlabel("time since the first planning tick [s]")
     axes[-1][1].set_xlabel("time since the first planning tick [s]")
     fig.suptitle(title or f"replay: {result.planner}")
     fig.tight_layout()
-    out = Path(path)
-    fig.savefig(out, dpi=110)
-    plt.close(fig)
-    return out
+    return fig

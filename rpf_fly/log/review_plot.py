@@ -98,6 +98,59 @@ def _event_list(fig, ax_xy, legend, named: list[tuple[R.ReviewEvent, str]],  # t
                  color=colour)
 
 
+LABEL_SPOTS = ((0, 6, "center", "bottom"), (0, -7, "center", "top"), (0, 17, "center", "bottom"),
+               (0, -18, "center", "top"), (7, 0, "left", "center"), (-7, 0, "right", "center"))
+"""Where an event's number may go, in points from its marker, tried in this order: above, below, higher, lower,
+right, left; the first spot that covers no marker and no label already placed is taken."""
+
+
+def _event_labels(fig, ax, clusters: list[tuple[float, int, list[int]]]) -> None:  # type: ignore[no-untyped-def]
+    """Number the events on the timeline, each cluster once, where its number covers no other marker and no
+    other number (an interruption and the events of its instant share one time), on a white ground so the
+    interruption's line does not strike through it."""
+    from matplotlib.transforms import Bbox
+
+    renderer = fig.canvas.get_renderer()
+    markers = []
+    for line in ax.get_lines():
+        if line.get_gid() == "event-marker":
+            x, y = ax.transData.transform((line.get_xdata()[0], line.get_ydata()[0]))
+            half = line.get_markersize() * fig.dpi / 72.0 / 2.0
+            markers.append(Bbox.from_extents(x - half, y - half, x + half, y + half))
+    placed: list = []
+
+    def put(text: str, t: float, level: int, spot: tuple[int, int, str, str]):  # type: ignore[no-untyped-def]
+        dx, dy, ha, va = spot
+        return ax.annotate(text, (t, level), xytext=(dx, dy), textcoords="offset points", fontsize=7,
+                           fontweight="bold", color=LEVEL_COLOURS.get(level, "0.3"), ha=ha, va=va,
+                           gid="event-label", zorder=4,
+                           bbox={"boxstyle": "square,pad=0.1", "fc": "white", "ec": "none", "alpha": 0.85})
+
+    for t, level, numbers in clusters:
+        text = ",".join(map(str, numbers)) if len(numbers) <= 3 else f"{numbers[0]}-{numbers[-1]}"
+        for spot in LABEL_SPOTS:
+            label = put(text, t, level, spot)
+            box = label.get_window_extent(renderer)
+            if not any(box.overlaps(other) for other in markers + placed):
+                break
+            label.remove()
+        else:  # no free spot: the first one
+            box = put(text, t, level, LABEL_SPOTS[0]).get_window_extent(renderer)
+        placed.append(box)
+
+
+def _legend_clear_of_data(fig, ax) -> None:  # type: ignore[no-untyped-def]
+    """Raise the top of a time panel so that its legend (upper right) sits above the curves instead of on them:
+    the panel's range so far keeps its share below the legend."""
+    renderer = fig.canvas.get_renderer()
+    frame = ax.get_window_extent(renderer)
+    share = ax.get_legend().get_window_extent(renderer).height / max(frame.height, 1.0) + 0.05
+    if share >= 0.7:
+        return  # a legend taller than most of the panel: left where it is
+    bottom, top = ax.get_ylim()
+    ax.set_ylim(bottom, bottom + (top - bottom) / (1.0 - share))
+
+
 def plot_review(data: LogData, result: R.Review, path: str | Path) -> Path:
     """Draw the review of ``data`` into a PNG at ``path``; returns the path."""
     import matplotlib.pyplot as plt
@@ -113,7 +166,7 @@ def review_figure(data: LogData, result: R.Review):  # type: ignore[no-untyped-d
     """The review's figure (a matplotlib Figure on the Agg backend). Its axes are labelled ``xy`` and by panel
     (``altitude``, ``tracking``, ``separation``, ``clearance``, ``battery``, ``events``); the artists a reader looks
     for carry a ``gid`` (``track:<drone>``, ``goal:<drone>``, ``start-goal:<drone>``, ``r``, ``2r``,
-    ``interruption``, ``event-label``)."""
+    ``interruption``, ``event-marker``, ``event-label``)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -230,8 +283,8 @@ def review_figure(data: LogData, result: R.Review):  # type: ignore[no-untyped-d
         ax.set_title(f"setpoint tracking error |setpoint - pose|: RMS {rms:.3f} m, max {peak:.3f} m", fontsize=10)
         ax.set_ylabel("error [m]")
         ax.set_ylim(bottom=0)
-        if len(tracking) <= 8:
-            ax.legend(fontsize=7, loc="upper right")
+        if len(tracking) <= 8:  # in rows of up to 4 drones, so that it stays above the curves
+            ax.legend(fontsize=7, loc="upper right", ncol=1 if len(tracking) <= 3 else min(4, -(-len(tracking) // 2)))
 
     # separation
     if "separation" in axes:
@@ -254,7 +307,11 @@ def review_figure(data: LogData, result: R.Review):  # type: ignore[no-untyped-d
             ax.plot(c.t, c.values, lw=1.0, color=colour[d])
         if r is not None:
             ax.axhline(r, color="#d62728", ls="--", lw=1.0, label=f"r = {r:g} m", gid="r")
-            ax.legend(fontsize=7, loc="upper right")
+            # named on its line, not in a legend: the panel is cut at the 95th percentile, so a legend at the top
+            # would sit on the clearances above it
+            ax.annotate(f"r = {r:g} m", (1.0, r), xycoords=("axes fraction", "data"), xytext=(-4, 2),
+                        textcoords="offset points", ha="right", va="bottom", fontsize=7, color="#d62728",
+                        gid="r-label")
         top = max(float(np.percentile(c.values, 95)) for c in clearances.values())
         ax.set_ylim(min(0.0, lowest - 0.05), max(top, 2.5 * (r or 0.1)) * 1.1)
         ax.set_title(f"obstacle clearance (centre to the nearest surface): min {lowest:.3f} m", fontsize=10)
@@ -273,10 +330,11 @@ def review_figure(data: LogData, result: R.Review):  # type: ignore[no-untyped-d
     seen_states: dict[str, None] = {}
     for row, d in enumerate(drones):
         for t0, t1, state in R.phases(data, d, start, end_s):
-            ax.broken_barh([(t0, max(t1 - t0, 1e-3))], (-row - 1.4, 0.8), facecolors=STATE_COLOURS.get(state, "#e0e0e0"))
+            ax.broken_barh([(t0, max(t1 - t0, 1e-3))], (-row - 1.4, 0.8),
+                           facecolors=STATE_COLOURS.get(state, "#e0e0e0"))
             seen_states[state] = None
     for e in result.events:
-        ax.plot(e.t_s, e.level, "v", ms=7, color=LEVEL_COLOURS.get(e.level, "0.3"), zorder=3)
+        ax.plot(e.t_s, e.level, "v", ms=7, color=LEVEL_COLOURS.get(e.level, "0.3"), zorder=3, gid="event-marker")
     named = labelled_events(result.events)
     clusters: list[tuple[float, int, list[int]]] = []  # events close in time on one level share one label
     for k, (e, _text) in enumerate(named):
@@ -285,11 +343,6 @@ def review_figure(data: LogData, result: R.Review):  # type: ignore[no-untyped-d
             near[0][2].append(k + 1)
         else:
             clusters.append((e.t_s, e.level, [k + 1]))
-    for j, (t, level, numbers) in enumerate(clusters):
-        text = ",".join(map(str, numbers)) if len(numbers) <= 3 else f"{numbers[0]}-{numbers[-1]}"
-        ax.annotate(text, (t, level), xytext=(0, 6 + 8 * (j % 2)), textcoords="offset points", fontsize=7,
-                    fontweight="bold", color=LEVEL_COLOURS.get(level, "0.3"), ha="center", va="bottom",
-                    gid="event-label")
     for cut in result.interruptions:
         if cut.how == "killed" and cut.t_s is not None:  # no event says so: the log just ends
             ax.annotate("killed: the log ends here", (cut.t_s, 5.0), xytext=(-4, 6), textcoords="offset points",
@@ -316,6 +369,10 @@ def review_figure(data: LogData, result: R.Review):  # type: ignore[no-untyped-d
     first.set_xlim(-0.01 * end_s, 1.01 * end_s)
     axes["events"].set_xlabel("t [s] (from the start of the log)")
 
-    fig.canvas.draw()  # the layout (aspect, legend) settled, so the list goes right under the legend
+    fig.canvas.draw()  # the layout (aspect, legend) settled: labels, legends and the list are placed on it
+    _event_labels(fig, axes["events"], clusters)
+    for name in ("tracking", "separation", "clearance"):
+        if name in axes and axes[name].get_legend() is not None:
+            _legend_clear_of_data(fig, axes[name])
     _event_list(fig, ax_xy, legend, named, result.interruptions)
     return fig

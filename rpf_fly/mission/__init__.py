@@ -28,6 +28,7 @@ from .model import (
 
 __all__ = [
     "MissionError",
+    "field_line",
     "load_mission",
     "parse_mission",
     "with_planner",
@@ -52,7 +53,7 @@ __all__ = [
 ]
 
 
-_LOADER = ("expand_formation", "load_mission", "parse_mission", "parse_uri", "with_planner")
+_LOADER = ("expand_formation", "field_line", "load_mission", "parse_mission", "parse_uri", "with_planner")
 
 
 def __getattr__(name: str) -> Any:

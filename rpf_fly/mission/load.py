@@ -769,6 +769,23 @@ def load_mission(path: str | Path) -> m.Mission:
     return parse_mission(text.removeprefix("\ufeff"), p)
 
 
+def field_line(path: str | Path, field: str) -> int:
+    """The line of the dotted ``field`` (``mocap.server``) in the mission file at ``path``, for a problem found
+    after loading (a host that does not resolve): the line of its nearest written parent when the field is left
+    to its default, 0 when the file no longer reads as YAML."""
+    try:
+        node = compose(Path(path).read_text(encoding="utf-8").removeprefix("\ufeff"), str(path))
+    except (OSError, UnicodeDecodeError, MissionError):
+        return 0
+    line = 0
+    for key in field.split("."):
+        if node is None or not node.is_map or key not in node.value:  # type: ignore[operator]
+            break
+        node = node.value[key]  # type: ignore[index]
+        line = node.key_line
+    return line
+
+
 def with_planner(mission: m.Mission, kind: str, policy: str | Path | None = None, **overrides: Any) -> m.Mission:
     """``mission`` flown with another planner: the CLI's ``--planner``, ``--policy`` and planner overrides such as
     ``wall_following=False`` (``--no-wall-following``). ``overrides`` are PlannerSettings fields (``lam`` for

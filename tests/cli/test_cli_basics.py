@@ -74,6 +74,14 @@ def test_sim_planner_help_lists_every_planner_kind():
     assert "orca" in PLANNER_KINDS
 
 
+def test_replay_planner_help_lists_every_planner_kind():
+    result = runner.invoke(get_app(), ["replay", "--help"], env=WIDE)
+    text = " ".join(result.output.split())
+    listed = re.search(r"Replay with this planner kind: ([a-z0-9, -]+) \(default", text)
+    assert listed, text
+    assert tuple(k.strip() for k in listed.group(1).split(",")) == PLANNER_KINDS
+
+
 def test_help_does_not_import_numpy():
     code = "import sys; from rpf_fly.cli import get_app; get_app(); print('numpy' in sys.modules)"
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)

@@ -59,7 +59,8 @@ def replay(*args: object):  # noqa: ANN201 - click's Result
 
 def planning_rows(path: Path) -> dict[str, int]:
     data = read_log(path)
-    return {d: sum(m.data["mode"] in PLANNING_MODES for m in data.topics[f"/{d}/planner"]) for d in ("cf1", "cf2", "cf3")}
+    return {d: sum(m.data["mode"] in PLANNING_MODES for m in data.topics[f"/{d}/planner"])
+            for d in ("cf1", "cf2", "cf3")}
 
 
 # ---------------------------------------------------------------------------------------------- reproduction
@@ -144,6 +145,38 @@ def test_the_text_report_and_the_plot(apf_log: Path, tmp_path: Path) -> None:
     import matplotlib.image
 
     assert matplotlib.image.imread(png).shape[0] > 300
+
+
+def test_the_text_report_piped_is_plain_lines_not_wrapped_at_80_columns(apf_log: Path) -> None:
+    """Not a terminal (CliRunner, a pipe, CI): the header and the table's title are one line each, as `review`'s."""
+    result = replay(apf_log, "--planner", "orca")
+    assert result.exit_code == 0, result.output
+    lines = result.stdout.splitlines()
+    assert lines[0].startswith(f"{apf_log.name}: replayed orca, open loop against the flown apf; ")
+    assert lines[0].endswith(" ms a tick"), lines[:2]
+    assert lines[1].strip().startswith("decisions: ") and lines[1].strip().endswith("ticks whose mode differs")
+    assert result.stdout.endswith("\n") and "…" not in result.stdout
+    assert not any(line.endswith(" ") for line in lines), lines
+
+
+def test_the_plot_has_one_time_axis_for_every_drone(apf_log: Path) -> None:
+    """Drones that arrive at different times still share the time axis (as the review figure's panels do)."""
+    import matplotlib.pyplot as plt
+
+    from rpf_fly.flight.replay_plot import replay_figure
+
+    data = read_log(apf_log)
+    setup = replay_setup(data, "orca")
+    result = replay_log(data, setup.mission, setup.factory, tolerance=setup.tolerance, planner="orca")
+    ends = {name: d.ticks[-1].t_ns for name, d in result.drones.items()}
+    assert len(set(ends.values())) > 1, ends  # the drones stop planning at different ticks
+    fig = replay_figure(result)
+    try:
+        limits = {tuple(ax.get_xlim()) for ax in fig.axes}
+        assert len(limits) == 1, limits
+        assert all("mode differs on " in ax.get_title() for ax in fig.axes[1::2])
+    finally:
+        plt.close(fig)
 
 
 # -------------------------------------------------------------------------------------------- broken logs
@@ -311,6 +344,40 @@ def test_emulate_replay_serves_the_logged_poses_over_natnet_at_their_logged_time
     (n0, r0, _), (n1, r1, _) = received[0], received[-1]
     logged_span = (frames[n1 - 1].t_ns - frames[n0 - 1].t_ns) / 1e9 / speed
     assert logged_span > 1.0 and abs((r1 - r0) - logged_span) < 0.1 * logged_span + 0.05, (r1 - r0, logged_span)
+
+
+def test_mocap_watch_reads_an_emulated_replay_back_to_1e_6(apf_log: Path) -> None:
+    """The acceptance's round trip with the commands a user types: `mocap emulate --replay LOG` in its own process,
+    `mocap watch --json` reading it; every frame watch prints is the logged frame of its number, to 1e-6."""
+    frames = mocap_frames(read_log(apf_log))
+    speed = 4.0
+    span_s = (frames[-1].t_ns - frames[0].t_ns) / 1e9 / speed
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "rpf_fly", "mocap", "emulate", "--replay", str(apf_log), "--unicast",
+         "--command-port", "0", "--data-port", "0", "--replay-speed", str(speed)],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )
+    try:
+        first = proc.stdout.readline()
+        assert "command port" in first, first + proc.stderr.read()
+        port = first.split("command port ")[1].split(",")[0]
+        watch = runner.invoke(get_app(), ["mocap", "watch", "--unicast", "--command-port", port, "--json",
+                                          "--duration", f"{span_s + 2.0:.1f}"])
+        proc.communicate(timeout=30)
+    finally:
+        proc.kill()
+    assert watch.exit_code == 0, watch.output
+    printed = [json.loads(line) for line in watch.stdout.splitlines()]
+    assert len(printed) > 0.5 * len(frames), (len(printed), len(frames))
+    worst = 0.0
+    for obj in printed:
+        logged = frames[obj["frame"] - 1].poses
+        assert {n for n, b in obj["bodies"].items() if b["valid"]} == set(logged), obj["frame"]
+        for name, (position, quaternion) in logged.items():
+            body = obj["bodies"][name]
+            worst = max(worst, float(np.max(np.abs(np.array(body["position"]) - np.asarray(position)))),
+                        float(np.max(np.abs(np.array(body["quaternion"]) - np.asarray(quaternion)))))
+    assert worst <= 1e-6, worst
 
 
 def test_emulate_replay_of_a_log_without_mocap_is_one_line(apf_log: Path, tmp_path: Path) -> None:

@@ -137,3 +137,60 @@ def test_errors_are_always_named():
               ReviewEvent(3.0, 2, "arrived", "cf1", "arrived"), ReviewEvent(4.0, 2, "arrived", "cf2", "arrived")]
     texts = [t for _, t in labelled_events(events)]
     assert texts == ["cf1: link lost", "cf2: link lost", "cf1: arrived (x2)"]
+
+
+def marker_boxes(fig, ax) -> list:  # type: ignore[no-untyped-def]
+    """The event triangles of the timeline, in display pixels."""
+    from matplotlib.transforms import Bbox
+
+    boxes = []
+    for line in ax.get_lines():
+        if line.get_marker() == "v":
+            x, y = ax.transData.transform((line.get_xdata()[0], line.get_ydata()[0]))
+            half = line.get_markersize() * fig.dpi / 72 / 2
+            boxes.append(Bbox.from_extents(x - half, y - half, x + half, y + half))
+    return boxes
+
+
+@pytest.mark.parametrize("flight", ["clean_cli_flight", "stopped_cli_flight"])
+def test_event_numbers_cover_no_marker_and_no_other_number(flight, request):
+    """An interruption and the events of its instant share one time: each number still has a spot of its own,
+    on a white ground (the interruption's line does not strike through it)."""
+    _, _, fig = figure_of(request.getfixturevalue(flight).log)
+    try:
+        ax = panels(fig)["events"]
+        fig.canvas.draw()
+        renderer = fig.canvas.get_renderer()
+        labels = by_gid(ax, "event-label")
+        boxes = [label.get_window_extent(renderer) for label in labels]
+        markers = marker_boxes(fig, ax)
+        for i, box in enumerate(boxes):
+            assert not any(box.overlaps(m) for m in markers), labels[i].get_text()
+            assert not any(box.overlaps(other) for other in boxes[i + 1:]), labels[i].get_text()
+            assert labels[i].get_bbox_patch() is not None
+    finally:
+        plt.close(fig)
+
+
+@pytest.mark.parametrize("flight", ["clean_cli_flight", "stopped_cli_flight", "lab_log"])
+def test_no_time_panel_legend_covers_a_curve(flight, request):
+    log = request.getfixturevalue(flight)
+    _, _, fig = figure_of(log[0] if flight == "lab_log" else log.log)
+    try:
+        fig.canvas.draw()
+        renderer = fig.canvas.get_renderer()
+        assert [a.get_text() for a in by_gid(panels(fig)["clearance"], "r-label")] == ["r = 0.1 m"]
+        for name in ("tracking", "separation", "clearance"):
+            ax = panels(fig).get(name)
+            if ax is None or ax.get_legend() is None:  # a simulated log tracks nothing; clearance names r on it
+                continue
+            box = ax.get_legend().get_window_extent(renderer)
+            for line in ax.get_lines():
+                if line.get_gid() in ("interruption", "r", "2r"):  # vertical, or the threshold the legend names
+                    continue
+                points = ax.transData.transform(np.column_stack([line.get_xdata(), line.get_ydata()]))
+                inside = (box.x0 < points[:, 0]) & (points[:, 0] < box.x1) & (box.y0 < points[:, 1]) & (
+                    points[:, 1] < box.y1)
+                assert not inside.any(), (name, line.get_label(), int(inside.sum()))
+    finally:
+        plt.close(fig)

@@ -533,3 +533,18 @@ def test_guidance_choice(fail):
 
 def test_margin_not_negative(fail):
     fail(BASE + "planner: {margin: -0.1}\n", "m.yaml:5: planner.margin: must be non-negative, got -0.1")
+
+
+def test_field_line_finds_a_field_written_in_block_or_flow_style_or_its_parent(tmp_path):
+    """Where a problem found after loading (a mocap.server that does not resolve) is reported: the field's line."""
+    from rpf_fly.mission import field_line
+
+    path = tmp_path / "m.yaml"
+    path.write_text("name: x\nmocap:\n  kind: natnet\n\n  server: lab-pc\n")
+    assert field_line(path, "mocap.server") == 5
+    path.write_text("name: x\nmocap: {kind: natnet}\n")
+    assert field_line(path, "mocap.server") == 2  # the default: the section that leaves it out
+    assert field_line(path, "radio.kind") == 0
+    path.write_text("mocap: [\n")
+    assert field_line(path, "mocap.server") == 0  # no longer YAML
+    assert field_line(tmp_path / "gone.yaml", "mocap.server") == 0

@@ -51,6 +51,21 @@ def test_watch_optitrack_reads_the_emulator_through_the_library(up_axis):
             assert body["quaternion"] == pytest.approx(quaternion, abs=1e-6)
 
 
+def test_local_ip_is_the_librarys_interface_ip():
+    """`--local-ip` reaches the library as `interface_ip`: 127.0.0.1 reads the loopback multicast, an address this
+    host does not have makes the library's own multicast join fail (RFC 5737's TEST-NET-1)."""
+    with NatNetServer(lambda: POSES, version="4.1", multicast=True, rate_hz=200, up_axis="z") as server:
+        args = ["mocap", "watch", "--system", "optitrack", "--host", "127.0.0.1", "--command-port",
+                str(server.command_port), "--frames", "2", "--json", "--timeout", "3"]
+        read = runner.invoke(app, [*args, "--local-ip", "127.0.0.1"])
+        refused = runner.invoke(app, [*args, "--local-ip", "192.0.2.1"])
+    assert read.exit_code == 0, read.output
+    assert len(read.stdout.splitlines()) == 2
+    assert refused.exit_code == 1, refused.output
+    assert refused.stderr.startswith("error: motioncapture optitrack at 127.0.0.1: the library failed: ")
+    assert len(refused.stderr.strip().splitlines()) == 1
+
+
 def test_watch_mock_prints_its_bodies_and_frames():
     result = runner.invoke(app, ["mocap", "watch", "--system", "mock", "--frames", "2", "--json",
                                  "--option", "rigid_bodies=cf1(1,2,0.5,1,0,0,0)", "--option", "frequency=50"])
@@ -118,7 +133,7 @@ def test_fly_and_check_refuse_real_drones_on_mock_poses(tmp_path):
     flown = runner.invoke(app, ["fly", str(path), "--no-console"])
     assert flown.exit_code == 2
     assert flown.stderr.strip() == (
-        f"{path}:0: mocap.type: 'mock' serves fixed poses from its options, not the drones': it can only fly with "
+        f"{path}:2: mocap.type: 'mock' serves fixed poses from its options, not the drones': it can only fly with "
         "--dry-run (which serves the simulated drones' poses, docs/mocap.md)")
     checked = runner.invoke(app, ["check", str(path)])
     assert checked.exit_code == 0 and "preflight skipped: mocap.type: 'mock' serves fixed poses" in checked.stdout
@@ -140,5 +155,5 @@ def test_an_unresolvable_optitrack_host_is_one_line_and_exit_2(tmp_path):
     path = write(tmp_path, "{kind: motioncapture, type: optitrack, hostname: no-such-host.invalid}")
     result = runner.invoke(app, ["fly", str(path), "--no-console"])
     assert result.exit_code == 2
-    assert result.stderr.startswith(f"{path}:0: mocap.hostname: cannot resolve 'no-such-host.invalid' (")
+    assert result.stderr.startswith(f"{path}:2: mocap.hostname: cannot resolve 'no-such-host.invalid' (")
     assert result.stderr.strip().endswith("expected the IP address or host name of the optitrack server")

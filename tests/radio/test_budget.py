@@ -91,3 +91,11 @@ def test_every_shipped_mission_is_within_budget() -> None:
         from rpf_fly.mission import load_mission
 
         assert not any(load.over for load in radio_loads(load_mission(path))), path
+
+
+def test_the_refusal_names_the_radio_sections_line(tmp_path: Path) -> None:
+    """FILE:LINE as every mission error: the line of `radio:` (line 4 here), not 0 (the command line's)."""
+    path = write(tmp_path, mission_text(15, 100.0, radio="kind: cflib"))
+    result = CliRunner().invoke(get_app(), ["check", str(path), "--no-preflight"])
+    assert result.exit_code == 2
+    assert result.stderr.startswith(f"{path}:4: radio: radio dongle 0"), result.stderr
