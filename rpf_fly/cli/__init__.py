@@ -75,5 +75,9 @@ def get_app() -> typer.Typer:
 
 
 def main() -> None:
-    """Console-script entry point."""
-    get_app()()
+    """Console-script entry point (``fly --foxglove PORT`` read as ``--foxglove-port PORT``: cli/live_opts.py)."""
+    import sys
+
+    from rpf_fly.cli.live_opts import foxglove_port_argv
+
+    get_app()(args=foxglove_port_argv(sys.argv[1:]), prog_name="rpf-fly")

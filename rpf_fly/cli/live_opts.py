@@ -3,14 +3,18 @@
 Kept apart from ``fly_cmd.py`` so the command only gains its options and two calls. The live view itself is
 :class:`rpf_fly.log.live.LiveView` (docs/foxglove.md).
 
-Why a flag and two options, not ``--foxglove [PORT]``: typer (0.29, no click underneath) gives an option either
-always a value or never one, and an option with an optional value would swallow whatever follows it
-(``--foxglove --dry-run`` takes ``--dry-run`` as the port). So ``--foxglove`` turns the live view on, and
-``--foxglove-port PORT`` / ``--foxglove-host HOST`` set where it listens (either of them turns it on too).
+The options: typer (0.29) gives an option either always a value or never one, and an option with an optional
+value would swallow whatever follows it (``--foxglove --dry-run`` takes ``--dry-run`` as the port, ``--foxglove
+missions/lab-3.yaml`` the mission). So ``--foxglove`` is a flag, and ``--foxglove-port PORT`` /
+``--foxglove-host HOST`` set where it listens (either of them turns it on too). The issue's form ``--foxglove
+[PORT]`` works as well, through :func:`foxglove_port_argv` before typer parses the command line: ``--foxglove=PORT``,
+and ``--foxglove PORT`` where the word after it is a port number (digits) that is not a file, are read as
+``--foxglove-port PORT``; anything else after ``--foxglove`` stays what it was (the mission, another option).
 """
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import TYPE_CHECKING, Optional
 
 import typer
@@ -21,6 +25,27 @@ if TYPE_CHECKING:
     from rpf_fly.log.live import LiveView
 
 LAYOUT = "docs/foxglove-layout.json"
+
+
+def foxglove_port_argv(args: list[str]) -> list[str]:
+    """``rpf-fly fly ... --foxglove [PORT]``: the command line with ``--foxglove=PORT`` and ``--foxglove PORT`` (a
+    word of digits that names no file) written as ``--foxglove-port PORT``; other commands' and other words
+    unchanged (see the module docstring)."""
+    if not args or args[0] != "fly":
+        return list(args)
+    out: list[str] = []
+    i = 0
+    while i < len(args):
+        word = args[i]
+        if word.startswith("--foxglove="):
+            out += ["--foxglove-port", word.split("=", 1)[1]]
+        elif word == "--foxglove" and i + 1 < len(args) and args[i + 1].isdigit() and not Path(args[i + 1]).exists():
+            out += ["--foxglove-port", args[i + 1]]
+            i += 1
+        else:
+            out.append(word)
+        i += 1
+    return out
 
 
 def start_live(enabled: bool, port: Optional[int], host: Optional[str]) -> Optional["LiveView"]:
