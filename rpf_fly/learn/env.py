@@ -285,7 +285,8 @@ class SwarmEnv:
         """Planned directions for actions ``(arenas, robots, size)``: gains (eta, lambda) or a heading change ``a``
         (the vanilla-PPO baseline: ``F = (v + a v_perp)/|...|``, paper Section V)."""
         if self.config.action == "gains":
-            step = apf_step(self.view, self.nearest, self.lambda_mask, action[..., 0], action[..., 1], self.planner)
+            step = apf_step(self.view, self.nearest, self.lambda_mask, action[..., 0], action[..., 1], self.planner,
+                            goal=self.world.goal)
             return step.direction
         h = self.world.heading
         return unit(h + action[..., 0] * (1j * h))
