@@ -45,6 +45,7 @@ from typing import Literal
 
 import numpy as np
 
+from rpf_fly.planning.arrival import capture
 from rpf_fly.planning.config import PlannerConfig
 from rpf_fly.planning.guidance import CIRCLE_SIDES, Guidance, Inflated, next_waypoint
 from rpf_fly.planning.obstacles import FAR, ObstacleSet, nearest_obstacle
@@ -289,7 +290,9 @@ class SwarmEnv:
                             goal=self.world.goal)
             return step.direction
         h = self.world.heading
-        return unit(h + action[..., 0] * (1j * h))
+        direction = unit(h + action[..., 0] * (1j * h))
+        return capture(direction, 0 * h.real.astype(np.int8), self.world.position, self.world.goal, 0 * h,
+                       self.nearest.distance, self.planner)[0]
 
     def step(self, action: np.ndarray) -> StepResult:
         """Apply one action per robot (ignored for robots that are done) and advance every arena by ``dt``."""
