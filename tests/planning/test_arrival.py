@@ -43,17 +43,21 @@ def test_not_captured_when_an_obstacle_is_nearer_than_the_goal():
     assert not captured(position, 2.5 + 0.31j, 1.0, config)  # beyond the capture radius
 
 
-def test_capture_keeps_the_moving_neighbours_force_and_passes_the_rest_through():
+def test_capture_keeps_the_moving_neighbours_force_capped_and_passes_the_rest_through():
+    """The moving neighbours' force, capped at 0.5, deflects the captured drone but never stops it: two drones
+    near their goals that push each other away (the APF's circles of 24, before the cap) still close in."""
     config = PlannerConfig.robust()
-    direction = np.array([1j, 1j])
-    mode = np.array([2, 2], dtype=np.int8)
-    position = np.array([0j, 0j])
-    goal = np.array([0.2 + 0j, 5 + 0j])
-    f_in = np.array([0.5j, 0j])
-    out, modes = capture(direction, mode, position, goal, f_in, np.array([1.0, 1.0]), config)
+    direction = np.array([1j, 1j, 1j])
+    mode = np.array([2, 2, 0], dtype=np.int8)
+    position = np.array([0j, 0j, 0j])
+    goal = np.array([0.2 + 0j, 5 + 0j, 0.2 + 0j])
+    f_in = np.array([0.5j, 0j, -0.99 + 0j])
+    distance = np.array([1.0, 1.0, 1.0])
+    out, modes = capture(direction, mode, position, goal, f_in, distance, config)
     assert out[0] == pytest.approx((1 + 0.5j) / abs(1 + 0.5j))
-    assert out[1] == 1j and modes.tolist() == [MODE_APF, 2]
-    same = capture(direction, mode, position, goal, f_in, np.array([1.0, 1.0]), PlannerConfig.paper())
+    assert out[1] == 1j and modes.tolist() == [MODE_APF, 2, MODE_APF]
+    assert out[2] == pytest.approx(1 + 0j)  # 1 - 0.5 along the goal: closing in at full speed
+    same = capture(direction, mode, position, goal, f_in, distance, PlannerConfig.paper())
     assert same[0] is direction and same[1] is mode
 
 
