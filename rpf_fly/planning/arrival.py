@@ -29,7 +29,9 @@ MAX_INTER_ROBOT = 0.5
 """The moving neighbours' force is capped at this magnitude inside the capture radius (0 drops it)."""
 
 
-def captured(position: np.ndarray, goal: np.ndarray, obstacle_distance: np.ndarray, config: PlannerConfig):  # type: ignore[no-untyped-def]
+def captured(
+    position: np.ndarray, goal: np.ndarray, obstacle_distance: np.ndarray, config: PlannerConfig
+) -> np.ndarray:
     """Where the capture rule applies: the goal nearer than ``capture_radius`` and than the nearest surface
     (``obstacle_distance``: the true signed distance, FAR when none). All false when the radius is 0."""
     d_g = abs(goal - position)
@@ -46,16 +48,14 @@ def capture(
     config: PlannerConfig,
 ) -> tuple[np.ndarray, np.ndarray]:
     """``(direction, mode)`` with the captured drones heading at ``unit(unit(goal - position) + f_in)`` (``f_in``
-    capped at :data:`MAX_INTER_ROBOT`) in mode ``apf``; the others unchanged (the same objects when no drone is captured or the radius is 0)."""
+    capped at :data:`MAX_INTER_ROBOT`) in mode ``apf``; the others unchanged (the same objects when no drone is
+    captured or the radius is 0)."""
     if not config.capture_radius:
         return direction, mode
     near = captured(position, goal, obstacle_distance, config)
     if not any_true(near):
         return direction, mode
-    if MAX_INTER_ROBOT:
-        f_in = f_in * minimum(MAX_INTER_ROBOT / (abs(f_in) + TINY), 1.0)
-    else:
-        f_in = 0.0 * f_in
+    f_in = f_in * minimum(MAX_INTER_ROBOT / (abs(f_in) + TINY), 1.0)
     straight = unit(unit(goal - position) + f_in)
     if isinstance(near, np.ndarray):
         direction = np.where(near, straight, direction)
