@@ -45,6 +45,7 @@ from typing import Literal
 
 import numpy as np
 
+from rpf_fly.planning.arrival import capture
 from rpf_fly.planning.config import PlannerConfig
 from rpf_fly.planning.guidance import CIRCLE_SIDES, Guidance, Inflated, next_waypoint
 from rpf_fly.planning.obstacles import FAR, ObstacleSet, nearest_obstacle
@@ -285,10 +286,13 @@ class SwarmEnv:
         """Planned directions for actions ``(arenas, robots, size)``: gains (eta, lambda) or a heading change ``a``
         (the vanilla-PPO baseline: ``F = (v + a v_perp)/|...|``, paper Section V)."""
         if self.config.action == "gains":
-            step = apf_step(self.view, self.nearest, self.lambda_mask, action[..., 0], action[..., 1], self.planner)
+            step = apf_step(self.view, self.nearest, self.lambda_mask, action[..., 0], action[..., 1], self.planner,
+                            goal=self.world.goal)
             return step.direction
         h = self.world.heading
-        return unit(h + action[..., 0] * (1j * h))
+        direction = unit(h + action[..., 0] * (1j * h))
+        return capture(direction, 0 * h.real.astype(np.int8), self.world.position, self.world.goal, 0 * h,
+                       self.nearest.distance, self.planner)[0]
 
     def step(self, action: np.ndarray) -> StepResult:
         """Apply one action per robot (ignored for robots that are done) and advance every arena by ``dt``."""

@@ -50,6 +50,11 @@ class PlannerConfig:
     every obstacle surface and every other drone ``margin`` closer than it is, so the planner keeps drones
     ``2r + margin`` apart and ``r + margin`` from obstacles where it kept ``2r`` and ``r`` (docs/algorithm.md,
     *Margin*). 0 is the paper's planner, bit for bit."""
+    capture_radius: float = 0.3
+    """Closer to its goal than this (metres) and than to the nearest obstacle surface, a drone heads straight at
+    the goal (plus the moving neighbours' force): :mod:`rpf_fly.planning.arrival`, docs/algorithm.md, *Arrival*.
+    Goals inside the band where the repulsion beats the unit attraction are otherwise orbited, never reached.
+    0 turns it off (the paper preset)."""
     guidance: Literal["none", "path"] = "none"
     """``path``: the attraction pulls toward the next waypoint of the shortest path around the obstacles inflated by
     ``r + margin`` that the drone can see, instead of straight at the goal (:mod:`rpf_fly.planning.guidance`)."""
@@ -69,6 +74,7 @@ class PlannerConfig:
             keep_right_deg=0.0,
             repulsive_only=False,
             static_neighbours_as_obstacles=False,
+            capture_radius=0.0,
         )
         return replace(base, **overrides)  # type: ignore[arg-type]
 

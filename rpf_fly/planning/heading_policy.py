@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from rpf_fly.planning.arrival import capture
 from rpf_fly.planning.config import PlannerConfig
 from rpf_fly.planning.forces import attractive
 from rpf_fly.planning.observation import build_observation
@@ -20,7 +21,8 @@ from rpf_fly.planning.view import LocalView
 
 
 class HeadingPolicyPlanner:
-    """Same interface as :class:`~rpf_fly.planning.Planner`; forces in the diagnostics are the attraction only."""
+    """Same interface as :class:`~rpf_fly.planning.Planner`; forces in the diagnostics are the attraction only.
+    The capture rule (:mod:`rpf_fly.planning.arrival`) applies as for the APF planners (no inter-robot force)."""
 
     def __init__(self, obstacles: ObstacleSet, config: PlannerConfig, policy: OnnxPolicy, bounds: Bounds | None = None):
         if policy.action != "heading":
@@ -46,10 +48,12 @@ class HeadingPolicyPlanner:
         direction = unit(view.heading + a * (1j * view.heading))
         f_a, d_g = attractive(view.position, view.goal)
         zero = f_a * 0
+        mode = zero.real.astype(np.int8) if isinstance(zero, np.ndarray) else 0
+        direction, mode = capture(direction, mode, view.position, goal, zero, nearest.distance, self.config)
         count = lambda_mask.sum(axis=-1) if isinstance(lambda_mask, np.ndarray) else 0
         return PlanStep(
             direction=direction,
-            mode=zero.real.astype(np.int8) if isinstance(zero, np.ndarray) else 0,
+            mode=mode,
             f_a=f_a,
             f_r=zero,
             f_in=zero,

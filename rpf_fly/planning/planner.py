@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from rpf_fly.planning.arrival import capture
 from rpf_fly.planning.config import PlannerConfig
 from rpf_fly.planning.forces import attractive, inter_robot, perceived, repulsive
 from rpf_fly.planning.gains import FixedGains, GainsPolicy
@@ -81,16 +82,20 @@ def apf_step(
     observation: Observation | None = None,
     waypoint: np.ndarray | None = None,
     goal_distance: np.ndarray | None = None,
+    goal: np.ndarray | None = None,
 ) -> PlanStep:
     """The APF with (soft) wall-following for given gains (``observation``, when the gains came from one, is kept
     in the result for the log). ``view.goal`` is what the attraction pulls toward: the goal, or with guidance the
     drone's ``waypoint`` (then ``goal_distance`` is the distance to the goal itself, for the log). ``nearest`` is
-    the true nearest obstacle; the forces see it ``config.margin`` closer."""
+    the true nearest obstacle; the forces see it ``config.margin`` closer. ``goal``: the drone's goal itself
+    (None: ``view.goal``), for the capture rule (:mod:`rpf_fly.planning.arrival`)."""
     f_a, d_g = attractive(view.position, view.goal)
     seen = perceived(nearest, config)
     f_r = repulsive(seen, eta, config)
     f_in, count = inter_robot(view.position, view.neighbour_position, lambda_mask, lam, config)
     direction, mode = select_heading(f_a, f_r, f_in, view.heading, seen.distance, config)
+    direction, mode = capture(direction, mode, view.position, view.goal if goal is None else goal, f_in,
+                              nearest.distance, config)
     return PlanStep(
         direction=direction,
         mode=mode,
@@ -161,4 +166,4 @@ class Planner:
         if waypoint is None:
             return apf_step(view, nearest, lambda_mask, eta, lam, self.config, observation)
         return apf_step(guided, nearest, lambda_mask, eta, lam, self.config, observation, waypoint,
-                        abs(view.goal - view.position))
+                        abs(view.goal - view.position), view.goal)
