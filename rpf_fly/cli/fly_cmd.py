@@ -257,12 +257,14 @@ class _nothing:
 
 
 def _install_signals(loop) -> dict:  # type: ignore[no-untyped-def]
+    from rpf_fly.flight.loop import signal_stop
+
     presses = {"n": 0}
 
     def on_interrupt(signum, frame) -> None:  # type: ignore[no-untyped-def]
         presses["n"] += 1
         if presses["n"] == 1 or signum == signal.SIGTERM:
-            loop.request_stop("interrupted: landing every drone (Ctrl-C again: emergency stop)")
+            loop.request_stop(*signal_stop(signum))
         else:
             loop.emergency_stop("second Ctrl-C: emergency stop, motors off")
 
