@@ -131,7 +131,7 @@ def fly(
                                                "coordinator listens on (default 127.0.0.1 only, e.g. "
                                                "tcp/0.0.0.0:7447 for remote workers)."),
 ) -> None:
-    """Fly MISSION: NatNet mocap and cflib radios as the mission says, or simulated drones with --dry-run."""
+    """Fly MISSION: its mocap (NatNet or motioncapture) and cflib radios, or simulated drones with --dry-run."""
     loaded = _load(mission)
     if (remote_dongles or listen) and not distributed:
         raise fail("--remote-dongles and --listen go with --distributed")

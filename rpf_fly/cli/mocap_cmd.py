@@ -24,7 +24,8 @@ import typer
 from rpf_fly.cli import app
 
 mocap_app = typer.Typer(
-    help="Motion capture: watch a NatNet (OptiTrack Motive) stream, or emulate a Motive server.",
+    help="Motion capture: watch a NatNet (OptiTrack Motive) stream or, with watch --system, any system of the "
+    "motioncapture package (Vicon, Qualisys, VRPN, ...); or emulate a Motive server.",
     no_args_is_help=True,
 )
 app.add_typer(mocap_app, name="mocap")
