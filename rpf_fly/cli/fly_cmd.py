@@ -120,8 +120,9 @@ def fly(
                                                 "0: any free port). Implies --foxglove."),
     foxglove_host: Optional[str] = typer.Option(None, "--foxglove-host", help="Address the live view listens on "
                                                 "(default 127.0.0.1; 0.0.0.0: every network). Implies --foxglove."),
-    verbose: bool = typer.Option(False, "--verbose", help="Also print the libraries' log records (cflib) on stderr; "
-                                                          "they always go to LOG.log beside the flight log."),
+    verbose: bool = typer.Option(False, "--verbose", help="Also print the libraries' log records (cflib, foxglove-sdk) "
+                                                          "on stderr; they always go to LOG.log beside the flight "
+                                                          "log."),
     distributed: bool = typer.Option(False, "--distributed", help="One worker process per radio dongle, a "
                                      "coordinator and a logger, on Zenoh (docs/distributed.md)."),
     remote_dongles: Optional[str] = typer.Option(None, "--remote-dongles", help="With --distributed: dongles "
@@ -165,16 +166,17 @@ def fly(
     from rpf_fly.cli.logs import route_logging
 
     live = start_live(foxglove, foxglove_port, foxglove_host)
-    try:
-        with route_logging(text_log_path(log_path), verbose) as logs:
+    with route_logging(text_log_path(log_path), verbose) as logs:  # the live server's records too, to its close
+        try:
             code = _run_flight(loaded, factory, dry_run, mocap, log_path, console, schedule, radio_loss,
                                live_view=live)
-    finally:
-        if live is not None:
-            live.close()
-            typer.echo(live.summary())
+        finally:
+            if live is not None:
+                live.close()
+                typer.echo(live.summary())
     if logs.warnings and logs.path is not None and not verbose:
-        typer.echo(f"({logs.warnings} warning(s) from cflib and rpf_fly: {logs.path})", err=True)
+        libraries = "cflib, foxglove-sdk" if live is not None else "cflib"
+        typer.echo(f"({logs.warnings} warning(s) from {libraries} and rpf_fly: {logs.path})", err=True)
     raise typer.Exit(code)
 
 
