@@ -165,6 +165,12 @@ def clean_cli_flight(tmp_path_factory: pytest.TempPathFactory) -> CliFlight:
 
 
 @pytest.fixture(scope="session")
+def landed_cli_flight(tmp_path_factory: pytest.TempPathFactory) -> CliFlight:
+    """Ctrl-C once in flight: every drone lands early, exit 130."""
+    return fly_cli(tmp_path_factory.mktemp("landed-flight"), interrupts=1)
+
+
+@pytest.fixture(scope="session")
 def stopped_cli_flight(tmp_path_factory: pytest.TempPathFactory) -> CliFlight:
     """Ctrl-C twice in flight: every motor cut (emergency stop), exit 130."""
     return fly_cli(tmp_path_factory.mktemp("stopped-flight"), interrupts=2)

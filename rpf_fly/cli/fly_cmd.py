@@ -120,8 +120,9 @@ def fly(
                                                 "0: any free port). Implies --foxglove."),
     foxglove_host: Optional[str] = typer.Option(None, "--foxglove-host", help="Address the live view listens on "
                                                 "(default 127.0.0.1; 0.0.0.0: every network). Implies --foxglove."),
-    verbose: bool = typer.Option(False, "--verbose", help="Also print the libraries' log records (cflib) on stderr; "
-                                                          "they always go to LOG.log beside the flight log."),
+    verbose: bool = typer.Option(False, "--verbose", help="Also print the libraries' log records (cflib, foxglove-sdk) "
+                                                          "on stderr; they always go to LOG.log beside the flight "
+                                                          "log."),
     distributed: bool = typer.Option(False, "--distributed", help="One worker process per radio dongle, a "
                                      "coordinator and a logger, on Zenoh (docs/distributed.md)."),
     remote_dongles: Optional[str] = typer.Option(None, "--remote-dongles", help="With --distributed: dongles "
@@ -131,7 +132,7 @@ def fly(
                                                "coordinator listens on (default 127.0.0.1 only, e.g. "
                                                "tcp/0.0.0.0:7447 for remote workers)."),
 ) -> None:
-    """Fly MISSION: NatNet mocap and cflib radios as the mission says, or simulated drones with --dry-run."""
+    """Fly MISSION: its mocap (NatNet or motioncapture) and cflib radios, or simulated drones with --dry-run."""
     loaded = _load(mission)
     if (remote_dongles or listen) and not distributed:
         raise fail("--remote-dongles and --listen go with --distributed")
@@ -165,16 +166,17 @@ def fly(
     from rpf_fly.cli.logs import route_logging
 
     live = start_live(foxglove, foxglove_port, foxglove_host)
-    try:
-        with route_logging(text_log_path(log_path), verbose) as logs:
+    with route_logging(text_log_path(log_path), verbose) as logs:  # the live server's records too, to its close
+        try:
             code = _run_flight(loaded, factory, dry_run, mocap, log_path, console, schedule, radio_loss,
                                live_view=live)
-    finally:
-        if live is not None:
-            live.close()
-            typer.echo(live.summary())
+        finally:
+            if live is not None:
+                live.close()
+                typer.echo(live.summary())
     if logs.warnings and logs.path is not None and not verbose:
-        typer.echo(f"({logs.warnings} warning(s) from cflib and rpf_fly: {logs.path})", err=True)
+        libraries = "cflib, foxglove-sdk" if live is not None else "cflib"
+        typer.echo(f"({logs.warnings} warning(s) from {libraries} and rpf_fly: {logs.path})", err=True)
     raise typer.Exit(code)
 
 
@@ -257,12 +259,14 @@ class _nothing:
 
 
 def _install_signals(loop) -> dict:  # type: ignore[no-untyped-def]
+    from rpf_fly.flight.loop import signal_stop
+
     presses = {"n": 0}
 
     def on_interrupt(signum, frame) -> None:  # type: ignore[no-untyped-def]
         presses["n"] += 1
         if presses["n"] == 1 or signum == signal.SIGTERM:
-            loop.request_stop("interrupted: landing every drone (Ctrl-C again: emergency stop)")
+            loop.request_stop(*signal_stop(signum))
         else:
             loop.emergency_stop("second Ctrl-C: emergency stop, motors off")
 

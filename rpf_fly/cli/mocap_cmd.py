@@ -3,10 +3,11 @@ Motive so ``watch`` can be tried without one.
 
 ``watch`` shows every rigid body as frames arrive, in the Z-up world frame: on a terminal one table redrawn in
 place, piped a header and at most ``--rate`` lines a second, with ``--json`` one JSON object per frame per line;
-then a summary (frames, rate, frames missed, each body's valid %) on exit, Ctrl-C or ``--duration`` (on stderr
-with ``--json``). It exits 0 after ``--frames`` frames, ``--duration`` seconds or Ctrl-C, and 1 with a one-line
-error when no server answers (or no frames arrive) within ``--timeout`` seconds. ``emulate`` runs :class:`NatNetServer` with bodies
-``cf1..cfN`` flying circles.
+then a summary (frames, the seconds from the first to the last and the rate over them, the watch's duration, frames
+missed, each body's valid %) on exit, Ctrl-C or ``--duration`` (on stderr with ``--json``). It exits 0 after
+``--frames`` frames, ``--duration`` seconds or Ctrl-C, and 1 with a one-line error when no server answers (or no
+frames arrive) within ``--timeout`` seconds. ``emulate`` runs :class:`NatNetServer` with bodies ``cf1..cfN`` flying
+circles.
 """
 
 from __future__ import annotations
@@ -23,7 +24,8 @@ import typer
 from rpf_fly.cli import app
 
 mocap_app = typer.Typer(
-    help="Motion capture: watch a NatNet (OptiTrack Motive) stream, or emulate a Motive server.",
+    help="Motion capture: watch a NatNet (OptiTrack Motive) stream or, with watch --system, any system of the "
+    "motioncapture package (Vicon, Qualisys, VRPN, ...); or emulate a Motive server.",
     no_args_is_help=True,
 )
 app.add_typer(mocap_app, name="mocap")
@@ -105,12 +107,22 @@ class WatchStats:
     def valid_pct(self, name: str) -> float:
         return 100.0 * self.valid.get(name, 0) / self.frames if self.frames else 0.0
 
+    @property
+    def span_s(self) -> float | None:
+        """Seconds from the first frame's arrival to the last's (None before two frames)."""
+        if self.frames < 2 or self.first_s is None or self.last_s is None:
+            return None
+        return self.last_s - self.first_s
+
     def summary(self, elapsed_s: float, stats=None) -> list[str]:  # noqa: ANN001 - MocapStats
-        """The closing report: frames, rate, frames missed, packets dropped, latency; per body its valid %."""
-        rate = self.rate_hz
-        head = f"summary: {self.frames} frames in {elapsed_s:.1f} s"
-        head += f", {rate:.1f} Hz" if rate is not None else ""
-        head += f"; {self.missed} missed (frame numbers skipped)"
+        """The closing report: frames, the span from the first to the last and the rate over it, how long the
+        watch ran (longer than the span where the stream stopped or started late), frames missed, packets dropped,
+        latency; per body its valid %."""
+        rate, span = self.rate_hz, self.span_s
+        head = f"summary: {self.frames} frame{'' if self.frames == 1 else 's'}"
+        if span is not None:
+            head += f" over {span:.1f} s" + (f", {rate:.1f} Hz" if rate is not None else "") + " (first to last)"
+        head += f"; watched {elapsed_s:.1f} s; {self.missed} missed (frame numbers skipped)"
         if stats is not None:
             head += f", {stats.superseded} not shown (newer frame waiting), {stats.dropped} packets dropped"
         if self.latencies:
@@ -174,7 +186,8 @@ def watch(
     (Z-up world frame, metres).
 
     NatNet: on a terminal one table is redrawn in place; piped, a header, at most --rate lines a second; then the
-    summary (frames, rate, frames missed, each body's valid %) on exit, Ctrl-C or --duration. A motioncapture
+    summary (frames, their span and rate, the watch's duration, frames missed, each body's valid %) on exit, Ctrl-C
+    or --duration. A motioncapture
     system: a header, at most --rate lines a second, the same summary."""
     if system != "natnet":
         from rpf_fly.cli.mocap_library import watch_library

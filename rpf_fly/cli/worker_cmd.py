@@ -102,6 +102,7 @@ def worker(
         raise fail(f"--flight: {err}")
     endpoints = _endpoints(tuple(connect or ()), "--connect")
     from rpf_fly.cli.logs import route_logging
+    from rpf_fly.flight.loop import signal_stop
     from rpf_fly.runtime.session import ZenohUnavailable
     from rpf_fly.runtime.worker import WorkerError, WorkerRun
 
@@ -119,7 +120,7 @@ def worker(
         if loop is None:
             return
         if presses["n"] == 1 or signum == signal.SIGTERM:
-            loop.request_stop("interrupted: landing this worker's drones (Ctrl-C again: emergency stop)")
+            loop.request_stop(*signal_stop(signum, "this worker's drones"))
         else:
             loop.emergency_stop("second Ctrl-C: emergency stop, motors off")
 

@@ -60,6 +60,20 @@ class SwarmLink(Protocol):
         """``go`` (take off), ``abort`` (nothing takes off) or None (not yet)."""
 
 
+INTERRUPT_STOP = ("interrupted by Ctrl-C", "Ctrl-C: all drones land (Ctrl-C again: emergency stop)")
+"""The first Ctrl-C's :meth:`FlightLoop.request_stop`: the reason each drone landed, and what the console says once
+as the landing starts."""
+
+
+def signal_stop(signum: int, drones: str = "all drones") -> tuple[str, str]:
+    """:meth:`FlightLoop.request_stop`'s reason and notice for the signal ``signum``: SIGINT is Ctrl-C (a second
+    one stops the motors), SIGTERM lands ``drones`` and says no more."""
+    if signum == signal.SIGINT:
+        return INTERRUPT_STOP[0], INTERRUPT_STOP[1].replace("all drones", drones)
+    name = signal.Signals(signum).name
+    return f"interrupted by {name}", f"{name}: {drones} land"
+
+
 GO_TIMEOUT_S = 60.0
 """How long a loop with a :class:`SwarmLink` waits for its coordinator's go after its preflight, drones on the
 ground, before it gives up (nothing takes off)."""
@@ -133,6 +147,7 @@ class FlightLoop:
         self._last_tick_s: Optional[float] = None
         self._stop = threading.Event()
         self._stop_reason = ""
+        self._stop_notice = ""
         self._end_reason = "mission complete"
         self._estop = threading.Event()
         self._estop_reason = ""
@@ -148,10 +163,12 @@ class FlightLoop:
 
     # ----------------------------------------------------------------------------------- external control
 
-    def request_stop(self, reason: str = "interrupted") -> None:
+    def request_stop(self, reason: str = "interrupted", notice: str = "") -> None:
         """Land every drone and end the flight (first Ctrl-C). Safe from a signal handler: it only sets flags; the
-        loop does the landing."""
+        loop does the landing. ``reason`` is why each drone landed (its outcome's reason, the final table);
+        ``notice`` what the ``interrupt`` event says once, as the landing starts (``reason`` when empty)."""
         self._stop_reason = reason
+        self._stop_notice = notice or reason
         self._stop.set()
 
     def emergency_stop(self, reason: str = "emergency stop requested") -> None:
@@ -195,13 +212,13 @@ class FlightLoop:
                     self._fly()
                 if self.phase not in (SwarmPhase.ABORTED,):
                     if self._stop_reason:
-                        self.events.emit(WARNING, "interrupt", self._stop_reason)
-                    self._land_all(self._stop_reason or self._end_reason)
+                        self.events.emit(WARNING, "interrupt", self._stop_notice)
+                    self._land_all(self._stop_reason or self._end_reason, told=bool(self._stop_reason))
             except KeyboardInterrupt:
-                self.request_stop("interrupted (KeyboardInterrupt): landing every drone")
-                self.events.emit(WARNING, "interrupt", self._stop_reason)
+                self.request_stop("interrupted by KeyboardInterrupt", "KeyboardInterrupt: every drone lands")
+                self.events.emit(WARNING, "interrupt", self._stop_notice)
                 try:
-                    self._land_all(self._stop_reason)
+                    self._land_all(self._stop_reason, told=True)
                 except KeyboardInterrupt:
                     self._estop_reason = "second KeyboardInterrupt: emergency stop, motors off"
                     self._estop.set()
@@ -243,7 +260,7 @@ class FlightLoop:
         def on_interrupt(signum: int, frame: object) -> None:
             presses[0] += 1
             if presses[0] == 1:
-                self.request_stop("interrupted (Ctrl-C): landing every drone (Ctrl-C again: emergency stop)")
+                self.request_stop(*INTERRUPT_STOP)
             else:
                 self.emergency_stop("second Ctrl-C: emergency stop, motors off")
 
@@ -479,10 +496,12 @@ class FlightLoop:
         finally:
             self._watchdog.arm(False)
 
-    def _land_all(self, reason: str, wait: bool = True) -> None:
+    def _land_all(self, reason: str, wait: bool = True, told: bool = False) -> None:
+        """Land every drone for ``reason``; the phase event names it unless an ``interrupt`` event just ``told``
+        it (the console then says it once)."""
         if self.phase not in (SwarmPhase.ABORTED,):
             self.phase = SwarmPhase.LANDING
-            self.events.emit(INFO, "phase", f"swarm: landing ({reason})")
+            self.events.emit(INFO, "phase", "swarm: landing" if told else f"swarm: landing ({reason})")
         self.commander.land_all(reason)
         if not wait:
             return

@@ -45,6 +45,23 @@ INSTALL_HINT = "pip install 'rpf-fly[live]'"
 SDK_DROP_LOGGER = "foxglove.websocket.connected_client.send_lossy"
 """Where foxglove-sdk (0.30) reports a client's full outbox, through Python logging."""
 
+SDK_LOGGER = "foxglove"
+"""The parent of foxglove-sdk's Python loggers: its Rust core logs through Python logging (pyo3-log; its level is
+cached per logger at first use, so ``FOXGLOVE_LOG_LEVEL`` or :func:`foxglove.set_log_level` are not needed), e.g.
+``foxglove.websocket.connected_client: Client ... attempted to subscribe to unknown channel: 7`` at ERROR when a
+client subscribes to a channel id that is gone or not yet advertised. With no handler anywhere, Python's last
+resort prints such a record on stderr; :func:`quiet_sdk` gives the SDK's loggers a handler that discards, so its
+records reach only the handlers on the root logger: during ``rpf-fly fly`` the flight's text log, and stderr with
+``--verbose`` (rpf_fly/cli/logs.py), as cflib's do."""
+
+
+def quiet_sdk() -> None:
+    """Keep foxglove-sdk's log records off the console unless the application routes them (:data:`SDK_LOGGER`):
+    a :class:`logging.NullHandler` on its parent logger, once. Records still propagate to the root's handlers."""
+    logger = logging.getLogger(SDK_LOGGER)
+    if not any(isinstance(h, logging.NullHandler) for h in logger.handlers):
+        logger.addHandler(logging.NullHandler())
+
 
 class LiveUnavailable(RuntimeError):
     """The live view cannot run: foxglove-sdk is missing, or the server cannot listen. One line, for the CLI."""
@@ -99,6 +116,7 @@ class LiveView:
         self._resend: set[str] = set()  # latched topics a client subscribed to since the last publish
         self._lock = threading.Lock()  # _latched and _resend: the writer thread and the SDK's threads
         self._closed = False
+        quiet_sdk()
         # Before the server exists, so the SDK's first report of a full outbox finds the level set.
         self._drop_logger = logging.getLogger(SDK_DROP_LOGGER)
         self._drop_counter = _DropCounter(self)

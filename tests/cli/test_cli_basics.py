@@ -1,5 +1,6 @@
 """The command line itself: ``--version``, the help of flags, and help texts derived from the registries."""
 
+import os
 import re
 import subprocess
 import sys
@@ -35,6 +36,21 @@ def test_version_in_a_real_process():
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout == f"rpf-fly {package_version()}\n"
     assert re.fullmatch(r"\d+\.\d+\.\d+\S*", package_version())
+
+
+def test_mocap_help_names_every_system_watch_reads():
+    """`mocap --help` (and the group's line in `--help`) says `watch` reads NatNet and the motioncapture package's
+    systems (`--system`), not OptiTrack alone."""
+    def run(*args: str) -> str:
+        proc = subprocess.run([sys.executable, "-m", "rpf_fly", *args], capture_output=True, text=True, timeout=60,
+                              env={**os.environ, **WIDE})
+        assert proc.returncode == 0, proc.stderr
+        return " ".join(proc.stdout.replace("│", " ").split())
+
+    group = run("mocap", "--help")
+    about = group[group.index("COMMAND [ARGS]...") + len("COMMAND [ARGS]..."):group.index("Options")]
+    assert "motioncapture" in about and "Vicon" in about and "NatNet" in about, about
+    assert "motioncapture" in run("--help").split(" mocap ", 1)[1]
 
 
 def test_version_falls_back_to_the_package_when_not_installed(monkeypatch):

@@ -40,6 +40,21 @@ def test_a_clean_flight_ends_with_every_drone_landed(clean_cli_flight):
     assert all(line.endswith("┃") or line.endswith("│") or not line.startswith(("┃", "│")) for line in table)
 
 
+def test_a_ctrl_c_is_said_once_plainly(landed_cli_flight):
+    """The first Ctrl-C: one line says what happens and what a second one does, the landing phase follows without
+    repeating it, and the end (table, summary) says why each drone landed without the now stale hint."""
+    flight = landed_cli_flight
+    assert flight.returncode == 130, flight.stderr
+    lines = flight.stderr.splitlines()
+    events = [line for line in lines[lines.index("phase swarm: flying") + 1:lines.index("phase swarm: done")]
+              if line.startswith(("interrupt", "phase"))]
+    assert events == ["interrupt Ctrl-C: all drones land (Ctrl-C again: emergency stop)", "phase swarm: landing"]
+    for cells in rows(final_table(flight.stderr)).values():
+        assert cells[1:3] == ["landed", "landed_early"] and cells[-1] == "interrupted by Ctrl-C", cells
+    assert "cf1: landed_early (interrupted by Ctrl-C)" in flight.stdout.splitlines()
+    assert "Ctrl-C again" not in flight.stdout
+
+
 def test_an_emergency_stop_ends_with_every_drone_stopped(stopped_cli_flight):
     flight = stopped_cli_flight
     assert flight.returncode == 130, flight.stderr

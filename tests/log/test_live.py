@@ -8,6 +8,7 @@ import asyncio
 import json
 import socket
 import struct
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -132,6 +133,43 @@ async def _subscribe_all(ws, topics: set[str]) -> dict[int, str]:  # type: ignor
             await ws.send(json.dumps({"op": "subscribe", "subscriptions": [
                 {"id": c["id"], "channelId": c["id"]} for c in message["channels"]]}))
     return channels
+
+
+SUBSCRIBE_UNKNOWN = """
+import asyncio, json, logging, sys
+from rpf_fly.log.live import LiveView
+
+if sys.argv[1] == "routed":  # as rpf-fly fly does (cli/logs.py): a handler on the root logger
+    handler = logging.StreamHandler(sys.stdout)
+    handler.setFormatter(logging.Formatter("%(levelname)s %(name)s: %(message)s"))
+    logging.getLogger().addHandler(handler)
+    logging.getLogger().setLevel(logging.INFO)
+with LiveView(0) as view:
+    async def main():
+        import websockets
+        async with websockets.connect(f"ws://127.0.0.1:{view.port}", subprotocols=["foxglove.sdk.v1"]) as ws:
+            await ws.send(json.dumps({"op": "subscribe", "subscriptions": [{"id": 1, "channelId": 4242}]}))
+            await asyncio.sleep(0.5)
+    asyncio.run(main())
+"""
+
+
+def test_the_sdks_log_records_reach_the_applications_handlers_never_stderr_by_themselves(sdk: None):
+    """A client subscribing to a channel id that does not exist makes foxglove-sdk log an error: with no handler
+    configured it stays off stderr (not Python's last resort, which printed it on a flight's console); with a handler
+    on the root logger (``rpf-fly fly``'s text log) it arrives there, named and levelled."""
+    def run(mode: str) -> subprocess.CompletedProcess:
+        proc = subprocess.run([sys.executable, "-c", SUBSCRIBE_UNKNOWN, mode], capture_output=True, text=True,
+                              timeout=60, cwd=ROOT)
+        assert proc.returncode == 0, proc.stderr
+        return proc
+
+    alone = run("alone")
+    assert alone.stderr == "" and alone.stdout == ""
+    routed = run("routed")
+    assert routed.stderr == ""
+    assert "ERROR foxglove.websocket.connected_client: Client 127.0.0.1:" in routed.stdout
+    assert "attempted to subscribe to unknown channel: 4242" in routed.stdout
 
 
 def test_a_stalled_client_never_blocks_a_publish_and_its_drops_are_counted(sdk: None):

@@ -10,6 +10,7 @@ import sys
 import pytest
 from natnet_samples import VERSIONS
 from typer.testing import CliRunner
+from watch_summary import stop_after, summary_numbers
 
 import rpf_fly.cli.mocap_cmd  # noqa: F401 - registers the `mocap` group on the app
 from rpf_fly.cli import app
@@ -123,6 +124,20 @@ def test_emulate_rejects_unknown_versions():
     assert "2.9" in result.output
 
 
+def test_the_summary_tells_the_frames_span_from_the_watchs_duration():
+    """The stream stops after 1 s of a 3 s watch: the summary gives the frames, the 1 s they span and the rate over
+    it (200 Hz), and the watch's 3 s apart (not 200 frames "in 3 s, 200 Hz")."""
+    with NatNetServer(lambda: POSES, version=(4, 1), multicast=False, rate_hz=200, up_axis="y") as server:
+        timer = stop_after(server, 1.0)
+        result = runner.invoke(app, watch_args(server, False, "--duration", "3", "--timeout", "5", "--rate", "1"))
+        timer.join()
+    assert result.exit_code == 0, result.output
+    head, _ = summary_of(result.stdout)
+    frames, span, rate, watched = summary_numbers(head)
+    assert 0.5 < span < 1.4 and 2.9 < watched < 3.6, head
+    assert 100 < rate < 250 and abs((frames - 1) / rate - span) < 0.06, head  # the rate is over the span
+
+
 def summary_of(text: str) -> tuple[str, dict[str, float]]:
     """The summary's head line and each body's valid %."""
     lines = text.splitlines()
@@ -146,7 +161,7 @@ def test_watch_piped_prints_a_header_at_most_rate_lines_a_second_and_a_summary()
     assert 4 <= len(frame_lines) <= 8  # 1.5 s at 4 lines a second, not 300 lines at 200 Hz
     head, valid = summary_of(result.stdout)
     frames = int(head.split()[1])
-    assert frames > 150 and " Hz; " in head and "missed" in head
+    assert frames > 150 and " Hz (first to last); watched " in head and "missed" in head
     assert valid == {"cf1": 100.0, "cf2": 100.0, "cf3": 0.0}
 
 

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import pytest
 from typer.testing import CliRunner
+from watch_summary import stop_after, summary_numbers
 
 from rpf_fly.cli import get_app
 from rpf_fly.emulator.natnet_server import NatNetServer
@@ -49,6 +50,22 @@ def test_watch_optitrack_reads_the_emulator_through_the_library(up_axis):
             assert body["valid"] is True
             assert body["position"] == pytest.approx(position, abs=1e-6)
             assert body["quaternion"] == pytest.approx(quaternion, abs=1e-6)
+
+
+def test_the_summary_tells_the_frames_span_from_the_watchs_duration():
+    """`--system`'s summary as NatNet's: the stream stops after 1 s of a 3 s watch; the frames, the 1 s they span and
+    the rate over it, and the watch's 3 s apart."""
+    with NatNetServer(lambda: POSES, version="4.1", multicast=True, rate_hz=200, up_axis="z") as server:
+        timer = stop_after(server, 1.5)
+        result = runner.invoke(app, ["mocap", "watch", "--system", "optitrack", "--host", "127.0.0.1",
+                                     "--command-port", str(server.command_port), "--duration", "3.5",
+                                     "--timeout", "5", "--rate", "1"])
+        timer.join()
+    assert result.exit_code == 0, result.output
+    head = next(line for line in result.stdout.splitlines() if line.startswith("summary: "))
+    frames, span, rate, watched = summary_numbers(head)
+    assert 0.5 < span < 1.9 and 3.4 < watched < 4.1, head
+    assert 100 < rate < 250 and abs((frames - 1) / rate - span) < 0.06, head
 
 
 def test_local_ip_is_the_librarys_interface_ip():
