@@ -21,12 +21,13 @@ What it does per drone (cflib 0.1.34, firmware protocol 12):
 
 Thread model: after `connect` returns, every public method may be called from any thread. One lock guards the
 backend's bookkeeping (telemetry, link state). Every command but the emergency stop and the estimator's parameter
-writes is queued in the drone's `Outbox` (rpf_fly/radio/outbox.py) and handed to cflib by a sender thread of that
-drone's own: the command methods return at once, and a dying link (cflib's radio driver blocks its caller up to 2 s
-when its queue is full) holds back only its own drone's commands, never the caller nor the other drones. The outbox
-keeps high-level commands in order, sends the newest setpoint and extpos only, and drops a waiting setpoint when a
-command that ends the stream (take-off, go-to, hand-over, land, stop) is queued after it, so no setpoint queued
-before a landing reaches the drone after it. `wait_sent` waits until the queued commands went out. Packets go
+writes is queued in the drone's `Outbox` (rpf_fly/radio/outbox.py) and handed to cflib by the backend's
+`SenderPool` (one thread sends every drone's in turn; one stuck in a dying link keeps that drone, and another takes
+over the others): the command methods return at once, and a dying link (cflib's radio driver blocks its caller up
+to 2 s when its queue is full) holds back only its own drone's commands, never the caller nor the other drones. The
+outbox keeps high-level commands in order, sends the newest setpoint and extpos only, and drops a waiting setpoint
+when a command that ends the stream (take-off, go-to, hand-over, land, stop) is queued after it, so no setpoint
+queued before a landing reaches the drone after it. `wait_sent` waits until the queued commands went out. Packets go
 through `Crazyflie.send_packet`, which holds cflib's own send lock. `emergency_stop` drops the drone's pending
 commands and sends from the caller's thread at once, one thread per drone when it stops several, so a blocked link
 delays no other drone's stop. Telemetry and link callbacks run on cflib's threads (the link's receive thread, the
@@ -65,7 +66,7 @@ from cflib.crazyflie.swarm import CachedCfFactory, Swarm
 from cflib.crazyflie.syncCrazyflie import SyncCrazyflie
 from cflib.crtp.radiodriver import RadioDriver
 
-from rpf_fly.radio.outbox import Action, Outbox
+from rpf_fly.radio.outbox import Action, Outbox, SenderPool
 from rpf_fly.radio.schedule import LinkCount
 
 from .backend import (
@@ -182,6 +183,8 @@ class CflibBackend:
         self._drones: dict[str, _Drone] = {}
         self._callbacks: list[LinkLostCallback] = []
         self._swarm: Swarm | None = None
+        self._pool = SenderPool()
+        """The threads that send every drone's queued commands (rpf_fly/radio/outbox.py)."""
         self._latencies: list[float] = []
         """Seconds from a setpoint's ``origin_s`` to its hand-over to cflib, not yet taken."""
 
@@ -302,7 +305,7 @@ class CflibBackend:
         with self._lock:
             if drone.closing:
                 raise RuntimeError("given up while configuring")
-            drone.outbox = Outbox(drone.name, partial(self._send, drone))
+            drone.outbox = self._pool.outbox(drone.name, partial(self._send, drone))
             drone.up, drone.configured, drone.error = True, True, None
 
     def _set_param(self, cf: Any, name: str, value: float) -> None:
@@ -418,6 +421,7 @@ class CflibBackend:
                 drone.scf.cf.close_link()
 
         self._parallel(close_one, drones, 5.0)
+        self._pool.close()
         with self._lock:
             for drone in drones:
                 drone.up = False
@@ -579,10 +583,9 @@ class CflibBackend:
     def wait_sent(self, names: list[str] | None = None, timeout_s: float = 1.0) -> bool:
         """Wait until every command queued so far to ``names`` (default: all) went out to cflib or was dropped;
         False on timeout. Commands return once queued; tests and scripts that need the packet sent call this."""
-        deadline = time.monotonic() + timeout_s
         with self._lock:
             boxes = [d.outbox for n, d in self._drones.items() if d.outbox is not None and (names is None or n in names)]
-        return all(box.wait_idle(max(deadline - time.monotonic(), 0.0)) for box in boxes)
+        return self._pool.wait_idle(boxes, timeout_s)
 
     def take_setpoint_latencies(self) -> list[float]:
         """Seconds from each setpoint's ``origin_s`` to the moment cflib had taken it, since the last call."""

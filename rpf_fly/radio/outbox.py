@@ -1,14 +1,14 @@
-"""One drone's outgoing commands and the thread that sends them, so that a dying link stalls only its own drone.
+"""Each drone's outgoing commands, and the threads that send them, so that a dying link stalls only its own drone.
 
 Why: cflib's send blocks its caller while the link's driver holds a full queue (cflib's ``RadioDriver``:
 ``out_queue.put(pk, True, 2)``, then "Could not send packet to copter"). A link that dies in flight blocks every
 send to it for about 0.4-0.6 s (the radio's unacknowledged retries, until cflib declares the link lost), up to 2 s.
-When one thread sent every drone's setpoints, that one send held back the whole swarm's stream: the fault campaign
-saw the flight watchdog (0.35 s at 10 Hz) land eight drones because one link dropped. Here each drone's commands
-wait in its own outbox, and a thread per drone hands them to cflib; the caller (the flight loop, the watchdog) only
-queues and never waits for a radio.
+When the flight loop sent every drone's setpoints itself, that one send held back the whole swarm's stream: the
+fault campaign saw the flight watchdog (0.35 s at 10 Hz) land eight drones because one link dropped. Here each
+drone's commands wait in its own :class:`Outbox`, and the threads of a :class:`SenderPool` hand them to cflib; the
+caller (the flight loop, the watchdog) only queues and never waits for a radio.
 
-What is kept, and in which order (the rules that make a queued stream safe):
+What an outbox keeps, and in which order (the rules that make a queued stream safe):
 
 - high-level commands (arm, take-off, go-to, hand-over, land, stop) are kept in the order they were queued and never
   dropped;
@@ -17,139 +17,257 @@ What is kept, and in which order (the rules that make a queued stream safe):
 - a command that ends the stream (every high-level command but arming) drops a setpoint still waiting, so a setpoint
   queued before a landing can never reach the drone after it; a setpoint queued after the command goes after it;
 - extpos / extpose is latest-wins in a slot of its own (a stale mocap position only misleads the estimator);
-- each round sends the oldest command first, then the setpoint, then the extpos: a command is never overtaken by
-  anything queued after it, and the setpoint is always newer than every command already sent.
+- each turn of a drone sends its oldest command first, then its setpoint, then its extpos, one action a turn: a
+  command is never overtaken by anything queued after it. A drone's actions never go out from two threads at once.
 
-`clear` drops everything pending (an emergency stop, which the backend sends from its caller's thread at once);
-`close` lets what is pending go out (a disarm queued after touchdown must reach the drone) for at most its
-``flush_s``, then ends the thread.
+How the pool sends: one thread at a time does the work in the normal case, taking the drones in the order their
+work arrived, one action each turn; so a tick's ten setpoints cost one thread wake-up, not ten. A thread whose send
+has lasted longer than :data:`STUCK_S` is taken as stuck in a dying link (it keeps that drone, whose further
+commands wait, newest setpoint only); the next time work is queued or waited for, another thread takes over the
+other drones (started when no idle one is left, so there are never more threads than stuck drones plus one).
+
+`Outbox.clear` drops everything pending (an emergency stop, which the backend sends from its caller's thread at
+once); `Outbox.close` lets what is pending go out (a disarm queued after touchdown must reach the drone) for at most
+its ``flush_s``; `SenderPool.close` ends the threads.
 """
 
 from __future__ import annotations
 
 import logging
 import threading
+import time
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 
 logger = logging.getLogger(__name__)
 
 Action = Callable[[], None]
-"""One radio command, ready to send (it raises on failure; the runner reports it)."""
+"""One radio command, ready to send."""
+
+STUCK_S = 0.002
+"""A send lasting longer than this is taken as blocked in its link (a healthy cflib send takes tens of
+microseconds; a full driver queue blocks for the radio's retries, 0.1-2 s): another thread takes over the other
+drones. Taking a slow-but-healthy send for a stuck one costs only a thread wake-up."""
+
+
+class SenderPool:
+    """The threads that send every outbox's actions (module docstring). One lock guards the pool and its outboxes."""
+
+    def __init__(self, name: str = "rpf-send") -> None:
+        self.name = name
+        self._lock = threading.Lock()
+        self._work = threading.Condition(self._lock)
+        """Idle threads wait here for a token."""
+        self._done = threading.Condition(self._lock)
+        """Notified when a send leaves the line empty: `wait_idle` waits here."""
+        self._ready: deque[Outbox] = deque()
+        self._working = 0
+        """Threads awake and looking for work (not inside a send)."""
+        self._sending: dict[int, float] = {}
+        """Threads inside a send, by thread number: since when (`time.monotonic()`)."""
+        self._idle = 0
+        self._tokens = 0
+        """Wake-ups handed to idle threads and not yet taken."""
+        self._threads: list[threading.Thread] = []
+        self._closed = False
+
+    def outbox(self, name: str, run: Callable[[Action], None]) -> Outbox:
+        """A new drone's outbox; ``run(action)`` sends one of its actions on a pool thread (what it raises is logged
+        and the pool goes on)."""
+        return Outbox(self, name, run)
+
+    @property
+    def threads(self) -> int:
+        """Threads started so far (one in normal flight; one more per drone stuck in a dying link)."""
+        return len(self._threads)
+
+    # ------------------------------------------------------------------------------------------ with the lock held
+
+    def _schedule(self, box: Outbox) -> None:
+        """``box`` has work: put it in line unless it is in line already or one of its sends is under way."""
+        if not box._queued and not box._busy and box._pending():
+            box._queued = True
+            self._ready.append(box)
+        self._wake()
+
+    def _wake(self) -> None:
+        """Make sure a thread that is not stuck will take the work in line: an idle one, or a new one."""
+        if not self._ready or self._closed:
+            return
+        now = time.monotonic()
+        unstuck = sum(1 for since in self._sending.values() if now - since <= STUCK_S)
+        if self._working + unstuck + self._tokens > 0:
+            return
+        if self._idle > self._tokens:
+            self._tokens += 1
+            self._work.notify()
+            return
+        self._working += 1
+        thread = threading.Thread(target=self._loop, name=f"{self.name}-{len(self._threads) + 1}", daemon=True)
+        self._threads.append(thread)
+        thread.start()
+
+    # ------------------------------------------------------------------------------------------ the threads
+
+    def _loop(self) -> None:
+        me = threading.get_ident()
+        with self._lock:
+            while True:
+                if not self._ready:
+                    self._working -= 1
+                    if self._closed:
+                        return
+                    self._idle += 1
+                    while not self._tokens and not self._closed:
+                        self._work.wait()
+                    self._idle -= 1
+                    if self._tokens:
+                        self._tokens -= 1
+                    self._working += 1
+                    continue
+                box = self._ready.popleft()
+                box._queued = False
+                action = box._take()
+                if action is None:
+                    continue
+                self._working -= 1
+                self._sending[me] = time.monotonic()
+                self._lock.release()
+                try:
+                    box._run(action)
+                except Exception:  # the drone's next commands, and the other drones', must still go out
+                    logger.exception("drone %s: sending a command failed", box.name)
+                finally:
+                    self._lock.acquire()
+                del self._sending[me]
+                self._working += 1
+                box._busy = False
+                if box._pending():
+                    box._queued = True
+                    self._ready.append(box)  # behind the drones already waiting: one action a turn
+                if not self._ready:  # the burst is out: wake the waiters once, not after every drone's send
+                    self._done.notify_all()
+
+    # ------------------------------------------------------------------------------------------ waiting, closing
+
+    def wait_idle(self, boxes: Iterable[Outbox], timeout_s: float) -> bool:
+        """Wait until every one of ``boxes`` has sent (or dropped) what was queued so far; False on timeout, and then
+        another thread takes over from one stuck in a send."""
+        boxes = list(boxes)
+        with self._lock:
+            done = self._done.wait_for(lambda: all(b._idle() for b in boxes), timeout_s)
+            if not done:
+                self._wake()
+            return done
+
+    def close(self, join_s: float = 1.0) -> None:
+        """End the threads (those stuck in a send end when it returns)."""
+        with self._lock:
+            self._closed = True
+            self._work.notify_all()
+        deadline = time.monotonic() + join_s
+        for thread in list(self._threads):
+            thread.join(max(deadline - time.monotonic(), 0.0))
 
 
 class Outbox:
-    """A drone's pending commands and the daemon thread that sends them (see the module docstring)."""
+    """One drone's pending commands (module docstring); made by :meth:`SenderPool.outbox`."""
 
-    def __init__(self, name: str, run: Callable[[Action], None]):
-        """``run(action)`` sends one action on the outbox's thread (what it raises is logged, and the thread goes
-        on with the next command)."""
+    def __init__(self, pool: SenderPool, name: str, run: Callable[[Action], None]):
         self.name = name
+        self._pool = pool
         self._run = run
-        self._cond = threading.Condition()
         self._commands: deque[Action] = deque()
         self._setpoint: Action | None = None
         self._extpos: Action | None = None
-        self._sending = False
+        self._busy = False
+        """One of its actions is being sent."""
+        self._queued = False
+        """It is in the pool's line."""
         self._closed = False
         self.setpoints_replaced = 0
         """Setpoints replaced by a newer one or dropped by a command before they were sent."""
-        self._thread = threading.Thread(target=self._loop, name=f"rpf-send-{name}", daemon=True)
-        self._thread.start()
 
     # ------------------------------------------------------------------------------------------ queueing
 
     def command(self, action: Action, ends_stream: bool) -> bool:
         """Queue a high-level command (kept in order); one that ``ends_stream`` drops a waiting setpoint. False
         once the outbox is closed."""
-        with self._cond:
+        with self._pool._lock:
             if self._closed:
                 return False
             if ends_stream and self._setpoint is not None:
                 self._setpoint = None
                 self.setpoints_replaced += 1
             self._commands.append(action)
-            self._cond.notify()
+            self._pool._schedule(self)
             return True
 
     def setpoint(self, action: Action) -> bool:
         """Queue a streamed setpoint, replacing one not yet sent. False once the outbox is closed."""
-        with self._cond:
+        with self._pool._lock:
             if self._closed:
                 return False
             if self._setpoint is not None:
                 self.setpoints_replaced += 1
             self._setpoint = action
-            self._cond.notify()
+            self._pool._schedule(self)
             return True
 
     def extpos(self, action: Action) -> bool:
         """Queue a mocap position for the estimator, replacing one not yet sent. False once closed."""
-        with self._cond:
+        with self._pool._lock:
             if self._closed:
                 return False
             self._extpos = action
-            self._cond.notify()
+            self._pool._schedule(self)
             return True
 
     def clear(self) -> None:
         """Drop everything not yet sent (what is being sent now still goes out)."""
-        with self._cond:
+        with self._pool._lock:
             if self._setpoint is not None:
                 self.setpoints_replaced += 1
             self._commands.clear()
             self._setpoint = self._extpos = None
 
-    # ------------------------------------------------------------------------------------------ state
+    # ------------------------------------------------------------------------------------------ state (lock held)
 
     def _pending(self) -> bool:
         return bool(self._commands) or self._setpoint is not None or self._extpos is not None
 
+    def _idle(self) -> bool:
+        return not self._busy and not self._pending()
+
+    def _take(self) -> Action | None:
+        """The next action to send (oldest command, then the setpoint, then the extpos), marking it under way."""
+        if self._commands:
+            action: Action | None = self._commands.popleft()
+        elif self._setpoint is not None:
+            action, self._setpoint = self._setpoint, None
+        else:
+            action, self._extpos = self._extpos, None
+        self._busy = action is not None
+        return action
+
+    # ------------------------------------------------------------------------------------------ waiting, closing
+
     def idle(self) -> bool:
         """Nothing waiting and nothing being sent."""
-        with self._cond:
-            return not self._pending() and not self._sending
+        with self._pool._lock:
+            return self._idle()
 
     def wait_idle(self, timeout_s: float) -> bool:
         """Wait until everything queued so far has been handed to cflib (or dropped); False on timeout."""
-        with self._cond:
-            return self._cond.wait_for(lambda: not self._pending() and not self._sending, timeout_s)
+        return self._pool.wait_idle((self,), timeout_s)
 
     def close(self, flush_s: float) -> bool:
-        """Refuse new commands, let the pending ones go out for at most ``flush_s``, then end the thread (what is
-        still pending then is dropped). True when everything pending went out."""
-        with self._cond:
+        """Refuse new commands, let the pending ones go out for at most ``flush_s``, then drop what is left. True
+        when everything pending went out."""
+        with self._pool._lock:
             self._closed = True
-            flushed = self._cond.wait_for(lambda: not self._pending() and not self._sending, flush_s)
+        flushed = self.wait_idle(flush_s)
+        with self._pool._lock:
             self._commands.clear()
             self._setpoint = self._extpos = None
-            self._cond.notify_all()
-        self._thread.join(max(flush_s, 0.1))
         return flushed
-
-    # ------------------------------------------------------------------------------------------ the thread
-
-    def _next(self) -> Action | None:
-        """The next action (oldest command, then the setpoint, then the extpos), or None when closed and empty."""
-        with self._cond:
-            self._sending = False
-            self._cond.notify_all()  # wait_idle / close
-            while not self._pending():
-                if self._closed:
-                    return None
-                self._cond.wait()
-            self._sending = True
-            if self._commands:
-                return self._commands.popleft()
-            if self._setpoint is not None:
-                action, self._setpoint = self._setpoint, None
-                return action
-            action, self._extpos = self._extpos, None
-            return action
-
-    def _loop(self) -> None:
-        while (action := self._next()) is not None:
-            try:
-                self._run(action)
-            except Exception:  # the drone's next commands must still go out
-                logger.exception("drone %s: sending a command failed", self.name)

@@ -1,43 +1,52 @@
-"""`Outbox`: the order and the coalescing rules of a drone's queued commands, on its real sender thread."""
+"""`Outbox` and `SenderPool`: the order and the coalescing rules of a drone's queued commands, and the pool's
+threads (one for the whole swarm normally, another taking over when one is stuck in a dying link), on real
+threads."""
 
 from __future__ import annotations
 
 import threading
+import time
 from collections.abc import Callable
 
-from rpf_fly.radio.outbox import Outbox
+from rpf_fly.radio.outbox import STUCK_S, Outbox, SenderPool
 
 
 class Radio:
-    """What the outbox's thread sent, in order; ``hold`` blocks the thread inside its current send (a dying link)."""
+    """What the pool sent, in order, and from which thread; ``hold`` blocks a send of a drone named in ``stuck``
+    (a dying link) until it is set."""
 
-    def __init__(self) -> None:
+    def __init__(self, stuck: tuple[str, ...] = ()) -> None:
         self.sent: list[str] = []
+        self.threads: dict[str, set[int]] = {}
+        self.stuck = stuck
         self.hold = threading.Event()
-        self.hold.set()
         self.inside = threading.Event()
 
-    def run(self, action: Callable[[], None]) -> None:
-        self.inside.set()
-        self.hold.wait(5.0)
-        action()
+    def runner(self, name: str) -> Callable[[Callable[[], None]], None]:
+        def run(action: Callable[[], None]) -> None:
+            self.threads.setdefault(name, set()).add(threading.get_ident())
+            if name in self.stuck:
+                self.inside.set()
+                self.hold.wait(5.0)
+            action()
+        return run
 
     def packet(self, label: str) -> Callable[[], None]:
         return lambda: self.sent.append(label)
 
 
-def blocked_outbox() -> tuple[Outbox, Radio]:
-    """An outbox whose thread is stuck in the send of ``first`` until ``radio.hold`` is set."""
-    radio = Radio()
-    radio.hold.clear()
-    box = Outbox("cf1", radio.run)
+def blocked_outbox() -> tuple[Outbox, Radio, SenderPool]:
+    """An outbox whose send is stuck in ``first`` until ``radio.hold`` is set."""
+    radio = Radio(stuck=("cf1",))
+    pool = SenderPool()
+    box = pool.outbox("cf1", radio.runner("cf1"))
     box.command(radio.packet("first"), ends_stream=False)
     assert radio.inside.wait(2.0)
-    return box, radio
+    return box, radio, pool
 
 
 def test_setpoints_are_latest_wins_and_commands_keep_their_order() -> None:
-    box, radio = blocked_outbox()
+    box, radio, pool = blocked_outbox()
     for i in range(5):
         assert box.setpoint(radio.packet(f"sp{i}"))
     box.command(radio.packet("arm"), ends_stream=False)  # arming does not end the stream: the setpoint stays
@@ -47,10 +56,11 @@ def test_setpoints_are_latest_wins_and_commands_keep_their_order() -> None:
     assert box.wait_idle(2.0)
     assert radio.sent == ["first", "arm", "sp4", "ext1"]
     assert box.setpoints_replaced == 4
+    pool.close()
 
 
 def test_a_landing_drops_the_setpoint_queued_before_it_and_keeps_the_one_after() -> None:
-    box, radio = blocked_outbox()
+    box, radio, pool = blocked_outbox()
     box.setpoint(radio.packet("before"))
     box.command(radio.packet("land"), ends_stream=True)
     radio.hold.set()
@@ -67,10 +77,11 @@ def test_a_landing_drops_the_setpoint_queued_before_it_and_keeps_the_one_after()
     radio.hold.set()
     assert box.wait_idle(2.0)
     assert radio.sent == ["first", "land", "take-off", "hand-over", "after the hand-over"]
+    pool.close()
 
 
 def test_clear_drops_everything_pending_and_close_flushes_then_refuses() -> None:
-    box, radio = blocked_outbox()
+    box, radio, pool = blocked_outbox()
     box.command(radio.packet("go-to"), ends_stream=True)
     box.setpoint(radio.packet("sp"))
     box.clear()
@@ -79,15 +90,16 @@ def test_clear_drops_everything_pending_and_close_flushes_then_refuses() -> None
     assert box.close(flush_s=2.0)
     assert radio.sent == ["first", "disarm"]  # the disarm queued before close went out
     assert not box.command(radio.packet("late"), ends_stream=False) and not box.setpoint(radio.packet("late"))
-    assert not box._thread.is_alive()
+    pool.close()
+    assert not any(t.is_alive() for t in pool._threads)
 
 
 def test_close_gives_up_on_a_stuck_send_after_its_flush_time() -> None:
-    box, radio = blocked_outbox()
+    box, radio, pool = blocked_outbox()
     box.command(radio.packet("land"), ends_stream=True)
     assert not box.close(flush_s=0.2)
     radio.hold.set()
-    box._thread.join(2.0)
+    pool.close(join_s=2.0)
     assert radio.sent == ["first"]  # what was still waiting at close was dropped
 
 
@@ -97,9 +109,47 @@ def test_a_raising_send_does_not_end_the_thread() -> None:
     def fail() -> None:
         raise RuntimeError("link")
 
-    box = Outbox("cf2", lambda action: action())
+    pool = SenderPool()
+    box = pool.outbox("cf2", lambda action: action())
     box.command(fail, ends_stream=False)
     box.command(lambda: sent.append("next"), ends_stream=False)
     assert box.wait_idle(2.0)
     assert sent == ["next"]
-    box.close(0.5)
+    pool.close()
+
+
+def test_one_thread_sends_a_whole_swarm_in_turn() -> None:
+    radio = Radio()
+    pool = SenderPool()
+    boxes = [pool.outbox(f"cf{i}", radio.runner(f"cf{i}")) for i in range(10)]
+    for tick in range(20):
+        for i, box in enumerate(boxes):
+            box.setpoint(radio.packet(f"cf{i}/{tick}"))
+        assert pool.wait_idle(boxes, 2.0)
+    # one thread for the swarm (a second one only where the machine held a send past STUCK_S), not one a drone
+    assert len(radio.sent) == 200 and pool.threads <= 2
+    assert radio.sent[:10] == [f"cf{i}/0" for i in range(10)]  # in the order their work arrived
+    pool.close()
+
+
+def test_a_drone_stuck_in_its_send_keeps_one_thread_and_another_sends_the_others() -> None:
+    radio = Radio(stuck=("cf1",))
+    pool = SenderPool()
+    stuck = pool.outbox("cf1", radio.runner("cf1"))
+    others = [pool.outbox(f"cf{i}", radio.runner(f"cf{i}")) for i in (2, 3)]
+    stuck.setpoint(radio.packet("cf1/0"))
+    assert radio.inside.wait(2.0)
+    time.sleep(2 * STUCK_S)
+    for tick in range(5):
+        stuck.setpoint(radio.packet(f"cf1/{tick + 1}"))  # waits, newest only
+        for i, box in zip((2, 3), others):
+            box.setpoint(radio.packet(f"cf{i}/{tick}"))
+        assert pool.wait_idle(others, 1.0), radio.sent  # the others go out while cf1 is stuck
+        assert not stuck.idle()
+    assert [s for s in radio.sent if s.startswith("cf1")] == []  # cf1/0 is still inside its send
+    assert 2 <= pool.threads <= 3 and not (radio.threads["cf2"] | radio.threads["cf3"]) & radio.threads["cf1"]
+    radio.hold.set()
+    assert stuck.wait_idle(2.0)
+    assert [s for s in radio.sent if s.startswith("cf1")] == ["cf1/0", "cf1/5"]
+    assert stuck.setpoints_replaced == 4
+    pool.close()
