@@ -471,8 +471,9 @@ class _MissionParser(_Checker):
         entries = self.mapping(node, ("zenoh",))
         if "zenoh" not in entries:
             return m.RuntimeSettings()
-        z = self.mapping(entries["zenoh"], ("mode", "connect", "listen"))
+        z = self.mapping(entries["zenoh"], ("mode", "connect", "listen", "config"))
         mode = self.choice(z["mode"], ("client", "peer")) if "mode" in z else "client"
+        config = self.zenoh_config(z["config"]) if "config" in z else None
         lists: dict[str, tuple[str, ...]] = {}
         for key in ("connect", "listen"):
             if key not in z:
@@ -481,7 +482,23 @@ class _MissionParser(_Checker):
             items = value.value if value.is_seq else [value]
             endpoints = tuple(self.endpoint(item) for item in items)
             lists[key] = endpoints
-        return m.RuntimeSettings(zenoh=m.ZenohSettings(mode=mode, **lists))  # type: ignore[arg-type]
+        return m.RuntimeSettings(zenoh=m.ZenohSettings(mode=mode, config=config, **lists))  # type: ignore[arg-type]
+
+    def zenoh_config(self, node: YNode) -> Path:
+        """``runtime.zenoh.config``: an existing file that Zenoh reads as its configuration (relative to the
+        mission's folder, then the current one); one line naming the file and Zenoh's complaint otherwise."""
+        raw = self.string(node)
+        found, looked = _find_file(raw, _search_dirs(self.base_dir))
+        if found is None:
+            raise self.error(node, "runtime.zenoh.config", f"Zenoh config file {raw!r} not found ({_looked(looked)})")
+        import zenoh
+
+        try:
+            zenoh.Config.from_file(str(found))
+        except zenoh.ZError as err:
+            first = " ".join(str(err).split())[:200]
+            raise self.error(node, "runtime.zenoh.config", f"Zenoh cannot read {str(found)!r}: {first}") from None
+        return found
 
     def endpoint(self, node: YNode) -> str:
         text = self.string(node)

@@ -178,6 +178,10 @@ class ZenohSettings:
     """Endpoints to connect to (``tcp/HOST:7447``): where a worker finds its coordinator."""
     listen: tuple[str, ...] = ()
     """Endpoints the coordinator listens on (empty: loopback only)."""
+    config: Optional[Path] = None
+    """A Zenoh configuration file (JSON5) every session of the flight starts from: TLS certificates, access
+    control, anything Zenoh reads; rpf_fly then sets the mode, the endpoints, the lease and scouting off on top
+    (docs/distributed.md, "Across hosts"). Resolved to an existing file at load."""
 
 
 @dataclass(frozen=True)

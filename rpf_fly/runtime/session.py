@@ -34,10 +34,11 @@ def free_loopback_endpoint() -> str:
 
 def zenoh_config(settings: ZenohSettings, *, connect: Sequence[str] = (), listen: Sequence[str] = (),
                  mode: Optional[str] = None) -> Any:
-    """A ``zenoh.Config``: the mission's settings, with the command line's endpoints replacing its own."""
+    """A ``zenoh.Config``: the mission's config file when it names one (TLS, access control: untouched), then the
+    mission's settings on top, with the command line's endpoints replacing its own."""
     import zenoh
 
-    config = zenoh.Config()
+    config = zenoh.Config.from_file(str(settings.config)) if settings.config is not None else zenoh.Config()
     config.insert_json5("mode", json.dumps(mode or settings.mode))
     config.insert_json5("scouting/multicast/enabled", "false")
     config.insert_json5("transport/link/tx/lease", str(LEASE_MS))
