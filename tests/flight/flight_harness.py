@@ -22,7 +22,8 @@ from rpf_fly.sim.scenario import obstacle_set
 # margin 0: before the capture rule, with the product's 0.05 m (planner.margin) the outer drones of this line of
 # goals 0.6 m apart circled their goals (arrived drones repel as if 5 cm closer), and the flight took 17.5 s or
 # more instead of 7.5 s. Since the rule (docs/algorithm.md, *Arrival*) a dry run at 0.05 m takes 7.5 s too; the
-# tests keep margin 0, the setting they were written and timed with.
+# tests keep margin 0, the setting they were written and timed with (tried 2026-12-02: the replay tests build
+# their rpf missions from this planner line, and the separation-hold test's geometry holds at margin 0 only).
 SHORT_MISSION = """\
 name: short-3
 arena: {x: [-2.0, 2.0], y: [-2.0, 2.0], z: [0.0, 1.5]}
