@@ -229,17 +229,23 @@ class Commander:
             agent.outcome = FlightOutcome.EMERGENCY
             agent.set_phase(DronePhase.EMERGENCY, self.clock(), "emergency stop")
 
-    def emergency_stop(self, reason: str, names: Optional[Iterable[str]] = None) -> None:
+    LOOP_STOP_WAIT_S = 0.05
+    """How long the flight loop waits for an emergency stop it orders (:meth:`emergency_stop` ``wait_s``): the
+    packets of a drone whose link is blocked go on from their own thread, and the loop ticks on."""
+
+    def emergency_stop(self, reason: str, names: Optional[Iterable[str]] = None,
+                       wait_s: Optional[float] = None) -> None:
         """Motors off now (latched until reboot), from any thread but a signal handler (it does radio I/O). It takes
-        no drone lock first: a drone whose link is blocked must not delay the stop of the others; the phase is set
-        after the packets went out."""
+        no drone lock first: a drone whose link is blocked must not delay the stop of the others (the backend sends
+        each drone's from a thread of its own, waiting ``wait_s`` at most: its default when None); the phase is
+        set after."""
         targets = [self.agents[n] for n in names] if names is not None else list(self.agents.values())
-        if names is None:
-            failures = dict(self.backend.emergency_stop(None))
+        stop_all = names is None
+        names_or_all = None if stop_all else [a.name for a in targets]
+        if wait_s is None:
+            failures = dict(self.backend.emergency_stop(names_or_all))
         else:
-            failures = {}
-            for agent in targets:
-                failures.update(self.backend.emergency_stop(agent.name))
+            failures = dict(self.backend.emergency_stop(names_or_all, wait_s=wait_s))
         for agent in targets:
             with self._locks[agent.name]:
                 if agent.phase.airborne or agent.phase == DronePhase.READY:

@@ -714,7 +714,7 @@ class FlightLoop:
                 elif f.response == "crashed":
                     self.commander.crashed(agent, f.message)
                 elif f.response == "stop":
-                    self.commander.emergency_stop(f.message, [agent.name])
+                    self.commander.emergency_stop(f.message, [agent.name], wait_s=Commander.LOOP_STOP_WAIT_S)
                 elif f.response == "land":
                     self.commander.land(agent, f.message)
                 elif f.response == "hold":

@@ -16,7 +16,7 @@ Implementations: `rpf_fly.radio.cflib_backend.CflibBackend` (cflib over `radio:/
 from __future__ import annotations
 
 import enum
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
@@ -219,9 +219,10 @@ class DroneBackend(Protocol):
         """Stop the motors now (high-level stop, plus a stop setpoint when streaming). Use on the ground."""
         ...
 
-    def emergency_stop(self, name: str | None = None) -> dict[str, str]:
-        """Supervisor emergency stop of one drone or (None) all of them: motors off, latched until reboot.
-        Returns name -> error for the drones it could not reach."""
+    def emergency_stop(self, name: str | Iterable[str] | None = None, *, wait_s: float = 2.5) -> dict[str, str]:
+        """Supervisor emergency stop of one drone, several, or (None) all of them: motors off, latched until
+        reboot; nothing sent to them afterwards. Waits ``wait_s`` at most. Returns name -> error for the drones it
+        could not reach, or whose stop was still being sent when the wait ended."""
         ...
 
     def send_extpos(self, name: str, position: Vec3) -> bool:

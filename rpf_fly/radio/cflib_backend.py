@@ -54,7 +54,7 @@ import logging
 import math
 import threading
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from functools import partial
 from pathlib import Path
@@ -236,7 +236,8 @@ class CflibBackend:
             if thread.is_alive():
                 with self._lock:
                     errors.setdefault(drone.name, "timed out")
-        return errors
+        with self._lock:  # a thread that overran may still add its error later: hand out a copy
+            return dict(errors)
 
     def _connect_one(self, drone: _Drone) -> None:
         assert drone.scf is not None
@@ -661,36 +662,37 @@ class CflibBackend:
         return self._queue(name, action, "ends_stream")
 
     EMERGENCY_DEADLINE_S = 2.5
-    """How long `emergency_stop` of several drones waits for each one's packets: cflib's send blocks up to 2 s on a
-    link whose queue is full; the other drones' stops go out meanwhile, each from a thread of its own."""
+    """How long `emergency_stop` waits by default for each drone's packets: cflib's send blocks up to 2 s on a
+    link whose queue is full (and a pool thread stuck there holds cflib's send lock); each drone's stop goes out
+    from a thread of its own meanwhile."""
 
-    def emergency_stop(self, name: str | None = None, repeats: int = 3) -> dict[str, str]:
-        """Emergency stop (latched until reboot), sent `repeats` times (idempotent, safety critical). It drops the
-        drone's queued commands and sends from the calling thread at once, not through the outbox (no command lock:
-        cflib's send lock alone orders the packets); several drones are stopped in parallel, so a blocked link
-        delays no other drone's stop."""
-        targets = list(self._drones) if name is None else [self._drones[name].name]
+    def emergency_stop(self, name: str | Iterable[str] | None = None, repeats: int = 3,
+                       wait_s: float = EMERGENCY_DEADLINE_S) -> dict[str, str]:
+        """Emergency stop (latched until reboot) of one drone, several, or (None) all, sent `repeats` times
+        (idempotent, safety critical). Each drone's queued commands are dropped and its outbox refuses anything
+        more; the packets go out at once, not through the outbox (no command lock: cflib's send lock alone orders
+        them), each drone's from a thread of its own, so a blocked link delays no other drone's stop. Waits
+        ``wait_s`` at most (the flight loop waits little: a stuck link must not stall it); a drone whose stop is
+        still being sent then is reported as such (its thread goes on sending)."""
+        if name is None:
+            targets = list(self._drones)
+        elif isinstance(name, str):
+            targets = [self._drones[name].name]
+        else:
+            targets = [self._drones[n].name for n in name]
 
-        def stop_one(target: str) -> None:
-            outbox = self._drones[target].outbox
-            if outbox is not None:
-                outbox.clear()
-            cf = self._live_cf(target)
+        def stop_one(drone: _Drone) -> None:
+            if drone.outbox is not None:
+                drone.outbox.clear(refuse=True)
+            cf = self._live_cf(drone.name)
             if cf is None:
                 raise RuntimeError("link down")
             for _ in range(repeats):
                 cf.supervisor.send_emergency_stop()
 
-        errors: dict[str, str] = {}
-        if len(targets) == 1:
-            try:
-                stop_one(targets[0])
-            except Exception as exc:
-                errors[targets[0]] = str(exc) or type(exc).__name__
-        else:
-            errors = self._parallel(lambda drone: stop_one(drone.name), [self._drones[t] for t in targets],
-                                    self.EMERGENCY_DEADLINE_S)
-        errors = {t: f"emergency stop not delivered: {why}" for t, why in errors.items()}
+        errors = self._parallel(stop_one, [self._drones[t] for t in targets], wait_s)
+        errors = {t: ("emergency stop still being sent (its link is blocked)" if why == "timed out"
+                      else f"emergency stop not delivered: {why}") for t, why in errors.items()}
         for target, why in errors.items():
             logger.error("drone %s: %s", target, why)
         return errors

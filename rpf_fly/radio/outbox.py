@@ -23,11 +23,14 @@ What an outbox keeps, and in which order (the rules that make a queued stream sa
 How the pool sends: one thread at a time does the work in the normal case, taking the drones in the order their
 work arrived, one action each turn; so a tick's ten setpoints cost one thread wake-up, not ten. A thread whose send
 has lasted longer than :data:`STUCK_S` is taken as stuck in a dying link (it keeps that drone, whose further
-commands wait, newest setpoint only); the next time work is queued or waited for, another thread takes over the
-other drones (started when no idle one is left, so there are never more threads than stuck drones plus one).
+commands wait, newest setpoint only), and another thread takes over the other drones: at once when work is queued
+or waited for then, and otherwise when the pool's watcher thread looks again, :data:`STUCK_S` after a send began
+with other drones' work waiting behind it (the watchdog's landings must not wait for a dying link while the loop
+that would queue more is stalled). A new thread is started only when no idle one is left, so there are never more
+senders than drones slow at once plus one.
 
-`Outbox.clear` drops everything pending (an emergency stop, which the backend sends from its caller's thread at
-once); `Outbox.close` lets what is pending go out (a disarm queued after touchdown must reach the drone) for at most
+`Outbox.clear` drops everything pending and, for an emergency stop (which the backend sends at once from threads
+of its own, not through the pool), refuses anything after it; `Outbox.close` lets what is pending go out (a disarm queued after touchdown must reach the drone) for at most
 its ``flush_s``; `SenderPool.close` ends the threads.
 """
 
@@ -44,10 +47,11 @@ logger = logging.getLogger(__name__)
 Action = Callable[[], None]
 """One radio command, ready to send."""
 
-STUCK_S = 0.002
+STUCK_S = 0.005
 """A send lasting longer than this is taken as blocked in its link (a healthy cflib send takes tens of
-microseconds; a full driver queue blocks for the radio's retries, 0.1-2 s): another thread takes over the other
-drones. Taking a slow-but-healthy send for a stuck one costs only a thread wake-up."""
+microseconds, a wait for the driver's one-packet queue on a busy dongle a few milliseconds, Python's thread switch
+interval is 5 ms; a full driver queue on a dying link blocks for the radio's retries, 0.1-2 s): another thread
+takes over the other drones. Taking a slow-but-healthy send for a stuck one costs only a thread wake-up."""
 
 
 class SenderPool:
@@ -70,6 +74,9 @@ class SenderPool:
         """Wake-ups handed to idle threads and not yet taken."""
         self._threads: list[threading.Thread] = []
         self._closed = False
+        self._recheck = threading.Condition(self._lock)
+        self._recheck_at: float | None = None
+        self._watcher: threading.Thread | None = None
 
     def outbox(self, name: str, run: Callable[[Action], None]) -> Outbox:
         """A new drone's outbox; ``run(action)`` sends one of its actions on a pool thread (what it raises is logged
@@ -95,17 +102,25 @@ class SenderPool:
         if not self._ready or self._closed:
             return
         now = time.monotonic()
-        unstuck = sum(1 for since in self._sending.values() if now - since <= STUCK_S)
-        if self._working + unstuck + self._tokens > 0:
+        if self._working + self._tokens > 0:
+            return
+        unstuck = [since for since in self._sending.values() if now - since <= STUCK_S]
+        if unstuck:  # a sender will take it if its send returns: look again once it would count as stuck
+            self._arm(min(unstuck))
             return
         if self._idle > self._tokens:
             self._tokens += 1
             self._work.notify()
             return
-        self._working += 1
         thread = threading.Thread(target=self._loop, name=f"{self.name}-{len(self._threads) + 1}", daemon=True)
+        self._working += 1
+        try:
+            thread.start()
+        except RuntimeError:  # "can't start new thread": the next queue or wait tries again
+            self._working -= 1
+            logger.exception("sender pool %s: no thread could be started", self.name)
+            return
         self._threads.append(thread)
-        thread.start()
 
     # ------------------------------------------------------------------------------------------ the threads
 
@@ -132,10 +147,12 @@ class SenderPool:
                     continue
                 self._working -= 1
                 self._sending[me] = time.monotonic()
+                if self._ready:  # others wait behind this send: take them over if it blocks
+                    self._arm(self._sending[me])
                 self._lock.release()
                 try:
                     box._run(action)
-                except Exception:  # the drone's next commands, and the other drones', must still go out
+                except BaseException:  # a pool thread never dies: the next commands must still go out
                     logger.exception("drone %s: sending a command failed", box.name)
                 finally:
                     self._lock.acquire()
@@ -147,6 +164,27 @@ class SenderPool:
                     self._ready.append(box)  # behind the drones already waiting: one action a turn
                 if not self._ready:  # the burst is out: wake the waiters once, not after every drone's send
                     self._done.notify_all()
+
+    def _arm(self, since: float) -> None:
+        """Look at the line again when a send begun at ``since`` would count as stuck."""
+        at = since + STUCK_S + 1e-4
+        if self._recheck_at is None or at < self._recheck_at:
+            self._recheck_at = at
+            if self._watcher is None:
+                self._watcher = threading.Thread(target=self._watch, name=f"{self.name}-watch", daemon=True)
+                self._watcher.start()
+            self._recheck.notify()
+
+    def _watch(self) -> None:
+        with self._lock:
+            while not self._closed:
+                if self._recheck_at is None:
+                    self._recheck.wait()
+                elif (delay := self._recheck_at - time.monotonic()) > 0:
+                    self._recheck.wait(delay)
+                else:
+                    self._recheck_at = None
+                    self._wake()
 
     # ------------------------------------------------------------------------------------------ waiting, closing
 
@@ -165,6 +203,7 @@ class SenderPool:
         with self._lock:
             self._closed = True
             self._work.notify_all()
+            self._recheck.notify_all()
         deadline = time.monotonic() + join_s
         for thread in list(self._threads):
             thread.join(max(deadline - time.monotonic(), 0.0))
@@ -223,9 +262,11 @@ class Outbox:
             self._pool._schedule(self)
             return True
 
-    def clear(self) -> None:
-        """Drop everything not yet sent (what is being sent now still goes out)."""
+    def clear(self, refuse: bool = False) -> None:
+        """Drop everything not yet sent (what is being sent now still goes out); ``refuse``: and accept nothing
+        more (an emergency stop: nothing may follow it)."""
         with self._pool._lock:
+            self._closed = self._closed or refuse
             if self._setpoint is not None:
                 self.setpoints_replaced += 1
             self._commands.clear()

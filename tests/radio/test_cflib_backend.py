@@ -507,3 +507,25 @@ def test_setpoint_latency_is_measured_to_cflibs_hand_over(make_world: MakeWorld,
     assert len(latencies) <= 1 and all(0.25 <= v < 1.0 for v in latencies)
     assert backend.take_setpoint_latencies() == []
     backend.stop("cf0")
+
+
+def test_an_emergency_stop_waits_for_no_blocked_link(make_world: MakeWorld, toc_cache: Path,
+                                                     backends: Callable[..., CflibBackend]) -> None:
+    """cf1's link dies while the pool's thread is inside a send to it (holding cflib's send lock): an emergency
+    stop of cf0 and cf1 with a short wait returns at once, cf0 stops, cf1's stop is reported as still being sent,
+    and nothing queued afterwards goes out to the stopped drones."""
+    world = make_world(2, timing=RadioTiming(transaction_s=0.002))
+    backend = backends(cache_dir=toc_cache)
+    assert backend.connect(names_to_uris(world)) == {}
+    for name in backend.names():
+        backend.takeoff(name, 0.5, 0.5)
+    assert world.wait_until(lambda w: all(s.position[2] > 0.45 for s in w.snapshots().values()), 2.0)
+    world.drop_link(address(1))
+    stream(0.1, lambda: backend.send_position_setpoint("cf1", 0.5, 0.0, 0.5, 0.0), 0.005)  # fills its driver queue
+    t0 = time.monotonic()
+    errors = backend.emergency_stop(["cf0", "cf1"], wait_s=0.05)
+    took = time.monotonic() - t0
+    assert took < 0.3, f"the emergency stop held its caller {took:.3f} s"
+    assert "cf0" not in errors and "cf1" in errors, errors
+    assert wait_for(lambda: backend.state("cf0").supervisor.locked, 1.0)
+    assert not backend.send_position_setpoint("cf0", 0.0, 0.0, 0.5, 0.0) and not backend.land("cf0")

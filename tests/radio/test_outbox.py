@@ -153,3 +153,35 @@ def test_a_drone_stuck_in_its_send_keeps_one_thread_and_another_sends_the_others
     assert [s for s in radio.sent if s.startswith("cf1")] == ["cf1/0", "cf1/5"]
     assert stuck.setpoints_replaced == 4
     pool.close()
+
+
+def test_work_queued_behind_a_send_that_then_blocks_is_taken_over_without_another_call() -> None:
+    """The watchdog's landings while the loop is stalled: cf1's land goes first and its send blocks (a dying link);
+    cf2's land, queued a moment later, must not wait for it although nobody queues or waits any more (the pool's
+    watcher looks again once cf1's send counts as stuck)."""
+    radio = Radio(stuck=("cf1",))
+    pool = SenderPool()
+    stuck, other = pool.outbox("cf1", radio.runner("cf1")), pool.outbox("cf2", radio.runner("cf2"))
+    t0 = time.monotonic()
+    sent_at: dict[str, float] = {}
+    stuck.command(lambda: sent_at.setdefault("cf1", time.monotonic() - t0), ends_stream=True)
+    other.command(lambda: sent_at.setdefault("cf2", time.monotonic() - t0), ends_stream=True)
+    deadline = time.monotonic() + 1.0
+    while "cf2" not in sent_at and time.monotonic() < deadline:
+        time.sleep(0.005)
+    assert "cf2" in sent_at and sent_at["cf2"] < 0.2, sent_at  # STUCK_S after cf1's send began, not after it
+    assert "cf1" not in sent_at
+    radio.hold.set()
+    assert stuck.wait_idle(2.0)
+    pool.close()
+
+
+def test_a_cleared_and_refusing_outbox_takes_nothing_more() -> None:
+    box, radio, pool = blocked_outbox()
+    box.setpoint(radio.packet("sp"))
+    box.clear(refuse=True)  # an emergency stop
+    assert not box.setpoint(radio.packet("late")) and not box.command(radio.packet("land"), ends_stream=True)
+    radio.hold.set()
+    assert box.wait_idle(2.0)
+    assert radio.sent == ["first"]
+    pool.close()
