@@ -333,6 +333,7 @@ PLANNER_SPEC: dict[str, tuple[str, Reader]] = {
     "lambda": ("lam", _num(NON_NEGATIVE)),
     "guidance": ("guidance", _choice(m.GUIDANCE_MODES)),
     "margin": ("margin", _num(NON_NEGATIVE)),
+    "capture_radius": ("capture_radius", _num(NON_NEGATIVE)),
 }
 MOCAP_SPEC: dict[str, tuple[str, Reader]] = {
     "kind": ("kind", lambda c, n: _mocap_kind(c, n)),

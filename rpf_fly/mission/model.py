@@ -109,6 +109,9 @@ class PlannerSettings:
     """``planner.guidance``; None: the kind's default (:func:`default_guidance`), see :attr:`guidance_mode`."""
     margin: Optional[float] = None
     """``planner.margin`` (m); None: the kind's default (:func:`default_margin`), see :attr:`margin_m`."""
+    capture_radius: Optional[float] = None
+    """``planner.capture_radius`` (m): within it a drone nearer its goal than any surface heads straight at the
+    goal (docs/algorithm.md, *Arrival*); None: the preset's (0.3 robust, 0 paper); 0 turns the rule off."""
 
     @property
     def guidance_mode(self) -> str:

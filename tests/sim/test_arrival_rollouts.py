@@ -71,3 +71,22 @@ def test_line_of_goals_settles_with_the_margin():
     assert run_.metrics.success
     assert run_.metrics.makespan_s <= 7.5
     assert run_.metrics.min_separation_m >= 2 * R + MARGIN
+
+
+def test_the_mission_key_sets_the_capture_radius_and_zero_turns_the_rule_off():
+    """``planner.capture_radius``: the mission's value reaches the planner (0 reproduces the orbit of the pole)."""
+    from rpf_fly.mission import parse_mission
+    from rpf_fly.sim.evaluate import run_scenario, sim_params
+    from rpf_fly.sim.scenario import scenario_from_mission
+    from rpf_fly.sim.planners import planner_config
+
+    text = ("name: pole\narena: {x: [-1, 5], y: [-2, 2]}\nflight: {speed: 0.5}\nobstacles:\n"
+            "  - {shape: circle, center: [3.0, 0.0], radius: 0.25}\n"
+            "drones:\n  - {name: cf1, uri: radio://0/80/2M/E7E7E7E701, start: [0, 0], goal: [2.5, 0]}\n")
+    runs = {}
+    for key in ("", ", capture_radius: 0", ", capture_radius: 0.3"):
+        mission = parse_mission(text + f"planner: {{kind: apf, guidance: none{key}}}\n")
+        assert planner_config(mission.planner).capture_radius == (0.0 if key.endswith(" 0") else 0.3)
+        runs[key] = run_scenario(scenario_from_mission(mission, 0), mission.planner, sim_params(mission), 0, "pole")
+    assert runs[""].metrics.success and runs[", capture_radius: 0.3"].metrics.success
+    assert not runs[", capture_radius: 0"].metrics.success
