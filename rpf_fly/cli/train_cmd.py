@@ -30,6 +30,9 @@ def train(
                                  "guidance, as the product flies: RPF-3)."),
     margin: float = typer.Option(0.0, "--margin", help="Clearance beyond contact (m) kept by the planner and asked "
                                  "by the reward (RPF-3: 0.05)."),
+    capture_radius: float = typer.Option(0.0, "--capture-radius", help="The planner's capture rule near the goal (m; "
+                                         "docs/algorithm.md Arrival): 0, the paper's, turns it off; the product "
+                                         "flies 0.3."),
     episodes: int = typer.Option(4000, "--episodes", help="Stop after this many finished arena episodes."),
     collision_penalty: float = typer.Option(500.0, "--collision-penalty", help="Reward of a collision (negated)."),
     margin_penalty: float = typer.Option(20.0, "--margin-penalty", help="Per step inside r + margin of an obstacle "
@@ -68,6 +71,8 @@ def train(
         raise fail(f"--guidance: expected none or path, got {guidance!r}")
     if not 0.0 <= margin < 1.0:
         raise fail(f"--margin: expected metres in [0, 1), got {margin}")
+    if not 0.0 <= capture_radius < 2.0:
+        raise fail(f"--capture-radius: expected metres in [0, 2), got {capture_radius}")
     if out.suffix != ".onnx":
         raise fail(f"--out: expected a path ending in .onnx, got {str(out)!r}")
     existing = [p for p in written_files(out) if p.exists()]
@@ -83,7 +88,8 @@ def train(
     radius = obstacle_radius if obstacle_radius is not None else (0.1 if kind == "ppo" else 0.5)
     config = PPOConfig(seed=seed, kind=kind, arena=arena, curriculum=families, episodes=episodes, max_updates=max_updates, n_arenas=arenas,  # type: ignore[arg-type]
                        obstacle_radius=radius, guidance=guidance, margin=margin, threads=threads,
-                       collision_penalty=collision_penalty, margin_penalty=margin_penalty)  # type: ignore[arg-type]
+                       collision_penalty=collision_penalty, margin_penalty=margin_penalty,
+                       capture_radius=capture_radius)  # type: ignore[arg-type]
     run_dir = out.with_suffix(".run")
     command = "rpf-fly train " + " ".join(shlex.quote(a) for a in sys.argv[2:]) if len(sys.argv) > 2 else "rpf-fly train"
     from rpf_fly.learn.card import git_commit

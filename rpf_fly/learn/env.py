@@ -90,6 +90,9 @@ class EnvConfig:
     """Clearance beyond contact the planner keeps and the reward asks for (metres; the product flies 0.05)."""
     margin_penalty: float = 20.0
     """Per step inside ``r + margin`` of an obstacle or ``2r + margin`` of a drone (with ``margin > 0``)."""
+    capture_radius: float = 0.0
+    """The planner's capture rule (docs/algorithm.md, *Arrival*); 0, the paper's environment, turns it off (the
+    product's planners fly 0.3)."""
     curriculum: tuple[str, ...] = ()
     """Scene families (rpf_fly.sim.generators.FAMILIES) to draw from, uniformly, instead of ``arena``; empty: the
     paper's arenas A and B."""
@@ -102,6 +105,7 @@ class EnvConfig:
             influence_range=self.influence_range,
             guidance=self.guidance,
             margin=self.margin,
+            capture_radius=self.capture_radius,
         )
 
 

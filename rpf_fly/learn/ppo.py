@@ -77,6 +77,8 @@ class PPOConfig:
     margin: float = 0.0
     """Clearance beyond contact (m) the planner keeps and the reward asks for; RPF-3 trains with the product's 0.05."""
     margin_penalty: float = 20.0
+    capture_radius: float = 0.0
+    """The planner's capture rule in the training environment; 0 (the paper's) turns it off."""
     threads: int = 2
     checkpoint_every: int = 10
     eval_every: int = 10
@@ -106,6 +108,7 @@ class PPOConfig:
             guidance=self.guidance,
             margin=self.margin,
             margin_penalty=self.margin_penalty,
+            capture_radius=self.capture_radius,
         )
 
 

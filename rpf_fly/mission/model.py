@@ -40,6 +40,15 @@ def default_guidance(kind: str, preset: str = "robust") -> str:
     return "path" if kind in ("apf", "rpf3") and preset == "robust" else "none"
 
 
+CAPTURE_RADIUS_M = 0.3
+"""``planner.capture_radius`` of the product's planners (docs/algorithm.md, *Arrival*)."""
+
+
+def default_capture_radius(kind: str, preset: str = "robust") -> float:
+    """0 for the paper's planners (they stay as the paper wrote them), :data:`CAPTURE_RADIUS_M` otherwise."""
+    return 0.0 if kind in PAPER_KINDS or preset == "paper" else CAPTURE_RADIUS_M
+
+
 def default_margin(kind: str, preset: str = "robust") -> float:
     """0 for the paper's planners (bit-identical reproduction), :data:`PRODUCT_MARGIN_M` otherwise (ORCA kept its
     0.05 m before the key existed)."""
@@ -111,7 +120,8 @@ class PlannerSettings:
     """``planner.margin`` (m); None: the kind's default (:func:`default_margin`), see :attr:`margin_m`."""
     capture_radius: Optional[float] = None
     """``planner.capture_radius`` (m): within it a drone nearer its goal than any surface heads straight at the
-    goal (docs/algorithm.md, *Arrival*); None: the preset's (0.3 robust, 0 paper); 0 turns the rule off."""
+    goal (docs/algorithm.md, *Arrival*); None: the kind's default (:func:`default_capture_radius`: 0.3, 0 for the
+    paper's planners), see :attr:`capture_radius_m`; 0 turns the rule off."""
 
     @property
     def guidance_mode(self) -> str:
@@ -122,6 +132,13 @@ class PlannerSettings:
     def margin_m(self) -> float:
         """The margin this planner keeps (metres): the mission's, else its kind's default."""
         return self.margin if self.margin is not None else default_margin(self.kind, self.preset)
+
+    @property
+    def capture_radius_m(self) -> float:
+        """The capture radius this planner flies with (metres): the mission's, else its kind's default."""
+        if self.capture_radius is not None:
+            return self.capture_radius
+        return default_capture_radius(self.kind, self.preset)
 
 
 @dataclass(frozen=True)

@@ -26,10 +26,9 @@ class UnsupportedPlanner(ValueError):
 def planner_config(settings: PlannerSettings) -> PlannerConfig:
     """The APF parameters of a mission (``apf-paper`` forces the paper preset)."""
     preset = "paper" if settings.kind == "apf-paper" else settings.preset
-    capture = {} if settings.capture_radius is None else {"capture_radius": settings.capture_radius}
     return PlannerConfig.preset(
         preset,
-        **capture,
+        capture_radius=settings.capture_radius_m,
         safety_radius=settings.safety_radius,
         sensing_range=settings.sensing_range,
         influence_range=settings.influence_range,

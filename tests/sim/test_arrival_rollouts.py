@@ -90,3 +90,9 @@ def test_the_mission_key_sets_the_capture_radius_and_zero_turns_the_rule_off():
         runs[key] = run_scenario(scenario_from_mission(mission, 0), mission.planner, sim_params(mission), 0, "pole")
     assert runs[""].metrics.success and runs[", capture_radius: 0.3"].metrics.success
     assert not runs[", capture_radius: 0"].metrics.success
+    from rpf_fly.mission.model import PlannerSettings
+
+    for kind in ("apf-paper", "rpf", "rpf-mean", "ppo"):  # the paper's planners stay as the paper wrote them
+        assert PlannerSettings(kind=kind).capture_radius_m == 0.0
+    assert PlannerSettings(kind="rpf3").capture_radius_m == PlannerSettings(kind="apf").capture_radius_m == 0.3
+    assert PlannerSettings(kind="apf", preset="paper").capture_radius_m == 0.0
