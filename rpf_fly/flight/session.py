@@ -119,6 +119,19 @@ def natnet_source(mission: Mission, timeout_s: float = 5.0) -> MocapSource:
     return client
 
 
+def live_topics(mission: Mission, truth: bool) -> list[str]:
+    """The topics a flight's log writes (docs/log-format.md), for the live view to advertise before the flight."""
+    from rpf_fly.radio.budget import dongle_of
+
+    topics = ["/scene", "/tf", "/events", *(f"/radio/{k}" for k in sorted({dongle_of(d.uri) for d in mission.drones}))]
+    for drone in mission.drones:
+        n = drone.name
+        topics += [f"/mocap/{n}", f"/{n}/setpoint", f"/{n}/planner", f"/{n}/status"]
+        if truth:
+            topics.append(f"/truth/{n}")
+    return topics
+
+
 def run_flight(
     mission: Mission,
     planner_factory: PlannerFactory,
@@ -145,6 +158,8 @@ def run_flight(
     recorder = None
     if log_path:
         truth = rig.truth_samples if rig is not None and rig.truth else None  # only a dry run has a truth
+        if live is not None:
+            live.prepare(live_topics(mission, truth is not None))
         recorder = McapRecorder(log_path, mission, seed, source="dry-run" if rig else "flight", truth=truth,
                                 sink=live.publish if live is not None else None, radio=backend.radio_counts)
     try:

@@ -156,6 +156,15 @@ class LiveView:
             raise
         self.published += 1
 
+    def prepare(self, topics: list[str]) -> None:
+        """Open the flight's channels before its first message (call before the log's writer runs): a client
+        that connects then is told of every channel at once and subscribes once, instead of each channel being
+        advertised on its topic's first message while clients are subscribing to others (a live client once
+        missed every message of one channel advertised mid-flight, under load)."""
+        for topic in topics:
+            if topic not in self._channels:
+                self._open(topic)
+
     def _open(self, topic: str) -> Any:
         """A channel with the log's schema (name, ``jsonschema`` document) and message encoding (``json``)."""
         fg = self._fg

@@ -158,6 +158,7 @@ def test_a_live_client_receives_every_topic_as_the_log_has_it_and_a_stalled_one_
                for t in set(log.topics) - topics}
     assert topics == EXPECTED_TOPICS == set(log.topics), f"not received live (how advertised, messages logged): " \
                                                          f"{missing}; channels {sorted(advertised)}"
+    assert set(advertised) == EXPECTED_TOPICS  # every channel advertised from the start, none the log lacks
 
     # One source of truth: each live message is the log's message of that topic at that log time.
     by_time: dict[tuple[str, int], list] = {}
