@@ -28,9 +28,9 @@ to 2 s when its queue is full) holds back only its own drone's commands, never t
 outbox keeps high-level commands in order, sends the newest setpoint and extpos only, and drops a waiting setpoint
 when a command that ends the stream (take-off, go-to, hand-over, land, stop) is queued after it, so no setpoint
 queued before a landing reaches the drone after it. `wait_sent` waits until the queued commands went out. Packets go
-through `Crazyflie.send_packet`, which holds cflib's own send lock. `emergency_stop` drops the drone's pending
-commands and sends from the caller's thread at once, one thread per drone when it stops several, so a blocked link
-delays no other drone's stop. Telemetry and link callbacks run on cflib's threads (the link's receive thread, the
+through `Crazyflie.send_packet`, which holds cflib's own send lock. `emergency_stop` drops the drones' pending
+commands, refuses any after it, and sends at once from a thread per drone (not through the pool), waiting a bounded
+time, so a blocked link delays no other drone's stop nor its caller. Telemetry and link callbacks run on cflib's threads (the link's receive thread, the
 radio thread on link loss). `connect`, `reset_estimators` and `close` block and must not run concurrently with each
 other. Link-lost callbacks must be short and must not call `close`.
 
@@ -130,7 +130,7 @@ class _Drone:
     command_lock: threading.Lock = field(default_factory=threading.Lock)
     """Serialises this drone's commands and guards `streaming` and `last_setpoint`."""
     outbox: Outbox | None = None
-    """The drone's queued commands and their sender thread, from the end of its configuration."""
+    """The drone's queued commands (sent by the backend's `SenderPool`), from the end of its configuration."""
     log_config: LogConfig | None = None
     radio_transactions: float = 0.0
     """Acknowledged transactions since the first window of cflib's link statistics (empty polls included)."""
@@ -557,11 +557,9 @@ class CflibBackend:
     def _queue(self, name: str, action: Callable[[Any, _Drone], None], kind: str) -> bool:
         """Queue one command in the drone's outbox (``kind``: ``setpoint``, ``extpos``, ``command`` or
         ``ends_stream``); False when its link is not up (KeyError for an unknown name)."""
-        with self._lock:
-            drone = self._drones[name]
-            live = drone.up and drone.scf is not None and drone.scf.cf.link is not None
-            outbox = drone.outbox
-        if not live or outbox is None:
+        drone = self._drones[name]
+        outbox = drone.outbox
+        if outbox is None or self._live_cf(name) is None:
             return False
         bound: Action = partial(action, drone=drone)
         if kind == "setpoint":
@@ -571,7 +569,7 @@ class CflibBackend:
         return outbox.command(bound, ends_stream=kind == "ends_stream")
 
     def _send(self, drone: _Drone, action: Action) -> None:
-        """The drone's sender thread: hand one queued command to cflib (dropped when the link went down since)."""
+        """A pool thread: hand one queued command to cflib (dropped when the link went down since)."""
         cf = self._live_cf(drone.name)
         if cf is None:
             return

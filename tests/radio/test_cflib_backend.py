@@ -54,6 +54,13 @@ def backends() -> Iterator[Callable[..., CflibBackend]]:
         backend.close()
 
 
+def take_off_all(backend: CflibBackend, world: FakeWorld) -> None:
+    """Every drone to 0.5 m with the high-level commander, and wait until the world has them there."""
+    for name in backend.names():
+        backend.takeoff(name, 0.5, 0.5)
+    assert world.wait_until(lambda w: all(s.position[2] > 0.45 for s in w.snapshots().values()), 2.0)
+
+
 def names_to_uris(world: FakeWorld) -> dict[str, str]:
     return {f"cf{i}": world.uri(a) for i, a in enumerate(world.addresses)}
 
@@ -207,9 +214,7 @@ def test_link_loss_is_surfaced_per_drone(make_world: MakeWorld, toc_cache: Path,
     backend.add_link_lost_callback(lambda name, reason: (lost.append((name, reason, time.monotonic())),
                                                          event.set()))
     assert backend.connect(names_to_uris(world)) == {}
-    for name in backend.names():
-        backend.takeoff(name, 0.5, 0.5)
-    assert world.wait_until(lambda w: all(s.position[2] > 0.45 for s in w.snapshots().values()), 2.0)
+    take_off_all(backend, world)
     dropped_at = time.monotonic()
     world.drop_link(address(1))
     assert event.wait(2.0)
@@ -233,9 +238,7 @@ def test_emergency_stop_one_then_all(make_world: MakeWorld, toc_cache: Path,
     world = make_world(3)
     backend = backends(cache_dir=toc_cache)
     assert backend.connect(names_to_uris(world)) == {}
-    for name in backend.names():
-        backend.takeoff(name, 0.5, 0.5)
-    assert world.wait_until(lambda w: all(s.position[2] > 0.45 for s in w.snapshots().values()), 2.0)
+    take_off_all(backend, world)
     assert backend.emergency_stop("cf1") == {}
     assert wait_for(lambda: backend.state("cf1").supervisor.locked, 1.0)
     assert world.wait_until(lambda w: w.snapshot(address(1)).position[2] == 0.0, 1.0)
@@ -445,9 +448,7 @@ def test_a_dying_link_holds_back_no_other_drone(make_world: MakeWorld, toc_cache
     world = make_world(3, timing=RadioTiming(transaction_s=0.002))
     backend = backends(cache_dir=toc_cache)
     assert backend.connect(names_to_uris(world)) == {}
-    for name in backend.names():
-        backend.takeoff(name, 0.5, 0.5)
-    assert world.wait_until(lambda w: all(s.position[2] > 0.45 for s in w.snapshots().values()), 2.0)
+    take_off_all(backend, world)
     slowest = [0.0]
 
     def send_all() -> None:
@@ -517,9 +518,7 @@ def test_an_emergency_stop_waits_for_no_blocked_link(make_world: MakeWorld, toc_
     world = make_world(2, timing=RadioTiming(transaction_s=0.002))
     backend = backends(cache_dir=toc_cache)
     assert backend.connect(names_to_uris(world)) == {}
-    for name in backend.names():
-        backend.takeoff(name, 0.5, 0.5)
-    assert world.wait_until(lambda w: all(s.position[2] > 0.45 for s in w.snapshots().values()), 2.0)
+    take_off_all(backend, world)
     world.drop_link(address(1))
     stream(0.1, lambda: backend.send_position_setpoint("cf1", 0.5, 0.0, 0.5, 0.0), 0.005)  # fills its driver queue
     t0 = time.monotonic()
