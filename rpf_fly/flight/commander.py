@@ -240,12 +240,8 @@ class Commander:
         each drone's from a thread of its own, waiting ``wait_s`` at most: its default when None); the phase is
         set after."""
         targets = [self.agents[n] for n in names] if names is not None else list(self.agents.values())
-        stop_all = names is None
-        names_or_all = None if stop_all else [a.name for a in targets]
-        if wait_s is None:
-            failures = dict(self.backend.emergency_stop(names_or_all))
-        else:
-            failures = dict(self.backend.emergency_stop(names_or_all, wait_s=wait_s))
+        wait = {} if wait_s is None else {"wait_s": wait_s}
+        failures = dict(self.backend.emergency_stop(None if names is None else [a.name for a in targets], **wait))
         for agent in targets:
             with self._locks[agent.name]:
                 if agent.phase.airborne or agent.phase == DronePhase.READY:

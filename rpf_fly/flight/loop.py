@@ -139,9 +139,10 @@ class FlightLoop:
         self.supervisor = Supervisor(mission, self.obstacles)
         self.phase = SwarmPhase.CONNECTING
         self.stats = LoopStats()
+        # A backend that queues setpoints for threads of its own measures their latency to the radio, and says
+        # when they went out (CflibBackend); with another, the loop measures to its own send.
         self._take_latencies: Optional[Callable[[], list[float]]] = getattr(backend, "take_setpoint_latencies", None)
         self._wait_sent: Optional[Callable[[Optional[list[str]], float], bool]] = getattr(backend, "wait_sent", None)
-        """Where the backend queues setpoints for threads of its own, it measures their latency to the radio."""
         self.tick = 0
         self._ticks = TickSchedule(mission.flight.dt, 0.0)
         self._last_tick_s: Optional[float] = None
