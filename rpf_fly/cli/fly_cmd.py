@@ -160,7 +160,7 @@ def fly(
                 mocap not in ("natnet", "motioncapture"):
             raise fail("--distributed flies without --faults, --foxglove or --mocap sim (docs/distributed.md)")
         fly_distributed(loaded, mission, log_path, dry_run, remote_dongles, tuple(listen or ()), radio_loss,
-                        verbose)
+                        verbose, console)
     from rpf_fly.cli.live_opts import start_live
     from rpf_fly.cli.logs import route_logging
 
