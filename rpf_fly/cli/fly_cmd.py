@@ -9,7 +9,6 @@ landed early, timed out, lost its link, the flight aborted before take-off); 2 i
 from __future__ import annotations
 
 import signal
-import time
 from datetime import datetime
 from pathlib import Path
 from typing import Optional
@@ -161,7 +160,7 @@ def fly(
                 mocap not in ("natnet", "motioncapture"):
             raise fail("--distributed flies without --faults, --foxglove or --mocap sim (docs/distributed.md)")
         fly_distributed(loaded, mission, log_path, dry_run, remote_dongles, tuple(listen or ()), radio_loss,
-                        verbose)
+                        verbose, console)
     from rpf_fly.cli.live_opts import start_live
     from rpf_fly.cli.logs import route_logging
 
@@ -282,105 +281,35 @@ def _print_event(event) -> None:  # type: ignore[no-untyped-def]
         typer.echo(f"[{event.kind}] {who}{event.message}", err=True)
 
 
-FINAL_STATES = {
-    "landed": "landed",
-    "emergency": "stopped",
-    "link_lost": "link lost",
-    "failed": "grounded",
-    "landing": "landing, touchdown not confirmed",
-}
-"""What the final table says of a drone's last phase (flight/phases.py): ``stopped`` is motors cut by an
-emergency stop; a drone still ``landing`` at the end never had its touchdown confirmed (docs/flight.md)."""
-
-
-def final_state(phase: str) -> str:
-    return FINAL_STATES.get(phase, phase)
-
-
 class _Console:
-    """The status table (rich): live on a terminal, refreshed by the flight loop at most four times a second, and
-    at the end the final table (every drone's final state and outcome). Not a terminal: the events as plain lines
-    and the final table once, wide, with its newline (cli/output.py)."""
+    """The single process's status console (cli/flight_console.py): the rows of ``FlightLoop.snapshot``, live on a
+    terminal (the flight loop calls :meth:`update`), and the final table from the loop and its report."""
 
     def __init__(self, mission):  # type: ignore[no-untyped-def]
-        from rich.live import Live
-
-        from rpf_fly.cli.output import console
+        from rpf_fly.cli.flight_console import FlightConsole
 
         self.mission = mission
-        self.console = console(stderr=True)
-        self.live = Live(console=self.console, refresh_per_second=4, transient=False) if self.console.is_terminal \
-            else None
-        self._last = 0.0
+        self.out = FlightConsole(mission.name)
+        self.event = self.out.event
 
     def __enter__(self) -> "_Console":
-        if self.live is not None:
-            self.live.__enter__()
+        self.out.__enter__()
         return self
 
     def __exit__(self, *exc: object) -> None:
-        if self.live is not None:
-            self.live.__exit__(*exc)
-
-    def event(self, event) -> None:  # type: ignore[no-untyped-def]
-        from rich.markup import escape
-
-        if event.level >= 3 or (event.drone is None and event.kind == "phase"):
-            who = f"{event.drone}: " if event.drone else ""
-            style = {3: "yellow", 4: "red", 5: "bold red"}.get(event.level, "")
-            text = escape(f"{who}{event.message}")
-            self.console.print(f"[{style}]{event.kind}[/{style}] {text}" if style else f"{event.kind} {text}")
+        self.out.__exit__(*exc)
 
     def update(self, loop) -> None:  # type: ignore[no-untyped-def]
-        if self.live is None:
-            return
-        now = time.monotonic()
-        if now - self._last < 0.25:
-            return
-        self._last = now
-        self.live.update(self._table(f"{self.mission.name}: {loop.phase.value}", loop.snapshot()))
+        self.out.show(loop.phase.value, loop.snapshot)
 
     def final(self, loop, report) -> None:  # type: ignore[no-untyped-def]
         """The table of how the flight ended: the swarm's final phase, each drone's final state and outcome."""
         rows = loop.snapshot()
         for row in rows:
             outcome = report.outcomes.get(row["name"])
-            row["phase"] = final_state(str(row["phase"]))
-            row["outcome"] = outcome.value if outcome is not None else "-"
-            row["why"] = report.reasons.get(row["name"]) or "" if row["outcome"] != "reached" else ""
-        table = self._table(f"{self.mission.name}: {report.phase.value}", rows, final=True)
-        if self.live is not None:
-            self.live.update(table, refresh=True)
-        else:
-            self.console.print(table)
-
-    @staticmethod
-    def _table(title: str, rows: list[dict], final: bool = False):  # type: ignore[no-untyped-def]
-        from rich.markup import escape
-        from rich.table import Table
-
-        table = Table(title=title)
-        columns = ["drone", "state"] + (["outcome"] if final else []) + ["x", "y", "z", "to goal [m]",
-                                                                         "battery [V]", "link [%]"]
-        why = final and any(row.get("why") for row in rows)
-        if why:
-            columns.append("why")
-        for column in columns:
-            left = column in ("drone", "state", "outcome", "why")
-            table.add_column(escape(column), justify="left" if left else "right")
-        for row in rows:
-            pos = row["position"]
-            cells = [str(row["name"]), str(row["phase"])] + ([str(row["outcome"])] if final else [])
-            cells += [*(f"{v:.2f}" for v in pos)] if pos else ["-", "-", "-"]
-            cells += [
-                "-" if row["goal_distance"] is None else f"{row['goal_distance']:.2f}",
-                "-" if row["battery_v"] is None else f"{row['battery_v']:.2f}",
-                "-" if row["link_pct"] is None else f"{row['link_pct']:.0f}",
-            ]
-            if why:
-                cells.append(escape(str(row.get("why") or "")))
-            table.add_row(*cells)
-        return table
+            row["outcome"] = outcome.value if outcome is not None else None
+            row["reason"] = report.reasons.get(row["name"]) or ""
+        self.out.final(report.phase.value, rows)
 
 
 def _summary(report, log_path: Path) -> None:  # type: ignore[no-untyped-def]

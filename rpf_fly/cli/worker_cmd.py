@@ -32,17 +32,26 @@ def _endpoints(values: tuple[str, ...], option: str) -> tuple[str, ...]:
 
 
 def fly_distributed(mission, mission_path: Path, log_path: Path, dry_run: bool, remote: Optional[str],  # type: ignore[no-untyped-def]
-                    listen: tuple[str, ...], radio_loss: bool, verbose: bool) -> None:
-    """The coordinator of ``rpf-fly fly --distributed`` (raises typer.Exit with the flight's code)."""
-    from rpf_fly.cli.fly_cmd import text_log_path
+                    listen: tuple[str, ...], radio_loss: bool, verbose: bool, console: bool = True) -> None:
+    """The coordinator of ``rpf-fly fly --distributed`` (raises typer.Exit with the flight's code). ``console``: the
+    status table of ``rpf-fly fly`` (cli/flight_console.py) from the coordinator's snapshot, with each drone's worker:
+    live on a terminal, the final table at the end."""
+    from rpf_fly.cli.fly_cmd import _nothing, text_log_path
     from rpf_fly.cli.logs import route_logging
     from rpf_fly.runtime.coordinator import Coordinator
     from rpf_fly.runtime.session import ZenohUnavailable
 
+    live = None
+    if console:
+        from rpf_fly.cli.flight_console import FlightConsole
+
+        live = FlightConsole(mission.name)
     try:
         coordinator = Coordinator(mission, mission_path, log_path, dry_run=dry_run, remote_dongles=_dongles(remote),
                                   listen=_endpoints(listen, "--listen"), radio_loss=radio_loss,
-                                  say=lambda line: typer.echo(line, err=True))
+                                  say=live.line if live is not None else lambda line: typer.echo(line, err=True),
+                                  status_hook=(lambda c: live.show(c.phase, c.snapshot)) if live is not None
+                                  else None)
     except ValueError as err:
         raise fail(str(err))
 
@@ -51,11 +60,13 @@ def fly_distributed(mission, mission_path: Path, log_path: Path, dry_run: bool, 
 
     previous = {sig: signal.signal(sig, on_interrupt) for sig in (signal.SIGINT, signal.SIGTERM)}
     try:
-        with route_logging(text_log_path(log_path), verbose):
+        with route_logging(text_log_path(log_path), verbose), (live if live is not None else _nothing()):
             try:
                 code = coordinator.run()
             except ZenohUnavailable as err:
                 raise fail(str(err))
+            if live is not None:
+                live.final(coordinator.phase, coordinator.snapshot())
     finally:
         for sig, handler in previous.items():
             signal.signal(sig, handler)

@@ -54,8 +54,14 @@ END_WAIT_S = 30.0
 
 @dataclass
 class DroneView:
+    """What the coordinator knows of one drone: its status messages (state, outcome, battery, link), where its
+    worker's ``tf`` last put it, and the reason its worker gave at the end."""
     state: str = "connecting"
     outcome: Optional[str] = None
+    battery_v: Optional[float] = None
+    link_pct: Optional[float] = None
+    position: Optional[tuple[float, float, float]] = None
+    reason: str = ""
 
 
 @dataclass
@@ -78,13 +84,17 @@ class Coordinator:
     def __init__(self, mission: Mission, mission_path: Path, log_path: Path, *, dry_run: bool,
                  remote_dongles: tuple[int, ...] = (), listen: tuple[str, ...] = (),
                  say: Callable[[str], None] = print, radio_loss: bool = True,
-                 remote_wait_s: float = REMOTE_WAIT_S, worker_args: tuple[str, ...] = ()):
+                 remote_wait_s: float = REMOTE_WAIT_S, worker_args: tuple[str, ...] = (),
+                 status_hook: Optional[Callable[["Coordinator"], None]] = None):
         self.mission = mission
         self.mission_path = Path(mission_path)
         self.log_path = Path(log_path)
         self.flight = self.log_path.stem
         self.dry_run = dry_run
         self.say = say
+        self.status_hook = status_hook
+        """Called with the coordinator from its own thread on each status message (at least every 0.2 s) while it
+        waits for the workers and flies: the console's live table, which reads :meth:`snapshot`."""
         self.radio_loss = radio_loss
         self.remote_wait_s = remote_wait_s
         self.worker_args = worker_args
@@ -107,6 +117,7 @@ class Coordinator:
             self.listen = (free_loopback_endpoint(),)
         self.local_endpoint = self.listen[0].replace("0.0.0.0", "127.0.0.1").replace("[::]", "[::1]")
         self.drones = {d.name: DroneView() for d in mission.drones}
+        self._goals = {d.name: complex(*d.goal) for d in mission.drones}
         self.events = EventBus(time.monotonic)
         self.events.subscribe(self._print_event)
         self.phase = "starting"
@@ -130,6 +141,32 @@ class Coordinator:
         if event.level >= WARNING or event.drone is None:
             who = f"{event.drone}: " if event.drone else ""
             self.say(f"[{event.kind}] {who}{event.message}")
+
+    def snapshot(self) -> list[dict[str, Any]]:
+        """Per-drone rows for the console, those of ``FlightLoop.snapshot`` (name, phase, position, goal distance,
+        battery, link quality, reason) from the drones' status and tf messages, with the drone's ``worker``, whether
+        that worker is ``lost`` and the drone's ``outcome`` once known (rpf_fly/cli/flight_console.py)."""
+        worker_of = {name: w for w in self.workers.values() for name in w.drones}
+        rows = []
+        for name, view in self.drones.items():
+            worker, pos = worker_of[name], view.position
+            reason = view.reason or (f"worker {worker.name} lost: left to its firmware's watchdog" if worker.lost
+                                     else "")
+            rows.append({"name": name, "phase": view.state, "position": pos,
+                         "goal_distance": abs(self._goals[name] - complex(pos[0], pos[1])) if pos is not None
+                         else None,
+                         "battery_v": view.battery_v, "link_pct": view.link_pct, "reason": reason,
+                         "outcome": view.outcome, "worker": worker.name, "lost": worker.lost})
+        return rows
+
+    def _show(self) -> None:
+        if self.status_hook is None:
+            return
+        try:
+            self.status_hook(self)
+        except Exception:  # noqa: BLE001 - the console never stops the flight
+            logger.exception("coordinator: the console's status hook failed")
+            self.status_hook = None
 
     def _worker_event(self, sample: Any) -> None:
         """The workers' events: the console shows warnings and errors, and the swarm-wide lines."""
@@ -159,9 +196,20 @@ class Coordinator:
         if view is None:
             return
         message = json.loads(sample.payload.to_bytes())
+        battery, quality = message.get("battery_v"), message.get("link_quality")
+        battery, link = None if battery is None else float(battery), None if quality is None else 100.0 * float(quality)
         view.state = str(message["state"])
         view.outcome = message.get("outcome") or view.outcome
+        view.battery_v, view.link_pct = battery, link
         self._wake.set()
+
+    def _tf(self, sample: Any) -> None:
+        """A worker's ``tf`` (20 Hz, its drones' mocap poses): where the console shows them."""
+        for transform in json.loads(sample.payload.to_bytes())["transforms"]:
+            view = self.drones.get(str(transform["child_frame_id"]))
+            if view is not None:
+                t = transform["translation"]
+                view.position = (float(t["x"]), float(t["y"]), float(t["z"]))
 
     def _worker_info(self, sample: Any) -> None:
         info = json.loads(sample.payload.to_bytes())
@@ -177,6 +225,9 @@ class Coordinator:
             for name, outcome in (info.get("outcomes") or {}).items():
                 if name in self.drones:
                     self.drones[name].outcome = outcome
+            for name, reason in (info.get("reasons") or {}).items():
+                if name in self.drones:
+                    self.drones[name].reason = str(reason)
         self._wake.set()
 
     def _alive(self, name: str, alive: bool) -> None:
@@ -221,6 +272,7 @@ class Coordinator:
         self.events.subscribe(lambda e: self.recorder.event(e) if self.recorder is not None else None)
         try:
             bus.subscribe(keys.key("status/*"), self._status)
+            bus.subscribe(keys.key("tf/*"), self._tf)
             bus.subscribe(keys.workers_all, self._worker_info)
             bus.subscribe(keys.events, self._worker_event, remote_only=True)
             bus.watch_alive(keys.alive_all, self._alive)
@@ -312,6 +364,7 @@ class Coordinator:
                 return False
             self._wake.wait(0.2)
             self._wake.clear()
+            self._show()
 
     def _command(self, command: str, reason: str = "") -> None:
         assert self.bus is not None
@@ -335,6 +388,7 @@ class Coordinator:
         while True:
             self._wake.wait(0.1)
             self._wake.clear()
+            self._show()
             now = time.monotonic()
             live = self._live()
             if self._estop and not sent_estop:

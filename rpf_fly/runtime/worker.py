@@ -216,6 +216,7 @@ class WorkerRun:
             wall0, cpu0 = link.go_at or (time.monotonic(), time.process_time())
             flown_s = time.monotonic() - wall0
             info("done", outcomes={n: o.value for n, o in report.outcomes.items()},
+                 reasons={n: r for n, r in report.reasons.items() if r},
                  latency=report.stats.summary(), cpu_s=time.process_time(),
                  cpu_pct=round(100 * (time.process_time() - cpu0) / flown_s, 1) if flown_s > 0 else None,
                  publish_cpu_pct=round(100 * recorder.log.writer_cpu_s / flown_s, 2) if flown_s > 0 else None,

@@ -65,3 +65,33 @@ def test_an_emergency_stop_ends_with_every_drone_stopped(stopped_cli_flight):
         assert cells[1:3] == ["stopped", "emergency"], cells
     assert "landing" not in "\n".join(table)
     assert "second Ctrl-C" in flight.stderr
+
+
+def test_a_distributed_flight_ends_with_the_same_table_naming_each_drones_worker(tmp_path):
+    """``--distributed``, piped: the coordinator's lines as plain lines, then the single process's final table
+    (same title, states and outcomes) with a worker column, once, wide, ending in its newline; the outcomes on
+    stdout as before."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    mission = Path(__file__).resolve().parents[1] / "runtime" / "two-dongles.yaml"
+    flight = subprocess.run([sys.executable, "-m", "rpf_fly", "fly", str(mission), "--dry-run", "--distributed",
+                             "--log", str(tmp_path / "flight.mcap")], capture_output=True, text=True, timeout=180,
+                            cwd=tmp_path, env=dict(os.environ, PYTHONUNBUFFERED="1"))
+    assert flight.returncode == 0, flight.stderr
+    table = final_table(flight.stderr)
+    assert table[0].strip() == "two-dongles: done"
+    assert table[2].split() == ["┃", "drone", "┃", "worker", "┃", "state", "┃", "outcome", "┃", "x", "┃", "y", "┃",
+                                "z", "┃", "to", "goal", "[m]", "┃", "battery", "[V]", "┃", "link", "[%]", "┃"]
+    found = rows(table)
+    assert {name: cells[1:4] for name, cells in found.items()} == {
+        "cf1": ["dongle-0", "landed", "reached"], "cf2": ["dongle-0", "landed", "reached"],
+        "cf3": ["dongle-1", "landed", "reached"], "cf4": ["dongle-1", "landed", "reached"]}
+    for cells in found.values():
+        assert float(cells[6]) < 0.1 and float(cells[7]) <= 0.1 and 3.0 < float(cells[8]) < 4.3, cells  # z, goal
+    assert flight.stderr.count("two-dongles: done") == 1  # the table once
+    assert "[phase] swarm: flying" in flight.stderr.splitlines()
+    assert "…" not in flight.stderr and flight.stderr.endswith("┘\n")
+    assert flight.stdout.splitlines()[:4] == ["cf1: reached", "cf2: reached", "cf3: reached", "cf4: reached"]

@@ -126,14 +126,28 @@ def test_remote_worker_tap_and_foreign_commands(tmp_path):
 
 def test_a_killed_worker_is_noticed_and_the_others_fly_on(tmp_path):
     """SIGKILL of dongle 1's worker mid-flight: an event names it and its drones within 1 s of the kill; dongle
-    0's drones reach their goals and land; the log closes."""
+    0's drones reach their goals and land; the log closes. The console's rows (``Coordinator.snapshot``, through
+    its status hook) follow the drones' status and tf messages: each drone's worker, its phase, where it is and how
+    far from its goal, its battery and link as the log has them; the lost worker's drones are marked."""
     mission = load_mission(MISSION)
     lines: list[str] = []
     log_path = tmp_path / "killed.mcap"
-    coordinator = Coordinator(mission, MISSION, log_path, dry_run=True, say=lines.append)
+    shown: list[list[dict]] = []
+    coordinator = Coordinator(mission, MISSION, log_path, dry_run=True, say=lines.append,
+                              status_hook=lambda c: shown.append(c.snapshot()))
     thread, result = _start(coordinator)
     assert _wait(lambda: coordinator.drones["cf3"].state == "planning", 90), lines
     time.sleep(0.5)
+    flying = {row["name"]: row for row in coordinator.snapshot()}
+    assert list(flying) == ["cf1", "cf2", "cf3", "cf4"]
+    assert [flying[n]["worker"] for n in flying] == ["dongle-0", "dongle-0", "dongle-1", "dongle-1"]
+    goals = {d.name: complex(*d.goal) for d in mission.drones}
+    for name, row in flying.items():
+        assert row["phase"] in ("planning", "arrived") and not row["lost"] and row["outcome"] is None, row
+        x, y, z = row["position"]
+        assert abs(z - mission.flight.height) < 0.15, row  # from the worker's tf: in the air
+        assert row["goal_distance"] == abs(goals[name] - complex(x, y))
+        assert 3.0 < row["battery_v"] < 4.3 and 0 <= row["link_pct"] <= 100, row
     victim = coordinator.workers["dongle-1"].process
     assert victim is not None
     killed_at = time.monotonic()
@@ -151,6 +165,23 @@ def test_a_killed_worker_is_noticed_and_the_others_fly_on(tmp_path):
     for name in ("cf1", "cf2"):
         assert log.messages(f"/{name}/status")[-1].data["state"] == "landed"
         assert all(not m.data["crashed"] for m in log.messages(f"/truth/{name}")), name
+    end = {row["name"]: row for row in coordinator.snapshot()}
+    for name in ("cf1", "cf2"):
+        last = log.messages(f"/{name}/status")[-1].data  # the same message reached the logger and the coordinator
+        row = end[name]
+        assert (row["phase"], row["outcome"], row["battery_v"], row["link_pct"]) == (
+            last["state"], last["outcome"], last["battery_v"], 100 * last["link_quality"]), (row, last)
+        pose = log.messages(f"/mocap/{name}")[-1].data["pose"]["position"]
+        assert max(abs(a - b) for a, b in zip(row["position"], (pose["x"], pose["y"], pose["z"]))) < 0.02, row
+        assert not row["lost"] and row["reason"] == "every drone of the swarm is at its goal", row  # its worker's
+    for name in ("cf3", "cf4"):
+        assert end[name]["lost"] and end[name]["worker"] == "dongle-1", end[name]
+        assert end[name]["reason"].startswith("worker dongle-1 lost"), end[name]
+    cf1 = [rows[0] for rows in shown]  # the hook's rows over the flight: cf1 took off, flew to its goal, landed
+    phases = [row["phase"] for row in cf1]
+    assert phases.index("planning") < phases.index("landed"), sorted(set(phases))
+    flown = [row["goal_distance"] for row in cf1 if row["phase"] == "planning"]
+    assert flown[0] - flown[-1] > 0.5, flown
 
 
 def test_zenoh_unreachable_at_start_is_one_line_and_exit_2(tmp_path):
