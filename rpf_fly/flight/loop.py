@@ -108,11 +108,16 @@ class FlightLoop:
         clock: Callable[[], float] = time.monotonic,
         drones: Optional[Collection[str]] = None,
         swarm: Optional[SwarmLink] = None,
+        tick_offset: Optional[float] = None,
     ):
         """``drones``: the names of the drones this loop flies (default: all of the mission's); the others are only
         seen, from mocap, as every drone sees its neighbours (a distributed flight's worker flies one dongle's).
         ``swarm``: the coordinator this loop waits for before take-off and whose ``finish`` ends it
-        (:class:`SwarmLink`, :meth:`end`)."""
+        (:class:`SwarmLink`, :meth:`end`). ``tick_offset``: where in the planning period this loop's ticks fall, a
+        fraction of the period in [0, 1) on a lattice of the monotonic clock (which every process of a host
+        shares): the workers of a distributed flight on one host spread their ticks over the period (worker k of n
+        at k/n), so they do not all plan on the same mocap frame and queue for the same cores (docs/distributed.md,
+        *Ticks*). None: the ticks start when the flight does."""
         self.mission = mission
         self.backend = backend
         self.mocap = mocap
@@ -144,6 +149,9 @@ class FlightLoop:
         self._take_latencies: Optional[Callable[[], list[float]]] = getattr(backend, "take_setpoint_latencies", None)
         self._wait_sent: Optional[Callable[[Optional[list[str]], float], bool]] = getattr(backend, "wait_sent", None)
         self.tick = 0
+        if tick_offset is not None and not 0.0 <= tick_offset < 1.0:
+            raise ValueError(f"tick_offset must be in [0, 1), not {tick_offset}")
+        self.tick_offset = tick_offset
         self._ticks = TickSchedule(mission.flight.dt, 0.0)
         self._last_tick_s: Optional[float] = None
         self._stop = threading.Event()
@@ -468,7 +476,7 @@ class FlightLoop:
     def _fly(self) -> None:
         self._set_phase(SwarmPhase.FLYING)
         started = self.clock()
-        self._ticks = TickSchedule(self.mission.flight.dt, started)
+        self._ticks = TickSchedule(self.mission.flight.dt, self._first_tick_s(started))
         self._last_tick_s = None
         all_arrived_at: Optional[float] = None
         self._watchdog.arm(True)
@@ -496,6 +504,14 @@ class FlightLoop:
                     break
         finally:
             self._watchdog.arm(False)
+
+    def _first_tick_s(self, started: float) -> float:
+        """The first planning tick's nominal time: at the start, or the lattice point of ``tick_offset`` at or
+        after it (clock times ``(k + tick_offset) * period``)."""
+        if self.tick_offset is None:
+            return started
+        period = self.mission.flight.dt
+        return (math.ceil(started / period - self.tick_offset) + self.tick_offset) * period
 
     def _land_all(self, reason: str, wait: bool = True, told: bool = False) -> None:
         """Land every drone for ``reason``; the phase event names it unless an ``interrupt`` event just ``told``

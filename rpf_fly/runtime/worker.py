@@ -49,6 +49,13 @@ def dongle_drones(mission: Mission, dongle: int) -> list[str]:
     return [d.name for d in mission.drones if dongle_of(d.uri) == dongle]
 
 
+def tick_offset(mission: Mission, dongle: int) -> float:
+    """Where in the planning period this dongle's worker ticks: the k-th of the mission's n dongles at k/n, so the
+    workers on one host plan on different mocap frames instead of all queueing for the cores on the same one."""
+    dongles = sorted({dongle_of(d.uri) for d in mission.drones})
+    return dongles.index(dongle) / len(dongles)
+
+
 def worker_info(mission: Mission, dongle: int, state: str, **extra: Any) -> dict[str, Any]:
     return {"name": worker_name(dongle), "dongle": dongle, "host": socket.gethostname(), "pid": os.getpid(),
             "drones": dongle_drones(mission, dongle), "state": state, **extra}
@@ -201,7 +208,8 @@ class WorkerRun:
                                     radio=backend.radio_counts, radio_dongles=(self.dongle,))
             try:
                 loop = FlightLoop(self.mission, backend, source, self.planner_factory, uris=uris,
-                                  recorder=recorder, drones=names, swarm=link)
+                                  recorder=recorder, drones=names, swarm=link,
+                                  tick_offset=tick_offset(self.mission, self.dongle))
             except BaseException:
                 recorder.close()
                 raise

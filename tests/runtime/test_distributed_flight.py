@@ -8,7 +8,9 @@ and emergency stop; one whose worker is killed mid-flight.
 
 from __future__ import annotations
 
+import cmath
 import json
+import math
 import os
 import signal
 import subprocess
@@ -122,6 +124,17 @@ def test_remote_worker_tap_and_foreign_commands(tmp_path):
     workers = json.loads(runtime["workers"])
     assert sorted(w["dongle"] for w in workers) == [0, 1] and all(w["pid"] for w in workers)
     assert any(w["pid"] == remote.pid for w in workers)
+    # The two workers tick half a planning period apart (worker k of n at k/n: rpf_fly/runtime/worker.py
+    # tick_offset), so they never plan on the same mocap frame: the circular mean of each worker's tick times
+    # within the period, from the planner steps' log times.
+    period_ns = round(mission.flight.dt * 1e9)
+
+    def tick_phase(drones: tuple[str, ...]) -> complex:
+        ticks = {m.log_time for n in drones for m in log.messages(f"/{n}/planner") if m.data["eta"] is not None}
+        return sum(cmath.exp(2j * math.pi * (t % period_ns) / period_ns) for t in ticks) / len(ticks)
+
+    apart = abs(cmath.phase(tick_phase(("cf1", "cf2")) / tick_phase(("cf3", "cf4")))) / (2 * math.pi)
+    assert 0.3 <= apart <= 0.5, apart  # half a period, give or take the phase lock's pull towards the frames
 
 
 def test_a_killed_worker_is_noticed_and_the_others_fly_on(tmp_path):
