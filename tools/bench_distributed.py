@@ -12,8 +12,8 @@ in this process, one ``rpf-fly worker`` process per dongle and the logger proces
 - CPU: the single process's CPU time in percent of a core over the whole flight (connection included);
   distributed: each worker's process CPU time from the coordinator's go to its end, and the logger's from its first
   message to its end (`time.process_time()`, reported by each as it ends), in percent of a core; and within each
-  worker, its log writer thread's (the messages' encoding and Zenoh puts; its whole life over the same span, so
-  an upper bound);
+  worker, what its logging costs from its recorder's start to its end (rpf_fly/runtime/worker.py ``logging_cpu``):
+  the flight loop's hand-over, the log writer thread's encoding and publishing, Zenoh's own threads, and the total;
 - outcome: drones that reached their goals.
 
 ``--kill worker``: a distributed run of the largest N only, SIGKILLing dongle 1's worker once its drones plan;
@@ -118,8 +118,8 @@ def distributed(path: Path, out: Path, kill: str = "") -> dict:
     latencies = [v * 1e-6 for w in coordinator.workers.values() for v in w.info.get("latencies_us", [])]
     cpu = {w.name: w.info.get("cpu_pct") for w in coordinator.workers.values() if "cpu_s" in w.info}
     for w in coordinator.workers.values():
-        if w.info.get("publish_cpu_pct") is not None:
-            cpu[f"{w.name}: its log writer thread (encode + publish)"] = w.info["publish_cpu_pct"]
+        if w.info.get("logging_cpu") is not None:
+            cpu[f"{w.name}: logging"] = w.info["logging_cpu"]
     if "cpu_s" in coordinator.logger_info:
         cpu["logger"] = coordinator.logger_info.get("cpu_pct")
     cpu["coordinator (+ truth feed)"] = round(

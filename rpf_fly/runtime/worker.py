@@ -27,7 +27,9 @@ from rpf_fly.flight.loop import FlightLoop, FlightReport, PlannerFactory
 from rpf_fly.mission.model import Mission
 from rpf_fly.radio.budget import dongle_of
 from rpf_fly.runtime.auth import Command
+from rpf_fly.flight.recorder import MeteredRecorder
 from rpf_fly.runtime.bus import FlightBus
+from rpf_fly.runtime.cpu import zenoh_threads_cpu_s
 from rpf_fly.runtime.keys import COORDINATOR, worker_name
 
 logger = logging.getLogger(__name__)
@@ -54,6 +56,23 @@ def tick_offset(mission: Mission, dongle: int) -> float:
     workers on one host plan on different mocap frames instead of all queueing for the cores on the same one."""
     dongles = sorted({dongle_of(d.uri) for d in mission.drones})
     return dongles.index(dongle) / len(dongles)
+
+
+def logging_cpu(since: tuple[float, Optional[float]], metered: MeteredRecorder, recorder: Any) -> dict[str, Any]:
+    """What logging cost this worker from its recorder's start to now, in percent of a core: the flight loop's
+    hand-over (``loop_pct``), the log writer thread's encoding and publishing (``writer_pct``), Zenoh's own threads
+    (``zenoh_pct``: they also carry the commands and tokens, a few messages a second) and their ``total_pct``; the
+    messages published and the span (docs/performance.md)."""
+    wall0, zenoh0 = since
+    span = time.monotonic() - wall0
+    zenoh1 = zenoh_threads_cpu_s()
+    parts = {"loop_pct": metered.cpu_s, "writer_pct": recorder.log.writer_cpu_s,
+             "zenoh_pct": None if zenoh0 is None or zenoh1 is None else zenoh1 - zenoh0}
+    out: dict[str, Any] = {k: None if v is None else round(100 * v / span, 3) for k, v in parts.items()}
+    out["total_pct"] = round(100 * sum(v for v in parts.values() if v is not None) / span, 3)
+    out["span_s"] = round(span, 1)
+    out["messages"] = recorder.log.written
+    return out
 
 
 def worker_info(mission: Mission, dongle: int, state: str, **extra: Any) -> dict[str, Any]:
@@ -203,12 +222,14 @@ class WorkerRun:
                                   f"(start `rpf-fly fly MISSION --distributed` first; is --connect right?)")
             bus.on_commands(self.secret, link.obey, link.refuse)
             backend, source, uris = self._rig(bus)
+            logging_since = (time.monotonic(), zenoh_threads_cpu_s())
             recorder = McapRecorder(Path(f"zenoh-{self.flight}-{name}"), self.mission,
                                     source="dry-run" if self.dry_run else "flight", out=bus.out,
                                     radio=backend.radio_counts, radio_dongles=(self.dongle,))
+            metered = MeteredRecorder(recorder)
             try:
                 loop = FlightLoop(self.mission, backend, source, self.planner_factory, uris=uris,
-                                  recorder=recorder, drones=names, swarm=link,
+                                  recorder=metered, drones=names, swarm=link,
                                   tick_offset=tick_offset(self.mission, self.dongle))
             except BaseException:
                 recorder.close()
@@ -228,6 +249,7 @@ class WorkerRun:
                  latency=report.stats.summary(), cpu_s=time.process_time(),
                  cpu_pct=round(100 * (time.process_time() - cpu0) / flown_s, 1) if flown_s > 0 else None,
                  publish_cpu_pct=round(100 * recorder.log.writer_cpu_s / flown_s, 2) if flown_s > 0 else None,
+                 logging_cpu=logging_cpu(logging_since, metered, recorder),
                  latencies_us=[round(v * 1e6) for v in report.stats.latencies])
             time.sleep(0.2)  # the last messages leave before the session closes
             return report

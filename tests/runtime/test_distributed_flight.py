@@ -124,6 +124,10 @@ def test_remote_worker_tap_and_foreign_commands(tmp_path):
     workers = json.loads(runtime["workers"])
     assert sorted(w["dongle"] for w in workers) == [0, 1] and all(w["pid"] for w in workers)
     assert any(w["pid"] == remote.pid for w in workers)
+    for worker in coordinator.workers.values():  # each worker says what its logging cost it, in its three parts
+        cost = worker.info["logging_cpu"]
+        assert cost["messages"] > 100 and cost["writer_pct"] > 0 and cost["zenoh_pct"] is not None, cost
+        assert cost["total_pct"] >= cost["loop_pct"] + cost["writer_pct"] - 0.01, cost
     # The two workers tick half a planning period apart (worker k of n at k/n: rpf_fly/runtime/worker.py
     # tick_offset), so they never plan on the same mocap frame: the circular mean of each worker's tick times
     # within the period, from the planner steps' log times.
