@@ -37,6 +37,7 @@ def fly_distributed(mission, mission_path: Path, log_path: Path, dry_run: bool, 
     from rpf_fly.cli.fly_cmd import text_log_path
     from rpf_fly.cli.logs import route_logging
     from rpf_fly.runtime.coordinator import Coordinator
+    from rpf_fly.runtime.relay import RelayError
     from rpf_fly.runtime.session import ZenohUnavailable
 
     try:
@@ -54,7 +55,7 @@ def fly_distributed(mission, mission_path: Path, log_path: Path, dry_run: bool, 
         with route_logging(text_log_path(log_path), verbose):
             try:
                 code = coordinator.run()
-            except ZenohUnavailable as err:
+            except (ZenohUnavailable, RelayError) as err:
                 raise fail(str(err))
     finally:
         for sig, handler in previous.items():
@@ -89,7 +90,10 @@ def worker(
     if not dry_run:
         if real_flight_problem(loaded):
             raise fail(at(mission, real_flight_problem(loaded)))
-        _resolve_server(loaded, mission)
+        from rpf_fly.runtime.relay import uses_relay
+
+        if not uses_relay(loaded):  # with the relay, the mocap is its host's to reach
+            _resolve_server(loaded, mission)
         _check_radios(loaded, only_dongle=dongle)
     secret = os.environ.get(SECRET_ENV, "")
     if len(secret) < 32:
