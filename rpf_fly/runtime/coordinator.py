@@ -15,6 +15,10 @@ dongle's worker is alive, remote ones included, before any drone arms. Then, fro
 
 In a dry run it also owns the simulated drones (the world process) and serves where they are on the ``rig`` key, so a
 worker on another "host" reaches them through its fake radio; their truth goes to the logger on ``truth/<drone>``.
+
+A flight with a mocap relay (unicast NatNet, a ``motioncapture`` system: rpf_fly/runtime/relay.py) has it started
+after the logger, and ``alive/relay`` awaited, before any worker; that token vanishing is an event naming the relay
+at once (the workers' mocap stops: their supervisors hold, then land the drones).
 """
 
 from __future__ import annotations
@@ -131,7 +135,8 @@ class Coordinator:
         self.relay_alive = False
         self.relay_info: dict[str, Any] = {}
         self._relay_said: list[str] = []
-        self._relay_stopping = False
+        self._closing = False
+        """Set as :meth:`_close` begins: the logger's and the relay's tokens vanish because it ends them."""
 
     # ------------------------------------------------------------------------------------------ console
 
@@ -197,7 +202,7 @@ class Coordinator:
             return
         if name == LOGGER:
             self.logger_alive = alive
-            if not alive and self.phase not in ("done",):
+            if not alive and self.phase not in ("done",) and not self._closing:
                 self.events.emit(ERROR, "logger", "the logger is gone: the flight goes on, the log ends here "
                                  f"(rpf-fly review --salvage {self.log_path})")
             self._wake.set()
@@ -329,7 +334,7 @@ class Coordinator:
             self.relay_alive = True
         elif self.relay_alive:
             self.relay_alive = False
-            if not self._relay_stopping:
+            if not self._closing:
                 pid, host = self.relay_info.get("pid", "?"), self.relay_info.get("host", "?")
                 self.events.emit(FATAL, "relay_lost", f"the mocap relay (pid {pid} on {host}) is gone: the workers "
                                  "get no mocap; their drones hold, then land")
@@ -345,7 +350,6 @@ class Coordinator:
         process = self.relay_process
         if process is None:
             return
-        self._relay_stopping = True
         if process.poll() is None:
             process.send_signal(signal.SIGTERM)
             try:
@@ -485,6 +489,7 @@ class Coordinator:
             time.sleep(0.1)
 
     def _close(self) -> None:
+        self._closing = True
         if self.recorder is not None:
             try:
                 self.recorder.close()  # the last truth samples and events go out

@@ -1,9 +1,11 @@
 """A distributed flight's worker: the drones of one radio dongle, flown by the same :class:`FlightLoop` as a
 single-process flight (docs/distributed.md).
 
-The worker receives mocap itself (NatNet multicast reaches every worker; unicast NatNet serves each client that
-connects), so its drones plan from what they sense: every other drone of the mission is a mocap body in their
-views (:attr:`FlightLoop.others`), never a message from another worker's planner. It publishes what its loop logs
+The worker receives mocap itself (NatNet multicast reaches every worker), or, when the flight has a mocap relay
+(unicast NatNet, a ``motioncapture`` system: rpf_fly/runtime/relay.py), the relay's frames, signed with the
+flight's secret (:class:`~rpf_fly.runtime.relayed_mocap.RelayedMocap`). Either way its drones plan from what they
+sense: every other drone of the mission is a mocap body in their views (:attr:`FlightLoop.others`), never a
+message from another worker's planner. It publishes what its loop logs
 (setpoints, planner steps, status, events, its drones' mocap) on the flight's keys, holds its liveliness token
 ``alive/dongle-K``, waits for the coordinator's signed ``go`` after its preflight and obeys only signed commands
 (rpf_fly/runtime/auth.py). Its coordinator's token vanishing (the coordinator died, its host or the network went)

@@ -256,6 +256,7 @@ def test_a_relay_that_cannot_open_its_mocap_stops_the_flight_before_any_worker(t
     assert "\n" not in message and "relay exited at start (code 2)" in message and "NatNet" in message, message
     assert all(w.process is None for w in coordinator.workers.values())
     assert coordinator.relay_process.poll() == 2 and coordinator.logger_process.poll() is not None
+    assert not coordinator.events.history  # that one line only (the logger it ended is not "gone")
 
 
 def test_zenoh_unreachable_at_start_is_one_line_and_exit_2(tmp_path):
