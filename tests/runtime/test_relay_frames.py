@@ -105,7 +105,8 @@ def test_the_workers_source_hands_over_the_newest_verified_frame_and_counts_the_
         forged, _ = FrameSigner(new_secret(), "f1").sign(frame(99, x=40.0))
         relay.put(key, forged)
         relay.put(key, forged, attachment=b"0" * 64)
-        assert _until(lambda: source.stats.frames == signer.seq and source.stats.dropped == 2)  # all arrived
+        # one session's puts arrive in order: once both forged frames are counted, frames 2-4 are in
+        assert _until(lambda: source.stats.dropped == 2)
         newest = source.receive(1.0)
         assert newest is not None and newest.frame_number == 4 and newest.bodies["cf1"].position[0] == 4.5
         stats = source.stats
