@@ -1,6 +1,7 @@
 """Distributed against single-process flight: latency and CPU, side by side in one run (docs/performance.md).
 
-    python tools/bench_distributed.py [--drones 10,20,40] [--json] [--kill worker|coordinator|logger]
+    python tools/bench_distributed.py [--drones 10,20,40] [--json] [--kill worker|coordinator|logger|relay]
+                                      [--mocap-relay auto|on|off|both] [--no-single]
 
 For each swarm size N, the first N drones of missions/lanes-40-4dongles.yaml (10 a dongle: N/10 dongles) fly a dry
 run twice, first in one process (``run_flight``, as ``rpf-fly fly --dry-run``), then distributed (the coordinator
@@ -14,10 +15,17 @@ in this process, one ``rpf-fly worker`` process per dongle and the logger proces
   message to its end (`time.process_time()`, reported by each as it ends), in percent of a core; and within each
   worker, what its logging costs from its recorder's start to its end (rpf_fly/runtime/worker.py ``logging_cpu``):
   the flight loop's hand-over, the log writer thread's encoding and publishing, Zenoh's own threads, and the total;
-- outcome: drones that reached their goals.
+- outcome: drones that reached their goals;
+- the mocap relay (docs/distributed.md, "Mocap relay"; the mission's NatNet is unicast, so ``auto`` flies with it):
+  its process's CPU from its first frame to its end, and the hop from its receipt of a frame to each worker's
+  (p50 and p99 over every worker's frames from the go). ``--mocap-relay both`` flies each size distributed twice,
+  through the relay and direct (each worker its own NatNet client), side by side; ``--no-single`` leaves out the
+  single process. With the relay, the latency starts at the worker's receipt of the relayed frame, so compare it
+  with the direct run's plus the relay's hop.
 
 ``--kill worker``: a distributed run of the largest N only, SIGKILLing dongle 1's worker once its drones plan;
-reports how long the coordinator took to name it, and the others' outcomes. ``--kill coordinator`` runs the
+reports how long the coordinator took to name it, and the others' outcomes. ``--kill relay``: the same with the
+mocap relay killed: how long until it was named, and how many drones ended on the floor. ``--kill coordinator`` runs the
 coordinator as ``rpf-fly fly --distributed`` in a child and SIGKILLs it mid-flight: every worker must land its
 drones (read from the log). ``--kill logger``: the logger killed mid-flight: the flight goes on, the log is salvaged.
 
@@ -42,14 +50,16 @@ ROOT = Path(__file__).resolve().parents[1]
 FULL = ROOT / "missions" / "lanes-40-4dongles.yaml"
 
 
-def mission_file(n: int, out_dir: Path) -> Path:
-    """The first ``n`` drones of the 40-drone mission, as a mission file of its own."""
+def mission_file(n: int, out_dir: Path, relay: str = "auto") -> Path:
+    """The first ``n`` drones of the 40-drone mission, as a mission file of its own (``runtime.mocap_relay``:
+    ``relay``)."""
     text = FULL.read_text()
     head, drones = text.split("drones:\n")
     lines = [line for line in drones.splitlines() if line.strip().startswith("- {name:")][:n]
-    path = out_dir / f"lanes-{n}.yaml"
+    path = out_dir / (f"lanes-{n}.yaml" if relay == "auto" else f"lanes-{n}-relay-{relay}.yaml")
     path.write_text(head.replace("name: lanes-40-4dongles", f"name: lanes-{n}").replace(
-        "../policies/", f"{ROOT}/policies/") + "drones:\n" + "\n".join(lines) + "\n")
+        "../policies/", f"{ROOT}/policies/") + "drones:\n" + "\n".join(lines) + "\n"
+        + ("" if relay == "auto" else f"runtime: {{mocap_relay: '{relay}'}}\n"))
     return path
 
 
@@ -95,7 +105,7 @@ def distributed(path: Path, out: Path, kill: str = "") -> dict:
 
     mission = load_mission(path)
     lines: list[str] = []
-    log = out / f"distributed-{len(mission.drones)}{'-kill-' + kill if kill else ''}.mcap"
+    log = out / f"distributed-{len(mission.drones)}-{path.stem}{'-kill-' + kill if kill else ''}.mcap"
     coordinator = Coordinator(mission, path, log, dry_run=True, say=lines.append)
     result: dict = {}
     thread = threading.Thread(target=lambda: result.update(code=coordinator.run()), daemon=True)
@@ -109,6 +119,8 @@ def distributed(path: Path, out: Path, kill: str = "") -> dict:
         time.sleep(1.0)
         if kill == "worker":
             process = coordinator.workers["dongle-1"].process
+        elif kill == "relay":
+            process = coordinator.relay_process
         else:
             process = coordinator.logger_process
         killed_at = time.monotonic()
@@ -124,10 +136,17 @@ def distributed(path: Path, out: Path, kill: str = "") -> dict:
         cpu["logger"] = coordinator.logger_info.get("cpu_pct")
     cpu["coordinator (+ truth feed)"] = round(
         100 * (time.process_time() - cpu0) / flight_s, 1)
-    row = {"mode": "distributed", "drones": len(mission.drones),
+    if coordinator.relay_info.get("cpu_pct") is not None:
+        cpu["mocap relay"] = coordinator.relay_info["cpu_pct"]
+    hops = [v * 1e-6 for w in coordinator.workers.values() for v in w.info.get("relay_transit_us", [])]
+    row = {"mode": "distributed, " + ("relay" if coordinator.relayed else "direct mocap"),
+           "drones": len(mission.drones),
            "reached": sum(v.outcome == "reached" for v in coordinator.drones.values()),
            "latency_p50_ms": _ms(pct(latencies, 0.5)), "latency_p99_ms": _ms(pct(latencies, 0.99)),
            "cpu_pct": cpu, "exit": result.get("code")}
+    if hops:
+        row.update(relay_hop_p50_ms=_ms(pct(hops, 0.5)), relay_hop_p99_ms=_ms(pct(hops, 0.99)),
+                   relay_frames=coordinator.relay_info.get("frames"))
     if killed_at is not None:
         lost = [e for e in coordinator.events.history if e.kind == "worker_lost"]
         row["killed"] = kill
@@ -137,6 +156,10 @@ def distributed(path: Path, out: Path, kill: str = "") -> dict:
             row["others_reached"] = sum(v.outcome == "reached" for n, v in coordinator.drones.items()
                                         if n not in dead)
             row["others"] = len(coordinator.drones) - len(dead)
+        if kill == "relay":
+            lost = [e for e in coordinator.events.history if e.kind == "relay_lost"]
+            row["noticed_after_s"] = round(lost[0].time_s - killed_at, 3) if lost else None
+            row["down"] = sum(v.state in ("landed", "failed") for v in coordinator.drones.values())
         row["log"] = str(log)
     return row
 
@@ -171,7 +194,11 @@ def kill_coordinator(path: Path, out: Path) -> dict:
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--drones", default="10,20,40")
-    parser.add_argument("--kill", choices=("worker", "coordinator", "logger"))
+    parser.add_argument("--kill", choices=("worker", "coordinator", "logger", "relay"))
+    parser.add_argument("--mocap-relay", choices=("auto", "on", "off", "both"), default="auto",
+                        help="the distributed runs' runtime.mocap_relay (auto: the relay, the mission's NatNet being "
+                        "unicast); both: one run each way")
+    parser.add_argument("--no-single", action="store_true", help="leave out the single-process runs")
     parser.add_argument("--mission", type=Path, default=None,
                         help="--kill: fly this mission (its dongle 1's worker is the one killed) instead")
     parser.add_argument("--json", action="store_true")
@@ -187,10 +214,12 @@ def main() -> int:
     elif args.kill:
         rows.append(distributed(target or mission_file(max(sizes), out), out, kill=args.kill))
     else:
+        ways = ("on", "off") if args.mocap_relay == "both" else (args.mocap_relay,)
         for n in sizes:
-            path = mission_file(n, out)
-            rows.append(single(path, out))
-            rows.append(distributed(path, out))
+            if not args.no_single:
+                rows.append(single(mission_file(n, out), out))
+            for way in ways:
+                rows.append(distributed(mission_file(n, out, way), out))
     if args.json:
         print(json.dumps(rows, indent=1))
     else:

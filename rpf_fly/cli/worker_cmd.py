@@ -39,6 +39,7 @@ def fly_distributed(mission, mission_path: Path, log_path: Path, dry_run: bool, 
     from rpf_fly.cli.fly_cmd import _nothing, text_log_path
     from rpf_fly.cli.logs import route_logging
     from rpf_fly.runtime.coordinator import Coordinator
+    from rpf_fly.runtime.relay import RelayError
     from rpf_fly.runtime.session import ZenohUnavailable
 
     live = None
@@ -63,7 +64,7 @@ def fly_distributed(mission, mission_path: Path, log_path: Path, dry_run: bool, 
         with route_logging(text_log_path(log_path), verbose), (live if live is not None else _nothing()):
             try:
                 code = coordinator.run()
-            except ZenohUnavailable as err:
+            except (ZenohUnavailable, RelayError) as err:
                 raise fail(str(err))
             if live is not None:
                 live.final(coordinator.phase, coordinator.snapshot())
@@ -100,7 +101,10 @@ def worker(
     if not dry_run:
         if real_flight_problem(loaded):
             raise fail(at(mission, real_flight_problem(loaded)))
-        _resolve_server(loaded, mission)
+        from rpf_fly.runtime.relay import uses_relay
+
+        if not uses_relay(loaded):  # with the relay, the mocap is its host's to reach
+            _resolve_server(loaded, mission)
         _check_radios(loaded, only_dongle=dongle)
     secret = os.environ.get(SECRET_ENV, "")
     if len(secret) < 32:

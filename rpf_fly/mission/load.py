@@ -469,9 +469,10 @@ class _MissionParser(_Checker):
         return dataclasses.replace(settings, system=system, hostname=hostname, options=tuple(options))
 
     def runtime(self, node: YNode) -> m.RuntimeSettings:
-        entries = self.mapping(node, ("zenoh",))
+        entries = self.mapping(node, ("zenoh", "mocap_relay"))
+        relay = self.mocap_relay(entries["mocap_relay"]) if "mocap_relay" in entries else "auto"
         if "zenoh" not in entries:
-            return m.RuntimeSettings()
+            return m.RuntimeSettings(mocap_relay=relay)  # type: ignore[arg-type]
         z = self.mapping(entries["zenoh"], ("mode", "connect", "listen", "config"))
         mode = self.choice(z["mode"], ("client", "peer")) if "mode" in z else "client"
         config = self.zenoh_config(z["config"]) if "config" in z else None
@@ -483,7 +484,15 @@ class _MissionParser(_Checker):
             items = value.value if value.is_seq else [value]
             endpoints = tuple(self.endpoint(item) for item in items)
             lists[key] = endpoints
-        return m.RuntimeSettings(zenoh=m.ZenohSettings(mode=mode, config=config, **lists))  # type: ignore[arg-type]
+        return m.RuntimeSettings(zenoh=m.ZenohSettings(mode=mode, config=config, **lists),  # type: ignore[arg-type]
+                                 mocap_relay=relay)  # type: ignore[arg-type]
+
+    def mocap_relay(self, node: YNode) -> str:
+        """``runtime.mocap_relay``: ``auto``, ``on`` or ``off`` (YAML 1.1 reads a bare on/off as true/false: taken
+        as written)."""
+        if isinstance(node.value, bool):
+            return "on" if node.value else "off"
+        return self.choice(node, ("auto", "on", "off"))
 
     def zenoh_config(self, node: YNode) -> Path:
         """``runtime.zenoh.config``: an existing file that Zenoh reads as its configuration (relative to the

@@ -209,6 +209,11 @@ class RuntimeSettings:
     """How the processes of a distributed flight talk (``rpf-fly fly --distributed``, ``rpf-fly worker``)."""
 
     zenoh: ZenohSettings = field(default_factory=ZenohSettings)
+    mocap_relay: Literal["auto", "on", "off"] = "auto"
+    """Whether one relay process reads the mocap and publishes the frames to the workers (``on``) or each worker
+    opens the mocap itself (``off``); ``auto``: the relay for unicast NatNet (``mocap.multicast: false``) and for
+    ``mocap.kind: motioncapture``, each worker its own client otherwise. Dry runs follow the same rule
+    (rpf_fly/runtime/relay.py :func:`uses_relay`, docs/distributed.md)."""
 
 
 @dataclass(frozen=True)

@@ -36,11 +36,21 @@ class Command:
     reason: str = ""
 
 
+def mac(key: bytes, payload: bytes) -> bytes:
+    """The signature of ``payload`` under the flight's secret (``secret.encode()``): HMAC-SHA256, hex."""
+    return hmac.new(key, payload, hashlib.sha256).hexdigest().encode()
+
+
+def signed_by(key: bytes, payload: bytes, attachment: Optional[bytes]) -> bool:
+    """Whether ``attachment`` is ``payload``'s signature under ``key`` (compared in constant time)."""
+    return bool(attachment) and hmac.compare_digest(mac(key, payload), bytes(attachment))  # type: ignore[arg-type]
+
+
 def sign(secret: str, flight: str, command: str, seq: int, reason: str = "") -> tuple[bytes, bytes]:
     """The payload and its signature (the sample's attachment) of one command."""
     payload = json.dumps({"command": command, "seq": int(seq), "reason": reason, "t_ns": time.time_ns(),
                           "flight": flight}, separators=(",", ":")).encode()
-    return payload, hmac.new(secret.encode(), payload, hashlib.sha256).hexdigest().encode()
+    return payload, mac(secret.encode(), payload)
 
 
 class CommandVerifier:
@@ -56,8 +66,7 @@ class CommandVerifier:
         """(the command, "") if it is the coordinator's, else (None, why it is refused)."""
         if not attachment:
             return None, "unsigned command (no signature)"
-        good = hmac.new(self._key, payload, hashlib.sha256).hexdigest().encode()
-        if not hmac.compare_digest(good, bytes(attachment)):
+        if not signed_by(self._key, payload, attachment):
             return None, "command with a wrong signature (not this flight's secret)"
         try:
             body = json.loads(payload)

@@ -15,6 +15,10 @@ dongle's worker is alive, remote ones included, before any drone arms. Then, fro
 
 In a dry run it also owns the simulated drones (the world process) and serves where they are on the ``rig`` key, so a
 worker on another "host" reaches them through its fake radio; their truth goes to the logger on ``truth/<drone>``.
+
+A flight with a mocap relay (unicast NatNet, a ``motioncapture`` system: rpf_fly/runtime/relay.py) has it started
+after the logger, and ``alive/relay`` awaited, before any worker; that token vanishing is an event naming the relay
+at once (the workers' mocap stops: their supervisors hold, then land the drones).
 """
 
 from __future__ import annotations
@@ -36,7 +40,8 @@ from rpf_fly.mission.model import Mission
 from rpf_fly.radio.budget import dongle_of
 from rpf_fly.runtime.auth import SECRET_ENV, new_secret
 from rpf_fly.runtime.bus import FlightBus
-from rpf_fly.runtime.keys import COORDINATOR, LOGGER, worker_name
+from rpf_fly.runtime.keys import COORDINATOR, LOGGER, RELAY, worker_name
+from rpf_fly.runtime.relay import RelayError, uses_relay
 from rpf_fly.runtime.session import DEFAULT_PORT, free_loopback_endpoint, open_session
 
 logger = logging.getLogger(__name__)
@@ -46,6 +51,8 @@ LOCAL_WAIT_S = 60.0
 REMOTE_WAIT_S = 120.0
 """How long it waits for the remote workers (``--remote-dongles``) before it gives up, nothing armed."""
 LOGGER_WAIT_S = 30.0
+RELAY_WAIT_S = 30.0
+"""How long the coordinator waits for the mocap relay's token (it imports, then its mocap must answer: 5 s)."""
 PREFLIGHT_STATES = {"ready", "failed"}
 DOWN_STATES = {"landed", "failed", "emergency", "link_lost", "landing"}
 END_WAIT_S = 30.0
@@ -134,6 +141,13 @@ class Coordinator:
         self.ended_s: Optional[float] = None
         self.rig: Any = None
         self.recorder: Any = None
+        self.relayed = uses_relay(mission)
+        self.relay_process: Optional[subprocess.Popen] = None
+        self.relay_alive = False
+        self.relay_info: dict[str, Any] = {}
+        self._relay_said: list[str] = []
+        self._closing = False
+        """Set as :meth:`_close` begins: the logger's and the relay's tokens vanish because it ends them."""
 
     # ------------------------------------------------------------------------------------------ console
 
@@ -216,6 +230,9 @@ class Coordinator:
         if info.get("name") == LOGGER:
             self.logger_info = info
             return
+        if info.get("name") == RELAY:
+            self.relay_info = info
+            return
         worker = self.workers.get(str(info.get("name")))
         if worker is None:
             return
@@ -231,9 +248,12 @@ class Coordinator:
         self._wake.set()
 
     def _alive(self, name: str, alive: bool) -> None:
+        if name == RELAY:
+            self._relay_alive(alive)
+            return
         if name == LOGGER:
             self.logger_alive = alive
-            if not alive and self.phase not in ("done",):
+            if not alive and self.phase not in ("done",) and not self._closing:
                 self.events.emit(ERROR, "logger", "the logger is gone: the flight goes on, the log ends here "
                                  f"(rpf-fly review --salvage {self.log_path})")
             self._wake.set()
@@ -284,6 +304,8 @@ class Coordinator:
             self.recorder = McapRecorder(Path(f"zenoh-{self.flight}-coordinator"), self.mission,
                                          source="dry-run" if self.dry_run else "flight", truth=truth, out=bus.out)
             self._start_logger()
+            if self.relayed:
+                self._start_relay()
             self._start_workers()
             if not self._wait_workers():
                 self._command("abort", "not every worker is alive: nothing takes off")
@@ -291,7 +313,7 @@ class Coordinator:
                 return 1
             bus.put_json("runtime", json.dumps({"flight_id": self.flight, "workers": [
                 {k: w.info.get(k) for k in ("name", "dongle", "host", "pid", "drones")} for w in
-                self.workers.values()]}).encode())
+                self.workers.values()], **self._relay_record()}).encode())
             self.started_s = time.monotonic()
             self._fly()
             self._end_workers()
@@ -323,6 +345,70 @@ class Coordinator:
             self._wake.clear()
         if not self.logger_alive:
             raise RuntimeError(f"the logger did not come up within {LOGGER_WAIT_S:.0f} s")
+
+    # ------------------------------------------------------------------------------------------ the mocap relay
+
+    def _start_relay(self) -> None:
+        """Start the mocap relay (rpf_fly/runtime/relay.py) and wait for its token before any worker starts;
+        :class:`RelayError` (one line: the relay's own reason when it exited) if it never comes."""
+        cmd = [sys.executable, "-m", "rpf_fly.runtime.relay", str(self.mission_path), "--flight", self.flight,
+               "--log", str(self.log_path), "--connect", self.local_endpoint] + (["--dry-run"] if self.dry_run else [])
+        self.relay_process = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                                              env=dict(os.environ, **{SECRET_ENV: self.secret}))
+        threading.Thread(target=self._relay_stderr, args=(self.relay_process,), name="relay-stderr",
+                         daemon=True).start()
+        deadline = time.monotonic() + RELAY_WAIT_S
+        while not self.relay_alive and time.monotonic() < deadline:
+            code = self.relay_process.poll()
+            if code is not None:
+                time.sleep(0.1)  # its last line
+                why = self._relay_said[-1] if self._relay_said else f"see {self.log_path.stem}.relay.log"
+                raise RelayError(f"the mocap relay exited at start (code {code}): {why}; nothing armed")
+            self._wake.wait(0.1)
+            self._wake.clear()
+        if not self.relay_alive:
+            raise RelayError(f"the mocap relay did not come up within {RELAY_WAIT_S:.0f} s (see "
+                             f"{self.log_path.stem}.relay.log); nothing armed")
+        self.say(f"mocap relay up (pid {self.relay_process.pid}): the workers fly on its frames "
+                 f"({self.bus.keys.mocap_frames if self.bus is not None else 'mocap_frames'})")
+
+    def _relay_stderr(self, process: subprocess.Popen) -> None:
+        """The relay's stderr: kept (its last line explains a failed start) and, once it is up, on the console."""
+        assert process.stderr is not None
+        for raw in process.stderr:
+            line = raw.decode(errors="replace").rstrip()
+            self._relay_said.append(line)
+            if self.relay_alive:
+                self.say(line)
+
+    def _relay_alive(self, alive: bool) -> None:
+        if alive:
+            self.relay_alive = True
+        elif self.relay_alive:
+            self.relay_alive = False
+            if not self._closing:
+                pid, host = self.relay_info.get("pid", "?"), self.relay_info.get("host", "?")
+                self.events.emit(FATAL, "relay_lost", f"the mocap relay (pid {pid} on {host}) is gone: the workers "
+                                 "get no mocap; their drones hold, then land")
+        self._wake.set()
+
+    def _relay_record(self) -> dict[str, Any]:
+        """The ``runtime`` record's ``relay`` (the log's metadata), when the flight has one."""
+        if not self.relayed:
+            return {}
+        return {"relay": {k: self.relay_info.get(k) for k in ("name", "host", "pid", "source", "key")}}
+
+    def _stop_relay(self) -> None:
+        process = self.relay_process
+        if process is None:
+            return
+        if process.poll() is None:
+            process.send_signal(signal.SIGTERM)
+            try:
+                process.wait(10.0)
+            except subprocess.TimeoutExpired:
+                process.kill()
+                process.wait(5.0)
 
     def worker_command(self, dongle: int, endpoint: str) -> list[str]:
         return ["worker", str(self.mission_path), "--dongle", str(dongle), "--flight", self.flight,
@@ -457,6 +543,7 @@ class Coordinator:
             time.sleep(0.1)
 
     def _close(self) -> None:
+        self._closing = True
         if self.recorder is not None:
             try:
                 self.recorder.close()  # the last truth samples and events go out
@@ -476,6 +563,7 @@ class Coordinator:
                     worker.process.wait(15.0)
                 except subprocess.TimeoutExpired:
                     worker.process.kill()
+        self._stop_relay()  # after the workers: their drones land on its frames
         if self.bus is not None:
             self.bus.close()
         if self.rig is not None:
@@ -500,5 +588,18 @@ class Coordinator:
                              + (" (lost)" if w.lost else ""))
             elif w.lost:
                 lines.append(f"{w.name}: lost")
+        lines += self._relay_summary()
         lines.append(f"log: {self.log_path}  (rpf-fly review {self.log_path})")
         return lines
+
+    def _relay_summary(self) -> list[str]:
+        """The relay's line: frames relayed, its CPU, and each worker's hop from the relay's receipt to its own."""
+        if not self.relay_info:
+            return []
+        hops = [f"{w.name} p50 {w.info['relay_transit_p50_s'] * 1e3:.2f} ms p99 "
+                f"{w.info['relay_transit_p99_s'] * 1e3:.2f} ms" for w in self.workers.values()
+                if w.info.get("relay_transit_p50_s") is not None]
+        cpu = self.relay_info.get("cpu_pct")
+        return [f"relay: {self.relay_info.get('frames', 0)} frames"
+                + (f", {cpu:.1f} % of a core" if cpu is not None else "")
+                + (f"; relay to worker: {', '.join(hops)}" if hops else "")]

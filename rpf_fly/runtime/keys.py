@@ -49,6 +49,11 @@ class FlightKeys:
         return self.key("events")
 
     @property
+    def mocap_frames(self) -> str:
+        """The mocap relay's frames: one signed message per frame holding every body (rpf_fly/runtime/frames.py)."""
+        return self.key("mocap_frames")
+
+    @property
     def rig(self) -> str:
         """The dry run's rig (the coordinator's simulated drones: radio server and NatNet port), a queryable."""
         return self.key("rig")
@@ -76,6 +81,8 @@ class FlightKeys:
 COORDINATOR = "coordinator"
 """The coordinator's liveliness token: ``alive/coordinator``."""
 LOGGER = "logger"
+RELAY = "relay"
+"""The mocap relay's liveliness token (``alive/relay``) and ``workers/relay`` record."""
 
 
 def worker_name(dongle: int) -> str:

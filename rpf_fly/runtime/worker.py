@@ -1,9 +1,11 @@
 """A distributed flight's worker: the drones of one radio dongle, flown by the same :class:`FlightLoop` as a
 single-process flight (docs/distributed.md).
 
-The worker receives mocap itself (NatNet multicast reaches every worker; unicast NatNet serves each client that
-connects), so its drones plan from what they sense: every other drone of the mission is a mocap body in their
-views (:attr:`FlightLoop.others`), never a message from another worker's planner. It publishes what its loop logs
+The worker receives mocap itself (NatNet multicast reaches every worker), or, when the flight has a mocap relay
+(unicast NatNet, a ``motioncapture`` system: rpf_fly/runtime/relay.py), the relay's frames, signed with the
+flight's secret (:class:`~rpf_fly.runtime.relayed_mocap.RelayedMocap`). Either way its drones plan from what they
+sense: every other drone of the mission is a mocap body in their views (:attr:`FlightLoop.others`), never a
+message from another worker's planner. It publishes what its loop logs
 (setpoints, planner steps, status, events, its drones' mocap) on the flight's keys, holds its liveliness token
 ``alive/dongle-K``, waits for the coordinator's signed ``go`` after its preflight and obeys only signed commands
 (rpf_fly/runtime/auth.py). Its coordinator's token vanishing (the coordinator died, its host or the network went)
@@ -18,7 +20,7 @@ import os
 import socket
 import threading
 import time
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Optional
 
@@ -31,12 +33,16 @@ from rpf_fly.flight.recorder import MeteredRecorder
 from rpf_fly.runtime.bus import FlightBus
 from rpf_fly.runtime.cpu import zenoh_threads_cpu_s
 from rpf_fly.runtime.keys import COORDINATOR, worker_name
+from rpf_fly.runtime.relayed_mocap import RelayedMocap
 
 logger = logging.getLogger(__name__)
 
 COORDINATOR_WAIT_S = 10.0
 """How long a worker waits for its coordinator's liveliness token at start."""
 RIG_WAIT_S = 10.0
+RELAY_FRAME_WAIT_S = 5.0
+"""How long a worker of a relayed flight waits for the relay's first frame (the coordinator starts the workers once
+the relay is alive, so the frames are flowing already)."""
 DRY_RUN_TOC_CACHE = Path.home() / ".cache" / "rpf_fly" / "toc-dry-run"
 """The simulated Crazyflies' TOC cache of a dry-run worker, kept between flights (cflib keys each TOC by its CRC,
 and the fake firmware's never changes): ten drones downloading their TOCs at once through one simulated dongle, on
@@ -171,6 +177,49 @@ def discover_flight(session: Any, timeout_s: float = COORDINATOR_WAIT_S) -> str:
         time.sleep(0.2)
 
 
+def find_rig(bus: FlightBus) -> dict[str, Any]:
+    """The coordinator's dry-run rig (its simulated drones' radio server and NatNet emulator port), asked on the
+    ``rig`` key; :class:`WorkerError` when no coordinator serves one within :data:`RIG_WAIT_S`."""
+    rig = None
+    deadline = time.monotonic() + RIG_WAIT_S
+    while rig is None and time.monotonic() < deadline:
+        for reply in bus.session.get(bus.keys.rig, timeout=2.0):
+            if reply.ok is not None:
+                rig = json.loads(reply.ok.payload.to_bytes())
+        if rig is None:
+            time.sleep(0.2)
+    if rig is None:
+        raise WorkerError(f"flight {bus.keys.flight!r}: the coordinator serves no dry-run rig (is it a dry run? "
+                          "start the worker with --dry-run only for one)")
+    return rig
+
+
+def relay_transit(source: Any, since_s: float) -> dict[str, Any]:
+    """A relayed source's hop from the relay's receipt to this worker's, for the frames received from ``since_s``
+    (monotonic: the coordinator's go, as the loop's latencies) on (the report's ``relay_transit_*``); {} for a
+    source of its own."""
+    transit = [t for at, t in source.transit if at >= since_s] if isinstance(source, RelayedMocap) else []
+    if not transit:
+        return {}
+    ordered = sorted(transit)
+    return {"relay_transit_p50_s": ordered[len(ordered) // 2],
+            "relay_transit_p99_s": ordered[min(len(ordered) - 1, round(0.99 * (len(ordered) - 1)))],
+            "relay_transit_us": [round(v * 1e6) for v in transit]}
+
+
+def rig_natnet(mission: Mission, rig: dict[str, Any]) -> Any:
+    """A unicast NatNet client to the dry-run rig's NatNet emulator, its handshake done (:class:`WorkerError` when
+    the emulator does not answer within 5 s)."""
+    from rpf_fly.mocap.natnet_client import NatNetClient
+
+    client = NatNetClient(rig["radio"][0], multicast=False, local_ip="127.0.0.1",
+                          command_port=int(rig["natnet_command_port"]), data_port=None, up_axis=mission.mocap.up_axis)
+    if not client.wait_for_server(5.0):
+        client.close()
+        raise WorkerError("dry run: the coordinator's NatNet emulator did not answer within 5 s")
+    return client
+
+
 @dataclass
 class WorkerRun:
     """What a worker needs besides its mission: built by ``rpf-fly worker`` (and by tests)."""
@@ -236,6 +285,8 @@ class WorkerRun:
                 raise
             for sink in self.event_sinks:
                 loop.events.subscribe(sink)
+            if isinstance(source, RelayedMocap):  # refused frames are warnings in the flight log
+                source.warn = lambda message: loop.events.emit(WARNING, "mocap_relay", message)
             info("connecting")
             bus.token(name)
             link.attach(loop)
@@ -250,7 +301,8 @@ class WorkerRun:
                  cpu_pct=round(100 * (time.process_time() - cpu0) / flown_s, 1) if flown_s > 0 else None,
                  publish_cpu_pct=round(100 * recorder.log.writer_cpu_s / flown_s, 2) if flown_s > 0 else None,
                  logging_cpu=logging_cpu(logging_since, metered, recorder),
-                 latencies_us=[round(v * 1e6) for v in report.stats.latencies])
+                 latencies_us=[round(v * 1e6) for v in report.stats.latencies],
+                 mocap=asdict(source.stats), **relay_transit(source, wall0))
             time.sleep(0.2)  # the last messages leave before the session closes
             return report
         finally:
@@ -261,14 +313,28 @@ class WorkerRun:
                     logger.exception("worker: closing failed")
             bus.close()
 
+    def _relayed(self, bus: FlightBus) -> Any:
+        """The relay's frames (the flight has a mocap relay: rpf_fly/runtime/relay.py), once the first arrived."""
+        source = RelayedMocap(bus.session, bus.keys.mocap_frames, self.secret, bus.keys.flight)
+        self._closers.append(source.close)
+        if not source.wait_first(RELAY_FRAME_WAIT_S):
+            raise WorkerError(f"no mocap frame from the flight's relay within {RELAY_FRAME_WAIT_S:.0f} s (on "
+                              f"{bus.keys.mocap_frames}; is alive/relay up, is RPF_FLY_SECRET this flight's?)")
+        return source
+
     def _rig(self, bus: FlightBus) -> tuple[Any, Any, Optional[dict[str, str]]]:
         """The backend, the mocap source and the URIs: the coordinator's simulated drones (a dry run: their radio
-        server and NatNet emulator, found on the ``rig`` key) or the real radios and mocap."""
+        server and NatNet emulator, found on the ``rig`` key) or the real radios and mocap; the mocap is the relay's
+        frames when the flight has a relay (:func:`~rpf_fly.runtime.relay.uses_relay`, dry runs alike)."""
         from rpf_fly.radio.cflib_backend import CflibBackend
+        from rpf_fly.runtime.relay import uses_relay
 
+        relayed = uses_relay(self.mission)
         if not self.dry_run:
             from rpf_fly.flight.session import DEFAULT_TOC_CACHE, mocap_source
 
+            if relayed:
+                return CflibBackend(cache_dir=DEFAULT_TOC_CACHE), self._relayed(bus), None
             source = mocap_source(self.mission)
             self._closers.append(source.close)
             return CflibBackend(cache_dir=DEFAULT_TOC_CACHE), source, None
@@ -276,28 +342,16 @@ class WorkerRun:
         from rpf_fly.emulator.fake_world import RadioTiming
         from rpf_fly.emulator.world_process import RemoteWorld
         from rpf_fly.flight.dry_run import AIR_TIME_S, fake_uri, uri_address
-        from rpf_fly.mocap.natnet_client import NatNetClient
 
-        rig = None
-        deadline = time.monotonic() + RIG_WAIT_S
-        while rig is None and time.monotonic() < deadline:
-            for reply in bus.session.get(bus.keys.rig, timeout=2.0):
-                if reply.ok is not None:
-                    rig = json.loads(reply.ok.payload.to_bytes())
-            if rig is None:
-                time.sleep(0.2)
-        if rig is None:
-            raise WorkerError(f"flight {self.flight!r}: the coordinator serves no dry-run rig (is it a dry run? "
-                              "start the worker with --dry-run only for one)")
+        rig = find_rig(bus)
         addresses = tuple(uri_address(d.uri) for d in self.mission.drones)
         fake_radio.register(RemoteWorld((rig["radio"][0], int(rig["radio"][1])), addresses,
                                         RadioTiming(transaction_s=float(rig.get("air_time_s", AIR_TIME_S)))))
         self._closers.append(fake_radio.unregister)
-        client = NatNetClient(rig["radio"][0], multicast=False, local_ip="127.0.0.1",
-                              command_port=int(rig["natnet_command_port"]), data_port=None,
-                              up_axis=self.mission.mocap.up_axis)
-        self._closers.append(client.close)
-        if not client.wait_for_server(5.0):
-            raise WorkerError("dry run: the coordinator's NatNet emulator did not answer within 5 s")
+        if relayed:
+            client = self._relayed(bus)
+        else:
+            client = rig_natnet(self.mission, rig)
+            self._closers.append(client.close)
         uris = {d.name: fake_uri(d.uri) for d in self.mission.drones}
         return CflibBackend(cache_dir=DRY_RUN_TOC_CACHE), client, uris

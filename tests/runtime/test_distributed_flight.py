@@ -1,9 +1,12 @@
 """Distributed dry runs on Zenoh (docs/distributed.md): real sessions on 127.0.0.1, worker and logger processes,
 cflib over the fake radio to the coordinator's simulated drones, the MCAP log read back.
 
-Two flights of four drones on two dongles, each a few seconds: one with a remote worker started by itself
-(``--connect`` to the coordinator's ``--listen``), a tap on ``rpf_fly/**`` and a foreign session commanding land
-and emergency stop; one whose worker is killed mid-flight.
+Flights of four drones on two dongles, each a few seconds. The mission's NatNet is unicast, so its workers take
+their mocap from the flight's relay (``runtime.mocap_relay: auto``): one flight with a remote worker started by
+itself (``--connect`` to the coordinator's ``--listen``), a tap on ``rpf_fly/**`` and a foreign session
+commanding land and emergency stop and forging mocap frames; one whose relay is killed mid-flight. The flight
+whose worker is killed mid-flight takes the direct path (``mocap_relay: off``: each worker its own NatNet
+client); one whose relay cannot open its mocap never starts a worker.
 """
 
 from __future__ import annotations
@@ -13,6 +16,7 @@ import json
 import math
 import os
 import signal
+import socket
 import subprocess
 import sys
 import threading
@@ -20,10 +24,16 @@ import time
 from collections import defaultdict
 from pathlib import Path
 
+import pytest
+
 from rpf_fly.log.reader import read_log
+from rpf_fly.log.review import review
 from rpf_fly.mission import load_mission
-from rpf_fly.runtime.auth import SECRET_ENV, sign
+from rpf_fly.mocap.frame import MocapFrame, RigidBodyPose
+from rpf_fly.runtime.auth import SECRET_ENV, mac, new_secret, sign
 from rpf_fly.runtime.coordinator import Coordinator
+from rpf_fly.runtime.frames import FrameSigner
+from rpf_fly.runtime.relay import RelayError
 from rpf_fly.runtime.session import free_loopback_endpoint, open_session
 
 HERE = Path(__file__).resolve().parent
@@ -44,6 +54,27 @@ def _wait(predicate, timeout_s: float) -> bool:
     return False
 
 
+def _variant(tmp_path: Path, extra: str, replace: tuple[str, str] = ("", "")) -> Path:
+    """The test mission with ``extra`` appended (and one text replaced), beside its copy of the policy path."""
+    text = MISSION.read_text().replace("../../policies/", f"{ROOT}/policies/").replace(*replace)
+    path = tmp_path / "mission.yaml"
+    path.write_text(text + extra)
+    return path
+
+
+def _forged_frames(flight: str, secret: str, genuine: tuple[bytes, bytes]) -> list[tuple[bytes, bytes | None]]:
+    """What a foreign session can put on the relay key: cf1 far outside the arena, numbered far ahead (flown on, it
+    would land cf1 and, taken as the newest, shut out the relay's own frames), unsigned and signed with another
+    secret; a genuine frame replayed; a frame signed with the flight's secret that does not decode."""
+    far = MocapFrame(10**9, 0.0, time.monotonic(), None,
+                     {"cf1": RigidBodyPose("cf1", 1, (50.0, 50.0, 0.5), (0.0, 0.0, 0.0, 1.0), True)})
+    signer = FrameSigner(new_secret(), flight)
+    signer.seq = 10**9
+    payload, wrong = signer.sign(far)
+    garbage = json.dumps({"flight": flight, "seq": 10**9}).encode()
+    return [(payload, None), (payload, wrong), genuine, (garbage, mac(secret.encode(), garbage))]
+
+
 def _start(coordinator: Coordinator) -> tuple[threading.Thread, dict]:
     result: dict = {}
 
@@ -56,9 +87,11 @@ def _start(coordinator: Coordinator) -> tuple[threading.Thread, dict]:
 
 
 def test_remote_worker_tap_and_foreign_commands(tmp_path):
-    """A worker started by itself with --connect flies dongle 1 in the coordinator's flight; a subscriber on
-    rpf_fly/** sees every drone's setpoints, status and events; a foreign session's land and emergency stop on the
-    command key change nothing and leave a warning in the log."""
+    """A worker started by itself with --connect flies dongle 1 in the coordinator's flight, both workers on the
+    relay's frames; a subscriber on rpf_fly/** sees every drone's setpoints, status and events and the relay's
+    frames; a foreign session's land and emergency stop on the command key, and its forged, replayed and malformed
+    mocap frames on the relay key, change nothing: counted by each worker and one warning each in the log. The log
+    reviews as a clean flight and names the relay."""
     mission = load_mission(MISSION)
     endpoint = free_loopback_endpoint()
     lines: list[str] = []
@@ -73,12 +106,15 @@ def test_remote_worker_tap_and_foreign_commands(tmp_path):
         env=dict(_env(), **{SECRET_ENV: coordinator.secret, "RPF_FLY_WORKER_LOG": str(tmp_path / "remote.log")}),
         stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
     seen: dict[str, set[str]] = defaultdict(set)
+    genuine: list[tuple[bytes, bytes]] = []
     tap = open_session(mission.runtime.zenoh, connect=(endpoint,))
     foreign = open_session(mission.runtime.zenoh, connect=(endpoint,))
     try:
         def sample(s) -> None:  # noqa: ANN001
             parts = str(s.key_expr).split("/")
-            if parts[2] == "events":
+            if parts[2] == "mocap_frames":
+                genuine.append((s.payload.to_bytes(), s.attachment.to_bytes()))
+            elif parts[2] == "events":
                 name = json.loads(s.payload.to_bytes()).get("name")
                 seen["events"].add(name)
             elif len(parts) == 4:
@@ -93,6 +129,9 @@ def test_remote_worker_tap_and_foreign_commands(tmp_path):
         prefix = f"rpf_fly/{coordinator.flight}"  # junk on the message keys: dropped and counted, never logged
         foreign.put(f"{prefix}/setpoint/cf1", b"not json", attachment=b"\0" * 16)
         foreign.put(f"{prefix}/status/cf1", b"{bad")
+        assert genuine, "the tap saw no relayed frame"
+        for payload, attachment in _forged_frames(coordinator.flight, coordinator.secret, genuine[-1]):
+            foreign.put(f"{prefix}/mocap_frames", payload, attachment=attachment)
         thread.join(120)
         assert not thread.is_alive()
         out = remote.communicate(timeout=30)[0].decode()
@@ -139,18 +178,34 @@ def test_remote_worker_tap_and_foreign_commands(tmp_path):
 
     apart = abs(cmath.phase(tick_phase(("cf1", "cf2")) / tick_phase(("cf3", "cf4")))) / (2 * math.pi)
     assert 0.3 <= apart <= 0.5, apart  # half a period, give or take the phase lock's pull towards the frames
+    relay = json.loads(runtime["relay"])
+    assert relay["pid"] == coordinator.relay_process.pid and relay["key"].endswith("/mocap_frames")
+    assert coordinator.relay_info["state"] == "done" and coordinator.relay_info["frames"] > 100
+    assert any(m.data["name"] == "relay" and m.data["message"].startswith("relaying") for m in log.messages("/events"))
+    for worker in coordinator.workers.values():  # 4 refused by each (1 malformed), none taken
+        mocap = worker.info["mocap"]
+        assert mocap["dropped"] == 4 and mocap["malformed"] == 1 and mocap["frames"] > 100, (worker.name, mocap)
+        assert worker.info["relay_transit_p50_s"] < 0.1, worker.info["relay_transit_p50_s"]
+    refused = [m.data for m in log.messages("/events") if m.data["file"] == "mocap_relay" and m.data["level"] == 3]
+    assert len(refused) == 2 and all("ignored a mocap frame" in e["message"] for e in refused), refused  # rate-limited
+    assert not any(m.data["file"] == "geofence" for m in log.messages("/events"))  # cf1 was never 50 m away
+    summary = review(log)
+    assert summary.clean_end and not summary.interrupted
+    assert summary.outcomes == {name: "reached" for name in names}
 
 
 def test_a_killed_worker_is_noticed_and_the_others_fly_on(tmp_path):
     """SIGKILL of dongle 1's worker mid-flight: an event names it and its drones within 1 s of the kill; dongle
-    0's drones reach their goals and land; the log closes. The console's rows (``Coordinator.snapshot``, through
-    its status hook) follow the drones' status and tf messages: each drone's worker, its phase, where it is and how
-    far from its goal, its battery and link as the log has them; the lost worker's drones are marked."""
-    mission = load_mission(MISSION)
+    0's drones reach their goals and land; the log closes. Direct mocap (``mocap_relay: off``): no relay runs, each
+    worker has its own NatNet client. The console's rows (``Coordinator.snapshot``, through its status hook) follow
+    the drones' status and tf messages: each drone's worker, its phase, where it is and how far from its goal, its
+    battery and link as the log has them; the lost worker's drones are marked."""
+    path = _variant(tmp_path, "runtime: {mocap_relay: off}\n")
+    mission = load_mission(path)
     lines: list[str] = []
     log_path = tmp_path / "killed.mcap"
     shown: list[list[dict]] = []
-    coordinator = Coordinator(mission, MISSION, log_path, dry_run=True, say=lines.append,
+    coordinator = Coordinator(mission, path, log_path, dry_run=True, say=lines.append,
                               status_hook=lambda c: shown.append(c.snapshot()))
     thread, result = _start(coordinator)
     assert _wait(lambda: coordinator.drones["cf3"].state == "planning", 90), lines
@@ -199,6 +254,57 @@ def test_a_killed_worker_is_noticed_and_the_others_fly_on(tmp_path):
     assert phases.index("planning") < phases.index("landed"), sorted(set(phases))
     flown = [row["goal_distance"] for row in cf1 if row["phase"] == "planning"]
     assert flown[0] - flown[-1] > 0.5, flown
+    assert coordinator.relay_process is None and "relay" not in log.metadata["runtime"]
+    assert coordinator.workers["dongle-0"].info["mocap"]["messages"] > 0  # NatNet's own handshake: its own client
+
+
+def test_a_killed_relay_is_noticed_and_every_drone_lands(tmp_path):
+    """SIGKILL of the mocap relay mid-flight: an event names it within 1 s; every worker's mocap stops, its
+    supervisor holds, then lands its drones; every drone is down in the log, none crashed."""
+    mission = load_mission(MISSION)
+    lines: list[str] = []
+    log_path = tmp_path / "relay-killed.mcap"
+    coordinator = Coordinator(mission, MISSION, log_path, dry_run=True, say=lines.append)
+    thread, result = _start(coordinator)
+    assert _wait(lambda: all(coordinator.drones[n].state == "planning" for n in ("cf1", "cf3")), 90), lines
+    relay = coordinator.relay_process
+    assert relay is not None
+    killed_at = time.monotonic()
+    os.kill(relay.pid, signal.SIGKILL)
+    thread.join(120)
+    assert not thread.is_alive()
+    lost = [e for e in coordinator.events.history if e.kind == "relay_lost"]
+    assert len(lost) == 1 and f"pid {relay.pid}" in lost[0].message, lost
+    assert lost[0].time_s - killed_at < 1.0
+    assert result["code"] == 1
+    log = read_log(log_path)
+    assert not log.truncated
+    events = [m.data for m in log.messages("/events")]
+    assert any(e["file"] == "relay_lost" for e in events)
+    assert sum(e["file"] == "mocap_lost" and e["level"] == 4 for e in events) >= 2  # each worker's supervisor
+    for name in ("cf1", "cf2", "cf3", "cf4"):
+        final = log.messages(f"/{name}/status")[-1].data
+        assert final["state"] == "landed" and final["outcome"] == "landed_early", (name, final)
+        assert any(e["file"] == "pose_lost" and e["name"] == name for e in events), name
+        assert all(not m.data["crashed"] for m in log.messages(f"/truth/{name}")), name
+
+
+def test_a_relay_that_cannot_open_its_mocap_stops_the_flight_before_any_worker(tmp_path):
+    """A real flight whose unicast NatNet server does not answer: the relay says why and exits; the coordinator
+    raises one line naming it (the command line's exit 2), no worker was started, nothing is left running."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        silent = s.getsockname()[1]  # nobody answers there once closed
+    path = _variant(tmp_path, "", ("up_axis: z, rate_hz: 50", f"up_axis: z, rate_hz: 50, command_port: {silent}"))
+    mission = load_mission(path)
+    coordinator = Coordinator(mission, path, tmp_path / "no-mocap.mcap", dry_run=False, say=lambda line: None)
+    with pytest.raises(RelayError) as err:
+        coordinator.run()
+    message = str(err.value)
+    assert "\n" not in message and "relay exited at start (code 2)" in message and "NatNet" in message, message
+    assert all(w.process is None for w in coordinator.workers.values())
+    assert coordinator.relay_process.poll() == 2 and coordinator.logger_process.poll() is not None
+    assert not coordinator.events.history  # that one line only (the logger it ended is not "gone")
 
 
 def test_zenoh_unreachable_at_start_is_one_line_and_exit_2(tmp_path):
