@@ -37,7 +37,7 @@ from rpf_fly.radio.budget import dongle_of
 from rpf_fly.runtime.auth import SECRET_ENV, new_secret
 from rpf_fly.runtime.bus import FlightBus
 from rpf_fly.runtime.keys import COORDINATOR, LOGGER, worker_name
-from rpf_fly.runtime.session import DEFAULT_PORT, free_loopback_endpoint, open_session
+from rpf_fly.runtime.session import DEFAULT_PORT, free_loopback_endpoint, open_session, rig_host
 
 logger = logging.getLogger(__name__)
 
@@ -106,6 +106,8 @@ class Coordinator:
         else:
             self.listen = (free_loopback_endpoint(),)
         self.local_endpoint = self.listen[0].replace("0.0.0.0", "127.0.0.1").replace("[::]", "[::1]")
+        self.rig_host = rig_host(self.listen) if dry_run else None
+        """Where a dry run's simulated drones serve: the listen address (ValueError: one line, nothing started)."""
         self.drones = {d.name: DroneView() for d in mission.drones}
         self.events = EventBus(time.monotonic)
         self.events.subscribe(self._print_event)
@@ -251,8 +253,12 @@ class Coordinator:
     def _start_rig(self, bus: FlightBus) -> None:
         from rpf_fly.flight.dry_run import RADIO_LOSS, DryRun, world_exit_report_for
 
+        host = self.rig_host or "127.0.0.1"  # where the workers reach the coordinator, they reach the drones
         self.rig = DryRun(self.mission, radio_loss=RADIO_LOSS if self.radio_loss else None,
-                          world_exit_report=world_exit_report_for(self.log_path)).__enter__()
+                          world_exit_report=world_exit_report_for(self.log_path), host=host).__enter__()
+        if not host.startswith("127."):
+            self.say(f"dry run: the simulated drones serve on {host} (radio udp/{self.rig.world.radio[1]}, NatNet "
+                     f"udp/{self.rig.world.natnet_command_port}), as Zenoh listens there")
         if self.rig.mocap is not None:  # the workers receive the mocap; the coordinator needs none
             self.rig.mocap.close()
             self.rig.mocap = None

@@ -244,8 +244,9 @@ class WorkerRun:
         from rpf_fly.emulator import fake_radio
         from rpf_fly.emulator.fake_world import RadioTiming
         from rpf_fly.emulator.world_process import RemoteWorld
-        from rpf_fly.flight.dry_run import AIR_TIME_S, fake_uri, uri_address
+        from rpf_fly.flight.dry_run import AIR_TIME_S, client_ip, fake_uri, uri_address
         from rpf_fly.mocap.natnet_client import NatNetClient
+        from rpf_fly.runtime.session import rig_address
 
         rig = None
         deadline = time.monotonic() + RIG_WAIT_S
@@ -259,10 +260,11 @@ class WorkerRun:
             raise WorkerError(f"flight {self.flight!r}: the coordinator serves no dry-run rig (is it a dry run? "
                               "start the worker with --dry-run only for one)")
         addresses = tuple(uri_address(d.uri) for d in self.mission.drones)
-        fake_radio.register(RemoteWorld((rig["radio"][0], int(rig["radio"][1])), addresses,
+        host = rig_address(str(rig["radio"][0]), self.connect or self.mission.runtime.zenoh.connect)
+        fake_radio.register(RemoteWorld((host, int(rig["radio"][1])), addresses,
                                         RadioTiming(transaction_s=float(rig.get("air_time_s", AIR_TIME_S)))))
         self._closers.append(fake_radio.unregister)
-        client = NatNetClient(rig["radio"][0], multicast=False, local_ip="127.0.0.1",
+        client = NatNetClient(host, multicast=False, local_ip=client_ip(host),
                               command_port=int(rig["natnet_command_port"]), data_port=None,
                               up_axis=self.mission.mocap.up_axis)
         self._closers.append(client.close)
