@@ -3,6 +3,10 @@
 
 from __future__ import annotations
 
+import hashlib
+import hmac
+import json
+
 import pytest
 
 from rpf_fly.runtime.auth import CommandVerifier, new_secret, sign
@@ -57,6 +61,27 @@ def test_commands_that_are_not_the_coordinators_are_refused(case):
         payload = payload.replace(b"emergency_stop", b"go")
     command, why = verifier.verify(payload, signature)
     assert command is None and why
+
+
+def test_a_go_carries_the_grounded_drones_under_its_signature():
+    """The drones that stay on the ground ride in the signed go: a foreign session can neither add nor remove one,
+    nor ground drones with another command."""
+    secret = new_secret()
+    payload, signature = sign(secret, "f1", "go", 1, "", ("cf3", "cf1"))
+    command, why = CommandVerifier(secret, "f1").verify(payload, signature)
+    assert command is not None and command.grounded == ("cf1", "cf3") and why == ""
+    plain, _ = CommandVerifier(secret, "f1").verify(*sign(secret, "f1", "go", 1))
+    assert plain is not None and plain.grounded == ()
+    tampered = payload.replace(b'"cf3"', b'"cf2"')
+    assert CommandVerifier(secret, "f1").verify(tampered, signature)[0] is None
+    ungrounded = payload.replace(b',"grounded":["cf1","cf3"]', b"")
+    assert ungrounded != payload and CommandVerifier(secret, "f1").verify(ungrounded, signature)[0] is None
+    land, why = CommandVerifier(secret, "f1").verify(*sign(secret, "f1", "land", 1, "", ("cf1",)))
+    assert land is None and "refused" in why
+    malformed = json.dumps({"command": "go", "seq": 1, "reason": "", "t_ns": 0, "flight": "f1",
+                            "grounded": "cf1"}).encode()
+    assert CommandVerifier(secret, "f1").verify(malformed, hmac.new(secret.encode(), malformed, hashlib.sha256)
+                                                .hexdigest().encode()) == (None, "malformed command")
 
 
 @pytest.mark.parametrize("listen, host", [
