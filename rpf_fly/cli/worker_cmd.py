@@ -32,7 +32,7 @@ def _endpoints(values: tuple[str, ...], option: str) -> tuple[str, ...]:
 
 
 def fly_distributed(mission, mission_path: Path, log_path: Path, dry_run: bool, remote: Optional[str],  # type: ignore[no-untyped-def]
-                    listen: tuple[str, ...], radio_loss: bool, verbose: bool) -> None:
+                    listen: tuple[str, ...], radio_loss: bool, verbose: bool, start_faults=None) -> None:
     """The coordinator of ``rpf-fly fly --distributed`` (raises typer.Exit with the flight's code)."""
     from rpf_fly.cli.fly_cmd import text_log_path
     from rpf_fly.cli.logs import route_logging
@@ -42,7 +42,7 @@ def fly_distributed(mission, mission_path: Path, log_path: Path, dry_run: bool, 
     try:
         coordinator = Coordinator(mission, mission_path, log_path, dry_run=dry_run, remote_dongles=_dongles(remote),
                                   listen=_endpoints(listen, "--listen"), radio_loss=radio_loss,
-                                  say=lambda line: typer.echo(line, err=True))
+                                  say=lambda line: typer.echo(line, err=True), start_faults=start_faults)
     except ValueError as err:
         raise fail(str(err))
 

@@ -61,6 +61,7 @@ class CoordinatorLink:
         self._bus = bus
         self._info = info
         self._verdict: Optional[str] = None
+        self._grounded: tuple[str, ...] = ()
         self.loop: Optional[FlightLoop] = None
         self._pending: list[Command] = []
         self._lock = threading.Lock()
@@ -75,6 +76,9 @@ class CoordinatorLink:
 
     def verdict(self) -> Optional[str]:
         return self._verdict
+
+    def grounded(self) -> tuple[str, ...]:
+        return self._grounded
 
     # the bus
     def attach(self, loop: FlightLoop) -> None:
@@ -96,6 +100,7 @@ class CoordinatorLink:
         if command.command == "go":
             if self._verdict is None:
                 self.go_at = (time.monotonic(), time.process_time())
+                self._grounded = command.grounded  # signed with the go; set before the verdict the loop reads
             self._verdict = self._verdict or "go"
         elif command.command == "abort":
             self._verdict = "abort"
