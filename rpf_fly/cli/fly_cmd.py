@@ -156,11 +156,17 @@ def fly(
     if distributed:
         from rpf_fly.cli.worker_cmd import fly_distributed
 
-        if faults is not None or foxglove or foxglove_port is not None or foxglove_host is not None or \
-                mocap not in ("natnet", "motioncapture"):
-            raise fail("--distributed flies without --faults, --foxglove or --mocap sim (docs/distributed.md)")
+        if foxglove or foxglove_port is not None or foxglove_host is not None or mocap not in ("natnet",
+                                                                                               "motioncapture"):
+            raise fail("--distributed flies without --foxglove or --mocap sim (docs/distributed.md)")
+        timed = next((f for f in schedule or () if f.at_s is not None or f.drone is None), None)
+        if timed is not None:  # the power-on ones live in the simulated drones; the others need the worker's loop
+            raise fail(f"{faults}:{timed.line}: {timed.kind}: --distributed takes the power-on faults only "
+                       "(yaw_offset, start_offset, upside_down, motor_fault; docs/distributed.md)")
+        from rpf_fly.flight.fault_injection import FaultInjection
+
         fly_distributed(loaded, mission, log_path, dry_run, remote_dongles, tuple(listen or ()), radio_loss,
-                        verbose, console)
+                        verbose, console, FaultInjection(loaded, schedule).start_faults() if schedule else None)
     from rpf_fly.cli.live_opts import start_live
     from rpf_fly.cli.logs import route_logging
 

@@ -32,10 +32,11 @@ def _endpoints(values: tuple[str, ...], option: str) -> tuple[str, ...]:
 
 
 def fly_distributed(mission, mission_path: Path, log_path: Path, dry_run: bool, remote: Optional[str],  # type: ignore[no-untyped-def]
-                    listen: tuple[str, ...], radio_loss: bool, verbose: bool, console: bool = True) -> None:
+                    listen: tuple[str, ...], radio_loss: bool, verbose: bool, console: bool = True,
+                    start_faults=None) -> None:
     """The coordinator of ``rpf-fly fly --distributed`` (raises typer.Exit with the flight's code). ``console``: the
     status table of ``rpf-fly fly`` (cli/flight_console.py) from the coordinator's snapshot, with each drone's worker:
-    live on a terminal, the final table at the end."""
+    live on a terminal, the final table at the end. ``start_faults``: a dry run's power-on faults."""
     from rpf_fly.cli.fly_cmd import _nothing, text_log_path
     from rpf_fly.cli.logs import route_logging
     from rpf_fly.runtime.coordinator import Coordinator
@@ -52,7 +53,7 @@ def fly_distributed(mission, mission_path: Path, log_path: Path, dry_run: bool, 
                                   listen=_endpoints(listen, "--listen"), radio_loss=radio_loss,
                                   say=live.line if live is not None else lambda line: typer.echo(line, err=True),
                                   status_hook=(lambda c: live.show(c.phase, c.snapshot)) if live is not None
-                                  else None)
+                                  else None, start_faults=start_faults)
     except ValueError as err:
         raise fail(str(err))
 

@@ -4,7 +4,8 @@ Why: a real flight's process holds the flight loop, the NatNet client, cflib wit
 writer; the drones and Motive are other machines. In a dry run the simulated firmwares (stepped at 100 Hz, about
 0.4 ms of Python for 10 drones), the packet handling of every radio transaction and the NatNet emulator would
 otherwise run on threads of the flight's process and hold its GIL at random moments, delaying setpoints in a way
-no real flight sees. So the dry run starts them here, in a child process, and reaches them over 127.0.0.1:
+no real flight sees. So the dry run starts them here, in a child process, and reaches them over 127.0.0.1 (a
+distributed flight's coordinator: over the address it listens on, so workers on other hosts reach them too):
 
 - the radio: each fake link (``fake_radio.FakeLink``, in the flight's process, emulating cflib's Crazyradio driver
   thread) performs each transaction as one UDP request to the child and waits for its reply, as the real driver
@@ -295,17 +296,21 @@ class WorldProcess:
         names: Optional[Mapping[int, str]] = None,
         exit_report: Optional[str | os.PathLike[str]] = None,
         orphan_cap_s: float = ORPHAN_CAP_S,
+        host: str = "127.0.0.1",
     ) -> None:
         """``names``: the drones' names (radio address -> name) for the exit report (else their addresses).
         ``exit_report``: where the child writes its exit report if this process dies without closing it (None:
-        no report); ``orphan_cap_s``: how long it simulates the drones at most then (`ORPHAN_CAP_S`)."""
+        no report); ``orphan_cap_s``: how long it simulates the drones at most then (`ORPHAN_CAP_S`). ``host``: the
+        IPv4 address its radio server and NatNet server bind (default loopback; a distributed flight's coordinator
+        gives its Zenoh listen address, so workers on other hosts reach the drones: docs/distributed.md); the
+        control connection stays on loopback."""
         self._lock = threading.Lock()
         self._conn: Any = None
         key = secrets.token_bytes(32)
         settings = {"drones": dict(drones), "bodies": dict(bodies), "seed": seed, "obstacles": tuple(obstacles),
                     "natnet": dict(natnet) if natnet else None, "authkey": key, "names": dict(names or {}),
                     "exit_report": os.fspath(exit_report) if exit_report is not None else None,
-                    "orphan_cap_s": float(orphan_cap_s)}
+                    "orphan_cap_s": float(orphan_cap_s), "host": host}
         self._process = subprocess.Popen(
             [sys.executable, "-m", "rpf_fly.emulator.world_process"], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
         )
@@ -435,12 +440,12 @@ def _read_line(stream: Any, timeout_s: float) -> Optional[bytes]:
 class _RadioServer:
     """The child's end of the fake links: one UDP socket, one thread, every link's transactions in turn."""
 
-    def __init__(self, world: FakeWorld) -> None:
+    def __init__(self, world: FakeWorld, host: str = "127.0.0.1") -> None:
         self._world = world
         self._ports: dict[int, DronePort | None] = {}
         self._wakers: dict[tuple[Any, int], threading.Event] = {}
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self.sock.bind(("127.0.0.1", 0))
+        self.sock.bind((host, 0))
         self._thread = threading.Thread(target=self._run, name="fake-radio-server", daemon=True)
 
     def start(self) -> _RadioServer:
@@ -648,7 +653,8 @@ def serve(settings: dict[str, Any], out: Any) -> None:
     orphan.watch_parent()
     bodies = settings["bodies"]
     tracked = SimulatedBodies(world, bodies)
-    radio = _RadioServer(world).start()
+    host = settings.get("host", "127.0.0.1")
+    radio = _RadioServer(world, host).start()
     server = None
     natnet = settings["natnet"]
     try:
@@ -657,7 +663,7 @@ def serve(settings: dict[str, Any], out: Any) -> None:
 
             server = NatNetServer(
                 tracked.poses, version=natnet["version"], multicast=natnet.get("multicast", False),
-                local_ip="127.0.0.1",
+                local_ip=host,
                 rate_hz=natnet["rate_hz"], up_axis=natnet["up_axis"], bodies=list(bodies.values()),
                 extra_latency_s=tracked.extra_latency_s,
             ).start()

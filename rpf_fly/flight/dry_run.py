@@ -77,6 +77,12 @@ def world_exit_report_for(log_path: Path) -> Path:
     return log_path.with_name(log_path.name + ".world-exit.json")
 
 
+def client_ip(server: str) -> str:
+    """The local address a NatNet client of the emulator at ``server`` binds: loopback for a loopback server (as
+    before: nothing else needed), else any (the system picks the card that routes to it)."""
+    return "127.0.0.1" if server.startswith("127.") else "0.0.0.0"
+
+
 def fake_uri(uri: str) -> str:
     """``radio://0/80/2M/E7E7E7E701`` -> ``fake://0/80/2M/E7E7E7E701`` (fake URIs pass through)."""
     scheme, _, rest = uri.partition("://")
@@ -126,6 +132,7 @@ class DryRun:
         air_time_s: Optional[float] = None,
         radio_loss: Optional[BurstLoss] = RADIO_LOSS,
         world_exit_report: Optional[Path] = None,
+        host: str = "127.0.0.1",
     ):
         """``truth``: the flight log of a flight on this rig gets the world's truth (``/truth/<drone>``); False only
         to measure what that costs (tools/bench_flight.py ``--no-truth``). ``air_time_s``: how long each radio
@@ -135,7 +142,9 @@ class DryRun:
         ``drone_configs`` whose `LinkFaults.burst` is set keeps its own. ``world_exit_report``: where the simulated
         drones' process writes what became of the drones if this process dies without closing the dry run
         (SIGKILL: they fall by the firmware's watchdog; `rpf_fly.emulator.world_process`); default
-        `default_world_exit_report()`; a stale report there is removed at the start."""
+        `default_world_exit_report()`; a stale report there is removed at the start. ``host``: the IPv4 address
+        the simulated drones' radio server and NatNet emulator bind (default loopback: nothing opened to the
+        network; a distributed flight's coordinator gives its listen address: docs/distributed.md)."""
         if mocap is None:  # the mission's kind decides: its own client against the emulator
             mocap = "motioncapture" if mission.mocap.kind == "motioncapture" else "natnet"
         if mocap not in ("natnet", "sim", "motioncapture"):
@@ -166,6 +175,7 @@ class DryRun:
         self.world_exit_report = Path(world_exit_report) if world_exit_report is not None else \
             default_world_exit_report()
         self.in_process = not process
+        self.host = host
         self.truth = truth
         self.world: Any = None  # a FakeWorld, or the WorldProcess speaking to one (same hook names)
         self._bodies: Any = None
@@ -203,7 +213,7 @@ class DryRun:
                 from rpf_fly.emulator.natnet_server import NatNetServer
 
                 self.server = NatNetServer(
-                    self._bodies.poses, version=self.natnet_version, multicast=multicast, local_ip="127.0.0.1",
+                    self._bodies.poses, version=self.natnet_version, multicast=multicast, local_ip=self.host,
                     rate_hz=self.rate_hz, up_axis=up, bodies=list(self.bodies.values()),
                     extra_latency_s=self._bodies.extra_latency_s,
                 ).start()
@@ -213,15 +223,16 @@ class DryRun:
             self.world = self._bodies = WorldProcess(
                 self.drone_configs, body_of_address, seed=self.seed,
                 natnet=natnet if served else None, obstacles=self.mission.obstacles,
-                names=self._names, exit_report=self.world_exit_report,
+                names=self._names, exit_report=self.world_exit_report, host=self.host,
             )
             fake_radio.register(RemoteWorld(self.world.radio, tuple(self.drone_configs), self.timing))
             command_port = self.world.natnet_command_port
         if self.mocap_kind == "natnet":
             from rpf_fly.mocap.natnet_client import NatNetClient
 
+            server = "127.0.0.1" if self.host == "0.0.0.0" else self.host
             client = NatNetClient(
-                "127.0.0.1", multicast=False, local_ip="127.0.0.1", command_port=command_port,
+                server, multicast=False, local_ip=client_ip(server), command_port=command_port,
                 data_port=None, up_axis=up,
             )
             self.mocap = client
@@ -231,7 +242,9 @@ class DryRun:
             from rpf_fly.mocap.motioncapture_source import MotioncaptureSource
 
             self.mocap = MotioncaptureSource(
-                "optitrack", "127.0.0.1", {"interface_ip": "127.0.0.1", "port_command": str(command_port)},
+                "optitrack", "127.0.0.1" if self.host == "0.0.0.0" else self.host,
+                {"interface_ip": "127.0.0.1" if self.host == "0.0.0.0" else self.host,
+                 "port_command": str(command_port)},
                 up_axis=up, bodies=list(self.bodies.values()),
             )
         else:

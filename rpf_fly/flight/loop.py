@@ -59,6 +59,11 @@ class SwarmLink(Protocol):
     def verdict(self) -> Optional[str]:
         """``go`` (take off), ``abort`` (nothing takes off) or None (not yet)."""
 
+    def grounded(self) -> Collection[str]:
+        """With ``go``: every drone of the swarm that stays on the ground (``safety.on_preflight_failure:
+        ground``), whichever loop flies it; this loop keeps down its own drones beside them
+        (:meth:`FlightLoop._ground_neighbours`)."""
+
 
 INTERRUPT_STOP = ("interrupted by Ctrl-C", "Ctrl-C: all drones land (Ctrl-C again: emergency stop)")
 """The first Ctrl-C's :meth:`FlightLoop.request_stop`: the reason each drone landed, and what the console says once
@@ -313,12 +318,15 @@ class FlightLoop:
         if problems:
             for name, problem in problems.items():
                 self.commander.fail(self.agents[name], f"preflight failed: {problem}")
-            if self.mission.safety.on_preflight_failure == "abort" or len(problems) == len(self.agents):
+            # With a swarm, a loop whose every drone failed still reports and waits: the coordinator decides
+            # whether the other loops' drones fly (as a single process would fly them).
+            alone = self.swarm is None
+            if self.mission.safety.on_preflight_failure == "abort" or (alone and len(problems) == len(self.agents)):
                 self._abort(f"preflight failed for {', '.join(sorted(problems))}: no drone takes off")
                 return False
             self._ground_neighbours(set(problems))
         flying = [a for a in self.agents.values() if a.phase == DronePhase.WAITING]
-        if not flying:
+        if not flying and self.swarm is None:
             self._abort("no drone passed its preflight: no drone takes off")
             return False
         for agent in flying:
@@ -338,7 +346,7 @@ class FlightLoop:
         while not self._stop.is_set():
             verdict = self.swarm.verdict()
             if verdict == "go":
-                return True
+                return self._ground_for_swarm(set(self.swarm.grounded()))
             if verdict == "abort":
                 break
             if self.clock() > deadline:
@@ -348,25 +356,55 @@ class FlightLoop:
         self._abort("the swarm does not take off" + (f" ({self._stop_reason})" if self._stop_reason else ""))
         return False
 
+    def _ground_for_swarm(self, grounded: set[str]) -> bool:
+        """The coordinator's go names every drone of the swarm that stays on the ground: keep down this loop's
+        drones beside them, before anything takes off, as a single process would (their spots from this loop's
+        own mocap, which sees every drone). False when none of this loop's drones is left to fly."""
+        ready = [n for n, a in self.agents.items() if a.phase == DronePhase.READY]
+        if grounded - set(self.agents):
+            self._ground_neighbours(grounded)
+        kept = sorted(n for n in ready if self.agents[n].phase == DronePhase.FAILED)
+        if kept:
+            others = ", ".join(sorted(grounded - set(self.agents)))
+            self.events.emit(ERROR, "preflight", f"{', '.join(kept)} stay on the ground beside the swarm's grounded "
+                             f"drones ({others}); the others fly")
+        if not any(a.phase == DronePhase.READY for a in self.agents.values()):
+            self._abort("every drone of this loop stays on the ground; the swarm's others fly")
+            return False
+        return True
+
     def _ground_neighbours(self, grounded: set[str]) -> None:
         """``safety.on_preflight_failure: ground``: a drone whose start or goal is within 2r of where a grounded
-        drone stands could not take off or land there; it stays down too."""
+        drone stands could not take off or land there; it stays down too, and then stands where it is for the
+        others in turn (A grounded, B's goal at A: B stays at its start, so C, whose goal is B's start, stays too).
+        Every drone of the mission counts, this loop's or another's (a distributed flight's worker: the others'
+        grounded drones come with the coordinator's go, their spots from this loop's mocap), so every loop reaches
+        the same set as a single process would; only this loop's drones are commanded."""
         r2 = 2 * self.mission.planner.safety_radius
-        spots = {n: p.xy for n in grounded if (p := self.tracker.get(n)) is not None}
-        for agent in self.agents.values():
-            if agent.phase not in (DronePhase.WAITING, DronePhase.READY):
-                continue
-            for name, xy in spots.items():
-                for what, point in (("start", agent.start), ("goal", agent.goal)):
-                    if abs(point - xy) < r2:
-                        why = f"its {what} is {abs(point - xy):.2f} m from {name}, which stays on the ground"
-                        if agent.phase == DronePhase.READY:  # armed (or asked to): disarm and keep it down
-                            self.commander.refuse_take_off(agent, why)
-                        else:
-                            self.commander.fail(agent, f"preflight: {why}")
-                        break
-                if agent.phase not in (DronePhase.WAITING, DronePhase.READY):
-                    break
+        down = set(grounded)
+        new = set(grounded)
+        while new:
+            spots = {n: p.xy for n in sorted(new) if (p := self.tracker.get(n)) is not None}
+            new = set()
+            for drone in self.mission.drones:
+                agent = self.agents.get(drone.name)
+                if drone.name in down or (agent is not None and agent.phase not in (DronePhase.WAITING,
+                                                                                    DronePhase.READY)):
+                    continue
+                why = next((f"its {what} is {abs(point - xy):.2f} m from {name}, which stays on the ground"
+                            for name, xy in spots.items()
+                            for what, point in (("start", complex(*drone.start)), ("goal", complex(*drone.goal)))
+                            if abs(point - xy) < r2), None)
+                if why is None:
+                    continue
+                new.add(drone.name)
+                if agent is None:
+                    continue  # another loop's: that loop keeps it down (it reaches the same set)
+                if agent.phase == DronePhase.READY and self.phase == SwarmPhase.TAKEOFF:  # asked to arm: disarm
+                    self.commander.refuse_take_off(agent, why)
+                else:
+                    self.commander.fail(agent, f"preflight: {why}")
+            down |= new
 
     ESTIMATOR_SETTLE_S = 3.0
     """How long the estimates may take to agree with mocap after their reset (extpos streams meanwhile)."""

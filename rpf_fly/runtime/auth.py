@@ -3,10 +3,11 @@
 A Zenoh endpoint is open to anyone who reaches it; a worker obeys only commands signed by its own flight's
 coordinator. Each flight draws a fresh 256-bit secret; the coordinator hands it to its local workers in their
 environment (``RPF_FLY_SECRET``, not their command line: ``ps`` shows command lines to every user) and prints how
-to give it to a remote one. A command is a JSON object ``{"command", "seq", "reason", "t_ns", "flight"}`` whose
-attachment is the HMAC-SHA256 of its bytes under the secret (hex). The secret itself never crosses the network, so
-a subscriber on ``rpf_fly/**`` cannot learn it; a replayed command is refused by its sequence number (each
-coordinator counts up from 1; a worker takes each number once, in order).
+to give it to a remote one. A command is a JSON object ``{"command", "seq", "reason", "t_ns", "flight"}`` (a ``go``
+also ``"grounded"``: the drones that stay on the ground, signed with the rest) whose attachment is the
+HMAC-SHA256 of its bytes under the secret (hex). The secret itself never crosses the network, so a subscriber on
+``rpf_fly/**`` cannot learn it; a replayed command is refused by its sequence number (each coordinator counts up
+from 1; a worker takes each number once, in order).
 """
 
 from __future__ import annotations
@@ -23,6 +24,8 @@ SECRET_ENV = "RPF_FLY_SECRET"
 COMMANDS = ("go", "abort", "finish", "land", "emergency_stop")
 """go: take off (every worker passed its preflight); abort: land or stay down before take-off; finish: the mission
 is over (every drone at its goal), land normally; land: the operator's first Ctrl-C; emergency_stop: motors off."""
+GROUNDED_ON = ("go",)
+"""The commands that may name drones staying on the ground (``safety.on_preflight_failure: ground``)."""
 
 
 def new_secret() -> str:
@@ -34,6 +37,9 @@ class Command:
     command: str
     seq: int
     reason: str = ""
+    grounded: tuple[str, ...] = ()
+    """A ``go``: every drone of the swarm that stays on the ground (failed its preflight, or kept down by one that
+    did); each worker keeps down its own drones that could not take off or land beside them (FlightLoop)."""
 
 
 def mac(key: bytes, payload: bytes) -> bytes:
@@ -46,10 +52,13 @@ def signed_by(key: bytes, payload: bytes, attachment: Optional[bytes]) -> bool:
     return bool(attachment) and hmac.compare_digest(mac(key, payload), bytes(attachment))  # type: ignore[arg-type]
 
 
-def sign(secret: str, flight: str, command: str, seq: int, reason: str = "") -> tuple[bytes, bytes]:
+def sign(secret: str, flight: str, command: str, seq: int, reason: str = "",
+         grounded: tuple[str, ...] = ()) -> tuple[bytes, bytes]:
     """The payload and its signature (the sample's attachment) of one command."""
-    payload = json.dumps({"command": command, "seq": int(seq), "reason": reason, "t_ns": time.time_ns(),
-                          "flight": flight}, separators=(",", ":")).encode()
+    body = {"command": command, "seq": int(seq), "reason": reason, "t_ns": time.time_ns(), "flight": flight}
+    if grounded:
+        body["grounded"] = sorted(grounded)
+    payload = json.dumps(body, separators=(",", ":")).encode()
     return payload, mac(secret.encode(), payload)
 
 
@@ -71,11 +80,14 @@ class CommandVerifier:
         try:
             body = json.loads(payload)
             command, seq, reason, flight = body["command"], int(body["seq"]), str(body.get("reason", "")), body["flight"]
+            grounded = body.get("grounded", [])
+            if not isinstance(grounded, list) or not all(isinstance(n, str) for n in grounded):
+                raise TypeError("grounded")
         except (ValueError, KeyError, TypeError):
             return None, "malformed command"
-        if flight != self._flight or command not in COMMANDS:
+        if flight != self._flight or command not in COMMANDS or (grounded and command not in GROUNDED_ON):
             return None, f"command {command!r} for flight {flight!r} refused"
         if seq <= self._last_seq:
             return None, f"replayed command {command!r} (sequence {seq} after {self._last_seq})"
         self._last_seq = seq
-        return Command(command, seq, reason), ""
+        return Command(command, seq, reason, tuple(grounded)), ""

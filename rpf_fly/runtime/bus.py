@@ -74,10 +74,10 @@ class FlightBus:
 
     # ------------------------------------------------------------------------------------------ commands
 
-    def command(self, secret: str, command: str, reason: str = "") -> None:
-        """The coordinator: publish one signed command."""
+    def command(self, secret: str, command: str, reason: str = "", grounded: tuple[str, ...] = ()) -> None:
+        """The coordinator: publish one signed command (a ``go``'s ``grounded`` drones signed with it)."""
         self._seq += 1
-        payload, signature = sign(secret, self.keys.flight, command, self._seq, reason)
+        payload, signature = sign(secret, self.keys.flight, command, self._seq, reason, grounded)
         self.session.put(self.keys.command, payload, attachment=signature)
 
     def on_commands(self, secret: str, obey: Callable[[Command], None],

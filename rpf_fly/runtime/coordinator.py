@@ -7,7 +7,8 @@ shows which process flies which dongle; the flight's secret goes in their enviro
 dongle's worker is alive, remote ones included, before any drone arms. Then, from the drones' status messages:
 
 - preflight: once every live worker's drones are ready or failed, ``go`` (or ``abort`` when none can fly, or one
-  failed under ``safety.on_preflight_failure: abort``);
+  failed under ``safety.on_preflight_failure: abort``); the ``go`` names the failed ones, and each worker keeps
+  down its drones beside them, as one process would;
 - flying: once every live worker's drones are at their goals (or down) for ``safety.arrival_hold_s``, ``finish``;
 - a worker whose liveliness token vanishes (killed, its host lost) is an event naming it and its drones; its drones
   are left to their firmware's watchdog and stay in the others' views from mocap; the others fly on;
@@ -33,7 +34,7 @@ import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Optional
+from typing import Any, Callable, Mapping, Optional
 
 from rpf_fly.flight.events import ERROR, FATAL, INFO, WARNING, EventBus, FlightEvent
 from rpf_fly.mission.model import Mission
@@ -42,7 +43,7 @@ from rpf_fly.runtime.auth import SECRET_ENV, new_secret
 from rpf_fly.runtime.bus import FlightBus
 from rpf_fly.runtime.keys import COORDINATOR, LOGGER, RELAY, worker_name
 from rpf_fly.runtime.relay import RelayError, uses_relay
-from rpf_fly.runtime.session import DEFAULT_PORT, free_loopback_endpoint, open_session
+from rpf_fly.runtime.session import DEFAULT_PORT, free_loopback_endpoint, open_session, rig_host
 
 logger = logging.getLogger(__name__)
 
@@ -92,7 +93,10 @@ class Coordinator:
                  remote_dongles: tuple[int, ...] = (), listen: tuple[str, ...] = (),
                  say: Callable[[str], None] = print, radio_loss: bool = True,
                  remote_wait_s: float = REMOTE_WAIT_S, worker_args: tuple[str, ...] = (),
-                 status_hook: Optional[Callable[["Coordinator"], None]] = None):
+                 status_hook: Optional[Callable[["Coordinator"], None]] = None,
+                 start_faults: Optional[Mapping[str, Any]] = None):
+        """``start_faults``: a dry run's power-on faults (``DryRun(start_faults=...)``: a drone standing off its
+        start, rotated, tumbled, with a failing motor), applied by the simulated drones themselves."""
         self.mission = mission
         self.mission_path = Path(mission_path)
         self.log_path = Path(log_path)
@@ -105,6 +109,7 @@ class Coordinator:
         self.radio_loss = radio_loss
         self.remote_wait_s = remote_wait_s
         self.worker_args = worker_args
+        self.start_faults = dict(start_faults or {})
         self.secret = new_secret()
         dongles = sorted({dongle_of(d.uri) for d in mission.drones})
         unknown = sorted(set(remote_dongles) - set(dongles))
@@ -123,6 +128,8 @@ class Coordinator:
         else:
             self.listen = (free_loopback_endpoint(),)
         self.local_endpoint = self.listen[0].replace("0.0.0.0", "127.0.0.1").replace("[::]", "[::1]")
+        self.rig_host = rig_host(self.listen) if dry_run else None
+        """Where a dry run's simulated drones serve: the listen address (ValueError: one line, nothing started)."""
         self.drones = {d.name: DroneView() for d in mission.drones}
         self._goals = {d.name: complex(*d.goal) for d in mission.drones}
         self.events = EventBus(time.monotonic)
@@ -325,8 +332,13 @@ class Coordinator:
     def _start_rig(self, bus: FlightBus) -> None:
         from rpf_fly.flight.dry_run import RADIO_LOSS, DryRun, world_exit_report_for
 
+        host = self.rig_host or "127.0.0.1"  # where the workers reach the coordinator, they reach the drones
         self.rig = DryRun(self.mission, radio_loss=RADIO_LOSS if self.radio_loss else None,
-                          world_exit_report=world_exit_report_for(self.log_path)).__enter__()
+                          world_exit_report=world_exit_report_for(self.log_path), host=host,
+                          start_faults=self.start_faults).__enter__()
+        if not host.startswith("127."):
+            self.say(f"dry run: the simulated drones serve on {host} (radio udp/{self.rig.world.radio[1]}, NatNet "
+                     f"udp/{self.rig.world.natnet_command_port}), as Zenoh listens there")
         if self.rig.mocap is not None:  # the workers receive the mocap; the coordinator needs none
             self.rig.mocap.close()
             self.rig.mocap = None
@@ -452,11 +464,11 @@ class Coordinator:
             self._wake.clear()
             self._show()
 
-    def _command(self, command: str, reason: str = "") -> None:
+    def _command(self, command: str, reason: str = "", grounded: tuple[str, ...] = ()) -> None:
         assert self.bus is not None
         self.events.emit(INFO if command in ("go", "finish") else WARNING, "command", f"{command}"
                          f"{': ' + reason if reason else ''}")
-        self.bus.command(self.secret, command, reason)
+        self.bus.command(self.secret, command, reason, grounded)
 
     def _live(self) -> list[WorkerView]:
         return [w for w in self.workers.values() if w.alive and not w.done]
@@ -502,8 +514,10 @@ class Coordinator:
                 if len(failed) == len(states) or (failed and self.mission.safety.on_preflight_failure == "abort"):
                     self._command("abort", f"preflight failed for {', '.join(failed)}: no drone takes off")
                     self.phase = "aborted"
-                else:
-                    self._command("go", "every worker passed its preflight")
+                else:  # the failed stay down; the go names them, each worker keeps down its drones beside them
+                    self._command("go", f"every worker finished its preflight; {', '.join(failed)} stay on the "
+                                  "ground, with every drone that could not take off or land beside them" if failed
+                                  else "every worker passed its preflight", tuple(failed))
                     self.phase = "flying"
                     self.events.emit(INFO, "phase", "swarm: flying")
             elif self.phase == "flying":

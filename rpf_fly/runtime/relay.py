@@ -31,7 +31,7 @@ import threading
 import time
 from dataclasses import asdict
 from pathlib import Path
-from typing import Any, Callable, Optional
+from typing import Any, Callable, Optional, Sequence
 
 from rpf_fly.mission.model import Mission
 from rpf_fly.runtime.keys import COORDINATOR, RELAY
@@ -129,13 +129,15 @@ class FrameRelay:
             pass
 
 
-def open_source(mission: Mission, bus: Any, dry_run: bool) -> Any:
-    """The mission's mocap, connected; a dry run: the coordinator's NatNet emulator (its ``rig``). Raises with one
-    line when it does not answer."""
+def open_source(mission: Mission, bus: Any, dry_run: bool, connect: Sequence[str] = ()) -> Any:
+    """The mission's mocap, connected; a dry run: the coordinator's NatNet emulator (its ``rig``, reached where
+    ``connect`` reached the coordinator). Raises with one line when it does not answer."""
     if dry_run:
+        from rpf_fly.runtime.session import rig_address
         from rpf_fly.runtime.worker import find_rig, rig_natnet
 
-        return rig_natnet(mission, find_rig(bus))
+        rig = find_rig(bus)
+        return rig_natnet(mission, rig, rig_address(str(rig["radio"][0]), connect))
     from rpf_fly.flight.session import mocap_source
 
     return mocap_source(mission)
@@ -198,7 +200,7 @@ def main(argv: Optional[list[str]] = None) -> int:
             return seen["coordinator"] and not any(n == COORDINATOR or n.startswith("dongle-") for n in set(alive))
 
         try:
-            source = open_source(mission, bus, args.dry_run)
+            source = open_source(mission, bus, args.dry_run, args.connect)
         except Exception as err:  # noqa: BLE001 - whatever the mocap says: one line, nothing armed
             print(f"relay: cannot open the mocap ({what}): {' '.join(str(err).split())}", file=sys.stderr)
             bus.close()

@@ -32,6 +32,47 @@ def free_loopback_endpoint() -> str:
         return f"tcp/127.0.0.1:{s.getsockname()[1]}"
 
 
+def endpoint_host(endpoint: str) -> Optional[str]:
+    """The host of a Zenoh endpoint such as ``tcp/10.0.0.5:7447`` or ``tls/[::1]:7447`` (metadata and settings
+    after ``?`` or ``#`` ignored); None for one without a host and port (a Unix socket)."""
+    proto, sep, rest = endpoint.partition("/")
+    address = rest.split("?", 1)[0].split("#", 1)[0]
+    if not sep or proto not in ("tcp", "udp", "tls", "quic", "ws") or ":" not in address:
+        return None
+    host = address.rsplit(":", 1)[0]
+    return host[1:-1] if host.startswith("[") and host.endswith("]") else host
+
+
+def rig_host(listen: Sequence[str]) -> str:
+    """The IPv4 address a dry run's simulated drones (their fake-radio server and NatNet emulator) bind, from the
+    coordinator's Zenoh listen endpoints: the first endpoint's host, so a worker that reaches the coordinator
+    reaches the drones at the same address. ``127.0.0.1`` when it is loopback or names none (the default: nothing
+    opened to the network); ``0.0.0.0`` (every interface) for ``0.0.0.0`` or ``[::]``: the rig then advertises
+    ``0.0.0.0`` and each worker takes the host it reached the coordinator at (its ``--connect``); a host name is
+    resolved to its IPv4 address. ValueError (one line) for an IPv6 address: the simulated drones serve IPv4."""
+    host = endpoint_host(listen[0]) if listen else None
+    if host is None or host in ("localhost", "::1"):
+        return "127.0.0.1"
+    if host in ("0.0.0.0", "::", ""):
+        return "0.0.0.0"
+    if ":" in host:
+        raise ValueError(f"--listen {listen[0]}: a dry run's simulated drones serve IPv4 only: listen on an IPv4 "
+                         "address (or 0.0.0.0) first")
+    try:
+        return socket.gethostbyname(host)
+    except OSError as err:
+        raise ValueError(f"--listen {listen[0]}: cannot resolve {host!r} to an IPv4 address ({err})") from None
+
+
+def rig_address(advertised: str, connect: Sequence[str]) -> str:
+    """Where a worker reaches the rig the coordinator advertised: that address, or for ``0.0.0.0`` (every
+    interface) the host the worker reached the coordinator at (its first ``connect`` endpoint; loopback without)."""
+    if advertised not in ("0.0.0.0", ""):
+        return advertised
+    host = endpoint_host(connect[0]) if connect else None
+    return "127.0.0.1" if host is None or host in ("0.0.0.0", "::", "", "localhost", "::1") else host
+
+
 def zenoh_config(settings: ZenohSettings, *, connect: Sequence[str] = (), listen: Sequence[str] = (),
                  mode: Optional[str] = None) -> Any:
     """A ``zenoh.Config``: the mission's config file when it names one (TLS, access control: untouched), then the

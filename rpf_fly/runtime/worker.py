@@ -93,6 +93,7 @@ class CoordinatorLink:
         self._bus = bus
         self._info = info
         self._verdict: Optional[str] = None
+        self._grounded: tuple[str, ...] = ()
         self.loop: Optional[FlightLoop] = None
         self._pending: list[Command] = []
         self._lock = threading.Lock()
@@ -107,6 +108,9 @@ class CoordinatorLink:
 
     def verdict(self) -> Optional[str]:
         return self._verdict
+
+    def grounded(self) -> tuple[str, ...]:
+        return self._grounded
 
     # the bus
     def attach(self, loop: FlightLoop) -> None:
@@ -128,6 +132,7 @@ class CoordinatorLink:
         if command.command == "go":
             if self._verdict is None:
                 self.go_at = (time.monotonic(), time.process_time())
+                self._grounded = command.grounded  # signed with the go; set before the verdict the loop reads
             self._verdict = self._verdict or "go"
         elif command.command == "abort":
             self._verdict = "abort"
@@ -207,12 +212,14 @@ def relay_transit(source: Any, since_s: float) -> dict[str, Any]:
             "relay_transit_us": [round(v * 1e6) for v in transit]}
 
 
-def rig_natnet(mission: Mission, rig: dict[str, Any]) -> Any:
-    """A unicast NatNet client to the dry-run rig's NatNet emulator, its handshake done (:class:`WorkerError` when
-    the emulator does not answer within 5 s)."""
+def rig_natnet(mission: Mission, rig: dict[str, Any], host: str) -> Any:
+    """A unicast NatNet client to the dry-run rig's NatNet emulator at ``host`` (where this process reaches the rig:
+    :func:`~rpf_fly.runtime.session.rig_address`), its handshake done (:class:`WorkerError` when the emulator does
+    not answer within 5 s)."""
+    from rpf_fly.flight.dry_run import client_ip
     from rpf_fly.mocap.natnet_client import NatNetClient
 
-    client = NatNetClient(rig["radio"][0], multicast=False, local_ip="127.0.0.1",
+    client = NatNetClient(host, multicast=False, local_ip=client_ip(host),
                           command_port=int(rig["natnet_command_port"]), data_port=None, up_axis=mission.mocap.up_axis)
     if not client.wait_for_server(5.0):
         client.close()
@@ -342,16 +349,18 @@ class WorkerRun:
         from rpf_fly.emulator.fake_world import RadioTiming
         from rpf_fly.emulator.world_process import RemoteWorld
         from rpf_fly.flight.dry_run import AIR_TIME_S, fake_uri, uri_address
+        from rpf_fly.runtime.session import rig_address
 
         rig = find_rig(bus)
         addresses = tuple(uri_address(d.uri) for d in self.mission.drones)
-        fake_radio.register(RemoteWorld((rig["radio"][0], int(rig["radio"][1])), addresses,
+        host = rig_address(str(rig["radio"][0]), self.connect or self.mission.runtime.zenoh.connect)
+        fake_radio.register(RemoteWorld((host, int(rig["radio"][1])), addresses,
                                         RadioTiming(transaction_s=float(rig.get("air_time_s", AIR_TIME_S)))))
         self._closers.append(fake_radio.unregister)
         if relayed:
             client = self._relayed(bus)
         else:
-            client = rig_natnet(self.mission, rig)
+            client = rig_natnet(self.mission, rig, host)
             self._closers.append(client.close)
         uris = {d.name: fake_uri(d.uri) for d in self.mission.drones}
         return CflibBackend(cache_dir=DRY_RUN_TOC_CACHE), client, uris

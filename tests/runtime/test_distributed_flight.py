@@ -6,7 +6,9 @@ their mocap from the flight's relay (``runtime.mocap_relay: auto``): one flight 
 itself (``--connect`` to the coordinator's ``--listen``), a tap on ``rpf_fly/**`` and a foreign session
 commanding land and emergency stop and forging mocap frames; one whose relay is killed mid-flight. The flight
 whose worker is killed mid-flight takes the direct path (``mocap_relay: off``: each worker its own NatNet
-client); one whose relay cannot open its mocap never starts a worker.
+client); one whose relay cannot open its mocap never starts a worker; one whose coordinator listens on another
+address than 127.0.0.1 (its simulated drones serve there) with a drone failing its preflight on one dongle and the
+drones beside it kept down on the other.
 """
 
 from __future__ import annotations
@@ -26,6 +28,8 @@ from pathlib import Path
 
 import pytest
 
+from rpf_fly.emulator.world_process import _REQUEST, CLOSE
+from rpf_fly.flight.dry_run import StartFault
 from rpf_fly.log.reader import read_log
 from rpf_fly.log.review import review
 from rpf_fly.mission import load_mission
@@ -38,6 +42,7 @@ from rpf_fly.runtime.session import free_loopback_endpoint, open_session
 
 HERE = Path(__file__).resolve().parent
 MISSION = HERE / "two-dongles.yaml"
+GROUNDED = HERE / "grounded.yaml"
 ROOT = HERE.parents[1]
 
 
@@ -307,6 +312,114 @@ def test_a_relay_that_cannot_open_its_mocap_stops_the_flight_before_any_worker(t
     assert not coordinator.events.history  # that one line only (the logger it ended is not "gone")
 
 
+def _local_address() -> str:
+    """A non-loopback IPv4 address of this machine, else 127.0.0.2: another address than the default 127.0.0.1
+    either way, so a rig found there follows the coordinator's listen address."""
+    import fcntl
+    import struct
+
+    for _, name in socket.if_nameindex():
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+            try:  # SIOCGIFADDR: the card's IPv4 address
+                packed = fcntl.ioctl(s.fileno(), 0x8915, struct.pack("256s", name.encode()[:15]))
+            except OSError:
+                continue
+        address = socket.inet_ntoa(packed[20:24])
+        if not address.startswith("127."):
+            return address
+    return "127.0.0.2"
+
+
+def _answers(host: str, port: int) -> bool:
+    """Whether the fake-radio server answers at (host, port): a CLOSE of no link, which changes nothing."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.settimeout(2.0)
+        s.connect((host, port))
+        s.send(_REQUEST.pack(CLOSE, 1, 0, 0, 0))
+        try:
+            return len(s.recv(64)) > 0
+        except OSError:  # refused: nothing listens there
+            return False
+
+
+def test_grounded_drones_across_workers_and_the_rig_on_the_listen_address(tmp_path):
+    """``safety.on_preflight_failure: ground`` across workers, the coordinator listening on a non-loopback address
+    (127.0.0.2 on a machine with none), dongle 1's worker started by itself with --connect to it.
+
+    The simulated drones serve on that address, not on 127.0.0.1, and both workers reach them there. cf1 (dongle 0)
+    stands 0.5 m off its start: its preflight fails. cf3's goal (dongle 1) is where cf1 stands: the coordinator's
+    signed go names cf1 and dongle 1's worker keeps cf3 down; cf2's goal (dongle 0) is 0.1 m from cf3's start: it
+    stays down too (the rule in turn, across workers). cf4 flies and reaches its goal. Before, cf2 and cf3 took off
+    and flew to land on a drone standing on the floor."""
+    mission = load_mission(GROUNDED)
+    address = _local_address()
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind((address, 0))
+        endpoint = f"tcp/{address}:{s.getsockname()[1]}"
+    lines: list[str] = []
+    log_path = tmp_path / "grounded.mcap"
+    coordinator = Coordinator(mission, GROUNDED, log_path, dry_run=True, remote_dongles=(1,), listen=(endpoint,),
+                              say=lines.append, remote_wait_s=60.0,
+                              start_faults={"cf1": StartFault(offset_m=(0.0, 0.5))})
+    thread, result = _start(coordinator)
+    remote = None
+    try:
+        assert _wait(lambda: any("waiting for dongle 1" in line for line in lines), 60), lines
+        radio, natnet = coordinator.rig.world.radio, coordinator.rig.world.natnet_command_port
+        assert radio[0] == address and _answers(address, radio[1])
+        assert not _answers("127.0.0.1", radio[1])  # bound to the listen address, not to loopback
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+            s.settimeout(2.0)
+            s.connect(("127.0.0.1", natnet))
+            s.send(b"\0" * 4)
+            with pytest.raises(ConnectionRefusedError):  # the NatNet emulator is not on loopback either
+                s.recv(64)
+        tap = open_session(mission.runtime.zenoh, connect=(endpoint,))
+        try:
+            rig = [json.loads(r.ok.payload.to_bytes()) for r in
+                   tap.get(f"rpf_fly/{coordinator.flight}/rig", timeout=5.0) if r.ok is not None]
+        finally:
+            tap.close()
+        assert rig and rig[0]["radio"] == [address, radio[1]] and rig[0]["natnet_command_port"] == natnet
+        remote = subprocess.Popen(
+            [sys.executable, "-m", "rpf_fly", "worker", str(GROUNDED), "--dongle", "1", "--connect", endpoint,
+             "--dry-run"],
+            env=dict(_env(), **{SECRET_ENV: coordinator.secret, "RPF_FLY_WORKER_LOG": str(tmp_path / "remote.log")}),
+            stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+        thread.join(120)
+        assert not thread.is_alive()
+        out = remote.communicate(timeout=30)[0].decode()
+    finally:
+        if thread.is_alive():  # a failed check above: land (nothing has taken off) and end every process
+            coordinator.interrupt()
+            thread.join(60)
+        if remote is not None and remote.poll() is None:
+            remote.kill()
+    assert result["code"] == 1, lines  # not every drone reached its goal
+    assert remote.returncode == 1 and "cf3: not_flown" in out and "cf4: reached" in out, out
+    outcomes = {name: view.outcome for name, view in coordinator.drones.items()}
+    assert outcomes == {"cf1": "not_flown", "cf2": "not_flown", "cf3": "not_flown", "cf4": "reached"}, outcomes
+    go = [e.message for e in coordinator.events.history if e.kind == "command" and e.message.startswith("go")]
+    assert len(go) == 1 and "cf1, cf2 stay on the ground" in go[0], go  # cf2: dongle 0 applied the rule in turn
+    log = read_log(log_path)
+    assert not log.truncated
+    said = {(m.data["name"], m.data["message"]) for m in log.messages("/events")}
+    assert any(name == "cf1" and "from its start" in text for name, text in said), said
+    assert any(name == "cf3" and "preflight: its goal is 0.00 m from cf1, which stays on the ground" in text
+               for name, text in said), said
+    assert any(name == "cf2" and "preflight: its goal is 0.10 m from cf3, which stays on the ground" in text
+               for name, text in said), said
+    assert any(name == "flight" and text.startswith("cf3 stay on the ground beside the swarm's grounded drones")
+               for name, text in said), said
+    for name in ("cf1", "cf2", "cf3"):
+        assert log.messages(f"/{name}/status")[-1].data["state"] == "failed", name
+        truth = log.messages(f"/truth/{name}")
+        assert truth and not any(m.data["motors"] for m in truth), name
+        assert max(m.data["position"]["z"] for m in truth) < 0.01, name
+    assert log.messages("/cf4/status")[-1].data["state"] == "landed"
+    assert max(m.data["position"]["z"] for m in log.messages("/truth/cf4")) > 0.4
+
+
 def test_zenoh_unreachable_at_start_is_one_line_and_exit_2(tmp_path):
     endpoint = free_loopback_endpoint()  # nobody listens there
     done = subprocess.run(
@@ -317,3 +430,21 @@ def test_zenoh_unreachable_at_start_is_one_line_and_exit_2(tmp_path):
     assert done.returncode == 2
     assert done.stderr.count("\n") == 1 and "zenoh: cannot open a session" in done.stderr, done.stderr
     assert done.stdout == ""
+
+
+def test_a_distributed_dry_run_takes_only_power_on_faults(tmp_path):
+    """--faults with --distributed: the power-on faults live in the simulated drones (the coordinator's); a timed
+    one needs the flight loop of a worker: refused in one line naming its line and kind, nothing started."""
+    from typer.testing import CliRunner
+
+    from rpf_fly.cli import get_app
+
+    faults = tmp_path / "faults.yaml"
+    faults.write_text("faults:\n  - {kind: start_offset, drone: cf1, offset_m: [0.0, 0.5]}\n"
+                      "  - {kind: planner_error, drone: cf2, at_s: 1.0}\n")
+    result = CliRunner().invoke(get_app(), ["fly", str(MISSION), "--dry-run", "--distributed", "--faults",
+                                            str(faults), "--log", str(tmp_path / "f.mcap")])
+    assert result.exit_code == 2
+    assert result.output.strip() == f"{faults}:3: planner_error: --distributed takes the power-on faults only " \
+                                    "(yaw_offset, start_offset, upside_down, motor_fault; docs/distributed.md)"
+    assert not (tmp_path / "f.mcap").exists()

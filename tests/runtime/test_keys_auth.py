@@ -1,11 +1,17 @@
-"""The flight's keys and the coordinator's signed commands (rpf_fly/runtime/keys.py, auth.py)."""
+"""The flight's keys, the coordinator's signed commands and where a dry run's simulated drones serve
+(rpf_fly/runtime/keys.py, auth.py, session.py)."""
 
 from __future__ import annotations
+
+import hashlib
+import hmac
+import json
 
 import pytest
 
 from rpf_fly.runtime.auth import CommandVerifier, new_secret, sign
 from rpf_fly.runtime.keys import FlightKeys, check_flight_id, suffix_topic, topic_suffix
+from rpf_fly.runtime.session import rig_address, rig_host
 
 
 @pytest.mark.parametrize("topic, suffix", [
@@ -55,3 +61,45 @@ def test_commands_that_are_not_the_coordinators_are_refused(case):
         payload = payload.replace(b"emergency_stop", b"go")
     command, why = verifier.verify(payload, signature)
     assert command is None and why
+
+
+def test_a_go_carries_the_grounded_drones_under_its_signature():
+    """The drones that stay on the ground ride in the signed go: a foreign session can neither add nor remove one,
+    nor ground drones with another command."""
+    secret = new_secret()
+    payload, signature = sign(secret, "f1", "go", 1, "", ("cf3", "cf1"))
+    command, why = CommandVerifier(secret, "f1").verify(payload, signature)
+    assert command is not None and command.grounded == ("cf1", "cf3") and why == ""
+    plain, _ = CommandVerifier(secret, "f1").verify(*sign(secret, "f1", "go", 1))
+    assert plain is not None and plain.grounded == ()
+    tampered = payload.replace(b'"cf3"', b'"cf2"')
+    assert CommandVerifier(secret, "f1").verify(tampered, signature)[0] is None
+    ungrounded = payload.replace(b',"grounded":["cf1","cf3"]', b"")
+    assert ungrounded != payload and CommandVerifier(secret, "f1").verify(ungrounded, signature)[0] is None
+    land, why = CommandVerifier(secret, "f1").verify(*sign(secret, "f1", "land", 1, "", ("cf1",)))
+    assert land is None and "refused" in why
+    malformed = json.dumps({"command": "go", "seq": 1, "reason": "", "t_ns": 0, "flight": "f1",
+                            "grounded": "cf1"}).encode()
+    assert CommandVerifier(secret, "f1").verify(malformed, hmac.new(secret.encode(), malformed, hashlib.sha256)
+                                                .hexdigest().encode()) == (None, "malformed command")
+
+
+@pytest.mark.parametrize("listen, host", [
+    ((), "127.0.0.1"), (("tcp/127.0.0.1:7447",), "127.0.0.1"), (("tcp/127.0.0.2:7447",), "127.0.0.2"),
+    (("tcp/10.0.0.5:7447",), "10.0.0.5"), (("tls/10.0.0.5:7447?iface=eth0",), "10.0.0.5"),
+    (("tcp/0.0.0.0:7447",), "0.0.0.0"), (("tcp/[::]:7447",), "0.0.0.0"), (("tcp/[::1]:7447",), "127.0.0.1"),
+    (("tcp/localhost:7447",), "127.0.0.1"), (("tcp/10.0.0.5:7447", "tcp/127.0.0.1:7447"), "10.0.0.5")])
+def test_the_rig_binds_the_first_listen_address(listen, host):
+    assert rig_host(listen) == host
+
+
+def test_the_rig_refuses_an_ipv6_listen_address_in_one_line():
+    with pytest.raises(ValueError, match=r"tcp/\[fd00::2\]:7447.*IPv4"):
+        rig_host(("tcp/[fd00::2]:7447",))
+
+
+@pytest.mark.parametrize("advertised, connect, host", [
+    ("10.0.0.5", ("tcp/10.0.0.9:7447",), "10.0.0.5"), ("0.0.0.0", ("tcp/10.0.0.5:7447",), "10.0.0.5"),
+    ("0.0.0.0", (), "127.0.0.1"), ("0.0.0.0", ("tcp/127.0.0.1:7447",), "127.0.0.1")])
+def test_a_worker_reaches_a_rig_on_every_interface_where_it_reached_the_coordinator(advertised, connect, host):
+    assert rig_address(advertised, connect) == host
