@@ -51,13 +51,17 @@ class McapRecorder:
     it sees what the file holds, on the writer thread, so the loop's cost is unchanged.
 
     ``out``: no file; every message goes to ``out`` instead (a distributed flight's worker and coordinator publish
-    them on Zenoh for the logger: rpf_fly/runtime/bus.py)."""
+    them on Zenoh for the logger: rpf_fly/runtime/bus.py).
+
+    ``mocap``: whether the frames' poses are logged (``/mocap/<drone>``); a distributed flight's worker leaves them
+    to the flight's mocap relay (rpf_fly/runtime/relay.py) and logs its drones' ``/tf`` only."""
 
     def __init__(self, path: str | Path, mission: Mission, seed: int = 0, source: str = "flight",
                  truth: Optional[Callable[[], TruthBatch]] = None, sink: Optional[Sink] = None,
                  radio: Optional[Callable[[], Mapping[str, LinkCount]]] = None, radio_period_s: Optional[float] = None,
-                 out: Optional[Out] = None, radio_dongles: Optional[Iterable[int]] = None):
+                 out: Optional[Out] = None, radio_dongles: Optional[Iterable[int]] = None, mocap: bool = True):
         self.mission = mission
+        self._mocap = mocap
         self._offset_ns = time.time_ns() - time.monotonic_ns()
         """Unix-epoch ns minus the loop's monotonic ns, an integer: logged (``mission.monotonic_offset_ns``) so that
         a replay gets the loop's own times back from the log, exactly for the tracker's stamps."""
@@ -92,11 +96,15 @@ class McapRecorder:
         """One frame's fresh poses, stamped with the frame's receive time as the tracker holds it (the poses of
         one frame share it; ``t_s``, the loop's time at the call, only when there are none): the replay feeds
         them back to a tracker at exactly that time (stamps on the tracker's 1 us grid, so in integer ns)."""
+        tf_due = bool(poses) and t_s - self._last_tf_s >= TF_PERIOD_S
+        if not (self._mocap or tf_due):
+            return
         stamp = next(iter(poses.values())).stamp_s if poses else None
         t = stamp_us(stamp) * 1000 + self._offset_ns if stamp is not None else self._ns(t_s)
         items = {name: (pose.position, pose.quaternion) for name, pose in poses.items()}
-        self.log.poses(t, items)
-        if items and t_s - self._last_tf_s >= TF_PERIOD_S:
+        if self._mocap:
+            self.log.poses(t, items)
+        if tf_due:
             self._last_tf_s = t_s
             self.log.tf(t, items)
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import logging
 import threading
-from typing import Any, Callable, Optional
+from typing import Any, Callable
 
 from rpf_fly.runtime.auth import Command, CommandVerifier, sign
 from rpf_fly.runtime.keys import STAMPS, FlightKeys, topic_suffix
@@ -28,6 +28,8 @@ class FlightBus:
         self.keys = FlightKeys(flight)
         self.name = name
         self._publishers: dict[str, Any] = {}
+        self._routes: dict[str, Any] = {}
+        """Log topic -> its publisher (None: the topic is not published), so a message costs one lookup."""
         self._lock = threading.Lock()
         self._handles: list[Any] = []
         self.published = 0
@@ -50,12 +52,16 @@ class FlightBus:
         return publisher
 
     def out(self, topic: str, log_time: int, t_ns: int, data: bytes) -> None:
-        """A :class:`~rpf_fly.log.writer.FlightLog` ``out``: publish one log message under its key."""
-        suffix = topic_suffix(topic, self.name)
-        if suffix is None:
-            return
+        """A :class:`~rpf_fly.log.writer.FlightLog` ``out``: publish one log message under its key (the log writer's
+        thread, every message of the flight: the topic's publisher is looked up once)."""
         try:
-            self._publisher(self.keys.key(suffix)).put(data, attachment=STAMPS.pack(log_time, t_ns))
+            publisher = self._routes.get(topic, self)
+            if publisher is self:  # a topic's first message
+                suffix = topic_suffix(topic, self.name)
+                publisher = self._routes[topic] = None if suffix is None else self._publisher(self.keys.key(suffix))
+            if publisher is None:
+                return
+            publisher.put(data, attachment=STAMPS.pack(log_time, t_ns))
             self.published += 1
         except Exception as err:  # noqa: BLE001 - a closed session at the end: the message is lost, not the flight
             logger.debug("zenoh: %s not published: %s", topic, err)

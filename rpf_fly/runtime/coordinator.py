@@ -17,9 +17,10 @@ dongle's worker is alive, remote ones included, before any drone arms. Then, fro
 In a dry run it also owns the simulated drones (the world process) and serves where they are on the ``rig`` key, so a
 worker on another "host" reaches them through its fake radio; their truth goes to the logger on ``truth/<drone>``.
 
-A flight with a mocap relay (unicast NatNet, a ``motioncapture`` system: rpf_fly/runtime/relay.py) has it started
-after the logger, and ``alive/relay`` awaited, before any worker; that token vanishing is an event naming the relay
-at once (the workers' mocap stops: their supervisors hold, then land the drones).
+Every flight has a mocap relay (rpf_fly/runtime/relay.py): started after the logger, and ``alive/relay`` awaited,
+before any worker. The workers fly on its frames with unicast NatNet or a ``motioncapture`` system; otherwise it
+publishes the log's mocap only. Its token vanishing is an event naming the relay at once (relayed, the workers'
+mocap stops: their supervisors hold, then land the drones; direct, they fly on).
 """
 
 from __future__ import annotations
@@ -311,8 +312,7 @@ class Coordinator:
             self.recorder = McapRecorder(Path(f"zenoh-{self.flight}-coordinator"), self.mission,
                                          source="dry-run" if self.dry_run else "flight", truth=truth, out=bus.out)
             self._start_logger()
-            if self.relayed:
-                self._start_relay()
+            self._start_relay()
             self._start_workers()
             if not self._wait_workers():
                 self._command("abort", "not every worker is alive: nothing takes off")
@@ -381,8 +381,11 @@ class Coordinator:
         if not self.relay_alive:
             raise RelayError(f"the mocap relay did not come up within {RELAY_WAIT_S:.0f} s (see "
                              f"{self.log_path.stem}.relay.log); nothing armed")
-        self.say(f"mocap relay up (pid {self.relay_process.pid}): the workers fly on its frames "
-                 f"({self.bus.keys.mocap_frames if self.bus is not None else 'mocap_frames'})")
+        if self.relayed:
+            self.say(f"mocap relay up (pid {self.relay_process.pid}): the workers fly on its frames "
+                     f"({self.bus.keys.mocap_frames if self.bus is not None else 'mocap_frames'})")
+        else:
+            self.say(f"mocap relay up (pid {self.relay_process.pid}): the log's mocap; the workers read their own")
 
     def _relay_stderr(self, process: subprocess.Popen) -> None:
         """The relay's stderr: kept (its last line explains a failed start) and, once it is up, on the console."""
@@ -400,15 +403,19 @@ class Coordinator:
             self.relay_alive = False
             if not self._closing:
                 pid, host = self.relay_info.get("pid", "?"), self.relay_info.get("host", "?")
-                self.events.emit(FATAL, "relay_lost", f"the mocap relay (pid {pid} on {host}) is gone: the workers "
-                                 "get no mocap; their drones hold, then land")
+                if self.relayed:
+                    self.events.emit(FATAL, "relay_lost", f"the mocap relay (pid {pid} on {host}) is gone: the "
+                                     "workers get no mocap; their drones hold, then land")
+                else:
+                    self.events.emit(WARNING, "relay_lost", f"the mocap relay (pid {pid} on {host}) is gone: the "
+                                     "workers fly on their own mocap; the log's /mocap ends here")
         self._wake.set()
 
     def _relay_record(self) -> dict[str, Any]:
-        """The ``runtime`` record's ``relay`` (the log's metadata), when the flight has one."""
-        if not self.relayed:
-            return {}
-        return {"relay": {k: self.relay_info.get(k) for k in ("name", "host", "pid", "source", "key")}}
+        """The ``runtime`` record's ``relay`` (the log's metadata): the process, and whether the workers fly on its
+        frames (``relayed``; else it publishes the log's mocap only)."""
+        return {"relay": {**{k: self.relay_info.get(k) for k in ("name", "host", "pid", "source", "key")},
+                          "relayed": self.relayed}}
 
     def _stop_relay(self) -> None:
         process = self.relay_process

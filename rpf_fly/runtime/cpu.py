@@ -15,10 +15,14 @@ from typing import Optional
 
 ZENOH_THREAD = re.compile(r"^(tx|rx|net|app|acc)-\d+$")
 """The names Zenoh's runtime gives its threads (zenoh 1.x)."""
+ZENOH_SENDING = re.compile(r"^(tx|net|app)-\d+$")
+"""Those that send what this process publishes (``rx-*`` receive, and run the subscribers' callbacks: a worker's
+relayed mocap frames are its input, not its logging)."""
 
 
-def zenoh_threads_cpu_s() -> Optional[float]:
-    """CPU seconds (user + system) of this process's Zenoh runtime threads so far; None where /proc has no tasks."""
+def zenoh_threads_cpu_s(names: re.Pattern = ZENOH_THREAD) -> Optional[float]:
+    """CPU seconds (user + system) of this process's Zenoh runtime threads so far (those whose name ``names``
+    matches); None where /proc has no tasks."""
     tasks = "/proc/self/task"
     if not os.path.isdir(tasks):
         return None
@@ -27,7 +31,7 @@ def zenoh_threads_cpu_s() -> Optional[float]:
     for tid in os.listdir(tasks):
         try:
             with open(f"{tasks}/{tid}/comm") as f:
-                if not ZENOH_THREAD.match(f.read().strip()):
+                if not names.match(f.read().strip()):
                     continue
             with open(f"{tasks}/{tid}/stat") as f:
                 fields = f.read().rsplit(")", 1)[1].split()

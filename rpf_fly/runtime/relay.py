@@ -1,15 +1,23 @@
-"""A distributed flight's mocap relay: one process reads the mocap and publishes every frame, signed, to the
-workers (docs/distributed.md, "Mocap relay").
+"""A distributed flight's mocap relay: one process reads the mocap and publishes every frame: signed, to the
+workers when they fly on it, and always each drone's pose for the log and the taps (docs/distributed.md, "Mocap
+relay").
 
 Multicast NatNet reaches every worker, so each opens its own client. A unicast NatNet server, or a ``motioncapture``
-system that serves one client per host, cannot feed several workers: then the coordinator starts this process,
-which opens the mission's mocap (:func:`rpf_fly.flight.session.mocap_source`; a dry run: the coordinator's NatNet
-emulator, as a worker would) and publishes each frame on ``rpf_fly/<flight>/mocap_frames`` (rpf_fly/runtime/
+system that serves one client per host, cannot feed several workers: then the workers fly on this process's
+frames: it opens the mission's mocap (:func:`rpf_fly.flight.session.mocap_source`; a dry run: the coordinator's
+NatNet emulator, as a worker would) and publishes each frame on ``rpf_fly/<flight>/mocap_frames`` (rpf_fly/runtime/
 frames.py: every body, signed with the flight's secret, numbered). Workers read them through
 :class:`~rpf_fly.runtime.relayed_mocap.RelayedMocap`. :func:`uses_relay` says when (``runtime.mocap_relay``).
 
+Every distributed flight runs it, relayed or not, as the flight's one mocap tap: it publishes each drone's valid
+pose on ``mocap/<drone>`` (the log's ``foxglove.PoseInFrame``, stamped with its receipt), which the logger writes as
+``/mocap/<drone>`` and any tap reads. So the workers, the flight's processes, publish only what they decide
+(setpoints, planner steps, status, events, their ``tf``): the mocap's 100 messages a second a drone cost them
+nothing (docs/performance.md), and a lost worker's drones stay in the log's mocap as they fall.
+
 It holds ``alive/relay`` once its mocap answers: the coordinator starts the workers only then, and names it at
-once if the token vanishes (the workers then see their mocap stop: their supervisors hold, then land the drones).
+once if the token vanishes (relayed, the workers then see their mocap stop: their supervisors hold, then land the
+drones; direct, they fly on and the log's mocap ends there).
 Its records go to ``<log>.relay.log``; its events (mocap silent, back) to the flight's ``events``; ``workers/relay``
 says what it relays and, at its end, how many frames and how much CPU. SIGTERM (the coordinator, once every worker
 has ended) stops it; SIGINT is ignored (a Ctrl-C reaches the whole process group while the drones still land on its
@@ -69,9 +77,12 @@ def describe_source(mission: Mission, dry_run: bool) -> str:
 
 
 class FrameRelay:
-    """Reads a :class:`~rpf_fly.mocap.frame.MocapSource` and publishes each frame, signed, on the relay key."""
+    """Reads a :class:`~rpf_fly.mocap.frame.MocapSource` and publishes each frame: signed on the relay key when
+    ``signed`` (the workers fly on it), and each drone's valid pose on ``mocap/<drone>`` (``drones``: rigid body
+    name -> drone name; ``offset_ns``: this process's Unix-epoch ns minus its monotonic ns)."""
 
-    def __init__(self, bus: Any, source: Any, secret: str, event: Callable[[int, str], None]):
+    def __init__(self, bus: Any, source: Any, secret: str, event: Callable[[int, str], None], *,
+                 signed: bool = True, drones: Optional[dict[str, str]] = None, offset_ns: int = 0):
         import zenoh
 
         from rpf_fly.runtime.frames import FrameSigner
@@ -79,6 +90,9 @@ class FrameRelay:
         self.bus = bus
         self.source = source
         self.event = event
+        self.signed = signed
+        self.topics = {body: f"/mocap/{name}" for body, name in (drones or {}).items()}
+        self.offset_ns = offset_ns
         self.signer = FrameSigner(secret, bus.keys.flight)
         # Mocap is the flight's most urgent data: sent at once (express, no batching), ahead of the other
         # priorities; a congested link drops a frame (the next one supersedes it) rather than delay the relay.
@@ -108,14 +122,29 @@ class FrameRelay:
             if silent:
                 silent = False
                 self.event(2, "mocap frames are back")
-            payload, signature = self.signer.sign(frame)
-            try:
-                self.publisher.put(payload, attachment=signature)
-                self.published += 1
-            except Exception as err:  # noqa: BLE001 - a closing session: counted, the relay goes on
-                self.failed += 1
-                if self.failed <= 3:
-                    logger.warning("relay: a frame was not published: %s", err)
+            if self.signed:
+                payload, signature = self.signer.sign(frame)
+                try:
+                    self.publisher.put(payload, attachment=signature)
+                except Exception as err:  # noqa: BLE001 - a closing session: counted, the relay goes on
+                    self.failed += 1
+                    if self.failed <= 3:
+                        logger.warning("relay: a frame was not published: %s", err)
+                    continue
+            self.published += 1
+            self._poses(frame)
+
+    def _poses(self, frame: Any) -> None:
+        """Each drone's valid pose of ``frame`` on ``mocap/<drone>``, stamped with the frame's receipt (the log's
+        ``/mocap/<drone>``; the bus drops what it cannot send)."""
+        from rpf_fly.log import schemas as S
+
+        t_ns = round(frame.receive_time_s * 1e9) + self.offset_ns
+        out, topics = self.bus.out, self.topics
+        for body in frame.bodies.values():
+            topic = topics.get(body.name)
+            if topic is not None and body.valid:
+                out(topic, t_ns, t_ns, S.pose_json(t_ns, body.position, body.quaternion))
 
     def cpu_pct(self) -> Optional[float]:
         if self.first_at is None or time.monotonic() <= self.first_at[0]:
@@ -205,12 +234,15 @@ def main(argv: Optional[list[str]] = None) -> int:
             print(f"relay: cannot open the mocap ({what}): {' '.join(str(err).split())}", file=sys.stderr)
             bus.close()
             return 2
-        relay = FrameRelay(bus, source, secret, event)
+        signed = uses_relay(mission)
+        relay = FrameRelay(bus, source, secret, event, signed=signed, offset_ns=offset_ns,
+                           drones={d.rigid_body: d.name for d in mission.drones})
         try:
             bus.watch_alive(bus.keys.alive_all, changed)
             info("relaying")
             bus.token(RELAY)
-            event(2, f"relaying {what} to the workers on {bus.keys.mocap_frames}")
+            event(2, f"relaying {what} to the workers on {bus.keys.mocap_frames}" if signed else
+                  f"publishing {what}'s poses for the log on mocap/<drone> (the workers read their own mocap)")
             relay.run(stop, gone)
         finally:
             stats = source.stats

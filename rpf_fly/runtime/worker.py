@@ -31,7 +31,7 @@ from rpf_fly.radio.budget import dongle_of
 from rpf_fly.runtime.auth import Command
 from rpf_fly.flight.recorder import MeteredRecorder
 from rpf_fly.runtime.bus import FlightBus
-from rpf_fly.runtime.cpu import zenoh_threads_cpu_s
+from rpf_fly.runtime.cpu import ZENOH_SENDING, zenoh_threads_cpu_s
 from rpf_fly.runtime.keys import COORDINATOR, worker_name
 from rpf_fly.runtime.relayed_mocap import RelayedMocap
 
@@ -66,12 +66,13 @@ def tick_offset(mission: Mission, dongle: int) -> float:
 
 def logging_cpu(since: tuple[float, Optional[float]], metered: MeteredRecorder, recorder: Any) -> dict[str, Any]:
     """What logging cost this worker from its recorder's start to now, in percent of a core: the flight loop's
-    hand-over (``loop_pct``), the log writer thread's encoding and publishing (``writer_pct``), Zenoh's own threads
-    (``zenoh_pct``: they also carry the commands and tokens, a few messages a second) and their ``total_pct``; the
-    messages published and the span (docs/performance.md)."""
+    hand-over (``loop_pct``), the log writer thread's encoding and publishing (``writer_pct``), Zenoh's sending
+    threads (``zenoh_pct``: ``tx``, ``net``, ``app``; the receiving ``rx`` threads run the subscribers, the relayed
+    mocap among them, which is the worker's input) and their ``total_pct``; the messages published and the span
+    (docs/performance.md)."""
     wall0, zenoh0 = since
     span = time.monotonic() - wall0
-    zenoh1 = zenoh_threads_cpu_s()
+    zenoh1 = zenoh_threads_cpu_s(ZENOH_SENDING)
     parts = {"loop_pct": metered.cpu_s, "writer_pct": recorder.log.writer_cpu_s,
              "zenoh_pct": None if zenoh0 is None or zenoh1 is None else zenoh1 - zenoh0}
     out: dict[str, Any] = {k: None if v is None else round(100 * v / span, 3) for k, v in parts.items()}
@@ -278,10 +279,10 @@ class WorkerRun:
                                   f"(start `rpf-fly fly MISSION --distributed` first; is --connect right?)")
             bus.on_commands(self.secret, link.obey, link.refuse)
             backend, source, uris = self._rig(bus)
-            logging_since = (time.monotonic(), zenoh_threads_cpu_s())
+            logging_since = (time.monotonic(), zenoh_threads_cpu_s(ZENOH_SENDING))
             recorder = McapRecorder(Path(f"zenoh-{self.flight}-{name}"), self.mission,
                                     source="dry-run" if self.dry_run else "flight", out=bus.out,
-                                    radio=backend.radio_counts, radio_dongles=(self.dongle,))
+                                    radio=backend.radio_counts, radio_dongles=(self.dongle,), mocap=False)
             metered = MeteredRecorder(recorder)
             try:
                 loop = FlightLoop(self.mission, backend, source, self.planner_factory, uris=uris,

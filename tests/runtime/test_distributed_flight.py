@@ -185,6 +185,7 @@ def test_remote_worker_tap_and_foreign_commands(tmp_path):
     assert 0.3 <= apart <= 0.5, apart  # half a period, give or take the phase lock's pull towards the frames
     relay = json.loads(runtime["relay"])
     assert relay["pid"] == coordinator.relay_process.pid and relay["key"].endswith("/mocap_frames")
+    assert relay["relayed"] is True
     assert coordinator.relay_info["state"] == "done" and coordinator.relay_info["frames"] > 100
     assert any(m.data["name"] == "relay" and m.data["message"].startswith("relaying") for m in log.messages("/events"))
     for worker in coordinator.workers.values():  # 4 refused by each (1 malformed), none taken
@@ -228,6 +229,7 @@ def test_a_killed_worker_is_noticed_and_the_others_fly_on(tmp_path):
     victim = coordinator.workers["dongle-1"].process
     assert victim is not None
     killed_at = time.monotonic()
+    killed_ns = time.time_ns()
     os.kill(victim.pid, signal.SIGKILL)
     thread.join(120)
     assert not thread.is_alive()
@@ -254,12 +256,19 @@ def test_a_killed_worker_is_noticed_and_the_others_fly_on(tmp_path):
     for name in ("cf3", "cf4"):
         assert end[name]["lost"] and end[name]["worker"] == "dongle-1", end[name]
         assert end[name]["reason"].startswith("worker dongle-1 lost"), end[name]
-    cf1 = [rows[0] for rows in shown]  # the hook's rows over the flight: cf1 took off, flew to its goal, landed
+    cf1 = [rows[0] for rows in shown]  # the hook's rows over the flight: cf1 took off, flew to its goal
     phases = [row["phase"] for row in cf1]
-    assert phases.index("planning") < phases.index("landed"), sorted(set(phases))
+    # (the last status and the worker's end race in Zenoh's threads: the hook may miss "landed", the final rows not)
+    assert "planning" in phases and phases[-1] in ("arrived", "landing", "landed"), sorted(set(phases))
     flown = [row["goal_distance"] for row in cf1 if row["phase"] == "planning"]
     assert flown[0] - flown[-1] > 0.5, flown
-    assert coordinator.relay_process is None and "relay" not in log.metadata["runtime"]
+    # The relay still runs, for the log's mocap only: the workers read their own NatNet; the dead worker's drones
+    # stay in the log's /mocap (the relay publishes every drone's pose, no worker does) as they fall to the floor.
+    relay = json.loads(log.metadata["runtime"]["relay"])
+    assert relay["relayed"] is False and relay["pid"] == coordinator.relay_process.pid
+    for name in ("cf3", "cf4"):
+        after = [m.data["pose"]["position"]["z"] for m in log.messages(f"/mocap/{name}") if m.log_time > killed_ns]
+        assert len(after) > 50 and max(after) > 0.3 and after[-1] < 0.05, (name, len(after), after[-5:])
     assert coordinator.workers["dongle-0"].info["mocap"]["messages"] > 0  # NatNet's own handshake: its own client
 
 
