@@ -152,7 +152,7 @@ def fly(
     _require_library(loaded, dry_run, mocap)
     mocap = mocap or ("motioncapture" if loaded.mocap.kind == "motioncapture" else "natnet")
     log_path = log or Path("flights") / f"{loaded.name}-{datetime.now():%Y%m%d-%H%M%S}.mcap"
-    log_path.parent.mkdir(parents=True, exist_ok=True)
+    _check_log_path(log_path)
     if distributed:
         from rpf_fly.cli.worker_cmd import fly_distributed
 
@@ -183,6 +183,22 @@ def fly(
         libraries = "cflib, foxglove-sdk" if live is not None else "cflib"
         typer.echo(f"({logs.warnings} warning(s) from {libraries} and rpf_fly: {logs.path})", err=True)
     raise typer.Exit(code)
+
+
+def _check_log_path(log_path: Path) -> None:
+    """The flight log's folder made and writable before anything connects (one line, exit 2, nothing armed)."""
+    try:
+        log_path.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise fail(f"--log {log_path}: cannot make its folder: {err.strerror or err}")
+    existed = log_path.exists()
+    try:  # a real try: permissions alone do not say it (root may write anywhere but /proc, a read-only mount)
+        with open(log_path, "ab"):
+            pass
+        if not existed:
+            log_path.unlink()
+    except OSError as err:
+        raise fail(f"--log {log_path}: cannot write it: {err.strerror or err}")
 
 
 def text_log_path(log_path: Path) -> Path:

@@ -40,8 +40,7 @@ def fly_distributed(mission, mission_path: Path, log_path: Path, dry_run: bool, 
     from rpf_fly.cli.fly_cmd import _nothing, text_log_path
     from rpf_fly.cli.logs import route_logging
     from rpf_fly.runtime.coordinator import Coordinator
-    from rpf_fly.runtime.relay import RelayError
-    from rpf_fly.runtime.session import ZenohUnavailable
+    from rpf_fly.runtime.session import StartError, ZenohUnavailable
 
     live = None
     if console:
@@ -65,7 +64,7 @@ def fly_distributed(mission, mission_path: Path, log_path: Path, dry_run: bool, 
         with route_logging(text_log_path(log_path), verbose), (live if live is not None else _nothing()):
             try:
                 code = coordinator.run()
-            except (ZenohUnavailable, RelayError) as err:
+            except (ZenohUnavailable, StartError) as err:
                 raise fail(str(err))
             if live is not None:
                 live.final(coordinator.phase, coordinator.snapshot())

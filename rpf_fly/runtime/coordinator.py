@@ -44,7 +44,7 @@ from rpf_fly.runtime.auth import SECRET_ENV, new_secret
 from rpf_fly.runtime.bus import FlightBus
 from rpf_fly.runtime.keys import COORDINATOR, LOGGER, RELAY, worker_name
 from rpf_fly.runtime.relay import RelayError, uses_relay
-from rpf_fly.runtime.session import DEFAULT_PORT, free_loopback_endpoint, open_session, rig_host
+from rpf_fly.runtime.session import DEFAULT_PORT, StartError, free_loopback_endpoint, open_session, rig_host
 
 logger = logging.getLogger(__name__)
 
@@ -352,11 +352,13 @@ class Coordinator:
         deadline = time.monotonic() + LOGGER_WAIT_S
         while not self.logger_alive and time.monotonic() < deadline:
             if self.logger_process.poll() is not None:
-                raise RuntimeError(f"the logger exited at start (code {self.logger_process.returncode})")
+                raise StartError(f"the logger exited at start (code {self.logger_process.returncode}; see "
+                                 f"{self.log_path.stem}.logger.log): nothing armed")
             self._wake.wait(0.1)
             self._wake.clear()
         if not self.logger_alive:
-            raise RuntimeError(f"the logger did not come up within {LOGGER_WAIT_S:.0f} s")
+            raise StartError(f"the logger did not come up within {LOGGER_WAIT_S:.0f} s (see "
+                             f"{self.log_path.stem}.logger.log): nothing armed")
 
     # ------------------------------------------------------------------------------------------ the mocap relay
 

@@ -125,7 +125,12 @@ def main(argv: list[str] | None = None) -> int:
             print(err, file=sys.stderr)
             return 2
         bus = FlightBus(session, args.flight, LOGGER)
-        flight_logger = FlightLogger(bus, mission, log_path, args.source)
+        try:
+            flight_logger = FlightLogger(bus, mission, log_path, args.source)
+        except OSError as err:  # the coordinator then stops in one line, nothing armed
+            print(f"logger: cannot write {log_path}: {err.strerror or err}", file=sys.stderr)
+            bus.close()
+            return 2
         bus.token(LOGGER)
         try:
             while not stop.is_set():

@@ -43,6 +43,7 @@ from typing import Any, Callable, Optional, Sequence
 
 from rpf_fly.mission.model import Mission
 from rpf_fly.runtime.keys import COORDINATOR, RELAY
+from rpf_fly.runtime.session import StartError
 
 logger = logging.getLogger(__name__)
 
@@ -50,7 +51,7 @@ SILENT_S = 1.0
 """The relay's mocap delivering no frame for this long is a warning event (and its return an info)."""
 
 
-class RelayError(RuntimeError):
+class RelayError(StartError):
     """The relay did not come up (its mocap did not answer, it exited, no token in time): one line, exit 2."""
 
 

@@ -25,6 +25,11 @@ class ZenohUnavailable(ConnectionError):
     """The session could not open (no endpoint reachable, a port taken): one line for the user."""
 
 
+class StartError(RuntimeError):
+    """A process of the flight (the logger, the mocap relay) did not come up: one line for the user, exit 2,
+    nothing armed."""
+
+
 def free_loopback_endpoint() -> str:
     """``tcp/127.0.0.1:<a free port>`` (the coordinator's default when no remote worker must find it)."""
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:

@@ -102,3 +102,22 @@ def test_help_does_not_import_numpy():
     code = "import sys; from rpf_fly.cli import get_app; get_app(); print('numpy' in sys.modules)"
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert proc.stdout.strip() == "False", proc.stderr
+
+
+@pytest.mark.parametrize("where", ["under a file", "in /proc"])
+@pytest.mark.parametrize("distributed", [False, True])
+def test_a_log_that_cannot_be_written_is_one_line_before_anything_flies(tmp_path, where, distributed):
+    """``fly --log`` where no file can be made (its folder is a file; /proc, where not even root makes files):
+    exit 2, one line naming the path, before any drone, Zenoh session or process is started (no traceback from
+    the flight or the distributed flight's logger)."""
+    from pathlib import Path
+
+    mission = Path(__file__).resolve().parents[1] / "runtime" / "two-dongles.yaml"
+    (tmp_path / "file").write_text("")
+    path = tmp_path / "file" / "x.mcap" if where == "under a file" else Path("/proc/rpf-fly-test.mcap")
+    result = runner.invoke(get_app(), ["fly", str(mission), "--dry-run", "--log", str(path)]
+                           + (["--distributed"] if distributed else []))
+    assert result.exit_code == 2, result.output
+    line = result.output.strip()
+    assert "\n" not in line and line.startswith(f"--log {path}: cannot "), line
+    assert not path.exists()
