@@ -405,9 +405,10 @@ class Coordinator:
             self.relay_alive = False
             if not self._closing:
                 pid, host = self.relay_info.get("pid", "?"), self.relay_info.get("host", "?")
-                if self.relayed:
+                if self.relayed:  # no worker sees anything any more: land now, not once each pose is stale
                     self.events.emit(FATAL, "relay_lost", f"the mocap relay (pid {pid} on {host}) is gone: the "
-                                     "workers get no mocap; their drones hold, then land")
+                                     "workers get no mocap; every drone lands")
+                    self._stop_reason = self._stop_reason or "the mocap relay is gone: landing every drone"
                 else:
                     self.events.emit(WARNING, "relay_lost", f"the mocap relay (pid {pid} on {host}) is gone: the "
                                      "workers fly on their own mocap; the log's /mocap ends here")
