@@ -64,6 +64,14 @@ class SwarmLink(Protocol):
         ground``), whichever loop flies it; this loop keeps down its own drones beside them
         (:meth:`FlightLoop._ground_neighbours`)."""
 
+    def armed(self, loop: "FlightLoop", refused: Collection[str]) -> None:
+        """This loop armed its drones; ``refused``: those that stay down (their supervisors refused, or kept down
+        beside them): tell the coordinator, which then says who takes off."""
+
+    def takeoff(self) -> Optional[Collection[str]]:
+        """Once every loop armed: every drone of the swarm that stays on the ground (the arming refusals of every
+        loop, and the drones down since the go), this loop keeping its own beside them down; None: not yet."""
+
 
 INTERRUPT_STOP = ("interrupted by Ctrl-C", "Ctrl-C: all drones land (Ctrl-C again: emergency stop)")
 """The first Ctrl-C's :meth:`FlightLoop.request_stop`: the reason each drone landed, and what the console says once
@@ -496,7 +504,10 @@ class FlightLoop:
     def _takeoff(self) -> None:
         self._set_phase(SwarmPhase.TAKEOFF)
         flight = self.mission.flight
-        for agent in self._arm():
+        armed = self._arm()
+        if self.swarm is not None:
+            armed = self._await_takeoff(armed)
+        for agent in armed:
             self.commander.take_off(agent, flight.height, flight.takeoff_s)
         until = self.clock() + flight.takeoff_s + self.TAKEOFF_SETTLE_S
         while self.clock() < until and not self._stop.is_set():
@@ -510,6 +521,38 @@ class FlightLoop:
                 self.commander.land(agent, f"take-off did not reach {flight.height:.2f} m ({z})")
             elif self.commander.begin_planning(agent, pose.xy, self.clock()):
                 self.events.emit(INFO, "takeoff", f"airborne at {pose.position[2]:.2f} m: planning", agent.name)
+
+    def _await_takeoff(self, armed: list[DroneAgent]) -> list[DroneAgent]:
+        """With a :class:`SwarmLink`: report the arming and wait, drones armed on the ground, for the coordinator's
+        ``takeoff``; keep down this loop's armed drones beside every drone of the swarm that stays on the ground
+        (another loop's arming refusal included: a drone landing on one would crash), as a single process keeps
+        them down beside its own refusals (:meth:`_arm`). Its abort, a stop or the timeout: every armed drone is
+        disarmed and stays down. Returns the drones that take off."""
+        refused = sorted(n for n, a in self.agents.items() if a.phase == DronePhase.FAILED)
+        self.swarm.armed(self, refused)  # type: ignore[union-attr]
+        deadline = self.clock() + GO_TIMEOUT_S
+        why = "the swarm does not take off"
+        while not self._stop.is_set():
+            grounded = self.swarm.takeoff()  # type: ignore[union-attr]
+            if grounded is not None:
+                others = set(grounded) - set(self.agents)
+                if others:
+                    self._ground_neighbours(set(grounded))
+                kept = sorted(a.name for a in armed if a.phase == DronePhase.FAILED)
+                if kept:
+                    self.events.emit(ERROR, "takeoff", f"{', '.join(kept)} stay on the ground beside the swarm's "
+                                     f"grounded drones ({', '.join(sorted(others))}); the others fly")
+                return [a for a in armed if a.phase == DronePhase.READY]
+            if self.swarm.verdict() == "abort":  # type: ignore[union-attr]
+                break
+            if self.clock() > deadline:
+                why = f"no take-off from the coordinator within {GO_TIMEOUT_S:.0f} s"
+                self.events.emit(ERROR, "swarm", why)
+                break
+            self._spin_once(self.clock() + 0.05)
+        for agent in armed:  # on the ground, armed: disarming is safe
+            self.commander.refuse_take_off(agent, why + (f" ({self._stop_reason})" if self._stop_reason else ""))
+        return []
 
     def _fly(self) -> None:
         self._set_phase(SwarmPhase.FLYING)

@@ -4,7 +4,7 @@ A Zenoh endpoint is open to anyone who reaches it; a worker obeys only commands 
 coordinator. Each flight draws a fresh 256-bit secret; the coordinator hands it to its local workers in their
 environment (``RPF_FLY_SECRET``, not their command line: ``ps`` shows command lines to every user) and prints how
 to give it to a remote one. A command is a JSON object ``{"command", "seq", "reason", "t_ns", "flight"}`` (a ``go``
-also ``"grounded"``: the drones that stay on the ground, signed with the rest) whose attachment is the
+and a ``takeoff`` also ``"grounded"``: the drones that stay on the ground, signed with the rest) whose attachment is the
 HMAC-SHA256 of its bytes under the secret (hex). The secret itself never crosses the network, so a subscriber on
 ``rpf_fly/**`` cannot learn it; a replayed command is refused by its sequence number (each coordinator counts up
 from 1; a worker takes each number once, in order).
@@ -21,10 +21,11 @@ from dataclasses import dataclass
 from typing import Optional
 
 SECRET_ENV = "RPF_FLY_SECRET"
-COMMANDS = ("go", "abort", "finish", "land", "emergency_stop")
-"""go: take off (every worker passed its preflight); abort: land or stay down before take-off; finish: the mission
-is over (every drone at its goal), land normally; land: the operator's first Ctrl-C; emergency_stop: motors off."""
-GROUNDED_ON = ("go",)
+COMMANDS = ("go", "takeoff", "abort", "finish", "land", "emergency_stop")
+"""go: arm (every worker passed its preflight); takeoff: every worker armed, take off (the drones that stay down
+named); abort: land or stay down before take-off; finish: the mission is over (every drone at its goal), land
+normally; land: the operator's first Ctrl-C; emergency_stop: motors off."""
+GROUNDED_ON = ("go", "takeoff")
 """The commands that may name drones staying on the ground (``safety.on_preflight_failure: ground``)."""
 
 
@@ -38,8 +39,9 @@ class Command:
     seq: int
     reason: str = ""
     grounded: tuple[str, ...] = ()
-    """A ``go``: every drone of the swarm that stays on the ground (failed its preflight, or kept down by one that
-    did); each worker keeps down its own drones that could not take off or land beside them (FlightLoop)."""
+    """A ``go`` or ``takeoff``: every drone of the swarm that stays on the ground (failed its preflight or its arming,
+    or kept down by one that did); each worker keeps down its own drones that could not take off or land beside
+    them (FlightLoop)."""
 
 
 def mac(key: bytes, payload: bytes) -> bytes:

@@ -57,6 +57,9 @@ RELAY_WAIT_S = 30.0
 """How long the coordinator waits for the mocap relay's token (it imports, then its mocap must answer: 5 s)."""
 PREFLIGHT_STATES = {"ready", "failed"}
 DOWN_STATES = {"landed", "failed", "emergency", "link_lost", "landing"}
+ARM_WAIT_S = 15.0
+"""After the go: how long the coordinator waits for every worker to report its arming (each waits up to 3 s for its
+drones' supervisors) before it aborts, nothing taking off."""
 END_WAIT_S = 30.0
 """After the finish or a land command: how long the coordinator waits for the workers to land and exit."""
 
@@ -476,7 +479,7 @@ class Coordinator:
 
     def _command(self, command: str, reason: str = "", grounded: tuple[str, ...] = ()) -> None:
         assert self.bus is not None
-        self.events.emit(INFO if command in ("go", "finish") else WARNING, "command", f"{command}"
+        self.events.emit(INFO if command in ("go", "takeoff", "finish") else WARNING, "command", f"{command}"
                          f"{': ' + reason if reason else ''}")
         self.bus.command(self.secret, command, reason, grounded)
 
@@ -490,6 +493,7 @@ class Coordinator:
         self.phase = "preflight"
         self.events.emit(INFO, "phase", "swarm: preflight")
         arrived_since: Optional[float] = None
+        arming_since = 0.0
         sent_stop = sent_estop = False
         timeout = self.mission.flight.timeout_s + 120.0
         start = time.monotonic()
@@ -528,8 +532,21 @@ class Coordinator:
                     self._command("go", f"every worker finished its preflight; {', '.join(failed)} stay on the "
                                   "ground, with every drone that could not take off or land beside them" if failed
                                   else "every worker passed its preflight", tuple(failed))
+                    self.phase = "arming"
+                    arming_since = now
+            elif self.phase == "arming":
+                if all(w.info.get("state") == "armed" for w in live):
+                    down = self._grounded_at_takeoff(live)
+                    self._command("takeoff", "every worker armed" + (
+                        f"; {', '.join(down)} stay on the ground, with every drone that could not take off or land "
+                        "beside them" if down else ""), tuple(down))
                     self.phase = "flying"
                     self.events.emit(INFO, "phase", "swarm: flying")
+                elif now - arming_since > ARM_WAIT_S:
+                    waiting = [w.name for w in live if w.info.get("state") != "armed"]
+                    self._command("abort", f"{', '.join(waiting)} did not arm within {ARM_WAIT_S:.0f} s: no drone "
+                                  "takes off")
+                    self.phase = "aborted"
             elif self.phase == "flying":
                 if states and all(s == "arrived" or s in DOWN_STATES for s in states) and "arrived" in states:
                     arrived_since = arrived_since if arrived_since is not None else now
@@ -540,6 +557,16 @@ class Coordinator:
                 else:
                     arrived_since = None
         self.phase = "done" if self.phase != "aborted" else self.phase
+
+    def _grounded_at_takeoff(self, live: list[WorkerView]) -> list[str]:
+        """Every drone that stays on the ground once the workers armed: their arming refusals (each worker's report
+        names them: their "failed" status may come later), every drone down since the go, and the drones of a
+        worker that ended or died meanwhile (on the ground where they stand). Each worker keeps down its drones
+        beside them, as a single process keeps its own down beside its refusals."""
+        down = {n for w in live for n in w.info.get("refused", ()) if n in self.drones}
+        down |= {n for n, view in self.drones.items() if view.state == "failed"}
+        down |= {n for w in self.workers.values() if w not in live for n in w.drones}
+        return sorted(down)
 
     def _end_workers(self) -> None:
         """Wait for the local workers to land and exit (a stuck one: land, then SIGTERM, then SIGKILL)."""

@@ -22,7 +22,7 @@ import threading
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Optional
+from typing import Any, Callable, Collection, Optional
 
 from rpf_fly.flight.events import ERROR, WARNING, FlightEvent
 from rpf_fly.flight.loop import FlightLoop, FlightReport, PlannerFactory
@@ -90,11 +90,12 @@ def worker_info(mission: Mission, dongle: int, state: str, **extra: Any) -> dict
 class CoordinatorLink:
     """The loop's :class:`~rpf_fly.flight.loop.SwarmLink` to its coordinator, fed by the bus's command callback."""
 
-    def __init__(self, bus: FlightBus, info: Callable[[str], None]):
+    def __init__(self, bus: FlightBus, info: Callable[..., None]):
         self._bus = bus
         self._info = info
         self._verdict: Optional[str] = None
         self._grounded: tuple[str, ...] = ()
+        self._takeoff: Optional[tuple[str, ...]] = None
         self.loop: Optional[FlightLoop] = None
         self._pending: list[Command] = []
         self._lock = threading.Lock()
@@ -112,6 +113,13 @@ class CoordinatorLink:
 
     def grounded(self) -> tuple[str, ...]:
         return self._grounded
+
+    def armed(self, loop: FlightLoop, refused: Collection[str]) -> None:
+        # The refusals go with the report itself: the drones' "failed" status messages may come after it.
+        self._info("armed", refused=sorted(refused))
+
+    def takeoff(self) -> Optional[tuple[str, ...]]:
+        return self._takeoff
 
     # the bus
     def attach(self, loop: FlightLoop) -> None:
@@ -135,6 +143,9 @@ class CoordinatorLink:
                 self.go_at = (time.monotonic(), time.process_time())
                 self._grounded = command.grounded  # signed with the go; set before the verdict the loop reads
             self._verdict = self._verdict or "go"
+        elif command.command == "takeoff":
+            if self._takeoff is None:
+                self._takeoff = command.grounded  # signed with the take-off
         elif command.command == "abort":
             self._verdict = "abort"
             loop.request_stop(why)

@@ -460,3 +460,42 @@ def test_a_distributed_dry_run_takes_only_power_on_faults(tmp_path):
     assert result.output.strip() == f"{faults}:3: planner_error: --distributed takes the power-on faults only " \
                                     "(yaw_offset, start_offset, upside_down, motor_fault; docs/distributed.md)"
     assert not (tmp_path / "f.mcap").exists()
+
+
+def test_a_drone_refused_at_arming_keeps_another_workers_drones_beside_it_down(tmp_path):
+    """cf1 (dongle 0) passes its preflight but a motor fails the arming's spin-up: it stays on the ground. cf3's goal
+    (dongle 1) is where cf1 stands, and cf2's goal (dongle 0) is beside cf3's start. The workers report their arming,
+    the coordinator's signed ``takeoff`` names cf1, and dongle 1's worker keeps cf3 down (disarmed), and so dongle 0
+    keeps cf2 down: the same as one process. Before, the workers took off without a second round: cf3 flew to land
+    on cf1. cf4 flies and reaches its goal."""
+    text = GROUNDED.read_text().replace("../../policies/", f"{ROOT}/policies/").replace(
+        "goal: [-0.8, -0.3]}", "goal: [-0.8, -0.8]}")
+    path = tmp_path / "arming.yaml"
+    path.write_text(text)
+    mission = load_mission(path)
+    lines: list[str] = []
+    log_path = tmp_path / "arming.mcap"
+    coordinator = Coordinator(mission, path, log_path, dry_run=True, say=lines.append,
+                              start_faults={"cf1": StartFault(motor_fault=True)})
+    thread, result = _start(coordinator)
+    thread.join(120)
+    assert not thread.is_alive()
+    assert result["code"] == 1, lines
+    outcomes = {name: view.outcome for name, view in coordinator.drones.items()}
+    assert outcomes == {"cf1": "not_flown", "cf2": "not_flown", "cf3": "not_flown", "cf4": "reached"}, outcomes
+    takeoff = [e.message for e in coordinator.events.history if e.kind == "command"
+               and e.message.startswith("takeoff")]
+    assert len(takeoff) == 1 and "cf1, cf2 stay on the ground" in takeoff[0], takeoff  # cf2: dongle 0, in turn
+    log = read_log(log_path)
+    said = {(m.data["name"], m.data["message"]) for m in log.messages("/events")}
+    assert any(name == "cf1" and "spin-up check" in text for name, text in said), said
+    assert any(name == "cf3" and "its goal is 0.00 m from cf1, which stays on the ground" in text
+               for name, text in said), said
+    assert any(name == "cf2" and "its goal is 0.10 m from cf3, which stays on the ground" in text
+               for name, text in said), said
+    for name in ("cf1", "cf2", "cf3"):
+        truth = log.messages(f"/truth/{name}")
+        assert truth and max(m.data["position"]["z"] for m in truth) < 0.01, name
+        assert not any(m.data["crashed"] for m in truth), name
+        assert not truth[-1].data["motors"], name
+    assert max(m.data["position"]["z"] for m in log.messages("/truth/cf4")) > 0.4
