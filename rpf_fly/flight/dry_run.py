@@ -83,6 +83,16 @@ def client_ip(server: str) -> str:
     return "127.0.0.1" if server.startswith("127.") else "0.0.0.0"
 
 
+def emulator_motioncapture_source(host: str, command_port: int, up_axis: str, bodies: list[str]) -> Any:
+    """The ``motioncapture`` package's OptiTrack decoder on the NatNet emulator at ``host`` (which multicasts for
+    it: libmotioncapture receives no unicast frames, docs/mocap.md): the dry run of a ``motioncapture`` mission, in
+    one process or in a distributed flight's relay."""
+    from rpf_fly.mocap.motioncapture_source import MotioncaptureSource
+
+    return MotioncaptureSource("optitrack", host, {"interface_ip": host, "port_command": str(command_port)},
+                               up_axis=up_axis, bodies=bodies)
+
+
 def fake_uri(uri: str) -> str:
     """``radio://0/80/2M/E7E7E7E701`` -> ``fake://0/80/2M/E7E7E7E701`` (fake URIs pass through)."""
     scheme, _, rest = uri.partition("://")
@@ -239,14 +249,8 @@ class DryRun:
             if not client.wait_for_server(5.0):
                 raise RuntimeError("dry run: the NatNet emulator did not answer within 5 s")
         elif self.mocap_kind == "motioncapture":
-            from rpf_fly.mocap.motioncapture_source import MotioncaptureSource
-
-            self.mocap = MotioncaptureSource(
-                "optitrack", "127.0.0.1" if self.host == "0.0.0.0" else self.host,
-                {"interface_ip": "127.0.0.1" if self.host == "0.0.0.0" else self.host,
-                 "port_command": str(command_port)},
-                up_axis=up, bodies=list(self.bodies.values()),
-            )
+            self.mocap = emulator_motioncapture_source("127.0.0.1" if self.host == "0.0.0.0" else self.host,
+                                                       int(command_port), up, list(self.bodies.values()))
         else:
             from rpf_fly.emulator.simulated_mocap import SimulatedMocap
 

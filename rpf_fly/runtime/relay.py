@@ -71,7 +71,8 @@ def describe_source(mission: Mission, dry_run: bool) -> str:
     """What the relay reads, for its record and the console."""
     m = mission.mocap
     if dry_run:
-        return "the dry run's NatNet emulator (unicast)"
+        return ("the dry run's NatNet emulator (multicast, through the motioncapture package's OptiTrack decoder)"
+                if m.kind == "motioncapture" else "the dry run's NatNet emulator (unicast)")
     if m.kind == "motioncapture":
         return f"motioncapture {m.system}" + (f" at {m.hostname}" if m.hostname else "")
     return f"NatNet {m.server} ({'multicast' if m.multicast else 'unicast'})"
@@ -164,10 +165,10 @@ def open_source(mission: Mission, bus: Any, dry_run: bool, connect: Sequence[str
     ``connect`` reached the coordinator). Raises with one line when it does not answer."""
     if dry_run:
         from rpf_fly.runtime.session import rig_address
-        from rpf_fly.runtime.worker import find_rig, rig_natnet
+        from rpf_fly.runtime.worker import find_rig, rig_mocap
 
         rig = find_rig(bus)
-        return rig_natnet(mission, rig, rig_address(str(rig["radio"][0]), connect))
+        return rig_mocap(mission, rig, rig_address(str(rig["radio"][0]), connect))
     from rpf_fly.flight.session import mocap_source
 
     return mocap_source(mission)

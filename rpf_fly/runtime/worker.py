@@ -224,13 +224,20 @@ def relay_transit(source: Any, since_s: float) -> dict[str, Any]:
             "relay_transit_us": [round(v * 1e6) for v in transit]}
 
 
-def rig_natnet(mission: Mission, rig: dict[str, Any], host: str) -> Any:
-    """A unicast NatNet client to the dry-run rig's NatNet emulator at ``host`` (where this process reaches the rig:
-    :func:`~rpf_fly.runtime.session.rig_address`), its handshake done (:class:`WorkerError` when the emulator does
-    not answer within 5 s)."""
-    from rpf_fly.flight.dry_run import client_ip
+def rig_mocap(mission: Mission, rig: dict[str, Any], host: str) -> Any:
+    """The dry-run rig's mocap as this process reads it, at ``host`` (where it reaches the rig:
+    :func:`~rpf_fly.runtime.session.rig_address`): a unicast NatNet client to the emulator, its handshake done, or
+    for a ``motioncapture`` mission the package's OptiTrack decoder on the emulator's multicast, as the
+    single-process dry run reads it (:class:`WorkerError` when the emulator does not answer within 5 s)."""
+    from rpf_fly.flight.dry_run import client_ip, emulator_motioncapture_source
     from rpf_fly.mocap.natnet_client import NatNetClient
 
+    if mission.mocap.kind == "motioncapture":
+        try:
+            return emulator_motioncapture_source(host, int(rig["natnet_command_port"]), mission.mocap.up_axis,
+                                                 [d.rigid_body for d in mission.drones])
+        except Exception as err:  # noqa: BLE001 - the library's own words, in one line
+            raise WorkerError(f"dry run: the motioncapture package could not read the emulator: {err}") from err
     client = NatNetClient(host, multicast=False, local_ip=client_ip(host),
                           command_port=int(rig["natnet_command_port"]), data_port=None, up_axis=mission.mocap.up_axis)
     if not client.wait_for_server(5.0):
@@ -372,7 +379,7 @@ class WorkerRun:
         if relayed:
             client = self._relayed(bus)
         else:
-            client = rig_natnet(self.mission, rig, host)
+            client = rig_mocap(self.mission, rig, host)
             self._closers.append(client.close)
         uris = {d.name: fake_uri(d.uri) for d in self.mission.drones}
         return CflibBackend(cache_dir=DRY_RUN_TOC_CACHE), client, uris

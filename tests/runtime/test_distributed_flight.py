@@ -499,3 +499,26 @@ def test_a_drone_refused_at_arming_keeps_another_workers_drones_beside_it_down(t
         assert not any(m.data["crashed"] for m in truth), name
         assert not truth[-1].data["motors"], name
     assert max(m.data["position"]["z"] for m in log.messages("/truth/cf4")) > 0.4
+
+
+def test_a_motioncapture_mission_flies_distributed_through_the_relay(tmp_path):
+    """A ``motioncapture`` mission (OptiTrack through the motioncapture package) flown distributed in a dry run: the
+    relay reads the emulator as the single-process dry run does (the package's decoder on its multicast) and the
+    workers fly on its frames. Before, the relay's unicast client got no frame from the multicasting emulator and
+    no worker started."""
+    path = _variant(tmp_path, "", ("mocap: {kind: natnet, server: 127.0.0.1, multicast: false, up_axis: z, rate_hz: 50}",
+                                   "mocap: {kind: motioncapture, type: optitrack, hostname: 127.0.0.1}"))
+    mission = load_mission(path)
+    assert mission.mocap.kind == "motioncapture"
+    lines: list[str] = []
+    coordinator = Coordinator(mission, path, tmp_path / "mc.mcap", dry_run=True, say=lines.append)
+    thread, result = _start(coordinator)
+    thread.join(120)
+    assert not thread.is_alive()
+    assert result["code"] == 0, lines
+    assert coordinator.relayed and coordinator.relay_info["frames"] > 100, coordinator.relay_info
+    assert "motioncapture" in coordinator.relay_info["source"]
+    log = read_log(tmp_path / "mc.mcap")
+    for name in ("cf1", "cf2", "cf3", "cf4"):
+        assert log.messages(f"/{name}/status")[-1].data["outcome"] == "reached", name
+        assert len(log.messages(f"/mocap/{name}")) > 100, name
