@@ -11,6 +11,12 @@ from dataclasses import dataclass, replace
 from typing import Literal
 
 
+RPF3_TUNING: dict[str, float] = {"guided_influence_range": 0.3, "neighbour_range": 1.5}
+"""What the ``rpf3`` kind flies on top of the robust preset (docs/algorithm.md, *RPF-3's tuning*, measured on the
+scene families): the static repulsion within 0.3 m of the margin-grown surface once guidance is on, the neighbours'
+within 1.5 m. The gains are the policy's, unchanged; no other kind uses these."""
+
+
 @dataclass(frozen=True)
 class PlannerConfig:
     """Parameters of the APF with (soft) wall-following. Defaults are the ``robust`` preset with the paper's numbers."""
@@ -55,6 +61,13 @@ class PlannerConfig:
     the goal (plus the moving neighbours' force): :mod:`rpf_fly.planning.arrival`, docs/algorithm.md, *Arrival*.
     Goals inside the band where the repulsion beats the unit attraction are otherwise orbited, never reached.
     0 turns it off (the paper preset)."""
+    guided_influence_range: float = 0.0
+    """With ``guidance == "path"``: rho of the static repulsion (metres of the margin-grown surface distance) in
+    place of ``influence_range``; 0 keeps ``influence_range``. The guidance path already clears every obstacle by
+    ``r + margin``, so the repulsion only needs to act near that bound (docs/algorithm.md, *RPF-3's tuning*)."""
+    neighbour_range: float = 0.0
+    """Robust preset: each pairwise repulsion acts within ``min(2 lambda, neighbour_range)`` of the margin-grown
+    distance, the term shifted so it falls to zero there (``max(0.5, lambda/R) - lambda/d``); 0: ``2 lambda``."""
     guidance: Literal["none", "path"] = "none"
     """``path``: the attraction pulls toward the next waypoint of the shortest path around the obstacles inflated by
     ``r + margin`` that the drone can see, instead of straight at the goal (:mod:`rpf_fly.planning.guidance`)."""

@@ -47,6 +47,8 @@ def repulsive(nearest: NearestObstacle, eta: np.ndarray | float, config: Planner
     d_raw = nearest.distance
     d = maximum(d_raw, config.min_distance)
     rho = config.influence_range
+    if config.guided_influence_range and config.guidance == "path":
+        rho = config.guided_influence_range
     visible = d_raw <= min(rho, config.sensing_range)
     magnitude = eta * (1.0 / d - 1.0 / rho) / (d * d)
     return (visible * magnitude) * nearest.normal
@@ -78,6 +80,8 @@ def inter_robot(
     else:
         coefficient = 0.5 - per_item(lam) / d
     if config.repulsive_only:
+        if config.neighbour_range:
+            coefficient = coefficient + np.maximum(per_item(lam) / config.neighbour_range - 0.5, 0.0)
         coefficient = np.minimum(coefficient, 0.0)
     force = plain(((mask * coefficient / d) * delta).sum(axis=-1))
     count = np.count_nonzero(mask) if mask.ndim == 1 else mask.sum(axis=-1)

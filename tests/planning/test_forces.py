@@ -141,3 +141,29 @@ def test_inter_robot_per_robot_lambda_broadcasts():
     mask = np.ones((2, 1), dtype=bool)
     f_in, _ = inter_robot(positions, neighbours, mask, np.array([2.0, 1.0]), PAPER)
     assert f_in == pytest.approx(np.array([-1.5 + 0j, -0.5 + 0j]))
+
+
+def test_guided_influence_range_limits_static_repulsion_only_with_guidance():
+    # Surface 0.5 m away: beyond a guided rho of 0.3 the repulsion vanishes with guidance, stays without it.
+    obstacles = ObstacleSet.from_shapes(circles=[((1.0, 0.0), 0.5)])
+    nearest = nearest_obstacle(0j, obstacles)
+    guided = PlannerConfig.robust(guidance="path", guided_influence_range=0.3)
+    assert repulsive(nearest, 0.05, guided) == 0
+    assert repulsive(nearest, 0.05, PlannerConfig.robust(guided_influence_range=0.3)) == repulsive(nearest, 0.05, ROBUST)
+    # Inside it: eta (1/d - 1/0.3) / d^2 at d = 0.2, pointing away from the obstacle.
+    near = nearest_obstacle(0.3 + 0j, obstacles)
+    assert repulsive(near, 0.05, guided) == pytest.approx(-0.05 * (1 / 0.2 - 1 / 0.3) / 0.04 + 0j)
+
+
+def test_neighbour_range_cuts_the_pairwise_repulsion_and_shifts_it_to_zero_there():
+    # lambda 1.2: the robust term reaches 2 lambda = 2.4 m; with R = 1.5 it is max(0.5, 1.2/1.5) - 1.2/d.
+    config = PlannerConfig.robust(neighbour_range=1.5, keep_right_deg=0.0)
+    plain_config = PlannerConfig.robust(keep_right_deg=0.0)
+    far, _ = inter_robot(0j, np.array([2.0 + 0j]), np.array([True]), 1.2, config)
+    assert far == 0
+    assert inter_robot(0j, np.array([2.0 + 0j]), np.array([True]), 1.2, plain_config)[0] != 0
+    near, _ = inter_robot(0j, np.array([1.0 + 0j]), np.array([True]), 1.2, config)
+    assert near == pytest.approx((0.8 - 1.2 / 1.0) + 0j)
+    # A lambda whose own range is shorter than R keeps the paper's term.
+    short, _ = inter_robot(0j, np.array([1.0 + 0j]), np.array([True]), 0.6, config)
+    assert short == pytest.approx(inter_robot(0j, np.array([1.0 + 0j]), np.array([True]), 0.6, plain_config)[0])
