@@ -11,10 +11,11 @@ from dataclasses import dataclass, replace
 from typing import Literal
 
 
-RPF3_TUNING: dict[str, float] = {"guided_influence_range": 0.3, "neighbour_range": 1.5}
+RPF3_TUNING: dict[str, float] = {"guided_influence_range": 0.2, "neighbour_range": 0.8, "yield_gain": 0.5}
 """What the ``rpf3`` kind flies on top of the robust preset (docs/algorithm.md, *RPF-3's tuning*, measured on the
-scene families): the static repulsion within 0.3 m of the margin-grown surface once guidance is on, the neighbours'
-within 1.5 m. The gains are the policy's, unchanged; no other kind uses these."""
+scene families): the static repulsion within 0.2 m of the margin-grown surface once guidance is on, the neighbours'
+within 0.8 m, and a drone slows (to 20 % at most) where they push against its motion. The gains are the policy's,
+unchanged; no other kind uses these."""
 
 
 @dataclass(frozen=True)
@@ -68,6 +69,11 @@ class PlannerConfig:
     neighbour_range: float = 0.0
     """Robust preset: each pairwise repulsion acts within ``min(2 lambda, neighbour_range)`` of the margin-grown
     distance, the term shifted so it falls to zero there (``max(0.5, lambda/R) - lambda/d``); 0: ``2 lambda``."""
+    yield_gain: float = 0.0
+    """k: the drone flies at ``clip(1 + k (d . F_in), min_speed_fraction, 1)`` of its speed, slower where the moving
+    neighbours push against its direction ``d`` (:mod:`rpf_fly.planning.speed`); 0: always full speed (the paper)."""
+    min_speed_fraction: float = 0.2
+    """The slowest a yielding drone flies, as a fraction of its speed."""
     guidance: Literal["none", "path"] = "none"
     """``path``: the attraction pulls toward the next waypoint of the shortest path around the obstacles inflated by
     ``r + margin`` that the drone can see, instead of straight at the goal (:mod:`rpf_fly.planning.guidance`)."""

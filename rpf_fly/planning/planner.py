@@ -19,14 +19,15 @@ from rpf_fly.planning.gains import FixedGains, GainsPolicy
 from rpf_fly.planning.guidance import Bounds, Guidance
 from rpf_fly.planning.obstacles import NearestObstacle, ObstacleSet, nearest_obstacle
 from rpf_fly.planning.observation import Observation, build_observation
+from rpf_fly.planning.speed import yield_speed
 from rpf_fly.planning.view import LocalView
 from rpf_fly.planning.wall_following import select_heading
 
 
 @dataclass(frozen=True)
 class PlanStep:
-    """Result for drones of leading shape ``S``. ``direction`` (complex) is a unit vector, or zero for a stalled
-    drone (resultant 0).
+    """Result for drones of leading shape ``S``. ``direction`` (complex) is a unit vector, zero for a stalled
+    drone (resultant 0), or shorter than unit for a drone that yields (``config.yield_gain``, :mod:`.speed`).
 
     Diagnostics for the log: forces ``f_a``, ``f_r``, ``f_in`` (complex); ``mode`` int8 (0 apf, 1 wall, 2 soft);
     gains ``eta``, ``lam``; ``neighbours``: lambda-neighbours used; ``obstacle_distance``: signed distance to the
@@ -96,6 +97,7 @@ def apf_step(
     direction, mode = select_heading(f_a, f_r, f_in, view.heading, seen.distance, config)
     direction, mode = capture(direction, mode, view.position, view.goal if goal is None else goal, f_in,
                               nearest.distance, config)
+    direction = yield_speed(direction, f_in, config)
     return PlanStep(
         direction=direction,
         mode=mode,

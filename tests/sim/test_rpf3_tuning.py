@@ -57,3 +57,16 @@ def test_neighbour_range_shortens_the_detour_of_a_crossing_and_keeps_the_margin(
     assert before.success and after.success and after.margin_held
     assert after.travel_distance_m < before.travel_distance_m - 0.3
     assert after.makespan_s < before.makespan_s
+
+
+def test_yielding_shortens_the_crossing_further_and_keeps_the_margin():
+    # The same crossing: with the neighbour range alone the pairs still swerve; yielding lets one pass first.
+    scenario = make_scenario("cross", np.array([-3 + 0.3j, -3 - 0.3j, 0.3 - 3j, -0.3 - 3j]),
+                             np.array([3 + 0.3j, 3 - 0.3j, 0.3 + 3j, -0.3 + 3j]))
+    assert TUNED.yield_gain > 0
+    before = fly(scenario, replace(TUNED, yield_gain=0.0), GAINS)
+    after = fly(scenario, TUNED, GAINS)
+    assert before.success and after.success and after.margin_held
+    assert after.travel_distance_m < before.travel_distance_m - 0.2
+    assert after.makespan_s < before.makespan_s
+    assert after.smoothness < before.smoothness

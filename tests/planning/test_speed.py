@@ -1,0 +1,30 @@
+"""Yielding (rpf_fly.planning.speed): slower where the moving neighbours push against the motion, never below the
+floor, full speed otherwise; off (the same object) at gain 0."""
+
+import numpy as np
+import pytest
+
+from rpf_fly.planning import PlannerConfig
+from rpf_fly.planning.speed import yield_speed
+
+CONFIG = PlannerConfig.robust(yield_gain=0.5, min_speed_fraction=0.2)
+
+
+def test_push_against_the_motion_slows_by_the_hand_worked_factor():
+    # Heading +x, neighbours pushing -0.8 along it: 1 + 0.5 * (-0.8) = 0.6 of the speed, direction kept.
+    assert yield_speed(1 + 0j, -0.8 + 0.3j, CONFIG) == pytest.approx(0.6 + 0j)
+
+
+def test_sideways_or_following_push_keeps_full_speed_and_the_floor_holds():
+    assert yield_speed(1j, 2.0 + 0j, CONFIG) == pytest.approx(1j)
+    assert yield_speed(1j, 0.5j, CONFIG) == pytest.approx(1j)
+    assert yield_speed(1 + 0j, -10 + 0j, CONFIG) == pytest.approx(0.2 + 0j)
+
+
+def test_batched_and_one_drone_calls_agree_and_gain_zero_is_the_identity():
+    direction = np.exp(1j * np.array([0.0, 1.0, 2.0, 3.0]))
+    f_in = np.array([-0.8 + 0j, 0.3 - 1.2j, 5 + 0j, -1 - 1j])
+    batched = yield_speed(direction, f_in, CONFIG)
+    assert batched == pytest.approx([yield_speed(complex(d), complex(f), CONFIG) for d, f in zip(direction, f_in)])
+    assert np.all(abs(batched) <= 1 + 1e-12) and np.all(abs(batched) >= 0.2 - 1e-12)
+    assert yield_speed(direction, f_in, PlannerConfig.robust()) is direction
