@@ -21,7 +21,7 @@ import math
 import numpy as np
 
 from rpf_fly.planning.config import PlannerConfig
-from rpf_fly.planning.obstacles import NearestObstacle
+from rpf_fly.planning.obstacles import NearestObstacle, Surfaces
 from rpf_fly.planning.vectors import TINY, maximum, per_item, plain
 
 
@@ -52,6 +52,25 @@ def repulsive(nearest: NearestObstacle, eta: np.ndarray | float, config: Planner
     visible = d_raw <= min(rho, config.sensing_range)
     magnitude = eta * (1.0 / d - 1.0 / rho) / (d * d)
     return (visible * magnitude) * nearest.normal
+
+
+def repulsive_sum(surfaces: Surfaces, eta: np.ndarray | float, config: PlannerConfig) -> np.ndarray:
+    """The repulsion of :func:`repulsive` summed over every surface within range (each seen ``margin`` closer),
+    where :func:`repulsive` takes the nearest only: between two obstacles nearer than the range the two pushes
+    cancel along the gap instead of flipping side from one step to the next. With guidance the mission's obstacles
+    act within ``guided_influence_range``, the static neighbours (which the guidance path does not know) within
+    ``influence_range``."""
+    if surfaces.distance.shape[-1] == 0:
+        return np.zeros(surfaces.distance.shape[:-1], dtype=complex) if surfaces.distance.ndim > 1 else 0j
+    d_raw = surfaces.distance - config.margin
+    d = np.maximum(d_raw, config.min_distance)
+    guided = bool(config.guided_influence_range) and config.guidance == "path"
+    base = config.guided_influence_range if guided else config.influence_range
+    rho = np.full(d.shape[-1], base)
+    rho[surfaces.mapped :] = config.static_influence_range or base
+    visible = d_raw <= np.minimum(rho, config.sensing_range)
+    magnitude = np.where(visible, per_item(eta) * (1.0 / d - 1.0 / rho) / (d * d), 0.0)
+    return plain((magnitude * surfaces.normal).sum(axis=-1))
 
 
 def inter_robot(

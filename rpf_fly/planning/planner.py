@@ -14,12 +14,12 @@ import numpy as np
 
 from rpf_fly.planning.arrival import capture
 from rpf_fly.planning.config import PlannerConfig
-from rpf_fly.planning.forces import attractive, inter_robot, perceived, repulsive
+from rpf_fly.planning.forces import attractive, inter_robot, perceived, repulsive, repulsive_sum
 from rpf_fly.planning.gains import FixedGains, GainsPolicy
 from rpf_fly.planning.guidance import Bounds, Guidance
-from rpf_fly.planning.obstacles import NearestObstacle, ObstacleSet, nearest_obstacle
+from rpf_fly.planning.obstacles import NearestObstacle, ObstacleSet, Surfaces, every_surface, nearest_obstacle
 from rpf_fly.planning.observation import Observation, build_observation
-from rpf_fly.planning.speed import yield_speed
+from rpf_fly.planning.speed import brake, yield_speed
 from rpf_fly.planning.view import LocalView
 from rpf_fly.planning.wall_following import select_heading
 
@@ -84,6 +84,7 @@ def apf_step(
     waypoint: np.ndarray | None = None,
     goal_distance: np.ndarray | None = None,
     goal: np.ndarray | None = None,
+    surfaces: Surfaces | None = None,
 ) -> PlanStep:
     """The APF with (soft) wall-following for given gains (``observation``, when the gains came from one, is kept
     in the result for the log). ``view.goal`` is what the attraction pulls toward: the goal, or with guidance the
@@ -92,12 +93,16 @@ def apf_step(
     (None: ``view.goal``), for the capture rule (:mod:`rpf_fly.planning.arrival`)."""
     f_a, d_g = attractive(view.position, view.goal)
     seen = perceived(nearest, config)
-    f_r = repulsive(seen, eta, config)
+    if surfaces is None:
+        f_r = repulsive(seen, eta, config)
+    else:
+        f_r = repulsive_sum(surfaces, eta, config)
     f_in, count = inter_robot(view.position, view.neighbour_position, lambda_mask, lam, config)
     direction, mode = select_heading(f_a, f_r, f_in, view.heading, seen.distance, config)
     direction, mode = capture(direction, mode, view.position, view.goal if goal is None else goal, f_in,
                               nearest.distance, config)
     direction = yield_speed(direction, f_in, config)
+    direction = brake(direction, view.position, view.neighbour_position, view.neighbour_mask, config)
     return PlanStep(
         direction=direction,
         mode=mode,
@@ -122,15 +127,41 @@ def make_guidance(obstacles: ObstacleSet, config: PlannerConfig, bounds: Bounds 
     return Guidance(obstacles, config.safety_radius + config.margin, bounds)
 
 
-def guided_view(view: LocalView, guidance: Guidance | None) -> tuple[LocalView, np.ndarray | None, np.ndarray | None]:
+def guided_view(
+    view: LocalView, guidance: Guidance | None, reach: float = 0.0
+) -> tuple[LocalView, np.ndarray | None, np.ndarray | None]:
     """``view`` with its goal replaced by each drone's next visible waypoint, the waypoints and the remaining path
-    lengths (the view itself and None without guidance)."""
+    lengths (the view itself and None without guidance). ``reach`` > 0: a drone nearer its waypoint corner than
+    that has reached it and is pulled on to the corner's own next waypoint (:func:`past_reached`)."""
     if guidance is None:
         return view, None, None
     waypoint, remaining = guidance.waypoint(view.position, view.goal)
+    if reach:
+        waypoint = past_reached(guidance, view.position, view.goal, waypoint, reach)
     guided = LocalView(view.position, waypoint, view.heading, view.neighbour_position, view.neighbour_velocity,
                        view.neighbour_mask)
     return guided, waypoint, remaining
+
+
+def past_reached(guidance: Guidance, position: np.ndarray, goal: np.ndarray, waypoint: np.ndarray,
+                 reach: float) -> np.ndarray:
+    """The waypoints with every corner nearer its drone than ``reach`` replaced by the corner's own next waypoint.
+
+    Why (docs/algorithm.md, *RPF-3's tuning*): a drone rounding a corner within the repulsion's band is pushed off
+    the corner before it stands on it; an inch short of it the goal is still hidden, so the pull points back at the
+    corner, and an inch past it the pull points on: the drone can shuttle between the two for ever (one arena-a
+    drone in 40 fresh runs). Pulling on from the corner once the drone is within ``reach`` of it removes the
+    backward pull; the repulsion still keeps the clearance."""
+    near = (abs(waypoint - position) < reach) & (waypoint != goal)
+    if not isinstance(near, np.ndarray):
+        return guidance.waypoint(complex(waypoint), complex(goal))[0] if near else waypoint
+    if not near.any():
+        return waypoint
+    rows = np.nonzero(near)
+    onward, _ = guidance.waypoint(waypoint[rows], np.broadcast_to(goal, near.shape)[rows])
+    waypoint = waypoint.copy()
+    waypoint[rows] = onward
+    return waypoint
 
 
 class Planner:
@@ -160,12 +191,22 @@ class Planner:
     def step(self, view: LocalView) -> PlanStep:
         """Plan every drone of ``view`` from its own local view."""
         nearest, lambda_mask = sense_obstacles(view, self.obstacles, self.config)
-        guided, waypoint, remaining = guided_view(view, self.guidance)
+        guided, waypoint, remaining = guided_view(view, self.guidance, self.config.waypoint_reach)
         observation = None
         if self.gains.needs_observation:
             observation = build_observation(guided, nearest, self.config, self.gains.max_neighbours, remaining)
         eta, lam = self.gains.gains(observation)
+        surfaces = self._surfaces(view, lambda_mask) if self.config.repulsion_sum else None
         if waypoint is None:
-            return apf_step(view, nearest, lambda_mask, eta, lam, self.config, observation)
+            return apf_step(view, nearest, lambda_mask, eta, lam, self.config, observation, surfaces=surfaces)
         return apf_step(guided, nearest, lambda_mask, eta, lam, self.config, observation, waypoint,
-                        abs(view.goal - view.position), view.goal)
+                        abs(view.goal - view.position), view.goal, surfaces)
+
+    def _surfaces(self, view: LocalView, lambda_mask: np.ndarray) -> Surfaces:
+        """Every obstacle surface, the static neighbours among them as :func:`sense_obstacles` counts them."""
+        config = self.config
+        mask = view.neighbour_mask
+        if config.static_neighbours_as_obstacles and mask.shape[-1]:
+            return every_surface(view.position, self.obstacles, view.neighbour_position, config.safety_radius,
+                                 mask & ~lambda_mask)
+        return every_surface(view.position, self.obstacles)

@@ -1,4 +1,4 @@
-"""Yielding: a drone slows down where its moving neighbours push against its motion, instead of only turning.
+"""Speed rules: a drone slows down where its moving neighbours push against its motion, instead of only turning.
 
 Why (docs/algorithm.md, *RPF-3's tuning*): the APF flies at one speed, so every conflict with a moving neighbour is
 resolved by a detour; ORCA, which may slow down, lets one drone pass in front of the other and keeps both on their
@@ -11,7 +11,8 @@ push sideways or from behind, slower where they push back against the motion, ne
 ``min_speed_fraction`` so no drone stalls on this rule alone. The world and the flight loop move a drone
 ``speed * |direction| * dt`` a step, so a shorter direction is a slower drone; the heading is unchanged. The
 static obstacles do not slow anyone (the guidance path and the repulsion already keep their clearance).
-Pure function of the step's own vectors: batched and one-drone calls agree.
+:func:`brake` is the second rule: a drone heading toward a neighbour slows as the gap to ``2r + margin`` closes.
+Pure functions of the step's own vectors and the view: batched and one-drone calls agree.
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from rpf_fly.planning.config import PlannerConfig
-from rpf_fly.planning.vectors import dot, maximum, minimum
+from rpf_fly.planning.vectors import dot, maximum, minimum, per_item, plain
 
 
 def yield_speed(direction: np.ndarray, f_in: np.ndarray, config: PlannerConfig) -> np.ndarray:
@@ -28,3 +29,25 @@ def yield_speed(direction: np.ndarray, f_in: np.ndarray, config: PlannerConfig) 
         return direction
     factor = minimum(maximum(1.0 + config.yield_gain * dot(direction, f_in), config.min_speed_fraction), 1.0)
     return direction * factor
+
+
+
+def brake(direction: np.ndarray, position: np.ndarray, neighbour_position: np.ndarray, neighbour_mask: np.ndarray,
+          config: PlannerConfig) -> np.ndarray:
+    """``direction`` scaled by ``min_j clip(gap_j / brake_distance, 0, 1)`` over the neighbours ``j`` it heads
+    toward (``d . (p_j - p) > 0``), ``gap_j = |p_j - p| - (2r + margin + brake_buffer)``; the same object when
+    ``brake_distance`` is 0 or there are no neighbours.
+
+    Why: the forces keep ``2r + margin`` on average, but a drone squeezed between several neighbours (a 23-drone
+    circle) can be pushed a few millimetres inside it (0.2467 m against 0.25 in 1 of 120 fresh circles). Braking
+    within ``brake_distance`` of the bar makes the drone's own steps toward a neighbour shrink geometrically as the
+    gap closes, so it never steps across the bar toward a hovering one; moving sideways or away stays at full
+    speed, so the rule alone cannot stall a drone that may turn away."""
+    if not config.brake_distance or neighbour_position.shape[-1] == 0:
+        return direction
+    delta = neighbour_position - per_item(position)
+    heading = per_item(direction)
+    towards = heading.real * delta.real + heading.imag * delta.imag > 0.0
+    gap = abs(delta) - (2.0 * config.safety_radius + config.margin + config.brake_buffer)
+    factor = np.where(neighbour_mask & towards, np.clip(gap / config.brake_distance, 0.0, 1.0), 1.0).min(axis=-1)
+    return direction * plain(factor)

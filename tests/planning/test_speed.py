@@ -28,3 +28,20 @@ def test_batched_and_one_drone_calls_agree_and_gain_zero_is_the_identity():
     assert batched == pytest.approx([yield_speed(complex(d), complex(f), CONFIG) for d, f in zip(direction, f_in)])
     assert np.all(abs(batched) <= 1 + 1e-12) and np.all(abs(batched) >= 0.2 - 1e-12)
     assert yield_speed(direction, f_in, PlannerConfig.robust()) is direction
+
+
+def test_brake_slows_toward_a_neighbour_in_proportion_to_the_gap_and_never_away():
+    from rpf_fly.planning.speed import brake
+
+    config = PlannerConfig.robust(margin=0.05, brake_distance=0.1, brake_buffer=0.01)
+    neighbours, mask = np.array([0.31 + 0j]), np.array([True])
+    # Gap 0.31 - 0.26 = 0.05 of 0.1: half speed toward it; full speed away; nothing for a masked-out one.
+    assert brake(1 + 0j, 0j, neighbours, mask, config) == pytest.approx(0.5 + 0j)
+    assert brake(-1 + 0j, 0j, neighbours, mask, config) == pytest.approx(-1 + 0j)
+    assert brake(1 + 0j, 0j, neighbours, np.array([False]), config) == pytest.approx(1 + 0j)
+    # At the bar: stop; batched rows equal one-drone calls.
+    positions = np.array([0j, 1 + 0j])
+    rows = np.array([[0.26 + 0j], [1.31 + 0j]])
+    batched = brake(np.array([1 + 0j, 1 + 0j]), positions, rows, np.array([[True], [True]]), config)
+    assert batched == pytest.approx([0j, 0.5 + 0j])
+    assert brake(1 + 0j, 0j, neighbours, mask, PlannerConfig.robust()) == 1 + 0j

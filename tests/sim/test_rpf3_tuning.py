@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from rpf_fly.mission.model import BoxObstacle, PlannerSettings
-from rpf_fly.planning import FixedGains, Planner
+from rpf_fly.planning import FixedGains, Planner, PlannerConfig
 from rpf_fly.planning.config import RPF3_TUNING
 from rpf_fly.sim import SimParams, compute_metrics, make_scenario, rollout
 from rpf_fly.sim.planners import planner_config
@@ -18,11 +18,12 @@ R, MARGIN = 0.1, 0.05
 @pytest.mark.parametrize("kind", ["apf", "apf-paper", "rpf", "rpf-mean", "ppo", "orca"])
 def test_only_the_rpf3_kind_gets_the_tuning(kind):
     config = planner_config(PlannerSettings(kind=kind))
-    assert config.guided_influence_range == 0.0 and config.neighbour_range == 0.0
     tuned = planner_config(PlannerSettings(kind="rpf3"))
-    assert tuned.guided_influence_range == RPF3_TUNING["guided_influence_range"] > 0
-    assert tuned.neighbour_range == RPF3_TUNING["neighbour_range"] > 0
-    assert planner_config(PlannerSettings(kind="rpf3", preset="paper")).neighbour_range == 0.0
+    paper_rpf3 = planner_config(PlannerSettings(kind="rpf3", preset="paper"))
+    default = PlannerConfig()
+    for key, value in RPF3_TUNING.items():
+        assert getattr(config, key) == getattr(default, key) == getattr(paper_rpf3, key) != value
+        assert getattr(tuned, key) == value
 
 
 def fly(scenario, config, gains):
