@@ -73,6 +73,53 @@ def repulsive_sum(surfaces: Surfaces, eta: np.ndarray | float, config: PlannerCo
     return plain((magnitude * surfaces.normal).sum(axis=-1))
 
 
+def repulsion_one(
+    position: complex, circles: list[tuple[float, float, float]], boxes: list[tuple[float, float, float, float]],
+    statics: list[complex], static_radius: float, config: PlannerConfig,
+) -> complex:
+    """:func:`repulsive_sum` for one drone with ``eta`` 1, in plain Python (the flight's one-drone call: a few
+    obstacles, where a numpy call per array costs more than the loop). ``circles``: ``(x, y, radius)``; ``boxes``:
+    ``(centre x, centre y, half x, half y)``; ``statics``: the static neighbours' centres (radius
+    ``static_radius``). Agrees with the batched function to rounding (tests/planning/test_planner.py)."""
+    guided = bool(config.guided_influence_range) and config.guidance == "path"
+    rho = config.guided_influence_range if guided else config.influence_range
+    rho_static = config.static_influence_range or rho
+    margin, floor, sensing = config.margin, config.min_distance, config.sensing_range
+    px, py = position.real, position.imag
+    fx = fy = 0.0
+
+    def push(distance: float, nx: float, ny: float, reach: float) -> None:
+        nonlocal fx, fy
+        d_raw = distance - margin
+        if d_raw <= reach and d_raw <= sensing:
+            d = d_raw if d_raw > floor else floor
+            magnitude = (1.0 / d - 1.0 / reach) / (d * d)
+            fx += magnitude * nx
+            fy += magnitude * ny
+
+    for cx, cy, radius in circles:
+        dx, dy = px - cx, py - cy
+        length = math.hypot(dx, dy)
+        push(length - radius, dx / (length + TINY), dy / (length + TINY), rho)
+    for cx, cy, hx, hy in boxes:
+        ax, ay = px - cx, py - cy
+        sx = (ax > 0) - (ax < 0)
+        sy = (ay > 0) - (ay < 0)
+        qx, qy = abs(ax) - hx, abs(ay) - hy
+        mx, my = (qx if qx > 0.0 else 0.0), (qy if qy > 0.0 else 0.0)
+        outside = math.hypot(mx, my)
+        if outside > 0.0:
+            push(outside, sx * mx / (outside + TINY), sy * my / (outside + TINY), rho)
+        else:
+            depth = qx if qx > qy else qy
+            push(depth if depth < 0.0 else 0.0, float(sx) if qx > qy else 0.0, 0.0 if qx > qy else float(sy), rho)
+    for q in statics:
+        dx, dy = px - q.real, py - q.imag
+        length = math.hypot(dx, dy)
+        push(length - static_radius, dx / (length + TINY), dy / (length + TINY), rho_static)
+    return complex(fx, fy)
+
+
 def inter_robot(
     position: np.ndarray,
     neighbour_position: np.ndarray,

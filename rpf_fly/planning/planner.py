@@ -14,10 +14,10 @@ import numpy as np
 
 from rpf_fly.planning.arrival import capture
 from rpf_fly.planning.config import PlannerConfig
-from rpf_fly.planning.forces import attractive, inter_robot, perceived, repulsive, repulsive_sum
+from rpf_fly.planning.forces import attractive, inter_robot, perceived, repulsion_one, repulsive, repulsive_sum
 from rpf_fly.planning.gains import FixedGains, GainsPolicy
 from rpf_fly.planning.guidance import Bounds, Guidance
-from rpf_fly.planning.obstacles import NearestObstacle, ObstacleSet, Surfaces, every_surface, nearest_obstacle
+from rpf_fly.planning.obstacles import NearestObstacle, ObstacleSet, every_surface, nearest_obstacle
 from rpf_fly.planning.observation import Observation, build_observation
 from rpf_fly.planning.speed import brake, yield_speed
 from rpf_fly.planning.view import LocalView
@@ -84,19 +84,18 @@ def apf_step(
     waypoint: np.ndarray | None = None,
     goal_distance: np.ndarray | None = None,
     goal: np.ndarray | None = None,
-    surfaces: Surfaces | None = None,
+    repulsion: np.ndarray | complex | None = None,
 ) -> PlanStep:
     """The APF with (soft) wall-following for given gains (``observation``, when the gains came from one, is kept
     in the result for the log). ``view.goal`` is what the attraction pulls toward: the goal, or with guidance the
     drone's ``waypoint`` (then ``goal_distance`` is the distance to the goal itself, for the log). ``nearest`` is
     the true nearest obstacle; the forces see it ``config.margin`` closer. ``goal``: the drone's goal itself
-    (None: ``view.goal``), for the capture rule (:mod:`rpf_fly.planning.arrival`)."""
+    (None: ``view.goal``), for the capture rule (:mod:`rpf_fly.planning.arrival`). ``repulsion``: with
+    ``config.repulsion_sum``, the summed static repulsion at ``eta`` 1 (:meth:`Planner.unit_repulsion`); the
+    repulsion is then ``eta`` times it (it is linear in ``eta``)."""
     f_a, d_g = attractive(view.position, view.goal)
     seen = perceived(nearest, config)
-    if surfaces is None:
-        f_r = repulsive(seen, eta, config)
-    else:
-        f_r = repulsive_sum(surfaces, eta, config)
+    f_r = repulsive(seen, eta, config) if repulsion is None else eta * repulsion
     f_in, count = inter_robot(view.position, view.neighbour_position, lambda_mask, lam, config)
     direction, mode = select_heading(f_a, f_r, f_in, view.heading, seen.distance, config)
     direction, mode = capture(direction, mode, view.position, view.goal if goal is None else goal, f_in,
@@ -182,6 +181,7 @@ class Planner:
         self.config = config or PlannerConfig()
         self.gains = gains or FixedGains()
         self.guidance = make_guidance(obstacles, self.config, bounds)
+        self._shapes: tuple[list, list] | None = None
 
     def prepare(self, goals: np.ndarray) -> None:
         """Precompute the guidance of these goals (nothing without guidance; other goals are computed on first use)."""
@@ -196,17 +196,33 @@ class Planner:
         if self.gains.needs_observation:
             observation = build_observation(guided, nearest, self.config, self.gains.max_neighbours, remaining)
         eta, lam = self.gains.gains(observation)
-        surfaces = self._surfaces(view, lambda_mask) if self.config.repulsion_sum else None
+        repulsion = self.unit_repulsion(view, lambda_mask) if self.config.repulsion_sum else None
         if waypoint is None:
-            return apf_step(view, nearest, lambda_mask, eta, lam, self.config, observation, surfaces=surfaces)
+            return apf_step(view, nearest, lambda_mask, eta, lam, self.config, observation, repulsion=repulsion)
         return apf_step(guided, nearest, lambda_mask, eta, lam, self.config, observation, waypoint,
-                        abs(view.goal - view.position), view.goal, surfaces)
+                        abs(view.goal - view.position), view.goal, repulsion)
 
-    def _surfaces(self, view: LocalView, lambda_mask: np.ndarray) -> Surfaces:
-        """Every obstacle surface, the static neighbours among them as :func:`sense_obstacles` counts them."""
+    def unit_repulsion(self, view: LocalView, lambda_mask: np.ndarray) -> np.ndarray | complex:
+        """The static repulsion summed over every surface (``config.repulsion_sum``) at ``eta`` 1: the mission's
+        obstacles and the static neighbours as :func:`sense_obstacles` counts them. One drone: plain Python."""
         config = self.config
         mask = view.neighbour_mask
-        if config.static_neighbours_as_obstacles and mask.shape[-1]:
-            return every_surface(view.position, self.obstacles, view.neighbour_position, config.safety_radius,
-                                 mask & ~lambda_mask)
-        return every_surface(view.position, self.obstacles)
+        statics = config.static_neighbours_as_obstacles and mask.shape[-1]
+        if not isinstance(view.position, np.ndarray):
+            if self._shapes is None:
+                o = self.obstacles
+                self._shapes = (
+                    [(c.real, c.imag, r) for c, r in zip(np.ravel(o.centers).tolist(), np.ravel(o.radii).tolist())],
+                    [(c.real, c.imag, hx, hy) for c, hx, hy in zip(np.ravel(o.box_center).tolist(),
+                                                                  np.ravel(o.box_half_x).tolist(),
+                                                                  np.ravel(o.box_half_y).tolist())],
+                )
+            chosen = (mask & ~lambda_mask) if statics else ()
+            others = [q for q, keep in zip(view.neighbour_position.tolist(), np.ravel(chosen).tolist()) if keep]
+            return repulsion_one(complex(view.position), *self._shapes, others, config.safety_radius, config)
+        if statics:
+            surfaces = every_surface(view.position, self.obstacles, view.neighbour_position, config.safety_radius,
+                                     mask & ~lambda_mask)
+        else:
+            surfaces = every_surface(view.position, self.obstacles)
+        return repulsive_sum(surfaces, 1.0, config)

@@ -17,6 +17,8 @@ Pure functions of the step's own vectors and the view: batched and one-drone cal
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from rpf_fly.planning.config import PlannerConfig
@@ -45,9 +47,18 @@ def brake(direction: np.ndarray, position: np.ndarray, neighbour_position: np.nd
     speed, so the rule alone cannot stall a drone that may turn away."""
     if not config.brake_distance or neighbour_position.shape[-1] == 0:
         return direction
+    bar = 2.0 * config.safety_radius + config.margin + config.brake_buffer
+    if not isinstance(position, np.ndarray):  # one drone: plain Python over its few neighbours
+        factor = 1.0
+        for q, keep in zip(neighbour_position.tolist(), neighbour_mask.tolist()):
+            dx, dy = q.real - position.real, q.imag - position.imag
+            if keep and direction.real * dx + direction.imag * dy > 0.0:
+                f = (math.hypot(dx, dy) - bar) / config.brake_distance
+                factor = min(factor, max(f, 0.0))
+        return direction * factor
     delta = neighbour_position - per_item(position)
     heading = per_item(direction)
     towards = heading.real * delta.real + heading.imag * delta.imag > 0.0
-    gap = abs(delta) - (2.0 * config.safety_radius + config.margin + config.brake_buffer)
+    gap = abs(delta) - bar
     factor = np.where(neighbour_mask & towards, np.clip(gap / config.brake_distance, 0.0, 1.0), 1.0).min(axis=-1)
     return direction * plain(factor)
