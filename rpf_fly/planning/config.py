@@ -19,13 +19,15 @@ RPF3_TUNING: dict[str, float | bool] = {
     "neighbour_range": 0.8,
     "yield_gain": 1.0,
     "brake_distance": 0.1,
+    "keep_right_deg": 45.0,
 }
 """What the ``rpf3`` kind flies on top of the robust preset (docs/algorithm.md, *RPF-3's tuning*, each measured on
 the scene families): with guidance the mission's obstacles repel within 0.2 m of their margin-grown surface, summed
 over every surface in range, the static neighbours within 0.5 m; a corner within 0.05 m counts as reached; the
-moving neighbours repel within 0.8 m; a drone slows (to 20 % at most) where they push against its motion, and
-brakes within 0.1 m of 2r + margin (+ 1 cm) of a neighbour it heads for. The gains are the policy's, unchanged; no
-other kind uses these."""
+moving neighbours repel within 0.8 m, their push turned 45 degrees to the right (20 in the robust preset); a drone
+slows (to 20 % at most) where they push against its motion, brakes within 0.1 m of 2r + margin (+ 1 cm) of a
+neighbour it heads for, and slides (its step into the wall scaled down) within 0.1 m of r + margin (+ 1 cm) of the
+nearest obstacle. The gains are the policy's, unchanged; no other kind uses these."""
 
 
 @dataclass(frozen=True)

@@ -85,6 +85,7 @@ def apf_step(
     goal_distance: np.ndarray | None = None,
     goal: np.ndarray | None = None,
     repulsion: np.ndarray | complex | None = None,
+    walls: NearestObstacle | None = None,
 ) -> PlanStep:
     """The APF with (soft) wall-following for given gains (``observation``, when the gains came from one, is kept
     in the result for the log). ``view.goal`` is what the attraction pulls toward: the goal, or with guidance the
@@ -92,7 +93,8 @@ def apf_step(
     the true nearest obstacle; the forces see it ``config.margin`` closer. ``goal``: the drone's goal itself
     (None: ``view.goal``), for the capture rule (:mod:`rpf_fly.planning.arrival`). ``repulsion``: with
     ``config.repulsion_sum``, the summed static repulsion at ``eta`` 1 (:meth:`Planner.unit_repulsion`); the
-    repulsion is then ``eta`` times it (it is linear in ``eta``)."""
+    repulsion is then ``eta`` times it (it is linear in ``eta``). ``walls``: the nearest of the mission's obstacles
+    alone (static neighbours left out, the brake takes them as neighbours), for the brake; None: ``nearest``."""
     f_a, d_g = attractive(view.position, view.goal)
     seen = perceived(nearest, config)
     f_r = repulsive(seen, eta, config) if repulsion is None else eta * repulsion
@@ -101,7 +103,8 @@ def apf_step(
     direction, mode = capture(direction, mode, view.position, view.goal if goal is None else goal, f_in,
                               nearest.distance, config)
     direction = yield_speed(direction, f_in, config)
-    direction = brake(direction, view.position, view.neighbour_position, view.neighbour_mask, config)
+    direction = brake(direction, view.position, view.neighbour_position, view.neighbour_mask, config,
+                      nearest if walls is None else walls)
     return PlanStep(
         direction=direction,
         mode=mode,
@@ -197,10 +200,14 @@ class Planner:
             observation = build_observation(guided, nearest, self.config, self.gains.max_neighbours, remaining)
         eta, lam = self.gains.gains(observation)
         repulsion = self.unit_repulsion(view, lambda_mask) if self.config.repulsion_sum else None
+        walls = None
+        if self.config.brake_distance and self.config.static_neighbours_as_obstacles:
+            walls = nearest_obstacle(view.position, self.obstacles)
         if waypoint is None:
-            return apf_step(view, nearest, lambda_mask, eta, lam, self.config, observation, repulsion=repulsion)
+            return apf_step(view, nearest, lambda_mask, eta, lam, self.config, observation, repulsion=repulsion,
+                            walls=walls)
         return apf_step(guided, nearest, lambda_mask, eta, lam, self.config, observation, waypoint,
-                        abs(view.goal - view.position), view.goal, repulsion)
+                        abs(view.goal - view.position), view.goal, repulsion, walls)
 
     def unit_repulsion(self, view: LocalView, lambda_mask: np.ndarray) -> np.ndarray | complex:
         """The static repulsion summed over every surface (``config.repulsion_sum``) at ``eta`` 1: the mission's

@@ -45,3 +45,24 @@ def test_brake_slows_toward_a_neighbour_in_proportion_to_the_gap_and_never_away(
     batched = brake(np.array([1 + 0j, 1 + 0j]), positions, rows, np.array([[True], [True]]), config)
     assert batched == pytest.approx([0j, 0.5 + 0j])
     assert brake(1 + 0j, 0j, neighbours, mask, PlannerConfig.robust()) == 1 + 0j
+
+
+def test_brake_toward_a_wall_scales_only_the_inward_part_of_the_step():
+    from rpf_fly.planning.obstacles import NearestObstacle
+    from rpf_fly.planning.speed import brake
+
+    config = PlannerConfig.robust(margin=0.05, brake_distance=0.1, brake_buffer=0.01)
+    # Wall below (outward normal +y), 0.21 m away: gap 0.21 - 0.16 = 0.05 of 0.1, so half the inward part stays.
+    wall = NearestObstacle(0.21, 1j)
+    heading = np.exp(-1j * np.pi / 4)  # 45 degrees down into the wall
+    slid = brake(heading, 0j, np.zeros(0, complex), np.zeros(0, bool), config, wall)
+    assert slid == pytest.approx(complex(heading.real, 0.5 * heading.imag))
+    # Away from the wall, or at gap 0 along it: untouched / only the tangential part.
+    assert brake(np.conj(heading), 0j, np.zeros(0, complex), np.zeros(0, bool), config, wall) == np.conj(heading)
+    at_bar = brake(heading, 0j, np.zeros(0, complex), np.zeros(0, bool), config, NearestObstacle(0.16, 1j))
+    assert at_bar == pytest.approx(complex(heading.real, 0.0))
+    # Batched rows equal one-drone calls.
+    walls = NearestObstacle(np.array([0.21, 0.16]), np.array([1j, 1j]))
+    rows = brake(np.array([heading, heading]), np.zeros(2, complex), np.zeros((2, 0), complex), np.zeros((2, 0), bool),
+                 config, walls)
+    assert rows == pytest.approx([slid, at_bar])
