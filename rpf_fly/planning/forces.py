@@ -21,7 +21,7 @@ import math
 import numpy as np
 
 from rpf_fly.planning.config import PlannerConfig
-from rpf_fly.planning.obstacles import NearestObstacle, Surfaces
+from rpf_fly.planning.obstacles import FAR, NearestObstacle, Surfaces
 from rpf_fly.planning.vectors import TINY, maximum, per_item, plain
 
 
@@ -76,20 +76,25 @@ def repulsive_sum(surfaces: Surfaces, eta: np.ndarray | float, config: PlannerCo
 def repulsion_one(
     position: complex, circles: list[tuple[float, float, float]], boxes: list[tuple[float, float, float, float]],
     statics: list[complex], static_radius: float, config: PlannerConfig,
-) -> complex:
+) -> tuple[complex, float, complex]:
     """:func:`repulsive_sum` for one drone with ``eta`` 1, in plain Python (the flight's one-drone call: a few
-    obstacles, where a numpy call per array costs more than the loop). ``circles``: ``(x, y, radius)``; ``boxes``:
-    ``(centre x, centre y, half x, half y)``; ``statics``: the static neighbours' centres (radius
-    ``static_radius``). Agrees with the batched function to rounding (tests/planning/test_planner.py)."""
+    obstacles, where a numpy call per array costs more than the loop), and the nearest of the mission's obstacles
+    (signed distance, outward normal; FAR and 0 without any) as :func:`~rpf_fly.planning.obstacles.nearest_obstacle`
+    gives it, for the brake. ``circles``: ``(x, y, radius)``; ``boxes``: ``(centre x, centre y, half x, half y)``;
+    ``statics``: the static neighbours' centres (radius ``static_radius``). Agrees with the batched functions to
+    rounding (tests/planning/test_planner.py)."""
     guided = bool(config.guided_influence_range) and config.guidance == "path"
     rho = config.guided_influence_range if guided else config.influence_range
     rho_static = config.static_influence_range or rho
     margin, floor, sensing = config.margin, config.min_distance, config.sensing_range
     px, py = position.real, position.imag
     fx = fy = 0.0
+    wall, wall_normal = FAR, 0j
 
-    def push(distance: float, nx: float, ny: float, reach: float) -> None:
-        nonlocal fx, fy
+    def push(distance: float, nx: float, ny: float, reach: float, mapped: bool = True) -> None:
+        nonlocal fx, fy, wall, wall_normal
+        if mapped and distance < wall:
+            wall, wall_normal = distance, complex(nx, ny)
         d_raw = distance - margin
         if d_raw <= reach and d_raw <= sensing:
             d = d_raw if d_raw > floor else floor
@@ -116,8 +121,8 @@ def repulsion_one(
     for q in statics:
         dx, dy = px - q.real, py - q.imag
         length = math.hypot(dx, dy)
-        push(length - static_radius, dx / (length + TINY), dy / (length + TINY), rho_static)
-    return complex(fx, fy)
+        push(length - static_radius, dx / (length + TINY), dy / (length + TINY), rho_static, False)
+    return complex(fx, fy), wall, wall_normal
 
 
 def inter_robot(

@@ -17,7 +17,7 @@ from rpf_fly.planning.config import PlannerConfig
 from rpf_fly.planning.forces import attractive, inter_robot, perceived, repulsion_one, repulsive, repulsive_sum
 from rpf_fly.planning.gains import FixedGains, GainsPolicy
 from rpf_fly.planning.guidance import Bounds, Guidance
-from rpf_fly.planning.obstacles import NearestObstacle, ObstacleSet, every_surface, nearest_obstacle
+from rpf_fly.planning.obstacles import FAR, NearestObstacle, ObstacleSet, every_surface, nearest_obstacle
 from rpf_fly.planning.observation import Observation, build_observation
 from rpf_fly.planning.speed import brake, yield_speed
 from rpf_fly.planning.view import LocalView
@@ -199,9 +199,10 @@ class Planner:
         if self.gains.needs_observation:
             observation = build_observation(guided, nearest, self.config, self.gains.max_neighbours, remaining)
         eta, lam = self.gains.gains(observation)
-        repulsion = self.unit_repulsion(view, lambda_mask) if self.config.repulsion_sum else None
-        walls = None
-        if self.config.brake_distance and self.config.static_neighbours_as_obstacles:
+        repulsion = walls = None
+        if self.config.repulsion_sum:
+            repulsion, walls = self.unit_repulsion(view, lambda_mask)
+        elif self.config.brake_distance and self.config.static_neighbours_as_obstacles:
             walls = nearest_obstacle(view.position, self.obstacles)
         if waypoint is None:
             return apf_step(view, nearest, lambda_mask, eta, lam, self.config, observation, repulsion=repulsion,
@@ -209,9 +210,10 @@ class Planner:
         return apf_step(guided, nearest, lambda_mask, eta, lam, self.config, observation, waypoint,
                         abs(view.goal - view.position), view.goal, repulsion, walls)
 
-    def unit_repulsion(self, view: LocalView, lambda_mask: np.ndarray) -> np.ndarray | complex:
+    def unit_repulsion(self, view: LocalView, lambda_mask: np.ndarray) -> tuple[np.ndarray | complex, NearestObstacle]:
         """The static repulsion summed over every surface (``config.repulsion_sum``) at ``eta`` 1: the mission's
-        obstacles and the static neighbours as :func:`sense_obstacles` counts them. One drone: plain Python."""
+        obstacles and the static neighbours as :func:`sense_obstacles` counts them; and the nearest of the mission's
+        obstacles alone (for the brake's wall slide), from the same distances. One drone: plain Python."""
         config = self.config
         mask = view.neighbour_mask
         statics = config.static_neighbours_as_obstacles and mask.shape[-1]
@@ -226,10 +228,20 @@ class Planner:
                 )
             chosen = (mask & ~lambda_mask) if statics else ()
             others = [q for q, keep in zip(view.neighbour_position.tolist(), np.ravel(chosen).tolist()) if keep]
-            return repulsion_one(complex(view.position), *self._shapes, others, config.safety_radius, config)
+            force, wall, normal = repulsion_one(complex(view.position), *self._shapes, others, config.safety_radius,
+                                                config)
+            return force, NearestObstacle(wall, normal)
         if statics:
             surfaces = every_surface(view.position, self.obstacles, view.neighbour_position, config.safety_radius,
                                      mask & ~lambda_mask)
         else:
             surfaces = every_surface(view.position, self.obstacles)
-        return repulsive_sum(surfaces, 1.0, config)
+        force = repulsive_sum(surfaces, 1.0, config)
+        mapped = surfaces.mapped
+        if not mapped:
+            shape = np.shape(view.position)
+            return force, NearestObstacle(np.full(shape, FAR), np.zeros(shape, dtype=complex))
+        k = surfaces.distance[..., :mapped].argmin(axis=-1)[..., None]
+        wall = NearestObstacle(np.take_along_axis(surfaces.distance, k, -1)[..., 0],
+                               np.take_along_axis(surfaces.normal, k, -1)[..., 0])
+        return force, wall
