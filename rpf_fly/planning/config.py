@@ -85,9 +85,10 @@ class PlannerConfig:
     """With ``repulsion_sum``: rho of the static neighbours' repulsion (metres); 0: as the obstacles'."""
     brake_distance: float = 0.0
     """Within this gap (metres) of ``2r + margin + brake_buffer`` a drone heading toward a neighbour slows in
-    proportion to the gap (:func:`rpf_fly.planning.speed.brake`); 0: off (the paper)."""
+    proportion to the gap, and within it of ``r + margin + brake_buffer`` from the nearest wall the part of its step
+    into the wall shrinks the same way (:func:`rpf_fly.planning.speed.brake`); 0: off (the paper)."""
     brake_buffer: float = 0.01
-    """Metres kept beyond ``2r + margin`` by the brake."""
+    """Metres the brake keeps beyond ``2r + margin`` (neighbours) and ``r + margin`` (walls)."""
     repulsion_sum: bool = False
     """Sum the static repulsion over every obstacle surface within range instead of the nearest one's (the paper);
     modes, the soft rule and the observation still read the nearest surface."""

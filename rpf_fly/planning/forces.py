@@ -58,8 +58,8 @@ def repulsive_sum(surfaces: Surfaces, eta: np.ndarray | float, config: PlannerCo
     """The repulsion of :func:`repulsive` summed over every surface within range (each seen ``margin`` closer),
     where :func:`repulsive` takes the nearest only: between two obstacles nearer than the range the two pushes
     cancel along the gap instead of flipping side from one step to the next. With guidance the mission's obstacles
-    act within ``guided_influence_range``, the static neighbours (which the guidance path does not know) within
-    ``influence_range``."""
+    (the first ``surfaces.mapped``) act within ``guided_influence_range``; the static neighbours (which the guidance
+    path does not know) within ``static_influence_range`` (0: as the obstacles)."""
     if surfaces.distance.shape[-1] == 0:
         return np.zeros(surfaces.distance.shape[:-1], dtype=complex) if surfaces.distance.ndim > 1 else 0j
     d_raw = surfaces.distance - config.margin

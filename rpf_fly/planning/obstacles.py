@@ -149,7 +149,6 @@ def nearest_obstacle(
     return NearestObstacle(dist, normal)
 
 
-
 @dataclass(frozen=True)
 class Surfaces:
     """Per robot, every obstacle ``S + (M,)``: signed ``distance`` and outward ``normal`` as in

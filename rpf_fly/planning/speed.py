@@ -9,9 +9,10 @@ paths. With ``config.yield_gain`` ``k > 0`` the commanded direction is scaled by
 (``d`` the unit direction, ``F_in`` the inter-robot force the heading already saw): full speed where the neighbours
 push sideways or from behind, slower where they push back against the motion, never slower than
 ``min_speed_fraction`` so no drone stalls on this rule alone. The world and the flight loop move a drone
-``speed * |direction| * dt`` a step, so a shorter direction is a slower drone; the heading is unchanged. The
-static obstacles do not slow anyone (the guidance path and the repulsion already keep their clearance).
-:func:`brake` is the second rule: a drone heading toward a neighbour slows as the gap to ``2r + margin`` closes.
+``speed * |direction| * dt`` a step, so a shorter direction is a slower drone; the heading is unchanged (a
+slide also turns it, along the wall). :func:`brake` is the second rule: a drone heading toward a neighbour slows as
+the gap to ``2r + margin`` closes, and one heading into the nearest wall loses the inward part of its step as the
+gap to ``r + margin`` closes.
 Pure functions of the step's own vectors and the view: batched and one-drone calls agree.
 """
 
@@ -23,7 +24,7 @@ import numpy as np
 
 from rpf_fly.planning.config import PlannerConfig
 from rpf_fly.planning.obstacles import NearestObstacle
-from rpf_fly.planning.vectors import dot, maximum, minimum, per_item, plain
+from rpf_fly.planning.vectors import dot, maximum, minimum, per_item
 
 
 def yield_speed(direction: np.ndarray, f_in: np.ndarray, config: PlannerConfig) -> np.ndarray:
