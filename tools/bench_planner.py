@@ -2,6 +2,7 @@
 
     python tools/bench_planner.py [--repeats 15] [--json out.json]
     python tools/bench_planner.py --cadence      # the flight tick's cold start at the flight's cadence
+    python tools/bench_planner.py --rpf3         # RPF-3 as shipped: per-drone step vs onnxruntime, batched ticks
 
 1. Per-drone plan step (fixed gains, the apf kind's defaults: guidance path, margin 0.05): one drone planned from
    its own view, as the flight loop does, on views taken mid-flight from the paper missions. Median over repeats of
@@ -117,6 +118,44 @@ def bench_guidance(repeats: int) -> dict[str, dict[str, float]]:
             "guided_views": float(hidden),
             "views": float(len(views)),
         }
+    return out
+
+
+def bench_rpf3(repeats: int) -> dict[str, dict[str, float]]:
+    """RPF-3 as shipped (kind ``rpf3``: guidance, margin 0.05 and RPF-3's tuning, policies/rpf3.onnx): the
+    per-drone step on each mission's mid-flight views beside the onnxruntime call alone on the same observations
+    (issue #11's line: at most 1.5x), and one batched tick of 10 and 100 drones (the line: 100 under 2 ms)."""
+    from dataclasses import replace
+
+    from rpf_fly.mission.model import PlannerSettings
+    from rpf_fly.planning import views_from_states
+    from rpf_fly.planning.observation import build_observation
+    from rpf_fly.planning.planner import guided_view, sense_obstacles
+
+    out: dict[str, dict[str, float]] = {}
+    for name in ("lab-3", "arena-a-6", "u-trap"):
+        _, views = midflight_views(name)
+        mission = load_mission(ROOT / "missions" / f"{name}.yaml")
+        scenario = scenario_from_mission(mission, 0)
+        settings = replace(mission.planner, kind="rpf3", policy=ROOT / "policies" / "rpf3.onnx", guidance=None,
+                           margin=None, capture_radius=None)
+        planner = make_planner(settings, scenario.obstacles, (scenario.arena_x, scenario.arena_y), scenario.goals)
+        policy = planner.gains.policy
+        observations = []
+        for v in views:
+            guided, _, remaining = guided_view(v, planner.guidance, planner.config.waypoint_reach)
+            nearest = sense_obstacles(v, planner.obstacles, planner.config)[0]
+            observations.append(build_observation(guided, nearest, planner.config, policy.max_neighbours, remaining))
+        out[name] = {
+            "step": statistics.median(timed(lambda v=v: planner.step(v), 300, repeats) for v in views),
+            "onnxruntime_alone": statistics.median(timed(lambda o=o: policy.act(o), 300, repeats) for o in observations),
+        }
+    for n in (10, 100):
+        pos, goals, vel, obstacles = swarm_state(n, np.random.default_rng(n))
+        planner = make_planner(PlannerSettings(kind="rpf3", policy=ROOT / "policies" / "rpf3.onnx"), obstacles,
+                               None, goals)
+        view = views_from_states(pos, vel, goals, vel / abs(vel), planner.config.sensing_range)
+        out[f"batched_tick_{n}"] = {"tick": timed(lambda: planner.step(view), max(2, 200 // n) * 5, repeats)}
     return out
 
 
@@ -265,7 +304,21 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--json", type=Path, default=None, help="also write the figures as JSON")
     parser.add_argument("--cadence", action="store_true",
                         help="only the flight tick at the flight's cadence (cold start after a sleep vs back to back)")
+    parser.add_argument("--rpf3", action="store_true",
+                        help="only RPF-3 as shipped: per-drone step against the onnxruntime call, batched ticks")
     args = parser.parse_args(argv)
+    if args.rpf3:
+        figures = bench_rpf3(args.repeats)
+        print("RPF-3 (kind rpf3: guidance, margin 0.05, RPF-3's tuning), median; line: step <= 1.5x onnxruntime")
+        for name, f in figures.items():
+            if "step" in f:
+                print(f"  {name:14s} step {f['step'] * 1e6:7.1f} us, onnxruntime alone {f['onnxruntime_alone'] * 1e6:6.1f} us:"
+                      f" {f['step'] / f['onnxruntime_alone']:.2f}x")
+            else:
+                print(f"  {name:14s} {f['tick'] * 1e3:7.2f} ms (line: 100 drones < 2 ms)")
+        if args.json:
+            args.json.write_text(json.dumps({"rpf3_s": figures}, indent=2))
+        return 0
     if args.cadence:
         cadence = bench_flight_tick_cadence()
         print("batched flight tick, 10 drones mid-flight, median wall time of single calls")

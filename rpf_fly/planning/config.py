@@ -11,6 +11,25 @@ from dataclasses import dataclass, replace
 from typing import Literal
 
 
+RPF3_TUNING: dict[str, float | bool] = {
+    "guided_influence_range": 0.2,
+    "repulsion_sum": True,
+    "static_influence_range": 0.5,
+    "waypoint_reach": 0.05,
+    "neighbour_range": 0.8,
+    "yield_gain": 1.0,
+    "brake_distance": 0.1,
+    "keep_right_deg": 45.0,
+}
+"""What the ``rpf3`` kind flies on top of the robust preset (docs/algorithm.md, *RPF-3's tuning*, each measured on
+the scene families): with guidance the mission's obstacles repel within 0.2 m of their margin-grown surface, summed
+over every surface in range, the static neighbours within 0.5 m; a corner within 0.05 m counts as reached; the
+moving neighbours repel within 0.8 m, their push turned 45 degrees to the right (20 in the robust preset); a drone
+slows (to 20 % at most) where they push against its motion, brakes within 0.1 m of 2r + margin (+ 1 cm) of a
+neighbour it heads for, and slides (its step into the wall scaled down) within 0.1 m of r + margin (+ 1 cm) of the
+nearest obstacle. The gains are the policy's, unchanged; no other kind uses these."""
+
+
 @dataclass(frozen=True)
 class PlannerConfig:
     """Parameters of the APF with (soft) wall-following. Defaults are the ``robust`` preset with the paper's numbers."""
@@ -55,6 +74,33 @@ class PlannerConfig:
     the goal (plus the moving neighbours' force): :mod:`rpf_fly.planning.arrival`, docs/algorithm.md, *Arrival*.
     Goals inside the band where the repulsion beats the unit attraction are otherwise orbited, never reached.
     0 turns it off (the paper preset)."""
+    guided_influence_range: float = 0.0
+    """With ``guidance == "path"``: rho of the static repulsion (metres of the margin-grown surface distance) in
+    place of ``influence_range``; 0 keeps ``influence_range``. The guidance path already clears every obstacle by
+    ``r + margin``, so the repulsion only needs to act near that bound (docs/algorithm.md, *RPF-3's tuning*)."""
+    neighbour_range: float = 0.0
+    """Robust preset: each pairwise repulsion acts within ``min(2 lambda, neighbour_range)`` of the margin-grown
+    distance, the term shifted so it falls to zero there (``max(0.5, lambda/R) - lambda/d``); 0: ``2 lambda``."""
+    static_influence_range: float = 0.0
+    """With ``repulsion_sum``: rho of the static neighbours' repulsion (metres); 0: as the obstacles'."""
+    brake_distance: float = 0.0
+    """Within this gap (metres) of ``2r + margin + brake_buffer`` a drone heading toward a neighbour slows in
+    proportion to the gap, and within it of ``r + margin + brake_buffer`` from the nearest wall the part of its step
+    into the wall shrinks the same way (:func:`rpf_fly.planning.speed.brake`); 0: off (the paper)."""
+    brake_buffer: float = 0.01
+    """Metres the brake keeps beyond ``2r + margin`` (neighbours) and ``r + margin`` (walls)."""
+    repulsion_sum: bool = False
+    """Sum the static repulsion over every obstacle surface within range instead of the nearest one's (the paper);
+    modes, the soft rule and the observation still read the nearest surface."""
+    waypoint_reach: float = 0.0
+    """With guidance: a drone nearer its waypoint corner than this (metres) is pulled on to the corner's next
+    waypoint (:func:`rpf_fly.planning.planner.past_reached`); 0: only once the corner is behind it (the goal or the
+    next corner in sight)."""
+    yield_gain: float = 0.0
+    """k: the drone flies at ``clip(1 + k (d . F_in), min_speed_fraction, 1)`` of its speed, slower where the moving
+    neighbours push against its direction ``d`` (:mod:`rpf_fly.planning.speed`); 0: always full speed (the paper)."""
+    min_speed_fraction: float = 0.2
+    """The slowest a yielding drone flies, as a fraction of its speed."""
     guidance: Literal["none", "path"] = "none"
     """``path``: the attraction pulls toward the next waypoint of the shortest path around the obstacles inflated by
     ``r + margin`` that the drone can see, instead of straight at the goal (:mod:`rpf_fly.planning.guidance`)."""

@@ -21,7 +21,7 @@ import math
 import numpy as np
 
 from rpf_fly.planning.config import PlannerConfig
-from rpf_fly.planning.obstacles import NearestObstacle
+from rpf_fly.planning.obstacles import FAR, NearestObstacle, Surfaces
 from rpf_fly.planning.vectors import TINY, maximum, per_item, plain
 
 
@@ -47,9 +47,82 @@ def repulsive(nearest: NearestObstacle, eta: np.ndarray | float, config: Planner
     d_raw = nearest.distance
     d = maximum(d_raw, config.min_distance)
     rho = config.influence_range
+    if config.guided_influence_range and config.guidance == "path":
+        rho = config.guided_influence_range
     visible = d_raw <= min(rho, config.sensing_range)
     magnitude = eta * (1.0 / d - 1.0 / rho) / (d * d)
     return (visible * magnitude) * nearest.normal
+
+
+def repulsive_sum(surfaces: Surfaces, eta: np.ndarray | float, config: PlannerConfig) -> np.ndarray:
+    """The repulsion of :func:`repulsive` summed over every surface within range (each seen ``margin`` closer),
+    where :func:`repulsive` takes the nearest only: between two obstacles nearer than the range the two pushes
+    cancel along the gap instead of flipping side from one step to the next. With guidance the mission's obstacles
+    (the first ``surfaces.mapped``) act within ``guided_influence_range``; the static neighbours (which the guidance
+    path does not know) within ``static_influence_range`` (0: as the obstacles)."""
+    if surfaces.distance.shape[-1] == 0:
+        return np.zeros(surfaces.distance.shape[:-1], dtype=complex) if surfaces.distance.ndim > 1 else 0j
+    d_raw = surfaces.distance - config.margin
+    d = np.maximum(d_raw, config.min_distance)
+    guided = bool(config.guided_influence_range) and config.guidance == "path"
+    base = config.guided_influence_range if guided else config.influence_range
+    rho = np.full(d.shape[-1], base)
+    rho[surfaces.mapped :] = config.static_influence_range or base
+    visible = d_raw <= np.minimum(rho, config.sensing_range)
+    magnitude = np.where(visible, per_item(eta) * (1.0 / d - 1.0 / rho) / (d * d), 0.0)
+    return plain((magnitude * surfaces.normal).sum(axis=-1))
+
+
+def repulsion_one(
+    position: complex, circles: list[tuple[float, float, float]], boxes: list[tuple[float, float, float, float]],
+    statics: list[complex], static_radius: float, config: PlannerConfig,
+) -> tuple[complex, float, complex]:
+    """:func:`repulsive_sum` for one drone with ``eta`` 1, in plain Python (the flight's one-drone call: a few
+    obstacles, where a numpy call per array costs more than the loop), and the nearest of the mission's obstacles
+    (signed distance, outward normal; FAR and 0 without any) as :func:`~rpf_fly.planning.obstacles.nearest_obstacle`
+    gives it, for the brake. ``circles``: ``(x, y, radius)``; ``boxes``: ``(centre x, centre y, half x, half y)``;
+    ``statics``: the static neighbours' centres (radius ``static_radius``). Agrees with the batched functions to
+    rounding (tests/planning/test_planner.py)."""
+    guided = bool(config.guided_influence_range) and config.guidance == "path"
+    rho = config.guided_influence_range if guided else config.influence_range
+    rho_static = config.static_influence_range or rho
+    margin, floor, sensing = config.margin, config.min_distance, config.sensing_range
+    px, py = position.real, position.imag
+    fx = fy = 0.0
+    wall, wall_normal = FAR, 0j
+
+    def push(distance: float, nx: float, ny: float, reach: float, mapped: bool = True) -> None:
+        nonlocal fx, fy, wall, wall_normal
+        if mapped and distance < wall:
+            wall, wall_normal = distance, complex(nx, ny)
+        d_raw = distance - margin
+        if d_raw <= reach and d_raw <= sensing:
+            d = d_raw if d_raw > floor else floor
+            magnitude = (1.0 / d - 1.0 / reach) / (d * d)
+            fx += magnitude * nx
+            fy += magnitude * ny
+
+    for cx, cy, radius in circles:
+        dx, dy = px - cx, py - cy
+        length = math.hypot(dx, dy)
+        push(length - radius, dx / (length + TINY), dy / (length + TINY), rho)
+    for cx, cy, hx, hy in boxes:
+        ax, ay = px - cx, py - cy
+        sx = (ax > 0) - (ax < 0)
+        sy = (ay > 0) - (ay < 0)
+        qx, qy = abs(ax) - hx, abs(ay) - hy
+        mx, my = (qx if qx > 0.0 else 0.0), (qy if qy > 0.0 else 0.0)
+        outside = math.hypot(mx, my)
+        if outside > 0.0:
+            push(outside, sx * mx / (outside + TINY), sy * my / (outside + TINY), rho)
+        else:
+            depth = qx if qx > qy else qy
+            push(depth if depth < 0.0 else 0.0, float(sx) if qx > qy else 0.0, 0.0 if qx > qy else float(sy), rho)
+    for q in statics:
+        dx, dy = px - q.real, py - q.imag
+        length = math.hypot(dx, dy)
+        push(length - static_radius, dx / (length + TINY), dy / (length + TINY), rho_static, False)
+    return complex(fx, fy), wall, wall_normal
 
 
 def inter_robot(
@@ -78,6 +151,8 @@ def inter_robot(
     else:
         coefficient = 0.5 - per_item(lam) / d
     if config.repulsive_only:
+        if config.neighbour_range:
+            coefficient = coefficient + np.maximum(per_item(lam) / config.neighbour_range - 0.5, 0.0)
         coefficient = np.minimum(coefficient, 0.0)
     force = plain(((mask * coefficient / d) * delta).sum(axis=-1))
     count = np.count_nonzero(mask) if mask.ndim == 1 else mask.sum(axis=-1)

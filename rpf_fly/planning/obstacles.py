@@ -147,3 +147,44 @@ def nearest_obstacle(
         dist = dist + closer * (d - dist)
         normal = normal + closer * (n - normal)
     return NearestObstacle(dist, normal)
+
+
+@dataclass(frozen=True)
+class Surfaces:
+    """Per robot, every obstacle ``S + (M,)``: signed ``distance`` and outward ``normal`` as in
+    :class:`NearestObstacle`; the first ``mapped`` are the mission's obstacles (the guidance path clears them), the
+    rest static neighbours (padding at FAR)."""
+
+    distance: np.ndarray
+    normal: np.ndarray
+    mapped: int
+
+
+def every_surface(
+    points: np.ndarray | complex,
+    obstacles: ObstacleSet,
+    extra_centers: np.ndarray | None = None,
+    extra_radius: float = 0.0,
+    extra_mask: np.ndarray | None = None,
+) -> Surfaces:
+    """Every obstacle surface (circles, boxes, then the extra circles of :func:`nearest_obstacle`, those outside
+    ``extra_mask`` at FAR), where :func:`nearest_obstacle` keeps the nearest. For the summed repulsion
+    (:func:`rpf_fly.planning.forces.repulsive_sum`)."""
+    dists, normals = [], []
+    if obstacles.n_circles:
+        d, n = _circles(points, obstacles.centers, obstacles.radii)
+        dists.append(d), normals.append(n)
+    if obstacles.n_boxes:
+        d, n = _boxes(points, obstacles)
+        dists.append(d), normals.append(n)
+    mapped = sum(d.shape[-1] for d in dists)
+    if extra_mask is not None and extra_centers is not None and extra_mask.any():
+        d, n = _circles(points, extra_centers, extra_radius)
+        dists.append(d + (~extra_mask) * FAR), normals.append(n)
+    if not dists:
+        shape = np.shape(points) + (0,)
+        return Surfaces(np.zeros(shape), np.zeros(shape, dtype=complex), 0)
+    lead = np.broadcast_shapes(*(d.shape[:-1] for d in dists))
+    dist = np.concatenate([np.broadcast_to(d, lead + d.shape[-1:]) for d in dists], axis=-1)
+    normal = np.concatenate([np.broadcast_to(n, lead + n.shape[-1:]) for n in normals], axis=-1)
+    return Surfaces(dist, normal, mapped)

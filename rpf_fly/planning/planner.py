@@ -14,19 +14,20 @@ import numpy as np
 
 from rpf_fly.planning.arrival import capture
 from rpf_fly.planning.config import PlannerConfig
-from rpf_fly.planning.forces import attractive, inter_robot, perceived, repulsive
+from rpf_fly.planning.forces import attractive, inter_robot, perceived, repulsion_one, repulsive, repulsive_sum
 from rpf_fly.planning.gains import FixedGains, GainsPolicy
 from rpf_fly.planning.guidance import Bounds, Guidance
-from rpf_fly.planning.obstacles import NearestObstacle, ObstacleSet, nearest_obstacle
+from rpf_fly.planning.obstacles import FAR, NearestObstacle, ObstacleSet, every_surface, nearest_obstacle
 from rpf_fly.planning.observation import Observation, build_observation
+from rpf_fly.planning.speed import brake, yield_speed
 from rpf_fly.planning.view import LocalView
 from rpf_fly.planning.wall_following import select_heading
 
 
 @dataclass(frozen=True)
 class PlanStep:
-    """Result for drones of leading shape ``S``. ``direction`` (complex) is a unit vector, or zero for a stalled
-    drone (resultant 0).
+    """Result for drones of leading shape ``S``. ``direction`` (complex) is a unit vector, zero for a stalled
+    drone (resultant 0), or shorter than unit for a drone that yields (``config.yield_gain``, :mod:`.speed`).
 
     Diagnostics for the log: forces ``f_a``, ``f_r``, ``f_in`` (complex); ``mode`` int8 (0 apf, 1 wall, 2 soft);
     gains ``eta``, ``lam``; ``neighbours``: lambda-neighbours used; ``obstacle_distance``: signed distance to the
@@ -83,19 +84,27 @@ def apf_step(
     waypoint: np.ndarray | None = None,
     goal_distance: np.ndarray | None = None,
     goal: np.ndarray | None = None,
+    repulsion: np.ndarray | complex | None = None,
+    walls: NearestObstacle | None = None,
 ) -> PlanStep:
     """The APF with (soft) wall-following for given gains (``observation``, when the gains came from one, is kept
     in the result for the log). ``view.goal`` is what the attraction pulls toward: the goal, or with guidance the
     drone's ``waypoint`` (then ``goal_distance`` is the distance to the goal itself, for the log). ``nearest`` is
     the true nearest obstacle; the forces see it ``config.margin`` closer. ``goal``: the drone's goal itself
-    (None: ``view.goal``), for the capture rule (:mod:`rpf_fly.planning.arrival`)."""
+    (None: ``view.goal``), for the capture rule (:mod:`rpf_fly.planning.arrival`). ``repulsion``: with
+    ``config.repulsion_sum``, the summed static repulsion at ``eta`` 1 (:meth:`Planner.unit_repulsion`); the
+    repulsion is then ``eta`` times it (it is linear in ``eta``). ``walls``: the nearest of the mission's obstacles
+    alone (static neighbours left out, the brake takes them as neighbours), for the brake; None: ``nearest``."""
     f_a, d_g = attractive(view.position, view.goal)
     seen = perceived(nearest, config)
-    f_r = repulsive(seen, eta, config)
+    f_r = repulsive(seen, eta, config) if repulsion is None else eta * repulsion
     f_in, count = inter_robot(view.position, view.neighbour_position, lambda_mask, lam, config)
     direction, mode = select_heading(f_a, f_r, f_in, view.heading, seen.distance, config)
     direction, mode = capture(direction, mode, view.position, view.goal if goal is None else goal, f_in,
                               nearest.distance, config)
+    direction = yield_speed(direction, f_in, config)
+    direction = brake(direction, view.position, view.neighbour_position, view.neighbour_mask, config,
+                      nearest if walls is None else walls)
     return PlanStep(
         direction=direction,
         mode=mode,
@@ -120,15 +129,41 @@ def make_guidance(obstacles: ObstacleSet, config: PlannerConfig, bounds: Bounds 
     return Guidance(obstacles, config.safety_radius + config.margin, bounds)
 
 
-def guided_view(view: LocalView, guidance: Guidance | None) -> tuple[LocalView, np.ndarray | None, np.ndarray | None]:
+def guided_view(
+    view: LocalView, guidance: Guidance | None, reach: float = 0.0
+) -> tuple[LocalView, np.ndarray | None, np.ndarray | None]:
     """``view`` with its goal replaced by each drone's next visible waypoint, the waypoints and the remaining path
-    lengths (the view itself and None without guidance)."""
+    lengths (the view itself and None without guidance). ``reach`` > 0: a drone nearer its waypoint corner than
+    that has reached it and is pulled on to the corner's own next waypoint (:func:`past_reached`)."""
     if guidance is None:
         return view, None, None
     waypoint, remaining = guidance.waypoint(view.position, view.goal)
+    if reach:
+        waypoint = past_reached(guidance, view.position, view.goal, waypoint, reach)
     guided = LocalView(view.position, waypoint, view.heading, view.neighbour_position, view.neighbour_velocity,
                        view.neighbour_mask)
     return guided, waypoint, remaining
+
+
+def past_reached(guidance: Guidance, position: np.ndarray, goal: np.ndarray, waypoint: np.ndarray,
+                 reach: float) -> np.ndarray:
+    """The waypoints with every corner nearer its drone than ``reach`` replaced by the corner's own next waypoint.
+
+    Why (docs/algorithm.md, *RPF-3's tuning*): a drone rounding a corner within the repulsion's band is pushed off
+    the corner before it stands on it; an inch short of it the goal is still hidden, so the pull points back at the
+    corner, and an inch past it the pull points on: the drone can shuttle between the two for ever (one arena-a
+    drone in 40 fresh runs). Pulling on from the corner once the drone is within ``reach`` of it removes the
+    backward pull; the repulsion still keeps the clearance."""
+    near = (abs(waypoint - position) < reach) & (waypoint != goal)
+    if not isinstance(near, np.ndarray):
+        return guidance.waypoint(complex(waypoint), complex(goal))[0] if near else waypoint
+    if not near.any():
+        return waypoint
+    rows = np.nonzero(near)
+    onward, _ = guidance.waypoint(waypoint[rows], np.broadcast_to(goal, near.shape)[rows])
+    waypoint = waypoint.copy()
+    waypoint[rows] = onward
+    return waypoint
 
 
 class Planner:
@@ -149,6 +184,7 @@ class Planner:
         self.config = config or PlannerConfig()
         self.gains = gains or FixedGains()
         self.guidance = make_guidance(obstacles, self.config, bounds)
+        self._shapes: tuple[list, list] | None = None
 
     def prepare(self, goals: np.ndarray) -> None:
         """Precompute the guidance of these goals (nothing without guidance; other goals are computed on first use)."""
@@ -158,12 +194,54 @@ class Planner:
     def step(self, view: LocalView) -> PlanStep:
         """Plan every drone of ``view`` from its own local view."""
         nearest, lambda_mask = sense_obstacles(view, self.obstacles, self.config)
-        guided, waypoint, remaining = guided_view(view, self.guidance)
+        guided, waypoint, remaining = guided_view(view, self.guidance, self.config.waypoint_reach)
         observation = None
         if self.gains.needs_observation:
             observation = build_observation(guided, nearest, self.config, self.gains.max_neighbours, remaining)
         eta, lam = self.gains.gains(observation)
+        repulsion = walls = None
+        if self.config.repulsion_sum:
+            repulsion, walls = self.unit_repulsion(view, lambda_mask)
+        elif self.config.brake_distance and self.config.static_neighbours_as_obstacles:
+            walls = nearest_obstacle(view.position, self.obstacles)
         if waypoint is None:
-            return apf_step(view, nearest, lambda_mask, eta, lam, self.config, observation)
+            return apf_step(view, nearest, lambda_mask, eta, lam, self.config, observation, repulsion=repulsion,
+                            walls=walls)
         return apf_step(guided, nearest, lambda_mask, eta, lam, self.config, observation, waypoint,
-                        abs(view.goal - view.position), view.goal)
+                        abs(view.goal - view.position), view.goal, repulsion, walls)
+
+    def unit_repulsion(self, view: LocalView, lambda_mask: np.ndarray) -> tuple[np.ndarray | complex, NearestObstacle]:
+        """The static repulsion summed over every surface (``config.repulsion_sum``) at ``eta`` 1: the mission's
+        obstacles and the static neighbours as :func:`sense_obstacles` counts them; and the nearest of the mission's
+        obstacles alone (for the brake's wall slide), from the same distances. One drone: plain Python."""
+        config = self.config
+        mask = view.neighbour_mask
+        statics = config.static_neighbours_as_obstacles and mask.shape[-1]
+        if not isinstance(view.position, np.ndarray):
+            if self._shapes is None:
+                o = self.obstacles
+                self._shapes = (
+                    [(c.real, c.imag, r) for c, r in zip(np.ravel(o.centers).tolist(), np.ravel(o.radii).tolist())],
+                    [(c.real, c.imag, hx, hy) for c, hx, hy in zip(np.ravel(o.box_center).tolist(),
+                                                                  np.ravel(o.box_half_x).tolist(),
+                                                                  np.ravel(o.box_half_y).tolist())],
+                )
+            chosen = (mask & ~lambda_mask) if statics else ()
+            others = [q for q, keep in zip(view.neighbour_position.tolist(), np.ravel(chosen).tolist()) if keep]
+            force, wall, normal = repulsion_one(complex(view.position), *self._shapes, others, config.safety_radius,
+                                                config)
+            return force, NearestObstacle(wall, normal)
+        if statics:
+            surfaces = every_surface(view.position, self.obstacles, view.neighbour_position, config.safety_radius,
+                                     mask & ~lambda_mask)
+        else:
+            surfaces = every_surface(view.position, self.obstacles)
+        force = repulsive_sum(surfaces, 1.0, config)
+        mapped = surfaces.mapped
+        if not mapped:
+            shape = np.shape(view.position)
+            return force, NearestObstacle(np.full(shape, FAR), np.zeros(shape, dtype=complex))
+        k = surfaces.distance[..., :mapped].argmin(axis=-1)[..., None]
+        wall = NearestObstacle(np.take_along_axis(surfaces.distance, k, -1)[..., 0],
+                               np.take_along_axis(surfaces.normal, k, -1)[..., 0])
+        return force, wall

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from rpf_fly.mission.model import Mission, PlannerSettings
-from rpf_fly.planning.config import PlannerConfig
+from rpf_fly.planning.config import RPF3_TUNING, PlannerConfig
 from rpf_fly.planning.gains import FixedGains
 from rpf_fly.planning.guidance import Bounds
 from rpf_fly.planning.heading_policy import HeadingPolicyPlanner
@@ -24,8 +24,10 @@ class UnsupportedPlanner(ValueError):
 
 
 def planner_config(settings: PlannerSettings) -> PlannerConfig:
-    """The APF parameters of a mission (``apf-paper`` forces the paper preset)."""
+    """The APF parameters of a mission (``apf-paper`` forces the paper preset; ``rpf3`` with the robust preset adds
+    :data:`~rpf_fly.planning.config.RPF3_TUNING`)."""
     preset = "paper" if settings.kind == "apf-paper" else settings.preset
+    tuning = RPF3_TUNING if settings.kind == "rpf3" and preset == "robust" else {}
     return PlannerConfig.preset(
         preset,
         capture_radius=settings.capture_radius_m,
@@ -37,6 +39,7 @@ def planner_config(settings: PlannerSettings) -> PlannerConfig:
         neighbour_aggregate=settings.neighbour_aggregate,
         guidance=settings.guidance_mode,
         margin=settings.margin_m,
+        **tuning,
     )
 
 

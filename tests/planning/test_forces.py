@@ -1,6 +1,7 @@
 """The APF forces against numbers worked by hand from the paper's equations (Section III-B)."""
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -141,3 +142,64 @@ def test_inter_robot_per_robot_lambda_broadcasts():
     mask = np.ones((2, 1), dtype=bool)
     f_in, _ = inter_robot(positions, neighbours, mask, np.array([2.0, 1.0]), PAPER)
     assert f_in == pytest.approx(np.array([-1.5 + 0j, -0.5 + 0j]))
+
+
+def test_guided_influence_range_limits_static_repulsion_only_with_guidance():
+    # Surface 0.5 m away: beyond a guided rho of 0.3 the repulsion vanishes with guidance, stays without it.
+    obstacles = ObstacleSet.from_shapes(circles=[((1.0, 0.0), 0.5)])
+    nearest = nearest_obstacle(0j, obstacles)
+    guided = PlannerConfig.robust(guidance="path", guided_influence_range=0.3)
+    assert repulsive(nearest, 0.05, guided) == 0
+    assert repulsive(nearest, 0.05, PlannerConfig.robust(guided_influence_range=0.3)) == repulsive(nearest, 0.05, ROBUST)
+    # Inside it: eta (1/d - 1/0.3) / d^2 at d = 0.2, pointing away from the obstacle.
+    near = nearest_obstacle(0.3 + 0j, obstacles)
+    assert repulsive(near, 0.05, guided) == pytest.approx(-0.05 * (1 / 0.2 - 1 / 0.3) / 0.04 + 0j)
+
+
+def test_neighbour_range_cuts_the_pairwise_repulsion_and_shifts_it_to_zero_there():
+    # lambda 1.2: the robust term reaches 2 lambda = 2.4 m; with R = 1.5 it is max(0.5, 1.2/1.5) - 1.2/d.
+    config = PlannerConfig.robust(neighbour_range=1.5, keep_right_deg=0.0)
+    plain_config = PlannerConfig.robust(keep_right_deg=0.0)
+    far, _ = inter_robot(0j, np.array([2.0 + 0j]), np.array([True]), 1.2, config)
+    assert far == 0
+    assert inter_robot(0j, np.array([2.0 + 0j]), np.array([True]), 1.2, plain_config)[0] != 0
+    near, _ = inter_robot(0j, np.array([1.0 + 0j]), np.array([True]), 1.2, config)
+    assert near == pytest.approx((0.8 - 1.2 / 1.0) + 0j)
+    # A lambda whose own range is shorter than R keeps the paper's term.
+    short, _ = inter_robot(0j, np.array([1.0 + 0j]), np.array([True]), 0.6, config)
+    assert short == pytest.approx(inter_robot(0j, np.array([1.0 + 0j]), np.array([True]), 0.6, plain_config)[0])
+
+
+def test_summed_repulsion_cancels_across_a_gap_where_the_nearest_one_flips_side():
+    # Two pillars 0.44 m apart (surfaces): in the middle of the gap the nearest-only push is 2 (one pillar's,
+    # whichever rounding picks) and jumps to the other side across it; the sum is 0 there and turns smoothly.
+    from rpf_fly.planning.forces import repulsive_sum
+    from rpf_fly.planning.obstacles import every_surface
+
+    obstacles = ObstacleSet.from_shapes(circles=[((-0.72, 0.0), 0.5), ((0.72, 0.0), 0.5)])
+    config = PlannerConfig.robust(guidance="path", guided_influence_range=0.2, margin=0.05)
+    middle = nearest_obstacle(0j, obstacles)
+    assert abs(repulsive(NearestObstacleSeen(middle, 0.05), 0.05, config)) > 1.5
+    assert repulsive_sum(every_surface(0j, obstacles), 0.05, config) == pytest.approx(0j, abs=1e-12)
+    for x in (-0.01, 0.01):
+        nearest = nearest_obstacle(complex(x, 0), obstacles)
+        alone = repulsive(NearestObstacleSeen(nearest, 0.05), 0.05, config)
+        total = repulsive_sum(every_surface(complex(x, 0), obstacles), 0.05, config)
+        assert np.sign(alone.real) == np.sign(total.real) == -np.sign(x)
+        assert abs(total) < 0.7 * abs(alone)
+    # Batched equals one-drone, and a static neighbour counts with its own (longer) range.
+    points = np.array([0.05j, -0.1 + 0j])
+    surfaces = every_surface(points, obstacles, np.array([[0.55j], [5 + 5j]]), 0.1, np.array([[True], [False]]))
+    assert surfaces.mapped == 2 and surfaces.distance.shape == (2, 3)
+    batch = repulsive_sum(surfaces, 0.05, replace(config, static_influence_range=0.5))
+    one = repulsive_sum(every_surface(points[0], obstacles, np.array([0.55j]), 0.1, np.array([True])), 0.05,
+                        replace(config, static_influence_range=0.5))
+    assert batch[0] == pytest.approx(one)
+    # The hovering neighbour 0.5 m away (0.35 m seen): out of the guided range, inside the static one.
+    assert repulsive_sum(surfaces, 0.05, config)[0] != pytest.approx(batch[0])
+
+
+def NearestObstacleSeen(nearest, margin):  # noqa: N802 - the obstacle as the forces see it
+    from rpf_fly.planning.obstacles import NearestObstacle
+
+    return NearestObstacle(nearest.distance - margin, nearest.normal)

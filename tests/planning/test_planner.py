@@ -15,6 +15,7 @@ from rpf_fly.planning import (
     view_of_drone,
     views_from_states,
 )
+from rpf_fly.planning.config import RPF3_TUNING
 
 
 def random_swarm(rng, n=7):
@@ -31,7 +32,11 @@ OBSTACLES = ObstacleSet.from_shapes(
 )
 
 
-@pytest.mark.parametrize("config", [PlannerConfig.robust(), PlannerConfig.paper()], ids=["robust", "paper"])
+RPF3 = PlannerConfig.robust(margin=0.05, guidance="path", **RPF3_TUNING)
+"""The rpf3 kind's configuration: guidance, summed repulsion, the corner reach, yielding and braking."""
+
+
+@pytest.mark.parametrize("config", [PlannerConfig.robust(), PlannerConfig.paper(), RPF3], ids=["robust", "paper", "rpf3"])
 def test_one_drone_call_equals_batched_call(config):
     """The flight path (one drone, Python numbers) and the simulator path (arrays) are the same function."""
     rng = np.random.default_rng(3)
@@ -51,9 +56,9 @@ def test_one_drone_call_equals_batched_call(config):
             assert one.obstacle_distance == pytest.approx(batch.obstacle_distance[i], abs=1e-12)
 
 
-def test_batched_over_many_arenas_equals_each_arena():
+@pytest.mark.parametrize("config", [PlannerConfig.robust(), RPF3], ids=["robust", "rpf3"])
+def test_batched_over_many_arenas_equals_each_arena(config):
     rng = np.random.default_rng(5)
-    config = PlannerConfig.robust()
     planner = Planner(OBSTACLES, config)
     arenas = [random_swarm(rng, 5) for _ in range(3)]
     stacked = [np.stack([a[k] for a in arenas]) for k in range(4)]
@@ -138,3 +143,23 @@ def test_phase_is_in_the_half_open_interval_for_signed_zeros():
     assert phase(complex(-1.0, 0.0)) == math.pi
     got = phase(np.array([complex(-1.0, -0.0), -1 + 0j, 1j, -1j, 0j, 1 - 1j]))
     np.testing.assert_array_equal(got, [math.pi, math.pi, math.pi / 2, -math.pi / 2, 0.0, -math.pi / 4])
+
+
+def test_a_corner_within_reach_counts_as_reached_and_the_pull_moves_on():
+    """``waypoint_reach``: 3 cm short of the first corner of a wall (beside it) the drone is pulled to the second corner, not
+    back to the first (one-drone and batched alike); farther off, or with the reach 0, the first corner stays."""
+    from rpf_fly.planning.planner import guided_view, make_guidance
+
+    wall = ObstacleSet.from_shapes(boxes=[((-0.1, -1.0), (0.1, 3.0))])
+    config = PlannerConfig.robust(margin=0.05, guidance="path")
+    guidance = make_guidance(wall, config)
+    goal = 2 + 1j
+    first, second = -0.25 - 1.15j, 0.25 - 1.15j
+    near, far = first - 0.02 + 0.02j, first - 0.35 + 0.65j
+    for reach, expect_near in ((0.0, first), (0.05, second)):
+        one = guided_view(view_of_drone(near, goal, 1j, np.zeros(0), np.zeros(0), 6.0), guidance, reach)[1]
+        assert one == pytest.approx(expect_near, abs=1e-5)
+        views = views_from_states(np.array([near, far]), np.zeros(2, complex), np.array([goal, goal]),
+                                  np.array([1j, 1j]), 6.0)
+        batch = guided_view(views, guidance, reach)[1]
+        assert batch == pytest.approx([expect_near, first], abs=1e-5)
