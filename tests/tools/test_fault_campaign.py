@@ -3,19 +3,11 @@
 
 from __future__ import annotations
 
-import importlib.util
-import sys
-from pathlib import Path
-
-ROOT = Path(__file__).resolve().parents[2]
+from tool_modules import ROOT, load_tool
 
 
 def load_campaign():  # type: ignore[no-untyped-def]
-    spec = importlib.util.spec_from_file_location("fault_campaign", ROOT / "tools" / "fault_campaign.py")
-    module = importlib.util.module_from_spec(spec)  # type: ignore[arg-type]
-    sys.modules["fault_campaign"] = module  # its dataclasses look their module up
-    spec.loader.exec_module(module)  # type: ignore[union-attr]
-    return module
+    return load_tool("fault_campaign")
 
 
 def test_an_occlusion_on_lab_3_passes_the_campaigns_judge(tmp_path):

@@ -4,24 +4,11 @@
 
 from __future__ import annotations
 
-import importlib.util
-import sys
-from pathlib import Path
-
-ROOT = Path(__file__).resolve().parents[2]
-
-
-def load_tool():  # type: ignore[no-untyped-def]
-    sys.path.insert(0, str(ROOT / "tools"))
-    spec = importlib.util.spec_from_file_location("swarm_acceptance", ROOT / "tools" / "swarm_acceptance.py")
-    module = importlib.util.module_from_spec(spec)  # type: ignore[arg-type]
-    sys.modules["swarm_acceptance"] = module  # its dataclasses look their module up
-    spec.loader.exec_module(module)  # type: ignore[union-attr]
-    return module
+from tool_modules import ROOT, load_tool
 
 
 def test_a_killed_worker_on_the_two_dongle_mission_passes_the_judge(tmp_path):
-    tool = load_tool()
+    tool = load_tool("swarm_acceptance")
     verdict = tool.fly(ROOT / "tests" / "runtime" / "two-dongles.yaml", tmp_path, kill_dongle=1, kill_after_s=0.5)
     assert verdict.passed, verdict.failures
     assert verdict.exit_code == 1 and verdict.reached == 2  # cf1, cf2; dongle 1's cf3, cf4 were killed
@@ -31,7 +18,7 @@ def test_a_killed_worker_on_the_two_dongle_mission_passes_the_judge(tmp_path):
 
 
 def test_the_judge_counts_contact_with_a_dead_workers_drones_and_ignores_theirs_among_themselves():
-    tool = load_tool()
+    tool = load_tool("swarm_acceptance")
 
     def sample(x: float, z: float, motors: bool) -> tuple[int, dict]:
         return 0, {"position": {"x": x, "y": 0.0, "z": z}, "motors": motors, "crashed": False}
