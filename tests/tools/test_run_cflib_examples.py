@@ -41,6 +41,8 @@ if __name__ == '__main__':
 '''
 
 HARDCODED_SWARM = '''
+import sys
+
 import cflib.crtp
 from cflib.crazyflie.swarm import CachedCfFactory, Swarm
 
@@ -49,7 +51,8 @@ uris = ['radio://0/80/2M/E7E7E7E701', 'radio://0/80/2M/E7E7E7E702']
 if __name__ == '__main__':
     cflib.crtp.init_drivers()
     with Swarm(uris, factory=CachedCfFactory(rw_cache='./cache')) as swarm:
-        swarm.parallel_safe(lambda scf: print(scf.cf.link_uri, scf.cf.param.get_value('cpu.flash')))
+        # one write a line: print() from the swarm's threads writes its parts apart, and they interleave
+        swarm.parallel_safe(lambda scf: sys.stdout.write(f"{scf.cf.link_uri} {scf.cf.param.get_value('cpu.flash')}\\n"))
 '''
 
 MISSING_LOG_VARIABLE = '''
