@@ -246,6 +246,10 @@ def test_emergency_stop_one_then_all(make_world: MakeWorld, toc_cache: Path,
     assert backend.emergency_stop() == {}
     assert wait_for(lambda: all(s.supervisor.locked and not s.supervisor.flying
                                 for s in backend.states().values()), 1.0)
+    # every drone down (a fall from 0.5 m takes about 0.3 s, more on a loaded machine's clock): then nothing that
+    # follows the stop may spin a motor up again
+    assert world.wait_until(lambda w: all(s.position[2] == 0.0 and not s.motors_on
+                                          for s in w.snapshots().values()), 2.0)
     backend.takeoff("cf0", 0.5, 0.5)
     backend.send_position_setpoint("cf2", 0.0, 0.0, 0.5, 0.0)
     time.sleep(0.3)
