@@ -315,7 +315,9 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"  {name:14s} step {f['step'] * 1e6:7.1f} us, onnxruntime alone {f['onnxruntime_alone'] * 1e6:6.1f} us:"
                       f" {f['step'] / f['onnxruntime_alone']:.2f}x")
             else:
-                print(f"  {name:14s} {f['tick'] * 1e3:7.2f} ms (line: 100 drones < 2 ms)")
+                n = int(name.rsplit("_", 1)[1])
+                print(f"  {name:14s} {f['tick'] * 1e3:7.2f} ms, {f['tick'] / n * 1e6:5.1f} us a drone"
+                      f" (line: 100 drones < 2 ms; the flight plans a worker's drones in one such call)")
         if args.json:
             args.json.write_text(json.dumps({"rpf3_s": figures}, indent=2))
         return 0

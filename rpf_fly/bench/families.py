@@ -97,7 +97,8 @@ def label(planner: str) -> str:
 
 @dataclass(frozen=True)
 class FamiliesConfig:
-    """What to run: ``seeds`` bench-stream seeds ``0..N-1`` per family; ``guidance`` None: every mode offered."""
+    """What to run: ``seeds`` bench-stream seeds ``first_seed..first_seed+N-1`` per family (``first_seed`` 0 by
+    default; a later one gives scenes nobody has looked at); ``guidance`` None: every mode offered."""
 
     planners: tuple[str, ...] = FAMILY_PLANNERS
     families: tuple[str, ...] = tuple(FAMILIES)
@@ -105,9 +106,10 @@ class FamiliesConfig:
     guidance: Optional[tuple[str, ...]] = None
     policies_dir: Path = Path("policies")
     policy_paths: Mapping[str, Path] = field(default_factory=dict)
+    first_seed: int = 0
 
     def seed_list(self) -> list[int]:
-        return split_seeds(SPLIT, self.seeds)
+        return split_seeds(SPLIT, self.seeds, self.first_seed)
 
     def modes(self) -> tuple[str, ...]:
         return self.guidance if self.guidance is not None else guidance_modes()
@@ -150,6 +152,8 @@ def prepare_families(config: FamiliesConfig) -> FamiliesPlan:
         raise BenchError(f"unknown scene family {unknown[0]!r} (expected some of {', '.join(FAMILIES)})")
     if config.seeds < 1:
         raise BenchError(f"seeds must be at least 1, got {config.seeds}")
+    if config.first_seed < 0:
+        raise BenchError(f"first seed must be at least 0, got {config.first_seed}")
     offered = guidance_modes()
     unknown = [m for m in config.modes() if m not in offered]
     if unknown or not config.modes():

@@ -23,6 +23,9 @@ def bench(
     seeds: Optional[int] = typer.Option(
         None, "--seeds", help="Seeds per scene or family (overrides --episodes; families: bench-stream seeds 0..N-1)."
     ),
+    first_seed: int = typer.Option(
+        0, "--first-seed", help="families suite: the first bench-stream seed (seeds FIRST..FIRST+N-1; default 0)."
+    ),
     planners: Optional[str] = typer.Option(
         None, "--planners", help=f"Comma-separated planner kinds (paper: {_PLANNERS}; families: also default)."
     ),
@@ -69,9 +72,11 @@ def bench(
     unknown = [k for k in paths if k not in POLICY_ACTIONS]
     if unknown:
         raise fail(f"--policy: {unknown[0]!r} is not a learned planner kind ({', '.join(POLICY_ACTIONS)})")
+    if first_seed and suite != "families":
+        raise fail("--first-seed: only the families suite takes it (the paper suite's seeds are fixed per scene)")
     if suite == "families":
         _families(episodes, planners, families, guidance, policies, paths, json_output, json_file, markdown, figure, out,
-                  jobs)
+                  jobs, first_seed)
         return
     if families is not None or guidance is not None or jobs != 1:
         raise fail("--families, --guidance and --jobs belong to --suite families")
@@ -123,7 +128,7 @@ def bench(
 
 
 def _families(episodes, planners, families, guidance, policies, paths, json_output, json_file, markdown, figure,  # type: ignore[no-untyped-def]
-              out, jobs) -> None:
+              out, jobs, first_seed=0) -> None:
     """``--suite families``: run, print the Markdown report (at most 110 columns), write what was asked for."""
     from rpf_fly.bench.families import FAMILY_PLANNERS, FamiliesConfig, prepare_families, results_json, run_families
     from rpf_fly.bench.families import to_markdown
@@ -141,6 +146,7 @@ def _families(episodes, planners, families, guidance, policies, paths, json_outp
         guidance=_split(guidance) if guidance else None,
         policies_dir=policies,
         policy_paths=paths,
+        first_seed=first_seed,
     )
     try:
         plan = prepare_families(config)
@@ -156,6 +162,8 @@ def _families(episodes, planners, families, guidance, policies, paths, json_outp
 
     result = _run_with_progress(plan, functools.partial(run_families, jobs=jobs), errors)
     command = f"rpf-fly bench --suite families --seeds {config.seeds}"
+    if config.first_seed:
+        command += f" --first-seed {config.first_seed}"
     if config.families != tuple(FAMILIES):
         command += f" --families {','.join(config.families)}"
     if config.planners != FAMILY_PLANNERS:

@@ -411,15 +411,23 @@ class _MissionParser(_Checker):
                 raise self.error(entries["policy"], "planner.policy",
                                  f"policy file {raw!r} not found ({_looked(looked)})")
         elif settings.kind in m.POLICY_KINDS:
-            raw = DEFAULT_POLICY.format(kind=settings.kind)
-            found, looked = _find_file(raw, dirs)
-            if found is None:
-                raise self.error(entries["kind"], "planner.policy",
-                                 f"planner kind {settings.kind!r} needs a policy and none is given; the default "
-                                 f"{raw!r} was not found ({_looked(looked)})")
+            found = self.default_policy(settings.kind, entries.get("kind", node), "kind" not in entries)
         else:
             found = None
         return dataclasses.replace(settings, policy=found)
+
+    def default_policy(self, kind: str, where: YNode | int, defaulted: bool) -> Path:
+        """``policies/<kind>.onnx`` for a policy kind given no ``planner.policy``; the error names the kind's
+        default, and says the kind itself was the default when the mission names none (``defaulted``)."""
+        raw = DEFAULT_POLICY.format(kind=kind)
+        found, looked = _find_file(raw, _search_dirs(self.base_dir))
+        if found is None:
+            whose = f"the default planner kind {kind!r}" if defaulted else f"planner kind {kind!r}"
+            hint = " (or name another planner.kind, e.g. apf, which needs none)" if defaulted else ""
+            raise self.error(where, "planner.policy",
+                             f"{whose} needs a policy and none is given; the default {raw!r} was not found "
+                             f"({_looked(looked)}){hint}")
+        return found
 
     def mocap(self, node: YNode) -> m.MocapSettings:
         settings: m.MocapSettings = self.settings(node, m.MocapSettings, MOCAP_SPEC)
@@ -647,6 +655,9 @@ class _MissionParser(_Checker):
         }
         for key, node in entries.items():  # document order
             parts[key] = readers[key](node)
+        if "planner" not in entries and parts["planner"].kind in m.POLICY_KINDS:
+            parts["planner"] = dataclasses.replace(
+                parts["planner"], policy=self.default_policy(parts["planner"].kind, root.key_line, True))
         if "formation" in entries:
             parts["formation"], parts["drones"] = parts["formation"]
 

@@ -22,6 +22,9 @@ on the scene families (docs/learning.md): the product's learned planner, with gu
 
 POLICY_KINDS = ("rpf", "rpf-mean", "ppo", "rpf3")
 
+DEFAULT_KIND = "rpf3"
+"""``planner.kind`` of a mission that names none: RPF-3, the product's planner (issue #11; docs/bench/rpf3.md)."""
+
 GUIDANCE_MODES = ("none", "path")
 """``planner.guidance``: ``none`` (the attraction pulls at the goal) or ``path`` (at the next visible waypoint of the
 shortest path around the inflated obstacles: docs/algorithm.md, *Global guidance*)."""
@@ -103,7 +106,9 @@ class FlightSettings:
 class PlannerSettings:
     """Which planner and its parameters (the paper's defaults: r 0.1, d_r 6, rho 10, F_in_bar 1)."""
 
-    kind: str = "apf"
+    kind: str = DEFAULT_KIND
+    """The shipped default is RPF-3 (:data:`DEFAULT_KIND`), whose policy a mission loader finds at
+    ``policies/rpf3.onnx``; ``apf`` was the default until RPF-3 led the families bench (docs/mission-format.md)."""
     policy: Optional[Path] = None
     sensing_range: float = 6.0
     safety_radius: float = 0.1

@@ -20,6 +20,7 @@ RPF3_TUNING: dict[str, float | bool] = {
     "yield_gain": 1.0,
     "brake_distance": 0.1,
     "keep_right_deg": 45.0,
+    "guide_around_parked": True,
 }
 """What the ``rpf3`` kind flies on top of the robust preset (docs/algorithm.md, *RPF-3's tuning*, each measured on
 the scene families): with guidance the mission's obstacles repel within 0.2 m of their margin-grown surface, summed
@@ -27,7 +28,9 @@ over every surface in range, the static neighbours within 0.5 m; a corner within
 moving neighbours repel within 0.8 m, their push turned 45 degrees to the right (20 in the robust preset); a drone
 slows (to 20 % at most) where they push against its motion, brakes within 0.1 m of 2r + margin (+ 1 cm) of a
 neighbour it heads for, and slides (its step into the wall scaled down) within 0.1 m of r + margin (+ 1 cm) of the
-nearest obstacle. The gains are the policy's, unchanged; no other kind uses these."""
+nearest obstacle; and the guidance routes round the drones it sees parked in the way, 0.2 m beyond 2r + margin
+(``guide_around_parked``, docs/algorithm.md, *Guidance round parked drones*). The gains are the policy's,
+unchanged; no other kind uses these."""
 
 
 @dataclass(frozen=True)
@@ -101,6 +104,15 @@ class PlannerConfig:
     neighbours push against its direction ``d`` (:mod:`rpf_fly.planning.speed`); 0: always full speed (the paper)."""
     min_speed_fraction: float = 0.2
     """The slowest a yielding drone flies, as a fraction of its speed."""
+    guide_around_parked: bool = False
+    """With guidance: the static neighbours (slower than ``static_speed``: parked on their goals, or holding) that
+    may lie in a drone's way are routed around: its waypoint comes from the shortest path over the mission's
+    obstacles plus those drones, each a circle of radius ``r + parked_clearance`` (else, with no way round, of
+    radius ``r``) grown by ``r + margin`` like every obstacle (:meth:`rpf_fly.planning.guidance.Guidance.detour`).
+    Off: the guidance knows the mission's obstacles only (the repulsion alone keeps drones off parked ones)."""
+    parked_clearance: float = 0.2
+    """Metres a detour keeps beyond ``2r + margin`` from a parked drone (``guide_around_parked``): a gap that leaves
+    less than this between a parked drone and an obstacle is not taken."""
     guidance: Literal["none", "path"] = "none"
     """``path``: the attraction pulls toward the next waypoint of the shortest path around the obstacles inflated by
     ``r + margin`` that the drone can see, instead of straight at the goal (:mod:`rpf_fly.planning.guidance`)."""

@@ -126,27 +126,34 @@ def make_guidance(obstacles: ObstacleSet, config: PlannerConfig, bounds: Bounds 
     without guidance or without obstacles: the attraction then pulls at the goal)."""
     if config.guidance != "path" or obstacles.is_empty:
         return None
-    return Guidance(obstacles, config.safety_radius + config.margin, bounds)
+    parked = config.safety_radius + config.parked_clearance if config.guide_around_parked else 0.0
+    return Guidance(obstacles, config.safety_radius + config.margin, bounds, parked,
+                    config.safety_radius if config.guide_around_parked else 0.0)
 
 
 def guided_view(
-    view: LocalView, guidance: Guidance | None, reach: float = 0.0
+    view: LocalView, guidance: Guidance | None, reach: float = 0.0, static_speed: float | None = None,
 ) -> tuple[LocalView, np.ndarray | None, np.ndarray | None]:
     """``view`` with its goal replaced by each drone's next visible waypoint, the waypoints and the remaining path
     lengths (the view itself and None without guidance). ``reach`` > 0: a drone nearer its waypoint corner than
-    that has reached it and is pulled on to the corner's own next waypoint (:func:`past_reached`)."""
+    that has reached it and is pulled on to the corner's own next waypoint (:func:`past_reached`).
+    ``static_speed``: neighbours slower than this are parked, and a guidance with a ``parked_radius`` routes
+    around those in a drone's way (``config.guide_around_parked``)."""
     if guidance is None:
         return view, None, None
-    waypoint, remaining = guidance.waypoint(view.position, view.goal)
+    parked = None
+    if static_speed is not None and guidance.parked_radius and np.shape(view.neighbour_mask)[-1:] != (0,):
+        parked = (view.neighbour_position, view.neighbour_mask & (abs(view.neighbour_velocity) < static_speed))
+    waypoint, remaining = guidance.waypoint(view.position, view.goal, parked)
     if reach:
-        waypoint = past_reached(guidance, view.position, view.goal, waypoint, reach)
+        waypoint = past_reached(guidance, view.position, view.goal, waypoint, reach, parked)
     guided = LocalView(view.position, waypoint, view.heading, view.neighbour_position, view.neighbour_velocity,
                        view.neighbour_mask)
     return guided, waypoint, remaining
 
 
 def past_reached(guidance: Guidance, position: np.ndarray, goal: np.ndarray, waypoint: np.ndarray,
-                 reach: float) -> np.ndarray:
+                 reach: float, parked: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """The waypoints with every corner nearer its drone than ``reach`` replaced by the corner's own next waypoint.
 
     Why (docs/algorithm.md, *RPF-3's tuning*): a drone rounding a corner within the repulsion's band is pushed off
@@ -156,11 +163,14 @@ def past_reached(guidance: Guidance, position: np.ndarray, goal: np.ndarray, way
     backward pull; the repulsion still keeps the clearance."""
     near = (abs(waypoint - position) < reach) & (waypoint != goal)
     if not isinstance(near, np.ndarray):
-        return guidance.waypoint(complex(waypoint), complex(goal))[0] if near else waypoint
+        return guidance.waypoint(complex(waypoint), complex(goal), parked)[0] if near else waypoint
     if not near.any():
         return waypoint
     rows = np.nonzero(near)
-    onward, _ = guidance.waypoint(waypoint[rows], np.broadcast_to(goal, near.shape)[rows])
+    if parked is not None:
+        parked = (np.broadcast_to(parked[0], near.shape + parked[0].shape[-1:])[rows],
+                  np.broadcast_to(parked[1], near.shape + parked[1].shape[-1:])[rows])
+    onward, _ = guidance.waypoint(waypoint[rows], np.broadcast_to(goal, near.shape)[rows], parked)
     waypoint = waypoint.copy()
     waypoint[rows] = onward
     return waypoint
@@ -194,7 +204,8 @@ class Planner:
     def step(self, view: LocalView) -> PlanStep:
         """Plan every drone of ``view`` from its own local view."""
         nearest, lambda_mask = sense_obstacles(view, self.obstacles, self.config)
-        guided, waypoint, remaining = guided_view(view, self.guidance, self.config.waypoint_reach)
+        guided, waypoint, remaining = guided_view(view, self.guidance, self.config.waypoint_reach,
+                                                  self.config.static_speed)
         observation = None
         if self.gains.needs_observation:
             observation = build_observation(guided, nearest, self.config, self.gains.max_neighbours, remaining)

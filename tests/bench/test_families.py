@@ -33,7 +33,8 @@ def smoke():
 
 def test_smoke_runs_every_planner_on_both_families(smoke):
     plan, result, seen, doc = smoke
-    assert not plan.missing and set(plan.policies) == {"rpf", "rpf-mean", "ppo"}
+    # rpf, rpf-mean and ppo by name, and rpf3 as the product's default (`default`)
+    assert not plan.missing and set(plan.policies) == {"rpf", "rpf-mean", "ppo", "rpf3"}
     assert all(info.sha256 for info in plan.policies.values())
     modes = guidance_modes()  # ("none",) until planner.guidance lands, then every mode it offers
     assert plan.config.modes() == modes and modes[0] == "none"
@@ -52,9 +53,12 @@ def test_smoke_runs_every_planner_on_both_families(smoke):
             assert row["min_obstacle_clearance_m"] is None
         else:
             assert row["below_margin"]["runs_clearance"] == int(run.min_obstacle_clearance_m < 0.15)
-    # the product's default is PlannerSettings().kind: flown exactly as that kind
+    # the product's default is PlannerSettings().kind (RPF-3 since 2026-12-02): flown exactly as that kind by name
+    assert PlannerSettings().kind == "rpf3"
     default = {(m, r.scene): r for m, r in result.runs if r.planner == "default"}
-    same = {(m, r.scene): r for m, r in result.runs if r.planner == PlannerSettings().kind}
+    named = run_families(prepare_families(FamiliesConfig(planners=("rpf3",), families=("arena-a", "arena-b"), seeds=1,
+                                                         policies_dir=POLICIES)))
+    same = {(m, r.scene): r for m, r in named.runs}
     assert {s: r.travel_distance_m for s, r in default.items()} == {s: r.travel_distance_m for s, r in same.items()}
 
 
@@ -75,7 +79,7 @@ def test_smoke_json_markdown_and_claims(smoke):
     assert claims["e"]["status"] in (HELD, NOT_HELD) and claims["e"]["numbers"]["runs"] == 1
     assert claims["d"]["numbers"]["runs"] == 2
     md = to_markdown(back)
-    assert "### arena-a" in md and "### arena-b" in md and "default (APF)" in md
+    assert "### arena-a" in md and "### arena-b" in md and "default (RPF-3)" in md
     assert "rpf-fly bench --suite families --seeds 1" in md
     assert max(len(line) for line in md.splitlines()) <= 110
     assert "- **(e) " in md and "## The paper's claims, guidance none" in md
@@ -187,6 +191,28 @@ def test_cli_families_suite_writes_json_and_markdown(tmp_path):
     assert bad.exit_code == 2 and "maze" in bad.stderr
     wrong = CliRunner().invoke(get_app(), ["bench", "--guidance", "none", "--episodes", "1"])
     assert wrong.exit_code == 2 and "--suite families" in wrong.stderr
+
+
+def test_first_seed_runs_later_bench_seeds_and_says_so(tmp_path):
+    """--first-seed F: seeds F..F+N-1 (scenes nobody looked at), in the JSON, each run and the command line."""
+    result = CliRunner().invoke(get_app(), [
+        "bench", "--suite", "families", "--seeds", "2", "--first-seed", "140", "--families", "arena-b",
+        "--planners", "apf", "--guidance", "path", "--json-file", str(tmp_path / "f.json"),
+    ])
+    assert result.exit_code == 0, result.output
+    doc = json.loads((tmp_path / "f.json").read_text())
+    assert doc["seeds"] == {"first": 140, "count": 2} and [r["seed"] for r in doc["runs"]] == [140, 141]
+    assert "--seeds 2 --first-seed 140 --families arena-b" in doc["command"]
+    later = run_families(prepare_families(FamiliesConfig(planners=("apf",), families=("arena-b",), seeds=1,
+                                                         guidance=("path",), first_seed=141)))
+    assert later.runs[0][1].to_json_dict() == [r for m, r in
+                                               run_families(prepare_families(FamiliesConfig(
+                                                   planners=("apf",), families=("arena-b",), seeds=2,
+                                                   guidance=("path",), first_seed=140))).runs][1].to_json_dict()
+    paper = CliRunner().invoke(get_app(), ["bench", "--first-seed", "3", "--episodes", "1"])
+    assert paper.exit_code == 2 and "--first-seed" in paper.stderr
+    negative = CliRunner().invoke(get_app(), ["bench", "--suite", "families", "--first-seed", "-1", "--seeds", "1"])
+    assert negative.exit_code == 2 and "first seed" in negative.stderr
 
 
 def test_worker_processes_give_the_same_runs_in_the_same_order():

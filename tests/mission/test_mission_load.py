@@ -8,6 +8,7 @@ from pathlib import Path
 
 import pytest
 
+from rpf_fly.mission.load import PROJECT_POLICIES
 from rpf_fly.mission import (
     Arena,
     BoxObstacle,
@@ -100,13 +101,36 @@ def test_minimal_mission_takes_the_dataclass_defaults(load):
     assert mission.source == Path("m.yaml")
     assert mission.arena == Arena(x=(-2.0, 2.0), y=(-2.0, 2.0), z=(0.0, 1.5))
     assert mission.flight == FlightSettings()
-    assert mission.planner == PlannerSettings()
+    # the default planner is RPF-3, with the shipped policy found for it (the product's default, issue #11)
+    assert mission.planner == PlannerSettings(policy=PROJECT_POLICIES.resolve() / "rpf3.onnx")
+    assert mission.planner.kind == "rpf3"
     assert mission.mocap == MocapSettings()
     assert mission.radio == RadioSettings()
     assert mission.sim == SimSettings()
     assert mission.obstacles == ()
     assert mission.formation is None
     assert [d.rigid_body for d in mission.drones] == ["cf1", "cf2"]
+
+
+def test_the_default_planners_missing_policy_is_one_line_naming_the_default(tmp_path, monkeypatch):
+    """Without the shipped policies (a wheel install, a copy of rpf_fly alone), a mission that names no planner,
+    or names kind rpf3 without a policy, fails at load with the file, the field and where it looked."""
+    import rpf_fly.mission.load as load_module
+
+    monkeypatch.setattr(load_module, "PROJECT_POLICIES", tmp_path / "nowhere")
+    monkeypatch.chdir(tmp_path)
+    path = tmp_path / "m.yaml"
+    path.write_text(BASE)
+    with pytest.raises(MissionError) as err:
+        load_mission(path)
+    text = str(err.value)
+    assert "\n" not in text and text.startswith(f"{path}:1: planner.policy: the default planner kind 'rpf3' needs a policy")
+    assert "policies/rpf3.onnx" in text and "planner.kind" in text
+    path.write_text(BASE + "planner: {kind: rpf3}\n")
+    with pytest.raises(MissionError, match=r"m.yaml:\d+: planner.policy: planner kind 'rpf3' needs a policy"):
+        load_mission(path)
+    path.write_text(BASE + "planner: {kind: apf}\n")
+    assert load_mission(path).planner.kind == "apf"
 
 
 def test_numbers_are_floats_and_arena_z_defaults(load):

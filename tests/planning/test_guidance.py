@@ -126,3 +126,131 @@ def test_observation_sees_the_margin():
     assert np.allclose(om.neighbours[:, 0, 0], o0.neighbours[:, 0, 0] - m, atol=1e-6)
     assert np.array_equal(om.local[:, 1:], o0.local[:, 1:])
     assert math.isclose(float(o0.neighbours[0, 0, 0]), 0.6, abs_tol=1e-6)
+
+
+# A wall at x = 0 with two gaps: A at y in [-0.5, 0.5] (straight between start and goal) and B at y in [1.5, 2.5].
+TWO_GAPS = ObstacleSet.from_shapes(
+    boxes=[((-0.1, -3.5), (0.1, -0.5)), ((-0.1, 0.5), (0.1, 1.5)), ((-0.1, 2.5), (0.1, 3.5))]
+)
+GAPS_BOUNDS = ((-3.0, 3.0), (-3.5, 3.5))
+
+
+def _parked(*points: complex, moving: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    positions = np.array(points, dtype=complex)
+    return positions, np.full(positions.shape, not moving)
+
+
+def test_a_drone_parked_in_the_gap_on_the_way_is_routed_around():
+    """Parked in gap A (its disc grown to r + clearance + r + margin = 0.35 m meets the walls grown by 0.15 m), it
+    closes the map's straight path: the waypoint leads through gap B, and the remaining length is the longer way."""
+    g = Guidance(TWO_GAPS, 0.15, GAPS_BOUNDS, parked_radius=0.2)
+    start, goal = -2.0 + 0j, 2.0 + 0j
+    assert g.waypoint(start, goal) == (goal, pytest.approx(4.0))
+    w, remaining = g.waypoint(start, goal, _parked(0j))
+    assert 1.5 < w.imag < 2.5 and abs(w.real) < 0.3
+    assert remaining == pytest.approx(2 * abs(complex(1.75, 1.65)) + 0.5, abs=0.01)  # by the corners of gap B
+    # a neighbour that moves, or none, leaves the map's path; so does a guidance without a parked radius
+    assert g.waypoint(start, goal, _parked(0j, moving=True))[0] == goal
+    assert Guidance(TWO_GAPS, 0.15, GAPS_BOUNDS).waypoint(start, goal, _parked(0j))[0] == goal
+    # parked well off the way (behind the start): the map's path, and no detour graph is built for it
+    fresh = Guidance(TWO_GAPS, 0.15, GAPS_BOUNDS, parked_radius=0.2)
+    assert fresh.waypoint(start, goal, _parked(-2.8 - 2.8j))[0] == goal
+    assert fresh.detours_built == 0
+
+
+def test_the_detour_holds_once_the_leg_in_front_is_clear():
+    """On the way to gap B the leg in front of the drone no longer passes the parked drone, but the rest of the map's
+    path from there would still go back through gap A: the drone keeps flying toward B, not back into A."""
+    g = Guidance(TWO_GAPS, 0.15, GAPS_BOUNDS, parked_radius=0.2)
+    goal, parked = 2.0 + 0j, _parked(0j)
+    p = -2.0 + 0j
+    for _ in range(60):  # follow the waypoints in 0.1 m steps until past the wall
+        w, _ = g.waypoint(p, goal, parked)
+        p = p + 0.1 * (w - p) / abs(w - p) if abs(w - p) > 0.1 else w
+        assert not (abs(p.real) < 0.3 and abs(p.imag) < 0.5), f"back into gap A at {p}"
+        if p.real > 0.3:
+            break
+    assert p.real > 0.3 and p.imag > 1.0
+
+
+def test_no_way_round_the_parked_drones_keeps_the_maps_path():
+    """Both gaps closed by parked drones: no detour exists, and the drone keeps the map's path (not plain APF at the
+    goal behind the wall). A parked radius of 0.3 m: each grown disc overlaps its gap's grown walls by 0.1 m."""
+    g = Guidance(TWO_GAPS, 0.15, GAPS_BOUNDS, parked_radius=0.3)
+    start, goal = -0.5 + 1.0j, 0.5 + 1.0j  # on either side of the wall between the gaps: both ways equally long
+    base = g.waypoint(start, goal)
+    assert abs(base[0].real) < 0.3 and g.detour([0j, 2.0j]).waypoint(start, goal)[0] == goal  # both gaps closed
+    assert g.waypoint(start, goal, _parked(0j, 2.0j)) == base
+    assert g.waypoint(start, goal, _parked(0j))[0].imag > 1.5  # one closed: the other one
+    assert g.waypoint(start, goal, _parked(2.0j))[0].imag < 0.5
+
+
+def test_detour_graphs_are_cached_through_a_hover_wobble():
+    g = Guidance(TWO_GAPS, 0.15, GAPS_BOUNDS, parked_radius=0.2)
+    start, goal = -2.0 + 0j, 2.0 + 0j
+    for wobble in (0j, 0.004 + 0.003j, -0.003 + 0.002j, 0.002 - 0.004j):
+        w, _ = g.waypoint(start, goal, _parked(0.01 + 0.01j + wobble))
+        assert w.imag > 1.5
+    assert g.detours_built == 1
+
+
+def test_detour_one_drone_call_equals_batched_call():
+    """Random drones with random parked neighbours: the flight's one-drone path and the batched path agree."""
+    rng = np.random.default_rng(11)
+    g = Guidance(MIXED, 0.15, ((-4.0, 4.0), (-4.0, 4.0)), parked_radius=0.2)
+    n, k = 200, 3
+    pos = rng.uniform(-4, 4, n) + 1j * rng.uniform(-4, 4, n)
+    goals = rng.uniform(-4, 4, n) + 1j * rng.uniform(-4, 4, n)
+    # neighbours near the straight line between start and goal, so that many of them are in the way
+    along = rng.uniform(0.2, 0.8, (n, k))
+    others = pos[:, None] + along * (goals - pos)[:, None] + 0.3 * (rng.normal(size=(n, k)) + 1j * rng.normal(size=(n, k)))
+    mask = rng.random((n, k)) < 0.7
+    w, r = g.waypoint(pos, goals, (others, mask))
+    one = [g.waypoint(complex(p), complex(q), (o, m)) for p, q, o, m in zip(pos, goals, others, mask)]
+    assert np.allclose(w, [o[0] for o in one], atol=1e-12)
+    assert np.allclose(r, [o[1] for o in one], atol=1e-9)
+    plain, _ = g.waypoint(pos, goals)
+    assert np.mean(w != plain) > 0.2  # the parked drones changed many waypoints
+    assert g.detours_built > 10
+
+
+def test_no_way_at_the_wide_radius_tries_the_drones_bodies_before_giving_up():
+    """Both gaps closed by parked drones at the wide radius (0.3 m, grown 0.45) but open at the body radius (0.1 m,
+    grown 0.25: a 0.1 m band beside each parked drone): the detour at the body radius leads past the parked drone in
+    gap A, not straight through it (the map's path) and not nowhere."""
+    start, goal, others = -2.0 + 0j, 2.0 + 0j, [0j, 2.0j]
+    wide_only = Guidance(TWO_GAPS, 0.15, GAPS_BOUNDS, parked_radius=0.3)
+    assert wide_only._detour_one(start, goal, goal, others) is None
+    g = Guidance(TWO_GAPS, 0.15, GAPS_BOUNDS, parked_radius=0.3, parked_min_radius=0.1)
+    w, remaining = g._detour_one(start, goal, goal, others)
+    assert w != goal and abs(w.real) <= 0.26 and 0.25 <= abs(w.imag) <= 0.35
+    assert remaining > 4.0
+    assert (w, remaining) == g.detour(others, 0.1).waypoint(start, goal)
+
+
+def test_detour_graph_equals_the_graph_of_the_grown_obstacles_built_from_scratch():
+    """The detour reuses the mission's edges and runs Dijkstra per goal; built from scratch on the mission's
+    obstacles plus the parked drones' circles (all pairs), the same waypoints and lengths come out."""
+    from rpf_fly.planning.guidance import PARKED_QUANTUM
+
+    rng = np.random.default_rng(3)
+    bounds = ((-4.0, 4.0), (-4.0, 4.0))
+    g = Guidance(MIXED, 0.15, bounds, parked_radius=0.2)
+    checked = 0
+    for _ in range(12):
+        parked = [complex(*np.round(rng.uniform(-3.5, 3.5, 2) / PARKED_QUANTUM) * PARKED_QUANTUM) for _ in range(4)]
+        detour = g.detour(parked)
+        scratch = Guidance(
+            ObstacleSet(np.concatenate([MIXED.centers, parked]), np.concatenate([MIXED.radii, np.full(4, 0.2)]),
+                        MIXED.box_center, MIXED.box_half_x, MIXED.box_half_y),
+            0.15, bounds,
+        )
+        pos = rng.uniform(-4, 4, 40) + 1j * rng.uniform(-4, 4, 40)
+        goals = rng.uniform(-4, 4, 40) + 1j * rng.uniform(-4, 4, 40)
+        w1, r1 = detour.waypoint(pos, goals)
+        w2, r2 = scratch.waypoint(pos, goals)
+        assert np.allclose(w1, w2, atol=1e-9) and np.allclose(r1, r2, atol=1e-9)
+        one = [detour.waypoint(complex(p), complex(q)) for p, q in zip(pos, goals)]
+        assert np.allclose(w1, [o[0] for o in one], atol=1e-12)
+        checked += int(np.sum(w1 != goals))
+    assert checked > 100  # most of them lead round something

@@ -87,3 +87,29 @@ def test_keep_right_45_makes_a_small_circle_swap_shorter_and_smoother_and_keeps_
     assert before.success and after.success and after.margin_held
     assert after.smoothness < before.smoothness - 0.005
     assert after.travel_distance_m < before.travel_distance_m and after.makespan_s < before.makespan_s
+
+
+def test_a_drone_is_routed_round_a_drone_parked_in_the_gap_of_its_path():
+    """Fresh arena-a seed 192 with the shipped RPF-3: drone 3's map path runs between two pillars where drone 0 has
+    parked on its goal. Without the detour it stalls there to the time limit; with it, it goes round by the next
+    gap and every drone arrives, with the margin held (docs/algorithm.md, *Guidance round parked drones*)."""
+    from rpf_fly.mission.load import PROJECT_POLICIES
+    from rpf_fly.sim.generators import generate
+    from rpf_fly.sim.planners import make_planner
+
+    scenario = generate("arena-a", 192, split="bench")
+    settings = PlannerSettings(kind="rpf3", policy=PROJECT_POLICIES / "rpf3.onnx")
+    bounds = (scenario.arena_x, scenario.arena_y)
+    shipped = make_planner(settings, scenario.obstacles, bounds, scenario.goals)
+    assert shipped.config.guide_around_parked
+    params = SimParams()
+
+    def outcome(planner):  # type: ignore[no-untyped-def]
+        result = rollout(scenario, planner, params)
+        return compute_metrics(result.positions, scenario.goals, params.dt, params.goal_tolerance, R,
+                               scenario.obstacles, scenario.names, margin=MARGIN)
+
+    without = Planner(scenario.obstacles, replace(shipped.config, guide_around_parked=False), shipped.gains, bounds)
+    before, after = outcome(without), outcome(shipped)
+    assert not before.success and before.reached == 5
+    assert after.success and after.margin_held and shipped.guidance.detours_built > 0
