@@ -2,6 +2,7 @@
 
     python tools/fault_campaign.py                       # every kind on lab-3 and circle-8-r3 (about 15 minutes)
     python tools/fault_campaign.py --kinds occlusion,gust --missions lab-3 --out -
+    python tools/fault_campaign.py --planner rpf3 --out docs/fault-campaign-rpf3.md   # the missions flown by RPF-3
 
 Each run is ``rpf-fly fly MISSION --dry-run --faults F --no-console --log L`` in a process of its own, with a
 schedule of ONE fault (the kind's default parameters below) naming the mission's middle drone. The verdict does
@@ -38,6 +39,7 @@ from typing import Any, Optional
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+import yaml  # noqa: E402
 from mcap.reader import make_reader  # noqa: E402
 
 from rpf_fly.mission import load_mission  # noqa: E402
@@ -256,18 +258,35 @@ def table(verdicts: list[Verdict]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def with_planner_kind(mission_path: Path, kind: str, workdir: Path) -> Path:
+    """A copy of the mission (same name) flying planner ``kind`` with that kind's default policy."""
+    doc = yaml.safe_load(mission_path.read_text())
+    planner = {k: v for k, v in (doc.get("planner") or {}).items() if k != "policy"}
+    doc["planner"] = {**planner, "kind": kind}
+    doc.setdefault("name", mission_path.stem)
+    copy = workdir / f"{mission_path.stem}.{kind}.yaml"
+    copy.write_text(yaml.safe_dump(doc, sort_keys=False))
+    return copy
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--missions", default="lab-3,circle-8-r3")
     parser.add_argument("--kinds", default=",".join(DEFAULTS))
     parser.add_argument("--out", default=str(ROOT / "docs" / "fault-campaign.md"), help="markdown table, - for stdout")
     parser.add_argument("--json", default=None, help="verdicts as JSON")
+    parser.add_argument("--planner", default=None,
+                        help="fly each mission with this planner kind instead of its own (its default policy: "
+                             "e.g. rpf3, the product's default planner)")
     args = parser.parse_args()
     verdicts = []
     with tempfile.TemporaryDirectory(prefix="rpf-fly-campaign-") as tmp:
         for mission_name in args.missions.split(","):
+            path = ROOT / "missions" / f"{mission_name}.yaml"
+            if args.planner:
+                path = with_planner_kind(path, args.planner, Path(tmp))
             for kind in args.kinds.split(","):
-                v = judge(kind, ROOT / "missions" / f"{mission_name}.yaml", Path(tmp))
+                v = judge(kind, path, Path(tmp))
                 verdicts.append(v)
                 print(f"{v.mission:14s} {v.kind:22s} {'pass' if v.passed else 'FAIL'}  {'; '.join(v.failures)}",
                       flush=True)

@@ -53,8 +53,9 @@ PARKED_QUANTUM = 0.05
 """Metres: parked drones are placed on a grid of this pitch before their detour graph is built, so a hovering
 drone's few centimetres of wobble reuse one graph instead of building a new one every tick."""
 
-DETOUR_CACHE = 32
-"""Detour graphs kept per :class:`Guidance` (least recently used dropped first)."""
+DETOUR_CACHE = 16
+"""Detour graphs kept per :class:`Guidance` (least recently used dropped first). A run of the families bench builds
+1-3 (median; 14 at most) for all its drones together; each holds a dense ``V x V`` graph (0.5 MB for 250 nodes)."""
 
 
 @dataclass(frozen=True)
