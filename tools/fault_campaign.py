@@ -294,7 +294,9 @@ def main() -> int:
     if args.out == "-":
         print(text)
     else:
-        header = ("# Fault campaign\n\n`python tools/fault_campaign.py` (docs/faults.md): one fault a run, judged on "
+        flown = f" --planner {args.planner}" if args.planner else ""
+        header = (f"# Fault campaign{' with planner ' + args.planner if args.planner else ''}\n\n"
+                  f"`python tools/fault_campaign.py{flown}` (docs/faults.md): one fault a run, judged on "
                   "the `/truth` topics by the tool's own reader.\n\n")
         Path(args.out).write_text(header + text)
     if args.json:
