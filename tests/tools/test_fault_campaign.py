@@ -31,3 +31,15 @@ def test_the_judges_truth_checks_can_fail():
     assert campaign._min_separation(airborne) < campaign.CONTACT_M  # noqa: SLF001
     on_floor = {"cf1": [sample(0.0, 0.0, False)], "cf2": [sample(0.1, 0.0, False)]}
     assert campaign._min_separation(on_floor) is None  # noqa: SLF001
+
+
+def test_planner_option_flies_a_copy_of_the_mission_with_that_kind_and_its_default_policy(tmp_path):
+    from rpf_fly.mission import load_mission
+
+    campaign = load_campaign()
+    original = load_mission(ROOT / "missions" / "lab-3.yaml")
+    copy = load_mission(campaign.with_planner_kind(ROOT / "missions" / "lab-3.yaml", "rpf3", tmp_path))
+    assert original.planner.kind == "rpf" and copy.planner.kind == "rpf3"
+    assert copy.planner.policy is not None and copy.planner.policy.name == "rpf3.onnx"
+    assert copy.name == original.name and copy.drones == original.drones and copy.obstacles == original.obstacles
+    assert copy.planner.safety_radius == original.planner.safety_radius
