@@ -357,7 +357,7 @@ class Guidance:
     _circles: list = field(init=False, repr=False)
     _boxes: list = field(init=False, repr=False)
     _node_xy: list = field(init=False, repr=False)
-    _row_lists: dict = field(init=False, repr=False, default_factory=dict)
+    _row_arrays: dict = field(init=False, repr=False, default_factory=dict)
     _detours: OrderedDict = field(init=False, repr=False, default_factory=OrderedDict)
     detours_built: int = field(init=False, default=0)
     """How many detour graphs this guidance has built (for the measurements)."""
@@ -535,9 +535,9 @@ class Guidance:
         skip = _inside_one(ax, ay, circles, boxes)
         if self._sees_one(p, g, skip):
             return g, direct
-        row = self._row_lists.get(g)
+        row = self._row_arrays.get(g)
         if row is None:
-            row = self._row_lists[g] = self.rows(g)
+            row = self._row_arrays[g] = self.rows(g)
         keys = abs(self.nodes - p) + row  # numpy: 5x quicker than a Python loop over ~100 nodes
         for k in np.argsort(keys, kind="stable").tolist():
             key = float(keys[k])
@@ -605,7 +605,7 @@ class _Detour(Guidance):
         np.fill_diagonal(direct, 0.0)
         self.direct, self.pairs = direct, None
         self._usable = usable
-        self._goals, self._index, self._row_lists = [], {}, {}
+        self._goals, self._index, self._row_arrays = [], {}, {}
         self._detours, self.detours_built = OrderedDict(), 0
         self._derived()
         return self

@@ -62,12 +62,17 @@ def plan_row(step: PlanStep, i: int) -> PlanStep:
     return PlanStep(**row)
 
 
+def static_mask(view: LocalView, config: PlannerConfig) -> np.ndarray:
+    """The neighbours each drone sees slower than ``config.static_speed`` (hovering, arrived: parked)."""
+    return view.neighbour_mask & (abs(view.neighbour_velocity) < config.static_speed)
+
+
 def sense_obstacles(view: LocalView, obstacles: ObstacleSet, config: PlannerConfig) -> tuple[NearestObstacle, np.ndarray]:
     """Nearest obstacle for each drone (static neighbours included as circles of radius r when the preset says so)
     and the mask of the neighbours that remain lambda-neighbours."""
     mask = view.neighbour_mask
     if config.static_neighbours_as_obstacles and mask.shape[-1]:
-        static = mask & (abs(view.neighbour_velocity) < config.static_speed)
+        static = static_mask(view, config)
         nearest = nearest_obstacle(view.position, obstacles, view.neighbour_position, config.safety_radius, static)
         return nearest, mask & ~static
     return nearest_obstacle(view.position, obstacles), mask
@@ -132,18 +137,18 @@ def make_guidance(obstacles: ObstacleSet, config: PlannerConfig, bounds: Bounds 
 
 
 def guided_view(
-    view: LocalView, guidance: Guidance | None, reach: float = 0.0, static_speed: float | None = None,
+    view: LocalView, guidance: Guidance | None, reach: float = 0.0, parked_mask: np.ndarray | None = None,
 ) -> tuple[LocalView, np.ndarray | None, np.ndarray | None]:
     """``view`` with its goal replaced by each drone's next visible waypoint, the waypoints and the remaining path
     lengths (the view itself and None without guidance). ``reach`` > 0: a drone nearer its waypoint corner than
     that has reached it and is pulled on to the corner's own next waypoint (:func:`past_reached`).
-    ``static_speed``: neighbours slower than this are parked, and a guidance with a ``parked_radius`` routes
-    around those in a drone's way (``config.guide_around_parked``)."""
+    ``parked_mask`` (``S + (K,)``): the neighbours each drone sees parked (:func:`static_mask`); a guidance with a
+    ``parked_radius`` routes around those in a drone's way (``config.guide_around_parked``)."""
     if guidance is None:
         return view, None, None
     parked = None
-    if static_speed is not None and guidance.parked_radius and np.shape(view.neighbour_mask)[-1:] != (0,):
-        parked = (view.neighbour_position, view.neighbour_mask & (abs(view.neighbour_velocity) < static_speed))
+    if parked_mask is not None and guidance.parked_radius and np.shape(parked_mask)[-1:] != (0,):
+        parked = (view.neighbour_position, parked_mask)
     waypoint, remaining = guidance.waypoint(view.position, view.goal, parked)
     if reach:
         waypoint = past_reached(guidance, view.position, view.goal, waypoint, reach, parked)
@@ -204,8 +209,12 @@ class Planner:
     def step(self, view: LocalView) -> PlanStep:
         """Plan every drone of ``view`` from its own local view."""
         nearest, lambda_mask = sense_obstacles(view, self.obstacles, self.config)
-        guided, waypoint, remaining = guided_view(view, self.guidance, self.config.waypoint_reach,
-                                                  self.config.static_speed)
+        parked = None
+        if self.guidance is not None and self.guidance.parked_radius:
+            # the static neighbours sense_obstacles took out of the lambda-neighbours, not computed twice
+            statics = self.config.static_neighbours_as_obstacles and view.neighbour_mask.shape[-1]
+            parked = view.neighbour_mask & ~lambda_mask if statics else static_mask(view, self.config)
+        guided, waypoint, remaining = guided_view(view, self.guidance, self.config.waypoint_reach, parked)
         observation = None
         if self.gains.needs_observation:
             observation = build_observation(guided, nearest, self.config, self.gains.max_neighbours, remaining)

@@ -53,10 +53,14 @@ def test_guided_repulsion_range_lets_a_drone_hug_its_path_round_a_wall_and_keep_
     assert after.min_obstacle_clearance_m < before.min_obstacle_clearance_m
 
 
+def crossing():  # type: ignore[no-untyped-def]
+    """Two pairs crossing at right angles in the open."""
+    return make_scenario("cross", np.array([-3 + 0.3j, -3 - 0.3j, 0.3 - 3j, -0.3 - 3j]),
+                         np.array([3 + 0.3j, 3 - 0.3j, 0.3 + 3j, -0.3 + 3j]))
+
+
 def test_neighbour_range_shortens_the_detour_of_a_crossing_and_keeps_the_margin():
-    # Two pairs crossing at right angles in the open.
-    scenario = make_scenario("cross", np.array([-3 + 0.3j, -3 - 0.3j, 0.3 - 3j, -0.3 - 3j]),
-                             np.array([3 + 0.3j, 3 - 0.3j, 0.3 + 3j, -0.3 + 3j]))
+    scenario = crossing()
     before = fly(scenario, replace(KEEP_RIGHT_20, neighbour_range=0.0), GAINS)
     after = fly(scenario, KEEP_RIGHT_20, GAINS)
     assert before.success and after.success and after.margin_held
@@ -66,8 +70,7 @@ def test_neighbour_range_shortens_the_detour_of_a_crossing_and_keeps_the_margin(
 
 def test_yielding_shortens_the_crossing_further_and_keeps_the_margin():
     # The same crossing: with the neighbour range alone the pairs still swerve; yielding lets one pass first.
-    scenario = make_scenario("cross", np.array([-3 + 0.3j, -3 - 0.3j, 0.3 - 3j, -0.3 - 3j]),
-                             np.array([3 + 0.3j, 3 - 0.3j, 0.3 + 3j, -0.3 + 3j]))
+    scenario = crossing()
     assert TUNED.yield_gain > 0
     before = fly(scenario, replace(KEEP_RIGHT_20, yield_gain=0.0), GAINS)
     after = fly(scenario, KEEP_RIGHT_20, GAINS)
