@@ -28,6 +28,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import random
 import subprocess
 import sys
 import tempfile
@@ -88,11 +89,15 @@ class Verdict:
     failures: list[str] = field(default_factory=list)
     events: list[str] = field(default_factory=list)
     min_separation_m: Optional[float] = None
+    params: dict[str, Any] = field(default_factory=dict)
+    """The random campaign's draw (planner, at_s, the fault's parameters); empty: the kind's `DEFAULTS`."""
 
 
-def schedule(kind: str, drone: Optional[str]) -> str:
+def schedule(kind: str, drone: Optional[str], params: Optional[dict[str, Any]] = None,
+             at_s: float = AT_S) -> str:
+    """The one-fault schedule: the kind's `DEFAULTS` unless ``params`` are given (the random campaign's)."""
     fields = {"kind": kind, **({} if kind in SWARM_KINDS else {"drone": drone}),
-              **({} if kind in POWER_ON else {"at_s": AT_S}), **DEFAULTS[kind]}
+              **({} if kind in POWER_ON else {"at_s": at_s}), **(DEFAULTS[kind] if params is None else params)}
     return "faults:\n  - " + json.dumps(fields) + "\n"
 
 
@@ -106,14 +111,19 @@ def read_log(path: Path) -> tuple[dict[str, list[tuple[int, dict]]], dict[str, s
     return topics, {}
 
 
-def judge(kind: str, mission_path: Path, workdir: Path, timeout_extra_s: float = 10.0) -> Verdict:
+def judge(kind: str, mission_path: Path, workdir: Path, timeout_extra_s: float = 10.0,
+          drone_index: Optional[int] = None, params: Optional[dict[str, Any]] = None, at_s: float = AT_S,
+          tag: str = "") -> Verdict:
+    """Fly ``mission_path`` with one fault of ``kind`` (on the middle drone unless ``drone_index``; the kind's
+    `DEFAULTS` unless ``params``; at ``at_s`` of the planning phase) and judge the flight on its truth."""
     mission = load_mission(mission_path)
     names = [d.name for d in mission.drones]
-    drone = None if kind in SWARM_KINDS else names[len(names) // 2]
+    drone = None if kind in SWARM_KINDS else names[len(names) // 2 if drone_index is None else drone_index]
     verdict = Verdict(kind, mission.name, drone)
-    faults = workdir / f"{mission.name}-{kind}.yaml"
-    faults.write_text(schedule(kind, drone))
-    log = workdir / f"{mission.name}-{kind}.mcap"
+    stem = f"{mission.name}-{kind}{tag}"
+    faults = workdir / f"{stem}.yaml"
+    faults.write_text(schedule(kind, drone, params, at_s))
+    log = workdir / f"{stem}.mcap"
     started = time.monotonic()
     limit = mission.flight.timeout_s + 60.0 + timeout_extra_s  # connect, preflight and take-off come first
     try:
@@ -187,7 +197,10 @@ def judge(kind: str, mission_path: Path, workdir: Path, timeout_extra_s: float =
     # rule). In a circle swap that is the antipodal drone. Those are judged as the named drone is: on the floor.
     kept_down: set[str] = set()
     notes: list[str] = []
-    if kind in UNSAFE_TO_FLY and drone is not None:
+    unsafe = kind in UNSAFE_TO_FLY
+    if kind == "start_offset" and params is not None:  # within the tolerance the drone flies from where it stands
+        unsafe = math.hypot(*params["offset_m"][:2]) > mission.safety.start_tolerance_m
+    if unsafe and drone is not None:
         spot = truth[drone][0][1]["position"]
         for d in mission.drones:
             if d.name != drone and min(math.dist(p, (spot["x"], spot["y"])) for p in (d.start, d.goal)) < 2 * r:
@@ -196,7 +209,7 @@ def judge(kind: str, mission_path: Path, workdir: Path, timeout_extra_s: float =
         missed = [n for n in names if n != drone and n not in kept_down and not reached[n]]
         if missed:
             fail("did not reach their goals: " + ", ".join(missed))
-    for n in sorted(kept_down | ({drone} if kind in UNSAFE_TO_FLY and drone is not None else set())):
+    for n in sorted(kept_down | ({drone} if unsafe and drone is not None else set())):
         if max(m["position"]["z"] for _, m in truth[n]) > ON_FLOOR_M or any(m["motors"] for _, m in truth[n]):
             fail(f"{n} left the floor")
         elif n in kept_down:
@@ -253,7 +266,8 @@ def table(verdicts: list[Verdict]) -> str:
         outcomes = ", ".join(f"{n} {o}" for n, o in v.outcomes.items())
         sep = "-" if v.min_separation_m is None else f"{v.min_separation_m:.3f} m"
         events = "; ".join(v.events).replace("|", "/")
-        lines.append(f"| {v.kind} | {v.mission} | {v.drone or '-'} | {'pass' if v.passed else 'FAIL'} | "
+        kind = v.kind + (" " + json.dumps(v.params).replace("|", "/") if v.params else "")
+        lines.append(f"| {kind} | {v.mission} | {v.drone or '-'} | {'pass' if v.passed else 'FAIL'} | "
                      f"{v.exit_code} | {outcomes} | {sep} | {events} | {'; '.join(v.failures).replace('|', '/')} |")
     return "\n".join(lines) + "\n"
 
@@ -269,6 +283,66 @@ def with_planner_kind(mission_path: Path, kind: str, workdir: Path) -> Path:
     return copy
 
 
+RANDOM_MISSIONS = "lab-3,circle-8-r3,arena-a-6,arena-b-6,u-trap"
+"""The shipped missions the random campaign draws from (the 40-drone ones are the distributed flight's)."""
+
+
+def _direction(rng: random.Random, length: float, dims: int = 2) -> list[float]:
+    angle = rng.uniform(-math.pi, math.pi)
+    vec = [length * math.cos(angle), length * math.sin(angle)]
+    return [round(v, 3) for v in vec] + ([0.0] if dims == 3 else [])
+
+
+def random_fault(rng: random.Random, kind: str, start_tolerance_m: float) -> dict[str, Any]:
+    """Parameters of one fault of ``kind`` drawn over what a lab meets (wider than `DEFAULTS`, within what a
+    flight is expected to survive: a gust a Crazyflie's controller can fight, a pose jump of a marker swap)."""
+    u = rng.uniform
+    draws: dict[str, Any] = {
+        "occlusion": lambda: {"duration_s": round(u(0.2, 3.0), 2)},
+        "blackout": lambda: {"duration_s": round(u(0.2, 3.0), 2)},
+        "pose_jump": lambda: {"duration_s": round(u(0.05, 1.0), 2), "offset_m": _direction(rng, u(0.3, 1.5), 3)},
+        "mocap_delay": lambda: {"duration_s": round(u(1.0, 4.0), 2), "delay_s": round(u(0.02, 0.15), 3)},
+        "link_drop": lambda: {},
+        "packet_loss": lambda: {"duration_s": round(u(1.0, 5.0), 2), "rate": round(u(0.2, 0.8), 2)},
+        "low_battery": lambda: {},
+        "planner_error": lambda: {},
+        "planner_hang": lambda: {"duration_s": round(u(0.3, 3.0), 2)},
+        "loop_stall": lambda: {"duration_s": round(u(0.1, 2.0), 2)},
+        "yaw_offset": lambda: {"deg": round(rng.choice((-1, 1)) * u(15.0, 180.0), 1)},
+        "start_offset": lambda: {"offset_m": _direction(rng, u(start_tolerance_m + 0.05, 0.8))},
+        "upside_down": lambda: {},
+        "motor_fault": lambda: {},
+        "gust": lambda: {"duration_s": round(u(0.2, 1.5), 2), "accel": _direction(rng, u(0.5, 2.0), 3)},
+        "estimator_divergence": lambda: {"rate_m_s": round(u(0.1, 0.6), 2)},
+        "reboot": lambda: {},
+    }
+    return draws[kind]()
+
+
+def random_campaign(runs: int, seed: int, missions: list[str], planners: list[str], workdir: Path) -> list[Verdict]:
+    """``runs`` flights, each a mission, planner (``mission``: its own), fault kind, drone, time and parameters
+    drawn from ``seed``; printed as they end with what reproduces them."""
+    rng = random.Random(seed)
+    verdicts = []
+    for run in range(runs):
+        mission_name = rng.choice(missions)
+        planner = rng.choice(planners)
+        path = ROOT / "missions" / f"{mission_name}.yaml"
+        if planner != "mission":
+            path = with_planner_kind(path, planner, workdir)
+        mission = load_mission(path)
+        kind = rng.choice(sorted(DEFAULTS))
+        params = random_fault(rng, kind, mission.safety.start_tolerance_m)
+        drone_index = rng.randrange(len(mission.drones))
+        at_s = round(rng.uniform(0.5, 6.0), 2)
+        v = judge(kind, path, workdir, drone_index=drone_index, params=params, at_s=at_s, tag=f"-r{run}")
+        v.params = {"planner": planner, "at_s": at_s, **params}
+        verdicts.append(v)
+        print(f"[{run}] {v.mission:12s} {planner:8s} {v.kind:21s} {v.drone or '-':5s} at {at_s:4.2f} "
+              f"{json.dumps(params)}  {'pass' if v.passed else 'FAIL'}  {'; '.join(v.failures)}", flush=True)
+    return verdicts
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--missions", default="lab-3,circle-8-r3")
@@ -278,10 +352,19 @@ def main() -> int:
     parser.add_argument("--planner", default=None,
                         help="fly each mission with this planner kind instead of its own (its default policy: "
                              "e.g. rpf3, the product's default planner)")
+    parser.add_argument("--random", type=int, default=0, metavar="N",
+                        help="N flights with a random mission, planner, fault kind, drone, time and parameters")
+    parser.add_argument("--seed", type=int, default=0, help="the random campaign's seed")
+    parser.add_argument("--planners", default="mission,rpf3",
+                        help="the random campaign's planners (mission: the mission's own)")
     args = parser.parse_args()
     verdicts = []
     with tempfile.TemporaryDirectory(prefix="rpf-fly-campaign-") as tmp:
-        for mission_name in args.missions.split(","):
+        if args.random:
+            missions = RANDOM_MISSIONS.split(",") if args.missions == parser.get_default("missions") \
+                else args.missions.split(",")
+            verdicts = random_campaign(args.random, args.seed, missions, args.planners.split(","), Path(tmp))
+        for mission_name in ([] if args.random else args.missions.split(",")):
             path = ROOT / "missions" / f"{mission_name}.yaml"
             if args.planner:
                 path = with_planner_kind(path, args.planner, Path(tmp))
@@ -291,10 +374,14 @@ def main() -> int:
                 print(f"{v.mission:14s} {v.kind:22s} {'pass' if v.passed else 'FAIL'}  {'; '.join(v.failures)}",
                       flush=True)
     text = table(verdicts)
+    if args.random and args.out == parser.get_default("out"):
+        args.out = str(ROOT / "docs" / "fault-campaign-random.md")
     if args.out == "-":
         print(text)
     else:
         flown = f" --planner {args.planner}" if args.planner else ""
+        if args.random:
+            flown = f" --random {args.random} --seed {args.seed} --planners {args.planners}"
         header = (f"# Fault campaign{' with planner ' + args.planner if args.planner else ''}\n\n"
                   f"`python tools/fault_campaign.py{flown}` (docs/faults.md): one fault a run, judged on "
                   "the `/truth` topics by the tool's own reader.\n\n")

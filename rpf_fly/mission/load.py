@@ -137,6 +137,20 @@ editable install). A relative policy path inside a ``policies/`` folder falls ba
 copied out of ``missions/`` keeps its ``../policies/rpf.onnx`` (docs/mission-format.md, *Policy paths*)."""
 
 
+INSTALLED_POLICIES = Path("share") / "rpf_fly" / "policies"
+"""Where a wheel puts the shipped policies, under its install prefix (``[tool.setuptools.data-files]`` in
+pyproject.toml): a ``pip install`` that is not editable has no ``policies/`` beside the package."""
+
+
+def shipped_policy_dirs() -> list[Path]:
+    """The folders holding the shipped policies: :data:`PROJECT_POLICIES` (a checkout or an editable install), then
+    :data:`INSTALLED_POLICIES` under the install prefix the package lies in (a venv, ``--prefix``, ``--user`` or the
+    system: the prefix is a parent of ``<prefix>/lib/pythonX.Y/site-packages/rpf_fly``). Only those that exist."""
+    here = Path(__file__).resolve()
+    dirs = [PROJECT_POLICIES] + [parent / INSTALLED_POLICIES for parent in here.parents[2:]]
+    return [d for d in dict.fromkeys(dirs) if d.is_dir()]
+
+
 def _search_dirs(base_dir: Optional[Path], cwd_first: bool = False) -> list[Path]:
     dirs = [d for d in (base_dir, Path.cwd()) if d is not None]
     return dirs[::-1] if cwd_first else dirs
@@ -144,12 +158,12 @@ def _search_dirs(base_dir: Optional[Path], cwd_first: bool = False) -> list[Path
 
 def _find_file(raw: str, dirs: Sequence[Path]) -> tuple[Optional[Path], list[Path]]:
     """The first existing file among ``raw`` (absolute) or ``raw`` under each of ``dirs``, then, for a path inside
-    a ``policies/`` folder, the project's :data:`PROJECT_POLICIES` by file name; and every place it looked, each
-    once (absolute, ``..`` folded)."""
+    a ``policies/`` folder, the shipped policies (`shipped_policy_dirs`) by file name; and every place it looked,
+    each once (absolute, ``..`` folded)."""
     path = Path(raw).expanduser()
     candidates = [path] if path.is_absolute() else [d / path for d in dirs]
-    if not path.is_absolute() and path.parent.name == "policies" and PROJECT_POLICIES.is_dir():
-        candidates.append(PROJECT_POLICIES / path.name)
+    if not path.is_absolute() and path.parent.name == "policies":
+        candidates += [shipped / path.name for shipped in shipped_policy_dirs()]
     places = list(dict.fromkeys(Path(os.path.abspath(c)) for c in candidates))
     for place in places:
         if place.is_file():

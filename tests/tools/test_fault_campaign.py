@@ -43,3 +43,24 @@ def test_planner_option_flies_a_copy_of_the_mission_with_that_kind_and_its_defau
     assert copy.planner.policy is not None and copy.planner.policy.name == "rpf3.onnx"
     assert copy.name == original.name and copy.drones == original.drones and copy.obstacles == original.obstacles
     assert copy.planner.safety_radius == original.planner.safety_radius
+
+
+def test_every_random_draw_is_a_schedule_the_stack_accepts():
+    """The random campaign's draws (every kind, many seeds) parse as fault schedules of the mission they fly, so a
+    random run judges the stack, not a refused file; a start offset is drawn beyond the mission's tolerance."""
+    import random
+
+    from rpf_fly.flight.faults import parse_faults
+    from rpf_fly.mission import load_mission
+
+    campaign = load_campaign()
+    mission = load_mission(ROOT / "missions" / "lab-3.yaml")
+    rng = random.Random(7)
+    for _ in range(20):
+        for kind in campaign.DEFAULTS:
+            params = campaign.random_fault(rng, kind, mission.safety.start_tolerance_m)
+            text = campaign.schedule(kind, "cf2", params, at_s=rng.uniform(0.5, 6.0))
+            (fault,) = parse_faults(text, "random.yaml", mission)
+            assert fault.kind == kind
+            if kind == "start_offset":
+                assert sum(v * v for v in params["offset_m"]) ** 0.5 > mission.safety.start_tolerance_m
