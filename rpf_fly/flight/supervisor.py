@@ -73,9 +73,12 @@ TRACKING_TAU_S = 0.25
 TRACKING_SPEED_M_S = 1.1
 """The firmware's horizontal speed limit (posCtlPid.xyVelMax 1 m/s, plus its 10 % overhead)."""
 
-MOCAP_LATENCY_WARN_S = 0.05
+MOCAP_LATENCY_WARN_S = 0.02
 """Mocap latency (camera to receipt, as the mocap measures it) above this: the estimators and the planners act on
-a picture that old (Crazyswarm2 warns at 10 ms over unicast; a healthy Motive link is 3-8 ms)."""
+a picture that old (Crazyswarm2 warns at 10 ms over unicast; a healthy Motive link is 3-8 ms). 20 ms: over twice
+the worst healthy link, so a healthy system never warns, and 2 cm of lag at 1 m/s. Was 50 ms until 2026-12-02: the
+random fault campaign delayed the mocap by 33 ms (plus the emulated camera's 4 ms), a picture five times older than a
+healthy one, and nothing said so."""
 
 Response = Literal["warn", "hold", "land", "lost", "resume", "crashed", "stop"]
 

@@ -8,7 +8,7 @@ from dataclasses import replace
 from rpf_fly.flight.agent import DroneAgent
 from rpf_fly.flight.phases import DronePhase
 from rpf_fly.flight.poses import PoseTracker
-from rpf_fly.flight.supervisor import LOW_BATTERY_SAMPLES, TELEMETRY_STALE_S, Supervisor
+from rpf_fly.flight.supervisor import LOW_BATTERY_SAMPLES, TELEMETRY_STALE_S, WARNING, Supervisor
 from rpf_fly.mission import parse_mission
 from rpf_fly.mocap.frame import MocapFrame, RigidBodyPose
 from rpf_fly.radio.backend import BatteryState, DroneState, LinkState, PmState, SupervisorState
@@ -26,9 +26,10 @@ def setup(mission_text: str = SHORT_MISSION):  # type: ignore[no-untyped-def]
     return mission, agents, tracker, Supervisor(mission, obstacle_set(mission.obstacles))
 
 
-def see(tracker: PoseTracker, n: int, t: float, positions: dict[str, tuple[float, float, float]]) -> None:
+def see(tracker: PoseTracker, n: int, t: float, positions: dict[str, tuple[float, float, float]],
+        latency_s: float | None = None) -> None:
     bodies = {name: RigidBodyPose(name, i, p, (0.0, 0.0, 0.0, 1.0), True) for i, (name, p) in enumerate(positions.items())}
-    tracker.update(MocapFrame(n, t, t, None, bodies))
+    tracker.update(MocapFrame(n, t, t, latency_s, bodies))
 
 
 def state(name: str, t: float, vbat: float = 3.9, up: bool = True) -> DroneState:
@@ -119,3 +120,17 @@ def test_another_workers_drone_is_in_the_separation_check_and_only_own_drones_ar
     see(tracker, 2, 0.1, dict(close, cf2=(-1.0, 0.0, 0.02)))
     found = [f for f in supervisor.check(0.1, own.values(), tracker, states, ("cf2",)) if f.kind == "separation"]
     assert all(f.response == "resume" for f in found) and sorted(f.drone for f in found) == ["cf1", "cf3"]
+
+
+def test_mocap_latency_four_times_a_healthy_links_is_a_warning_once_and_its_end_is_said():
+    """A healthy Motive link is 3-8 ms: 6 ms says nothing; 30 ms (a delay the random fault campaign injected,
+    which the former 50 ms threshold let pass silently) warns once, not every frame; back under 10 ms, an info."""
+    _, agents, tracker, supervisor = setup()
+    states = {n: state(n, 0.0) for n in agents}
+    said = []
+    for k, latency in enumerate([0.006] * 5 + [0.030] * 5 + [0.015] * 3 + [0.006] * 3):
+        t = 0.01 * k
+        see(tracker, k + 1, t, POSITIONS, latency_s=latency)
+        said += [(k, f.level) for f in supervisor.check(t, agents.values(), tracker, states) if f.kind == "mocap_latency"]
+    assert [k for k, _ in said] == [5, 13]
+    assert said[0][1] == WARNING and said[1][1] < WARNING
