@@ -107,6 +107,11 @@ class FlightLoop:
     STATUS_PERIOD_S = 0.1
     SEND_WAIT_S = 0.002
     """How long a tick waits for the backend's sender threads to hand its setpoints to cflib (see `_plan_tick`)."""
+    LATE_TICK_S = 0.1
+    """A planning tick this much later than its period after the last one is a warning (``loop``): the drones
+    flew on old setpoints that long (the firmware levels out 0.5 s after the last one). A normal flight's longest
+    gap is the period plus 15-35 ms (a garbage collection: docs/performance.md); a stall the watchdog caught is
+    said by the watchdog instead."""
 
     def __init__(
         self,
@@ -167,6 +172,8 @@ class FlightLoop:
         self.tick_offset = tick_offset
         self._ticks = TickSchedule(mission.flight.dt, 0.0)
         self._last_tick_s: Optional[float] = None
+        self._stalls_seen = 0
+        """The watchdog's stall count at the last planning tick (`_late_tick`)."""
         self._stop = threading.Event()
         self._stop_reason = ""
         self._stop_notice = ""
@@ -665,6 +672,7 @@ class FlightLoop:
             self._plan_tick(now, frame)
             if self._last_tick_s is not None:
                 self.stats.tick_intervals.append(now - self._last_tick_s)
+                self._late_tick(now - self._last_tick_s)
             self._last_tick_s = now
             ticks.fired(now, frame is not None)
             self.stats.overruns, self.stats.frameless_ticks = ticks.overruns, ticks.frameless
@@ -822,6 +830,16 @@ class FlightLoop:
                     pose = self.tracker.get(agent.name)
                     if pose is not None and pose.valid and f.kind in self.RESUMABLE:
                         self.commander.begin_planning(agent, pose.xy, now)
+
+    def _late_tick(self, interval_s: float) -> None:
+        """Say a gap between two planning ticks longer than the period plus `LATE_TICK_S` (the loop was blocked or
+        starved), unless the watchdog already said it (it fired during the gap)."""
+        stalls = self._watchdog.stalls
+        caught, self._stalls_seen = stalls != self._stalls_seen, stalls
+        period = self.mission.flight.dt
+        if interval_s > period + self.LATE_TICK_S and not caught:
+            self.events.emit(WARNING, "loop", f"flight loop late: {interval_s * 1e3:.0f} ms between two planning "
+                             f"ticks (period {period * 1e3:.0f} ms): the drones flew on old setpoints")
 
     def _on_loop_stall(self) -> None:
         """Watchdog thread: the loop stopped ticking while drones stream setpoints: land them all now, through the

@@ -39,7 +39,20 @@ def test_a_loop_stall_lands_every_drone_and_the_landing_stands(tmp_path, short_m
         assert late == [], f"{name}: {len(late)} setpoints streamed after the watchdog landed it"
         assert flight.report.outcomes[name] == FlightOutcome.LANDED_EARLY
     assert all(landed(s) for s in flight.snapshots.values())
-    assert [e.level for e in flight.events("loop")] == [5]
+    assert [e.level for e in flight.events("loop") if e.level >= 5] == [5]  # the watchdog, once
+
+
+def test_a_loop_stall_shorter_than_the_watchdog_is_a_warning_and_the_flight_goes_on(tmp_path, short_mission):
+    """The loop blocks 0.2 s at 20 Hz planning: under the watchdog's 0.35 s, so nothing lands, but the drones flew
+    on old setpoints for four ticks: one warning says so (before, nothing did)."""
+    from dataclasses import replace
+
+    mission = replace(short_mission, flight=replace(short_mission.flight, rate_hz=20))
+    flight = fly(mission, tmp_path, when_flying=lambda loop, rig: (time.sleep(1.0), rig.mocap.stall(0.2)))
+    loop_events = flight.events("loop")
+    assert [e.level for e in loop_events] == [3], [(e.level, e.message) for e in loop_events]
+    assert "flight loop late" in loop_events[0].message
+    assert all(o == FlightOutcome.REACHED for o in flight.report.outcomes.values()), flight.report.reasons
 
 
 def test_a_planner_that_blocks_faults_its_drone_only(tmp_path, short_mission):
@@ -62,7 +75,9 @@ def test_a_planner_that_blocks_faults_its_drone_only(tmp_path, short_mission):
     flight = fly(short_mission, tmp_path, factory=factory)
     fault = flight.events("planner_fault", "cf2")
     assert fault and "did not return within" in fault[0].message
-    assert not flight.events("loop")
+    # The watchdog never fired; the tick that waited out the planner's deadline is said late (the others' setpoints
+    # waited with it), and that is all.
+    assert [e.message.split(":")[0] for e in flight.events("loop")] in ([], ["flight loop late"])
     assert flight.report.outcomes["cf2"] == FlightOutcome.LANDED_EARLY
     assert flight.report.outcomes["cf1"] == flight.report.outcomes["cf3"] == FlightOutcome.REACHED
     assert all(landed(s) for s in flight.snapshots.values())
