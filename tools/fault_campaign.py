@@ -303,7 +303,8 @@ def random_fault(rng: random.Random, kind: str, start_tolerance_m: float) -> dic
         "pose_jump": lambda: {"duration_s": round(u(0.05, 1.0), 2), "offset_m": _direction(rng, u(0.3, 1.5), 3)},
         "mocap_delay": lambda: {"duration_s": round(u(1.0, 4.0), 2), "delay_s": round(u(0.02, 0.15), 3)},
         "link_drop": lambda: {},
-        "packet_loss": lambda: {"duration_s": round(u(1.0, 5.0), 2), "rate": round(u(0.2, 0.8), 2)},
+        # under 28 % of the attempts lost, cflib's link quality dips no lower than in a lab's normal bursts
+        "packet_loss": lambda: {"duration_s": round(u(1.0, 5.0), 2), "rate": round(u(0.3, 0.8), 2)},
         "low_battery": lambda: {},
         "planner_error": lambda: {},
         "planner_hang": lambda: {"duration_s": round(u(0.3, 3.0), 2)},

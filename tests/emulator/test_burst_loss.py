@@ -162,7 +162,7 @@ def test_the_packet_loss_hook_overrides_the_bursts_while_it_lasts() -> None:
 def test_link_quality_dips_in_the_bursts(make_world: MakeWorld, toc_cache: Path) -> None:
     """Real cflib over the fake radio, a drone with the default bursts and an extpos stream at 100 Hz: cflib's link
     quality (its `RadioLinkStatistics`, 10 points a retry over the last 100 acks) falls in the bursts, far more
-    often than between them, and dips below 100 % without nearing the supervisor's 95 % warning."""
+    often than between them, and dips below 100 % without nearing the supervisor's 96 % warning."""
     model = BurstLoss()
     world = make_world({A: FakeDroneConfig.at(0.0, 0.0, faults=LinkFaults(burst=model))}, seed=3,
                        timing=RadioTiming(transaction_s=0.001))

@@ -188,3 +188,17 @@ def test_a_drone_held_six_cm_off_its_setpoints_is_a_tracking_warning_and_three_c
             found += [f for f in supervisor.check(t, agents.values(), tracker, states) if f.kind == "tracking"]
         assert [(f.drone, f.level) for f in found] == ([("cf2", WARNING)] if said else []), (offset, found)
     assert 0.03 < TRACKING_WARN_M < 0.06
+
+
+def test_a_poor_link_is_said_each_episode():
+    """cflib's link quality under 96 % is a warning; back at 99 % an info, and the next episode is said again (the
+    former end, 10 points above the warning, was above cflib's 100 % and never came)."""
+    _, agents, tracker, supervisor = setup()
+    see(tracker, 1, 0.0, POSITIONS)
+    said = []
+    for k, quality in enumerate([100.0, 97.0, 95.5, 94.0, 97.0, 99.5, 100.0, 95.0]):
+        states = {n: state(n, 0.1 * k) for n in agents}
+        states["cf1"] = replace(states["cf1"], link=LinkState(True, quality))
+        said += [(k, f.level) for f in supervisor.check(0.1 * k, agents.values(), tracker, states) if f.kind == "radio"]
+    assert [k for k, _ in said] == [2, 5, 7]
+    assert [level for _, level in said] == [WARNING, 2, WARNING]
