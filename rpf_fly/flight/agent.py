@@ -27,6 +27,8 @@ import math
 import queue
 import threading
 import time
+from concurrent.futures import Future
+from concurrent.futures import TimeoutError as FutureTimeout
 from dataclasses import dataclass
 from typing import Callable, Optional, Protocol
 
@@ -55,43 +57,51 @@ def check_direction(direction: complex) -> None:
 
 
 class PlannerWorker:
-    """One drone's planner on a daemon thread of its own, called with a wall-clock deadline. A call that misses it
-    is a :class:`PlannerFault`; the thread is left to finish (or never) on its own, and its late answer is dropped:
-    the drone is already holding and landing. Daemon: a planner stuck for good must not keep the process alive."""
+    """One drone's planner on a daemon thread of its own. :meth:`submit` hands it a view and returns at once with a
+    :class:`~concurrent.futures.Future` of ``(step, direction, cpu seconds)`` (or of its :class:`PlannerFault`), so a
+    tick can hand every such drone its view first and wait for them together, and stream the drones that answered
+    without waiting for one that did not. A call that never answers is left to finish (or never) on its own, and
+    its late answer is dropped by whoever gave up on it. Daemon: a planner stuck for good must not keep the process
+    alive."""
 
     def __init__(self, step: Callable[[LocalView], tuple[PlanStep, complex, float]], name: str):
         self._step = step
-        self._requests: queue.Queue[Optional[tuple[LocalView, queue.Queue]]] = queue.Queue()
-        self._busy = False
+        self._requests: queue.Queue[Optional[tuple[LocalView, Future]]] = queue.Queue()
+        self._current: Optional[Future] = None
         self._thread = threading.Thread(target=self._run, name=name, daemon=True)
         self._thread.start()
 
-    def call(self, view: LocalView, deadline_s: float) -> tuple[PlanStep, complex, float]:
-        if self._busy:
+    @property
+    def busy(self) -> bool:
+        """Whether the last call submitted has not answered yet."""
+        return self._current is not None and not self._current.done()
+
+    def submit(self, view: LocalView) -> Future:
+        """Hand ``view`` to the planner's thread; raises :class:`PlannerFault` while an earlier call still runs."""
+        if self.busy:
             raise PlannerFault("planner still busy with an earlier call")
-        reply: queue.Queue = queue.Queue(maxsize=1)
-        self._busy = True
-        self._requests.put((view, reply))
+        future: Future = Future()
+        self._current = future
+        self._requests.put((view, future))
+        return future
+
+    def call(self, view: LocalView, deadline_s: float) -> tuple[PlanStep, complex, float]:
+        """:meth:`submit` and wait up to ``deadline_s`` of wall time for the answer."""
         try:
-            ok, value = reply.get(timeout=deadline_s)
-        except queue.Empty:
+            return self.submit(view).result(timeout=deadline_s)
+        except FutureTimeout:
             raise PlannerFault(f"planner did not return within {deadline_s * 1e3:.0f} ms") from None
-        if not ok:
-            raise value
-        return value
 
     def close(self) -> None:
         self._requests.put(None)
 
     def _run(self) -> None:
         while (request := self._requests.get()) is not None:
-            view, reply = request
+            view, future = request
             try:
-                result = (True, self._step(view))
+                future.set_result(self._step(view))
             except BaseException as err:  # noqa: BLE001 - handed to the caller
-                result = (False, err if isinstance(err, PlannerFault) else PlannerFault(f"planner raised {err!r}"))
-            self._busy = False
-            reply.put(result)
+                future.set_exception(err if isinstance(err, PlannerFault) else PlannerFault(f"planner raised {err!r}"))
 
 
 @dataclass
@@ -202,15 +212,26 @@ class DroneAgent:
         wall time (a planner that blocks must not stop the loop that streams every other drone's setpoints; a
         Python call cannot be pre-empted, so the worker is abandoned and the drone faulted). None: inline."""
         if deadline_s is None:
-            step, direction, seconds = self._step(view)
-        else:
-            if self._worker is None:
-                self._worker = PlannerWorker(self._step, f"rpf-fly-planner-{self.name}")
-            step, direction, seconds = self._worker.call(view, deadline_s)
+            return self.finish(self._step(view), measured)
+        return self.finish(self._worker_of().call(view, deadline_s), measured)
+
+    def submit(self, view: LocalView) -> Future:
+        """Start a planning step on this drone's own worker thread (see :class:`PlannerWorker`); take its answer
+        with :meth:`finish`. Raises :class:`PlannerFault` while an earlier call still runs."""
+        return self._worker_of().submit(view)
+
+    def finish(self, answer: tuple[PlanStep, complex, float], measured: complex) -> PlanResult:
+        """Check a planner's answer (direction, CPU-time budget) and take it: raises :class:`PlannerFault`."""
+        step, direction, seconds = answer
         check_direction(direction)
         if seconds > self.budget_s:
             raise PlannerFault(f"planner took {seconds * 1e3:.1f} ms (budget {self.budget_s * 1e3:.0f} ms)")
         return self.accept(step, direction, measured, seconds)
+
+    def _worker_of(self) -> PlannerWorker:
+        if self._worker is None:
+            self._worker = PlannerWorker(self._step, f"rpf-fly-planner-{self.name}")
+        return self._worker
 
     def _step(self, view: LocalView) -> tuple[PlanStep, complex, float]:
         """The planner's call, timed in CPU time of the thread that runs it."""

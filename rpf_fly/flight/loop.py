@@ -18,7 +18,7 @@ import math
 import signal
 import threading
 import time
-from typing import Callable, Collection, Optional, Protocol
+from typing import Callable, Collection, Optional, Protocol, Union
 
 import numpy as np
 
@@ -758,19 +758,23 @@ class FlightLoop:
             # Plan on the commanded geometry (see flight/agent.py): each drone from its own reference, with each
             # neighbour predicted ahead by that drone's observed tracking lag; batched where planners allow
             # (flight/swarm_plan.py).
+            # Isolated planners (their own threads) get their views first; the drones that have an answer are
+            # streamed at once, then each isolated one as it answers within the planning budget; one still
+            # computing streams its reference unchanged (flight/swarm_plan.py).
             world = Neighbourhood.of(airborne_poses)
-            outcomes = self._swarm_planner.plan([(a, p.xy) for a, p in requests], world)
+            tick = self._swarm_planner.start([(a, p.xy) for a, p in requests], world)
+            by_name = {a.name: (a, p) for a, p in requests}
             for agent, pose in requests:
-                outcome = outcomes[agent.name]
-                if isinstance(outcome, PlannerFault):
-                    self.commander.hold(agent, pose.xy, now, str(outcome))
-                    self.events.emit(ERROR, "planner_fault", f"{outcome}: holding, then landing", agent.name)
-                    self.commander.land(agent, "planner fault")
-                    records.append((agent, pose, None, "hold"))
-                    continue
-                self.stats.planner_seconds.append(outcome.seconds)
-                self._send(agent, outcome.setpoint, frame, sent)
-                planned.append((agent, pose, outcome))
+                outcome = tick.ready.get(agent.name)
+                if outcome is not None:
+                    del by_name[agent.name]
+                    self._take_plan(agent, pose, outcome, now, frame, sent, records, planned)
+            for name, outcome in tick.collect(min(self._swarm_planner.budget_s, self._swarm_planner.hang_s)):
+                agent, pose = by_name.pop(name)
+                self._take_plan(agent, pose, outcome, now, frame, sent, records, planned)
+            for agent, pose in by_name.values():  # planner still computing: stay on the reference this tick
+                self._send(agent, agent.reference, frame, sent)
+                records.append((agent, pose, None, "hold"))
             for note in self._swarm_planner.notes:
                 self.events.emit(WARNING, "planner_batch", note)
             self._swarm_planner.notes.clear()
@@ -785,6 +789,19 @@ class FlightLoop:
             records.append((agent, pose, step, MODE_NAMES.get(int(step.mode), "apf")))
         self.recorder.setpoints(sent)
         self.recorder.planner_steps(now, self.tick, records)
+
+    def _take_plan(self, agent: DroneAgent, pose: TrackedPose, outcome: Union[PlanResult, PlannerFault], now: float,
+                   frame: Optional[MocapFrame], sent: list, records: list, planned: list) -> None:
+        """Stream a drone's planned setpoint, or hold and land it on its planner's fault."""
+        if isinstance(outcome, PlannerFault):
+            self.commander.hold(agent, pose.xy, now, str(outcome))
+            self.events.emit(ERROR, "planner_fault", f"{outcome}: holding, then landing", agent.name)
+            self.commander.land(agent, "planner fault")
+            records.append((agent, pose, None, "hold"))
+            return
+        self.stats.planner_seconds.append(outcome.seconds)
+        self._send(agent, outcome.setpoint, frame, sent)
+        planned.append((agent, pose, outcome))
 
     def _send(self, agent: DroneAgent, xy: complex, frame: Optional[MocapFrame],
               sent: list[tuple[str, tuple[float, float, float], float]]) -> None:

@@ -12,7 +12,14 @@ Isolation under faults: a batched call that raises, or a row whose direction is 
 drones are planned alone on their own planner instance, so a fault stays that drone's :class:`PlannerFault` (it
 holds and lands; the others fly on). A batched call over the planning budget cannot say which drone was slow, so
 batching is switched off for the rest of the flight and each drone's own call is timed against the budget again.
-A drone with a different planner (a wrapper, another policy) is always planned alone.
+A drone with a different planner (a wrapper, another policy, ORCA, a user's planner) is always planned alone, on a
+thread of its own (`isolated`), because such a planner may block. The tick hands each of them its view first and
+plans the rest meanwhile (:meth:`SwarmPlanner.start`); the loop streams every drone that has its answer, then waits
+a short while (the planning budget) for the isolated ones, streaming each as it answers (:meth:`TickPlan.collect`).
+One that has not answered streams its reference unchanged this tick, takes its answer at the next tick, and is
+faulted once its call is older than ``hang_s``: a planner that blocks never holds back another drone's setpoint
+(before, the tick waited out the 0.25 s deadline, one isolated drone after the other, and every drone flew on an
+old setpoint meanwhile).
 """
 
 from __future__ import annotations
@@ -20,7 +27,9 @@ from __future__ import annotations
 import dataclasses
 import time
 from dataclasses import dataclass, field
-from typing import Callable, Mapping, Sequence, Union
+from concurrent.futures import Future, as_completed
+from concurrent.futures import TimeoutError as FutureTimeout
+from typing import Callable, Iterator, Mapping, Sequence, Union
 
 import numpy as np
 
@@ -112,6 +121,40 @@ def isolated(planner: object) -> bool:
 
 
 @dataclass
+class _Call:
+    """An isolated drone's planning call on its own thread: when it was handed its view (wall clock) and the
+    drone's measured position then."""
+
+    agent: DroneAgent
+    future: Future
+    submitted_s: float
+    measured: complex
+
+
+@dataclass
+class TickPlan:
+    """One tick's planning as it comes in: :attr:`ready` at once (batched and inline drones, the faults, an isolated
+    drone's answer that came in after its tick), then :meth:`collect` for the isolated drones handed a view this
+    tick, as each answers. A drone in neither has no answer this tick (its planner is still computing): the loop
+    streams its reference unchanged, and it is faulted once its call is older than the deadline."""
+
+    ready: dict[str, Outcome]
+    _planner: "SwarmPlanner"
+    _calls: list[_Call]
+
+    def collect(self, wait_s: float) -> Iterator[tuple[str, Outcome]]:
+        """The answers of this tick's isolated calls, in the order they come, for up to ``wait_s`` of wall time."""
+        pending = {c.future: c for c in self._calls}
+        self._calls = []
+        try:
+            for future in as_completed(pending, timeout=wait_s):
+                call = pending[future]
+                yield call.agent.name, self._planner._finish(call)
+        except FutureTimeout:
+            return
+
+
+@dataclass
 class SwarmPlanner:
     """Plans a tick of drones; ``batching`` turns off (for good) when a batched call runs over ``budget_s``."""
 
@@ -123,23 +166,76 @@ class SwarmPlanner:
     notes: list[str] = field(default_factory=list)
     """Why batching changed or a batch was not trusted, for the flight's event log (the caller drains it)."""
     hang_s: float = 0.25
-    """Wall-clock deadline of an isolated planner's call (below the loop watchdog's 0.35 s: the loop keeps
-    ticking for everyone else)."""
+    """Wall-clock deadline of an isolated planner's call (below the loop watchdog's 0.35 s): past it, the drone is
+    faulted. The loop never waits that long: the drones that answered are streamed at once."""
+    wall: Callable[[], float] = time.monotonic
     _leaders: list[object] = field(default_factory=list, repr=False)
     _known: dict[int, tuple[object, int]] = field(default_factory=dict, repr=False)
+    _calls: dict[str, _Call] = field(default_factory=dict, repr=False)
+    """Isolated calls handed out and not yet taken, by drone."""
 
     def plan(self, requests: Sequence[tuple[DroneAgent, complex]], world: Neighbourhood) -> dict[str, Outcome]:
         """``requests``: (agent, measured position) of every drone to plan this tick. Returns each drone's
-        :class:`PlanResult`, or the :class:`PlannerFault` of its own planner."""
-        out: dict[str, Outcome] = {}
-        if self.batching:
-            for group in self._groups(requests):
-                if len(group) > 1:
-                    out.update(self._plan_batch(group, world))
-        for agent, measured in requests:
+        :class:`PlanResult`, or the :class:`PlannerFault` of its own planner: waits for every isolated call (all
+        at once) up to the deadline, and faults the ones that did not answer (``rpf-fly replay``, the tests)."""
+        tick = self.start(requests, world)
+        out = dict(tick.ready)
+        out.update(tick.collect(self.hang_s))
+        for agent, _ in requests:
             if agent.name not in out:
-                out[agent.name] = self._plan_alone(agent, measured, world)
+                self._calls.pop(agent.name, None)
+                out[agent.name] = PlannerFault(f"planner did not return within {self.hang_s * 1e3:.0f} ms")
         return out
+
+    def start(self, requests: Sequence[tuple[DroneAgent, complex]], world: Neighbourhood) -> TickPlan:
+        """Hand every isolated drone its view (each planner's own thread computes meanwhile), plan the rest here
+        (batched where planners allow), and return the tick's :class:`TickPlan`."""
+        now = self.wall()
+        ready: dict[str, Outcome] = {}
+        fresh: list[_Call] = []
+        inline: list[tuple[DroneAgent, complex]] = []
+        for agent, measured in requests:
+            if not isolated(agent.planner):
+                inline.append((agent, measured))
+                continue
+            call = self._calls.get(agent.name)
+            if call is not None:
+                age = now - call.submitted_s
+                if call.future.done() and age <= self.hang_s:
+                    # Answered after its tick (the loop did not wait for it): take it now, planned one tick ago.
+                    del self._calls[agent.name]
+                    call.measured = measured
+                    ready[agent.name] = self._finish(call)
+                    continue
+                if not call.future.done():
+                    if age > self.hang_s:
+                        del self._calls[agent.name]  # abandoned: its worker stays busy, a new call is refused
+                        ready[agent.name] = PlannerFault(f"planner did not return within {self.hang_s * 1e3:.0f} ms")
+                    continue  # still computing: no answer this tick
+                del self._calls[agent.name]  # answered long ago (the drone was not planning since): stale
+            view = self._view_of(agent, measured, world)
+            try:
+                future = agent.submit(view)
+            except PlannerFault as fault:
+                ready[agent.name] = fault
+                continue
+            call = self._calls[agent.name] = _Call(agent, future, now, measured)
+            fresh.append(call)
+        if self.batching:
+            for group in self._groups(inline):
+                if len(group) > 1:
+                    ready.update(self._plan_batch(group, world))
+        for agent, measured in inline:
+            if agent.name not in ready:
+                ready[agent.name] = self._plan_alone(agent, measured, world)
+        return TickPlan(ready, self, fresh)
+
+    def _finish(self, call: _Call) -> Outcome:
+        self._calls.pop(call.agent.name, None)
+        try:
+            return call.agent.finish(call.future.result(timeout=0), call.measured)
+        except PlannerFault as fault:
+            return fault
 
     def _groups(self, requests: Sequence[tuple[DroneAgent, complex]]) -> list[list[tuple[DroneAgent, complex]]]:
         groups: dict[int, list[tuple[DroneAgent, complex]]] = {}
@@ -158,12 +254,15 @@ class SwarmPlanner:
             known = self._known[id(planner)] = (planner, group)
         return known[1]
 
-    def _plan_alone(self, agent: DroneAgent, measured: complex, world: Neighbourhood) -> Outcome:
+    def _view_of(self, agent: DroneAgent, measured: complex, world: Neighbourhood):  # type: ignore[no-untyped-def]
         lag_s = agent.tracking_lag_s(measured)
         xy, velocity = world.others_of(agent)
-        view = view_of_drone(agent.reference, agent.goal, agent.heading, xy + lag_s * velocity, velocity, self.sensing_range)
+        return view_of_drone(agent.reference, agent.goal, agent.heading, xy + lag_s * velocity, velocity, self.sensing_range)
+
+    def _plan_alone(self, agent: DroneAgent, measured: complex, world: Neighbourhood) -> Outcome:
+        """A drone of the product's own planner, planned inline on its own view."""
         try:
-            return agent.plan(view, measured, deadline_s=self.hang_s if isolated(agent.planner) else None)
+            return agent.plan(self._view_of(agent, measured, world), measured)
         except PlannerFault as fault:
             return fault
 

@@ -163,3 +163,102 @@ def test_planners_of_different_functions_are_not_batched_together():
     d = Planner(OBSTACLES, PlannerConfig.paper(), FixedGains())
     assert same_function(a, fixed()) and same_function(learned(), learned())
     assert not any(same_function(a, other) for other in (b, c, d, learned()))
+
+
+class Blocking:
+    """A user's planner (not the product's: planned on its own thread) that blocks until released on its
+    ``block_on``-th call."""
+
+    def __init__(self, planner: Planner, block_on: int = 0):
+        import threading
+
+        self.planner, self.block_on, self.calls = planner, block_on, 0
+        self.release = threading.Event()
+
+    def step(self, view):  # type: ignore[no-untyped-def]
+        self.calls += 1
+        if self.calls == self.block_on:
+            self.release.wait(10.0)
+        return self.planner.step(view)
+
+
+def test_an_isolated_planner_that_blocks_holds_back_no_other_drone_and_is_faulted_after_the_deadline():
+    """Three drones with a user's planner (each on its own thread); one blocks. The tick hands out every view at
+    once: the two that answer come back within the wait, the blocked one has no answer (its drone stays on its
+    reference), and a later tick faults it once its call is older than the deadline."""
+    import time
+
+    agents, requests, world = swarm(fixed, n=3)
+    for agent in agents:
+        agent.planner = Blocking(fixed(), block_on=1 if agent is agents[1] else 0)
+    swarm_planner = SwarmPlanner(6.0, 1.0, hang_s=0.3)
+    started = time.monotonic()
+    tick = swarm_planner.start(requests, world)
+    assert tick.ready == {}  # every drone is isolated: all were handed their views
+    answered = dict(tick.collect(0.1))
+    assert time.monotonic() - started < 0.25  # never the blocked call's deadline
+    assert set(answered) == {agents[0].name, agents[2].name}
+    assert all(isinstance(r, PlanResult) for r in answered.values())
+    # The next tick, before the deadline: the two answer again, the blocked one still has nothing.
+    tick = swarm_planner.start(requests, world)
+    assert agents[1].name not in tick.ready
+    assert set(dict(tick.collect(0.1))) == {agents[0].name, agents[2].name}
+    time.sleep(0.3)
+    tick = swarm_planner.start(requests, world)
+    fault = tick.ready[agents[1].name]
+    assert isinstance(fault, PlannerFault) and "did not return within 300 ms" in str(fault)
+    dict(tick.collect(0.1))
+    # Released later, its worker answers a call nobody waits for; a new call is refused while it was busy, and
+    # taken again once it is free.
+    agents[1].planner.release.set()
+    time.sleep(0.05)
+    assert isinstance(swarm_planner.plan(requests, world)[agents[1].name], PlanResult)
+
+
+def test_an_answer_that_comes_after_its_tick_is_taken_at_the_next():
+    """A planner slower than the tick's wait (but within the deadline) is not faulted: its answer is taken at
+    the next tick, and the drone moves on from it."""
+    import threading
+    import time
+
+    agents, requests, world = swarm(fixed, n=2)
+    gate = threading.Event()
+
+    class Slow:
+        def __init__(self) -> None:
+            self.planner = fixed()
+
+        def step(self, view):  # type: ignore[no-untyped-def]
+            gate.wait(5.0)
+            return self.planner.step(view)
+
+    agents[0].planner = Slow()
+    swarm_planner = SwarmPlanner(6.0, 1.0, hang_s=1.0)
+    tick = swarm_planner.start(requests, world)
+    assert set(tick.ready) == {agents[1].name}  # the product's planner, inline
+    assert dict(tick.collect(0.02)) == {}
+    before = agents[0].reference
+    gate.set()
+    time.sleep(0.05)
+    tick = swarm_planner.start(requests, world)
+    late = tick.ready[agents[0].name]
+    assert isinstance(late, PlanResult) and late.setpoint != before
+
+
+def test_hung_planners_are_waited_for_together_not_one_after_the_other():
+    """The synchronous ``plan`` (replay, tools) waits for every isolated call at once: two blocked planners cost one
+    deadline, not two."""
+    import time
+
+    agents, requests, world = swarm(fixed, n=3)
+    blocked = [Blocking(fixed(), block_on=1), Blocking(fixed(), block_on=1)]
+    agents[0].planner, agents[1].planner = blocked
+    agents[2].planner = Blocking(fixed())
+    started = time.monotonic()
+    out = SwarmPlanner(6.0, 1.0, hang_s=0.3).plan(requests, world)
+    took = time.monotonic() - started
+    for planner in blocked:
+        planner.release.set()
+    assert all(isinstance(out[a.name], PlannerFault) for a in agents[:2])
+    assert isinstance(out[agents[2].name], PlanResult)
+    assert took < 0.5, took  # one after the other: 0.6 s
