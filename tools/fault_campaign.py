@@ -315,7 +315,7 @@ def random_fault(rng: random.Random, kind: str, start_tolerance_m: float) -> dic
         "upside_down": lambda: {},
         "motor_fault": lambda: {},
         # a push that moves a drone less than a real one's normal tracking error (5 cm) is noise to any stack
-        "gust": lambda: {"duration_s": round(u(0.5, 1.5), 2), "accel": _direction(rng, u(0.7, 2.0), 3)},
+        "gust": lambda: {"duration_s": round(u(1.0, 1.5), 2), "accel": _direction(rng, u(1.0, 2.0), 3)},
         "estimator_divergence": lambda: {"rate_m_s": round(u(0.1, 0.6), 2)},
         "reboot": lambda: {},
     }

@@ -324,7 +324,8 @@ class FakeFirmware:
             return  # still falling: it boots where it lands
         self.config = VehicleConfig((old.pos[0], old.pos[1], old.floor_z), math.degrees(old.yaw), old.battery.open_v,
                                     self.config.auto_arm, self.config.positioning,
-                                    upside_down=self.config.upside_down, motor_fault=self.config.motor_fault)
+                                    upside_down=self.config.upside_down, motor_fault=self.config.motor_fault,
+                                    turbulence_m_s2=self.config.turbulence_m_s2)
         self.vehicle = Vehicle(self.config, now_s, self.seed)
         self.vehicle.gust(old.gust_accel, old.gust_until_s)  # the wind does not care
         self._params = dict(_PARAM_DEFAULTS)

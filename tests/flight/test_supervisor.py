@@ -166,13 +166,14 @@ def test_a_pose_gap_shorter_than_the_hold_is_said_once_per_drone_and_a_swarm_wid
     assert POSE_LATE_S < 0.25
 
 
-def test_a_drone_held_six_cm_off_its_setpoints_is_a_tracking_warning_and_three_cm_is_noise():
-    """A push that holds a drone 6 cm from where its setpoints should bring it for 0.3 s is said (a 1 m/s^2 gust
-    for 0.5 s does that to the simulated drone, and the former 10 cm threshold let it pass); 3 cm, within a real
-    Crazyflie's normal tracking error, is not."""
+def test_a_drone_held_eight_cm_off_its_setpoints_is_a_tracking_warning_and_five_cm_is_noise():
+    """A push that holds a drone 8 cm from where its setpoints should bring it for 0.3 s is said (a 1 m/s^2 gust
+    for 1 s does that to the simulated drone, and the former 10 cm threshold let it pass); 5 cm, the top of a real
+    Crazyflie's normal tracking error (the simulated one's turbulence reaches 4 cm), is not: the former 5 cm line
+    would have said it on a healthy drone."""
     from rpf_fly.flight.supervisor import TRACKING_WARN_M
 
-    for offset, said in ((0.03, False), (0.06, True)):
+    for offset, said in ((0.03, False), (0.05, False), (0.08, True)):
         _, agents, tracker, supervisor = setup()
         states = {n: state(n, 0.0) for n in agents}
         for agent in agents.values():
@@ -187,7 +188,7 @@ def test_a_drone_held_six_cm_off_its_setpoints_is_a_tracking_warning_and_three_c
             see(tracker, k + 1, t, pushed)
             found += [f for f in supervisor.check(t, agents.values(), tracker, states) if f.kind == "tracking"]
         assert [(f.drone, f.level) for f in found] == ([("cf2", WARNING)] if said else []), (offset, found)
-    assert 0.03 < TRACKING_WARN_M < 0.06
+    assert 0.05 < TRACKING_WARN_M < 0.08
 
 
 def test_a_poor_link_is_said_each_episode():
