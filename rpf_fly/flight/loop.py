@@ -103,6 +103,11 @@ class FlightLoop:
 
     TAKEOFF_SETTLE_S = 0.5
     LAND_SETTLE_S = 0.5
+    FALL_WAIT_S = 3.0
+    """How long the end of a flight waits, after a drone's link was lost or its motors were cut, for mocap to see it
+    on the floor: its firmware levels it 0.5 s and cuts its motors 2 s after the last setpoint that reached it, and
+    it falls from 1.5 m in 0.6 s. Until then it may still hover or drift where the others land, and the log should
+    show where it came down (a one-drone flight used to end, and close its log, with that drone still in the air)."""
     PREFLIGHT_TIMEOUT_S = 8.0
     STATUS_PERIOD_S = 0.1
     SEND_WAIT_S = 0.002
@@ -174,6 +179,8 @@ class FlightLoop:
         self._last_tick_s: Optional[float] = None
         self._stalls_seen = 0
         """The watchdog's stall count at the last planning tick (`_late_tick`)."""
+        self._down_since: dict[str, float] = {}
+        """When mocap first saw each drone nobody commands any more on the floor (`_coming_down`)."""
         self._stop = threading.Event()
         self._stop_reason = ""
         self._stop_notice = ""
@@ -611,7 +618,8 @@ class FlightLoop:
         if not wait:
             return
         deadline = self.clock() + self.mission.flight.land_s + self.LAND_SETTLE_S + TOUCHDOWN_TIMEOUT_S + 1.0
-        while any(a.phase == DronePhase.LANDING for a in self.agents.values()) and self.clock() < deadline:
+        while self.clock() < deadline and (any(a.phase == DronePhase.LANDING for a in self.agents.values())
+                                           or self._coming_down(self.clock())):
             if self._estop.is_set():
                 self._emergency_now()
                 break
@@ -620,6 +628,23 @@ class FlightLoop:
             except Exception:  # noqa: BLE001 - landing must finish even if the mocap or log misbehaves
                 time.sleep(0.05)
                 self._finish_landings(self.clock())
+
+    def _coming_down(self, now: float) -> list[str]:
+        """Drones nobody commands any more (link lost, motors cut) that mocap has not yet seen on the floor for
+        `LAND_SETTLE_S` (a falling drone passes the floor line moving), within `FALL_WAIT_S` of losing them."""
+        out = []
+        for agent in self.agents.values():
+            if agent.phase not in (DronePhase.LINK_LOST, DronePhase.EMERGENCY):
+                continue
+            if now - agent.phase_since_s >= self.FALL_WAIT_S:
+                continue
+            pose = self.tracker.get(agent.name)
+            if pose is None or pose.position[2] > ON_FLOOR_Z_M:
+                self._down_since.pop(agent.name, None)
+                out.append(agent.name)
+            elif now - self._down_since.setdefault(agent.name, now) < self.LAND_SETTLE_S:
+                out.append(agent.name)
+        return out
 
     def _abort(self, message: str) -> None:
         self.phase = SwarmPhase.ABORTED

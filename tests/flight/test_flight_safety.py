@@ -215,3 +215,24 @@ def test_a_drone_is_disarmed_only_after_its_supervisor_says_it_landed(tmp_path, 
         assert ("Flying", "Reset") not in moves, (name, moves)
         assert ("Flying", "Landed") in moves, (name, moves)
         assert landed(snap)
+
+
+def test_a_flight_whose_last_drone_lost_its_link_ends_once_mocap_sees_it_down(tmp_path, short_mission):
+    """A one-drone flight whose link drops: nothing is left flying its mission, but the flight waits, its log
+    open, until mocap shows the drone on the floor (its firmware cuts the motors 2 s after its last setpoint).
+    Before, the flight ended at once and its log closed with the drone still in the air, motors on."""
+    solo = replace(short_mission, drones=short_mission.drones[:1])
+    name = solo.drones[0].name
+    dropped_at: list[int] = []
+
+    def drop(loop, rig):  # type: ignore[no-untyped-def]
+        time.sleep(1.0)
+        rig.world.drop_link(rig.addresses[name])
+        dropped_at.append(time.time_ns())
+
+    flight = fly(solo, tmp_path, when_flying=drop)
+    assert flight.report.outcomes[name] == FlightOutcome.LINK_LOST
+    truth = [m.data for m in flight.log.messages(f"/truth/{name}")]
+    last = truth[-1]
+    assert not last["motors"] and last["position"]["z"] < 0.05, last
+    assert flight.log.messages(f"/truth/{name}")[-1].log_time > dropped_at[0] + 2_000_000_000
