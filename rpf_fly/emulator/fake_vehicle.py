@@ -518,7 +518,7 @@ class Vehicle:
         to ``push``."""
         keep = math.exp(-dt / TURBULENCE_TAU_S)
         spread = math.sqrt(1.0 - keep * keep)
-        sigma = float(self.config.turbulence_m_s2 or 0.0)
+        sigma = self.config.turbulence_m_s2 or 0.0  # resolved to a float by VehicleConfig
         gauss, turbulence = self._turbulence_rng.gauss, self._turbulence
         for axis in range(3):
             scale = sigma if axis < 2 else sigma * TURBULENCE_Z_SHARE

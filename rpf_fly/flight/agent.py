@@ -28,7 +28,6 @@ import queue
 import threading
 import time
 from concurrent.futures import Future
-from concurrent.futures import TimeoutError as FutureTimeout
 from dataclasses import dataclass
 from typing import Callable, Optional, Protocol
 
@@ -84,13 +83,6 @@ class PlannerWorker:
         self._current = future
         self._requests.put((view, future))
         return future
-
-    def call(self, view: LocalView, deadline_s: float) -> tuple[PlanStep, complex, float]:
-        """:meth:`submit` and wait up to ``deadline_s`` of wall time for the answer."""
-        try:
-            return self.submit(view).result(timeout=deadline_s)
-        except FutureTimeout:
-            raise PlannerFault(f"planner did not return within {deadline_s * 1e3:.0f} ms") from None
 
     def close(self) -> None:
         self._requests.put(None)
@@ -205,15 +197,10 @@ class DroneAgent:
 
     # ---------------------------------------------------------------------------------------- planning
 
-    def plan(self, view: LocalView, measured: complex, deadline_s: Optional[float] = None) -> PlanResult:
-        """One guarded planning step from this drone's own view; raises :class:`PlannerFault`.
-
-        ``deadline_s``: run the planner on this drone's own worker thread and give up after that many seconds of
-        wall time (a planner that blocks must not stop the loop that streams every other drone's setpoints; a
-        Python call cannot be pre-empted, so the worker is abandoned and the drone faulted). None: inline."""
-        if deadline_s is None:
-            return self.finish(self._step(view), measured)
-        return self.finish(self._worker_of().call(view, deadline_s), measured)
+    def plan(self, view: LocalView, measured: complex) -> PlanResult:
+        """One guarded planning step from this drone's own view, inline; raises :class:`PlannerFault`. A planner
+        that may block runs on the drone's own thread instead (:meth:`submit`, flight/swarm_plan.py)."""
+        return self.finish(self._step(view), measured)
 
     def submit(self, view: LocalView) -> Future:
         """Start a planning step on this drone's own worker thread (see :class:`PlannerWorker`); take its answer

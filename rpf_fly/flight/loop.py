@@ -782,10 +782,9 @@ class FlightLoop:
         if requests:
             # Plan on the commanded geometry (see flight/agent.py): each drone from its own reference, with each
             # neighbour predicted ahead by that drone's observed tracking lag; batched where planners allow
-            # (flight/swarm_plan.py).
-            # Isolated planners (their own threads) get their views first; the drones that have an answer are
-            # streamed at once, then each isolated one as it answers within the planning budget; one still
-            # computing streams its reference unchanged (flight/swarm_plan.py).
+            # (flight/swarm_plan.py). Isolated planners (their own threads) get their views first; the drones that
+            # have an answer are streamed at once, then each isolated one as it answers within the planning budget;
+            # one still computing streams its reference unchanged.
             world = Neighbourhood.of(airborne_poses)
             tick = self._swarm_planner.start([(a, p.xy) for a, p in requests], world)
             by_name = {a.name: (a, p) for a, p in requests}

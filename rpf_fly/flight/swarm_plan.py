@@ -144,6 +144,8 @@ class TickPlan:
 
     def collect(self, wait_s: float) -> Iterator[tuple[str, Outcome]]:
         """The answers of this tick's isolated calls, in the order they come, for up to ``wait_s`` of wall time."""
+        if not self._calls:
+            return
         pending = {c.future: c for c in self._calls}
         self._calls = []
         try:
@@ -184,7 +186,7 @@ class SwarmPlanner:
         for agent, _ in requests:
             if agent.name not in out:
                 self._calls.pop(agent.name, None)
-                out[agent.name] = PlannerFault(f"planner did not return within {self.hang_s * 1e3:.0f} ms")
+                out[agent.name] = self._hung()
         return out
 
     def start(self, requests: Sequence[tuple[DroneAgent, complex]], world: Neighbourhood) -> TickPlan:
@@ -203,14 +205,13 @@ class SwarmPlanner:
                 age = now - call.submitted_s
                 if call.future.done() and age <= self.hang_s:
                     # Answered after its tick (the loop did not wait for it): take it now, planned one tick ago.
-                    del self._calls[agent.name]
                     call.measured = measured
                     ready[agent.name] = self._finish(call)
                     continue
                 if not call.future.done():
                     if age > self.hang_s:
                         del self._calls[agent.name]  # abandoned: its worker stays busy, a new call is refused
-                        ready[agent.name] = PlannerFault(f"planner did not return within {self.hang_s * 1e3:.0f} ms")
+                        ready[agent.name] = self._hung()
                     continue  # still computing: no answer this tick
                 del self._calls[agent.name]  # answered long ago (the drone was not planning since): stale
             view = self._view_of(agent, measured, world)
@@ -229,6 +230,9 @@ class SwarmPlanner:
             if agent.name not in ready:
                 ready[agent.name] = self._plan_alone(agent, measured, world)
         return TickPlan(ready, self, fresh)
+
+    def _hung(self) -> PlannerFault:
+        return PlannerFault(f"planner did not return within {self.hang_s * 1e3:.0f} ms")
 
     def _finish(self, call: _Call) -> Outcome:
         self._calls.pop(call.agent.name, None)
