@@ -3,6 +3,7 @@
     python tools/fault_campaign.py                       # every kind on lab-3 and circle-8-r3 (about 15 minutes)
     python tools/fault_campaign.py --kinds occlusion,gust --missions lab-3 --out -
     python tools/fault_campaign.py --planner rpf3 --out docs/fault-campaign-rpf3.md   # the missions flown by RPF-3
+    python tools/fault_campaign.py --extpose --kinds orientation_flip,pose_jump --out -   # poses sent as extpose
 
 Each run is ``rpf-fly fly MISSION --dry-run --faults F --no-console --log L`` in a process of its own, with a
 schedule of ONE fault (the kind's default parameters below) naming the mission's middle drone. The verdict does
@@ -56,6 +57,7 @@ DEFAULTS: dict[str, dict[str, Any]] = {
     "occlusion": {"duration_s": 1.0},
     "blackout": {"duration_s": 2.0},
     "pose_jump": {"duration_s": 0.3, "offset_m": [0.6, 0.0, 0.0]},
+    "orientation_flip": {"duration_s": 1.0, "deg": 180},
     "mocap_delay": {"duration_s": 3.0, "delay_s": 0.08},
     "link_drop": {},
     "packet_loss": {"duration_s": 4.0, "rate": 0.5},
@@ -272,6 +274,17 @@ def table(verdicts: list[Verdict]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def with_extpose(mission_path: Path, workdir: Path) -> Path:
+    """A copy of the mission (same name) whose mocap poses reach the estimators as extpose (position and
+    orientation: ``radio.extpos: extpose``), so the campaign flies the path where a wrong orientation matters."""
+    doc = yaml.safe_load(mission_path.read_text())
+    doc["radio"] = {**(doc.get("radio") or {}), "extpos": "extpose"}
+    doc.setdefault("name", mission_path.stem)
+    copy = workdir / f"{mission_path.stem}.extpose.yaml"
+    copy.write_text(yaml.safe_dump(doc, sort_keys=False))
+    return copy
+
+
 def with_planner_kind(mission_path: Path, kind: str, workdir: Path) -> Path:
     """A copy of the mission (same name) flying planner ``kind`` with that kind's default policy."""
     doc = yaml.safe_load(mission_path.read_text())
@@ -301,6 +314,9 @@ def random_fault(rng: random.Random, kind: str, start_tolerance_m: float) -> dic
         "occlusion": lambda: {"duration_s": round(u(0.15, 3.0), 2)},
         "blackout": lambda: {"duration_s": round(u(0.15, 3.0), 2)},
         "pose_jump": lambda: {"duration_s": round(u(0.05, 1.0), 2), "offset_m": _direction(rng, u(0.3, 1.5), 3)},
+        # a turn of a nearly symmetric marker set's wrong fit: 90 or 180 degrees on a square or a line, tens on others
+        "orientation_flip": lambda: {"duration_s": round(u(0.1, 3.0), 2),
+                                     "deg": round(rng.choice((-1, 1)) * u(30.0, 180.0), 1)},
         "mocap_delay": lambda: {"duration_s": round(u(1.0, 4.0), 2), "delay_s": round(u(0.02, 0.15), 3)},
         "link_drop": lambda: {},
         # under 28 % of the attempts lost, cflib's link quality dips no lower than in a lab's normal bursts; near
@@ -331,7 +347,7 @@ def mission_path(name: str) -> Path:
 
 
 def random_campaign(runs: int, seed: int, missions: list[str], planners: list[str], workdir: Path,
-                    kinds: Optional[list[str]] = None) -> list[Verdict]:
+                    kinds: Optional[list[str]] = None, extpose: bool = False) -> list[Verdict]:
     """``runs`` flights, each a mission, planner (``mission``: its own), fault kind (of ``kinds``, default all),
     drone, time and parameters drawn from ``seed``; printed as they end with what reproduces them."""
     rng = random.Random(seed)
@@ -342,6 +358,8 @@ def random_campaign(runs: int, seed: int, missions: list[str], planners: list[st
         path = mission_path(mission_name)
         if planner != "mission":
             path = with_planner_kind(path, planner, workdir)
+        if extpose:
+            path = with_extpose(path, workdir)
         mission = load_mission(path)
         kind = rng.choice(sorted(kinds or DEFAULTS))
         params = random_fault(rng, kind, mission.safety.start_tolerance_m)
@@ -370,6 +388,9 @@ def main() -> int:
     parser.add_argument("--seed", type=int, default=0, help="the random campaign's seed")
     parser.add_argument("--planners", default="mission,rpf3",
                         help="the random campaign's planners (mission: the mission's own)")
+    parser.add_argument("--extpose", action="store_true",
+                        help="fly each mission with radio.extpos: extpose (mocap's orientation reaches the "
+                             "estimators, so a wrong one would turn them)")
     args = parser.parse_args()
     verdicts = []
     with tempfile.TemporaryDirectory(prefix="rpf-fly-campaign-") as tmp:
@@ -377,11 +398,14 @@ def main() -> int:
             missions = RANDOM_MISSIONS.split(",") if args.missions == parser.get_default("missions") \
                 else args.missions.split(",")
             kinds = None if args.kinds == parser.get_default("kinds") else args.kinds.split(",")
-            verdicts = random_campaign(args.random, args.seed, missions, args.planners.split(","), Path(tmp), kinds)
+            verdicts = random_campaign(args.random, args.seed, missions, args.planners.split(","), Path(tmp), kinds,
+                                       extpose=args.extpose)
         for mission_name in ([] if args.random else args.missions.split(",")):
             path = mission_path(mission_name)
             if args.planner:
                 path = with_planner_kind(path, args.planner, Path(tmp))
+            if args.extpose:
+                path = with_extpose(path, Path(tmp))
             for kind in args.kinds.split(","):
                 v = judge(kind, path, Path(tmp))
                 verdicts.append(v)
@@ -396,6 +420,7 @@ def main() -> int:
         flown = f" --planner {args.planner}" if args.planner else ""
         if args.random:
             flown = f" --random {args.random} --seed {args.seed} --planners {args.planners}"
+        flown += " --extpose" if args.extpose else ""
         header = (f"# Fault campaign{' with planner ' + args.planner if args.planner else ''}\n\n"
                   f"`python tools/fault_campaign.py{flown}` (docs/faults.md): one fault a run, judged on "
                   "the `/truth` topics by the tool's own reader.\n\n")

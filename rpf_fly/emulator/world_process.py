@@ -91,10 +91,19 @@ MOCAP_HISTORY_S = 2.0
 """Seconds of true poses `SimulatedBodies` keeps for `mocap_delay` (the longest delay it can serve)."""
 
 
+def _turned(turn: tuple[float, float, float, float],
+            q: tuple[float, float, float, float]) -> tuple[float, float, float, float]:
+    """The orientation ``q`` (qx, qy, qz, qw, world from body) turned by ``turn`` in the world frame: turn * q."""
+    ax, ay, az, aw = turn
+    bx, by, bz, bw = q
+    return (aw * bx + ax * bw + ay * bz - az * by, aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw, aw * bw - ax * bx - ay * by - az * bz)
+
+
 class SimulatedBodies:
     """The drones' true poses as the mocap sees them, keyed by rigid-body name, with tracking faults: a body hidden
-    for a while (occlusion), every body lost (blackout), a body reported in the wrong place (pose jump), every
-    pose late (mocap delay). Durations are seconds from the call, on `time.monotonic()`. Thread-safe."""
+    for a while (occlusion), every body lost (blackout), a body reported in the wrong place (pose jump) or turned
+    (orientation flip), every pose late (mocap delay). Durations are seconds from the call, on `time.monotonic()`. Thread-safe."""
 
     def __init__(self, world: FakeWorld, bodies: Mapping[int, str]) -> None:
         self._world = world
@@ -102,6 +111,7 @@ class SimulatedBodies:
         self._hidden: dict[str, float] = {}
         self._blackout_until = -math.inf
         self._jumps: dict[str, tuple[tuple[float, float, float], float]] = {}
+        self._flips: dict[str, tuple[tuple[float, float, float, float], float]] = {}
         self._delay: tuple[float, float] | None = None  # (delay_s, until)
         self._history: deque[tuple[float, TruePoses]] = deque()
         self._lock = threading.Lock()
@@ -116,12 +126,16 @@ class SimulatedBodies:
             blackout = now < self._blackout_until
             hidden = {name for name, until in self._hidden.items() if now < until}
             jumps = {name: offset for name, (offset, until) in self._jumps.items() if now < until}
+            flips = {name: turn for name, (turn, until) in self._flips.items() if now < until}
         poses: dict[str, Pose] = {}
         for address, name in self._bodies.items():
             position, quaternion = served[address]
             jump = jumps.get(name)
             if jump is not None:
                 position = (position[0] + jump[0], position[1] + jump[1], position[2] + jump[2])
+            flip = flips.get(name)
+            if flip is not None:
+                quaternion = _turned(flip, quaternion)
             poses[name] = (position, quaternion, not blackout and name not in hidden)
         return poses
 
@@ -168,6 +182,14 @@ class SimulatedBodies:
         offset = (float(offset_m[0]), float(offset_m[1]), float(offset_m[2]))
         with self._lock:
             self._jumps[body] = (offset, time.monotonic() + seconds)
+
+    def orientation_flip(self, body: str, deg: float, seconds: float) -> None:
+        """Report ``body`` turned by ``deg`` about the vertical for ``seconds``, as tracked (valid), where it is: the
+        wrong fit Motive makes of a nearly symmetric marker set. The drone itself does not turn; a flight that
+        sends this orientation as extpose turns its yaw estimate, and its position controller then flies it off."""
+        half = math.radians(float(deg)) / 2.0
+        with self._lock:
+            self._flips[body] = ((0.0, 0.0, math.sin(half), math.cos(half)), time.monotonic() + seconds)
 
     def mocap_delay(self, delay_s: float, seconds: float) -> None:
         """For ``seconds`` every frame carries poses ``delay_s`` old (at most `MOCAP_HISTORY_S`): latency (a
@@ -400,6 +422,9 @@ class WorldProcess:
 
     def pose_jump(self, body: str, offset_m: tuple[float, float, float], seconds: float) -> None:
         self.call("pose_jump", body, offset_m, seconds)
+
+    def orientation_flip(self, body: str, deg: float, seconds: float) -> None:
+        self.call("orientation_flip", body, deg, seconds)
 
     def mocap_delay(self, delay_s: float, seconds: float) -> None:
         self.call("mocap_delay", delay_s, seconds)
@@ -683,7 +708,7 @@ def serve(settings: dict[str, Any], out: Any) -> None:
             # fault hooks of a campaign (same names and arguments as on FakeWorld and SimulatedBodies)
             "packet_loss": world.packet_loss, "gust": world.gust, "estimator_divergence": world.estimator_divergence,
             "radio_counters": world.radio_counters, "radio_bursts": world.radio_bursts, "time_s": world.time_s,
-            "pose_jump": tracked.pose_jump,
+            "pose_jump": tracked.pose_jump, "orientation_flip": tracked.orientation_flip,
             "mocap_delay": tracked.mocap_delay,
         }
         with conn:

@@ -29,8 +29,8 @@ Fault hooks for tests, demos and fault campaigns, by drone name, safe to call wh
 in seconds from the call; each behaves as the real thing would, see docs/radio.md, "Fault hooks"):
 
 - mocap: :meth:`DryRun.hide` (a rigid body untracked for a while), :meth:`DryRun.blackout` (no body tracked at
-  all), :meth:`DryRun.pose_jump` (a body reported in the wrong place, as tracked), :meth:`DryRun.mocap_delay`
-  (every pose late);
+  all), :meth:`DryRun.pose_jump` (a body reported in the wrong place, as tracked), :meth:`DryRun.orientation_flip`
+  (a body reported turned, as tracked), :meth:`DryRun.mocap_delay` (every pose late);
 - radio: :meth:`DryRun.packet_loss` (lossy link for a while, replacing the bursty loss every dry-run link has
   by default: ``radio_loss``, `RADIO_LOSS`);
 - drone: :meth:`DryRun.gust` (an external push its controller fights), :meth:`DryRun.estimator_divergence` (the
@@ -300,6 +300,11 @@ class DryRun:
         """Report drone ``name``'s rigid body ``offset_m`` metres from where it is, as tracked, for ``seconds`` (a
         marker swap, a wrong model fit); the drone does not move."""
         self._bodies.pose_jump(self.bodies[name], offset_m, seconds)
+
+    def orientation_flip(self, name: str, deg: float, seconds: float) -> None:
+        """Report drone ``name``'s rigid body turned by ``deg`` about the vertical, as tracked, for ``seconds`` (a
+        wrong fit of a nearly symmetric marker set); the drone does not turn."""
+        self._bodies.orientation_flip(self.bodies[name], deg, seconds)
 
     def mocap_delay(self, delay_s: float, seconds: float) -> None:
         """For ``seconds`` every mocap frame carries poses ``delay_s`` old (latency, not a frame-rate drop)."""

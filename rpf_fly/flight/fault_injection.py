@@ -171,6 +171,8 @@ class FaultInjection:
             rig.blackout(seconds)
         elif kind == "pose_jump":
             rig.pose_jump(name, p["offset_m"], seconds)
+        elif kind == "orientation_flip":
+            rig.orientation_flip(name, p["deg"], seconds)
         elif kind == "mocap_delay":
             rig.mocap_delay(p["delay_s"], seconds)
         elif kind == "link_drop":

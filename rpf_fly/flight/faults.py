@@ -40,6 +40,8 @@ FAULT_KINDS: dict[str, FaultKind] = {
     "blackout": FaultKind("no NatNet frames carry any tracked body", False, duration=True),
     "pose_jump": FaultKind("the drone's body reported offset_m away (a marker swap)", True, duration=True,
                            params={"offset_m": ("vec3", True)}),
+    "orientation_flip": FaultKind("the drone's body reported turned by deg about the vertical (a wrong fit of its "
+                                  "markers)", True, duration=True, params={"deg": ("number", True)}),
     "mocap_delay": FaultKind("every frame carries poses delay_s old", False, duration=True,
                              params={"delay_s": ("positive", True)}),
     "link_drop": FaultKind("the drone's radio link lost for good (its firmware levels, then cuts)", True),

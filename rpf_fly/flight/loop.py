@@ -28,7 +28,8 @@ from rpf_fly.flight.events import ERROR, FATAL, INFO, WARNING, EventBus, FlightE
 from rpf_fly.flight.gc_pacing import GcPacer
 from rpf_fly.flight.phases import DronePhase, FlightOutcome, SwarmPhase
 from rpf_fly.flight.poses import PoseTracker, TrackedPose
-from rpf_fly.flight.preflight import estimate_problem, preflight_problem, yaw_of, yaw_problem
+from rpf_fly.flight.preflight import (estimate_problem, orientation_problem, preflight_problem, yaw_of,
+                                     yaw_problem)
 from rpf_fly.flight.recorder import NullRecorder, PlannerRecord, Recorder
 from rpf_fly.flight.report import FlightReport, LoopStats
 from rpf_fly.flight.supervisor import Finding, Supervisor
@@ -445,11 +446,14 @@ class FlightLoop:
             if before:  # the position converges with extpos; a yaw estimate never does
                 self.events.emit(WARNING, "estimator", f"before take-off: {before}; restarting its estimator at the "
                                  "mocap pose", name)
-            if pose is None or not self.commander.reset_estimator(self.agents[name], pose.position,
-                                                                  yaw_of(pose.quaternion)):
+            if pose is not None and not pose.orientation_trusted:
+                problems[name] = orientation_problem(self.tracker, name)
+            elif pose is None or not self.commander.reset_estimator(self.agents[name], pose.position,
+                                                                    yaw_of(pose.quaternion)):
                 problems[name] = "its estimator could not be reset (kalman.initialX/Y/Z/Yaw, resetEstimation)"
         deadline = self.clock() + self.ESTIMATOR_SETTLE_S
         pending = {n: "" for n in names if n not in problems}
+        turns = dict(self.tracker.orientation_glitches)
         while pending and self.clock() < deadline and not self._stop.is_set():
             self._spin_once(min(deadline, self.clock() + 0.05))
             for name in list(pending):
@@ -460,6 +464,9 @@ class FlightLoop:
                 else:
                     del pending[name]
         problems.update(pending)
+        for name in names:  # the yaw it was reset to came from one of two fits, and nothing says which was right
+            if name not in problems and self.tracker.orientation_glitches.get(name, 0) != turns.get(name, 0):
+                problems[name] = orientation_problem(self.tracker, name)
         return problems
 
     def preflight_only(self) -> dict[str, str]:
@@ -473,8 +480,12 @@ class FlightLoop:
             self._finish()
 
     def _preflight_problem(self, agent: DroneAgent) -> str:
-        return preflight_problem(self.mission, agent, self._states.get(agent.name), self.tracker.get(agent.name),
-                                 self.tracker.age(agent.name, self.clock()))
+        pose = self.tracker.get(agent.name)
+        problem = preflight_problem(self.mission, agent, self._states.get(agent.name), pose,
+                                    self.tracker.age(agent.name, self.clock()))
+        if not problem and pose is not None and not pose.orientation_trusted:
+            return orientation_problem(self.tracker, agent.name)
+        return problem
 
     def _arm(self) -> list[DroneAgent]:
         """Arm every ready drone and wait until its supervisor says it can fly (a fresh telemetry sample after the
@@ -728,7 +739,9 @@ class FlightLoop:
             agent = self.agents[name]
             if agent.phase.terminal or not self._extpos.due(name, now):
                 continue
-            self.commander.extpos(agent, pose.position, pose.quaternion if extpose else None)
+            # an orientation refused as a jump (a wrong fit of the markers) is not fed to the estimator
+            self.commander.extpos(agent, pose.position,
+                                  pose.quaternion if extpose and pose.orientation_trusted else None)
 
     def _finish_landings(self, now: float) -> None:
         stale_after = self.mission.safety.pose_timeout_s

@@ -10,6 +10,17 @@ the drone) until the track jumps back near the frozen pose, or until the new tra
 ``REACQUIRE_S`` (the drone really is there: it was pushed, or Motive fixed its model). The raw samples are compared
 frame to frame, so a swap is caught however long it lasts, and so is the swap back.
 
+Orientation glitches (2026-12-02): an orientation that turned further from the previous sample than a Crazyflie can
+turn in that time (``MAX_TURN_RATE_DEG_S`` times the interval plus ``TURN_TOLERANCE_DEG``) is a wrong fit of the
+rigid body's markers: the flip Motive makes on a nearly symmetric marker set, a complaint of Crazyswarm and cflib
+users. The position is judged on its own (a fit about the body's pivot keeps it), and followed; the orientation
+freezes at the last trusted one, ``TrackedPose.orientation_trusted`` is False and the drone is in
+``orientation_glitching``, until an orientation within ``ORIENTATION_BACK_DEG`` of the frozen one comes back.
+A jumped orientation is never taken as the drone's after a while, as a jumped position is: nothing but the flip
+itself says which of the two fits is right, and one wrong yaw fed to the estimator flies the drone off. What the
+flight does with that (docs/flight.md): extpose forwards the position only, a drone on the ground does not take
+off, the supervisor says so.
+
 Times on a 1 us grid (2026-12, for ``rpf-fly replay``): the tracker rounds every receive time to a whole
 microsecond before it uses it (:func:`stamp_on_grid`). The flight log's times are integer nanoseconds; with the
 stamps on this grid the log carries them exactly (:func:`stamp_us`), so a replay feeds the same floats to the same
@@ -38,6 +49,9 @@ class TrackedPose:
     stamp_s: float
     frame_number: int
     valid: bool = True
+    orientation_trusted: bool = True
+    """False while the body's orientation is refused as a jump (`PoseTracker.orientation_glitching`): ``quaternion``
+    is then the last trusted one, not what mocap says."""
 
     @property
     def xy(self) -> complex:
@@ -52,6 +66,18 @@ JUMP_TOLERANCE_M = 0.05
 
 REACQUIRE_S = 0.5
 """A jumped track consistent for this long is taken as the drone's real pose."""
+
+MAX_TURN_RATE_DEG_S = 720.0
+"""Faster than a Crazyflie turns while it is not tumbling: this stack holds its yaw at 0, tilts stay under about
+20 degrees, and the firmware's hardest manoeuvres turn it a few hundred degrees a second."""
+
+TURN_TOLERANCE_DEG = 10.0
+"""Added to ``MAX_TURN_RATE_DEG_S * dt``: a small rigid body's orientation noise is a fraction of a degree, and a
+flip of a nearly symmetric marker set turns it by tens of degrees or more (90 or 180 on a square or a line)."""
+
+ORIENTATION_BACK_DEG = 30.0
+"""A refused orientation's glitch ends when mocap's orientation comes back this close to the frozen one (a flying
+drone holds its yaw; its tilt stays within about 20 degrees)."""
 
 STAMP_GRID_PER_S = 1_000_000
 """The tracker's time grid: whole microseconds (module docstring)."""
@@ -73,6 +99,13 @@ def stamp_on_grid(t_s: float) -> float:
     return stamp_from_us(stamp_us(t_s))
 
 
+def turn_deg(a: tuple[float, float, float, float], b: tuple[float, float, float, float]) -> float:
+    """The angle (degrees, 0-180) of the rotation between two unit quaternions (qx, qy, qz, qw): any axis, so a
+    flip about x or y counts as well as one about z."""
+    dot = abs(a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3])
+    return math.degrees(2.0 * math.acos(min(1.0, dot)))
+
+
 class PoseTracker:
     """Folds mocap frames into per-drone poses. ``bodies`` maps drone name -> rigid body name."""
 
@@ -92,6 +125,14 @@ class PoseTracker:
         self._jumped_at: dict[str, float] = {}
         self.last_jump: dict[str, tuple[float, float]] = {}
         """drone -> (metres, seconds) of its newest refused jump, for the event that reports it."""
+        self.orientation_glitching: set[str] = set()
+        """Drones whose mocap orientation is refused as a jump (a wrong fit of its markers): module docstring."""
+        self.orientation_glitches: dict[str, int] = {}
+        """Samples whose orientation was refused, per drone."""
+        self.last_turn: dict[str, tuple[float, float]] = {}
+        """drone -> (degrees, seconds) of its newest refused orientation jump, for the event that reports it."""
+        self._raw_turn: dict[str, tuple[tuple[float, float, float, float], float, float]] = {}
+        """drone -> its newest sample's orientation: (quaternion, receive time, capture time)."""
 
     @staticmethod
     def _jump(a: tuple[float, ...], b: tuple[float, ...], dt: float) -> bool:
@@ -127,6 +168,30 @@ class PoseTracker:
             previous.valid = False
         return False
 
+    def _trust_orientation(self, name: str, quaternion: tuple[float, float, float, float], t: float,
+                           captured: float, trusted: Optional[tuple[float, float, float, float]]) -> bool:
+        """Whether this sample's orientation may be followed (module docstring); updates the orientation glitch
+        state. ``trusted``: the orientation the drone's pose holds now (None before its first pose)."""
+        raw = self._raw_turn.get(name)
+        self._raw_turn[name] = (quaternion, t, captured)
+        if name in self.orientation_glitching:
+            if trusted is not None and turn_deg(quaternion, trusted) > ORIENTATION_BACK_DEG:
+                self.orientation_glitches[name] = self.orientation_glitches.get(name, 0) + 1
+                return False
+            self.orientation_glitching.discard(name)
+            return True
+        if raw is None or trusted is None:
+            return True
+        dt_capture = captured - raw[2]
+        dt = max(t - raw[1], dt_capture if 0.0 <= dt_capture < 10.0 else 0.0)
+        turned = turn_deg(quaternion, raw[0])
+        if turned <= MAX_TURN_RATE_DEG_S * max(dt, 0.0) + TURN_TOLERANCE_DEG:
+            return True
+        self.orientation_glitching.add(name)
+        self.orientation_glitches[name] = self.orientation_glitches.get(name, 0) + 1
+        self.last_turn[name] = (turned, dt)
+        return False
+
     def update(self, frame: MocapFrame, reacquired: Collection[str] = ()) -> None:
         """Take the frame's poses of our drones (Z-up world frame). ``reacquired``: drones whose sample in this
         frame ends a glitch the tracker did not see (a replay learns it from the log's ``pose_glitch`` events,
@@ -142,8 +207,15 @@ class PoseTracker:
                     previous.valid = False
                 continue
             position = tuple(body.position)
+            quaternion = tuple(body.quaternion)
+            trusted = self._trust_orientation(name, quaternion, t, frame.capture_time_s,  # type: ignore[arg-type]
+                                              previous.quaternion if previous is not None else None)
+            if not trusted and previous is not None:
+                quaternion = previous.quaternion
             jumped = name in self.glitching or name in reacquired
             if not self._accept(name, position, t, frame.capture_time_s, previous):  # type: ignore[arg-type]
+                if previous is not None:
+                    previous.orientation_trusted = trusted
                 continue
             if jumped:
                 previous = None  # a re-acquired track: no velocity across the jump
@@ -157,7 +229,8 @@ class PoseTracker:
                 else:
                     velocity = previous.velocity
             self.poses[name] = TrackedPose(
-                position, tuple(body.quaternion), velocity, t, frame.frame_number  # type: ignore[arg-type]
+                position, quaternion, velocity, t, frame.frame_number,  # type: ignore[arg-type]
+                orientation_trusted=trusted,
             )
 
     def get(self, name: str) -> Optional[TrackedPose]:

@@ -11,7 +11,7 @@ import math
 from typing import Optional
 
 from rpf_fly.flight.agent import DroneAgent
-from rpf_fly.flight.poses import TrackedPose
+from rpf_fly.flight.poses import PoseTracker, TrackedPose
 from rpf_fly.mission.model import Mission
 from rpf_fly.radio.backend import DroneState
 
@@ -44,6 +44,15 @@ def preflight_problem(mission: Mission, agent: DroneAgent, state: Optional[Drone
     if z > ON_GROUND_MAX_Z_M:
         return f"not on the ground (z = {z:.2f} m)"
     return ""
+
+
+def orientation_problem(tracker: PoseTracker, name: str) -> str:
+    """Why a drone whose mocap orientation is refused as a jump (`PoseTracker.orientation_glitching`) must not take
+    off: one of the two fits is wrong and nothing says which, and its estimator would start from that yaw."""
+    degrees, seconds = tracker.last_turn.get(name, (math.nan, math.nan))
+    return (f"mocap's orientation of its rigid body turned {degrees:.0f} deg in {seconds * 1e3:.0f} ms and has not "
+            "turned back: a wrong fit of its markers (a nearly symmetric marker set?); which fit is right is "
+            "unknown, so its estimator is not started from it: check the rigid body in Motive")
 
 
 ESTIMATE_POSITION_TOLERANCE_M = 0.1

@@ -12,7 +12,10 @@ Checks (docs/flight.md):
 - link: the backend says the link is down: that drone is lost (nothing can reach it); the others continue;
 - telemetry: a linked drone whose status telemetry stopped arriving for ``TELEMETRY_STALE_S`` -> warning event;
 - pose glitch: the pose tracker refused a pose that jumped further than a drone can fly (a marker swap) -> hold
-  until the track is back.
+  until the track is back;
+- orientation glitch: the pose tracker refused an orientation that turned further than a drone can turn (a wrong
+  fit of its markers) -> warning; it flies on (the position is still followed), and extpose forwards the position
+  only until the orientation is back (rpf_fly/flight/poses.py).
 
 A drone nobody commands any more (link lost, motors cut) stays in the separation check at its mocap pose until
 mocap shows it on the floor: it may hover, drift or fall for up to 2 s where the others fly. A ``hold`` response
@@ -133,6 +136,7 @@ class Supervisor:
         """drone -> (consecutive low samples, stamp of the last one counted)."""
         self._telemetry_stale: set[str] = set()
         self._glitching: set[str] = set()
+        self._turned: set[str] = set()
         self._diverging: dict[str, tuple[int, int, float]] = {}
         self._history: dict[str, deque[tuple[float, tuple[float, float, float]]]] = {}
         self._poor_link: set[str] = set()
@@ -155,6 +159,7 @@ class Supervisor:
         findings: list[Finding] = []
         findings += self._links(agents, states)
         findings += self._glitches(agents, tracker)
+        findings += self._orientations(agents, tracker)
         findings += self._poses(now_s, agents, tracker)
         findings += self._geofence(agents, tracker)
         foreign = [n for n in others if (p := tracker.get(n)) is not None and p.position[2] > ON_FLOOR_Z_M]
@@ -177,7 +182,8 @@ class Supervisor:
             state = states.get(a.name)
             if state is not None and not state.link.up:
                 why = state.link.error or "link down"
-                out.append(Finding("link_lost", ERROR, f"radio link lost ({why}); the others continue", a.name, "lost"))
+                others = "; the others continue" if any(b is not a for b in agents) else ""  # not for a lone drone
+                out.append(Finding("link_lost", ERROR, f"radio link lost ({why}){others}", a.name, "lost"))
         return out
 
     def _poses(self, now_s: float, agents: list[DroneAgent], tracker: PoseTracker) -> list[Finding]:
@@ -337,6 +343,25 @@ class Supervisor:
             elif not glitching and a.name in self._glitching:
                 self._glitching.discard(a.name)
                 out.append(Finding("pose_glitch", INFO, "mocap track consistent again: resuming", a.name, "resume"))
+        return out
+
+    def _orientations(self, agents: list[DroneAgent], tracker: PoseTracker) -> list[Finding]:
+        """Orientations the tracker refused as jumps (edge-triggered): a warning; the drone flies on its position."""
+        out = []
+        extpose = self.mission.radio.extpos == "extpose"
+        for a in agents:
+            turned = a.name in tracker.orientation_glitching
+            if turned and a.name not in self._turned:
+                self._turned.add(a.name)
+                degrees, seconds = tracker.last_turn.get(a.name, (math.nan, math.nan))
+                use = ("extpose sends its position only until it turns back" if extpose
+                       else "its orientation is not used in flight")
+                out.append(Finding("orientation_glitch", WARNING, f"mocap orientation turned {degrees:.0f} deg in "
+                                   f"{seconds * 1e3:.0f} ms, faster than a drone turns (a wrong fit of its "
+                                   f"markers?): not followed; {use}", a.name, "warn"))
+            elif not turned and a.name in self._turned:
+                self._turned.discard(a.name)
+                out.append(Finding("orientation_glitch", INFO, "mocap orientation consistent again", a.name, "warn"))
         return out
 
     def _crashes(self, agents: list[DroneAgent], states: dict[str, DroneState]) -> list[Finding]:

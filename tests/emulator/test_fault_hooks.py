@@ -124,6 +124,29 @@ def test_a_pose_jump_moves_the_served_pose_not_the_drone_and_ends(rig: DryRun) -
     assert after and all(f.bodies["cf1"].position == pytest.approx(START["cf1"], abs=1e-4) for f in after)
 
 
+def yaw_deg_of(quaternion: tuple[float, float, float, float]) -> float:
+    qx, qy, qz, qw = quaternion
+    return math.degrees(math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz)))
+
+
+def test_an_orientation_flip_turns_the_served_orientation_not_the_drone_and_ends(rig: DryRun) -> None:
+    before = frames(rig, 0.2)[-1].bodies["cf1"]
+    assert yaw_deg_of(before.quaternion) == pytest.approx(0.0, abs=1e-3) and before.valid
+    rig.orientation_flip("cf1", 90.0, 0.6)
+    time.sleep(0.05)  # frames already on their way
+    during = frames(rig, 0.4)
+    assert len(during) > 20
+    for frame in during:
+        assert yaw_deg_of(frame.bodies["cf1"].quaternion) == pytest.approx(90.0, abs=1e-3)
+        assert frame.bodies["cf1"].position == pytest.approx(START["cf1"], abs=1e-4)  # where it is
+        assert frame.bodies["cf1"].valid  # a wrong fit looks tracked
+        assert yaw_deg_of(frame.bodies["cf2"].quaternion) == pytest.approx(0.0, abs=1e-3)
+    assert rig.snapshot("cf1").yaw_deg == pytest.approx(0.0, abs=1e-6)  # the drone did not turn
+    time.sleep(0.25)
+    after = frames(rig, 0.2)
+    assert after and all(yaw_deg_of(f.bodies["cf1"].quaternion) == pytest.approx(0.0, abs=1e-3) for f in after)
+
+
 def first_frame_showing(rig: DryRun, x: float, timeout_s: float) -> float:
     """Seconds until a frame shows cf1 beyond ``x`` (the step it made)."""
     start = time.monotonic()

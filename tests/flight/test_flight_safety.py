@@ -236,3 +236,57 @@ def test_a_flight_whose_last_drone_lost_its_link_ends_once_mocap_sees_it_down(tm
     last = truth[-1]
     assert not last["motors"] and last["position"]["z"] < 0.05, last
     assert flight.log.messages(f"/truth/{name}")[-1].log_time > dropped_at[0] + 2_000_000_000
+
+
+def test_an_orientation_flip_under_extpose_is_not_fed_to_the_estimator(tmp_path, short_mission):
+    """Motive flips cf2's rigid body 180 degrees (a wrong fit of its markers) for 1.5 s mid-flight. With extpose the
+    stack used to forward that orientation: the estimator took the flipped yaw, the position controller then acted
+    in a frame turned 180 degrees, and cf2 flew off. Now the tracker refuses the flip, extpose carries the position
+    only until the fit turns back, and the supervisor says so within a frame."""
+    mission = replace(short_mission, radio=replace(short_mission.radio, extpos="extpose"))
+    injected: list[float] = []
+
+    def flip(loop, rig):  # type: ignore[no-untyped-def]
+        time.sleep(0.5)
+        injected.append(time.time())
+        rig.orientation_flip("cf2", 180.0, 1.5)
+
+    flight = fly(mission, tmp_path, when_flying=flip)
+    assert flight.report.success, flight.report.reasons
+    warned = flight.events("orientation_glitch", "cf2")
+    assert warned and warned[0].level == 3 and "turned 180 deg" in warned[0].message, warned
+    assert "consistent again" in warned[-1].message
+    said_ns = event_time_ns(flight, "mocap orientation turned")
+    assert 0.0 <= said_ns / 1e9 - injected[0] < 0.2
+    cf2 = flight.snapshots["cf2"]
+    assert abs(cf2.estimate_yaw_deg - cf2.yaw_deg) < 5.0  # its estimator never took the flipped yaw
+    assert abs(cf2.position[0] - mission.drones[1].goal[0]) < 0.2 and landed(cf2)
+
+
+def test_a_drone_whose_mocap_orientation_flipped_on_the_ground_does_not_take_off(tmp_path, short_mission):
+    """A flip seen before take-off: one of the two fits is wrong and nothing says which, and the estimator would
+    start from that yaw. The drone stays on the ground with the reason; the others fly."""
+    from rpf_fly.flight.phases import SwarmPhase
+    from rpf_fly.flight.session import run_flight
+    from rpf_fly.flight.dry_run import DryRun
+    from rpf_fly.log.reader import read_log
+
+    log_path = tmp_path / "flight.mcap"
+    with DryRun(short_mission, mocap="natnet") as rig:
+        def flip_when_tracked(loop) -> None:  # type: ignore[no-untyped-def]
+            def act() -> None:
+                deadline = time.monotonic() + 20
+                while loop.phase != SwarmPhase.PREFLIGHT and time.monotonic() < deadline:
+                    time.sleep(0.002)
+                rig.orientation_flip("cf1", 90.0, 60.0)
+            threading.Thread(target=act, daemon=True).start()
+
+        report = run_flight(short_mission, default_factory(short_mission), log_path, rig=rig, on_loop=flip_when_tracked)
+        cf1 = rig.snapshot("cf1")
+    assert report.phase == SwarmPhase.DONE
+    assert report.outcomes["cf1"] == FlightOutcome.NOT_FLOWN, report.outcomes
+    assert "orientation of its rigid body turned 90 deg" in report.reasons["cf1"], report.reasons
+    assert report.outcomes["cf2"] == report.outcomes["cf3"] == FlightOutcome.REACHED
+    truth = read_log(log_path).messages("/truth/cf1")
+    assert truth and max(m.data["position"]["z"] for m in truth) < 0.01  # it never left the floor
+    assert not cf1.flying and cf1.position[2] == 0.0

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import pytest
 
 from rpf_fly.flight.poses import REACQUIRE_S, PoseTracker
@@ -78,3 +80,74 @@ def test_a_fall_and_a_reappearance_after_occlusion_are_not_glitches():
         tracker.update(frame(n, (0.0, 0.0, 0.0), valid=False))
     tracker.update(frame(100, (0.3, 0.0, 0.0)))  # moved 0.3 m while hidden for 0.55 s: possible
     assert not tracker.glitches and tracker.get("cf1").position == (0.3, 0.0, 0.0)
+
+
+def turned_frame(n: int, yaw_deg: float, position: tuple[float, float, float] = (0.0, 0.0, 1.0),
+                 valid: bool = True) -> MocapFrame:
+    """Frame ``n`` of a body at ``position`` turned ``yaw_deg`` about the vertical."""
+    t = n / RATE_HZ
+    half = math.radians(yaw_deg) / 2.0
+    body = RigidBodyPose("cf1", 1, position, (0.0, 0.0, math.sin(half), math.cos(half)), valid)
+    return MocapFrame(n, t, t, None, {"cf1": body})
+
+
+def yaw_of_pose(tracker: PoseTracker) -> float:
+    qx, qy, qz, qw = tracker.get("cf1").quaternion
+    return (math.degrees(2.0 * math.atan2(qz, qw)) + 180.0) % 360.0 - 180.0
+
+
+def test_an_orientation_flip_is_refused_while_its_position_is_followed_until_the_fit_turns_back():
+    """Motive's wrong fit of a nearly symmetric marker set turns the body 180 degrees in one frame, where it is."""
+    tracker = PoseTracker({"cf1": "cf1"})
+    for n in range(20):
+        tracker.update(turned_frame(n, 5.0, (0.005 * n, 0.0, 1.0)))
+    for n in range(20, 60):
+        tracker.update(turned_frame(n, 185.0, (0.005 * n, 0.0, 1.0)))
+        pose = tracker.get("cf1")
+        assert "cf1" in tracker.orientation_glitching and not pose.orientation_trusted
+        assert pose.valid and pose.position[0] == pytest.approx(0.005 * n)  # the position is followed
+        assert yaw_of_pose(tracker) == pytest.approx(5.0)  # the orientation is the last trusted one
+    assert tracker.orientation_glitches["cf1"] == 40
+    assert tracker.last_turn["cf1"][0] == pytest.approx(180.0)
+    assert not tracker.glitching  # not a position glitch
+    tracker.update(turned_frame(60, 6.0, (0.3, 0.0, 1.0)))
+    pose = tracker.get("cf1")
+    assert "cf1" not in tracker.orientation_glitching and pose.orientation_trusted
+    assert yaw_of_pose(tracker) == pytest.approx(6.0)
+
+
+@pytest.mark.parametrize("axis", ["x", "y"])
+def test_a_flip_about_a_horizontal_axis_is_refused_too(axis):
+    tracker = PoseTracker({"cf1": "cf1"})
+    level = RigidBodyPose("cf1", 1, (0.0, 0.0, 1.0), (0.0, 0.0, 0.0, 1.0), True)
+    flipped = RigidBodyPose("cf1", 1, (0.0, 0.0, 1.0), (1.0, 0.0, 0.0, 0.0) if axis == "x" else (0.0, 1.0, 0.0, 0.0),
+                            True)
+    for n, body in enumerate([level] * 5 + [flipped]):
+        tracker.update(MocapFrame(n, n / RATE_HZ, n / RATE_HZ, None, {"cf1": body}))
+    assert "cf1" in tracker.orientation_glitching
+    assert tracker.get("cf1").quaternion == (0.0, 0.0, 0.0, 1.0)
+
+
+def test_turns_a_drone_can_make_are_followed():
+    """360 deg/s (3.6 degrees a frame) is followed, and so is a 90 degree turn over an occlusion of 0.5 s."""
+    tracker = PoseTracker({"cf1": "cf1"})
+    for n in range(50):
+        tracker.update(turned_frame(n, 3.6 * n))
+        assert tracker.get("cf1").orientation_trusted
+    for n in range(50, 100):
+        tracker.update(turned_frame(n, 0.0, valid=False))
+    tracker.update(turned_frame(100, 3.6 * 49 + 90.0))
+    assert not tracker.orientation_glitching and not tracker.orientation_glitches
+    assert yaw_of_pose(tracker) == pytest.approx(3.6 * 49 + 90.0 - 360.0)
+
+
+def test_a_flip_that_stays_is_never_taken_as_the_drones_orientation():
+    """Unlike a jumped position (taken after REACQUIRE_S), a jumped orientation stays refused: only the flip says
+    which fit is wrong, and a wrong yaw fed to the estimator flies the drone off."""
+    tracker = PoseTracker({"cf1": "cf1"})
+    for n in range(10):
+        tracker.update(turned_frame(n, 0.0))
+    for n in range(10, 10 + int(10 * REACQUIRE_S * RATE_HZ)):
+        tracker.update(turned_frame(n, 90.0))
+    assert "cf1" in tracker.orientation_glitching
+    assert yaw_of_pose(tracker) == pytest.approx(0.0)

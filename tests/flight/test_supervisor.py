@@ -203,3 +203,36 @@ def test_a_poor_link_is_said_each_episode():
         said += [(k, f.level) for f in supervisor.check(0.1 * k, agents.values(), tracker, states) if f.kind == "radio"]
     assert [k for k, _ in said] == [2, 5, 7]
     assert [level for _, level in said] == [WARNING, 2, WARNING]
+
+
+def test_a_lost_link_says_the_others_continue_only_when_others_fly():
+    _, agents, tracker, supervisor = setup()
+    see(tracker, 1, 0.0, POSITIONS)
+    states = {n: state(n, 0.0) for n in agents}
+    states["cf1"] = state("cf1", 0.0, up=False)
+    lost = [f for f in supervisor.check(0.0, agents.values(), tracker, states) if f.kind == "link_lost"]
+    assert [(f.drone, f.response) for f in lost] == [("cf1", "lost")] and "the others continue" in lost[0].message
+    _, agents, tracker, supervisor = setup()
+    see(tracker, 1, 0.0, POSITIONS)
+    for name in ("cf2", "cf3"):
+        agents[name].set_phase(DronePhase.LANDED, 0.0)
+    lost = [f for f in supervisor.check(0.0, agents.values(), tracker, states) if f.kind == "link_lost"]
+    assert [f.drone for f in lost] == ["cf1"] and "others" not in lost[0].message  # a lone drone: nobody else
+
+
+def test_an_orientation_flip_in_flight_is_a_warning_once_and_its_end_is_said():
+    from rpf_fly.flight.supervisor import INFO
+
+    _, agents, tracker, supervisor = setup()
+    states = {n: state(n, 0.0) for n in agents}
+    found = []
+    for n in range(30):  # cf2 turned 180 degrees by Motive from frame 10 to 19
+        t = n / 100.0
+        flipped = 10 <= n < 20
+        bodies = {name: RigidBodyPose(name, i, p, (0.0, 0.0, 1.0, 0.0) if name == "cf2" and flipped
+                                      else (0.0, 0.0, 0.0, 1.0), True) for i, (name, p) in enumerate(POSITIONS.items())}
+        tracker.update(MocapFrame(n, t, t, None, bodies))
+        found += [f for f in supervisor.check(t, agents.values(), tracker, states) if f.kind == "orientation_glitch"]
+    assert [(f.drone, f.level, f.response) for f in found] == [("cf2", WARNING, "warn"), ("cf2", INFO, "warn")]
+    assert "turned 180 deg" in found[0].message and "not used in flight" in found[0].message
+    assert not [a for a in agents.values() if a.phase != DronePhase.PLANNING]  # it flies on
