@@ -38,6 +38,7 @@ import math
 import os
 import pickle
 import queue
+import random
 import secrets
 import select
 import signal
@@ -55,6 +56,7 @@ from typing import Any, Optional
 from rpf_fly.mission.model import Obstacle
 
 from .fake_firmware import FirmwareSnapshot, Packet
+from .mocap_noise import MocapNoise, turned
 from .fake_world import DongleAir, DronePort, FakeDroneConfig, FakeWorld, LinkFaults, RadioCounters, RadioTiming, TruthSample
 
 logger = logging.getLogger(__name__)
@@ -91,22 +93,20 @@ MOCAP_HISTORY_S = 2.0
 """Seconds of true poses `SimulatedBodies` keeps for `mocap_delay` (the longest delay it can serve)."""
 
 
-def _turned(turn: tuple[float, float, float, float],
-            q: tuple[float, float, float, float]) -> tuple[float, float, float, float]:
-    """The orientation ``q`` (qx, qy, qz, qw, world from body) turned by ``turn`` in the world frame: turn * q."""
-    ax, ay, az, aw = turn
-    bx, by, bz, bw = q
-    return (aw * bx + ax * bw + ay * bz - az * by, aw * by - ax * bz + ay * bw + az * bx,
-            aw * bz + ax * by - ay * bx + az * bw, aw * bw - ax * bx - ay * by - az * bz)
-
-
 class SimulatedBodies:
     """The drones' true poses as the mocap sees them, keyed by rigid-body name, with tracking faults: a body hidden
     for a while (occlusion), every body lost (blackout), a body reported in the wrong place (pose jump) or turned
-    (orientation flip), every pose late (mocap delay). Durations are seconds from the call, on `time.monotonic()`. Thread-safe."""
+    (orientation flip), every pose late (mocap delay). Durations are seconds from the call, on
+    `time.monotonic()`. Thread-safe.
 
-    def __init__(self, world: FakeWorld, bodies: Mapping[int, str]) -> None:
+    Every pose served carries the jitter and the single-frame dropouts of a real mocap (`noise`, default
+    `MocapNoise.default()`: rpf_fly/emulator/mocap_noise.py), seeded by ``seed``."""
+
+    def __init__(self, world: FakeWorld, bodies: Mapping[int, str], noise: Optional[MocapNoise] = None,
+                 seed: int = 0) -> None:
         self._world = world
+        self._noise = MocapNoise.default() if noise is None else noise
+        self._rng = random.Random(f"mocap-noise-{seed}")
         self._bodies = dict(bodies)  # radio address -> rigid-body name
         self._hidden: dict[str, float] = {}
         self._blackout_until = -math.inf
@@ -135,8 +135,9 @@ class SimulatedBodies:
                 position = (position[0] + jump[0], position[1] + jump[1], position[2] + jump[2])
             flip = flips.get(name)
             if flip is not None:
-                quaternion = _turned(flip, quaternion)
-            poses[name] = (position, quaternion, not blackout and name not in hidden)
+                quaternion = turned(flip, quaternion)
+            position, quaternion, tracked = self._noise.apply(self._rng, position, quaternion)
+            poses[name] = (position, quaternion, tracked and not blackout and name not in hidden)
         return poses
 
     def _served(self, now: float, true: TruePoses) -> TruePoses:
@@ -319,6 +320,7 @@ class WorldProcess:
         exit_report: Optional[str | os.PathLike[str]] = None,
         orphan_cap_s: float = ORPHAN_CAP_S,
         host: str = "127.0.0.1",
+        mocap_noise: Optional[MocapNoise] = None,
     ) -> None:
         """``names``: the drones' names (radio address -> name) for the exit report (else their addresses).
         ``exit_report``: where the child writes its exit report if this process dies without closing it (None:
@@ -332,7 +334,8 @@ class WorldProcess:
         settings = {"drones": dict(drones), "bodies": dict(bodies), "seed": seed, "obstacles": tuple(obstacles),
                     "natnet": dict(natnet) if natnet else None, "authkey": key, "names": dict(names or {}),
                     "exit_report": os.fspath(exit_report) if exit_report is not None else None,
-                    "orphan_cap_s": float(orphan_cap_s), "host": host}
+                    "orphan_cap_s": float(orphan_cap_s), "host": host,
+                    "mocap_noise": MocapNoise.default() if mocap_noise is None else mocap_noise}
         self._process = subprocess.Popen(
             [sys.executable, "-m", "rpf_fly.emulator.world_process"], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
         )
@@ -677,7 +680,7 @@ def serve(settings: dict[str, Any], out: Any) -> None:
                      settings.get("orphan_cap_s", ORPHAN_CAP_S))
     orphan.watch_parent()
     bodies = settings["bodies"]
-    tracked = SimulatedBodies(world, bodies)
+    tracked = SimulatedBodies(world, bodies, settings.get("mocap_noise"), seed=settings["seed"])
     host = settings.get("host", "127.0.0.1")
     radio = _RadioServer(world, host).start()
     server = None

@@ -52,6 +52,7 @@ from typing import Any, Mapping, Optional
 from rpf_fly.mission.model import Mission
 from rpf_fly.mocap.frame import MocapSource
 from rpf_fly.emulator.fake_world import BurstLoss, FakeDroneConfig, FakeWorld, RadioTiming
+from rpf_fly.emulator.mocap_noise import MocapNoise
 
 
 AIR_TIME_S = 0.001
@@ -143,6 +144,7 @@ class DryRun:
         radio_loss: Optional[BurstLoss] = RADIO_LOSS,
         world_exit_report: Optional[Path] = None,
         host: str = "127.0.0.1",
+        mocap_noise: Optional[MocapNoise] = None,
     ):
         """``truth``: the flight log of a flight on this rig gets the world's truth (``/truth/<drone>``); False only
         to measure what that costs (tools/bench_flight.py ``--no-truth``). ``air_time_s``: how long each radio
@@ -154,7 +156,10 @@ class DryRun:
         (SIGKILL: they fall by the firmware's watchdog; `rpf_fly.emulator.world_process`); default
         `default_world_exit_report()`; a stale report there is removed at the start. ``host``: the IPv4 address
         the simulated drones' radio server and NatNet emulator bind (default loopback: nothing opened to the
-        network; a distributed flight's coordinator gives its listen address: docs/distributed.md)."""
+        network; a distributed flight's coordinator gives its listen address: docs/distributed.md).
+        ``mocap_noise``: the jitter and single-frame dropouts of every pose the mocap serves (default
+        `MocapNoise.default()`, a real room's: rpf_fly/emulator/mocap_noise.py; ``MocapNoise(0, 0, 0)``: the exact
+        truth, for tests that compare poses to the millimetre)."""
         if mocap is None:  # the mission's kind decides: its own client against the emulator
             mocap = "motioncapture" if mission.mocap.kind == "motioncapture" else "natnet"
         if mocap not in ("natnet", "sim", "motioncapture"):
@@ -187,6 +192,7 @@ class DryRun:
         self.in_process = not process
         self.host = host
         self.truth = truth
+        self.mocap_noise = MocapNoise.default() if mocap_noise is None else mocap_noise
         self.world: Any = None  # a FakeWorld, or the WorldProcess speaking to one (same hook names)
         self._bodies: Any = None
         self._cache = tempfile.TemporaryDirectory(prefix="rpf-fly-toc-") if cache_dir is None else None
@@ -216,7 +222,7 @@ class DryRun:
         if self.in_process:
             self.world = FakeWorld(self.drone_configs, seed=self.seed, obstacles=self.mission.obstacles,
                                    timing=self.timing).start()
-            self._bodies = SimulatedBodies(self.world, body_of_address)
+            self._bodies = SimulatedBodies(self.world, body_of_address, self.mocap_noise, seed=self.seed)
             fake_radio.register(self.world)
             command_port = None
             if served:
@@ -233,7 +239,7 @@ class DryRun:
             self.world = self._bodies = WorldProcess(
                 self.drone_configs, body_of_address, seed=self.seed,
                 natnet=natnet if served else None, obstacles=self.mission.obstacles,
-                names=self._names, exit_report=self.world_exit_report, host=self.host,
+                names=self._names, exit_report=self.world_exit_report, host=self.host, mocap_noise=self.mocap_noise,
             )
             fake_radio.register(RemoteWorld(self.world.radio, tuple(self.drone_configs), self.timing))
             command_port = self.world.natnet_command_port

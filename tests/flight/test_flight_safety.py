@@ -7,6 +7,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 import _thread
+import re
 import threading
 import time
 
@@ -254,7 +255,7 @@ def test_an_orientation_flip_under_extpose_is_not_fed_to_the_estimator(tmp_path,
     flight = fly(mission, tmp_path, when_flying=flip)
     assert flight.report.success, flight.report.reasons
     warned = flight.events("orientation_glitch", "cf2")
-    assert warned and warned[0].level == 3 and "turned 180 deg" in warned[0].message, warned
+    assert warned and warned[0].level == 3 and re.search(r"turned 1[78][0-9] deg", warned[0].message), warned
     assert "consistent again" in warned[-1].message
     said_ns = event_time_ns(flight, "mocap orientation turned")
     assert 0.0 <= said_ns / 1e9 - injected[0] < 0.2
