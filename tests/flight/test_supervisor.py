@@ -191,6 +191,30 @@ def test_a_drone_held_eight_cm_off_its_setpoints_is_a_tracking_warning_and_five_
     assert 0.05 < TRACKING_WARN_M < 0.08
 
 
+def test_a_push_is_said_through_frames_the_mocap_dropped():
+    """A real room leaves a body untracked for a frame now and then (the dry run's mocap: 0.1 % of frames). The
+    tracking model used to restart at the next pose after each: a campaign gust on circle-8-r3 went unsaid (3 runs
+    of 3) because one frame of the pushed drone was dropped during the push. Here cf2 is pushed 12 cm over 0.3 s and
+    one frame in 25 of it is dropped: it is said within 1 s of the push."""
+    _, agents, tracker, supervisor = setup()
+    states = {n: state(n, 0.0) for n in agents}
+    for agent in agents.values():
+        agent.last_setpoint = complex(*POSITIONS[agent.name][:2])
+    said = []
+    for k in range(150):
+        t = 0.01 * k
+        bodies = {}
+        for i, (name, (x, y, z)) in enumerate(POSITIONS.items()):
+            push = 0.12 * min(1.0, max(0.0, (k - 20) / 30)) if name == "cf2" else 0.0
+            bodies[name] = RigidBodyPose(name, i, (x, y + push, z), (0.0, 0.0, 0.0, 1.0),
+                                         not (name == "cf2" and k % 25 == 0))
+        tracker.update(MocapFrame(k + 1, t, t, None, bodies))
+        said += [(t, f.drone, f.level) for f in supervisor.check(t, agents.values(), tracker, states)
+                 if f.kind == "tracking"]
+    assert [(d, level) for _, d, level in said] == [("cf2", WARNING)], said
+    assert said[0][0] - 0.2 < 1.0
+
+
 def test_a_poor_link_is_said_each_episode():
     """cflib's link quality under 96 % is a warning; back at 99 % an info, and the next episode is said again (the
     former end, 10 points above the warning, was above cflib's 100 % and never came)."""
