@@ -40,6 +40,14 @@ def state(name: str, t: float, vbat: float = 3.9, up: bool = True) -> DroneState
 POSITIONS = {"cf1": (-1.0, -0.6, 0.5), "cf2": (-1.0, 0.0, 0.5), "cf3": (-1.0, 0.6, 0.5)}
 
 
+def holding_their_spots():  # type: ignore[no-untyped-def]
+    """Agents whose setpoints hold them at `POSITIONS`, with healthy telemetry: for the tracking checks."""
+    _, agents, tracker, supervisor = setup()
+    for agent in agents.values():
+        agent.last_setpoint = complex(*POSITIONS[agent.name][:2])
+    return agents, tracker, supervisor, {n: state(n, 0.0) for n in agents}
+
+
 def test_one_low_battery_sample_does_not_land_a_drone_but_consecutive_ones_do():
     _, agents, tracker, supervisor = setup()
     see(tracker, 1, 0.0, POSITIONS)
@@ -174,10 +182,7 @@ def test_a_drone_held_eight_cm_off_its_setpoints_is_a_tracking_warning_and_five_
     from rpf_fly.flight.supervisor import TRACKING_WARN_M
 
     for offset, said in ((0.03, False), (0.05, False), (0.08, True)):
-        _, agents, tracker, supervisor = setup()
-        states = {n: state(n, 0.0) for n in agents}
-        for agent in agents.values():
-            agent.last_setpoint = complex(*POSITIONS[agent.name][:2])
+        agents, tracker, supervisor, states = holding_their_spots()
         found = []
         for k in range(60):
             t = 0.01 * k
@@ -196,10 +201,7 @@ def test_a_push_is_said_through_frames_the_mocap_dropped():
     tracking model used to restart at the next pose after each: a campaign gust on circle-8-r3 went unsaid (3 runs
     of 3) because one frame of the pushed drone was dropped during the push. Here cf2 is pushed 12 cm over 0.3 s and
     one frame in 25 of it is dropped: it is said within 1 s of the push."""
-    _, agents, tracker, supervisor = setup()
-    states = {n: state(n, 0.0) for n in agents}
-    for agent in agents.values():
-        agent.last_setpoint = complex(*POSITIONS[agent.name][:2])
+    agents, tracker, supervisor, states = holding_their_spots()
     said = []
     for k in range(150):
         t = 0.01 * k
