@@ -165,6 +165,7 @@ class FlightLoop:
                                    land_settle_s=self.LAND_SETTLE_S, floor_z=0.0)
         self.obstacles = obstacle_set(mission.obstacles)
         self.tracker = PoseTracker({d.name: d.rigid_body for d in mission.drones})
+        self.tracker.estimate_of = self._estimate_of  # a jumped track is taken only where the drone thinks it is
         self.supervisor = Supervisor(mission, self.obstacles)
         self.phase = SwarmPhase.CONNECTING
         self.stats = LoopStats()
@@ -478,6 +479,12 @@ class FlightLoop:
             return {n: (a.reason if a.phase == DronePhase.FAILED else "") for n, a in self.agents.items()}
         finally:
             self._finish()
+
+    def _estimate_of(self, name: str) -> Optional[tuple[float, float, float]]:
+        """The drone's newest on-board position estimate from its telemetry (None: not one of this loop's drones,
+        or no estimate yet)."""
+        state = self._states.get(name)
+        return state.position_m if state is not None else None
 
     def _preflight_problem(self, agent: DroneAgent) -> str:
         pose = self.tracker.get(agent.name)

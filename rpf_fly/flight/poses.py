@@ -7,7 +7,9 @@ keep their last pose but age; the supervisor decides what a stale pose means.
 Glitches: a pose that jumped further from the previous sample than a Crazyflie can move in that time (a marker
 swap, a reflection taken for a marker) is not followed. The body's pose freezes (and ages, so the supervisor holds
 the drone) until the track jumps back near the frozen pose, or until the new track has been consistent for
-``REACQUIRE_S`` (the drone really is there: it was pushed, or Motive fixed its model). The raw samples are compared
+``REACQUIRE_S`` (the drone really is there: Motive fixed its model) and, in flight, the drone's own on-board
+estimate is nearer the new track than the frozen pose (2026-12-02: a swap that stayed was taken after 0.5 s and flew
+the drone into a neighbour). The raw samples are compared
 frame to frame, so a swap is caught however long it lasts, and so is the swap back.
 
 Orientation glitches (2026-12-02): an orientation that turned further from the previous sample than a Crazyflie can
@@ -32,7 +34,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Collection, Mapping, Optional
+from typing import Callable, Collection, Mapping, Optional
 
 from rpf_fly.mocap.frame import MocapFrame
 
@@ -131,6 +133,9 @@ class PoseTracker:
         """Samples whose orientation was refused, per drone."""
         self.last_turn: dict[str, tuple[float, float]] = {}
         """drone -> (degrees, seconds) of its newest refused orientation jump, for the event that reports it."""
+        self.estimate_of: Optional[Callable[[str], Optional[tuple[float, float, float]]]] = None
+        """drone -> its on-board position estimate (None: none known), or None (no estimates): see
+        `_estimate_agrees`. The flight loop sets it from the drones' telemetry."""
         self._raw_turn: dict[str, tuple[tuple[float, float, float, float], float, float]] = {}
         """drone -> its newest sample's orientation: (quaternion, receive time, capture time)."""
 
@@ -160,7 +165,7 @@ class PoseTracker:
                 self.glitching.discard(name)  # jumped back onto the frozen track
                 return True
             self._jumped_at[name] = t  # jumped elsewhere: a new candidate track
-        elif t - self._jumped_at[name] >= REACQUIRE_S:
+        elif t - self._jumped_at[name] >= REACQUIRE_S and self._estimate_agrees(name, position, previous):
             self.glitching.discard(name)  # the new track held: the drone is there
             return True
         self.glitches[name] = self.glitches.get(name, 0) + 1
@@ -191,6 +196,20 @@ class PoseTracker:
         self.orientation_glitches[name] = self.orientation_glitches.get(name, 0) + 1
         self.last_turn[name] = (turned, dt)
         return False
+
+    def _estimate_agrees(self, name: str, position: tuple[float, float, float],
+                         frozen: Optional[TrackedPose]) -> bool:
+        """Whether a jumped track that held for ``REACQUIRE_S`` is the drone: without an ``estimate_of`` (a replay,
+        a bare tracker) it is taken, as before 2026-12-02; with one, only when the drone's on-board estimate (which
+        flew on its IMU alone while the glitch lasted: centimetres of drift) is nearer the new track than the frozen
+        pose. A marker swap that stays is otherwise taken, fed to the estimator as extpos, and the controller flies
+        the true drone the jump's length the other way (random fault campaign, seed 8: two crashes)."""
+        if self.estimate_of is None:
+            return True
+        estimate = self.estimate_of(name)
+        if estimate is None or frozen is None:
+            return False
+        return math.dist(estimate, position) < math.dist(estimate, frozen.position)
 
     def update(self, frame: MocapFrame, reacquired: Collection[str] = ()) -> None:
         """Take the frame's poses of our drones (Z-up world frame). ``reacquired``: drones whose sample in this
