@@ -286,7 +286,8 @@ def test_a_drone_whose_mocap_orientation_flipped_on_the_ground_does_not_take_off
         cf1 = rig.snapshot("cf1")
     assert report.phase == SwarmPhase.DONE
     assert report.outcomes["cf1"] == FlightOutcome.NOT_FLOWN, report.outcomes
-    assert "orientation of its rigid body turned 90 deg" in report.reasons["cf1"], report.reasons
+    said = re.search(r"orientation of its rigid body turned (\d+) deg", report.reasons["cf1"])
+    assert said and abs(int(said.group(1)) - 90) <= 5, report.reasons  # the dry run's mocap jitters by ~0.5 deg
     assert report.outcomes["cf2"] == report.outcomes["cf3"] == FlightOutcome.REACHED
     truth = read_log(log_path).messages("/truth/cf1")
     assert truth and max(m.data["position"]["z"] for m in truth) < 0.01  # it never left the floor
