@@ -34,10 +34,10 @@ from .fake_memory import (
     MEM_TYPE_EEPROM, MEM_TYPE_TRAJ, BufferMemory, DeckCtrlDfuMemory, DeckMemory, MemorySubsystem, MemoryTester,
     eeprom_image,
 )
-from .fake_setpoint import decode_generic, decode_rpyt, wrap_angle
+from .fake_setpoint import AxisMode, decode_generic, decode_rpyt, wrap_angle
 from .fake_supervisor import Transition
 from .fake_toc import EXTENDED_TYPE_PERSISTENT, LOG_TYPE_NAMES, Toc, make_toc, pack_value, unpack_value, value_size
-from .fake_vehicle import Vehicle, VehicleConfig
+from .fake_vehicle import HOVER_THRUST, Vehicle, VehicleConfig
 
 logger = logging.getLogger(__name__)
 
@@ -57,6 +57,14 @@ the firmware's start-up) until its radio answers again. The fake's choice within
 PORT_CONSOLE, PORT_PARAM, PORT_COMMANDER, PORT_MEM, PORT_LOG = 0, 2, 3, 4, 5
 PORT_LOCALIZATION, PORT_COMMANDER_GENERIC, PORT_SETPOINT_HL, PORT_SUPERVISOR = 6, 7, 8, 9
 PORT_PLATFORM, PORT_LINK = 13, 15
+
+def _thrust(vehicle: Vehicle) -> float:
+    """`stabilizer.thrust`: an attitude mode's raw thrust, else the hover thrust while the motors spin."""
+    if not vehicle.motors_on:
+        return 0.0
+    setpoint = vehicle.control_setpoint
+    return float(setpoint.thrust) if setpoint.modes[2] is AxisMode.DISABLE else float(HOVER_THRUST)
+
 
 _LOG_VARIABLES: tuple[tuple[str, str, Callable[[FakeFirmware], float]], ...] = (
     ("stateEstimate.x", "float", lambda f: f.vehicle.estimate[0]),
@@ -87,10 +95,10 @@ _LOG_VARIABLES: tuple[tuple[str, str, Callable[[FakeFirmware], float]], ...] = (
     ("ctrltarget.y", "float", lambda f: f.vehicle.control_setpoint.position[1]),
     ("ctrltarget.z", "float", lambda f: f.vehicle.control_setpoint.position[2]),
     ("ctrltarget.yaw", "float", lambda f: f.vehicle.control_setpoint.yaw_deg),
-    ("stabilizer.roll", "float", lambda f: 0.0),
-    ("stabilizer.pitch", "float", lambda f: 0.0),
+    ("stabilizer.roll", "float", lambda f: f.vehicle.attitude_deg[0]),
+    ("stabilizer.pitch", "float", lambda f: f.vehicle.attitude_deg[1]),
     ("stabilizer.yaw", "float", lambda f: math.degrees(f.vehicle.estimate_yaw)),
-    ("stabilizer.thrust", "float", lambda f: 36000.0 if f.vehicle.motors_on else 0.0),
+    ("stabilizer.thrust", "float", lambda f: _thrust(f.vehicle)),
     ("memTst.errCntW", "uint32_t", lambda f: f.memory_tester.write_errors),
 )
 
@@ -651,7 +659,9 @@ class FakeFirmware:
     # Flight ---------------------------------------------------------------------------------------------------
 
     def _commander(self, channel: int, data: bytes, now_s: float) -> list[Packet]:
-        setpoint = decode_rpyt(data, now_s) if channel == 0 else None
+        if channel != 0:
+            return []
+        setpoint, self.vehicle.rpyt_thrust_locked = decode_rpyt(data, now_s, self.vehicle.rpyt_thrust_locked)
         if setpoint is not None:
             self.vehicle.crtp_setpoint(setpoint, now_s)
         return []

@@ -18,8 +18,18 @@ Dynamics (documented model, not physics):
   plan that begins inside an interval is flown from the interval's start (up to 10 ms early, a lead that decays
   with `TRACK_TAU_S`).
 - Velocity axes bring the *estimated* velocity to the commanded one with the same time constant. Disabled horizontal
-  axes (level attitude: the watchdog's "level out", attitude-only setpoints) keep their velocity, decaying with
-  `DRAG_TAU_S` (1 s).
+  axes keep their velocity, decaying with `DRAG_TAU_S` (1 s), plus what the attitude gives them (below).
+- Attitude modes (RPYT, z-distance, alt-hold, manual, CPPM: fake_setpoint.py; the watchdog's "level out" is a level
+  attitude): roll and pitch follow the command with the attitude loop's time constant `ATTITUDE_TAU_S` (1/6 s;
+  rates integrate), bounded at `MAX_TILT_DEG`, in the TRUE body frame (the attitude loop runs on the IMU, so a yaw
+  estimate error does not turn it). The thrust tilted with them accelerates the free horizontal axes: where the
+  height is controlled (z-distance, alt-hold, level out) by the specific force that holds the height, g / cos(tilt)
+  (g tan(tilt) sideways: 1.73 m/s^2 at 10 degrees), up to full thrust; where it is not (RPYT, manual, CPPM) by the
+  raw thrust's, g x thrust / `HOVER_THRUST`, which also lifts the drone against gravity: 45000 climbs at 2.45 m/s^2,
+  30000 sinks; nothing holds a height. Vertical drag as horizontal (`DRAG_TAU_S`). A thrust that cannot lift it
+  leaves the drone standing (it cannot slide). Not modelled: the height lost at a tilt past what full thrust holds
+  (57 degrees), the thrust lost to a sagging battery beyond the firmware's compensation. Until 2026-12-02 any
+  thrust above zero was "level, hold the height" and roll and pitch were ignored: kinder than a real drone.
 - The controller works in its estimated frame: the horizontal velocity it commands (position axes) or aims at
   (velocity axes) is realised through the true attitude, i.e. rotated by the yaw error (true minus estimated yaw)
   in the true world. A small error bends the path (5 degrees: 1.6 cm sideways on a 0.5 m move); beyond 90 degrees
@@ -152,6 +162,15 @@ TURBULENCE_Z_SHARE = 0.4
 """The vertical push's share of the horizontal one."""
 TURBULENCE_MIN_HEIGHT_M = 0.02
 """Above the floor by this much a body with its motors on is flying (below it, it stands: it cannot slide)."""
+HOVER_THRUST = 36000
+"""The integer thrust that holds a Crazyflie 2.1 in the air (`PID_VEL_THRUST_BASE`, platform_defaults_cf2.h). The
+firmware's battery compensation makes the thrust linear in newtons (thrust / 65535 x 0.12 N a motor), so the
+thrust's specific force is g x thrust / `HOVER_THRUST`: 1.67 g at the RPYT maximum (60000), 1.82 g at 65535."""
+ATTITUDE_TAU_S = 1.0 / 6.0
+"""Time constant with which roll and pitch follow an attitude command: the attitude loop's gain (`PID_ROLL_KP`,
+`PID_PITCH_KP` = 6 /s) over a rate loop fast enough to be ideal."""
+MAX_TILT_DEG = 80.0
+"""The model's bound on roll and pitch (rate modes integrate; a real drone past this flips)."""
 
 
 @dataclass(frozen=True)
@@ -264,6 +283,11 @@ class Vehicle:
         self.last_crtp_setpoint_s: float | None = None
         self.thrusting = False
         self.motors_on = False
+        self.rpyt_thrust_locked = True
+        """`crtp_commander_rpyt.c`'s thrust lock: set at power-on, lifted by an RPYT packet with thrust 0."""
+        self.attitude_deg = [0.0, 0.0]
+        """True roll and pitch (degrees, the firmware's legacy convention: fake_setpoint.py) in the attitude modes;
+        level while the horizontal axes are controlled (their tilt is not modelled, only its effect)."""
         self.crash_s: float | None = None
         """Time of the crash (seconds on the caller's clock), None if the drone never crashed."""
         self.crash_reason: str | None = None
@@ -536,7 +560,9 @@ class Vehicle:
                 velocity=setpoint.velocity,
                 yaw_mode=AxisMode.VELOCITY,
                 yaw_rate_deg_s=0.0,
-                thrust=setpoint.thrust,
+                thrust=setpoint.thrust,  # the height as it was: held, or the raw thrust kept
+                attitude_mode=AxisMode.ABS,
+                attitude_deg=(0.0, 0.0),
                 timestamp_s=setpoint.timestamp_s,
                 source="level-out",
             )
@@ -552,6 +578,7 @@ class Vehicle:
         pos, vel, gust = self.pos, self.vel, self._gust_vel
         if not motors_on:
             gust[0] = gust[1] = gust[2] = 0.0
+            self.attitude_deg[0] = self.attitude_deg[1] = 0.0
             if pos[2] <= self.floor_z and vel[2] <= 0.0:
                 pos[2], vel[:] = self.floor_z, [0.0, 0.0, 0.0]
                 return
@@ -577,19 +604,19 @@ class Vehicle:
             if self.yaw_offset != 0.0:
                 c, s = math.cos(self.yaw_offset), math.sin(self.yaw_offset)  # rotation by true - estimated yaw
                 wanted[0], wanted[1] = c * wanted[0] + s * wanted[1], c * wanted[1] - s * wanted[0]
+            thrust_accel = self._attitude_step(dt, sp)
             if push is None and not (gust[0] or gust[1] or gust[2]):
+                drag = math.exp(-dt / DRAG_TAU_S)
                 for axis in range(3):
                     mode = modes[axis]
                     if mode is AxisMode.ABS:
                         vel[axis] = wanted[axis]
                     elif mode is AxisMode.VELOCITY:
                         vel[axis] += (wanted[axis] - vel[axis]) * gain
-                    elif axis < 2:
-                        vel[axis] *= math.exp(-dt / DRAG_TAU_S)
                     else:
-                        vel[axis] *= 1.0 - gain
+                        vel[axis] = vel[axis] * drag + thrust_accel[axis] * dt
             else:
-                self._move_in_gust(dt, modes, wanted, gain, push)
+                self._move_in_gust(dt, modes, wanted, gain, push, thrust_accel)
             if sp.yaw_mode is AxisMode.ABS:
                 self.yaw += wrap_angle(math.radians(sp.yaw_deg) - self.estimate_yaw) * gain
             elif sp.yaw_mode is AxisMode.VELOCITY:
@@ -603,12 +630,14 @@ class Vehicle:
                 vel[:] = [0.0, 0.0, 0.0]
 
     def _move_in_gust(self, dt: float, modes: tuple[AxisMode, AxisMode, AxisMode], wanted: list[float],
-                      gain: float, push: Vec3 | None) -> None:
+                      gain: float, push: Vec3 | None, thrust_accel: Vec3) -> None:
         """The controlled velocities of `_move` with a gust (or what is left of one): on controlled axes the true
         velocity is the controller's plus the disturbance velocity d, d' = push - d / `GUST_RESPONSE_TAU_S`
-        (integrated exactly over the step); uncontrolled axes take the push whole."""
+        (integrated exactly over the step); uncontrolled axes take the push whole, with the thrust's acceleration
+        (`_attitude_step`)."""
         vel, gust = self.vel, self._gust_vel
         decay = math.exp(-dt / GUST_RESPONSE_TAU_S)
+        drag = math.exp(-dt / DRAG_TAU_S)
         for axis in range(3):
             a = push[axis] if push is not None else 0.0
             mode = modes[axis]
@@ -621,4 +650,34 @@ class Vehicle:
                 vel[axis] = controlled + gust[axis]
             else:
                 gust[axis] = 0.0
-                vel[axis] = vel[axis] * (math.exp(-dt / DRAG_TAU_S) if axis < 2 else 1.0 - gain) + a * dt
+                vel[axis] = vel[axis] * drag + (a + thrust_accel[axis]) * dt
+
+    def _attitude_step(self, dt: float, sp: Setpoint) -> Vec3:
+        """Roll and pitch follow the setpoint's attitude (module doc, "Attitude modes"); returns the world-frame
+        acceleration the thrust gives the axes the controller does not hold: horizontally its tilt (the specific
+        force that holds the height, or the raw thrust's), vertically the raw thrust's lift less gravity (0 where
+        the height is controlled)."""
+        att = self.attitude_deg
+        if sp.attitude_mode is AxisMode.DISABLE:
+            att[0] = att[1] = 0.0
+            return (0.0, 0.0, 0.0)
+        keep = math.exp(-dt / ATTITUDE_TAU_S)
+        for i in range(2):
+            if sp.attitude_mode is AxisMode.ABS:
+                target = min(max(sp.attitude_deg[i], -MAX_TILT_DEG), MAX_TILT_DEG)
+                att[i] = target + (att[i] - target) * keep
+            else:
+                att[i] = min(max(att[i] + sp.attitude_deg[i] * dt, -MAX_TILT_DEG), MAX_TILT_DEG)
+        roll, pitch = math.radians(att[0]), math.radians(-att[1])  # right-handed pitch: nose down is positive
+        up = math.cos(roll) * math.cos(pitch)
+        if sp.modes[2] is AxisMode.DISABLE:
+            force = GRAVITY_M_S2 * sp.thrust / HOVER_THRUST if sp.commands_thrust else 0.0
+            vertical = force * up - GRAVITY_M_S2
+            if vertical <= 0.0 and self.pos[2] <= self.floor_z and self.vel[2] <= 0.0:
+                return (0.0, 0.0, 0.0)  # too little lift to leave the floor: it stands (and cannot slide)
+        else:  # the height controller asks for what holds the height, up to full thrust
+            force = min(GRAVITY_M_S2 / max(up, 1e-6), GRAVITY_M_S2 * 65535 / HOVER_THRUST)
+            vertical = 0.0
+        c, s = math.cos(self.yaw), math.sin(self.yaw)  # the attitude loop holds the TRUE body (its IMU)
+        forward, left = math.sin(pitch) * math.cos(roll), -math.sin(roll)
+        return (force * (c * forward - s * left), force * (s * forward + c * left), vertical)
