@@ -56,6 +56,15 @@ ESTIMATE_DIVERGENCE_M = 0.15
 the estimator no longer takes extpos: the drone holds its ESTIMATE at the setpoint while its true position drifts.
 With extpos streaming the two agree within a centimetre or two."""
 
+ESTIMATE_WRONG_M = 0.10
+"""In flight, an on-board estimate this far from the mocap pose OF ITS OWN TIME (the telemetry's firmware
+timestamp, `DroneState.estimate_stamp_s`; in 2 status samples in a row) is wrong, not late: motors off. With extpos
+streaming the two agree within 1-3 cm (the mocap's own lag and the stamp's few milliseconds at flight speed), so
+10 cm is a diverged estimator 0.2 s after it diverged at 0.5 m/s. Before 2026-12-02 the check had no stamp and
+had to find the estimate far from EVERY pose of the last `ESTIMATE_HISTORY_S` to tell wrong from late: a drone
+whose estimator ran away at 0.57 m/s was stopped 0.75 s after, 0.6 m off its track, and fell into a wall (random
+fault campaign, seed 9)."""
+
 ESTIMATE_HISTORY_S = 0.5
 """How far back an on-board estimate may be matched against mocap: telemetry queued behind a full radio arrives
 hundreds of milliseconds late, and a late estimate of a drone at 0.5 m/s is decimetres behind the newest pose."""
@@ -102,6 +111,24 @@ a picture that old (Crazyswarm2 warns at 10 ms over unicast; a healthy Motive li
 the worst healthy link, so a healthy system never warns, and 2 cm of lag at 1 m/s. Was 50 ms until 2026-12-02: the
 random fault campaign delayed the mocap by 33 ms (plus the emulated camera's 4 ms), a picture five times older than a
 healthy one, and nothing said so."""
+
+def _pose_at(history: deque[tuple[float, tuple[float, float, float]]],
+             stamp_s: Optional[float]) -> Optional[tuple[float, float, float]]:
+    """The mocap position at ``stamp_s`` (linear between the two poses around it); None without a stamp or when
+    the history does not reach back that far (or forward: a stamp ahead of the newest pose by over 20 ms)."""
+    if stamp_s is None or not history or stamp_s < history[0][0] or stamp_s > history[-1][0] + 0.02:
+        return None
+    before = history[0]
+    for after in history:
+        if after[0] >= stamp_s:
+            span = after[0] - before[0]
+            if span <= 0.0:
+                return after[1]
+            w = (stamp_s - before[0]) / span
+            return tuple(b + w * (c - b) for b, c in zip(before[1], after[1]))  # type: ignore[return-value]
+        before = after
+    return history[-1][1]
+
 
 Response = Literal["warn", "hold", "land", "lost", "resume", "crashed", "stop"]
 
@@ -195,7 +222,9 @@ class Supervisor:
         if all_stale and not self._mocap_lost:
             self._mocap_lost = True
             out.append(Finding("mocap_lost", ERROR, "no fresh mocap pose for any drone: all hold", None, "hold"))
-        elif not all_stale and self._mocap_lost:
+        elif self._mocap_lost and any(tracker.age(a.name, now_s) <= s.pose_timeout_s for a in agents):
+            # a fresh pose of any airborne drone, landing ones included: until 2026-12-02 this said "mocap poses
+            # are back" the moment every blind drone began its landing, with no pose back at all
             self._mocap_lost = False
             out.append(Finding("mocap_lost", INFO, "mocap poses are back", None, "resume"))
         late = {n for n, age in ages.items() if age > POSE_LATE_S}
@@ -396,17 +425,23 @@ class Supervisor:
             if state.telemetry_stamp_s == stamp:
                 continue
             off = math.dist(state.position_m, pose.position)
-            nearest = min((math.dist(state.position_m, p) for _, p in history), default=off)
+            then = _pose_at(history, state.estimate_stamp_s)
+            if then is not None:  # the estimate against where mocap saw the drone when it was made
+                nearest = math.dist(state.position_m, then)
+                wrong_m, what = ESTIMATE_WRONG_M, "the mocap pose of its own time"
+            else:  # no stamp: only far from every recent pose is surely wrong, not late
+                nearest = min((math.dist(state.position_m, p) for _, p in history), default=off)
+                wrong_m, what = ESTIMATE_DIVERGENCE_M, f"every mocap pose of the last {ESTIMATE_HISTORY_S:g} s"
             late = late + 1 if off > ESTIMATE_DIVERGENCE_M else 0
-            wrong = wrong + 1 if nearest > ESTIMATE_DIVERGENCE_M else 0
+            wrong = wrong + 1 if nearest > wrong_m else 0
             self._diverging[a.name] = (late, wrong, state.telemetry_stamp_s)
             if late == 2 and wrong < 2:
                 out.append(Finding("estimator", WARNING, f"on-board estimate {off:.2f} m from mocap (late telemetry "
                                    "on a full radio, or an estimator that stopped taking extpos)", a.name, "warn"))
             if wrong == 2:
-                out.append(Finding("estimator", ERROR, f"on-board estimate {nearest:.2f} m from every mocap pose of "
-                                   f"the last {ESTIMATE_HISTORY_S:g} s: the estimator no longer follows extpos, and a "
-                                   "landing would fly wherever the estimate goes: motors off", a.name, "stop"))
+                out.append(Finding("estimator", ERROR, f"on-board estimate {nearest:.2f} m from {what}: the "
+                                   "estimator no longer follows extpos, and a landing would fly wherever the "
+                                   "estimate goes: motors off", a.name, "stop"))
         return out
 
     def _link_quality(self, agents: list[DroneAgent], states: dict[str, DroneState]) -> list[Finding]:

@@ -145,6 +145,10 @@ class DroneState:
     yaw_deg: float | None = None
     """Estimated yaw (`stateEstimate.yaw`) in DEGREES, as the firmware logs it; None until the first status log
     packet. Compare it with the mocap's yaw before take-off: position-only extpos never corrects it."""
+    estimate_stamp_s: float | None = None
+    """When the drone made the telemetry of `telemetry_stamp_s` (its log timestamp on the host's `time.monotonic()`
+    clock: rpf_fly/radio/telemetry_clock.py); None where the backend cannot tell. Compare the estimate with the
+    mocap pose of this time: a packet may wait in the radio for hundreds of milliseconds."""
 
 
 @runtime_checkable

@@ -68,6 +68,7 @@ from cflib.crtp.radiodriver import RadioDriver
 
 from rpf_fly.radio.outbox import Action, Outbox, SenderPool
 from rpf_fly.radio.schedule import LinkCount
+from rpf_fly.radio.telemetry_clock import TelemetryClock
 
 from .backend import (
     BatteryState,
@@ -123,6 +124,9 @@ class _Drone:
     position: Vec3 | None = None
     yaw_deg: float | None = None
     stamp_s: float | None = None
+    measured_s: float | None = None
+    """When the last status packet's values were true (its firmware timestamp mapped by `clock`)."""
+    clock: TelemetryClock = field(default_factory=TelemetryClock)
     streaming: bool = False
     last_setpoint: tuple[float, float, float, float] | None = None
     """x, y, z (m), yaw (deg) of the last streamed setpoint."""
@@ -435,8 +439,9 @@ class CflibBackend:
 
     # cflib callbacks (cflib threads) --------------------------------------------------------------------------
 
-    def _on_status(self, name: str, _timestamp: int, data: dict[str, float], _config: LogConfig) -> None:
+    def _on_status(self, name: str, timestamp: int, data: dict[str, float], _config: LogConfig) -> None:
         drone = self._drones[name]
+        arrived = time.monotonic()
         with self._lock:
             drone.vbat_v = float(data["pm.vbat"])
             drone.pm_state = int(data["pm.state"])
@@ -444,7 +449,8 @@ class CflibBackend:
             drone.position = (float(data["stateEstimate.x"]), float(data["stateEstimate.y"]),
                               float(data["stateEstimate.z"]))
             drone.yaw_deg = float(data["stateEstimate.yaw"])
-            drone.stamp_s = time.monotonic()
+            drone.stamp_s = arrived
+            drone.measured_s = drone.clock.measured_at(int(timestamp), arrived)
         drone.first_status.set()
 
     def _on_quality(self, name: str, quality: float) -> None:
@@ -533,6 +539,7 @@ class CflibBackend:
                 position_m=d.position,
                 telemetry_stamp_s=d.stamp_s,
                 yaw_deg=d.yaw_deg,
+                estimate_stamp_s=d.measured_s,
             )
 
     def states(self) -> dict[str, DroneState]:

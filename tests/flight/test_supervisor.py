@@ -262,3 +262,69 @@ def test_an_orientation_flip_in_flight_is_a_warning_once_and_its_end_is_said():
     assert [(f.drone, f.level, f.response) for f in found] == [("cf2", WARNING, "warn"), ("cf2", INFO, "warn")]
     assert "turned 180 deg" in found[0].message and "not used in flight" in found[0].message
     assert not [a for a in agents.values() if a.phase != DronePhase.PLANNING]  # it flies on
+
+
+def fly_with_telemetry(estimate_of, truth_of, stamp_lag_s: float, seconds: float = 1.2,  # type: ignore[no-untyped-def]
+                       stamped: bool = True):
+    """cf1's truth ``truth_of(t)`` seen by mocap at 100 Hz, its status telemetry at 10 Hz carrying the estimate
+    ``estimate_of(t)`` made ``stamp_lag_s`` before it arrives (with its firmware timestamp on the host clock unless
+    not ``stamped``); the estimator findings and their times."""
+    _, agents, tracker, supervisor = setup()
+    found = []
+    states = {n: state(n, 0.0) for n in agents}
+    for k in range(int(seconds * 100) + 1):
+        t = k / 100
+        see(tracker, k + 1, t, {**POSITIONS, "cf1": truth_of(t)})
+        if k % 10 == 5:
+            made = t - stamp_lag_s
+            states["cf1"] = replace(state("cf1", t), position_m=estimate_of(made),
+                                    estimate_stamp_s=made if stamped else None)
+        found += [(t, f) for f in supervisor.check(t, agents.values(), tracker, states) if f.kind == "estimator"]
+    return found
+
+
+def moving(t: float) -> tuple[float, float, float]:
+    return (-1.0 + 0.5 * t, -0.6, 0.5)
+
+
+def test_a_late_estimate_of_a_moving_drone_is_not_taken_for_a_wrong_one():
+    """Telemetry 0.35 s late on a full radio: the estimate is 0.18 m behind the newest pose (a warning) but exactly
+    where mocap saw the drone when the estimate was made: no motors off."""
+    found = fly_with_telemetry(moving, moving, stamp_lag_s=0.35)
+    assert [f.response for _, f in found] == ["warn"], found
+
+
+def test_a_wrong_estimate_is_stopped_by_the_mocap_pose_of_its_own_time():
+    """An estimator that diverged at t = 0.2 s: the controller holds the estimate on the track while the true drone
+    drifts off at 0.57 m/s. With the telemetry's timestamps it is stopped within 0.3 s; without them (the
+    check had to find the estimate far from every pose of the last 0.5 s) it took 0.55 s more, 0.6 m off its track
+    in the random campaign's u-trap flight."""
+    def truth(t: float) -> tuple[float, float, float]:
+        x, y, z = moving(t)
+        return (x, y - 0.57 * max(0.0, t - 0.2), z)
+
+    found = fly_with_telemetry(moving, truth, stamp_lag_s=0.01)
+    stops = [(t, f) for t, f in found if f.response == "stop"]
+    assert stops and stops[0][0] - 0.2 <= 0.4, found  # 0.1 m at 0.57 m/s, then two 10 Hz samples
+    assert "the mocap pose of its own time" in stops[0][1].message
+    # without stamps (a backend that cannot tell when its telemetry was made) only the old rule can stop it: later
+    unstamped = [t for t, f in fly_with_telemetry(moving, truth, 0.01, 1.5, stamped=False) if f.response == "stop"]
+    assert unstamped and unstamped[0] - stops[0][0] > 0.15, (unstamped, stops)
+
+
+def test_mocap_is_said_back_only_when_a_pose_is_back_not_when_the_blind_drones_land():
+    _, agents, tracker, supervisor = setup()
+    states = {n: state(n, 0.0) for n in agents}
+    see(tracker, 1, 0.0, POSITIONS)
+    said = []
+    for t in (0.3, 1.0):
+        said += [f for f in supervisor.check(t, agents.values(), tracker, states) if f.kind == "mocap_lost"]
+    assert [f.response for f in said] == ["hold"]
+    for agent in agents.values():  # blind for pose_lost_land_s: each drone lands
+        agent.set_phase(DronePhase.LANDING, 1.6)
+    landing = [f for t in (1.6, 1.8) for f in supervisor.check(t, agents.values(), tracker, states)
+               if f.kind == "mocap_lost"]
+    assert landing == []  # before 2026-12-02: "mocap poses are back", with none back
+    see(tracker, 2, 2.0, POSITIONS)
+    back = [f for f in supervisor.check(2.0, agents.values(), tracker, states) if f.kind == "mocap_lost"]
+    assert [(f.level, f.message) for f in back] == [(2, "mocap poses are back")]  # INFO
