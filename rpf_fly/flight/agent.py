@@ -155,6 +155,8 @@ class DroneAgent:
         self.arrived_at_s: Optional[float] = None
         self.stale_since_s: Optional[float] = None
         self.landing_until_s: Optional[float] = None
+        self.touchdown_s: Optional[float] = None
+        """When its landing's descent ends (the land command's duration from when it was sent)."""
         self._worker: Optional[PlannerWorker] = None
         self.planned_from: complex = self.start
         """The reference its newest planning step planned from (its own position in that view), for the log:

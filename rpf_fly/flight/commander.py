@@ -180,17 +180,20 @@ class Commander:
             return self.backend.send_extpos(agent.name, position)
         return self.backend.send_extpose(agent.name, position, quaternion)
 
-    def land(self, agent: DroneAgent, reason: str, level: int = WARNING) -> bool:
-        """High-level landing of an airborne drone (once; from any thread). A land command that cannot be sent is
-        followed by an emergency stop: a drone nobody can land must not fly on."""
+    def land(self, agent: DroneAgent, reason: str, level: int = WARNING, duration_s: Optional[float] = None) -> bool:
+        """High-level landing of an airborne drone (once; from any thread), over ``duration_s`` (the mission's
+        ``land_s`` unless given: a drone without mocap lands faster, docs/flight.md). A land command that cannot be
+        sent is followed by an emergency stop: a drone nobody can land must not fly on."""
+        land_s = self.land_s if duration_s is None else duration_s
         with self._locks[agent.name]:
             if not agent.phase.airborne or agent.phase == DronePhase.LANDING:
                 return False
             if agent.outcome is None:
                 agent.outcome = FlightOutcome.REACHED if agent.phase == DronePhase.ARRIVED else FlightOutcome.LANDED_EARLY
             self._set(agent, DronePhase.LANDING, reason, level)
-            agent.landing_until_s = self.clock() + self.land_s + self.land_settle_s
-            if self.backend.land(agent.name, 0.0, self.land_s):
+            agent.landing_until_s = self.clock() + land_s + self.land_settle_s
+            agent.touchdown_s = self.clock() + land_s
+            if self.backend.land(agent.name, 0.0, land_s):
                 return True
             self.events.emit(ERROR, "error", "land command failed: emergency stop", agent.name)
             self._emergency(agent)

@@ -883,7 +883,7 @@ class FlightLoop:
                 elif f.response == "stop":
                     self.commander.emergency_stop(f.message, [agent.name], wait_s=Commander.LOOP_STOP_WAIT_S)
                 elif f.response == "land":
-                    self.commander.land(agent, f.message)
+                    self.commander.land(agent, f.message, duration_s=f.land_s)
                 elif f.response == "hold":
                     pose = self.tracker.get(agent.name)
                     self.commander.hold(agent, pose.xy if pose is not None else agent.reference, now, f.kind)

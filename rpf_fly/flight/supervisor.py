@@ -130,6 +130,35 @@ def _pose_at(history: deque[tuple[float, tuple[float, float, float]]],
     return history[-1][1]
 
 
+BLIND_DRIFT_M_S2 = 0.1
+"""How fast a drone without mocap may drift off where it believes it is: its estimator dead-reckons on a biased
+accelerometer, about 0.5 a t^2 after t s blind. The dry run's drones have 0.08 m/s^2 (4.5 cm median after 1 s, 17
+cm after 2 s: rpf_fly/emulator/fake_vehicle.py); a real Crazyflie without a position source is no better. An
+assumption with a margin over the emulator's figure, not measured on hardware."""
+BODY_RADIUS_M = 0.065
+"""A Crazyflie 2.1's rotor-tip radius: two bodies touch at 0.13 m centre to centre, a body touches an obstacle at
+0.065 m from its surface (the dry run's contact figures)."""
+BLIND_LAND_S_PER_M = 2.0
+"""A drone that lands without mocap lands over this many seconds per metre of height (at least `BLIND_LAND_MIN_S`,
+at most the mission's ``land_s``): every second of a blind landing is drift. The high-level commander's landing is a
+7th-order polynomial whose peak speed is 2.19 x its mean: 2 s/m keeps it at the firmware's 1.1 m/s vertical limit
+(0.5 m: 1 s instead of the mission's 2 s)."""
+BLIND_LAND_MIN_S = 0.6
+LAND_EARLY_SHARE = 0.8
+"""A blind drone lands before ``pose_lost_land_s`` when a landing begun any later would end with its possible drift
+over this share of the room it has (docs/flight.md, "Blind")."""
+
+
+def blind_drift_m(blind_s: float) -> float:
+    """How far a drone blind for ``blind_s`` may have drifted (`BLIND_DRIFT_M_S2`)."""
+    return 0.5 * BLIND_DRIFT_M_S2 * blind_s * blind_s
+
+
+def blind_land_s(height_m: float, land_s: float) -> float:
+    """How long a drone at ``height_m`` without mocap takes to land (`BLIND_LAND_S_PER_M`)."""
+    return min(land_s, max(BLIND_LAND_MIN_S, BLIND_LAND_S_PER_M * height_m))
+
+
 Response = Literal["warn", "hold", "land", "lost", "resume", "crashed", "stop"]
 
 
@@ -142,6 +171,8 @@ class Finding:
     message: str
     drone: Optional[str]
     response: Response
+    land_s: Optional[float] = None
+    """For ``land``: how long the landing takes (None: the mission's ``land_s``)."""
 
 
 class Supervisor:
@@ -172,6 +203,8 @@ class Supervisor:
         """drone -> (where its setpoints should have brought it, when)."""
         self._off_track_warned: set[str] = set()
         self._late_mocap = False
+        self._blind_landed: set[str] = set()
+        self._blind_stopped: set[str] = set()
 
     def check(
         self, now_s: float, agents: Iterable[DroneAgent], tracker: PoseTracker, states: dict[str, DroneState],
@@ -191,6 +224,7 @@ class Supervisor:
         findings += self._geofence(agents, tracker)
         foreign = [n for n in others if (p := tracker.get(n)) is not None and p.position[2] > ON_FLOOR_Z_M]
         findings += self._separation(agents + uncommanded, tracker, foreign)
+        findings += self._blind(now_s, agents, uncommanded, foreign, tracker)
         findings += self._obstacles(agents, tracker)
         findings += self._battery(agents, states)
         findings += self._telemetry(now_s, agents, states)
@@ -246,7 +280,10 @@ class Supervisor:
                     out.append(Finding("pose_late", WARNING, f"no pose for {age * 1e3:.0f} ms (occluded?): "
                                        "flying on its last one", a.name, "warn"))
             if age > s.pose_lost_land_s:
-                out.append(Finding("pose_lost", ERROR, f"no valid pose for {age:.1f} s: landing", a.name, "land"))
+                pose = tracker.get(a.name)
+                duration = blind_land_s(pose.position[2] if pose is not None else 1.0, self.mission.flight.land_s)
+                out.append(Finding("pose_lost", ERROR, f"no valid pose for {age:.1f} s: landing (in {duration:.1f} s: "
+                                   "without mocap its estimate drifts)", a.name, "land", duration))
             elif age > s.pose_timeout_s:
                 if a.name not in self._stale:
                     self._stale.add(a.name)
@@ -255,6 +292,73 @@ class Supervisor:
                 self._stale.discard(a.name)
                 out.append(Finding("pose_stale", INFO, "pose fresh again: resuming", a.name, "resume"))
         return out
+
+    def _blind(self, now_s: float, agents: list[DroneAgent], uncommanded: list[DroneAgent], foreign: list[str],
+               tracker: PoseTracker) -> list[Finding]:
+        """A drone without a fresh pose flies on its estimate, which drifts (`blind_drift_m`). Its room: the
+        clearance of its last pose to obstacle surfaces and the arena's edge (plus r, the geofence's allowance), and
+        half its distance to another blind drone (both drift) or all of it to one mocap sees, less the bodies'
+        radii. Land now (fast: `blind_land_s`) when a landing begun later could not end inside
+        `LAND_EARLY_SHARE` of it; cut the motors when even the landing under way cannot end inside it and a fall
+        begun later would not either (a fall takes sqrt(2 z / g)). A drone far from everything keeps the hold of
+        ``pose_timeout_s`` and the landing of ``pose_lost_land_s``."""
+        s, out = self.safety, []
+        land_s = self.mission.flight.land_s
+        ages = {a.name: tracker.age(a.name, now_s) for a in agents + uncommanded}
+        ages.update({n: tracker.age(n, now_s) for n in foreign})
+        for a in agents:
+            age = ages[a.name]
+            pose = tracker.get(a.name)
+            if pose is None or age <= s.pose_timeout_s:
+                self._blind_landed.discard(a.name)
+                continue
+            if a.name in self._blind_stopped:
+                continue
+            room, what = self._room(a.name, pose.position, ages, tracker, agents + uncommanded, foreign)
+            height = max(0.0, pose.position[2])
+            if a.phase == DronePhase.LANDING:
+                if a.touchdown_s is None or a.touchdown_s <= now_s:
+                    continue  # its descent has ended: down, as far as anything here knows
+                touchdown = age + a.touchdown_s - now_s
+            else:
+                touchdown = age + blind_land_s(height, land_s)
+            fall = math.sqrt(2.0 * height / 9.81)
+            if blind_drift_m(touchdown) > room and blind_drift_m(age + fall) >= room:
+                self._blind_stopped.add(a.name)
+                out.append(Finding("pose_lost", ERROR, f"no valid pose for {age:.1f} s, {room:.2f} m of room to "
+                                   f"{what}: its estimate may drift it {blind_drift_m(touchdown):.2f} m before a "
+                                   "landing could end: motors off", a.name, "stop"))
+            elif (a.phase != DronePhase.LANDING and a.name not in self._blind_landed
+                  and blind_drift_m(touchdown) >= LAND_EARLY_SHARE * room):
+                self._blind_landed.add(a.name)
+                duration = blind_land_s(height, land_s)
+                out.append(Finding("pose_lost", ERROR, f"no valid pose for {age:.1f} s, {room:.2f} m of room to "
+                                   f"{what}: landing now (in {duration:.1f} s), before its estimate's drift could "
+                                   "take it there", a.name, "land", duration))
+        return out
+
+    def _room(self, name: str, position: tuple[float, float, float], ages: dict[str, float], tracker: PoseTracker,
+              airborne: list[DroneAgent], foreign: list[str]) -> tuple[float, str]:
+        """How far a blind drone at ``position`` may drift before it touches something, and what."""
+        x, y = position[0], position[1]
+        arena = self.mission.arena
+        best = min(x - arena.x[0], arena.x[1] - x, y - arena.y[0], arena.y[1] - y) + self.r
+        what = "the arena's edge"
+        if not self.obstacles.is_empty:
+            clearance = float(self.obstacles.signed_distance(complex(x, y))) - BODY_RADIUS_M
+            if clearance < best:
+                best, what = clearance, "an obstacle"
+        blind = self.safety.pose_timeout_s
+        for other in [o.name for o in airborne if o.name != name] + list(foreign):
+            pose = tracker.get(other)
+            if pose is None or pose.position[2] <= ON_FLOOR_Z_M:
+                continue
+            gap = math.dist(position, pose.position) - 2.0 * BODY_RADIUS_M
+            if ages.get(other, 0.0) > blind:
+                gap /= 2.0
+            if gap < best:
+                best, what = gap, other
+        return best, what
 
     def _geofence(self, agents: list[DroneAgent], tracker: PoseTracker) -> list[Finding]:
         arena = self.mission.arena

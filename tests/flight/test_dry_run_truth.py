@@ -143,7 +143,7 @@ def test_a_crash_in_a_dry_run_is_in_the_truth(tmp_path):
     flight = fly(mission, tmp_path, when_flying=push)
     snap = flight.snapshots["cf2"]
     assert snap.crashed and snap.crash_reason == "obstacle" and snap.locked and snap.position[2] == 0.0
-    assert flight.report.outcomes["cf1"] == flight.report.outcomes["cf3"] == FlightOutcome.REACHED
+    assert flight.report.outcomes["cf1"] == flight.report.outcomes["cf3"] == FlightOutcome.REACHED, flight.report.reasons
     truth = [m.data for m in flight.log.messages("/truth/cf2")]
     crashed = [d["crashed"] for d in truth]
     first = crashed.index(True)

@@ -328,3 +328,55 @@ def test_mocap_is_said_back_only_when_a_pose_is_back_not_when_the_blind_drones_l
     see(tracker, 2, 2.0, POSITIONS)
     back = [f for f in supervisor.check(2.0, agents.values(), tracker, states) if f.kind == "mocap_lost"]
     assert [(f.level, f.message) for f in back] == [(2, "mocap poses are back")]  # INFO
+
+
+def fly_blind(cf3_at: tuple[float, float, float], seconds: float = 3.0):  # type: ignore[no-untyped-def]
+    """cf3 loses its mocap at t = 0 (the others keep theirs); a ``land`` finding lands it as the loop would
+    (phase LANDING, touchdown after the finding's duration). The blind findings of cf3, with their times."""
+    _, agents, tracker, supervisor = setup()
+    positions = {**POSITIONS, "cf3": cf3_at}
+    states = {n: state(n, 0.0) for n in agents}
+    see(tracker, 1, 0.0, positions)
+    found = []
+    for k in range(1, int(seconds * 100)):
+        t = k / 100
+        see(tracker, k + 1, t, {n: p for n, p in positions.items() if n != "cf3"})
+        for f in supervisor.check(t, agents.values(), tracker, states):
+            if f.drone == "cf3" and f.kind == "pose_lost":
+                found.append((t, f))
+                cf3 = agents["cf3"]
+                if f.response == "land" and cf3.phase != DronePhase.LANDING:
+                    cf3.set_phase(DronePhase.LANDING, t)
+                    cf3.touchdown_s = t + (f.land_s or 1.0)
+                elif f.response == "stop":
+                    return found
+    return found
+
+
+def test_a_blind_drone_far_from_everything_holds_then_lands_fast():
+    """0.6 m from its neighbours: the hold of pose_timeout_s, the landing at pose_lost_land_s (1.5 s), over 1 s
+    from 0.5 m (2 s per metre) rather than the mission's land_s; no motors off: its drift when down (2.5 s
+    blind: 0.31 m at most) stays inside its room."""
+    found = fly_blind((-1.0, 0.6, 0.5))
+    assert [(f.response, f.land_s) for _, f in found][:1] == [("land", 1.0)] and found[0][0] > 1.5, found
+    assert not [f for _, f in found if f.response == "stop"]
+
+
+def test_a_blind_drone_near_an_obstacle_lands_at_once():
+    """0.2 m from the pillar's surface (room 0.135 m for its body): a landing begun at 1.5 s would end 2.5 s blind,
+    0.31 m of possible drift; it lands at the last moment a 1 s landing ends within 80 % of its room (0.47 s
+    blind: down after 1.47 s, 0.11 m), a second before pose_lost_land_s."""
+    found = fly_blind((0.0, 0.6, 0.5))
+    assert found and found[0][1].response == "land" and 0.4 <= found[0][0] <= 0.5, found
+    assert "an obstacle" in found[0][1].message
+    assert not [f for _, f in found if f.response == "stop"]
+
+
+def test_a_blind_drone_that_a_landing_cannot_save_has_its_motors_cut():
+    """0.12 m from the pillar's surface (room 0.055 m): even a landing begun at once would end with 0.08 m of
+    possible drift; it lands, and its motors are cut once a fall (0.32 s from 0.5 m) begun later would end past
+    its room: dropped where it is rather than let drift into the pillar."""
+    found = fly_blind((0.0, 0.68, 0.5))
+    responses = [(f.response, round(t, 2)) for t, f in found]
+    assert responses[0][0] == "land" and responses[-1][0] == "stop", responses
+    assert 0.6 <= responses[-1][1] <= 0.8, responses  # drift(age + 0.32 s) reaches 0.055 m at about 0.73 s
