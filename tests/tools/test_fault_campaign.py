@@ -11,10 +11,18 @@ def load_campaign():  # type: ignore[no-untyped-def]
 
 
 def test_an_occlusion_on_lab_3_passes_the_campaigns_judge(tmp_path):
+    """cf2 is occluded for 1 s with 0.23 m of room to an obstacle: the blind rule (docs/flight.md, "Blind") may
+    land it before its estimate's possible drift could take it there; whatever it does, the others reach, the exit
+    code says whether every drone did, and a landing has its reason in an event."""
     campaign = load_campaign()
     verdict = campaign.judge("occlusion", ROOT / "missions" / "lab-3.yaml", tmp_path)
     assert verdict.passed, verdict.failures
-    assert verdict.exit_code == 0 and set(verdict.outcomes.values()) == {"reached"}
+    others = {name: outcome for name, outcome in verdict.outcomes.items() if name != verdict.drone}
+    assert len(others) == 2 and set(others.values()) == {"reached"}
+    every_drone_reached = verdict.outcomes[verdict.drone] == "reached"
+    assert verdict.exit_code == (0 if every_drone_reached else 1)
+    if not every_drone_reached:
+        assert any("pose_lost" in e and "landing now" in e for e in verdict.events), verdict.events
     assert any("pose_stale" in e for e in verdict.events)
     assert verdict.min_separation_m is not None and verdict.min_separation_m > 0.13
 
