@@ -4,6 +4,7 @@
     python tools/fault_campaign.py --kinds occlusion,gust --missions lab-3 --out -
     python tools/fault_campaign.py --planner rpf3 --out docs/fault-campaign-rpf3.md   # the missions flown by RPF-3
     python tools/fault_campaign.py --extpose --kinds orientation_flip,pose_jump --out -   # poses sent as extpose
+    python tools/fault_campaign.py --random 20 --seed 10 --faults-per-run 2   # two faults of different kinds a flight
 
 Each run is ``rpf-fly fly MISSION --dry-run --faults F --no-console --log L`` in a process of its own, with a
 schedule of ONE fault (the kind's default parameters below) naming the mission's middle drone. The verdict does
@@ -18,6 +19,8 @@ not trust the stack: it reads the flight log with the mcap library itself and ju
   antipodal drone), which is therefore not asked to reach its goal;
 - the fault leaves an event of level warning or above naming the drone (or mocap / loop) within 1 s of its effect
   (the injection's own info event marks the effect; power-on faults: before the planning phase);
+- with several faults a flight (``--faults-per-run``, random campaigns): the drones no fault names reach their goals
+  (none asked when a swarm fault is among them), and each fault needs its own warning after its own injection;
 - the log reviews (``rpf-fly review --json``); the process exits by itself within the flight timeout plus 10 s
   of its planning phase, 0 when every drone reached, 1 otherwise, and never with a traceback.
 
@@ -95,12 +98,22 @@ class Verdict:
     """The random campaign's draw (planner, at_s, the fault's parameters); empty: the kind's `DEFAULTS`."""
 
 
+def fault_fields(kind: str, drone: Optional[str], params: Optional[dict[str, Any]] = None,
+                 at_s: float = AT_S) -> dict[str, Any]:
+    """One fault's schedule entry: the kind's `DEFAULTS` unless ``params`` are given (the random campaign's)."""
+    return {"kind": kind, **({} if kind in SWARM_KINDS else {"drone": drone}),
+            **({} if kind in POWER_ON else {"at_s": at_s}), **(DEFAULTS[kind] if params is None else params)}
+
+
 def schedule(kind: str, drone: Optional[str], params: Optional[dict[str, Any]] = None,
              at_s: float = AT_S) -> str:
-    """The one-fault schedule: the kind's `DEFAULTS` unless ``params`` are given (the random campaign's)."""
-    fields = {"kind": kind, **({} if kind in SWARM_KINDS else {"drone": drone}),
-              **({} if kind in POWER_ON else {"at_s": at_s}), **(DEFAULTS[kind] if params is None else params)}
-    return "faults:\n  - " + json.dumps(fields) + "\n"
+    """The one-fault schedule."""
+    return schedule_of([fault_fields(kind, drone, params, at_s)])
+
+
+def schedule_of(faults: list[dict[str, Any]]) -> str:
+    """A schedule of several faults (entries of `fault_fields`)."""
+    return "faults:\n" + "".join(f"  - {json.dumps(f)}\n" for f in faults)
 
 
 def read_log(path: Path) -> tuple[dict[str, list[tuple[int, dict]]], dict[str, str]]:
@@ -118,20 +131,32 @@ def judge(kind: str, mission_path: Path, workdir: Path, timeout_extra_s: float =
           tag: str = "") -> Verdict:
     """Fly ``mission_path`` with one fault of ``kind`` (on the middle drone unless ``drone_index``; the kind's
     `DEFAULTS` unless ``params``; at ``at_s`` of the planning phase) and judge the flight on its truth."""
+    names = [d.name for d in load_mission(mission_path).drones]
+    drone = None if kind in SWARM_KINDS else names[len(names) // 2 if drone_index is None else drone_index]
+    return judge_faults([fault_fields(kind, drone, params, at_s)], mission_path, workdir, timeout_extra_s, tag)
+
+
+def judge_faults(faults: list[dict[str, Any]], mission_path: Path, workdir: Path, timeout_extra_s: float = 10.0,
+                 tag: str = "") -> Verdict:
+    """Fly ``mission_path`` with the schedule ``faults`` (entries of `fault_fields`; several at once: a compound
+    failure) and judge it as one fault is judged, over every fault: the drones no fault names reach their goals
+    (unless a swarm fault is among them), a drone any fault makes unsafe to fly stays down, and each fault leaves
+    its own warning within 1 s of its injection."""
     mission = load_mission(mission_path)
     names = [d.name for d in mission.drones]
-    drone = None if kind in SWARM_KINDS else names[len(names) // 2 if drone_index is None else drone_index]
-    verdict = Verdict(kind, mission.name, drone)
-    stem = f"{mission.name}-{kind}{tag}"
-    faults = workdir / f"{stem}.yaml"
-    faults.write_text(schedule(kind, drone, params, at_s))
+    kinds = [f["kind"] for f in faults]
+    named = sorted({f["drone"] for f in faults if f.get("drone")})
+    verdict = Verdict("+".join(kinds), mission.name, ",".join(named) if named else None)
+    stem = f"{mission.name}-{'+'.join(kinds)}{tag}"
+    schedule_file = workdir / f"{stem}.yaml"
+    schedule_file.write_text(schedule_of(faults))
     log = workdir / f"{stem}.mcap"
     started = time.monotonic()
     limit = mission.flight.timeout_s + 60.0 + timeout_extra_s  # connect, preflight and take-off come first
     try:
         done = subprocess.run([sys.executable, "-m", "rpf_fly", "fly", str(mission_path), "--dry-run", "--faults",
-                               str(faults), "--no-console", "--log", str(log)], capture_output=True, text=True,
-                              timeout=limit, cwd=workdir)
+                               str(schedule_file), "--no-console", "--log", str(log)], capture_output=True,
+                              text=True, timeout=limit, cwd=workdir)
     except subprocess.TimeoutExpired:
         verdict.failures.append(f"did not exit within {limit:.0f} s")
         return verdict
@@ -156,8 +181,6 @@ def judge(kind: str, mission_path: Path, workdir: Path, timeout_extra_s: float =
 
     events = [(t, m) for t, m in topics.get("/events", [])]
     flying_at = next((t for t, m in events if m.get("message") == "swarm: flying"), None)
-    injected = next((t for t, m in events if m.get("file") == "fault" and m.get("message", "").startswith("injected")),
-                    None)
     if flying_at is not None:
         end_ns = max(t for t, _ in events)
         if (end_ns - flying_at) / 1e9 > mission.flight.timeout_s + timeout_extra_s + mission.flight.land_s + 5:
@@ -199,47 +222,72 @@ def judge(kind: str, mission_path: Path, workdir: Path, timeout_extra_s: float =
     # rule). In a circle swap that is the antipodal drone. Those are judged as the named drone is: on the floor.
     kept_down: set[str] = set()
     notes: list[str] = []
-    unsafe = kind in UNSAFE_TO_FLY
-    if kind == "start_offset" and params is not None:  # within the tolerance the drone flies from where it stands
-        unsafe = math.hypot(*params["offset_m"][:2]) > mission.safety.start_tolerance_m
-    if unsafe and drone is not None:
+    unsafe_drones = {f["drone"] for f in faults if f.get("drone") and _unsafe_to_fly(f, mission)}
+    for drone in sorted(unsafe_drones):
         spot = truth[drone][0][1]["position"]
         for d in mission.drones:
-            if d.name != drone and min(math.dist(p, (spot["x"], spot["y"])) for p in (d.start, d.goal)) < 2 * r:
+            if d.name not in unsafe_drones and min(math.dist(p, (spot["x"], spot["y"])) for p in (d.start, d.goal)) \
+                    < 2 * r:
                 kept_down.add(d.name)
-    if kind not in SWARM_KINDS:
-        missed = [n for n in names if n != drone and n not in kept_down and not reached[n]]
+                notes.append(f"{d.name} kept down: its start or goal is within 2r of {drone}")
+    if not any(k in SWARM_KINDS for k in kinds):
+        missed = [n for n in names if n not in named and n not in kept_down and not reached[n]]
         if missed:
             fail("did not reach their goals: " + ", ".join(missed))
-    for n in sorted(kept_down | ({drone} if unsafe and drone is not None else set())):
+    for n in sorted(kept_down | unsafe_drones):
         if max(m["position"]["z"] for _, m in truth[n]) > ON_FLOOR_M or any(m["motors"] for _, m in truth[n]):
             fail(f"{n} left the floor")
-        elif n in kept_down:
-            notes.append(f"{n} kept down: its start or goal is within 2r of {drone}")
     expected = 0 if all(reached.values()) else 1
     if done.returncode != expected:
         fail(f"exit code {done.returncode}, expected {expected}")
-    # --- the stack's own word on it
-    target = drone if drone is not None else ("loop" if kind == "loop_stall" else "mocap")
+    # --- the stack's own word on it: each fault its own warning
+    for f in faults:
+        found = _warnings_for(f, events, flying_at)
+        if found is None:
+            fail(f"{f['kind']} was never injected")
+            continue
+        verdict.events += [f"{m.get('file')}: {m.get('message')}" for m in found][:3]
+        if not found:
+            fail(f"no warning naming {_target(f)} within {EVENT_WINDOW_S:g} s of its {f['kind']}")
+    verdict.events += notes
+    verdict.passed = not verdict.failures
+    return verdict
+
+
+def _unsafe_to_fly(fault: dict[str, Any], mission: Any) -> bool:
+    """A fault that must keep its drone on the floor (a start offset only beyond the mission's tolerance: within
+    it the drone flies from where it stands)."""
+    if fault["kind"] == "start_offset":
+        return math.hypot(*fault["offset_m"][:2]) > mission.safety.start_tolerance_m
+    return fault["kind"] in UNSAFE_TO_FLY
+
+
+def _target(fault: dict[str, Any]) -> str:
+    """What a fault's warning must name: its drone, or ``mocap`` / ``loop`` for a swarm fault."""
+    return fault.get("drone") or ("loop" if fault["kind"] == "loop_stall" else "mocap")
+
+
+def _warnings_for(fault: dict[str, Any], events: list[tuple[int, dict]],
+                  flying_at: Optional[int]) -> Optional[list[dict]]:
+    """The warnings (level >= warning) naming the fault's target: before the planning phase for a power-on fault,
+    else within `EVENT_WINDOW_S` of the fault's own injection event; None when it was never injected."""
+    drone, target = fault.get("drone"), _target(fault)
 
     def names_target(m: dict) -> bool:
-        if drone is not None:
+        if fault["kind"] not in SWARM_KINDS:
             return m.get("name") == drone
         return target in m.get("file", "") or target in m.get("message", "").lower()
 
-    if kind in POWER_ON:
-        window = [(t, m) for t, m in events if flying_at is None or t <= flying_at]
-    elif injected is None:
-        window = []
-        fail("the fault was never injected")
+    if fault["kind"] in POWER_ON:
+        window = [m for t, m in events if flying_at is None or t <= flying_at]
     else:
-        window = [(t, m) for t, m in events if injected <= t <= injected + EVENT_WINDOW_S * 1e9]
-    found = [m for t, m in window if m.get("level", 0) >= 3 and names_target(m)]
-    verdict.events = [f"{m.get('file')}: {m.get('message')}" for m in found][:3] + notes
-    if not found:
-        fail(f"no warning naming {target} within {EVENT_WINDOW_S:g} s of the fault")
-    verdict.passed = not verdict.failures
-    return verdict
+        injected = next((t for t, m in events if m.get("file") == "fault"
+                         and m.get("message", "").startswith(f"injected {fault['kind']}")
+                         and (fault["kind"] in SWARM_KINDS or m.get("name") == drone)), None)
+        if injected is None:
+            return None
+        window = [m for t, m in events if injected <= t <= injected + EVENT_WINDOW_S * 1e9]
+    return [m for m in window if m.get("level", 0) >= 3 and names_target(m)]
 
 
 def _min_separation(truth: dict[str, list[tuple[int, dict]]]) -> Optional[float]:
@@ -347,9 +395,12 @@ def mission_path(name: str) -> Path:
 
 
 def random_campaign(runs: int, seed: int, missions: list[str], planners: list[str], workdir: Path,
-                    kinds: Optional[list[str]] = None, extpose: bool = False) -> list[Verdict]:
-    """``runs`` flights, each a mission, planner (``mission``: its own), fault kind (of ``kinds``, default all),
-    drone, time and parameters drawn from ``seed``; printed as they end with what reproduces them."""
+                    kinds: Optional[list[str]] = None, extpose: bool = False,
+                    faults_per_run: int = 1) -> list[Verdict]:
+    """``runs`` flights, each a mission, planner (``mission``: its own) and ``faults_per_run`` faults of different
+    kinds (of ``kinds``, default all), each with its drone, time and parameters drawn from ``seed``; printed as
+    they end with what reproduces them. One fault a run draws exactly what the campaigns before compound faults
+    drew, seed for seed."""
     rng = random.Random(seed)
     verdicts = []
     for run in range(runs):
@@ -361,15 +412,25 @@ def random_campaign(runs: int, seed: int, missions: list[str], planners: list[st
         if extpose:
             path = with_extpose(path, workdir)
         mission = load_mission(path)
-        kind = rng.choice(sorted(kinds or DEFAULTS))
-        params = random_fault(rng, kind, mission.safety.start_tolerance_m)
-        drone_index = rng.randrange(len(mission.drones))
-        at_s = round(rng.uniform(0.5, 6.0), 2)
-        v = judge(kind, path, workdir, drone_index=drone_index, params=params, at_s=at_s, tag=f"-r{run}")
-        v.params = {"planner": planner, "at_s": at_s, **params}
+        names = [d.name for d in mission.drones]
+        pool = sorted(kinds or DEFAULTS)
+        faults, draws = [], []
+        for _ in range(min(faults_per_run, len(pool))):
+            kind = rng.choice(pool)
+            pool.remove(kind)
+            params = random_fault(rng, kind, mission.safety.start_tolerance_m)
+            drone = names[rng.randrange(len(names))]
+            at_s = round(rng.uniform(0.5, 6.0), 2)
+            faults.append(fault_fields(kind, None if kind in SWARM_KINDS else drone, params, at_s))
+            draws.append({"kind": kind, **({} if kind in SWARM_KINDS else {"drone": drone}),
+                          **({} if kind in POWER_ON else {"at_s": at_s}), **params})
+        v = judge_faults(faults, path, workdir, tag=f"-r{run}")
+        v.params = {"planner": planner, **(draws[0] if len(draws) == 1 else {"faults": draws})}
+        v.params.pop("kind", None)
+        v.params.pop("drone", None)
         verdicts.append(v)
-        print(f"[{run}] {v.mission:12s} {planner:8s} {v.kind:21s} {v.drone or '-':5s} at {at_s:4.2f} "
-              f"{json.dumps(params)}  {'pass' if v.passed else 'FAIL'}  {'; '.join(v.failures)}", flush=True)
+        print(f"[{run}] {v.mission:12s} {planner:8s} {v.kind:21s} {v.drone or '-':5s} {json.dumps(draws)}  "
+              f"{'pass' if v.passed else 'FAIL'}  {'; '.join(v.failures)}", flush=True)
     return verdicts
 
 
@@ -388,6 +449,8 @@ def main() -> int:
     parser.add_argument("--seed", type=int, default=0, help="the random campaign's seed")
     parser.add_argument("--planners", default="mission,rpf3",
                         help="the random campaign's planners (mission: the mission's own)")
+    parser.add_argument("--faults-per-run", type=int, default=1, metavar="K",
+                        help="the random campaign's faults a flight: K of different kinds at once (compound)")
     parser.add_argument("--extpose", action="store_true",
                         help="fly each mission with radio.extpos: extpose (mocap's orientation reaches the "
                              "estimators, so a wrong one would turn them)")
@@ -399,7 +462,7 @@ def main() -> int:
                 else args.missions.split(",")
             kinds = None if args.kinds == parser.get_default("kinds") else args.kinds.split(",")
             verdicts = random_campaign(args.random, args.seed, missions, args.planners.split(","), Path(tmp), kinds,
-                                       extpose=args.extpose)
+                                       extpose=args.extpose, faults_per_run=args.faults_per_run)
         for mission_name in ([] if args.random else args.missions.split(",")):
             path = mission_path(mission_name)
             if args.planner:
@@ -420,9 +483,11 @@ def main() -> int:
         flown = f" --planner {args.planner}" if args.planner else ""
         if args.random:
             flown = f" --random {args.random} --seed {args.seed} --planners {args.planners}"
+            flown += f" --faults-per-run {args.faults_per_run}" if args.faults_per_run != 1 else ""
         flown += " --extpose" if args.extpose else ""
         header = (f"# Fault campaign{' with planner ' + args.planner if args.planner else ''}\n\n"
-                  f"`python tools/fault_campaign.py{flown}` (docs/faults.md): one fault a run, judged on "
+                  f"`python tools/fault_campaign.py{flown}` (docs/faults.md): "
+                  f"{'one fault' if args.faults_per_run == 1 else f'{args.faults_per_run} faults'} a run, judged on "
                   "the `/truth` topics by the tool's own reader.\n\n")
         Path(args.out).write_text(header + text)
     if args.json:

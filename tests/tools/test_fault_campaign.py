@@ -72,3 +72,40 @@ def test_every_random_draw_is_a_schedule_the_stack_accepts():
             assert fault.kind == kind
             if kind == "start_offset":
                 assert sum(v * v for v in params["offset_m"]) ** 0.5 > mission.safety.start_tolerance_m
+
+
+def test_a_compound_schedule_parses_and_each_fault_needs_its_own_warning():
+    """Several faults a run (`--faults-per-run`): the schedule holds them all, and the judge asks each for its own
+    warning after its own injection: one fault's warning does not stand in for another's."""
+    from rpf_fly.flight.faults import parse_faults
+    from rpf_fly.mission import load_mission
+
+    campaign = load_campaign()
+    mission = load_mission(ROOT / "missions" / "lab-3.yaml")
+    faults = [campaign.fault_fields("occlusion", "cf1", None, 2.0), campaign.fault_fields("gust", "cf3", None, 4.0),
+              campaign.fault_fields("blackout", None, None, 5.0)]
+    parsed = parse_faults(campaign.schedule_of(faults), "compound.yaml", mission)
+    assert [(f.kind, f.drone) for f in parsed] == [("occlusion", "cf1"), ("gust", "cf3"), ("blackout", None)]
+
+    def event(t_s: float, level: int, file: str, message: str, name: str = "") -> tuple[int, dict]:
+        return int(t_s * 1e9), {"level": level, "file": file, "message": message, "name": name}
+
+    events = [event(2.0, 1, "fault", "injected occlusion", "cf1"), event(2.3, 3, "supervisor", "pose stale", "cf1"),
+              event(4.0, 1, "fault", "injected gust", "cf3"), event(4.2, 3, "supervisor", "pose stale", "cf1"),
+              event(6.5, 3, "supervisor", "mocap_lost: no fresh mocap pose", "")]
+    occlusion, gust, blackout = faults
+    assert [m["message"] for m in campaign._warnings_for(occlusion, events, 0)] == ["pose stale"]  # noqa: SLF001
+    assert campaign._warnings_for(gust, events, 0) == []  # noqa: SLF001 - cf1's warning is not cf3's
+    assert campaign._warnings_for(blackout, events, 0) is None  # noqa: SLF001 - never injected
+
+
+def test_two_faults_at_once_on_lab_3_are_judged_on_the_truth(tmp_path):
+    """A compound run flown and judged end to end: an occlusion of cf1 and a gust on cf3 in the same flight."""
+    campaign = load_campaign()
+    faults = [campaign.fault_fields("occlusion", "cf1", {"duration_s": 0.5}, 2.0),
+              campaign.fault_fields("gust", "cf3", None, 3.0)]
+    verdict = campaign.judge_faults(faults, ROOT / "missions" / "lab-3.yaml", tmp_path)
+    assert verdict.passed, verdict.failures
+    assert verdict.kind == "occlusion+gust" and verdict.drone == "cf1,cf3"
+    assert verdict.outcomes["cf2"] == "reached"
+    assert any("pose_" in e for e in verdict.events) and any("tracking" in e for e in verdict.events), verdict.events
