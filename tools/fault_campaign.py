@@ -344,6 +344,20 @@ def with_planner_kind(mission_path: Path, kind: str, workdir: Path) -> Path:
     return copy
 
 
+def with_world_seed(mission_path: Path, seed: int, workdir: Path) -> Path:
+    """A copy of the mission (same name, its policy path made absolute) whose dry run draws its simulated world
+    from ``seed`` (``dry_run.seed``: the drones' IMU biases, turbulence, radio loss and mocap jitter)."""
+    doc = yaml.safe_load(mission_path.read_text())
+    doc["dry_run"] = {**(doc.get("dry_run") or {}), "seed": seed}
+    policy = (doc.get("planner") or {}).get("policy")
+    if policy and (mission_path.parent / policy).exists():
+        doc["planner"]["policy"] = str((mission_path.parent / policy).resolve())
+    doc.setdefault("name", mission_path.stem)
+    copy = workdir / f"{mission_path.stem}.seed{seed}.yaml"
+    copy.write_text(yaml.safe_dump(doc, sort_keys=False))
+    return copy
+
+
 RANDOM_MISSIONS = "lab-3,circle-8-r3,arena-a-6,arena-b-6,u-trap"
 """The shipped missions the random campaign draws from (the 40-drone ones are the distributed flight's)."""
 
@@ -396,11 +410,12 @@ def mission_path(name: str) -> Path:
 
 def random_campaign(runs: int, seed: int, missions: list[str], planners: list[str], workdir: Path,
                     kinds: Optional[list[str]] = None, extpose: bool = False,
-                    faults_per_run: int = 1) -> list[Verdict]:
+                    faults_per_run: int = 1, vary_world: bool = False) -> list[Verdict]:
     """``runs`` flights, each a mission, planner (``mission``: its own) and ``faults_per_run`` faults of different
     kinds (of ``kinds``, default all), each with its drone, time and parameters drawn from ``seed``; printed as
     they end with what reproduces them. One fault a run draws exactly what the campaigns before compound faults
-    drew, seed for seed."""
+    drew, seed for seed. ``vary_world``: each run's simulated world drawn from its own seed (``seed * 1000 + run``)
+    instead of every dry run's 0, so a drone's IMU bias (where it drifts blind) differs from run to run."""
     rng = random.Random(seed)
     verdicts = []
     for run in range(runs):
@@ -411,6 +426,8 @@ def random_campaign(runs: int, seed: int, missions: list[str], planners: list[st
             path = with_planner_kind(path, planner, workdir)
         if extpose:
             path = with_extpose(path, workdir)
+        if vary_world:
+            path = with_world_seed(path, seed * 1000 + run, workdir)
         mission = load_mission(path)
         names = [d.name for d in mission.drones]
         pool = sorted(kinds or DEFAULTS)
@@ -425,7 +442,8 @@ def random_campaign(runs: int, seed: int, missions: list[str], planners: list[st
             draws.append({"kind": kind, **({} if kind in SWARM_KINDS else {"drone": drone}),
                           **({} if kind in POWER_ON else {"at_s": at_s}), **params})
         v = judge_faults(faults, path, workdir, tag=f"-r{run}")
-        v.params = {"planner": planner, **(draws[0] if len(draws) == 1 else {"faults": draws})}
+        v.params = {"planner": planner, **({"world_seed": seed * 1000 + run} if vary_world else {}),
+                    **(draws[0] if len(draws) == 1 else {"faults": draws})}
         v.params.pop("kind", None)
         v.params.pop("drone", None)
         verdicts.append(v)
@@ -451,6 +469,9 @@ def main() -> int:
                         help="the random campaign's planners (mission: the mission's own)")
     parser.add_argument("--faults-per-run", type=int, default=1, metavar="K",
                         help="the random campaign's faults a flight: K of different kinds at once (compound)")
+    parser.add_argument("--vary-world", action="store_true",
+                        help="the random campaign's simulated world drawn from a seed of each run's own "
+                             "(dry_run.seed = seed * 1000 + run) instead of 0")
     parser.add_argument("--extpose", action="store_true",
                         help="fly each mission with radio.extpos: extpose (mocap's orientation reaches the "
                              "estimators, so a wrong one would turn them)")
@@ -462,7 +483,8 @@ def main() -> int:
                 else args.missions.split(",")
             kinds = None if args.kinds == parser.get_default("kinds") else args.kinds.split(",")
             verdicts = random_campaign(args.random, args.seed, missions, args.planners.split(","), Path(tmp), kinds,
-                                       extpose=args.extpose, faults_per_run=args.faults_per_run)
+                                       extpose=args.extpose, faults_per_run=args.faults_per_run,
+                                       vary_world=args.vary_world)
         for mission_name in ([] if args.random else args.missions.split(",")):
             path = mission_path(mission_name)
             if args.planner:
@@ -484,6 +506,7 @@ def main() -> int:
         if args.random:
             flown = f" --random {args.random} --seed {args.seed} --planners {args.planners}"
             flown += f" --faults-per-run {args.faults_per_run}" if args.faults_per_run != 1 else ""
+            flown += " --vary-world" if args.vary_world else ""
         flown += " --extpose" if args.extpose else ""
         header = (f"# Fault campaign{' with planner ' + args.planner if args.planner else ''}\n\n"
                   f"`python tools/fault_campaign.py{flown}` (docs/faults.md): "

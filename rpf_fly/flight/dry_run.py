@@ -121,6 +121,15 @@ class StartFault:
     """A motor does not spin up: arming never gets ready to fly (`VehicleConfig.motor_fault`)."""
 
 
+def mission_mocap_noise(mission: Mission) -> MocapNoise:
+    """The mocap jitter and dropouts of the mission's ``dry_run`` section, the emulator's figures where it says
+    nothing."""
+    default, d = MocapNoise.default(), mission.dry_run
+    return MocapNoise(default.position_m if d.mocap_noise_m is None else d.mocap_noise_m,
+                      default.orientation_deg if d.mocap_noise_deg is None else d.mocap_noise_deg,
+                      default.dropout if d.mocap_dropout is None else d.mocap_dropout)
+
+
 class DryRun:
     """Context manager owning the fake drones, the fake-radio registration and the mocap source of a dry run.
 
@@ -137,7 +146,7 @@ class DryRun:
         start_faults: Optional[Mapping[str, StartFault]] = None,
         mocap_rate_hz: Optional[float] = None,
         cache_dir: Optional[Path] = None,
-        seed: int = 0,
+        seed: Optional[int] = None,
         process: bool = True,
         truth: bool = True,
         air_time_s: Optional[float] = None,
@@ -159,7 +168,8 @@ class DryRun:
         network; a distributed flight's coordinator gives its listen address: docs/distributed.md).
         ``mocap_noise``: the jitter and single-frame dropouts of every pose the mocap serves (default
         `MocapNoise.default()`, a real room's: rpf_fly/emulator/mocap_noise.py; ``MocapNoise(0, 0, 0)``: the exact
-        truth, for tests that compare poses to the millimetre)."""
+        truth, for tests that compare poses to the millimetre). ``seed`` and ``mocap_noise`` default to the
+        mission's ``dry_run`` section (docs/mission-format.md)."""
         if mocap is None:  # the mission's kind decides: its own client against the emulator
             mocap = "motioncapture" if mission.mocap.kind == "motioncapture" else "natnet"
         if mocap not in ("natnet", "sim", "motioncapture"):
@@ -184,7 +194,7 @@ class DryRun:
                 config = replace(config, faults=replace(config.faults, burst=radio_loss))
             self.drone_configs[self.addresses[d.name]] = _with_start_fault(config, faults.get(d.name))
         self._names = {address: name for name, address in self.addresses.items()}
-        self.seed = seed
+        self.seed = mission.dry_run.seed if seed is None else seed
         self.timing = RadioTiming(transaction_s=AIR_TIME_S if air_time_s is None else float(air_time_s))
         self.radio_loss = radio_loss
         self.world_exit_report = Path(world_exit_report) if world_exit_report is not None else \
@@ -192,7 +202,7 @@ class DryRun:
         self.in_process = not process
         self.host = host
         self.truth = truth
-        self.mocap_noise = MocapNoise.default() if mocap_noise is None else mocap_noise
+        self.mocap_noise = mission_mocap_noise(mission) if mocap_noise is None else mocap_noise
         self.world: Any = None  # a FakeWorld, or the WorldProcess speaking to one (same hook names)
         self._bodies: Any = None
         self._cache = tempfile.TemporaryDirectory(prefix="rpf-fly-toc-") if cache_dir is None else None

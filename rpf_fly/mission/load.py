@@ -39,7 +39,7 @@ DEFAULT_POLICY = "policies/{kind}.onnx"
 """Where a policy kind looks for its policy when the mission names none (resolved like ``planner.policy``)."""
 
 TOP_KEYS = ("name", "arena", "flight", "planner", "mocap", "radio", "sim", "safety", "obstacles", "drones", "formation",
-            "runtime")
+            "runtime", "dry_run")
 DRONE_KEYS = ("name", "uri", "rigid_body", "start", "goal")
 FORMATION_KEYS = ("kind", "count", "radius", "center", "uri_base", "name_prefix", "phase_deg")
 FORMATION_KINDS = ("circle_swap",)
@@ -389,6 +389,12 @@ SAFETY_SPEC: dict[str, tuple[str, Reader]] = {
     "start_tolerance_m": ("start_tolerance_m", _num(POSITIVE)),
     "arrival_hold_s": ("arrival_hold_s", _num(NON_NEGATIVE)),
 }
+DRY_RUN_SPEC: dict[str, tuple[str, Reader]] = {
+    "seed": ("seed", lambda c, n: c.integer(n, 0)),
+    "mocap_noise_m": ("mocap_noise_m", _num(NON_NEGATIVE)),
+    "mocap_noise_deg": ("mocap_noise_deg", _num(NON_NEGATIVE)),
+    "mocap_dropout": ("mocap_dropout", _num(FRACTION)),
+}
 SIM_SPEC: dict[str, tuple[str, Reader]] = {
     "time_limit_s": ("time_limit_s", _num(POSITIVE)),
     "start_jitter_m": ("start_jitter_m", _num(NON_NEGATIVE)),
@@ -666,6 +672,7 @@ class _MissionParser(_Checker):
             "sim": lambda n: self.settings(n, m.SimSettings, SIM_SPEC),
             "safety": lambda n: self.settings(n, m.SafetySettings, SAFETY_SPEC),
             "runtime": self.runtime,
+            "dry_run": lambda n: self.settings(n, m.DryRunSettings, DRY_RUN_SPEC),
         }
         for key, node in entries.items():  # document order
             parts[key] = readers[key](node)

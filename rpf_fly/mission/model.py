@@ -292,6 +292,23 @@ class SimSettings:
 
 
 @dataclass(frozen=True)
+class DryRunSettings:
+    """What the dry run's simulated room does (ignored in flight), for a lab that wants its own figures.
+
+    ``seed`` draws the simulated drones' IMU biases (so the direction a blind drone drifts), their turbulence,
+    the radio's loss bursts and the mocap's jitter: the same seed flies the same draws, another seed other ones.
+    ``mocap_noise_m`` / ``mocap_noise_deg`` (per-axis jitter of every served pose) and ``mocap_dropout`` (the
+    share of a body's frames left untracked): None keeps the emulator's figures (rpf_fly/emulator/mocap_noise.py:
+    0.5 mm, 0.5 deg, 0.1 %).
+    """
+
+    seed: int = 0
+    mocap_noise_m: Optional[float] = None
+    mocap_noise_deg: Optional[float] = None
+    mocap_dropout: Optional[float] = None
+
+
+@dataclass(frozen=True)
 class Formation:
     """A generated layout. ``circle_swap``: ``count`` drones evenly on a circle, each flying to the antipode."""
 
@@ -320,6 +337,7 @@ class Mission:
     formation: Optional[Formation] = None
     safety: SafetySettings = field(default_factory=SafetySettings)
     runtime: RuntimeSettings = field(default_factory=RuntimeSettings)
+    dry_run: DryRunSettings = field(default_factory=DryRunSettings)
     source: Optional[Path] = None
     text: str = field(default="", repr=False)
     """The file's text as loaded (logged into flight records as metadata)."""

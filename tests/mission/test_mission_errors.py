@@ -548,3 +548,20 @@ def test_field_line_finds_a_field_written_in_block_or_flow_style_or_its_parent(t
     path.write_text("mocap: [\n")
     assert field_line(path, "mocap.server") == 0  # no longer YAML
     assert field_line(tmp_path / "gone.yaml", "mocap.server") == 0
+
+
+# ------------------------------------------------------------------------------------ dry_run
+
+
+def test_dry_run_settings_are_read_and_default_to_the_emulators(load):
+    mission = load(BASE + "dry_run: {seed: 7, mocap_noise_m: 0.001, mocap_dropout: 0.01}\n")
+    assert (mission.dry_run.seed, mission.dry_run.mocap_noise_m, mission.dry_run.mocap_dropout) == (7, 0.001, 0.01)
+    assert mission.dry_run.mocap_noise_deg is None
+    assert load(BASE).dry_run.seed == 0 and load(BASE).dry_run.mocap_noise_m is None
+
+
+def test_dry_run_bad_values(fail):
+    fail(BASE + "dry_run: {mocap_dropout: 1.5}\n", "m.yaml:5: dry_run.mocap_dropout: must be in [0, 1), got 1.5")
+    fail(BASE + "dry_run: {seed: -1}\n", "m.yaml:5: dry_run.seed: must be at least 0, got -1")
+    fail(BASE + "dry_run: {seed: 1.5}\n", "m.yaml:5: dry_run.seed: expected an integer")
+    fail(BASE + "dry_run: {noise: 1}\n", "m.yaml:5: dry_run.noise: unknown key")

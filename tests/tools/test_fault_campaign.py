@@ -109,3 +109,14 @@ def test_two_faults_at_once_on_lab_3_are_judged_on_the_truth(tmp_path):
     assert verdict.kind == "occlusion+gust" and verdict.drone == "cf1,cf3"
     assert verdict.outcomes["cf2"] == "reached"
     assert any("pose_" in e for e in verdict.events) and any("tracking" in e for e in verdict.events), verdict.events
+
+
+def test_a_world_seed_copy_keeps_the_mission_and_its_policy(tmp_path):
+    from rpf_fly.mission import load_mission
+
+    campaign = load_campaign()
+    original = load_mission(ROOT / "missions" / "lab-3.yaml")
+    copy = load_mission(campaign.with_world_seed(ROOT / "missions" / "lab-3.yaml", 9004, tmp_path))
+    assert copy.dry_run.seed == 9004 and original.dry_run.seed == 0
+    assert copy.planner.policy == original.planner.policy and copy.drones == original.drones
+    assert copy.name == original.name
