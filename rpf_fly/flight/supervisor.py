@@ -143,6 +143,9 @@ BLIND_LAND_S_PER_M = 2.0
 at most the mission's ``land_s``): every second of a blind landing is drift. The high-level commander's landing is a
 7th-order polynomial whose peak speed is 2.19 x its mean: 2 s/m keeps it at the firmware's 1.1 m/s vertical limit
 (0.5 m: 1 s instead of the mission's 2 s)."""
+ESTIMATE_FRESH_S = 0.3
+"""A blind drone's height is taken from its on-board estimate when that telemetry is at most this old (three
+status samples at 10 Hz)."""
 BLIND_LAND_MIN_S = 0.6
 LAND_EARLY_SHARE = 0.8
 """A blind drone lands before ``pose_lost_land_s`` when a landing begun any later would end with its possible drift
@@ -224,7 +227,7 @@ class Supervisor:
         findings += self._geofence(agents, tracker)
         foreign = [n for n in others if (p := tracker.get(n)) is not None and p.position[2] > ON_FLOOR_Z_M]
         findings += self._separation(agents + uncommanded, tracker, foreign)
-        findings += self._blind(now_s, agents, uncommanded, foreign, tracker)
+        findings += self._blind(now_s, agents, uncommanded, foreign, tracker, states)
         findings += self._obstacles(agents, tracker)
         findings += self._battery(agents, states)
         findings += self._telemetry(now_s, agents, states)
@@ -294,14 +297,17 @@ class Supervisor:
         return out
 
     def _blind(self, now_s: float, agents: list[DroneAgent], uncommanded: list[DroneAgent], foreign: list[str],
-               tracker: PoseTracker) -> list[Finding]:
+               tracker: PoseTracker, states: Optional[dict[str, DroneState]] = None) -> list[Finding]:
         """A drone without a fresh pose flies on its estimate, which drifts (`blind_drift_m`). Its room: the
         clearance of its last pose to obstacle surfaces and the arena's edge (plus r, the geofence's allowance), and
         half its distance to another blind drone (both drift) or all of it to one mocap sees, less the bodies'
         radii. Land now (fast: `blind_land_s`) when a landing begun later could not end inside
         `LAND_EARLY_SHARE` of it; cut the motors when even the landing under way cannot end inside it and a fall
         begun later would not either (a fall takes sqrt(2 z / g)). A drone far from everything keeps the hold of
-        ``pose_timeout_s`` and the landing of ``pose_lost_land_s``."""
+        ``pose_timeout_s`` and the landing of ``pose_lost_land_s``. Its height z: its on-board estimate's (fresh
+        telemetry) plus the drift it may have had, at most its last pose's: a blind landing's drone is lower than
+        where mocap last saw it, and a fall from there ends sooner (with the last pose's height, a landing 0.15 m
+        above the floor was cut as if it fell from 0.6 m: campaign lab-3, blackout)."""
         s, out = self.safety, []
         land_s = self.mission.flight.land_s
         ages = {a.name: tracker.age(a.name, now_s) for a in agents + uncommanded}
@@ -315,7 +321,7 @@ class Supervisor:
             if a.name in self._blind_stopped:
                 continue
             room, what = self._room(a.name, pose.position, ages, tracker, agents + uncommanded, foreign)
-            height = max(0.0, pose.position[2])
+            height = self._blind_height(now_s, pose.position[2], age, (states or {}).get(a.name))
             if a.phase == DronePhase.LANDING:
                 if a.touchdown_s is None or a.touchdown_s <= now_s:
                     continue  # its descent has ended: down, as far as anything here knows
@@ -336,6 +342,15 @@ class Supervisor:
                                    f"{what}: landing now (in {duration:.1f} s), before its estimate's drift could "
                                    "take it there", a.name, "land", duration))
         return out
+
+    def _blind_height(self, now_s: float, pose_z: float, age: float, state: Optional[DroneState]) -> float:
+        """How high a blind drone may be: its estimate's height (telemetry under `ESTIMATE_FRESH_S` old) plus its
+        possible drift, at most its last pose's height; the last pose's height without a fresh estimate."""
+        height = pose_z
+        if (state is not None and state.position_m is not None and state.telemetry_stamp_s is not None
+                and now_s - state.telemetry_stamp_s <= ESTIMATE_FRESH_S):
+            height = min(height, state.position_m[2] + blind_drift_m(age))
+        return max(0.0, height)
 
     def _room(self, name: str, position: tuple[float, float, float], ages: dict[str, float], tracker: PoseTracker,
               airborne: list[DroneAgent], foreign: list[str]) -> tuple[float, str]:

@@ -330,17 +330,24 @@ def test_mocap_is_said_back_only_when_a_pose_is_back_not_when_the_blind_drones_l
     assert [(f.level, f.message) for f in back] == [(2, "mocap poses are back")]  # INFO
 
 
-def fly_blind(cf3_at: tuple[float, float, float], seconds: float = 3.0):  # type: ignore[no-untyped-def]
+def fly_blind(cf3_at: tuple[float, float, float], seconds: float = 3.0,  # type: ignore[no-untyped-def]
+              telemetry: bool = False):
     """cf3 loses its mocap at t = 0 (the others keep theirs); a ``land`` finding lands it as the loop would
-    (phase LANDING, touchdown after the finding's duration). The blind findings of cf3, with their times."""
+    (phase LANDING, touchdown after the finding's duration). ``telemetry``: its status keeps coming at 10 Hz with
+    an estimate that descends with the landing (else its last status is from t = 0). The blind findings of cf3,
+    with their times."""
     _, agents, tracker, supervisor = setup()
     positions = {**POSITIONS, "cf3": cf3_at}
     states = {n: state(n, 0.0) for n in agents}
     see(tracker, 1, 0.0, positions)
     found = []
+    landing: tuple[float, float] | None = None  # (start, touchdown)
     for k in range(1, int(seconds * 100)):
         t = k / 100
         see(tracker, k + 1, t, {n: p for n, p in positions.items() if n != "cf3"})
+        if telemetry and k % 10 == 0:
+            z = cf3_at[2] if landing is None else cf3_at[2] * max(0.0, (landing[1] - t) / (landing[1] - landing[0]))
+            states["cf3"] = replace(state("cf3", t), position_m=(cf3_at[0], cf3_at[1], z))
         for f in supervisor.check(t, agents.values(), tracker, states):
             if f.drone == "cf3" and f.kind == "pose_lost":
                 found.append((t, f))
@@ -348,6 +355,7 @@ def fly_blind(cf3_at: tuple[float, float, float], seconds: float = 3.0):  # type
                 if f.response == "land" and cf3.phase != DronePhase.LANDING:
                     cf3.set_phase(DronePhase.LANDING, t)
                     cf3.touchdown_s = t + (f.land_s or 1.0)
+                    landing = (t, cf3.touchdown_s)
                 elif f.response == "stop":
                     return found
     return found
@@ -380,3 +388,15 @@ def test_a_blind_drone_that_a_landing_cannot_save_has_its_motors_cut():
     responses = [(f.response, round(t, 2)) for t, f in found]
     assert responses[0][0] == "land" and responses[-1][0] == "stop", responses
     assert 0.6 <= responses[-1][1] <= 0.8, responses  # drift(age + 0.32 s) reaches 0.055 m at about 0.73 s
+
+
+def test_a_blind_landing_whose_estimate_is_low_is_cut_as_a_fall_from_there():
+    """The same drone with its status coming in: its estimate descends with the landing, so a fall from where it is
+    (its estimate plus its possible drift, not the last pose's 0.5 m) ends sooner; its motors are cut later and
+    lower (the campaign's lab-3 blackout was cut 0.10-0.15 m above the floor, as if from 0.6 m)."""
+    cut_blind = [t for t, f in fly_blind((0.0, 0.68, 0.5)) if f.response == "stop"]
+    cut_seen = [t for t, f in fly_blind((0.0, 0.68, 0.5), telemetry=True) if f.response == "stop"]
+    # from the last pose's 0.5 m a fall takes 0.32 s: cut at 0.73 s; from the estimate's 0.23 m plus 0.03 m of
+    # drift, 0.23 s: cut at about 0.82 s, 4.5 cm lower on a 0.5 m/s descent
+    assert cut_blind and cut_seen and cut_seen[0] >= cut_blind[0] + 0.06, (cut_blind, cut_seen)
+    assert cut_seen[0] <= 1.05, cut_seen  # drift(age) alone reaches the 0.055 m room at 1.05 s
