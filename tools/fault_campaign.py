@@ -246,6 +246,9 @@ def judge_faults(faults: list[dict[str, Any]], mission_path: Path, workdir: Path
         if found is None:
             fail(f"{f['kind']} was never injected")
             continue
+        if not found and _grounded_at_injection(f, events, truth):
+            notes.append(f"{f['drone']} on the floor, motors off, at its {f['kind']}: nothing for it to act on")
+            continue
         verdict.events += [f"{m.get('file')}: {m.get('message')}" for m in found][:3]
         if not found:
             fail(f"no warning naming {_target(f)} within {EVENT_WINDOW_S:g} s of its {f['kind']}")
@@ -260,6 +263,22 @@ def _unsafe_to_fly(fault: dict[str, Any], mission: Any) -> bool:
     if fault["kind"] == "start_offset":
         return math.hypot(*fault["offset_m"][:2]) > mission.safety.start_tolerance_m
     return fault["kind"] in UNSAFE_TO_FLY
+
+
+def _grounded_at_injection(fault: dict[str, Any], events: list[tuple[int, dict]],
+                           truth: dict[str, list[tuple[int, dict]]]) -> bool:
+    """A drone's flight-time fault injected while its truth stands on the floor with its motors off (kept down by
+    another fault, or already landed): it has no flight to act on, so no warning is owed."""
+    drone = fault.get("drone")
+    if drone is None or fault["kind"] in POWER_ON or fault["kind"] in SWARM_KINDS:
+        return False
+    injected = next((t for t, m in events if m.get("file") == "fault" and m.get("name") == drone
+                     and m.get("message", "").startswith(f"injected {fault['kind']}")), None)
+    samples = truth.get(drone) or []
+    if injected is None or not samples:
+        return False
+    _, m = min(samples, key=lambda s: abs(s[0] - injected))
+    return not m["motors"] and m["position"]["z"] <= ON_FLOOR_M
 
 
 def _target(fault: dict[str, Any]) -> str:

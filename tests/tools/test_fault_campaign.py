@@ -120,3 +120,18 @@ def test_a_world_seed_copy_keeps_the_mission_and_its_policy(tmp_path):
     assert copy.dry_run.seed == 9004 and original.dry_run.seed == 0
     assert copy.planner.policy == original.planner.policy and copy.drones == original.drones
     assert copy.name == original.name
+
+
+def test_a_fault_on_a_drone_standing_with_its_motors_off_owes_no_warning():
+    """A compound run may occlude a drone another fault kept on the floor (upside down): nothing to act on, so the
+    judge does not ask for a warning; a drone flying at its injection still owes one."""
+    campaign = load_campaign()
+    occlusion = campaign.fault_fields("occlusion", "cf1", None, 4.0)
+    events = [(int(4e9), {"level": 1, "file": "fault", "message": "injected occlusion for 1 s", "name": "cf1"})]
+
+    def truth(z: float, motors: bool) -> dict:
+        return {"cf1": [(int(3.99e9), {"position": {"x": 0.0, "y": 0.0, "z": z}, "motors": motors})]}
+
+    assert campaign._grounded_at_injection(occlusion, events, truth(0.0, False))  # noqa: SLF001
+    assert not campaign._grounded_at_injection(occlusion, events, truth(0.5, True))  # noqa: SLF001
+    assert not campaign._grounded_at_injection(occlusion, events, truth(0.0, True))  # noqa: SLF001 - spinning up
