@@ -131,10 +131,11 @@ def _pose_at(history: deque[tuple[float, tuple[float, float, float]]],
 
 
 BLIND_DRIFT_M_S2 = 0.1
-"""How fast a drone without mocap may drift off where it believes it is: its estimator dead-reckons on a biased
-accelerometer, about 0.5 a t^2 after t s blind. The dry run's drones have 0.08 m/s^2 (4.5 cm median after 1 s, 17
-cm after 2 s: rpf_fly/emulator/fake_vehicle.py); a real Crazyflie without a position source is no better. An
-assumption with a margin over the emulator's figure, not measured on hardware."""
+"""The default of the mission's ``safety.blind_drift_m_s2``: how fast a drone without mocap may drift off where it
+believes it is. Its estimator dead-reckons on a biased accelerometer, about 0.5 a t^2 after t s blind. The dry run's
+drones have 0.08 m/s^2 (4.5 cm median after 1 s, 17 cm after 2 s: rpf_fly/emulator/fake_vehicle.py); a real
+Crazyflie without a position source is no better. An assumption with a margin over the emulator's figure, not
+measured on hardware: a lab that has measured its drones sets its own figure in the mission."""
 BODY_RADIUS_M = 0.065
 """A Crazyflie 2.1's rotor-tip radius: two bodies touch at 0.13 m centre to centre, a body touches an obstacle at
 0.065 m from its surface (the dry run's contact figures)."""
@@ -152,9 +153,10 @@ LAND_EARLY_SHARE = 0.8
 over this share of the room it has (docs/flight.md, "Blind")."""
 
 
-def blind_drift_m(blind_s: float) -> float:
-    """How far a drone blind for ``blind_s`` may have drifted (`BLIND_DRIFT_M_S2`)."""
-    return 0.5 * BLIND_DRIFT_M_S2 * blind_s * blind_s
+def blind_drift_m(blind_s: float, rate_m_s2: float = BLIND_DRIFT_M_S2) -> float:
+    """How far a drone blind for ``blind_s`` may have drifted at ``rate_m_s2`` (the mission's
+    ``safety.blind_drift_m_s2``)."""
+    return 0.5 * rate_m_s2 * blind_s * blind_s
 
 
 def blind_land_s(height_m: float, land_s: float) -> float:
@@ -310,6 +312,7 @@ class Supervisor:
         above the floor was cut as if it fell from 0.6 m: campaign lab-3, blackout)."""
         s, out = self.safety, []
         land_s = self.mission.flight.land_s
+        rate = s.blind_drift_m_s2
         ages = {a.name: tracker.age(a.name, now_s) for a in agents + uncommanded}
         ages.update({n: tracker.age(n, now_s) for n in foreign})
         for a in agents:
@@ -329,13 +332,13 @@ class Supervisor:
             else:
                 touchdown = age + blind_land_s(height, land_s)
             fall = math.sqrt(2.0 * height / 9.81)
-            if blind_drift_m(touchdown) > room and blind_drift_m(age + fall) >= room:
+            if blind_drift_m(touchdown, rate) > room and blind_drift_m(age + fall, rate) >= room:
                 self._blind_stopped.add(a.name)
                 out.append(Finding("pose_lost", ERROR, f"no valid pose for {age:.1f} s, {room:.2f} m of room to "
-                                   f"{what}: its estimate may drift it {blind_drift_m(touchdown):.2f} m before a "
+                                   f"{what}: its estimate may drift it {blind_drift_m(touchdown, rate):.2f} m before a "
                                    "landing could end: motors off", a.name, "stop"))
             elif (a.phase != DronePhase.LANDING and a.name not in self._blind_landed
-                  and blind_drift_m(touchdown) >= LAND_EARLY_SHARE * room):
+                  and blind_drift_m(touchdown, rate) >= LAND_EARLY_SHARE * room):
                 self._blind_landed.add(a.name)
                 duration = blind_land_s(height, land_s)
                 out.append(Finding("pose_lost", ERROR, f"no valid pose for {age:.1f} s, {room:.2f} m of room to "
@@ -349,7 +352,7 @@ class Supervisor:
         height = pose_z
         if (state is not None and state.position_m is not None and state.telemetry_stamp_s is not None
                 and now_s - state.telemetry_stamp_s <= ESTIMATE_FRESH_S):
-            height = min(height, state.position_m[2] + blind_drift_m(age))
+            height = min(height, state.position_m[2] + blind_drift_m(age, self.safety.blind_drift_m_s2))
         return max(0.0, height)
 
     def _room(self, name: str, position: tuple[float, float, float], ages: dict[str, float], tracker: PoseTracker,

@@ -388,6 +388,7 @@ SAFETY_SPEC: dict[str, tuple[str, Reader]] = {
     "planner_budget_s": ("planner_budget_s", _num(POSITIVE)),
     "start_tolerance_m": ("start_tolerance_m", _num(POSITIVE)),
     "arrival_hold_s": ("arrival_hold_s", _num(NON_NEGATIVE)),
+    "blind_drift_m_s2": ("blind_drift_m_s2", _num(POSITIVE)),
 }
 DRY_RUN_SPEC: dict[str, tuple[str, Reader]] = {
     "seed": ("seed", lambda c, n: c.integer(n, 0)),

@@ -331,12 +331,12 @@ def test_mocap_is_said_back_only_when_a_pose_is_back_not_when_the_blind_drones_l
 
 
 def fly_blind(cf3_at: tuple[float, float, float], seconds: float = 3.0,  # type: ignore[no-untyped-def]
-              telemetry: bool = False):
+              telemetry: bool = False, mission_text: str = SHORT_MISSION):
     """cf3 loses its mocap at t = 0 (the others keep theirs); a ``land`` finding lands it as the loop would
     (phase LANDING, touchdown after the finding's duration). ``telemetry``: its status keeps coming at 10 Hz with
     an estimate that descends with the landing (else its last status is from t = 0). The blind findings of cf3,
     with their times."""
-    _, agents, tracker, supervisor = setup()
+    _, agents, tracker, supervisor = setup(mission_text)
     positions = {**POSITIONS, "cf3": cf3_at}
     states = {n: state(n, 0.0) for n in agents}
     see(tracker, 1, 0.0, positions)
@@ -400,3 +400,21 @@ def test_a_blind_landing_whose_estimate_is_low_is_cut_as_a_fall_from_there():
     # drift, 0.23 s: cut at about 0.82 s, 4.5 cm lower on a 0.5 m/s descent
     assert cut_blind and cut_seen and cut_seen[0] >= cut_blind[0] + 0.06, (cut_blind, cut_seen)
     assert cut_seen[0] <= 1.05, cut_seen  # drift(age) alone reaches the 0.055 m room at 1.05 s
+
+
+def test_a_lab_that_measured_a_larger_blind_drift_lands_its_blind_drones_sooner_and_farther_from_things():
+    """``safety.blind_drift_m_s2`` replaces the assumed 0.1 m/s^2. The drone far from everything (room 0.47 m to the
+    next drone) rides out 1.5 s at 0.1; at 1.0 m/s^2 a 1 s landing begun at 0.5 s would end with 1.1 m of possible
+    drift, so it lands at once (after the 0.25 s hold) and is dropped before it could reach its neighbour."""
+    measured = SHORT_MISSION + "safety: {blind_drift_m_s2: 1.0}\n"
+    assumed = fly_blind((-1.0, 0.6, 0.5))
+    drifty = fly_blind((-1.0, 0.6, 0.5), mission_text=measured)
+    assert assumed and assumed[0][0] > 1.5, assumed
+    assert drifty and drifty[0][1].response == "land" and drifty[0][0] <= 0.35, drifty
+    assert "0.47 m of room to cf2" in drifty[0][1].message, drifty
+    assert [f.response for _, f in drifty] == ["land", "stop"], drifty  # 0.79 m of drift before a landing ends
+    # and a lab whose drones drift less rides the same blackout out near the pillar, where 0.1 lands at once
+    steady = SHORT_MISSION + "safety: {blind_drift_m_s2: 0.01}\n"
+    near = fly_blind((0.0, 0.6, 0.5))
+    calm = fly_blind((0.0, 0.6, 0.5), mission_text=steady)
+    assert near[0][0] <= 0.5 and calm and calm[0][0] > 1.5, (near, calm)

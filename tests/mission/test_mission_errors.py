@@ -565,3 +565,15 @@ def test_dry_run_bad_values(fail):
     fail(BASE + "dry_run: {seed: -1}\n", "m.yaml:5: dry_run.seed: must be at least 0, got -1")
     fail(BASE + "dry_run: {seed: 1.5}\n", "m.yaml:5: dry_run.seed: expected an integer")
     fail(BASE + "dry_run: {noise: 1}\n", "m.yaml:5: dry_run.noise: unknown key")
+
+
+# ------------------------------------------------------------------------------------ safety.blind_drift_m_s2
+
+
+def test_blind_drift_is_read_and_defaults_to_the_supervisors_assumption(load):
+    assert load(BASE + "safety: {blind_drift_m_s2: 0.25}\n").safety.blind_drift_m_s2 == 0.25
+    assert load(BASE).safety.blind_drift_m_s2 == 0.1
+
+
+def test_blind_drift_must_be_positive(fail):
+    fail(BASE + "safety: {blind_drift_m_s2: 0}\n", "m.yaml:5: safety.blind_drift_m_s2: must be positive, got 0")
