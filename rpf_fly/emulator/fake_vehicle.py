@@ -38,7 +38,9 @@ Dynamics (documented model, not physics):
 - Yaw tracks a yaw setpoint on the *estimated* yaw (time constant `TRACK_TAU_S`) or integrates a yaw rate; the
   estimate turns with the truth (an ideal gyro), so the yaw error stays what it was.
 - Motors off (null setpoint, supervisor forbids flying, power off): free fall at 9.81 m/s^2 onto the floor (the
-  initial z), then rest. On the floor a drone cannot slide.
+  initial z), then rest. On the floor a drone cannot slide, with its motors on either: a body on the floor whose
+  controller asks for no lift (a position setpoint at floor height, too little RPYT thrust) stands where it is
+  (until 2026-12-03 a setpoint on the floor 0.5 m away slid it there at flying speed; a real one scrapes or tips).
 - A crash (`Vehicle.crash`, called by the fake world on a contact): motors off at once and the horizontal velocity
   lost in the impact, so the drone drops where it hit (an inelastic impact: a Crazyflie that clips a pole or
   another drone does not sail on), then rests on the floor; its supervisor is crashed, tumbled and locked.
@@ -622,6 +624,9 @@ class Vehicle:
             elif sp.yaw_mode is AxisMode.VELOCITY:
                 self.yaw += math.radians(sp.yaw_rate_deg_s) * dt
             self.yaw = wrap_angle(self.yaw)
+            if pos[2] <= self.floor_z and vel[2] <= 0.0:
+                vel[:] = [0.0, 0.0, 0.0]  # no lift off the floor: it stands on its feet, it cannot slide
+                return
         for axis in range(3):
             pos[axis] += vel[axis] * dt
         if pos[2] <= self.floor_z:

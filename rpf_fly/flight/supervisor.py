@@ -334,9 +334,12 @@ class Supervisor:
             fall = math.sqrt(2.0 * height / 9.81)
             if blind_drift_m(touchdown, rate) > room and blind_drift_m(age + fall, rate) >= room:
                 self._blind_stopped.add(a.name)
+                where = (f"{touchdown - age:.1f} s before its landing would end, " if a.phase == DronePhase.LANDING
+                         else "")
                 out.append(Finding("pose_lost", ERROR, f"no valid pose for {age:.1f} s, {room:.2f} m of room to "
                                    f"{what}: its estimate may drift it {blind_drift_m(touchdown, rate):.2f} m before a "
-                                   "landing could end: motors off", a.name, "stop"))
+                                   f"landing could end: motors off ({where}at most {height:.2f} m up)", a.name,
+                                   "stop"))
             elif (a.phase != DronePhase.LANDING and a.name not in self._blind_landed
                   and blind_drift_m(touchdown, rate) >= LAND_EARLY_SHARE * room):
                 self._blind_landed.add(a.name)

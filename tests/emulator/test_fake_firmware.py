@@ -658,3 +658,17 @@ def test_persistent_parameters_are_stored_survive_a_reboot_and_clear() -> None:
         assert PARAM_TOC.by_name[name].read_only and sim.snap().params[name] == 0
     assert sim.snap().params["cpu.flash"] == 1024 and PARAM_TOC.by_name["cpu.flash"].ctype == "uint16_t"
     assert {"kalman.stateX", "kalman.stateY", "kalman.stateZ"} <= set(LOG_TOC.by_name)
+
+
+def test_a_drone_on_the_floor_with_its_motors_on_does_not_slide_to_a_setpoint_at_floor_height() -> None:
+    """A position setpoint on the floor 0.5 m away, streamed to a drone standing there with its motors on: the
+    height controller asks for no lift, so the body stands on its feet (a real one scrapes or tips, it does not
+    glide). Until 2026-12-03 it slid to the setpoint at flying speed. A setpoint above the floor still lifts it and
+    takes it there."""
+    sim = Sim(position=(1.0, 1.0, 0.0))
+    sim.run(0.1)
+    sim.run(1.0, lambda t: sim.send(7, 0, position(1.5, 1.0, 0.0)))
+    standing = sim.snap()
+    assert standing.motors_on and standing.position == pytest.approx((1.0, 1.0, 0.0), abs=1e-9)
+    sim.run(2.0, lambda t: sim.send(7, 0, position(1.5, 1.0, 0.3)))
+    assert sim.snap().position == pytest.approx((1.5, 1.0, 0.3), abs=0.02)

@@ -388,6 +388,9 @@ def test_a_blind_drone_that_a_landing_cannot_save_has_its_motors_cut():
     responses = [(f.response, round(t, 2)) for t, f in found]
     assert responses[0][0] == "land" and responses[-1][0] == "stop", responses
     assert 0.6 <= responses[-1][1] <= 0.8, responses  # drift(age + 0.32 s) reaches 0.055 m at about 0.73 s
+    # the cut says how far from its landing's end and from how high at most it drops (a reviewer tells a drop from
+    # 0.5 m from one a few centimetres above the floor)
+    assert found[-1][1].message.endswith("motors off (0.5 s before its landing would end, at most 0.50 m up)"), found
 
 
 def test_a_blind_landing_whose_estimate_is_low_is_cut_as_a_fall_from_there():
@@ -400,6 +403,8 @@ def test_a_blind_landing_whose_estimate_is_low_is_cut_as_a_fall_from_there():
     # drift, 0.23 s: cut at about 0.82 s, 4.5 cm lower on a 0.5 m/s descent
     assert cut_blind and cut_seen and cut_seen[0] >= cut_blind[0] + 0.06, (cut_blind, cut_seen)
     assert cut_seen[0] <= 1.05, cut_seen  # drift(age) alone reaches the 0.055 m room at 1.05 s
+    last = fly_blind((0.0, 0.68, 0.5), telemetry=True)[-1][1].message
+    assert last.endswith("at most 0.26 m up)"), last  # the estimate's 0.23 m plus 0.03 m of drift
 
 
 def test_a_lab_that_measured_a_larger_blind_drift_lands_its_blind_drones_sooner_and_farther_from_things():
