@@ -244,6 +244,9 @@ def judge_faults(faults: list[dict[str, Any]], mission_path: Path, workdir: Path
     for f in faults:
         found = _warnings_for(f, events, flying_at)
         if found is None:
+            if _uninjectable(f, flying_at, set(names) <= kept_down | unsafe_drones):
+                notes.append(f"{f['kind']} not injected: no drone took off, so no planning phase for its at_s")
+                continue
             fail(f"{f['kind']} was never injected")
             continue
         if not found and _grounded_at_injection(f, events, truth):
@@ -263,6 +266,13 @@ def _unsafe_to_fly(fault: dict[str, Any], mission: Any) -> bool:
     if fault["kind"] == "start_offset":
         return math.hypot(*fault["offset_m"][:2]) > mission.safety.start_tolerance_m
     return fault["kind"] in UNSAFE_TO_FLY
+
+
+def _uninjectable(fault: dict[str, Any], flying_at: Optional[int], all_kept_down: bool) -> bool:
+    """A flight-time fault (its ``at_s`` counts from the planning phase) in a flight with no planning phase because
+    other faults rightly kept every drone on the floor (compound seed 12, run 0: solo, upside_down + blackout): it
+    could not be injected, and nothing is owed for it. Without such a reason a missing injection stays a failure."""
+    return flying_at is None and all_kept_down and fault["kind"] not in POWER_ON
 
 
 def _grounded_at_injection(fault: dict[str, Any], events: list[tuple[int, dict]],

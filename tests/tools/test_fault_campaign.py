@@ -135,3 +135,16 @@ def test_a_fault_on_a_drone_standing_with_its_motors_off_owes_no_warning():
     assert campaign._grounded_at_injection(occlusion, events, truth(0.0, False))  # noqa: SLF001
     assert not campaign._grounded_at_injection(occlusion, events, truth(0.5, True))  # noqa: SLF001
     assert not campaign._grounded_at_injection(occlusion, events, truth(0.0, True))  # noqa: SLF001 - spinning up
+
+
+def test_a_timed_fault_in_a_flight_that_rightly_never_took_off_is_not_owed():
+    """Compound seed 12, run 0: solo with cf1 upside down and a blackout at 2 s of the planning phase. The only
+    drone rightly stays down, so there is no planning phase and the blackout cannot be injected: nothing owed. A
+    flight that never planned without such a reason, or a power-on fault never injected, still fails."""
+    campaign = load_campaign()
+    blackout = campaign.fault_fields("blackout", None, {"duration_s": 3.0}, 2.0)
+    yaw = campaign.fault_fields("yaw_offset", "cf1", {"deg": 120.0}, 0.0)
+    assert campaign._uninjectable(blackout, None, True)  # noqa: SLF001
+    assert not campaign._uninjectable(blackout, None, False)  # noqa: SLF001 - nothing kept the drones down
+    assert not campaign._uninjectable(blackout, int(1e9), True)  # noqa: SLF001 - it planned: the fault was due
+    assert not campaign._uninjectable(yaw, None, True)  # noqa: SLF001 - a power-on fault is injected before that
