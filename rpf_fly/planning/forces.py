@@ -125,12 +125,19 @@ def repulsion_one(
     return complex(fx, fy), wall, wall_normal
 
 
+def _offsets(position: np.ndarray | complex, neighbour_position: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``p_j - p`` and its length (:meth:`LocalView.neighbour_offsets` when the caller has no view)."""
+    delta = neighbour_position - per_item(position)
+    return delta, abs(delta)
+
+
 def inter_robot(
     position: np.ndarray,
     neighbour_position: np.ndarray,
     neighbour_mask: np.ndarray,
     lam: np.ndarray | float,
     config: PlannerConfig,
+    offsets: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Force from the lambda-neighbours ``S + (K,)`` selected by ``neighbour_mask``, and how many contributed.
 
@@ -142,8 +149,7 @@ def inter_robot(
         if isinstance(position, np.ndarray):
             return np.zeros(position.shape, dtype=complex), np.zeros(position.shape, dtype=int)
         return 0j, 0
-    delta = neighbour_position - per_item(position)
-    d_true = abs(delta)
+    delta, d_true = offsets if offsets is not None else _offsets(position, neighbour_position)
     mask = neighbour_mask & (d_true < config.sensing_range)
     d = np.maximum(d_true, config.min_distance)
     if config.margin:  # the neighbour seen margin closer: its repulsion ranges shift outward by the margin

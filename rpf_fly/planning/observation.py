@@ -78,8 +78,7 @@ def build_observation(
         return Observation(
             local, np.zeros(lead + (max_neighbours, NEIGHBOUR_SIZE), np.float32), np.zeros(lead + (max_neighbours,), bool)
         )
-    delta = view.neighbour_position - per_item(view.position)
-    dist = abs(delta)
+    delta, dist = view.neighbour_offsets()
     order = _along_last_axis(
         np.argsort(np.where(view.neighbour_mask, dist, np.inf), axis=-1, kind="stable")[..., :max_neighbours]
     )

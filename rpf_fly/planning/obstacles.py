@@ -82,10 +82,16 @@ class NearestObstacle:
     normal: np.ndarray
 
 
-def _circles(points: np.ndarray, centers: np.ndarray, radii: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
-    """Signed distance and outward normal for every circle ``S + (M,)``."""
-    diff = per_item(points) - centers
-    dist = abs(diff)
+def _circles(points: np.ndarray, centers: np.ndarray, radii: np.ndarray | float,
+             offsets: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Signed distance and outward normal for every circle ``S + (M,)``. ``offsets``: the centres' ``(c - p,
+    |c - p|)`` when the caller has them (a view's :meth:`~rpf_fly.planning.view.LocalView.neighbour_offsets`;
+    ``p - c`` is their exact negation, up to the sign of a zero offset)."""
+    if offsets is None:
+        diff = per_item(points) - centers
+        dist = abs(diff)
+    else:
+        diff, dist = -offsets[0], offsets[1]
     return dist - radii, diff / (dist + TINY)
 
 
@@ -123,6 +129,7 @@ def nearest_obstacle(
     extra_centers: np.ndarray | None = None,
     extra_radius: float = 0.0,
     extra_mask: np.ndarray | None = None,
+    extra_offsets: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> NearestObstacle:
     """Nearest obstacle surface for each point (complex, leading shape ``S``; a Python complex for one robot).
 
@@ -135,7 +142,7 @@ def nearest_obstacle(
     if obstacles.n_boxes:
         found.append(_reduce(*_boxes(points, obstacles)))
     if extra_mask is not None and extra_centers is not None and extra_mask.any():
-        d, n = _circles(points, extra_centers, extra_radius)
+        d, n = _circles(points, extra_centers, extra_radius, extra_offsets)
         found.append(_reduce(d + (~extra_mask) * FAR, n))
     if not found:
         if isinstance(points, np.ndarray):
@@ -166,6 +173,7 @@ def every_surface(
     extra_centers: np.ndarray | None = None,
     extra_radius: float = 0.0,
     extra_mask: np.ndarray | None = None,
+    extra_offsets: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> Surfaces:
     """Every obstacle surface (circles, boxes, then the extra circles of :func:`nearest_obstacle`, those outside
     ``extra_mask`` at FAR), where :func:`nearest_obstacle` keeps the nearest. For the summed repulsion
@@ -179,7 +187,7 @@ def every_surface(
         dists.append(d), normals.append(n)
     mapped = sum(d.shape[-1] for d in dists)
     if extra_mask is not None and extra_centers is not None and extra_mask.any():
-        d, n = _circles(points, extra_centers, extra_radius)
+        d, n = _circles(points, extra_centers, extra_radius, extra_offsets)
         dists.append(d + (~extra_mask) * FAR), normals.append(n)
     if not dists:
         shape = np.shape(points) + (0,)

@@ -73,7 +73,8 @@ def sense_obstacles(view: LocalView, obstacles: ObstacleSet, config: PlannerConf
     mask = view.neighbour_mask
     if config.static_neighbours_as_obstacles and mask.shape[-1]:
         static = static_mask(view, config)
-        nearest = nearest_obstacle(view.position, obstacles, view.neighbour_position, config.safety_radius, static)
+        nearest = nearest_obstacle(view.position, obstacles, view.neighbour_position, config.safety_radius, static,
+                                   view.neighbour_offsets())
         return nearest, mask & ~static
     return nearest_obstacle(view.position, obstacles), mask
 
@@ -103,13 +104,14 @@ def apf_step(
     f_a, d_g = attractive(view.position, view.goal)
     seen = perceived(nearest, config)
     f_r = repulsive(seen, eta, config) if repulsion is None else eta * repulsion
-    f_in, count = inter_robot(view.position, view.neighbour_position, lambda_mask, lam, config)
+    f_in, count = inter_robot(view.position, view.neighbour_position, lambda_mask, lam, config,
+                              view.neighbour_offsets())
     direction, mode = select_heading(f_a, f_r, f_in, view.heading, seen.distance, config)
     direction, mode = capture(direction, mode, view.position, view.goal if goal is None else goal, f_in,
                               nearest.distance, config)
     direction = yield_speed(direction, f_in, config)
     direction = brake(direction, view.position, view.neighbour_position, view.neighbour_mask, config,
-                      nearest if walls is None else walls)
+                      nearest if walls is None else walls, view.neighbour_offsets())
     return PlanStep(
         direction=direction,
         mode=mode,
@@ -152,8 +154,7 @@ def guided_view(
     waypoint, remaining = guidance.waypoint(view.position, view.goal, parked)
     if reach:
         waypoint = past_reached(guidance, view.position, view.goal, waypoint, reach, parked)
-    guided = LocalView(view.position, waypoint, view.heading, view.neighbour_position, view.neighbour_velocity,
-                       view.neighbour_mask)
+    guided = view.with_goal(waypoint)
     return guided, waypoint, remaining
 
 
@@ -253,7 +254,7 @@ class Planner:
             return force, NearestObstacle(wall, normal)
         if statics:
             surfaces = every_surface(view.position, self.obstacles, view.neighbour_position, config.safety_radius,
-                                     mask & ~lambda_mask)
+                                     mask & ~lambda_mask, view.neighbour_offsets())
         else:
             surfaces = every_surface(view.position, self.obstacles)
         force = repulsive_sum(surfaces, 1.0, config)

@@ -37,7 +37,8 @@ def yield_speed(direction: np.ndarray, f_in: np.ndarray, config: PlannerConfig) 
 
 
 def brake(direction: np.ndarray, position: np.ndarray, neighbour_position: np.ndarray, neighbour_mask: np.ndarray,
-          config: PlannerConfig, nearest: NearestObstacle | None = None) -> np.ndarray:
+          config: PlannerConfig, nearest: NearestObstacle | None = None,
+          offsets: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """``direction`` scaled by ``min clip(gap / brake_distance, 0, 1)`` over what it heads toward: each neighbour
     ``j`` with ``d . (p_j - p) > 0``, ``gap = |p_j - p| - (2r + margin + brake_buffer)``; then, toward the
     ``nearest`` obstacle surface (``d . normal < 0``), only the inward part of the step is scaled by the same
@@ -49,7 +50,8 @@ def brake(direction: np.ndarray, position: np.ndarray, neighbour_position: np.nd
     centimetres) inside (0.2467 m against 0.25 in 1 of 120 fresh circles; 0.131 m against 0.15 beside a pillar).
     Braking within ``brake_distance`` of the bar makes the drone's own steps toward it shrink geometrically as the
     gap closes, so it never steps across the bar toward a hovering neighbour or a wall; moving sideways or away
-    stays at full speed, so the rule alone cannot stall a drone that may turn away."""
+    stays at full speed, so the rule alone cannot stall a drone that may turn away. ``offsets``: the neighbours'
+    ``(p_j - p, |p_j - p|)`` when the caller has them (:meth:`LocalView.neighbour_offsets`)."""
     if not config.brake_distance:
         return direction
     pair_bar = 2.0 * config.safety_radius + config.margin + config.brake_buffer
@@ -74,10 +76,10 @@ def brake(direction: np.ndarray, position: np.ndarray, neighbour_position: np.nd
         return direction
     factor = np.ones(np.shape(position))
     if k:
-        delta = neighbour_position - per_item(position)
+        delta, distance = offsets if offsets is not None else (neighbour_position - per_item(position), None)
         heading = per_item(direction)
         towards = heading.real * delta.real + heading.imag * delta.imag > 0.0
-        gap = abs(delta) - pair_bar
+        gap = (abs(delta) if distance is None else distance) - pair_bar
         factor = np.where(neighbour_mask & towards, np.clip(gap / config.brake_distance, 0.0, 1.0), 1.0).min(axis=-1)
     direction = direction * factor
     if nearest is not None:

@@ -31,6 +31,26 @@ class LocalView:
     neighbour_velocity: np.ndarray
     neighbour_mask: np.ndarray
 
+    def neighbour_offsets(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(delta, distance)`` ``S + (K,)``: each neighbour's offset ``p_j - p`` (complex) and its length, computed
+        once per view. The observation, the inter-robot force and the brake each needed them (a 100-drone tick
+        computed the same 100 x 99 offsets three times); a view is never changed, so one computation serves all."""
+        cached = self.__dict__.get("_offsets")
+        if cached is None:
+            p = self.position
+            delta = self.neighbour_position - (p[..., None] if isinstance(p, np.ndarray) and p.ndim else p)
+            cached = (delta, abs(delta))
+            object.__setattr__(self, "_offsets", cached)
+        return cached
+
+    def with_goal(self, goal: np.ndarray) -> "LocalView":
+        """The same view with another goal (guidance's waypoint), its neighbour offsets shared."""
+        view = LocalView(self.position, goal, self.heading, self.neighbour_position, self.neighbour_velocity,
+                         self.neighbour_mask)
+        if "_offsets" in self.__dict__:
+            object.__setattr__(view, "_offsets", self.__dict__["_offsets"])
+        return view
+
 
 @lru_cache(maxsize=64)
 def others_index(n: int) -> np.ndarray:
