@@ -201,6 +201,7 @@ class Supervisor:
         self._glitching: set[str] = set()
         self._turned: set[str] = set()
         self._diverging: dict[str, tuple[int, int, float]] = {}
+        self._estimate_stopped: set[str] = set()
         self._history: dict[str, deque[tuple[float, tuple[float, float, float]]]] = {}
         self._poor_link: set[str] = set()
         self._off_track: dict[str, float] = {}
@@ -533,7 +534,11 @@ class Supervisor:
                    states: dict[str, DroneState]) -> list[Finding]:
         """The on-board estimate against mocap (``ESTIMATE_DIVERGENCE_M``), in two steps. Off the newest pose in 2
         samples: a warning (also what late telemetry on a full radio looks like at flight speed). Off EVERY pose of
-        the last ``ESTIMATE_HISTORY_S`` in 2 samples: the estimate is not just late, it is wrong; motors off."""
+        the last ``ESTIMATE_HISTORY_S`` in 2 samples: the estimate is not just late, it is wrong; motors off.
+        Take-off and landing are watched as the planning is (until 2026-12-03 they were not: a landing flies the
+        estimate's way, and a drone whose estimator diverged mid-landing slid 0.16 m sideways in its last half second
+        without a word); a taking-off or landing drone whose mocap height is within ``ON_FLOOR_Z_M`` of the floor gets
+        a warning instead (a cut there buys nothing, and a landed drone's outcome stays landed)."""
         out = []
         for a in agents:
             state, pose = states.get(a.name), tracker.get(a.name)
@@ -543,9 +548,9 @@ class Supervisor:
             while history and history[0][0] < now_s - ESTIMATE_HISTORY_S:
                 history.popleft()
             if (state is None or state.position_m is None or state.telemetry_stamp_s is None or pose is None
-                    or not pose.valid or now_s - pose.stamp_s > self.safety.pose_timeout_s
-                    or a.phase in (DronePhase.LANDING, DronePhase.TAKEOFF)):
+                    or not pose.valid or now_s - pose.stamp_s > self.safety.pose_timeout_s):
                 continue
+            grounded = a.phase in (DronePhase.LANDING, DronePhase.TAKEOFF) and pose.position[2] <= ON_FLOOR_Z_M
             late, wrong, stamp = self._diverging.get(a.name, (0, 0, -1.0))
             if state.telemetry_stamp_s == stamp:
                 continue
@@ -563,7 +568,12 @@ class Supervisor:
             if late == 2 and wrong < 2:
                 out.append(Finding("estimator", WARNING, f"on-board estimate {off:.2f} m from mocap (late telemetry "
                                    "on a full radio, or an estimator that stopped taking extpos)", a.name, "warn"))
-            if wrong == 2:
+            if wrong == 2 and grounded:
+                out.append(Finding("estimator", WARNING, f"on-board estimate {nearest:.2f} m from {what}: the "
+                                   "estimator no longer follows extpos; on the floor, its landing's end is left to "
+                                   "it", a.name, "warn"))
+            if wrong >= 2 and not grounded and a.name not in self._estimate_stopped:
+                self._estimate_stopped.add(a.name)
                 out.append(Finding("estimator", ERROR, f"on-board estimate {nearest:.2f} m from {what}: the "
                                    "estimator no longer follows extpos, and a landing would fly wherever the "
                                    "estimate goes: motors off", a.name, "stop"))

@@ -265,11 +265,12 @@ def test_an_orientation_flip_in_flight_is_a_warning_once_and_its_end_is_said():
 
 
 def fly_with_telemetry(estimate_of, truth_of, stamp_lag_s: float, seconds: float = 1.2,  # type: ignore[no-untyped-def]
-                       stamped: bool = True):
+                       stamped: bool = True, phase: DronePhase = DronePhase.PLANNING):
     """cf1's truth ``truth_of(t)`` seen by mocap at 100 Hz, its status telemetry at 10 Hz carrying the estimate
     ``estimate_of(t)`` made ``stamp_lag_s`` before it arrives (with its firmware timestamp on the host clock unless
-    not ``stamped``); the estimator findings and their times."""
+    not ``stamped``), cf1 in ``phase``; the estimator findings and their times."""
     _, agents, tracker, supervisor = setup()
+    agents["cf1"].set_phase(phase, 0.0)
     found = []
     states = {n: state(n, 0.0) for n in agents}
     for k in range(int(seconds * 100) + 1):
@@ -310,6 +311,30 @@ def test_a_wrong_estimate_is_stopped_by_the_mocap_pose_of_its_own_time():
     # without stamps (a backend that cannot tell when its telemetry was made) only the old rule can stop it: later
     unstamped = [t for t, f in fly_with_telemetry(moving, truth, 0.01, 1.5, stamped=False) if f.response == "stop"]
     assert unstamped and unstamped[0] - stops[0][0] > 0.15, (unstamped, stops)
+
+
+def descending(t: float) -> tuple[float, float, float]:
+    return (-1.0, -0.6, max(0.0, 0.5 - 0.25 * t))
+
+
+def test_an_estimator_that_diverges_while_its_drone_lands_or_takes_off_is_stopped_too():
+    """Compound campaign seed 12, run 14: the watchdog landed the swarm, and cf3's estimator diverged mid-landing; the
+    landing flew the estimate's way and the true drone slid 0.16 m sideways in its last 0.5 s of descent, without a
+    word (the check skipped landing and take-off drones: it dated from when its answer was to land). Motors off
+    once the estimate is 0.1 m off the pose of its own time; a drone near the floor is warned about, not cut."""
+    def truth(t: float) -> tuple[float, float, float]:
+        x, y, z = descending(t)
+        return (x, y - 0.38 * max(0.0, t - 0.2), z)
+
+    for phase in (DronePhase.LANDING, DronePhase.TAKEOFF):
+        found = fly_with_telemetry(descending, truth, stamp_lag_s=0.01, phase=phase)
+        stops = [(t, f) for t, f in found if f.response == "stop"]
+        assert stops and stops[0][0] - 0.2 <= 0.6, (phase, found)
+    assert not fly_with_telemetry(descending, descending, 0.01, phase=DronePhase.LANDING)  # a healthy landing
+    on_floor = fly_with_telemetry(lambda t: (-1.0, -0.6, 0.0), lambda t: (-1.0 + 0.5 * t, -0.6, 0.0), 0.01,
+                                  phase=DronePhase.LANDING)
+    assert [f.response for _, f in on_floor] == ["warn"], on_floor  # below 0.1 m: said, not cut
+    assert "on the floor" in on_floor[0][1].message
 
 
 def test_mocap_is_said_back_only_when_a_pose_is_back_not_when_the_blind_drones_land():
