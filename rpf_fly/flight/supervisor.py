@@ -556,18 +556,25 @@ class Supervisor:
                 continue
             off = math.dist(state.position_m, pose.position)
             then = _pose_at(history, state.estimate_stamp_s)
+            nearest: Optional[float]
             if then is not None:  # the estimate against where mocap saw the drone when it was made
                 nearest = math.dist(state.position_m, then)
                 wrong_m, what = ESTIMATE_WRONG_M, "the mocap pose of its own time"
+            elif (state.estimate_stamp_s is not None and history
+                  and state.estimate_stamp_s < history[0][0]):  # made before the poses kept (the loop stalled)
+                nearest, wrong_m, what = None, ESTIMATE_WRONG_M, ""
             else:  # no stamp: only far from every recent pose is surely wrong, not late
                 nearest = min((math.dist(state.position_m, p) for _, p in history), default=off)
                 wrong_m, what = ESTIMATE_DIVERGENCE_M, f"every mocap pose of the last {ESTIMATE_HISTORY_S:g} s"
             late = late + 1 if off > ESTIMATE_DIVERGENCE_M else 0
-            wrong = wrong + 1 if nearest > wrong_m else 0
+            if nearest is not None:  # an estimate nothing can date against the poses neither clears nor counts
+                wrong = wrong + 1 if nearest > wrong_m else 0
             self._diverging[a.name] = (late, wrong, state.telemetry_stamp_s)
             if late == 2 and wrong < 2:
                 out.append(Finding("estimator", WARNING, f"on-board estimate {off:.2f} m from mocap (late telemetry "
                                    "on a full radio, or an estimator that stopped taking extpos)", a.name, "warn"))
+            if nearest is None:
+                continue
             if wrong == 2 and grounded:
                 out.append(Finding("estimator", WARNING, f"on-board estimate {nearest:.2f} m from {what}: the "
                                    "estimator no longer follows extpos; on the floor, its landing's end is left to "

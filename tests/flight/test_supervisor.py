@@ -337,6 +337,43 @@ def test_an_estimator_that_diverges_while_its_drone_lands_or_takes_off_is_stoppe
     assert "on the floor" in on_floor[0][1].message
 
 
+def test_an_estimate_made_during_a_loop_stall_is_not_judged_against_the_pose_after_it():
+    """Found by a targeted campaign (seed 13, u-trap, 50 ms mocap delay, then a 1.4 s loop stall): the watchdog
+    landed the swarm; when the loop came back, the first status sample read was made during the stall, before any
+    pose the check still kept, and its estimate (0.17 m higher: the drone had descended since) was judged against
+    the newest pose alone: motors cut on a healthy landing. An estimate the poses cannot date is now not counted;
+    the next one, made after the stall, is judged as before."""
+    _, agents, tracker, supervisor = setup()
+    agents["cf1"].set_phase(DronePhase.LANDING, 0.0)
+    states = {n: state(n, 0.0) for n in agents}
+
+    def at(t: float) -> tuple[float, float, float]:
+        return (-1.0, -0.6, 1.0 - 0.25 * t)  # a landing from 1 m: 0.22 m lower after the stall
+
+    found = []
+    for k in range(51):  # 0-0.5 s: landing, the loop running
+        t = k / 100
+        see(tracker, k + 1, t, {**POSITIONS, "cf1": at(t)})
+        if k % 10 == 5:
+            states["cf1"] = replace(state("cf1", t), position_m=at(t - 0.01), estimate_stamp_s=t - 0.01)
+        found += [f for f in supervisor.check(t, agents.values(), tracker, states) if f.kind == "estimator"]
+    # the loop stalls 0.5-1.9 s; back, it reads two samples made during the stall, then fresh ones
+    for k, t in enumerate((1.9, 2.0, 2.1, 2.2, 2.3)):
+        see(tracker, 100 + k, t, {**POSITIONS, "cf1": at(t)})
+        made = 1.0 + 0.1 * k if k < 2 else t - 0.01
+        states["cf1"] = replace(state("cf1", t), position_m=at(made), estimate_stamp_s=made)
+        found += [f for f in supervisor.check(t, agents.values(), tracker, states) if f.kind == "estimator"]
+    assert not [f for f in found if f.response == "stop"], found
+    # a wrong estimate after the stall is still stopped
+    wrong = []
+    for k, t in enumerate((2.4, 2.5, 2.6)):
+        see(tracker, 110 + k, t, {**POSITIONS, "cf1": at(t)})
+        x, y, z = at(t - 0.01)
+        states["cf1"] = replace(state("cf1", t), position_m=(x + 0.2, y, z), estimate_stamp_s=t - 0.01)
+        wrong += [f for f in supervisor.check(t, agents.values(), tracker, states) if f.kind == "estimator"]
+    assert [f.response for f in wrong if f.response == "stop"] == ["stop"], wrong
+
+
 def test_mocap_is_said_back_only_when_a_pose_is_back_not_when_the_blind_drones_land():
     _, agents, tracker, supervisor = setup()
     states = {n: state(n, 0.0) for n in agents}
