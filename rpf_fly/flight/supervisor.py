@@ -562,7 +562,7 @@ class Supervisor:
                 wrong_m, what = ESTIMATE_WRONG_M, "the mocap pose of its own time"
             elif (state.estimate_stamp_s is not None and history
                   and state.estimate_stamp_s < history[0][0]):  # made before the poses kept (the loop stalled)
-                nearest, wrong_m, what = None, ESTIMATE_WRONG_M, ""
+                nearest = None
             else:  # no stamp: only far from every recent pose is surely wrong, not late
                 nearest = min((math.dist(state.position_m, p) for _, p in history), default=off)
                 wrong_m, what = ESTIMATE_DIVERGENCE_M, f"every mocap pose of the last {ESTIMATE_HISTORY_S:g} s"

@@ -22,7 +22,7 @@ import numpy as np
 
 from rpf_fly.planning.config import PlannerConfig
 from rpf_fly.planning.obstacles import FAR, NearestObstacle, Surfaces
-from rpf_fly.planning.vectors import TINY, maximum, per_item, plain
+from rpf_fly.planning.vectors import TINY, maximum, offsets as offsets_of, per_item, plain
 
 
 def attractive(position: np.ndarray, goal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -125,12 +125,6 @@ def repulsion_one(
     return complex(fx, fy), wall, wall_normal
 
 
-def _offsets(position: np.ndarray | complex, neighbour_position: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``p_j - p`` and its length (:meth:`LocalView.neighbour_offsets` when the caller has no view)."""
-    delta = neighbour_position - per_item(position)
-    return delta, abs(delta)
-
-
 def inter_robot(
     position: np.ndarray,
     neighbour_position: np.ndarray,
@@ -149,7 +143,7 @@ def inter_robot(
         if isinstance(position, np.ndarray):
             return np.zeros(position.shape, dtype=complex), np.zeros(position.shape, dtype=int)
         return 0j, 0
-    delta, d_true = offsets if offsets is not None else _offsets(position, neighbour_position)
+    delta, d_true = offsets if offsets is not None else offsets_of(position, neighbour_position)
     mask = neighbour_mask & (d_true < config.sensing_range)
     d = np.maximum(d_true, config.min_distance)
     if config.margin:  # the neighbour seen margin closer: its repulsion ranges shift outward by the margin

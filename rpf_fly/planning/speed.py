@@ -24,7 +24,7 @@ import numpy as np
 
 from rpf_fly.planning.config import PlannerConfig
 from rpf_fly.planning.obstacles import NearestObstacle
-from rpf_fly.planning.vectors import dot, maximum, minimum, per_item
+from rpf_fly.planning.vectors import dot, maximum, minimum, offsets as offsets_of, per_item
 
 
 def yield_speed(direction: np.ndarray, f_in: np.ndarray, config: PlannerConfig) -> np.ndarray:
@@ -76,10 +76,10 @@ def brake(direction: np.ndarray, position: np.ndarray, neighbour_position: np.nd
         return direction
     factor = np.ones(np.shape(position))
     if k:
-        delta, distance = offsets if offsets is not None else (neighbour_position - per_item(position), None)
+        delta, distance = offsets if offsets is not None else offsets_of(position, neighbour_position)
         heading = per_item(direction)
         towards = heading.real * delta.real + heading.imag * delta.imag > 0.0
-        gap = (abs(delta) if distance is None else distance) - pair_bar
+        gap = distance - pair_bar
         factor = np.where(neighbour_mask & towards, np.clip(gap / config.brake_distance, 0.0, 1.0), 1.0).min(axis=-1)
     direction = direction * factor
     if nearest is not None:

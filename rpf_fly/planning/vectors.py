@@ -96,6 +96,14 @@ def per_item(x):  # type: ignore[no-untyped-def]
     return x[..., None] if isinstance(x, np.ndarray) and x.ndim else x
 
 
+def offsets(position, neighbour_position: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # type: ignore[no-untyped-def]
+    """Each neighbour's offset ``p_j - p`` (complex ``S + (K,)``) and its length: what the observation, the
+    inter-robot force, the brake and the static-neighbour circles all start from (a view computes them once:
+    :meth:`~rpf_fly.planning.view.LocalView.neighbour_offsets`)."""
+    delta = neighbour_position - per_item(position)
+    return delta, abs(delta)
+
+
 def phase(z):  # type: ignore[no-untyped-def]
     """Angle of ``z`` in (-pi, pi], for a Python number or an array.
 

@@ -14,6 +14,8 @@ from functools import lru_cache
 
 import numpy as np
 
+from rpf_fly.planning.vectors import offsets
+
 
 @dataclass(frozen=True)
 class LocalView:
@@ -33,13 +35,12 @@ class LocalView:
 
     def neighbour_offsets(self) -> tuple[np.ndarray, np.ndarray]:
         """``(delta, distance)`` ``S + (K,)``: each neighbour's offset ``p_j - p`` (complex) and its length, computed
-        once per view. The observation, the inter-robot force and the brake each needed them (a 100-drone tick
-        computed the same 100 x 99 offsets three times); a view is never changed, so one computation serves all."""
+        once per view (:func:`~rpf_fly.planning.vectors.offsets`). The observation, the inter-robot force, the brake
+        and the static-neighbour circles each needed them (a 100-drone tick computed the same 100 x 99 offsets five
+        times); a view is never changed, so one computation serves all."""
         cached = self.__dict__.get("_offsets")
         if cached is None:
-            p = self.position
-            delta = self.neighbour_position - (p[..., None] if isinstance(p, np.ndarray) and p.ndim else p)
-            cached = (delta, abs(delta))
+            cached = offsets(self.position, self.neighbour_position)
             object.__setattr__(self, "_offsets", cached)
         return cached
 
