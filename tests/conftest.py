@@ -31,6 +31,15 @@ def fake_drivers() -> list[type]:
     return [c for c in cflib.crtp.CLASSES if isinstance(c, type) and issubclass(c, fake_radio.FakeRadioDriver)]
 
 
+def pytest_configure(config: pytest.Config) -> None:
+    """Run the tests as a foreground Python program: Ctrl-C raises KeyboardInterrupt, and the programs the tests start
+    (``rpf-fly mocap watch``, a library user's flight) hear SIGINT. A test run started in the background of a shell
+    without job control (``pytest ... &`` in a script) inherits SIGINT ignored; Python keeps an ignored SIGINT, and
+    so does every child it starts, so the Ctrl-C tests would fail there for a reason that is not theirs."""
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+
+
 @pytest.fixture(autouse=True)
 def sigint_handler_left_as_found() -> Iterator[None]:
     """Every test leaves Python's SIGINT handler as it found it: a handler left behind by one test (a flight's
