@@ -28,8 +28,8 @@ from rpf_fly.flight.events import ERROR, FATAL, INFO, WARNING, EventBus, FlightE
 from rpf_fly.flight.gc_pacing import GcPacer
 from rpf_fly.flight.phases import DronePhase, FlightOutcome, SwarmPhase
 from rpf_fly.flight.poses import PoseTracker, TrackedPose
-from rpf_fly.flight.preflight import (estimate_problem, orientation_problem, preflight_problem, yaw_of,
-                                     yaw_problem)
+from rpf_fly.flight.preflight import (awaits_data, estimate_problem, orientation_problem, preflight_problem,
+                                     yaw_of, yaw_problem)
 from rpf_fly.flight.recorder import NullRecorder, PlannerRecord, Recorder
 from rpf_fly.flight.report import FlightReport, LoopStats
 from rpf_fly.flight.supervisor import Finding, Supervisor
@@ -110,6 +110,12 @@ class FlightLoop:
     it falls from 1.5 m in 0.6 s. Until then it may still hover or drift where the others land, and the log should
     show where it came down (a one-drone flight used to end, and close its log, with that drone still in the air)."""
     PREFLIGHT_TIMEOUT_S = 8.0
+    """The longest the preflight waits for every drone to pass (a link, telemetry, a pose still to come)."""
+    PREFLIGHT_SETTLED_S = 2.0
+    """A drone whose preflight finding (tumbled, low battery, off its start, outside the arena...: not an absence of
+    data, `preflight.awaits_data`) has held this long, fresh telemetry and mocap repeating it, fails now instead of
+    at the timeout, once every other drone has passed or failed so too: a user with a drone on its back hears so in
+    2 s, not 8."""
     STATUS_PERIOD_S = 0.1
     SEND_WAIT_S = 0.002
     """How long a tick waits for the backend's sender threads to hand its setpoints to cflib (see `_plan_tick`)."""
@@ -328,12 +334,15 @@ class FlightLoop:
         self._set_phase(SwarmPhase.PREFLIGHT)
         deadline = self.clock() + self.PREFLIGHT_TIMEOUT_S
         problems: dict[str, str] = {}
+        found_since: dict[str, float] = {}  # drone -> since when a finding (not a wait for data) has held
         while self.clock() < deadline and not self._stop.is_set():
             self._spin_once(deadline)
             problems = {name: self._preflight_problem(agent) for name, agent in self.agents.items()}
             problems = {n: p for n, p in problems.items() if p}
-            if not problems:
-                break
+            now = self.clock()
+            found_since = {n: found_since.get(n, now) for n, p in problems.items() if not awaits_data(p)}
+            if all(n in found_since and now - found_since[n] >= self.PREFLIGHT_SETTLED_S for n in problems):
+                break  # every drone passed, or fails for what the data has kept saying
         if not self._stop.is_set():
             problems.update(self._align_estimators([n for n in self.agents if n not in problems]))
         if self._stop.is_set():

@@ -18,23 +18,37 @@ from rpf_fly.radio.backend import DroneState
 ON_GROUND_MAX_Z_M = 0.3
 """A drone standing higher than this above the floor (mocap z = 0) is not on the ground (on a box, held in a hand)."""
 
+NO_LINK = "no radio link"
+NO_BATTERY = "no battery telemetry yet"
+NOT_TRACKED = "not tracked by the mocap"
+"""The problems that are an absence (of a link, of telemetry, of a pose), not a finding: data that may still come
+(a link that is reconnecting, telemetry that starts, a rigid body someone steps out of the cameras' view of), so the
+preflight waits its whole timeout for them (:func:`awaits_data`)."""
+
+
+def awaits_data(problem: str) -> bool:
+    """Whether ``problem`` (of :func:`preflight_problem`) says something has not arrived yet, rather than what the
+    telemetry or the mocap shows (tumbled, low battery, off its start...): a finding the same data would only
+    repeat, so the preflight need not wait its whole timeout for it to change."""
+    return problem in (NO_LINK, NO_BATTERY) or problem.endswith(NOT_TRACKED)
+
 
 def preflight_problem(mission: Mission, agent: DroneAgent, state: Optional[DroneState], pose: Optional[TrackedPose],
                       pose_age_s: float) -> str:
     """The first reason ``agent``'s drone must not take off, or ""."""
     s, arena = mission.safety, mission.arena
     if state is None or not state.link.up:
-        return "no radio link"
+        return NO_LINK
     if state.supervisor is not None and (state.supervisor.locked or state.supervisor.crashed):
         return "the drone's supervisor is locked or crashed: reboot it"
     if state.supervisor is not None and state.supervisor.tumbled:
         return "the drone's supervisor reports it tumbled (on its back or tilted): set it upright"
     if state.battery is None:
-        return "no battery telemetry yet"
+        return NO_BATTERY
     if state.battery.low or state.battery.voltage_v < mission.radio.min_battery_v:
         return f"battery {state.battery.voltage_v:.2f} V below {mission.radio.min_battery_v:.2f} V"
     if pose is None or not pose.valid or pose_age_s > s.pose_timeout_s:
-        return f"rigid body {agent.drone.rigid_body!r} not tracked by the mocap"
+        return f"rigid body {agent.drone.rigid_body!r} {NOT_TRACKED}"
     x, y, z = pose.position
     if not (arena.x[0] <= x <= arena.x[1] and arena.y[0] <= y <= arena.y[1]):
         return f"outside the arena at ({x:.2f}, {y:.2f})"

@@ -12,6 +12,7 @@ from dataclasses import replace
 
 import pytest
 
+from rpf_fly.flight.loop import FlightLoop
 from rpf_fly.flight.phases import FlightOutcome, SwarmPhase
 from rpf_fly.log.review import metrics_of
 from rpf_fly.mission import load_mission
@@ -243,11 +244,16 @@ def test_a_drone_whose_supervisor_does_not_get_ready_to_fly_stays_on_the_ground(
 
 
 def test_a_drone_lying_tumbled_fails_its_preflight(tmp_path, short_mission):
+    """A finding the telemetry keeps repeating (tumbled) fails the drone once it has held 2 s
+    (``FlightLoop.PREFLIGHT_SETTLED_S``), not after the whole 8 s timeout that data still to come gets."""
     flight = fly(short_mission, tmp_path, start_faults={"cf3": StartFault(upside_down=True)})
     assert "tumbled" in flight.report.reasons["cf3"] and "preflight" in flight.report.reasons["cf3"]
     assert flight.report.outcomes["cf3"] == FlightOutcome.NOT_FLOWN
     assert flight.report.outcomes["cf1"] == flight.report.outcomes["cf2"] == FlightOutcome.REACHED
     assert not any(m.data["motors"] for m in flight.log.messages("/truth/cf3"))
+    began = next(e.time_s for e in flight.report.events if e.kind == "phase" and e.message == "swarm: preflight")
+    failed = next(e.time_s for e in flight.report.events if e.drone == "cf3" and "preflight failed" in e.message)
+    assert FlightLoop.PREFLIGHT_SETTLED_S <= failed - began < FlightLoop.PREFLIGHT_TIMEOUT_S - 3.0, failed - began
 
 
 def test_simulated_mocap_source_flies_too(tmp_path, short_mission):
