@@ -80,6 +80,11 @@ SWARM_KINDS = {"blackout", "mocap_delay", "loop_stall"}
 POWER_ON = {"yaw_offset", "start_offset", "upside_down", "motor_fault"}
 UNSAFE_TO_FLY = {"start_offset", "upside_down", "motor_fault"}
 AT_S = 3.0
+PLANNER_KINDS = {"planner_error", "planner_hang"}
+NOT_PLANNING_AGAIN = {"landing", "landed", "failed", "link_lost", "emergency"}
+"""Drone phases (`rpf_fly.flight.phases.DronePhase`) after which a drone's planner is never called again."""
+TRACKING_NOISE_M = 0.05
+"""A real Crazyflie's normal tracking error under mocap: a push smaller than this is not a fault anyone can see."""
 
 
 @dataclass
@@ -195,15 +200,7 @@ def judge_faults(faults: list[dict[str, Any]], mission_path: Path, workdir: Path
     crashed = sorted(n for n, s in truth.items() if any(m["crashed"] for _, m in s))
     if crashed:
         fail("crashed: " + ", ".join(crashed))
-    outside = []
-    for n, samples in truth.items():
-        for _, m in samples:
-            p = m["position"]
-            excess = max(arena.x[0] - p["x"], p["x"] - arena.x[1], arena.y[0] - p["y"], p["y"] - arena.y[1],
-                         p["z"] - arena.z[1])
-            if excess > r:
-                outside.append(f"{n} {excess:.2f} m")
-                break
+    outside = _outside_arena(truth, arena, r)
     if outside:
         fail("outside the arena by more than r: " + ", ".join(outside))
     min_sep = _min_separation(truth)
@@ -252,12 +249,38 @@ def judge_faults(faults: list[dict[str, Any]], mission_path: Path, workdir: Path
         if not found and _grounded_at_injection(f, events, truth):
             notes.append(f"{f['drone']} on the floor, motors off, at its {f['kind']}: nothing for it to act on")
             continue
+        if not found and _planner_unused_at_injection(f, events):
+            notes.append(f"{f['drone']} no longer planning at its {f['kind']} (landing or down): its planner is "
+                         "never called again")
+            continue
+        if not found and (push := _gust_push_bound(f, events, truth)) is not None and push < TRACKING_NOISE_M:
+            notes.append(f"{f['drone']} airborne too little of its gust to be pushed more than {push:.3f} m, under "
+                         f"a real drone's {TRACKING_NOISE_M:g} m tracking noise")
+            continue
         verdict.events += [f"{m.get('file')}: {m.get('message')}" for m in found][:3]
         if not found:
             fail(f"no warning naming {_target(f)} within {EVENT_WINDOW_S:g} s of its {f['kind']}")
     verdict.events += notes
     verdict.passed = not verdict.failures
     return verdict
+
+
+def _outside_arena(truth: dict[str, list[tuple[int, dict]]], arena: Any, r: float) -> list[str]:
+    """The drones whose true position left the arena by more than ``r`` while flying or spinning, with how far.
+    A drone standing with its motors off where it was put (a start offset beyond the edge, compound seed 15, run
+    13: its preflight kept it there) left nothing, so only airborne or motors-on samples count."""
+    outside = []
+    for n, samples in truth.items():
+        for _, m in samples:
+            p = m["position"]
+            if not m["motors"] and p["z"] <= ON_FLOOR_M:
+                continue
+            excess = max(arena.x[0] - p["x"], p["x"] - arena.x[1], arena.y[0] - p["y"], p["y"] - arena.y[1],
+                         p["z"] - arena.z[1])
+            if excess > r:
+                outside.append(f"{n} {excess:.2f} m")
+                break
+    return outside
 
 
 def _unsafe_to_fly(fault: dict[str, Any], mission: Any) -> bool:
@@ -282,13 +305,52 @@ def _grounded_at_injection(fault: dict[str, Any], events: list[tuple[int, dict]]
     drone = fault.get("drone")
     if drone is None or fault["kind"] in POWER_ON or fault["kind"] in SWARM_KINDS:
         return False
-    injected = next((t for t, m in events if m.get("file") == "fault" and m.get("name") == drone
-                     and m.get("message", "").startswith(f"injected {fault['kind']}")), None)
+    injected = _injected_at(fault, events)
     samples = truth.get(drone) or []
     if injected is None or not samples:
         return False
     _, m = min(samples, key=lambda s: abs(s[0] - injected))
     return not m["motors"] and m["position"]["z"] <= ON_FLOOR_M
+
+
+def _injected_at(fault: dict[str, Any], events: list[tuple[int, dict]]) -> Optional[int]:
+    """When the fault's own injection event names its drone (None: never injected, or a swarm fault)."""
+    drone = fault.get("drone")
+    return next((t for t, m in events if m.get("file") == "fault" and m.get("name") == drone
+                 and m.get("message", "").startswith(f"injected {fault['kind']}")), None)
+
+
+def _planner_unused_at_injection(fault: dict[str, Any], events: list[tuple[int, dict]]) -> bool:
+    """A planner fault injected on a drone whose last phase before it is one it never plans in again (landing,
+    landed, failed, link_lost, emergency: each one-way): the faulty planner is never called, so the fault has no
+    effect and owes no warning (compound seed 15, run 14: a blackout's blind landing began 0.9 s before cf4's
+    planner_error). A drone holding or planning at its injection still owes one."""
+    if fault["kind"] not in PLANNER_KINDS or fault.get("drone") is None:
+        return False
+    injected = _injected_at(fault, events)
+    if injected is None:
+        return False
+    phases = [m.get("message", "") for t, m in events
+              if t <= injected and m.get("file") == "phase" and m.get("name") == fault["drone"]]
+    return bool(phases) and phases[-1].split(":")[0] in NOT_PLANNING_AGAIN
+
+
+def _gust_push_bound(fault: dict[str, Any], events: list[tuple[int, dict]],
+                     truth: dict[str, list[tuple[int, dict]]]) -> Optional[float]:
+    """The most a gust could have moved its drone: 0.5 |a| t^2 over the time its truth was airborne within the gust
+    (no controller fighting it, so an upper bound; on the floor a gust moves nothing). None for other kinds.
+    Compound seed 15, run 5: a gust began 0.25 s before its drone, landing blind in a blackout, touched down: at
+    most 3 cm, which neither a real stack nor mocap tells from a drone's normal tracking error."""
+    if fault["kind"] != "gust" or fault.get("drone") is None:
+        return None
+    injected = _injected_at(fault, events)
+    if injected is None:
+        return None
+    end = injected + fault["duration_s"] * 1e9
+    samples = [(t, m) for t, m in truth.get(fault["drone"], []) if injected <= t <= end]
+    airborne = sum((b[0] - a[0]) / 1e9 for a, b in zip(samples, samples[1:])
+                   if a[1]["position"]["z"] > ON_FLOOR_M)
+    return 0.5 * math.hypot(*fault["accel"]) * airborne ** 2
 
 
 def _target(fault: dict[str, Any]) -> str:

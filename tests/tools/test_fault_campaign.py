@@ -148,3 +148,65 @@ def test_a_timed_fault_in_a_flight_that_rightly_never_took_off_is_not_owed():
     assert not campaign._uninjectable(blackout, None, False)  # noqa: SLF001 - nothing kept the drones down
     assert not campaign._uninjectable(blackout, int(1e9), True)  # noqa: SLF001 - it planned: the fault was due
     assert not campaign._uninjectable(yaw, None, True)  # noqa: SLF001 - a power-on fault is injected before that
+
+
+def test_only_a_flying_or_spinning_drone_can_leave_the_arena():
+    """Compound seed 15, run 13: a start offset put cf4 0.18 m beyond the arena's edge and its preflight rightly
+    kept it there, motors off: it left nothing. The same spot airborne, or on the floor with its motors on, fails."""
+    from types import SimpleNamespace
+
+    campaign = load_campaign()
+    arena = SimpleNamespace(x=(-5.0, 5.0), y=(-5.0, 5.0), z=(0.0, 3.0))
+
+    def at(z: float, motors: bool) -> dict:
+        return {"cf4": [(0, {"position": {"x": -5.18, "y": 0.0, "z": z}, "motors": motors})]}
+
+    assert campaign._outside_arena(at(0.0, False), arena, 0.1) == []  # noqa: SLF001
+    assert campaign._outside_arena(at(0.5, True), arena, 0.1) == ["cf4 0.18 m"]  # noqa: SLF001
+    assert campaign._outside_arena(at(0.0, True), arena, 0.1) == ["cf4 0.18 m"]  # noqa: SLF001
+    assert campaign._outside_arena(at(0.3, False), arena, 0.1) == ["cf4 0.18 m"]  # noqa: SLF001 - falling
+
+
+def test_a_planner_fault_on_a_drone_that_will_never_plan_again_owes_no_warning():
+    """Compound seed 15, run 14: a blackout's blind landing began 0.9 s before cf4's planner_error; its planner is
+    never called again, so the fault has no effect. Injected while planning or holding, it still owes a warning."""
+    campaign = load_campaign()
+    error = campaign.fault_fields("planner_error", "cf4", {}, 5.38)
+    injection = (int(5.38e9), {"level": 2, "file": "fault", "name": "cf4", "message": "injected planner_error"})
+
+    def phase(t: float, message: str) -> tuple[int, dict]:
+        return int(t * 1e9), {"level": 2, "file": "phase", "name": "cf4", "message": message}
+
+    landing = [phase(4.46, "landing: no valid pose for 1.5 s"), injection]
+    holding = [phase(4.46, "holding: pose stale"), injection]
+    later = [injection, phase(5.5, "landing: planner fault")]
+    other = [(t, {**m, "name": "cf3"}) if m["file"] == "phase" else (t, m) for t, m in landing]
+    assert campaign._planner_unused_at_injection(error, landing)  # noqa: SLF001
+    assert not campaign._planner_unused_at_injection(error, holding)  # noqa: SLF001
+    assert not campaign._planner_unused_at_injection(error, later)  # noqa: SLF001 - its own landing came after
+    assert not campaign._planner_unused_at_injection(error, other)  # noqa: SLF001 - another drone landed
+    gust = campaign.fault_fields("gust", "cf4", {"duration_s": 1.0, "accel": [1.0, 0.0, 0.0]}, 5.38)
+    assert not campaign._planner_unused_at_injection(gust, landing)  # noqa: SLF001 - a gust pushes a landing drone
+
+
+def test_a_gust_owes_a_warning_only_when_it_could_push_its_drone_past_the_tracking_noise():
+    """Compound seed 15, run 5: a gust of 1.06 m/s^2 began 0.25 s before its drone touched down (landing blind):
+    at most 3 cm, owed nothing. The same gust on a drone airborne through it could push it 0.5 m: owed."""
+    campaign = load_campaign()
+    gust = campaign.fault_fields("gust", "cf4", {"duration_s": 1.0, "accel": [0.0, -1.06, 0.0]}, 3.6)
+    events = [(int(3.6e9), {"level": 2, "file": "fault", "name": "cf4", "message": "injected gust for 1 s"})]
+
+    def truth(touchdown_s: float) -> dict:
+        samples = []
+        for k in range(361, 471):  # 10 ms steps from 3.61 s to 4.70 s
+            t = k / 100
+            samples.append((int(t * 1e9), {"position": {"x": 0.0, "y": 0.0, "z": 0.0 if t >= touchdown_s else 0.3},
+                                            "motors": True}))
+        return {"cf4": samples}
+
+    short = campaign._gust_push_bound(gust, events, truth(3.85))  # noqa: SLF001
+    assert short is not None and short < campaign.TRACKING_NOISE_M
+    whole = campaign._gust_push_bound(gust, events, truth(9.0))  # noqa: SLF001
+    assert whole is not None and whole > 0.4
+    occlusion = campaign.fault_fields("occlusion", "cf4", None, 3.6)
+    assert campaign._gust_push_bound(occlusion, events, truth(3.85)) is None  # noqa: SLF001
