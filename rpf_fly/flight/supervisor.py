@@ -207,6 +207,7 @@ class Supervisor:
         self._off_track: dict[str, float] = {}
         self._predicted: dict[str, tuple[complex, float]] = {}
         """drone -> (where its setpoints should have brought it, when)."""
+        self._late_landing: set[str] = set()
         self._off_track_warned: set[str] = set()
         self._late_mocap = False
         self._blind_landed: set[str] = set()
@@ -269,13 +270,29 @@ class Supervisor:
             out.append(Finding("mocap_lost", INFO, "mocap poses are back", None, "resume"))
         late = {n for n, age in ages.items() if age > POSE_LATE_S}
         all_late = bool(flying) and len(late) == len(flying)
-        if all_late and not self._mocap_late and not self._mocap_lost:
+        # Landing drones are not held on a lost pose (their landing stands), but a pose they miss is said: they
+        # land on their estimates, and a review must tell why one ended off its spot. Until 2026-12-03 neither an
+        # occlusion of a landing drone nor a blackout while every drone landed left a word (extpose campaign seed
+        # 16, run 11: a watchdog's landing, then cf3 occluded for 1.3 s).
+        landing = {a.name: tracker.age(a.name, now_s) for a in agents if a.phase == DronePhase.LANDING}
+        late_landing = {n for n, age in landing.items() if age > POSE_LATE_S}
+        landing_only = not flying and bool(landing) and len(late_landing) == len(landing)
+        if (all_late or landing_only) and not self._mocap_late and not self._mocap_lost:
             self._mocap_late = True
-            oldest = max(ages.values())
-            out.append(Finding("mocap_late", WARNING, f"no mocap pose for any drone for {oldest * 1e3:.0f} ms: "
-                               "flying on the last ones", None, "warn"))
-        elif not late:
+            oldest = max({**ages, **landing}.values())
+            tail = "flying on the last ones" if all_late else "the landing drones land on their estimates"
+            out.append(Finding("mocap_late", WARNING, f"no mocap pose for any drone for {oldest * 1e3:.0f} ms: {tail}",
+                               None, "warn"))
+        elif not (late if flying else late_landing):
             self._mocap_late = False
+        for name, age in landing.items():
+            if age <= POSE_LATE_S:
+                self._late_landing.discard(name)
+            elif name not in self._late_landing:
+                self._late_landing.add(name)
+                if not (self._mocap_late or self._mocap_lost):
+                    out.append(Finding("pose_late", WARNING, f"no pose for {age * 1e3:.0f} ms while landing "
+                                       "(occluded?): it lands on its estimate", name, "warn"))
         for a in flying:
             age = ages[a.name]
             if age <= POSE_LATE_S:
@@ -603,7 +620,13 @@ class Supervisor:
         return out
 
     def _tracking(self, now_s: float, agents: list[DroneAgent], tracker: PoseTracker) -> list[Finding]:
-        """Measured position against a first-order follower of the streamed setpoints (``TRACKING_WARN_M``)."""
+        """Measured position against a first-order follower of the streamed setpoints (``TRACKING_WARN_M``).
+
+        Not in take-off and landing: the high-level commander flies those, and a landing begun in motion (a
+        watchdog's, a Ctrl-C's) overshoots its point by the drone's speed times the position loop's lag, which this
+        follower does not model. So a push during take-off or landing is not said (extpose campaign seed 16, run 14:
+        a gust during a watchdog's landing moved cf2 0.13 m; anchoring the follower where the landing began warned
+        of drones no gust touched): open, docs/faults.md."""
         out = []
         for a in agents:
             pose = tracker.get(a.name)

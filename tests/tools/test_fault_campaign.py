@@ -210,3 +210,39 @@ def test_a_gust_owes_a_warning_only_when_it_could_push_its_drone_past_the_tracki
     assert whole is not None and whole > 0.4
     occlusion = campaign.fault_fields("occlusion", "cf4", None, 3.6)
     assert campaign._gust_push_bound(occlusion, events, truth(3.85)) is None  # noqa: SLF001
+
+
+def test_a_slow_estimator_divergence_is_owed_a_warning_from_when_it_leaves_the_tracking_noise():
+    """Extpose campaign seed 16, run 9: a divergence at 0.12 m/s carried cf2 5 cm off after 0.42 s; the stack said it
+    0.99 s after the injection (its thresholds are 0.07-0.10 m). The window runs 1 s from that effect: a warning at
+    1.3 s is in time, one at 1.5 s is late; a fast divergence's window is barely moved."""
+    campaign = load_campaign()
+
+    def said_at(rate: float, after_s: float) -> bool:
+        fault = campaign.fault_fields("estimator_divergence", "cf2", {"rate_m_s": rate}, 2.85)
+        events = [(int(2.85e9), {"level": 2, "file": "fault", "name": "cf2",
+                                 "message": f"injected estimator_divergence: rate_m_s {rate}"}),
+                  (int((2.85 + after_s) * 1e9), {"level": 4, "file": "estimator", "name": "cf2", "message": "off"})]
+        return bool(campaign._warnings_for(fault, events, 0))  # noqa: SLF001
+
+    assert said_at(0.12, 1.3) and not said_at(0.12, 1.5)
+    assert said_at(0.5, 1.05) and not said_at(0.5, 1.2)
+
+
+def test_a_yaw_offset_under_extpose_owes_nothing_only_when_its_drone_flew_right():
+    """Extpose campaign seed 16, run 6: with extpose the estimator takes mocap's yaw from the first pose, so the
+    preflight finds nothing to correct and cf2 reached its goal: nothing owed. Without extpose, or had it not
+    reached, the warning is still owed."""
+    from types import SimpleNamespace
+
+    campaign = load_campaign()
+    yaw = campaign.fault_fields("yaw_offset", "cf2", {"deg": -123.8}, 0.0)
+
+    def mission(extpos: str):  # type: ignore[no-untyped-def]
+        return SimpleNamespace(radio=SimpleNamespace(extpos=extpos))
+
+    assert campaign._corrected_by_extpose(yaw, mission("extpose"), {"cf2": True})  # noqa: SLF001
+    assert not campaign._corrected_by_extpose(yaw, mission("extpose"), {"cf2": False})  # noqa: SLF001
+    assert not campaign._corrected_by_extpose(yaw, mission("extpos"), {"cf2": True})  # noqa: SLF001
+    gust = campaign.fault_fields("gust", "cf2", {"duration_s": 1.0, "accel": [1.0, 0.0, 0.0]}, 3.0)
+    assert not campaign._corrected_by_extpose(gust, mission("extpose"), {"cf2": True})  # noqa: SLF001
