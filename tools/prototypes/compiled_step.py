@@ -18,16 +18,21 @@ keep-right, the wall-following / soft rule, capture, yield and a brake check. Ti
 import math
 import statistics
 import sys
-import time
 
 import numpy as np
 from numba import njit
 
 sys.path.insert(0, str(__import__("pathlib").Path(__file__).resolve().parents[1]))
 from bench_planner import ROOT, load_mission, midflight_views, scenario_from_mission, make_planner  # noqa: E402
+from bench_planner import timed as bench_timed  # noqa: E402
 from dataclasses import replace  # noqa: E402
 from rpf_fly.planning.observation import build_observation  # noqa: E402
 from rpf_fly.planning.planner import guided_view, sense_obstacles  # noqa: E402
+
+
+def timed(fn):  # type: ignore[no-untyped-def]
+    """Median of 7 means over 300 calls (tools/bench_planner.py's rule)."""
+    return bench_timed(fn, 300, 7)
 
 
 @njit(cache=True, fastmath=False)
@@ -172,18 +177,6 @@ def step_kernel(p, g, h, npos, nvel, nmask, circles, boxes, nodes, cost, eta, la
         if nmask[j] and math.hypot(ox, oy) < 2 * r + margin + 0.1 and dx * ox + dy * oy > 0:
             y = 0.2
     return complex(dx * y, dy * y), mode, tn
-
-
-def timed(fn, inner=300, repeats=7):
-    for _ in range(30):
-        fn()
-    samples = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        for _ in range(inner):
-            fn()
-        samples.append((time.perf_counter() - t0) / inner)
-    return statistics.median(samples)
 
 
 for name in ("lab-3", "arena-a-6", "u-trap"):
