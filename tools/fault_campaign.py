@@ -318,10 +318,11 @@ def _grounded_at_injection(fault: dict[str, Any], events: list[tuple[int, dict]]
 
 
 def _injected_at(fault: dict[str, Any], events: list[tuple[int, dict]]) -> Optional[int]:
-    """When the fault's own injection event names its drone (None: never injected, or a swarm fault)."""
+    """When the fault's own injection event came (naming its drone, unless a swarm fault); None: never injected."""
     drone = fault.get("drone")
-    return next((t for t, m in events if m.get("file") == "fault" and m.get("name") == drone
-                 and m.get("message", "").startswith(f"injected {fault['kind']}")), None)
+    return next((t for t, m in events if m.get("file") == "fault"
+                 and m.get("message", "").startswith(f"injected {fault['kind']}")
+                 and (fault["kind"] in SWARM_KINDS or m.get("name") == drone)), None)
 
 
 def _planner_unused_at_injection(fault: dict[str, Any], events: list[tuple[int, dict]]) -> bool:
@@ -386,9 +387,7 @@ def _warnings_for(fault: dict[str, Any], events: list[tuple[int, dict]],
     if fault["kind"] in POWER_ON:
         window = [m for t, m in events if flying_at is None or t <= flying_at]
     else:
-        injected = next((t for t, m in events if m.get("file") == "fault"
-                         and m.get("message", "").startswith(f"injected {fault['kind']}")
-                         and (fault["kind"] in SWARM_KINDS or m.get("name") == drone)), None)
+        injected = _injected_at(fault, events)
         if injected is None:
             return None
         effect = injected
