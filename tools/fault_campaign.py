@@ -5,6 +5,8 @@
     python tools/fault_campaign.py --planner rpf3 --out docs/fault-campaign-rpf3.md   # the missions flown by RPF-3
     python tools/fault_campaign.py --extpose --kinds orientation_flip,pose_jump --out -   # poses sent as extpose
     python tools/fault_campaign.py --random 20 --seed 10 --faults-per-run 2   # two faults of different kinds a flight
+    python tools/fault_campaign.py --random 16 --seed 16 --extpose --faults-per-run 2 --vary-world --only 14 \
+        --keep /tmp/run14 --out -                         # re-fly one run of that campaign, keeping its log
 
 Each run is ``rpf-fly fly MISSION --dry-run --faults F --no-console --log L`` in a process of its own, with a
 schedule of ONE fault (the kind's default parameters below) naming the mission's middle drone. The verdict does
@@ -30,6 +32,7 @@ Writes the table (markdown) to ``--out`` (default docs/fault-campaign.md) and th
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import random
@@ -520,12 +523,14 @@ def mission_path(name: str) -> Path:
 
 def random_campaign(runs: int, seed: int, missions: list[str], planners: list[str], workdir: Path,
                     kinds: Optional[list[str]] = None, extpose: bool = False,
-                    faults_per_run: int = 1, vary_world: bool = False) -> list[Verdict]:
+                    faults_per_run: int = 1, vary_world: bool = False,
+                    only: Optional[set[int]] = None) -> list[Verdict]:
     """``runs`` flights, each a mission, planner (``mission``: its own) and ``faults_per_run`` faults of different
     kinds (of ``kinds``, default all), each with its drone, time and parameters drawn from ``seed``; printed as
     they end with what reproduces them. One fault a run draws exactly what the campaigns before compound faults
     drew, seed for seed. ``vary_world``: each run's simulated world drawn from its own seed (``seed * 1000 + run``)
-    instead of every dry run's 0, so a drone's IMU bias (where it drifts blind) differs from run to run."""
+    instead of every dry run's 0, so a drone's IMU bias (where it drifts blind) differs from run to run. ``only``:
+    fly just these runs (their draws are the full campaign's: every run's draw is still made, in order)."""
     rng = random.Random(seed)
     verdicts = []
     for run in range(runs):
@@ -551,6 +556,8 @@ def random_campaign(runs: int, seed: int, missions: list[str], planners: list[st
             faults.append(fault_fields(kind, None if kind in SWARM_KINDS else drone, params, at_s))
             draws.append({"kind": kind, **({} if kind in SWARM_KINDS else {"drone": drone}),
                           **({} if kind in POWER_ON else {"at_s": at_s}), **params})
+        if only is not None and run not in only:
+            continue
         v = judge_faults(faults, path, workdir, tag=f"-r{run}")
         v.params = {"planner": planner, **({"world_seed": seed * 1000 + run} if vary_world else {}),
                     **(draws[0] if len(draws) == 1 else {"faults": draws})}
@@ -585,16 +592,25 @@ def main() -> int:
     parser.add_argument("--extpose", action="store_true",
                         help="fly each mission with radio.extpos: extpose (mocap's orientation reaches the "
                              "estimators, so a wrong one would turn them)")
+    parser.add_argument("--only", default=None, metavar="RUNS",
+                        help="the random campaign's runs to fly, comma-separated (e.g. 14: re-fly one run of a "
+                             "campaign; the draws are the whole campaign's)")
+    parser.add_argument("--keep", default=None, metavar="DIR",
+                        help="fly in DIR and keep it: each run's mission copy, fault schedule and flight log")
     args = parser.parse_args()
     verdicts = []
-    with tempfile.TemporaryDirectory(prefix="rpf-fly-campaign-") as tmp:
+    if args.keep:
+        Path(args.keep).mkdir(parents=True, exist_ok=True)
+    with (contextlib.nullcontext(str(Path(args.keep).resolve())) if args.keep
+          else tempfile.TemporaryDirectory(prefix="rpf-fly-campaign-")) as tmp:
         if args.random:
             missions = RANDOM_MISSIONS.split(",") if args.missions == parser.get_default("missions") \
                 else args.missions.split(",")
             kinds = None if args.kinds == parser.get_default("kinds") else args.kinds.split(",")
             verdicts = random_campaign(args.random, args.seed, missions, args.planners.split(","), Path(tmp), kinds,
                                        extpose=args.extpose, faults_per_run=args.faults_per_run,
-                                       vary_world=args.vary_world)
+                                       vary_world=args.vary_world,
+                                       only={int(r) for r in args.only.split(",")} if args.only else None)
         for mission_name in ([] if args.random else args.missions.split(",")):
             path = mission_path(mission_name)
             if args.planner:
