@@ -98,6 +98,20 @@ TRACKING_TAU_S = 0.25
 """The Crazyflie position loop's time constant (docs/flight.md: drones trail their setpoints by about v tau)."""
 TRACKING_SPEED_M_S = 1.1
 """The firmware's horizontal speed limit (posCtlPid.xyVelMax 1 m/s, plus its 10 % overhead)."""
+TRACKING_PLAN_TAU_S = 0.5
+"""The follower's time constant while the high-level commander flies a take-off or landing, and how long the
+overshoot it allows lasts: the slowest return a default Crazyflie gives. Its position PID (posCtlPid.xKp 2/s) alone
+is 0.5 s; with its velocity loop (velCtlPid.vxKp 25 degrees per m/s, about 4.3 /s of acceleration per m/s) the pair
+is a damped oscillator (omega 2.95/s, zeta 0.74) that runs a landing begun at 1 m/s 15 cm past its point and
+brings it back in about a second. Against that model this follower stays within 2.8 cm (0.25 s: 9.4 cm, which
+would cry wolf), and within 1.4 cm of the simulated drone's first-order return (an estimate snapped back by
+6 cm). Worked out from the firmware's default gains, not measured on hardware."""
+PLAN_TARGET_AFTER_S = 0.15
+"""A take-off's or landing's firmware target is read from telemetry made at least this long after the command was
+sent (an outbox, a sender and a radio transaction: milliseconds on a healthy link, tens on a full one)."""
+PLAN_TARGET_AGREE_M = 0.01
+"""Two target samples this close are the plan's fixed x, y (a streamed setpoint at 0.3 m/s moves 3 cm in a 10 Hz
+sample; the compressed target's resolution is 1 mm)."""
 
 POSE_LATE_S = 0.1
 """A flying drone without a valid pose this long (10 frames at 100 Hz) is a warning, before the hold at
@@ -111,6 +125,15 @@ a picture that old (Crazyswarm2 warns at 10 ms over unicast; a healthy Motive li
 the worst healthy link, so a healthy system never warns, and 2 cm of lag at 1 m/s. Was 50 ms until 2026-12-02: the
 random fault campaign delayed the mocap by 33 ms (plus the emulated camera's 4 ms), a picture five times older than a
 healthy one, and nothing said so."""
+
+def _to_segment(p: complex, a: complex, b: complex) -> float:
+    """Distance from ``p`` to the segment from ``a`` to ``b`` (a point when they coincide)."""
+    ab = b - a
+    if abs(ab) < 1e-12:
+        return abs(p - a)
+    w = ((p - a) * ab.conjugate()).real / (abs(ab) ** 2)
+    return abs(p - (a + min(max(w, 0.0), 1.0) * ab))
+
 
 def _pose_at(history: deque[tuple[float, tuple[float, float, float]]],
              stamp_s: Optional[float]) -> Optional[tuple[float, float, float]]:
@@ -205,8 +228,12 @@ class Supervisor:
         self._history: dict[str, deque[tuple[float, tuple[float, float, float]]]] = {}
         self._poor_link: set[str] = set()
         self._off_track: dict[str, float] = {}
-        self._predicted: dict[str, tuple[complex, float]] = {}
-        """drone -> (where its setpoints should have brought it, when)."""
+        self._predicted: dict[str, tuple[complex, float, complex, float, Optional[float]]] = {}
+        """drone -> (where its setpoints should have brought it, when, the overshoot its velocity at the start of a
+        take-off or landing allows, when that started, the take-off's or landing's start or None)."""
+        self._plan_targets: dict[str, tuple[float, complex, bool, float]] = {}
+        """drone -> (the take-off's or landing's start, its firmware target x + iy, confirmed by a second sample,
+        when the last sample was made)."""
         self._late_landing: set[str] = set()
         self._off_track_warned: set[str] = set()
         self._late_mocap = False
@@ -238,7 +265,7 @@ class Supervisor:
         findings += self._crashes(agents, states)
         findings += self._estimates(now_s, agents, tracker, states)
         findings += self._link_quality(agents, states)
-        findings += self._tracking(now_s, agents, tracker)
+        findings += self._tracking(now_s, agents, tracker, states)
         findings += self._mocap_latency(tracker)
         return findings
 
@@ -619,44 +646,85 @@ class Supervisor:
                 out.append(Finding("radio", INFO, f"radio link quality back to {quality:.0f} %", a.name, "warn"))
         return out
 
-    def _tracking(self, now_s: float, agents: list[DroneAgent], tracker: PoseTracker) -> list[Finding]:
-        """Measured position against a first-order follower of the streamed setpoints (``TRACKING_WARN_M``).
+    def _tracking(self, now_s: float, agents: list[DroneAgent], tracker: PoseTracker,
+                  states: dict[str, DroneState]) -> list[Finding]:
+        """Measured position against a first-order follower of where the drone is being taken
+        (``TRACKING_WARN_M``): the streamed setpoints while it plans, holds or hovers; while the high-level
+        commander flies its take-off or landing, the firmware's own target (`_plan_target`), which keeps the x, y
+        where the plan began (the estimate of that moment, not the mocap pose: after a stall or a blind spell the
+        estimate snaps back to mocap and the drone moves by the difference, which is no push). A landing begun in
+        motion may overshoot its point by up to its speed times the position loop's lag before it comes back: the
+        follower allows that much along the drone's velocity at its start, fading with the lag.
 
-        Not in take-off and landing: the high-level commander flies those, and a landing begun in motion (a
-        watchdog's, a Ctrl-C's) overshoots its point by the drone's speed times the position loop's lag, which this
-        follower does not model. So a push during take-off or landing is not said (extpose campaign seed 16, run 14:
-        a gust during a watchdog's landing moved cf2 0.13 m; anchoring the follower where the landing began warned
-        of drones no gust touched): open, docs/faults.md."""
+        Until 2026-12-04 take-off and landing were not watched: a gust during a watchdog's landing moved cf2
+        0.13 m without a word (extpose compound campaign seed 16, run 14)."""
         out = []
         for a in agents:
             pose = tracker.get(a.name)
-            if a.last_setpoint is None or pose is None or now_s - pose.stamp_s > POSE_LATE_S or a.phase in (
-                    DronePhase.TAKEOFF, DronePhase.LANDING):
+            setpoint = None
+            if pose is not None and now_s - pose.stamp_s <= POSE_LATE_S:
+                if a.phase in (DronePhase.TAKEOFF, DronePhase.LANDING):
+                    if a.phase != DronePhase.LANDING or a.touchdown_s is None or now_s <= a.touchdown_s:
+                        setpoint = self._plan_target(a, states.get(a.name))
+                else:
+                    setpoint = a.last_setpoint
+            if setpoint is None:
                 self._off_track.pop(a.name, None)
                 self._predicted.pop(a.name, None)
                 continue
             if not pose.valid:  # a frame or a few without it: the model waits (2026-12-02: it restarted at the
                 continue        # next pose, and one dropped frame in a push hid the push)
-            predicted, then = self._predicted.get(a.name, (pose.xy, now_s))
+            planned = a.phase in (DronePhase.TAKEOFF, DronePhase.LANDING)
+            key = a.phase_since_s if planned else None  # a take-off or landing starts the model afresh
+            tau = TRACKING_PLAN_TAU_S if planned else TRACKING_TAU_S
+            entry = self._predicted.get(a.name)
+            if entry is None or entry[4] != key:
+                entry = (pose.xy, now_s, pose.velocity * tau if planned else 0j, now_s, key)
+            predicted, then, momentum, since, _ = entry
             dt = max(0.0, min(now_s - then, 0.1))
-            step = (a.last_setpoint - predicted) * (1.0 - math.exp(-dt / TRACKING_TAU_S))
+            step = (setpoint - predicted) * (1.0 - math.exp(-dt / tau))
             if abs(step) > TRACKING_SPEED_M_S * dt:
                 step *= TRACKING_SPEED_M_S * dt / abs(step)
             predicted += step
-            self._predicted[a.name] = (predicted, now_s)
-            off = abs(pose.xy - predicted)
+            self._predicted[a.name] = (predicted, now_s, momentum, since, key)
+            overshoot = momentum * math.exp(-(now_s - since) / tau)
+            off = _to_segment(pose.xy, predicted, predicted + overshoot)
             if off > TRACKING_WARN_M:
-                since = self._off_track.setdefault(a.name, now_s)
-                if now_s - since >= TRACKING_WARN_S and a.name not in self._off_track_warned:
+                started = self._off_track.setdefault(a.name, now_s)
+                if now_s - started >= TRACKING_WARN_S and a.name not in self._off_track_warned:
                     self._off_track_warned.add(a.name)
+                    being = {DronePhase.LANDING: " while landing", DronePhase.TAKEOFF: " while taking off"}
                     out.append(Finding("tracking", WARNING, f"{off:.2f} m from where its setpoints should have "
-                                       "brought it: something pushes it (a gust, a contact?)", a.name, "warn"))
+                                       f"brought it{being.get(a.phase, '')}: something pushes it (a gust, a "
+                                       "contact?)", a.name, "warn"))
             else:
                 self._off_track.pop(a.name, None)
                 if off < TRACKING_WARN_M / 2 and a.name in self._off_track_warned:
                     self._off_track_warned.discard(a.name)
                     out.append(Finding("tracking", INFO, "following its setpoints again", a.name, "warn"))
         return out
+
+    def _plan_target(self, a: DroneAgent, state: Optional[DroneState]) -> Optional[complex]:
+        """The x, y the high-level commander's take-off or landing holds, from the firmware's logged target
+        (`DroneState.target_m`): two telemetry samples in a row, both made at least ``PLAN_TARGET_AFTER_S`` after
+        the command was sent, that agree within ``PLAN_TARGET_AGREE_M`` (a sample made before the command reached
+        the drone holds the last streamed setpoint, up to the carrot's lead ahead; a streamed setpoint moves
+        between samples, the plan's x, y does not). Kept for the rest of the phase; None until then, or where
+        the firmware logs no target."""
+        held = self._plan_targets.get(a.name)
+        if held is not None and held[0] != a.phase_since_s:
+            held = None
+        if held is not None and held[2]:
+            return held[1]
+        if state is None or state.target_m is None:
+            return None
+        made = state.estimate_stamp_s if state.estimate_stamp_s is not None else state.telemetry_stamp_s
+        if made is None or made < a.phase_since_s + PLAN_TARGET_AFTER_S or (held is not None and held[3] == made):
+            return None
+        target = complex(state.target_m[0], state.target_m[1])
+        agree = held is not None and abs(target - held[1]) <= PLAN_TARGET_AGREE_M
+        self._plan_targets[a.name] = (a.phase_since_s, held[1] if agree else target, agree, made)  # type: ignore[index]
+        return held[1] if agree else None  # type: ignore[index]
 
     def _mocap_latency(self, tracker: PoseTracker) -> list[Finding]:
         latency = tracker.latency_s

@@ -149,6 +149,11 @@ class DroneState:
     """When the drone made the telemetry of `telemetry_stamp_s` (its log timestamp on the host's `time.monotonic()`
     clock: rpf_fly/radio/telemetry_clock.py); None where the backend cannot tell. Compare the estimate with the
     mocap pose of this time: a packet may wait in the radio for hundreds of milliseconds."""
+    target_m: Vec3 | None = None
+    """Where the drone's own controller is taking it (`ctrltargetZ.x/y/z`, metres) at `estimate_stamp_s`: the
+    streamed setpoint, or the high-level commander's plan (a take-off or landing keeps the x, y where it began);
+    None where the firmware does not log it. Garbage while the motors are off (the firmware's setpoint then holds
+    nothing)."""
 
 
 @runtime_checkable

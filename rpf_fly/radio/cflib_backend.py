@@ -8,8 +8,9 @@ What it does per drone (cflib 0.1.34, firmware protocol 12):
 - configure: `stabilizer.estimator` = 2 (Kalman), `commander.enHighLevel` = 1 (when the firmware still has it),
   `locSrv.extQuatStdDev` when streaming poses, `locSrv.extPosStdDev` if given; each write is confirmed by the
   firmware's echo;
-- telemetry: one `LogConfig` at 10 Hz with `pm.vbat`, `pm.state`, `supervisor.info`, `stateEstimate.x/y/z` and
-  `stateEstimate.yaw` (degrees); link quality and latency from `cf.link_statistics`;
+- telemetry: one `LogConfig` at 10 Hz with `pm.vbat`, `pm.state`, `supervisor.info`, `stateEstimateZ.x/y/z` (mm),
+  `stateEstimate.yaw` (degrees) and the controller's target `ctrltargetZ.x/y/z` (mm); link quality and latency from
+  `cf.link_statistics`;
 - estimator: `reset_estimator` sets `kalman.initialX/Y/Z/Yaw` (from mocap) and triggers `kalman.resetEstimation`
   without waiting for the variance; `reset_estimators` resets and waits until the variance settles;
 - commands: supervisor arming, high-level take-off / go-to / land / stop, streamed position setpoints (yaw in
@@ -87,12 +88,38 @@ STATUS_VARIABLES: tuple[tuple[str, str], ...] = (
     ("pm.vbat", "float"),
     ("pm.state", "int8_t"),
     ("supervisor.info", "uint16_t"),
+    ("stateEstimateZ.x", "int16_t"),
+    ("stateEstimateZ.y", "int16_t"),
+    ("stateEstimateZ.z", "int16_t"),
+    ("stateEstimate.yaw", "float"),
+    ("ctrltargetZ.x", "int16_t"),
+    ("ctrltargetZ.y", "int16_t"),
+    ("ctrltargetZ.z", "int16_t"),
+)
+"""The status log block (23 bytes; one log packet carries 26 bytes of values). The estimate and the controller's
+target in the firmware's compressed groups (millimetres as int16, stabilizer.c): the target is where the drone's own
+controller is taking it, which the supervisor needs while the high-level commander flies a take-off or a landing
+(docs/flight.md, "Tracking"), and the float groups would not fit both in one packet."""
+STATUS_VARIABLES_FLOAT: tuple[tuple[str, str], ...] = (
+    ("pm.vbat", "float"),
+    ("pm.state", "int8_t"),
+    ("supervisor.info", "uint16_t"),
     ("stateEstimate.x", "float"),
     ("stateEstimate.y", "float"),
     ("stateEstimate.z", "float"),
     ("stateEstimate.yaw", "float"),
 )
-"""The status log block (23 bytes; one log packet carries 26 bytes of values)."""
+"""The status block of a firmware without the compressed groups (none since 2021 lacks them): no target."""
+MM = 0.001
+"""Metres per unit of the compressed log groups."""
+
+
+def status_variables(log_toc: Any) -> tuple[tuple[str, str], ...]:
+    """The status block a drone's log TOC (cflib's `Toc`) can give: `STATUS_VARIABLES` when it has every one of
+    them, else `STATUS_VARIABLES_FLOAT`."""
+    if all(log_toc.get_element_by_complete_name(name) is not None for name, _ in STATUS_VARIABLES):
+        return STATUS_VARIABLES
+    return STATUS_VARIABLES_FLOAT
 
 INITIAL_STATE_PARAMS: tuple[str, ...] = ("kalman.initialX", "kalman.initialY", "kalman.initialZ", "kalman.initialYaw")
 """The Kalman estimator's initial state (metres, radians), used at its next reset."""
@@ -122,6 +149,7 @@ class _Drone:
     pm_state: int | None = None
     sup_bits: int | None = None
     position: Vec3 | None = None
+    target: Vec3 | None = None
     yaw_deg: float | None = None
     stamp_s: float | None = None
     measured_s: float | None = None
@@ -298,7 +326,7 @@ class CflibBackend:
         stats.uplink_rate_updated.add_callback(partial(self._on_uplink_rate, drone.name))
         stats.uplink_congestion_updated.add_callback(partial(self._on_uplink_congestion, drone.name))
         config = LogConfig(name="rpf_status", period_in_ms=self._status_period_ms)
-        for variable, ctype in STATUS_VARIABLES:
+        for variable, ctype in status_variables(cf.log.toc):
             config.add_variable(variable, ctype)
         cf.log.add_config(config)
         config.data_received_cb.add_callback(partial(self._on_status, drone.name))
@@ -446,8 +474,13 @@ class CflibBackend:
             drone.vbat_v = float(data["pm.vbat"])
             drone.pm_state = int(data["pm.state"])
             drone.sup_bits = int(data["supervisor.info"])
-            drone.position = (float(data["stateEstimate.x"]), float(data["stateEstimate.y"]),
-                              float(data["stateEstimate.z"]))
+            if "stateEstimateZ.x" in data:
+                drone.position = (data["stateEstimateZ.x"] * MM, data["stateEstimateZ.y"] * MM,
+                                  data["stateEstimateZ.z"] * MM)
+                drone.target = (data["ctrltargetZ.x"] * MM, data["ctrltargetZ.y"] * MM, data["ctrltargetZ.z"] * MM)
+            else:
+                drone.position = (float(data["stateEstimate.x"]), float(data["stateEstimate.y"]),
+                                  float(data["stateEstimate.z"]))
             drone.yaw_deg = float(data["stateEstimate.yaw"])
             drone.stamp_s = arrived
             drone.measured_s = drone.clock.measured_at(int(timestamp), arrived)
@@ -540,6 +573,7 @@ class CflibBackend:
                 telemetry_stamp_s=d.stamp_s,
                 yaw_deg=d.yaw_deg,
                 estimate_stamp_s=d.measured_s,
+                target_m=d.target,
             )
 
     def states(self) -> dict[str, DroneState]:

@@ -37,3 +37,29 @@ def test_mocap_radio_and_drone_faults_mid_flight_the_swarm_stays_safe(tmp_path, 
     assert not flight.events("link_lost")
     assert all(o == FlightOutcome.REACHED for o in flight.report.outcomes.values()), flight.report.reasons
     assert all(s.position[2] < 0.05 and not s.motors_on for s in flight.snapshots.values())
+
+
+def test_a_push_during_a_mid_flight_landing_is_said_and_the_other_landing_drones_are_not(tmp_path, short_mission):
+    """Every drone is landed mid-flight at flight speed (as a Ctrl-C or a watchdog lands them), then a gust pushes
+    cf2 while it descends. The landing's point is the firmware's own target, read from its telemetry
+    (`ctrltargetZ`), so the push is said "while landing", within 1 s, and the drones that just stopped are not
+    (until 2026-12-04 nothing was said during a landing: extpose compound campaign seed 16, run 14)."""
+    from rpf_fly.flight.events import WARNING
+
+    mission = replace(short_mission, flight=replace(short_mission.flight, land_s=2.0))
+    pushed_at: list[float] = []
+
+    def land_then_push(loop, rig):
+        time.sleep(1.0)
+        loop.commander.land_all("test: every drone lands mid-flight", WARNING)
+        time.sleep(0.5)
+        pushed_at.append(loop.clock())
+        rig.gust("cf2", (-1.6, -0.6, 0.0), 1.4)
+
+    flight = fly(mission, tmp_path, when_flying=land_then_push)
+    tracking = flight.events("tracking")
+    assert [(e.drone, e.level) for e in tracking if e.level >= WARNING] == [("cf2", WARNING)], \
+        [(e.drone, e.message) for e in tracking]
+    assert "while landing" in tracking[0].message
+    assert tracking[0].time_s - pushed_at[0] < 1.0
+    assert all(s.position[2] < 0.05 and not s.motors_on for s in flight.snapshots.values())

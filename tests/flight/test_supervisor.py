@@ -3,6 +3,7 @@ fires, and when a hold ends."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 
 from rpf_fly.flight.agent import DroneAgent
@@ -514,3 +515,91 @@ def test_a_landing_drone_that_loses_its_pose_is_said_and_a_blackout_while_all_la
     found = run(0.4, 20, set(), seen=False)
     assert [(f.kind, f.drone, f.level) for f in found] == [("mocap_late", None, WARNING)]
     assert "land on their estimates" in found[0].message
+
+
+def landing_with(target_of, pose_of, seconds: float = 2.0, phase: DronePhase = DronePhase.LANDING,  # type: ignore[no-untyped-def]
+                 telemetry_at_s: float = 0.0):
+    """Every drone in ``phase`` (a high-level take-off or landing) from t = 0 (touchdown at 2 s), seen at 100 Hz at
+    ``pose_of(name, t)``, with 10 Hz telemetry (from ``telemetry_at_s``) whose logged firmware target is
+    ``target_of(name, t)``; returns the tracking findings as (time, drone, level, message)."""
+    _, agents, tracker, supervisor = setup()
+    for agent in agents.values():
+        agent.set_phase(phase, 0.0)
+        agent.touchdown_s = 2.0
+    said, states = [], {}
+    for k in range(int(seconds * 100)):
+        t = 0.01 * k
+        see(tracker, k + 1, t, {n: pose_of(n, t) for n in agents})
+        if k % 10 == round(telemetry_at_s * 100) % 10:
+            states = {n: replace(state(n, t), estimate_stamp_s=t, target_m=target_of(n, t)) for n in agents}
+        said += [(t, f.drone, f.level, f.message) for f in supervisor.check(t, agents.values(), tracker, states)
+                 if f.kind == "tracking"]
+    return said
+
+
+def test_a_push_during_a_landing_is_said_and_the_landing_drones_own_moves_are_not():
+    """The high-level commander's landing holds the x, y where it began: the estimate of that moment, which the
+    firmware logs as its target. cf1 stays where it is; its first telemetry, made before the land command reached
+    it, still holds the streamed carrot 0.25 m ahead, which is not the landing's target. cf3's estimate had drifted
+    (a loop stall: no extpos) and snaps back, so it moves 6 cm to its target as the position loop does. cf2 is
+    pushed 12 cm from 0.5 s on. Only cf2 is said, within 1 s of its push (until 2026-12-04 nothing was said in a
+    landing: extpose compound campaign seed 16, run 14)."""
+    tau = 0.25
+    target = {"cf1": (-1.0, -0.6), "cf2": (-1.0, 0.0), "cf3": (-0.94, 0.6)}
+
+    def target_of(name: str, t: float) -> tuple[float, float, float]:
+        x, y = target[name]
+        return (x + 0.25 if t < 0.1 else x, y, 0.5 - 0.2 * t)
+
+    def pose_of(name: str, t: float) -> tuple[float, float, float]:
+        x, y, _ = POSITIONS[name]
+        z = max(0.0, 0.5 - 0.25 * t)
+        if name == "cf3":
+            return (x + 0.06 * (1.0 - math.exp(-t / tau)), y, z)
+        if name == "cf2":
+            return (x, y + 0.12 * min(1.0, max(0.0, (t - 0.5) / 0.3)), z)
+        return (x, y, z)
+
+    said = landing_with(target_of, pose_of)
+    assert [(d, level) for _, d, level, _ in said] == [("cf2", WARNING)], said
+    assert "while landing" in said[0][3]
+    assert said[0][0] - 0.5 < 1.0
+
+
+def test_a_landing_begun_at_speed_may_overshoot_its_point_and_a_take_off_is_watched_too():
+    """A real Crazyflie's position loop lags: a landing begun at 1 m/s (its speed limit) runs past its point and
+    comes back, as the firmware's default position and velocity gains make it (a damped oscillator, omega
+    2.95/s, zeta 0.74: 15 cm past it after 0.37 s, back in about a second); that is no push. A drone pushed 10 cm
+    while it takes off is said "while taking off"."""
+    v0, omega, zeta = 1.0, 2.95, 0.74
+    damped = omega * math.sqrt(1.0 - zeta * zeta)
+
+    def overshooting(name: str, t: float) -> tuple[float, float, float]:
+        x, y, _ = POSITIONS[name]
+        past = v0 / damped * math.exp(-zeta * omega * t) * math.sin(damped * t)
+        return (x + past, y, max(0.0, 0.5 - 0.25 * t))
+
+    def at_rest(name: str, t: float) -> tuple[float, float, float]:
+        x, y, _ = POSITIONS[name]
+        return (x, y, 0.5 - 0.25 * t)
+
+    for telemetry_at_s in (0.0, 0.05):  # the landing's target known from 0.3 s or from 0.25 s, mid-overshoot
+        assert landing_with(at_rest, overshooting, telemetry_at_s=telemetry_at_s) == [], telemetry_at_s
+
+    def lifting(name: str, t: float) -> tuple[float, float, float]:
+        x, y, _ = POSITIONS[name]
+        return (x + (0.1 * min(1.0, max(0.0, (t - 0.6) / 0.3)) if name == "cf1" else 0.0), y, min(0.5, 0.25 * t))
+
+    said = landing_with(at_rest, lifting, phase=DronePhase.TAKEOFF)
+    assert [(d, level) for _, d, level, _ in said] == [("cf1", WARNING)], said
+    assert "while taking off" in said[0][3]
+
+
+def test_without_a_logged_target_a_landing_is_not_judged():
+    """A firmware that logs no controller target (`DroneState.target_m` None): the landing's point is unknown, and
+    nothing is guessed."""
+    def pose_of(name: str, t: float) -> tuple[float, float, float]:
+        x, y, _ = POSITIONS[name]
+        return (x + (0.2 if name == "cf2" and t > 0.5 else 0.0), y, 0.5 - 0.2 * t)
+
+    assert landing_with(lambda n, t: None, pose_of) == []

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 import math
 import threading
 import time
@@ -11,7 +12,7 @@ from pathlib import Path
 import pytest
 
 from rpf_fly.radio.backend import DroneBackend, PmState
-from rpf_fly.radio.cflib_backend import STATUS_VARIABLES, CflibBackend
+from rpf_fly.radio.cflib_backend import STATUS_VARIABLES, STATUS_VARIABLES_FLOAT, CflibBackend, status_variables
 from rpf_fly.emulator.fake_firmware import LOG_MAX_PAYLOAD
 from rpf_fly.emulator.fake_toc import value_size
 from rpf_fly.emulator.fake_world import FakeDroneConfig, FakeWorld, RadioTiming
@@ -71,8 +72,36 @@ def test_backend_implements_the_protocol() -> None:
 
 
 def test_status_block_fits_one_log_packet() -> None:
-    assert sum(value_size(ctype) for _, ctype in STATUS_VARIABLES) <= LOG_MAX_PAYLOAD == 26
-    assert ("stateEstimate.yaw", "float") in STATUS_VARIABLES
+    for block in (STATUS_VARIABLES, STATUS_VARIABLES_FLOAT):
+        assert sum(value_size(ctype) for _, ctype in block) <= LOG_MAX_PAYLOAD == 26
+        assert ("stateEstimate.yaw", "float") in block
+
+
+def test_the_controllers_target_is_in_the_telemetry_and_a_landing_holds_its_x_y(
+        make_world: MakeWorld, toc_cache: Path, backends: Callable[..., CflibBackend]) -> None:
+    """The status block carries the firmware's controller target (`ctrltargetZ`, mm): the streamed setpoint while
+    one streams, then the high-level landing's point, which keeps the x, y of the estimate when the land command
+    arrived (the supervisor's tracking check of a landing reads it: docs/flight.md, *Tracking*). A firmware whose
+    log TOC lacks the compressed groups gets the float block, without a target."""
+    world = make_world(1)
+    backend = backends(cache_dir=toc_cache)
+    assert backend.connect(names_to_uris(world)) == {}
+    take_off_all(backend, world)
+    stream(1.5, lambda: backend.send_position_setpoint("cf0", 0.3, 0.1, 0.5, 0.0))
+    assert wait_for(lambda: backend.state("cf0").target_m is not None, 1.0)
+    assert backend.state("cf0").target_m == pytest.approx((0.3, 0.1, 0.5), abs=0.0015)
+    backend.land("cf0", 0.0, 1.0)
+    landed_at = time.monotonic()
+    assert wait_for(lambda: (backend.state("cf0").estimate_stamp_s or 0.0) > landed_at + 0.3, 1.0)
+    state = backend.state("cf0")
+    assert state.target_m[:2] == pytest.approx(state.position_m[:2], abs=0.01)  # the estimate's x, y: it hovered
+    assert state.target_m[:2] == pytest.approx((0.3, 0.1), abs=0.03)           # there
+    assert 0.05 < state.target_m[2] < 0.45                                        # on the way down
+
+    toc = copy.deepcopy(backend._drones["cf0"].scf.cf.log.toc)  # the real TOC cflib read from the firmware
+    assert status_variables(toc) == STATUS_VARIABLES
+    del toc.toc["ctrltargetZ"]                                    # a firmware without the compressed groups
+    assert status_variables(toc) == STATUS_VARIABLES_FLOAT
 
 
 def test_connects_ten_drones_and_reports_preflight_state(make_world: MakeWorld, toc_cache: Path,
