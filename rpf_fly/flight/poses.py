@@ -138,6 +138,9 @@ class PoseTracker:
         `_estimate_agrees`. The flight loop sets it from the drones' telemetry."""
         self._raw_turn: dict[str, tuple[tuple[float, float, float, float], float, float]] = {}
         """drone -> its newest sample's orientation: (quaternion, receive time, capture time)."""
+        self.unseen_untracked: dict[str, float] = {}
+        """drone -> the longest stretch it went untracked entirely between two frames it was given (the caller
+        busy: `MocapFrame.unseen_untracked_s`), gathered until `take_unseen`."""
 
     @staticmethod
     def _jump(a: tuple[float, ...], b: tuple[float, ...], dt: float) -> bool:
@@ -218,6 +221,12 @@ class PoseTracker:
         t = stamp_on_grid(frame.receive_time_s)
         self.last_frame_s = t
         self.latency_s = frame.latency_s
+        if frame.unseen_untracked_s:
+            unseen = self.unseen_untracked
+            for name, body_name in self.bodies.items():
+                gap = frame.unseen_untracked_s.get(body_name)
+                if gap is not None and gap > unseen.get(name, 0.0):
+                    unseen[name] = gap
         for name, body_name in self.bodies.items():
             body = frame.bodies.get(body_name)
             previous = self.poses.get(name)
@@ -254,6 +263,11 @@ class PoseTracker:
 
     def get(self, name: str) -> Optional[TrackedPose]:
         return self.poses.get(name)
+
+    def take_unseen(self) -> dict[str, float]:
+        """`unseen_untracked` so far, and forget it (the supervisor reports each stretch once)."""
+        unseen, self.unseen_untracked = self.unseen_untracked, {}
+        return unseen
 
     def age(self, name: str, now_s: float) -> float:
         """Seconds since the drone's newest valid pose (infinite if it never had one)."""

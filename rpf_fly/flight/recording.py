@@ -166,7 +166,8 @@ class McapRecorder:
         latency = state.link.latency_ms if state is not None else None
         outcome = agent.outcome.value if agent.outcome is not None and agent.phase.terminal else None
         self.log.status(agent.name, self._ns(t_s), state=agent.phase.value, battery_v=battery, link_quality=quality,
-                        latency_ms=latency, outcome=outcome)
+                        latency_ms=latency, outcome=outcome, estimate=state.position_m if state is not None else None,
+                        target=state.target_m if state is not None else None)
 
     def event(self, event: FlightEvent) -> None:
         self.log.event(self._ns(event.time_s), event.level, event.message, name=event.drone or "flight",

@@ -352,7 +352,15 @@ DRONE_STATUS: dict[str, Any] = _obj(
                          "description": "Radio link quality 0..1; null if unknown"},
         "latency_ms": _nullable_num("Radio round-trip latency (ms); null if unknown"),
         "outcome": {"type": ["string", "null"], "description": "null while flying; reached, stalled, timeout, ..."},
+        "estimate": {"type": ["object", "null"], "properties": {"x": _num(), "y": _num(), "z": _num()},
+                     "description": "The on-board estimate of the drone's position (m), as its firmware logs it; "
+                                    "null if unknown (2026-12-04)"},
+        "target": {"type": ["object", "null"], "properties": {"x": _num(), "y": _num(), "z": _num()},
+                   "description": "Where the drone's own controller is taking it (m): the streamed setpoint, or the "
+                                  "high-level take-off's or landing's point; null if the firmware does not log it "
+                                  "(2026-12-04)"},
     },
+    required=("timestamp", "state", "battery_v", "link_quality", "latency_ms", "outcome"),
     title="rpf_fly.DroneStatus",
     description="State, battery and link of one drone",
 )
@@ -558,8 +566,8 @@ def planner_step(t_ns: int, tick: int, position: Any, goal: Any, mode: Any, eta:
 
 
 def drone_status(t_ns: int, state: str, battery_v: Any = None, link_quality: Any = None, latency_ms: Any = None,
-                 outcome: Optional[str] = None) -> dict[str, Any]:
-    """A ``rpf_fly.DroneStatus`` (unknown values None)."""
+                 outcome: Optional[str] = None, estimate: Any = None, target: Any = None) -> dict[str, Any]:
+    """A ``rpf_fly.DroneStatus`` (unknown values None; ``estimate`` and ``target`` as ``(x, y, z)``)."""
     return {
         "timestamp": stamp(t_ns),
         "state": str(state),
@@ -567,6 +575,8 @@ def drone_status(t_ns: int, state: str, battery_v: Any = None, link_quality: Any
         "link_quality": _opt(link_quality),
         "latency_ms": _opt(latency_ms),
         "outcome": None if outcome is None else str(getattr(outcome, "value", outcome)),
+        "estimate": None if estimate is None else xyz(estimate),
+        "target": None if target is None else xyz(target),
     }
 
 

@@ -14,10 +14,10 @@ backend cannot know are optional (``latency_s``) or are synthesised (``frame_num
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from types import TracebackType
+from types import MappingProxyType, TracebackType
 from typing import Callable, Mapping, Protocol, Sequence, runtime_checkable
 
-__all__ = ["RigidBodyPose", "MocapFrame", "MocapStats", "MocapSource", "PoseSample", "PoseCallable"]
+__all__ = ["RigidBodyPose", "MocapFrame", "MocapStats", "MocapSource", "PoseSample", "PoseCallable", "NO_UNSEEN"]
 
 PoseSample = tuple[Sequence[float], Sequence[float], bool]
 """A true pose as simulators supply it: (position x, y, z in metres, quaternion qx, qy, qz, qw, tracking valid),
@@ -62,6 +62,15 @@ class MocapFrame:
     latency_s: float | None
     """Camera-to-server latency in seconds when the source measures it (NatNet high-resolution clock), else None."""
     bodies: dict[str, RigidBodyPose] = field(default_factory=dict)
+    unseen_untracked_s: Mapping[str, float] = field(default_factory=lambda: NO_UNSEEN)
+    """Bodies that went untracked and came back entirely within frames the caller never got (it was busy: a
+    stalled loop reads only the newest frame of those the socket queued), tracked in the caller's previous frame
+    and in this one: body name -> the longest such stretch (source clock, seconds). Empty unless the source
+    knows (the NatNet client; 2026-12-04); without it an occlusion or a blackout during a loop stall left no
+    trace."""
+
+
+NO_UNSEEN: Mapping[str, float] = MappingProxyType({})
 
 
 @dataclass(slots=True)

@@ -38,8 +38,9 @@ import socket
 import sys
 import time
 from types import TracebackType
+from typing import Mapping
 
-from rpf_fly.mocap.frame import MocapFrame, MocapStats, RigidBodyPose
+from rpf_fly.mocap.frame import NO_UNSEEN, MocapFrame, MocapStats, RigidBodyPose
 from rpf_fly.mocap.natnet_protocol import (
     UNRECOGNIZED_REQUEST_ALT,
     ConnectRequest,
@@ -74,6 +75,12 @@ _MAX_DRAIN = 4096
 #: Minimum seconds between MODELDEF requests, and between re-requests caused by unknown rigid-body ids.
 _MODEL_REQUEST_GAP_S = 0.1
 _UNKNOWN_ID_INTERVAL_S = 1.0
+#: A body's gap between two frames that tracked it is noted from this long (a few frames at 100 Hz: a single
+#: dropped frame is not worth a dict write) ...
+_UNTRACKED_NOTED_S = 0.03
+#: ... and reported to the caller (`MocapFrame.unseen_untracked_s`) from this long: the flight supervisor's
+#: ``POSE_LATE_S``, what it says of a pose gap it sees live.
+_UNSEEN_S = 0.1
 #: Consecutive undecodable frames after which CONNECT is re-sent to re-learn the bitstream version.
 _BAD_FRAMES_RECONNECT = 10
 #: Minimum seconds between repeated warnings of one kind.
@@ -158,6 +165,12 @@ class NatNetClient:
         self._names: dict[int, str] = {}
         self._pending: tuple[FrameOfData, float] | None = None
         self._last_delivered: int | None = None
+        self._last_tracked: dict[int, float] = {}
+        """Body id -> server time of the newest frame that tracked it (every decoded frame, delivered or not)."""
+        self._untracked: dict[int, float] = {}
+        """Body id -> the longest stretch between two frames that tracked it since the last delivery."""
+        self._delivered_tracked: frozenset[int] = frozenset()
+        """Ids the last delivered frame tracked."""
         self._last_connect = -1e9
         self._last_keepalive = -1e9
         self._last_model_request = -1e9
@@ -408,7 +421,7 @@ class NatNetClient:
         data, received = pending
         self._pending = None
         self._last_delivered = data.frame_number
-        frame = self._to_mocap_frame(data, received)
+        frame = self._to_mocap_frame(data, received, self._unseen(data))
         self._stats.delivered += 1
         return frame
 
@@ -544,6 +557,13 @@ class NatNetClient:
     def _on_frame(self, data: FrameOfData, receive_time_s: float) -> None:
         stats = self._stats
         stats.frames += 1
+        t, last, untracked = data.timestamp, self._last_tracked, self._untracked
+        for rb in data.rigid_bodies:
+            if rb.params & 0x01:
+                before = last.get(rb.id)
+                if before is not None and t - before > _UNTRACKED_NOTED_S and t - before > untracked.get(rb.id, 0.0):
+                    untracked[rb.id] = t - before
+                last[rb.id] = t
         if data.models_changed:
             self._model_stale = True
         pending = self._pending
@@ -556,7 +576,21 @@ class NatNetClient:
         else:
             self._pending = (data, receive_time_s)
 
-    def _to_mocap_frame(self, data: FrameOfData, received: float) -> MocapFrame:
+    def _unseen(self, data: FrameOfData) -> Mapping[str, float]:
+        """`MocapFrame.unseen_untracked_s` of the frame about to be delivered: stretches of bodies tracked in the
+        previous delivered frame and in this one (so the caller saw neither end), and at least ``_UNSEEN_S`` long."""
+        tracked = frozenset(rb.id for rb in data.rigid_bodies if rb.params & 0x01)
+        untracked, before = self._untracked, self._delivered_tracked
+        self._delivered_tracked = tracked
+        if not untracked:
+            return NO_UNSEEN
+        unseen = {self._names.get(i, str(i)): s for i, s in untracked.items()
+                  if s >= _UNSEEN_S and i in before and i in tracked}
+        untracked.clear()
+        return unseen or NO_UNSEEN
+
+    def _to_mocap_frame(self, data: FrameOfData, received: float,
+                        unseen: Mapping[str, float] = NO_UNSEEN) -> MocapFrame:
         names = self._names
         y_up = self._y_up
         bodies: dict[str, RigidBodyPose] = {}
@@ -585,4 +619,4 @@ class NatNetClient:
         frequency = info.clock_frequency_hz if info is not None else None
         if frequency and data.camera_mid_exposure and data.camera_data_received >= data.camera_mid_exposure:
             latency = (data.camera_data_received - data.camera_mid_exposure) / frequency
-        return MocapFrame(data.frame_number, data.timestamp, received, latency, bodies)
+        return MocapFrame(data.frame_number, data.timestamp, received, latency, bodies, unseen)

@@ -63,3 +63,26 @@ def test_a_push_during_a_mid_flight_landing_is_said_and_the_other_landing_drones
     assert "while landing" in tracking[0].message
     assert tracking[0].time_s - pushed_at[0] < 1.0
     assert all(s.position[2] < 0.05 and not s.motors_on for s in flight.snapshots.values())
+    # The log's status carries what the supervisor judged by: the on-board estimate and the firmware's target.
+    landing = [m.data for m in flight.log.messages("/cf1/status") if m.data["state"] == "landing" and m.data["target"]]
+    assert landing and {"x", "y", "z"} <= set(landing[0]["estimate"]) and {"x", "y", "z"} <= set(landing[0]["target"])
+    xs = {round(d["target"]["x"], 3) for d in landing[2:] if d["target"]["z"] > 0.05}  # (after touchdown the
+    assert xs and max(xs) - min(xs) <= 0.002, xs  # landing holds its x, y            # firmware's target is void)
+
+
+def test_a_blackout_inside_a_loop_stall_is_said_when_the_loop_reads_again(tmp_path, short_mission):
+    """The loop thread blocks for 1.3 s (its watchdog lands the swarm), and inside that the mocap loses every body
+    for 0.4 s and finds them again. The loop then reads only the newest frame, but the NatNet client saw the gap
+    in the frames it drained, so one swarm-wide warning says it after the fact (until 2026-12-04 it left no trace:
+    compound campaign seed 17, run 15)."""
+    def stall_then_black_out(loop, rig):
+        time.sleep(0.5)
+        rig.mocap.stall(1.3)
+        time.sleep(0.4)
+        rig.blackout(0.4)
+
+    flight = fly(short_mission, tmp_path, when_flying=stall_then_black_out)
+    said = [e for e in flight.events("mocap_late") if "after the fact" in e.message]
+    assert len(said) == 1 and said[0].drone is None, [(e.drone, e.message) for e in flight.events("mocap_late")]
+    assert flight.events("loop")
+    assert all(s.position[2] < 0.05 and not s.motors_on for s in flight.snapshots.values())

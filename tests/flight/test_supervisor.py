@@ -603,3 +603,20 @@ def test_without_a_logged_target_a_landing_is_not_judged():
         return (x + (0.2 if name == "cf2" and t > 0.5 else 0.0), y, 0.5 - 0.2 * t)
 
     assert landing_with(lambda n, t: None, pose_of) == []
+
+
+def test_a_pose_gap_the_loop_did_not_see_is_said_after_the_fact_once():
+    """A frame whose source saw bodies untracked between it and the loop's previous frame
+    (`MocapFrame.unseen_untracked_s`: the loop was stalled) is said once: one drone, a `pose_late` naming it; every
+    airborne drone, one swarm-wide `mocap_late`."""
+    for unseen, expected in (({"cf2": 0.3}, [("pose_late", "cf2")]),
+                             ({"cf1": 0.5, "cf2": 0.5, "cf3": 0.4}, [("mocap_late", None)])):
+        agents, tracker, supervisor, states = holding_their_spots()
+        bodies = {name: RigidBodyPose(name, i, p, (0.0, 0.0, 0.0, 1.0), True) for i, (name, p) in enumerate(POSITIONS.items())}
+        tracker.update(MocapFrame(1, 0.0, 0.0, None, bodies))
+        assert not [f for f in supervisor.check(0.0, agents.values(), tracker, states) if f.level >= WARNING]
+        tracker.update(MocapFrame(2, 0.5, 0.5, None, bodies, unseen))
+        said = [(f.kind, f.drone) for f in supervisor.check(0.5, agents.values(), tracker, states) if f.level >= WARNING]
+        assert said == expected, said
+        tracker.update(MocapFrame(3, 0.51, 0.51, None, bodies))
+        assert not [f for f in supervisor.check(0.51, agents.values(), tracker, states) if f.level >= WARNING]

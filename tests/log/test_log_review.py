@@ -166,7 +166,7 @@ def test_plot_and_csv(lab_log, tmp_path):
         assert column in header, column
     header, rows = header_and_rows("cf1_status.csv")
     assert header[3:] == ["timestamp.sec", "timestamp.nsec", "state", "battery_v", "link_quality", "latency_ms",
-                          "outcome"]
+                          "outcome", "estimate", "target"]  # a simulation's drones have no firmware: both null
     assert rows[-1][header.index("outcome")] == "reached" and rows[0][header.index("battery_v")] == ""
     header, rows = header_and_rows("events.csv")
     assert {"level", "message", "name", "file", "line"} <= set(header)

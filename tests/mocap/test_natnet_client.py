@@ -268,3 +268,28 @@ def test_unicast_frames_on_the_data_port_are_received_when_asked(fake_server):
         fake_server.sendto(frame(5, [rb(1, 0.5)]), ("127.0.0.1", port))  # to the data port, not the command socket
         received = client.receive(1.0)
         assert received is not None and received.bodies["1"].position[0] == 0.5
+
+
+def test_a_gap_the_caller_never_saw_is_reported_with_the_frame_after_it(fake_server):
+    """A caller that does not read for a while (a stalled flight loop) gets only the newest of the frames the
+    socket queued. A body that went untracked and came back within those frames is reported with the delivered
+    frame (`MocapFrame.unseen_untracked_s`, server time), once: here body 1 is lost for 0.5 s and body 2 for
+    0.05 s (one frame at 100 Hz would not count either). A gap whose start the caller saw (a frame it was given
+    showed the body untracked) is not: the caller saw it live."""
+    def at(n: int, *bodies: RigidBodyData) -> bytes:
+        return encode_frame(FrameOfData(n, rigid_bodies=list(bodies), timestamp=n / 100.0), V)
+
+    with make_client(fake_server) as client:
+        feed(client, encode_server_info(server_info(V)), at(100, rb(1), rb(2)))
+        assert client.receive(0.0).unseen_untracked_s == {}
+        queued = [at(n, rb(1, valid=not 110 <= n < 160), rb(2, valid=not 120 <= n < 125)) for n in range(101, 200)]
+        feed(client, *queued)                      # the caller was stalled: all of them wait in the socket
+        delivered = client.receive(0.0)
+        assert delivered.frame_number == 199
+        assert delivered.unseen_untracked_s == {"1": pytest.approx(0.51)}
+        feed(client, at(200, rb(1), rb(2)))
+        assert client.receive(0.0).unseen_untracked_s == {}  # said once
+        feed(client, at(201, rb(1, valid=False), rb(2)))
+        assert not client.receive(0.0).bodies["1"].valid   # the caller sees the gap begin ...
+        feed(client, *[at(n, rb(1, valid=n >= 260), rb(2)) for n in range(202, 262)])
+        assert client.receive(0.0).unseen_untracked_s == {}  # ... so its end is not news
