@@ -246,3 +246,38 @@ def test_a_yaw_offset_under_extpose_owes_nothing_only_when_its_drone_flew_right(
     assert not campaign._corrected_by_extpose(yaw, mission("extpos"), {"cf2": True})  # noqa: SLF001
     gust = campaign.fault_fields("gust", "cf2", {"duration_s": 1.0, "accel": [1.0, 0.0, 0.0]}, 3.0)
     assert not campaign._corrected_by_extpose(gust, mission("extpose"), {"cf2": True})  # noqa: SLF001
+
+
+def test_a_frame_fault_wholly_inside_a_loop_stall_owes_nothing_but_one_outliving_it_does():
+    """A pose jump that began and ended while the loop was stalled never reached the stack (it reads only the newest
+    frame when it wakes); one that outlives the stall does, and owes its warning. A pose gap is not such a fault:
+    the stack says it after the fact."""
+    campaign = load_campaign()
+    events = [(int(3.0e9), {"level": 2, "file": "fault", "name": "flight", "message": "injected loop_stall for 1.5 s"}),
+              (int(3.5e9), {"level": 2, "file": "fault", "name": "cf2",
+                            "message": "injected pose_jump for 0.4 s: offset_m [0.6, 0.0, 0.0]"})]
+    inside = campaign.fault_fields("pose_jump", "cf2", {"duration_s": 0.4, "offset_m": [0.6, 0.0, 0.0]}, 3.5)
+    assert campaign._inside_loop_stall(inside, events)  # noqa: SLF001
+    outliving = campaign.fault_fields("pose_jump", "cf2", {"duration_s": 1.2, "offset_m": [0.6, 0.0, 0.0]}, 3.5)
+    assert not campaign._inside_loop_stall(outliving, events)  # noqa: SLF001
+    occlusion = campaign.fault_fields("occlusion", "cf2", {"duration_s": 0.4}, 3.5)
+    assert not campaign._inside_loop_stall(occlusion, events)  # noqa: SLF001
+
+
+def test_a_loop_stall_that_delayed_no_tick_past_the_late_line_owes_nothing():
+    """Extpose compound seed 18, run 6: a 0.12 s stall at 15 Hz began as the loop waited for its next frame and
+    made one tick 59 ms late (0.126 s after the last one): under the period plus 0.1 s, the loop's own late line,
+    so owed nothing. The same stall at 100 Hz holds the ticks 0.13 s apart, past 0.11 s: owed."""
+    campaign = load_campaign()
+    stall = campaign.fault_fields("loop_stall", None, {"duration_s": 0.12}, 4.74)
+    events = [(int(4.742e9), {"level": 2, "file": "fault", "name": "flight", "message": "injected loop_stall for 0.12 s"})]
+
+    def ticks(period: float, gap: float) -> dict:
+        """Ticks every ``period`` from 4.0 s; the one after 4.742 s comes ``gap`` later; then every period."""
+        before = [4.742 - k * period for k in range(12, -1, -1)]
+        after = [4.742 + gap + k * period for k in range(12)]
+        return {"cf1": [int(t * 1e9) for t in before + after]}
+
+    slow = campaign._stall_within_jitter(stall, events, ticks(1 / 15, 0.126), 1 / 15)  # noqa: SLF001
+    assert slow is not None and abs(slow - 0.126) < 1e-3
+    assert campaign._stall_within_jitter(stall, events, ticks(0.01, 0.13), 0.01) is None  # noqa: SLF001
