@@ -33,6 +33,7 @@ from __future__ import annotations
 import dataclasses
 import ipaddress
 import logging
+import math
 import select
 import socket
 import sys
@@ -75,11 +76,8 @@ _MAX_DRAIN = 4096
 #: Minimum seconds between MODELDEF requests, and between re-requests caused by unknown rigid-body ids.
 _MODEL_REQUEST_GAP_S = 0.1
 _UNKNOWN_ID_INTERVAL_S = 1.0
-#: A body's gap between two frames that tracked it is noted from this long (a few frames at 100 Hz: a single
-#: dropped frame is not worth a dict write) ...
-_UNTRACKED_NOTED_S = 0.03
-#: ... and reported to the caller (`MocapFrame.unseen_untracked_s`) from this long: the flight supervisor's
-#: ``POSE_LATE_S``, what it says of a pose gap it sees live.
+#: A body's untracked run inside frames the caller skipped is reported (`MocapFrame.unseen_untracked_s`) from this
+#: long: the flight supervisor's ``POSE_LATE_S``, what it says of a pose gap it sees live.
 _UNSEEN_S = 0.1
 #: Consecutive undecodable frames after which CONNECT is re-sent to re-learn the bitstream version.
 _BAD_FRAMES_RECONNECT = 10
@@ -165,12 +163,14 @@ class NatNetClient:
         self._names: dict[int, str] = {}
         self._pending: tuple[FrameOfData, float] | None = None
         self._last_delivered: int | None = None
-        self._last_tracked: dict[int, float] = {}
-        """Body id -> server time of the newest frame that tracked it (every decoded frame, delivered or not)."""
-        self._untracked: dict[int, float] = {}
-        """Body id -> the longest stretch between two frames that tracked it since the last delivery."""
-        self._delivered_tracked: frozenset[int] = frozenset()
-        """Ids the last delivered frame tracked."""
+        self._skipped_untracked: dict[int, list[float]] = {}
+        """Body id -> [start, end, longest] of its runs of untracked poses in the frames skipped since the last
+        delivery (superseded before the caller read them): the open run's first and last server time (start NaN
+        when none is open) and the longest closed one. Empty while the caller keeps up, so the normal path pays
+        nothing."""
+        self._skipped = 0
+        self._previous: FrameOfData | None = None
+        """The frame delivered last."""
         self._last_connect = -1e9
         self._last_keepalive = -1e9
         self._last_model_request = -1e9
@@ -557,36 +557,57 @@ class NatNetClient:
     def _on_frame(self, data: FrameOfData, receive_time_s: float) -> None:
         stats = self._stats
         stats.frames += 1
-        t, last, untracked = data.timestamp, self._last_tracked, self._untracked
-        for rb in data.rigid_bodies:
-            if rb.params & 0x01:
-                before = last.get(rb.id)
-                if before is not None and t - before > _UNTRACKED_NOTED_S and t - before > untracked.get(rb.id, 0.0):
-                    untracked[rb.id] = t - before
-                last[rb.id] = t
         if data.models_changed:
             self._model_stale = True
         pending = self._pending
         if pending is not None:
             stats.superseded += 1
             if _is_newer(data.frame_number, pending[0].frame_number):
+                self._skip(pending[0])
                 self._pending = (data, receive_time_s)
         elif self._last_delivered is not None and not _is_newer(data.frame_number, self._last_delivered):
             stats.superseded += 1  # duplicate or reordered: older than what the caller already has
         else:
             self._pending = (data, receive_time_s)
 
+    def _skip(self, data: FrameOfData) -> None:
+        """Note the untracked bodies of a frame the caller will never get (superseded by a newer one)."""
+        self._skipped += 1
+        t, runs = data.timestamp, self._skipped_untracked
+        for rb in data.rigid_bodies:
+            run = runs.get(rb.id)
+            if rb.params & 0x01:
+                if run is not None and run[0] == run[0]:  # an open run ends (NaN != NaN: none open)
+                    run[2] = max(run[2], run[1] - run[0])
+                    run[0] = math.nan
+            elif run is None:
+                runs[rb.id] = [t, t, 0.0]
+            else:
+                if run[0] != run[0]:
+                    run[0] = t
+                run[1] = t
+
     def _unseen(self, data: FrameOfData) -> Mapping[str, float]:
-        """`MocapFrame.unseen_untracked_s` of the frame about to be delivered: stretches of bodies tracked in the
-        previous delivered frame and in this one (so the caller saw neither end), and at least ``_UNSEEN_S`` long."""
-        tracked = frozenset(rb.id for rb in data.rigid_bodies if rb.params & 0x01)
-        untracked, before = self._untracked, self._delivered_tracked
-        self._delivered_tracked = tracked
-        if not untracked:
+        """`MocapFrame.unseen_untracked_s` of the frame about to be delivered: the bodies' untracked runs in the
+        frames skipped since the last delivery, each plus one frame interval (it was tracked a frame before and a
+        frame after), of bodies tracked in the previous delivered frame and in this one (so the caller saw neither
+        end), at least ``_UNSEEN_S`` long."""
+        previous, self._previous = self._previous, data
+        skipped, self._skipped = self._skipped, 0
+        runs = self._skipped_untracked
+        if not runs:
             return NO_UNSEEN
-        unseen = {self._names.get(i, str(i)): s for i, s in untracked.items()
-                  if s >= _UNSEEN_S and i in before and i in tracked}
-        untracked.clear()
+        self._skipped_untracked = {}
+        if previous is None:
+            return NO_UNSEEN
+        interval = (data.timestamp - previous.timestamp) / (skipped + 1)
+        before = {rb.id for rb in previous.rigid_bodies if rb.params & 0x01}
+        now = {rb.id for rb in data.rigid_bodies if rb.params & 0x01}
+        unseen = {}
+        for i, (start, end, longest) in runs.items():
+            gap = max(longest, end - start if start == start else 0.0) + interval
+            if gap >= _UNSEEN_S and i in before and i in now:
+                unseen[self._names.get(i, str(i))] = gap
         return unseen or NO_UNSEEN
 
     def _to_mocap_frame(self, data: FrameOfData, received: float,
