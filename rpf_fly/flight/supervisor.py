@@ -99,13 +99,18 @@ TRACKING_TAU_S = 0.25
 TRACKING_SPEED_M_S = 1.1
 """The firmware's horizontal speed limit (posCtlPid.xyVelMax 1 m/s, plus its 10 % overhead)."""
 TRACKING_PLAN_TAU_S = 0.5
-"""The follower's time constant while the high-level commander flies a take-off or landing, and how long the
-overshoot it allows lasts: the slowest return a default Crazyflie gives. Its position PID (posCtlPid.xKp 2/s) alone
-is 0.5 s; with its velocity loop (velCtlPid.vxKp 25 degrees per m/s, about 4.3 /s of acceleration per m/s) the pair
-is a damped oscillator (omega 2.95/s, zeta 0.74) that runs a landing begun at 1 m/s 15 cm past its point and
-brings it back in about a second. Against that model this follower stays within 2.8 cm (0.25 s: 9.4 cm, which
-would cry wolf), and within 1.4 cm of the simulated drone's first-order return (an estimate snapped back by
-6 cm). Worked out from the firmware's default gains, not measured on hardware."""
+"""While the high-level commander flies a take-off or landing the follower is an envelope between a first-order
+return with ``TRACKING_TAU_S`` (the simulated drone's) and one with this, the slowest a default Crazyflie gives;
+this is also how long the overshoot it allows lasts. The firmware's position PID (posCtlPid.xKp 2/s) alone is
+0.5 s; with its velocity loop (velCtlPid.vxKp 25 degrees per m/s, about 4.3 /s of acceleration per m/s) the pair is
+a damped oscillator (omega 2.95/s, zeta 0.74) that runs a landing begun at 1 m/s 15 cm past its point and brings it
+back in about a second. Against that model the slow follower with its overshoot stays within 2.8 cm (a 0.25 s one:
+9.4 cm, which would cry wolf); a drone whose estimate snaps back 0.35 m in the air (a blind spell's drift) and
+returns with the simulated drone's 0.25 s would leave a 0.5 s follower by 8.8 cm, hence the envelope. Worked out
+from the firmware's default gains, not measured on hardware."""
+TRACKING_LATENCY_WINDOW_S = 0.5
+"""The tracking line is widened by the drone's speed times the largest mocap latency of this long: long enough
+for the drone's estimate to settle after the latency changes."""
 PLAN_TARGET_AFTER_S = 0.15
 """A take-off's or landing's firmware target is read from telemetry made at least this long after the command was
 sent (an outbox, a sender and a radio transaction: milliseconds on a healthy link, tens on a full one)."""
@@ -125,6 +130,53 @@ a picture that old (Crazyswarm2 warns at 10 ms over unicast; a healthy Motive li
 the worst healthy link, so a healthy system never warns, and 2 cm of lag at 1 m/s. Was 50 ms until 2026-12-02: the
 random fault campaign delayed the mocap by 33 ms (plus the emulated camera's 4 ms), a picture five times older than a
 healthy one, and nothing said so."""
+
+class _Follower:
+    """Where a drone's setpoints should have brought it: two first-order followers of the setpoint (time constants
+    ``fast_s`` and ``slow_s``, each at most the firmware's speed limit) and an overshoot ``momentum`` (m) that fades
+    with ``slow_s`` from ``since``; a pose anywhere on the segment between the two followers, or within the
+    overshoot past the slow one, follows. Once a landing drone reaches the floor (`touch`) it may stop there or
+    slide on to its point: anywhere from where the followers were then to where they are now follows too.
+    ``key``: the take-off's or landing's start (a new one starts a new follower); None while the drone plans,
+    holds or hovers (both constants then the position loop's: one point)."""
+
+    def __init__(self, key: Optional[float], at: complex, now_s: float, momentum: complex, fast_s: float,
+                 slow_s: float) -> None:
+        self.key = key
+        self.fast = self.slow = at
+        self.then = self.since = now_s
+        self.momentum = momentum
+        self.fast_s, self.slow_s = fast_s, slow_s
+        self.touched: Optional[tuple[complex, complex]] = None
+
+    def step(self, setpoint: complex, now_s: float) -> None:
+        """Advance to ``now_s`` towards ``setpoint``."""
+        dt = max(0.0, min(now_s - self.then, 0.1))
+        self.then = now_s
+        if dt > 0.0:
+            limit = TRACKING_SPEED_M_S * dt
+            for name, tau in (("fast", self.fast_s), ("slow", self.slow_s)):
+                at = getattr(self, name)
+                step = (setpoint - at) * (1.0 - math.exp(-dt / tau))
+                if abs(step) > limit:
+                    step *= limit / abs(step)
+                setattr(self, name, at + step)
+
+    def touch(self) -> None:
+        """The drone is on the floor now (the first call counts)."""
+        if self.touched is None:
+            self.touched = (self.fast, self.slow)
+
+    def off(self, position: complex) -> float:
+        """How far ``position`` is from where the drone should be now."""
+        overshoot = self.momentum * math.exp(-max(0.0, self.then - self.since) / self.slow_s)
+        off = min(_to_segment(position, self.fast, self.slow), _to_segment(position, self.slow, self.slow + overshoot))
+        if self.touched is not None:
+            fast, slow = self.touched
+            off = min(off, _to_segment(position, fast, self.fast), _to_segment(position, slow, self.slow),
+                      _to_segment(position, fast, slow))
+        return off
+
 
 def _to_segment(p: complex, a: complex, b: complex) -> float:
     """Distance from ``p`` to the segment from ``a`` to ``b`` (a point when they coincide)."""
@@ -228,9 +280,10 @@ class Supervisor:
         self._history: dict[str, deque[tuple[float, tuple[float, float, float]]]] = {}
         self._poor_link: set[str] = set()
         self._off_track: dict[str, float] = {}
-        self._predicted: dict[str, tuple[complex, float, complex, float, Optional[float]]] = {}
-        """drone -> (where its setpoints should have brought it, when, the overshoot its velocity at the start of a
-        take-off or landing allows, when that started, the take-off's or landing's start or None)."""
+        self._predicted: dict[str, _Follower] = {}
+        """drone -> where its setpoints should have brought it (`_tracking`)."""
+        self._latencies: deque[tuple[float, float]] = deque()
+        """(when, the mocap's latency) of the last ``TRACKING_LATENCY_WINDOW_S``."""
         self._plan_targets: dict[str, tuple[float, complex, bool, float]] = {}
         """drone -> (the take-off's or landing's start, its firmware target x + iy, confirmed by a second sample,
         when the last sample was made)."""
@@ -666,48 +719,60 @@ class Supervisor:
 
     def _tracking(self, now_s: float, agents: list[DroneAgent], tracker: PoseTracker,
                   states: dict[str, DroneState]) -> list[Finding]:
-        """Measured position against a first-order follower of where the drone is being taken
-        (``TRACKING_WARN_M``): the streamed setpoints while it plans, holds or hovers; while the high-level
-        commander flies its take-off or landing, the firmware's own target (`_plan_target`), which keeps the x, y
-        where the plan began (the estimate of that moment, not the mocap pose: after a stall or a blind spell the
-        estimate snaps back to mocap and the drone moves by the difference, which is no push). A landing begun in
-        motion may overshoot its point by up to its speed times the position loop's lag before it comes back: the
-        follower allows that much along the drone's velocity at its start, fading with the lag.
+        """Measured position against a follower of where the drone is being taken (``TRACKING_WARN_M``): the
+        streamed setpoints while it plans, holds or hovers; while the high-level commander flies its take-off or
+        landing, the firmware's own target (`_plan_target`), which keeps the x, y where the plan began (the
+        estimate of that moment, not the mocap pose: after a stall or a blind spell the estimate snaps back to mocap
+        and the drone moves by the difference, which is no push). There the follower is an envelope (`_Follower`):
+        anywhere between a first-order return with the position loop's 0.25 s and one with 0.5 s, plus an overshoot
+        along the drone's velocity at its start; from the moment the drone reaches the floor (mocap height under
+        ``ON_FLOOR_Z_M``) it may also have stopped anywhere on the way (on the floor it cannot slide, and it reaches
+        it before it touches), and a follower starts only while the drone is off the floor. The line is widened by the drone's speed times the mocap's
+        latency (the largest of the last 0.5 s): the drone's estimator takes the same late poses as extpos, so its
+        truth runs ahead of them by that much, and when the latency changes the drone surges or drops back until
+        its estimate settles (compound campaign seed 17, run 13: 137 ms of mocap delay at 0.5 m/s said 6 drones
+        "pushed"). Under a healthy latency (3-8 ms) the widening is under 1 cm.
 
         Until 2026-12-04 take-off and landing were not watched: a gust during a watchdog's landing moved cf2
         0.13 m without a word (extpose compound campaign seed 16, run 14)."""
         out = []
+        latencies = self._latencies
+        latencies.append((now_s, tracker.latency_s or 0.0))
+        while len(latencies) > 1 and latencies[0][0] < now_s - TRACKING_LATENCY_WINDOW_S:
+            latencies.popleft()
+        late = max(latency for _, latency in latencies)
         for a in agents:
             pose = tracker.get(a.name)
-            setpoint = None
-            if pose is not None and now_s - pose.stamp_s <= POSE_LATE_S:
-                if a.phase in (DronePhase.TAKEOFF, DronePhase.LANDING):
-                    if a.phase != DronePhase.LANDING or a.touchdown_s is None or now_s <= a.touchdown_s:
-                        setpoint = self._plan_target(a, states.get(a.name))
-                else:
-                    setpoint = a.last_setpoint
+            planned = a.phase in (DronePhase.TAKEOFF, DronePhase.LANDING)
+            if planned:  # the target is read while the drone is unseen too, to be known the moment it is seen
+                setpoint = self._plan_target(a, states.get(a.name))
+                if a.phase == DronePhase.LANDING and a.touchdown_s is not None and now_s > a.touchdown_s:
+                    setpoint = None
+            else:
+                setpoint = a.last_setpoint
+            if pose is None or now_s - pose.stamp_s > POSE_LATE_S:
+                setpoint = None
             if setpoint is None:
                 self._off_track.pop(a.name, None)
                 self._predicted.pop(a.name, None)
                 continue
             if not pose.valid:  # a frame or a few without it: the model waits (2026-12-02: it restarted at the
                 continue        # next pose, and one dropped frame in a push hid the push)
-            planned = a.phase in (DronePhase.TAKEOFF, DronePhase.LANDING)
+            on_floor = planned and pose.position[2] <= ON_FLOOR_Z_M
             key = a.phase_since_s if planned else None  # a take-off or landing starts the model afresh
-            tau = TRACKING_PLAN_TAU_S if planned else TRACKING_TAU_S
-            entry = self._predicted.get(a.name)
-            if entry is None or entry[4] != key:
-                entry = (pose.xy, now_s, pose.velocity * tau if planned else 0j, now_s, key)
-            predicted, then, momentum, since, _ = entry
-            dt = max(0.0, min(now_s - then, 0.1))
-            step = (setpoint - predicted) * (1.0 - math.exp(-dt / tau))
-            if abs(step) > TRACKING_SPEED_M_S * dt:
-                step *= TRACKING_SPEED_M_S * dt / abs(step)
-            predicted += step
-            self._predicted[a.name] = (predicted, now_s, momentum, since, key)
-            overshoot = momentum * math.exp(-(now_s - since) / tau)
-            off = _to_segment(pose.xy, predicted, predicted + overshoot)
-            if off > TRACKING_WARN_M:
+            follower = self._predicted.get(a.name)
+            if follower is None or follower.key != key:
+                if on_floor:  # first seen on the floor (landed blind, or not yet lifted): nothing to follow
+                    self._predicted.pop(a.name, None)
+                    continue
+                follower = _Follower(key, pose.xy, now_s, pose.velocity * TRACKING_PLAN_TAU_S if planned else 0j,
+                                     TRACKING_TAU_S, TRACKING_PLAN_TAU_S if planned else TRACKING_TAU_S)
+                self._predicted[a.name] = follower
+            follower.step(setpoint, now_s)
+            if on_floor:
+                follower.touch()
+            off = follower.off(pose.xy)
+            if off > TRACKING_WARN_M + abs(pose.velocity) * late:
                 started = self._off_track.setdefault(a.name, now_s)
                 if now_s - started >= TRACKING_WARN_S and a.name not in self._off_track_warned:
                     self._off_track_warned.add(a.name)
