@@ -727,11 +727,11 @@ class Supervisor:
         anywhere between a first-order return with the position loop's 0.25 s and one with 0.5 s, plus an overshoot
         along the drone's velocity at its start; from the moment the drone reaches the floor (mocap height under
         ``ON_FLOOR_Z_M``) it may also have stopped anywhere on the way (on the floor it cannot slide, and it reaches
-        it before it touches), and a follower starts only while the drone is off the floor. The line is widened by the drone's speed times the mocap's
-        latency (the largest of the last 0.5 s): the drone's estimator takes the same late poses as extpos, so its
-        truth runs ahead of them by that much, and when the latency changes the drone surges or drops back until
-        its estimate settles (compound campaign seed 17, run 13: 137 ms of mocap delay at 0.5 m/s said 6 drones
-        "pushed"). Under a healthy latency (3-8 ms) the widening is under 1 cm.
+        it before it touches), and a follower starts only while the drone is off the floor. The line is widened by
+        the drone's speed times the mocap's latency (the largest of the last 0.5 s): the drone's estimator takes the
+        same late poses as extpos, so its truth runs ahead of them by that much, and when the latency changes the
+        drone surges or drops back until its estimate settles (compound campaign seed 17, run 13: 137 ms of mocap
+        delay at 0.5 m/s said 6 drones "pushed"). Under a healthy latency (3-8 ms) the widening is under 1 cm.
 
         Until 2026-12-04 take-off and landing were not watched: a gust during a watchdog's landing moved cf2
         0.13 m without a word (extpose compound campaign seed 16, run 14)."""
