@@ -31,11 +31,36 @@ def fake_drivers() -> list[type]:
     return [c for c in cflib.crtp.CLASSES if isinstance(c, type) and issubclass(c, fake_radio.FakeRadioDriver)]
 
 
+@pytest.hookimpl(trylast=True)
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Refuse to run when pytest-xdist's ``--dist loadgroup`` (pyproject addopts) has not grouped the marked tests.
+
+    The CLI flights, crash logs and bench runs are shared by the tests of one ``xdist_group`` only while those tests
+    share a worker; otherwise each worker flies them again (minutes) and two workers race over one install
+    (tools/mcap_js). pytest 9.2 made xdist 3.8's grouping a silent no-op (it renames ``item._nodeid``, which 9.2 no
+    longer reads): found when CI failed on 2026-12-04. pyproject pins pytest below 9.2."""
+    if not getattr(config.option, "loadgroup", False):
+        return  # not a loadgroup worker: a run without -n, or another --dist (the controller checks the version)
+    ungrouped = [item.nodeid for item in items
+                 if item.get_closest_marker("xdist_group") is not None and "@" not in item.nodeid]
+    if ungrouped:
+        raise pytest.UsageError(
+            f"pytest-xdist's loadgroup did not group {len(ungrouped)} marked tests (first: {ungrouped[0]}) under "
+            f"pytest {pytest.__version__}: install the pytest that pyproject's dev extra pins")
+
+
 def pytest_configure(config: pytest.Config) -> None:
     """Run the tests as a foreground Python program: Ctrl-C raises KeyboardInterrupt, and the programs the tests start
     (``rpf-fly mocap watch``, a library user's flight) hear SIGINT. A test run started in the background of a shell
     without job control (``pytest ... &`` in a script) inherits SIGINT ignored; Python keeps an ignored SIGINT, and
     so does every child it starts, so the Ctrl-C tests would fail there for a reason that is not theirs."""
+    # A pytest that breaks xdist's grouping is named here, on the controller (pytest_collection_modifyitems below
+    # catches any other cause, on the workers, less legibly).
+    if (config.getoption("dist", "no") == "loadgroup" and config.getoption("numprocesses", None)
+            and tuple(int(part) for part in pytest.__version__.split(".")[:2]) >= (9, 2)):
+        raise pytest.UsageError(f"pytest {pytest.__version__} ignores pytest-xdist's --dist loadgroup (the shared test "
+                                f"flights would fly on every worker): pip install 'pytest>=8,<9.2' (pyproject's dev "
+                                f"extra)")
     if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
         signal.signal(signal.SIGINT, signal.default_int_handler)
 

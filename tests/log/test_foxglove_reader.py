@@ -7,10 +7,12 @@ digest every topic's messages the same way (log time, publish time, sequence and
 
 from __future__ import annotations
 
+import fcntl
 import hashlib
 import json
 import shutil
 import subprocess
+import tempfile
 from pathlib import Path
 
 import pytest
@@ -33,10 +35,20 @@ def foxglove_reader() -> Path:
     node, npm = shutil.which("node"), shutil.which("npm")
     if node is None or npm is None:
         pytest.fail("Node.js and npm are needed to read the logs with Foxglove's reader (tools/mcap_js; Node 18+)")
-    if not (JS / "node_modules" / "@mcap" / "core").is_dir():
-        done = subprocess.run([npm, "ci", "--no-audit", "--no-fund", "--ignore-scripts"], cwd=JS,
-                              capture_output=True, text=True, timeout=600)
-        assert done.returncode == 0, f"npm ci in {JS} failed:\n{done.stdout}\n{done.stderr}"
+    # The module's tests can run on both xdist workers at once (the CLI-flight fixtures set their own groups), so
+    # the install is serialised with a lock and counted done only by a marker written after ``npm ci`` succeeded:
+    # a package directory that exists is not one that is complete (CI, 2026-12-04: the second worker ran the reader
+    # while the first was still unpacking @mcap/core, ERR_MODULE_NOT_FOUND).
+    lock_digest = hashlib.sha256((JS / "package-lock.json").read_bytes()).hexdigest()
+    marker = JS / "node_modules" / ".rpf-installed"
+    lock_path = Path(tempfile.gettempdir()) / f"rpf-mcap-js-{hashlib.sha256(bytes(JS)).hexdigest()[:16]}.lock"
+    with lock_path.open("w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if not marker.is_file() or marker.read_text() != lock_digest:
+            done = subprocess.run([npm, "ci", "--no-audit", "--no-fund", "--ignore-scripts"], cwd=JS,
+                                  capture_output=True, text=True, timeout=600)
+            assert done.returncode == 0, f"npm ci in {JS} failed:\n{done.stdout}\n{done.stderr}"
+            marker.write_text(lock_digest)
     return JS / "read.mjs"
 
 
