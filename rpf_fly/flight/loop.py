@@ -172,6 +172,8 @@ class FlightLoop:
         self.obstacles = obstacle_set(mission.obstacles)
         self.tracker = PoseTracker({d.name: d.rigid_body for d in mission.drones})
         self.tracker.estimate_of = self._estimate_of  # a jumped track is taken only where the drone thinks it is
+        self.tracker.airborne_estimate_of = self._airborne_estimate_of  # and so is the first pose after a gap
+        self.tracker.blind_drift_m_s2 = mission.safety.blind_drift_m_s2
         self.supervisor = Supervisor(mission, self.obstacles)
         self.phase = SwarmPhase.CONNECTING
         self.stats = LoopStats()
@@ -494,6 +496,16 @@ class FlightLoop:
         or no estimate yet)."""
         state = self._states.get(name)
         return state.position_m if state is not None else None
+
+    def _airborne_estimate_of(self, name: str) -> Optional[tuple[tuple[float, float, float], float]]:
+        """A flying drone's newest on-board estimate and when the drone made it (`PoseTracker.airborne_estimate_of`):
+        None on the ground (before take-off the estimate may not have been reset to mocap yet) or without one."""
+        agent = self.agents.get(name)
+        state = self._states.get(name)
+        if agent is None or state is None or not agent.phase.airborne or state.position_m is None:
+            return None
+        made = state.estimate_stamp_s if state.estimate_stamp_s is not None else state.telemetry_stamp_s
+        return (state.position_m, made) if made is not None else None
 
     def _preflight_problem(self, agent: DroneAgent) -> str:
         pose = self.tracker.get(agent.name)

@@ -12,6 +12,10 @@ estimate is nearer the new track than the frozen pose (2026-12-02: a swap that s
 the drone into a neighbour). The raw samples are compared
 frame to frame, so a swap is caught however long it lasts, and so is the swap back.
 
+After a gap (``GAP_S``: an occlusion, a blackout, a stalled loop) the frame-to-frame bound allows metres, so the
+first sample after it must also lie near where the drone's own on-board estimate says it is, while it flies
+(2026-12-04: a marker swap that began inside a blackout was taken and fed to the estimator).
+
 Orientation glitches (2026-12-02): an orientation that turned further from the previous sample than a Crazyflie can
 turn in that time (``MAX_TURN_RATE_DEG_S`` times the interval plus ``TURN_TOLERANCE_DEG``) is a wrong fit of the
 rigid body's markers: the flip Motive makes on a nearly symmetric marker set, a complaint of Crazyswarm and cflib
@@ -68,6 +72,23 @@ JUMP_TOLERANCE_M = 0.05
 
 REACQUIRE_S = 0.5
 """A jumped track consistent for this long is taken as the drone's real pose."""
+
+GAP_S = 0.05
+"""Two samples of a body further apart than this (five frames at 100 Hz: an occlusion, a blackout, a stalled loop)
+span a gap over which ``MAX_SPEED_M_S`` allows metres: the sample after it must also lie near the drone's own
+on-board estimate (`PoseTracker.airborne_estimate_of`) while it flies. Motive often re-acquires a body after an
+occlusion with the wrong markers; without this a swap that began inside a 0.43 s blackout (2.2 m allowed) was taken,
+fed to the estimator, and the controller flew the drone 1.5 m the other way into a neighbour (random fault
+campaign, seed 19, run 2: two crashes)."""
+
+ESTIMATE_TOLERANCE_M = 0.15
+"""How far from the drone's on-board estimate the first sample after a gap may lie, before the estimate's age and
+drift are added: the estimate follows extpos within millimetres while mocap flows, and a swap with a neighbour moves
+the body at least the 0.2 m two drones keep apart."""
+
+ESTIMATE_SPEED_M_S = 1.5
+"""How fast a flying drone may have moved between its estimate's telemetry and the sample (horizontally): the
+firmware's 1.1 m/s position-control limit, with room for a gust."""
 
 MAX_TURN_RATE_DEG_S = 720.0
 """Faster than a Crazyflie turns while it is not tumbling: this stack holds its yaw at 0, tilts stay under about
@@ -133,6 +154,15 @@ class PoseTracker:
         """Samples whose orientation was refused, per drone."""
         self.last_turn: dict[str, tuple[float, float]] = {}
         """drone -> (degrees, seconds) of its newest refused orientation jump, for the event that reports it."""
+        self.airborne_estimate_of: Optional[Callable[[str], Optional[tuple[tuple[float, float, float], float]]]] = None
+        """drone -> (its on-board position estimate, when the drone made it, on the receive clock) while it flies
+        (None on the ground, before its estimator was reset to mocap, or without telemetry), or None: the check of a
+        sample after a gap (``GAP_S``). The flight loop sets it."""
+        self.blind_drift_m_s2 = 0.1
+        """How fast a blind estimate may drift off the truth (the mission's ``safety.blind_drift_m_s2``)."""
+        self.last_jump_from_estimate: dict[str, bool] = {}
+        """drone -> whether its newest refused jump was measured from its on-board estimate after a gap (else from
+        its previous sample)."""
         self.estimate_of: Optional[Callable[[str], Optional[tuple[float, float, float]]]] = None
         """drone -> its on-board position estimate (None: none known), or None (no estimates): see
         `_estimate_agrees`. The flight loop sets it from the drones' telemetry."""
@@ -158,9 +188,17 @@ class PoseTracker:
             dt_capture = captured - raw[2]
             dt = max(t - raw[1], dt_capture if 0.0 <= dt_capture < 10.0 else 0.0)
         if name not in self.glitching:
-            if raw is None or previous is None or not self._jump(position, raw[0], dt):
+            if raw is None or previous is None:
                 return True
-            self.last_jump[name] = (math.dist(position, raw[0]), dt)
+            if self._jump(position, raw[0], dt):
+                self.last_jump[name] = (math.dist(position, raw[0]), dt)
+                self.last_jump_from_estimate[name] = False
+            else:
+                off = self._off_estimate(name, position, t, dt) if dt > GAP_S else None
+                if off is None:
+                    return True
+                self.last_jump[name] = (off, dt)
+                self.last_jump_from_estimate[name] = True
             self.glitching.add(name)
             self._jumped_at[name] = t
         elif raw is not None and self._jump(position, raw[0], dt):
@@ -199,6 +237,22 @@ class PoseTracker:
         self.orientation_glitches[name] = self.orientation_glitches.get(name, 0) + 1
         self.last_turn[name] = (turned, dt)
         return False
+
+    def _off_estimate(self, name: str, position: tuple[float, float, float], t: float, gap_s: float) -> Optional[float]:
+        """How far (m, horizontally) the first sample after a ``gap_s`` gap lies from the flying drone's on-board
+        estimate, when that is further than the estimate can be off (``ESTIMATE_TOLERANCE_M``, plus what the drone
+        may have flown since the estimate was made at ``ESTIMATE_SPEED_M_S``, plus its drift over the gap at
+        ``blind_drift_m_s2``); None when it is near enough, or nothing is known (on the ground, no telemetry)."""
+        if self.airborne_estimate_of is None:
+            return None
+        known = self.airborne_estimate_of(name)
+        if known is None:
+            return None
+        estimate, made_s = known
+        off = math.hypot(position[0] - estimate[0], position[1] - estimate[1])
+        allowed = (ESTIMATE_TOLERANCE_M + ESTIMATE_SPEED_M_S * abs(t - made_s)
+                   + 0.5 * self.blind_drift_m_s2 * gap_s * gap_s)
+        return off if off > allowed else None
 
     def _estimate_agrees(self, name: str, position: tuple[float, float, float],
                          frozen: Optional[TrackedPose]) -> bool:

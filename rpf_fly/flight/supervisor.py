@@ -608,8 +608,13 @@ class Supervisor:
             if glitching and a.name not in self._glitching:
                 self._glitching.add(a.name)
                 metres, seconds = tracker.last_jump.get(a.name, (math.nan, math.nan))
-                out.append(Finding("pose_glitch", WARNING, f"mocap pose jumped {metres:.2f} m in {seconds * 1e3:.0f} ms, "
-                                   "further than a drone can fly (marker swap?): not followed, holding", a.name, "hold"))
+                if tracker.last_jump_from_estimate.get(a.name, False):
+                    text = (f"mocap pose back after {seconds * 1e3:.0f} ms unseen lies {metres:.2f} m from the drone's "
+                            "own estimate (re-acquired on the wrong markers?): not followed, holding")
+                else:
+                    text = (f"mocap pose jumped {metres:.2f} m in {seconds * 1e3:.0f} ms, further than a drone can fly "
+                            "(marker swap?): not followed, holding")
+                out.append(Finding("pose_glitch", WARNING, text, a.name, "hold"))
             elif not glitching and a.name in self._glitching:
                 self._glitching.discard(a.name)
                 out.append(Finding("pose_glitch", INFO, "mocap track consistent again: resuming", a.name, "resume"))

@@ -165,3 +165,61 @@ def test_a_jump_that_stays_is_taken_only_where_the_drones_own_estimate_is(estima
         tracker.update(frame(n, (2.0, 1.0, 1.0)))
     assert ("cf1" not in tracker.glitching) == taken
     assert tracker.get("cf1").position == ((2.0, 1.0, 1.0) if taken else pytest.approx((0.245, 0.0, 1.0)))
+
+
+def occluded(tracker: PoseTracker, start: int, stop: int) -> None:
+    for n in range(start, stop):
+        tracker.update(frame(n, (0.0, 0.0, 0.0), valid=False))
+
+
+@pytest.mark.parametrize("back_at, refused", [((1.6, 0.6, 1.0), True),    # re-acquired 1.4 m off: a swap
+                                              ((0.30, 0.0, 1.0), False),  # where the drone flew meanwhile
+                                              ((0.45, 0.0, 1.0), False)])  # within the estimate's tolerance
+def test_the_first_pose_after_a_gap_must_lie_near_the_flying_drones_own_estimate(back_at, refused):
+    """After 0.43 s unseen the frame-to-frame bound allows 2.2 m, so a body re-acquired on the wrong markers was
+    taken, fed to the estimator, and the drone flew the jump's length into a neighbour (random fault campaign, seed
+    19, run 2: two crashes). Now the sample after a gap must lie near the flying drone's on-board estimate."""
+    tracker = PoseTracker({"cf1": "cf1"})
+    tracker.airborne_estimate_of = lambda name: ((0.30, 0.0, 1.0), 0.92)  # flew on to 0.3 m, 10 ms before
+    fly_along_x(tracker, 0, 50)
+    occluded(tracker, 50, 93)
+    tracker.update(frame(93, back_at))
+    assert ("cf1" in tracker.glitching) is refused
+    pose = tracker.get("cf1")
+    assert pose.valid is not refused
+    assert pose.position == (pytest.approx((0.245, 0.0, 1.0)) if refused else back_at)
+    if refused:
+        assert tracker.last_jump_from_estimate["cf1"] and tracker.last_jump["cf1"][0] == pytest.approx(1.43, abs=0.01)
+        occluded(tracker, 94, 95)
+        tracker.update(frame(95, (0.31, 0.0, 1.0)))  # the true track back: the glitch ends
+        assert "cf1" not in tracker.glitching and tracker.get("cf1").position == (0.31, 0.0, 1.0)
+
+
+def test_without_a_flying_estimate_or_without_a_gap_the_sample_is_judged_on_motion_alone():
+    """On the ground (no airborne estimate: the estimator may not be reset to mocap yet) a body re-acquired far
+    off is taken as before, and frame to frame (no gap) the motion bound alone judges, even where the estimate is
+    far off (an estimator that diverged must not freeze the drone's true pose)."""
+    grounded = PoseTracker({"cf1": "cf1"})
+    grounded.airborne_estimate_of = lambda name: None
+    fly_along_x(grounded, 0, 50)
+    occluded(grounded, 50, 93)
+    grounded.update(frame(93, (1.6, 0.6, 1.0)))
+    assert not grounded.glitching and grounded.get("cf1").position == (1.6, 0.6, 1.0)
+    diverged = PoseTracker({"cf1": "cf1"})
+    diverged.airborne_estimate_of = lambda name: ((3.0, 3.0, 1.0), name and 0.0)
+    fly_along_x(diverged, 0, 60)
+    assert not diverged.glitches and diverged.get("cf1").position[0] == pytest.approx(0.295)
+
+
+@pytest.mark.parametrize("made_s, back_frame, off_m, refused", [
+    (0.73, 93, 0.45, False), (0.73, 93, 0.48, True),      # estimate 0.2 s old: 0.15 + 0.30 + 0.01 m
+    (2.49, 250, 0.36, False), (2.49, 250, 0.40, True)])   # 2 s blind: 0.15 + 0.015 + 0.20 m
+def test_the_estimates_age_and_the_blind_drift_widen_what_may_be_taken(made_s, back_frame, off_m, refused):
+    """An estimate made 0.2 s before the sample may be 0.3 m behind a drone at 1.5 m/s, and after 2 s blind its
+    drift may reach 0.5 x 0.1 m/s^2 x (2 s)^2 = 0.2 m: within those the sample is the drone, beyond them it is not."""
+    tracker = PoseTracker({"cf1": "cf1"})
+    tracker.airborne_estimate_of = lambda name: ((0.30, 0.0, 1.0), made_s)
+    fly_along_x(tracker, 0, 50)
+    occluded(tracker, 50, back_frame)
+    tracker.update(frame(back_frame, (0.30 + off_m, 0.0, 1.0)))
+    assert ("cf1" in tracker.glitching) is refused
