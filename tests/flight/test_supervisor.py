@@ -70,6 +70,23 @@ def test_one_low_battery_sample_does_not_land_a_drone_but_consecutive_ones_do():
     assert [(f.drone, f.response) for f in found] == [("cf1", "land")]
 
 
+def test_a_landing_drones_low_battery_is_said_without_a_second_landing():
+    """A drone already landing (a planner fault, a hold that timed out) whose battery goes low: the person at the
+    bench hears of it, and the landing under way is not restarted (random fault campaign seed 19, run 10: nothing
+    was said)."""
+    _, agents, tracker, supervisor = setup()
+    agents["cf1"].set_phase(DronePhase.LANDING, 0.0)
+    found = []
+    for k in range(LOW_BATTERY_SAMPLES):
+        t = 0.1 * k
+        see(tracker, 1 + k, t, POSITIONS)
+        states = {n: state(n, t) for n in agents}
+        states["cf1"] = state("cf1", t, vbat=3.0)
+        found += [f for f in supervisor.check(t, agents.values(), tracker, states) if f.kind == "battery"]
+    assert [(f.drone, f.level, f.response) for f in found] == [("cf1", WARNING, "warn")]
+    assert "landing already" in found[0].message
+
+
 def test_stale_telemetry_of_a_linked_drone_is_an_event():
     _, agents, tracker, supervisor = setup()
     see(tracker, 1, 0.0, POSITIONS)
