@@ -5,7 +5,7 @@ What it does per drone (cflib 0.1.34, firmware protocol 12):
   is opened on its own thread with a deadline (``cf.open_link`` and cflib's connected / fully-connected /
   connection-failed / connection-lost callbacks; not `SyncCrazyflie.open_link`, which waits forever when a link
   drops during the TOC download), so one drone's failure neither blocks nor fails the others;
-- configure: `stabilizer.estimator` = 2 (Kalman), `commander.enHighLevel` = 1 (when the firmware still has it),
+- configure: first notify-setpoint-stop (below, "Latched priority"), then `stabilizer.estimator` = 2 (Kalman), `commander.enHighLevel` = 1 (when the firmware still has it),
   `locSrv.extQuatStdDev` when streaming poses, `locSrv.extPosStdDev` if given; each write is confirmed by the
   firmware's echo;
 - telemetry: one `LogConfig` at 10 Hz with `pm.vbat`, `pm.state`, `supervisor.info`, `stateEstimateZ.x/y/z` (mm),
@@ -44,6 +44,13 @@ command sent while streaming goes first and notify-setpoint-stop right after it 
 `takeoff` do both): two radio transactions about 1 ms apart, and a firmware tick between them finds the drone
 holding its last setpoint, never motors off. The reverse order (notify first) cuts the motors for the tick that
 falls between the two packets, and for as long as the command packet is retried or lost.
+
+Latched priority (crazyflie-firmware `commander.c`): a low-level setpoint takes the commander at CRTP priority, and
+only notify-setpoint-stop lowers it again; the high-level commander runs below it, so until then every high-level
+command is planned but never flown. cflib's `close_link` sends a zero-thrust setpoint, so any earlier connection in
+the same power cycle (`rpf-fly check`, an earlier flight, cfclient) leaves the drone latched: a take-off is silently
+refused until power-cycle. Each drone therefore gets notify-setpoint-stop right after it connects, before any other
+command (on a drone with nothing latched it does nothing: the idle high-level commander keeps the motors off).
 
 Safety: `close` must only be called on the ground: cflib's `close_link` sends a zero-thrust setpoint, which cuts the
 motors of a flying drone.
@@ -312,6 +319,8 @@ class CflibBackend:
 
     def _configure(self, drone: _Drone, deadline: float) -> None:
         cf = drone.scf.cf  # type: ignore[union-attr]
+        # before anything else: release a setpoint priority an earlier connection left latched (module docstring)
+        cf.commander.send_notify_setpoint_stop()
         toc = cf.param.toc
         self._set_param(cf, "stabilizer.estimator", ESTIMATOR_KALMAN)
         if toc.get_element_by_complete_name("commander.enHighLevel") is not None:
