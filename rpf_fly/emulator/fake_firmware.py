@@ -6,7 +6,9 @@ Time is the caller's clock in seconds (the fake world's clock); nothing here sle
 drive it with synthetic time. All methods are thread-safe (one lock per firmware).
 
 Services answered, as crazyflie-firmware 2026.08 (CRTP protocol version 12) answers cflib 0.1.34:
-- link (15): echo (channel 0) returns the payload; source (channel 1) returns "Bitcraze Crazyflie";
+- link (15): echo (channel 0) returns the payload; source (channel 1) returns "Bitcraze Crazyflie"; the nRF51's
+  bootloader commands (channel 3, ``[0xFE, cmd, ...]``, as cflib's `PowerSwitch` sends them on an open link):
+  reset-init (answered with the nRF's device address) then reset to firmware reboots the drone (`reboot`);
 - platform (13): protocol version 12, firmware version string; legacy arming and crash recovery;
 - log (5): TOC v2 with a stable CRC, reset, block create/append (v1 and v2), start, stop, delete, periodic data;
 - param (2): TOC v2, read (``[id, 0, value]``), write (echo; read-only: no answer), set-by-name, extended types,
@@ -57,6 +59,10 @@ the firmware's start-up) until its radio answers again. The fake's choice within
 PORT_CONSOLE, PORT_PARAM, PORT_COMMANDER, PORT_MEM, PORT_LOG = 0, 2, 3, 4, 5
 PORT_LOCALIZATION, PORT_COMMANDER_GENERIC, PORT_SETPOINT_HL, PORT_SUPERVISOR = 6, 7, 8, 9
 PORT_PLATFORM, PORT_LINK = 13, 15
+NRF_TARGET = 0xFE
+"""First payload byte of a link channel-3 packet the nRF51 takes for itself (crazyflie2-nrf-firmware main.c)."""
+BOOTLOADER_CMD_RESET_INIT, BOOTLOADER_CMD_RESET = 0xFF, 0xF0
+RESET_TO_FIRMWARE = 1
 
 def _thrust(vehicle: Vehicle) -> float:
     """`stabilizer.thrust`: an attitude mode's raw thrust, else the hover thrust while the motors spin."""
@@ -298,6 +304,11 @@ class FakeFirmware:
         self._toc_item_requests = 0
         self._booting_until: float | None = None
         self._boots = 0
+        self._reset_init = False
+        """The nRF51 took a reset-init command: a reset command now reboots (a static of its main loop, so a reboot
+        clears it)."""
+        self._device_address = radio_address.to_bytes(6, "little")
+        """What reset-init answers: a real nRF51's factory DEVICEADDR (6 bytes); the fake's is its radio address."""
         self._eeprom = eeprom_image(radio_channel, 2, radio_address)
         """Survives reboots (it is the EEPROM); everything else on the memory port is RAM."""
         self._memories = self._memory_subsystem()
@@ -334,6 +345,7 @@ class FakeFirmware:
         with self._lock:
             self.vehicle.cut_power()
             self._blocks.clear()
+            self._reset_init = False
             self._booting_until = now_s + max(0.0, boot_s)
             self._finish_boot(now_s)
 
@@ -488,6 +500,26 @@ class FakeFirmware:
             return [(PORT_LINK, 0, data)]
         if channel == 1:
             return [(PORT_LINK, 1, b"Bitcraze Crazyflie".ljust(30, b"\0"))]
+        if channel == 3 and len(data) >= 2 and data[0] == NRF_TARGET:
+            return self._nrf_command(data, now_s)
+        return []
+
+    def _nrf_command(self, data: bytes, now_s: float) -> list[Packet]:
+        """The nRF51's own commands (crazyflie2-nrf-firmware main.c ``handleBootloaderCmd``): reset-init answers
+        ``[0xFE, 0xFF, device address]``; a reset after it (``[0xFE, 0xF0, 1]``, exactly three bytes) reboots into
+        the firmware, as `reboot` does. Reset into the bootloader (argument 0) and the power commands are not
+        simulated (ignored). The reboot here is the firmware's own: the world's downlink queue is not flushed
+        (the link that asked closes, and a detached link's queue is flushed then)."""
+        cmd = data[1]
+        if cmd == BOOTLOADER_CMD_RESET_INIT:
+            self._reset_init = True
+            return [(PORT_LINK, 3, bytes([NRF_TARGET, BOOTLOADER_CMD_RESET_INIT]) + self._device_address)]
+        if cmd == BOOTLOADER_CMD_RESET and self._reset_init and len(data) == 3:
+            if data[2] == RESET_TO_FIRMWARE:
+                logger.info("fake Crazyflie: reset to firmware over the radio at %.3f s", now_s)
+                self.reboot(now_s)
+            else:
+                logger.warning("fake Crazyflie: reset into the bootloader is not simulated: ignored")
         return []
 
     def _platform(self, channel: int, data: bytes, now_s: float) -> list[Packet]:

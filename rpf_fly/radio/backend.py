@@ -173,7 +173,8 @@ class DroneBackend(Protocol):
         ...
 
     def close(self) -> None:
-        """Close every link. Only on the ground: closing a cflib link sends a zero-thrust setpoint."""
+        """Close every link. Only on the ground: closing a cflib link sends a zero-thrust setpoint. First reboots
+        every drone whose watchdog was armed (`arm_watchdog`) and that is neither flying nor locked."""
         ...
 
     def names(self) -> tuple[str, ...]:
@@ -196,6 +197,20 @@ class DroneBackend(Protocol):
 
     def arm(self, name: str, armed: bool = True) -> bool:
         """Send an arming (or disarming) request to the supervisor."""
+        ...
+
+    def arm_watchdog(self, name: str) -> bool:
+        """Arm the drone's emergency-stop watchdog; call it when arming the drone for take-off. From then until
+        `close` the backend sends the drone a keep-alive every 0.2 s from a thread of its own (not the caller's, so
+        a flight loop busy for half a second does not trip it), and the firmware stops the drone (motors off,
+        locked until reboot) 1 s after the last keep-alive arrived.
+
+        Why: during a high-level take-off, hold or landing the firmware's high-level commander renews its own
+        setpoint every 10 ms, so the commander's setpoint watchdog never trips; a drone whose ground station died
+        (a killed process, an unplugged dongle, a dropped link) would fly its last plan on dead reckoning for
+        minutes. With the watchdog armed it is stopped within about 1 s. The firmware never disarms it, so `close`
+        reboots the drones it fed that are on the floor with motors off (neither flying nor locked), over their own
+        links, and the next connection finds them ready. False when the link is down (nothing armed)."""
         ...
 
     def takeoff(self, name: str, height_m: float, duration_s: float) -> bool:

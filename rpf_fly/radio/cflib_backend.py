@@ -17,6 +17,8 @@ What it does per drone (cflib 0.1.34, firmware protocol 12):
   degrees) with `send_notify_setpoint_stop` at every hand-over back to the high-level commander, extpos / extpose,
   supervisor emergency stop (cflib falls back to the localization emergency stop for firmware older than protocol
   12);
+- watchdog: `arm_watchdog` feeds the supervisor's emergency-stop watchdog until `close`, which then reboots the
+  drones it fed that are down (below, "Emergency-stop watchdog");
 - link loss: cflib's connection-lost callback marks the drone down, records why and when, and calls the
   registered link-lost callbacks.
 
@@ -52,6 +54,18 @@ the same power cycle (`rpf-fly check`, an earlier flight, cfclient) leaves the d
 refused until power-cycle. Each drone therefore gets notify-setpoint-stop right after it connects, before any other
 command (on a drone with nothing latched it does nothing: the idle high-level commander keeps the motors off).
 
+Emergency-stop watchdog (crazyflie-firmware `supervisor.c`, `crtp_supervisor.c`): while the high-level commander
+flies a take-off, a hold or a landing it re-stamps its setpoint every 10 ms, so the commander's setpoint watchdog
+never trips, and a drone whose ground station died (a killed process, an unplugged dongle, a dropped link) would fly
+its plan on dead reckoning for minutes. The supervisor's emergency-stop watchdog is the firmware's answer: once the
+first keep-alive arrived, 1 s without one is an emergency stop (motors off, free fall, locked until reboot).
+`arm_watchdog` (the flight calls it when it arms a drone for take-off) starts feeding it: a backend-owned thread
+queues a keep-alive every `KEEPALIVE_PERIOD_S` into the drone's outbox (first in its turn, never stacked behind a
+stuck link), so a flight loop busy for half a second does not trip it, while a dead process, dongle or link stops
+the drone within about 1 s. The firmware never disarms that watchdog: a drone fed once ends locked 1 s after the
+feeding stops, even on the floor. So `close` reboots every fed drone that its telemetry says is neither flying nor
+locked (`_reboot_if_down`), over its own link, before closing it: a flight leaves its drones rebooted and ready.
+
 Safety: `close` must only be called on the ground: cflib's `close_link` sends a zero-thrust setpoint, which cuts the
 motors of a flying drone.
 """
@@ -72,6 +86,7 @@ import cflib.crtp
 from cflib.crazyflie.log import LogConfig
 from cflib.crazyflie.swarm import CachedCfFactory, Swarm
 from cflib.crazyflie.syncCrazyflie import SyncCrazyflie
+from cflib.crtp.crtpstack import CRTPPacket
 from cflib.crtp.radiodriver import RadioDriver
 
 from rpf_fly.radio.outbox import Action, Outbox, SenderPool
@@ -132,6 +147,19 @@ INITIAL_STATE_PARAMS: tuple[str, ...] = ("kalman.initialX", "kalman.initialY", "
 """The Kalman estimator's initial state (metres, radians), used at its next reset."""
 
 ESTIMATOR_KALMAN = 2
+KEEPALIVE_PERIOD_S = 0.2
+"""How often each armed drone's emergency-stop watchdog is fed (the firmware stops the drone after 1 s without:
+supervisor.c DEFAULT_EMERGENCY_STOP_WATCHDOG_TIMEOUT), so four in a row may be lost or late before it trips."""
+REBOOT_STATUS_WAIT_S = 0.5
+"""`close` decides whether to reboot a drone on a status packet that arrived after its last command went out;
+this long at most (five status periods at 10 Hz), else it is not rebooted."""
+BOOTLOADER_HEADER = 0xFF
+"""CRTP port 15 (link), channel 3: the nRF51's bootloader commands (cflib/utils/power_switch.py)."""
+NRF_TARGET = 0xFE
+"""First payload byte of a command the nRF51 takes for itself (not forwarded to the STM32)."""
+BOOTLOADER_CMD_RESET_INIT = 0xFF
+BOOTLOADER_CMD_RESET = 0xF0
+RESET_TO_FIRMWARE = 1
 VARIANCE_THRESHOLD_M2 = 0.001
 """Spread of the Kalman position variance over 10 samples below which the estimate counts as settled (cflib's)."""
 
@@ -162,6 +190,10 @@ class _Drone:
     measured_s: float | None = None
     """When the last status packet's values were true (its firmware timestamp mapped by `clock`)."""
     clock: TelemetryClock = field(default_factory=TelemetryClock)
+    watchdog: bool = False
+    """`arm_watchdog` was called: the backend feeds the drone's emergency-stop watchdog until `close`."""
+    rebooted: bool = False
+    """`close` sent it the reboot commands."""
     streaming: bool = False
     last_setpoint: tuple[float, float, float, float] | None = None
     """x, y, z (m), yaw (deg) of the last streamed setpoint."""
@@ -226,6 +258,9 @@ class CflibBackend:
         """The threads that send every drone's queued commands (rpf_fly/radio/outbox.py)."""
         self._latencies: list[float] = []
         """Seconds from a setpoint's ``origin_s`` to its hand-over to cflib, not yet taken."""
+        self._feeder: threading.Thread | None = None
+        """Feeds the armed drones' emergency-stop watchdogs (`arm_watchdog`), started by the first of them."""
+        self._feeder_stop = threading.Event()
 
     # Connection -----------------------------------------------------------------------------------------------
 
@@ -449,24 +484,79 @@ class CflibBackend:
         return True
 
     def close(self) -> None:
-        """Close every link (on the ground only: cflib sends a zero-thrust setpoint when closing)."""
+        """Close every link (on the ground only: cflib sends a zero-thrust setpoint when closing). A drone whose
+        emergency-stop watchdog was armed (`arm_watchdog`) and whose telemetry then says neither flying nor locked
+        is rebooted first (`_reboot_if_down`), so the next connection finds it ready, not locked by the watchdog
+        that nobody feeds any more."""
         with self._lock:
             drones = list(self._drones.values())
             for drone in drones:
                 drone.closing = True
 
         def close_one(drone: _Drone) -> None:
+            flushed = True
             if drone.outbox is not None:  # what was queued (a disarm after touchdown) goes out first
-                drone.outbox.close(flush_s=1.0)
+                flushed = drone.outbox.close(flush_s=1.0)
+            if drone.watchdog:
+                if flushed:
+                    self._reboot_if_down(drone)
+                else:
+                    logger.warning("drone %s: its link is stuck: not rebooted (its watchdog stops it)", drone.name)
             # also for lost links: cflib keeps their receive thread until close_link (which sends nothing then)
             if drone.scf is not None:
                 drone.scf.cf.close_link()
 
         self._parallel(close_one, drones, 5.0)
+        self._stop_feeder()
         self._pool.close()
         with self._lock:
             for drone in drones:
                 drone.up = False
+
+    def _reboot_if_down(self, drone: _Drone) -> None:
+        """`close`, for a drone whose watchdog was armed, once its outbox is flushed: feed the watchdog directly
+        (the outbox is closed) until a status packet newer than the last command arrives, then reboot the drone over
+        its own link when that status says neither flying (the supervisor's flag: thrust above idle within 2 s)
+        nor locked. A flying drone is left to its watchdog; a locked one (an emergency stop, a crash) stays locked
+        for a person to look at. A reboot is the nRF51's reset to firmware (cflib's `PowerSwitch.reboot_to_fw`,
+        sent on this link): the drone is silent for 1-2 s, then boots fresh on the floor."""
+        cf = self._live_cf(drone.name)
+        if cf is None:
+            return
+        asked = time.monotonic()
+        fed_at = -math.inf
+        while True:
+            now = time.monotonic()
+            with self._lock:
+                fresh = drone.stamp_s is not None and drone.stamp_s > asked
+                bits = drone.sup_bits
+            if fresh:
+                break
+            if now - asked > REBOOT_STATUS_WAIT_S:
+                logger.warning("drone %s: no status since its last command: not rebooted (its watchdog stops it)",
+                               drone.name)
+                return
+            if now - fed_at >= KEEPALIVE_PERIOD_S:
+                fed_at = now
+                with drone.command_lock:
+                    cf.supervisor.send_emergency_stop_watchdog()
+            time.sleep(0.01)
+        supervisor = SupervisorState(bits or 0)
+        if supervisor.flying or supervisor.locked:
+            logger.warning("drone %s: %s at the end: not rebooted", drone.name,
+                           "locked" if supervisor.locked else "still flying (its watchdog stops it)")
+            return
+        with drone.command_lock:
+            cf.send_packet(CRTPPacket(BOOTLOADER_HEADER, [NRF_TARGET, BOOTLOADER_CMD_RESET_INIT]))
+            cf.send_packet(CRTPPacket(BOOTLOADER_HEADER, [NRF_TARGET, BOOTLOADER_CMD_RESET, RESET_TO_FIRMWARE]))
+        with self._lock:
+            drone.rebooted = True
+        logger.info("drone %s: rebooted at the end (its emergency-stop watchdog was armed)", drone.name)
+
+    def rebooted(self) -> tuple[str, ...]:
+        """The drones `close` rebooted (module docstring, "Emergency-stop watchdog")."""
+        with self._lock:
+            return tuple(d.name for d in self._drones.values() if d.rebooted)
 
     def __enter__(self) -> CflibBackend:
         return self
@@ -605,8 +695,8 @@ class CflibBackend:
             return drone.scf.cf
 
     def _queue(self, name: str, action: Callable[[Any, _Drone], None], kind: str) -> bool:
-        """Queue one command in the drone's outbox (``kind``: ``setpoint``, ``extpos``, ``command`` or
-        ``ends_stream``); False when its link is not up (KeyError for an unknown name)."""
+        """Queue one command in the drone's outbox (``kind``: ``setpoint``, ``extpos``, ``keepalive``, ``command``
+        or ``ends_stream``); False when its link is not up (KeyError for an unknown name)."""
         drone = self._drones[name]
         outbox = drone.outbox
         if outbox is None or self._live_cf(name) is None:
@@ -616,6 +706,8 @@ class CflibBackend:
             return outbox.setpoint(bound)
         if kind == "extpos":
             return outbox.extpos(bound)
+        if kind == "keepalive":
+            return outbox.keepalive(bound)
         return outbox.command(bound, ends_stream=kind == "ends_stream")
 
     def _send(self, drone: _Drone, action: Action) -> None:
@@ -651,6 +743,48 @@ class CflibBackend:
 
     def arm(self, name: str, armed: bool = True) -> bool:
         return self._queue(name, lambda cf, drone: cf.supervisor.send_arming_request(armed), "command")
+
+    def arm_watchdog(self, name: str) -> bool:
+        """Arm the drone's emergency-stop watchdog: from now until `close` the backend's feeder thread queues a
+        keep-alive (`Supervisor.send_emergency_stop_watchdog`) every `KEEPALIVE_PERIOD_S`, the first at once;
+        after its first keep-alive the firmware stops the drone (motors off, locked) 1 s after the last one
+        arrived. False when the link is down (nothing armed); KeyError for an unknown name. See the module
+        docstring, "Emergency-stop watchdog"."""
+        drone = self._drones[name]
+        if not self._queue(name, self._keepalive, "keepalive") and self._live_cf(name) is None:
+            return False
+        with self._lock:
+            drone.watchdog = True
+            if self._feeder is None:
+                self._feeder = threading.Thread(target=self._feed, name="rpf-keepalive", daemon=True)
+                self._feeder.start()
+        return True
+
+    @staticmethod
+    def _keepalive(cf: Any, drone: _Drone) -> None:
+        cf.supervisor.send_emergency_stop_watchdog()
+
+    def _feed(self) -> None:
+        """The feeder thread: every `KEEPALIVE_PERIOD_S` (on a fixed cadence; a tick missed by a stalled thread is
+        skipped, never made up in a burst) one keep-alive into each armed drone's outbox, skipped there while the
+        previous one still waits."""
+        next_at = time.monotonic() + KEEPALIVE_PERIOD_S
+        while not self._feeder_stop.wait(max(next_at - time.monotonic(), 0.0)):
+            with self._lock:
+                names = [d.name for d in self._drones.values() if d.watchdog and not d.closing]
+            for name in names:
+                self._queue(name, self._keepalive, "keepalive")
+            next_at += KEEPALIVE_PERIOD_S
+            now = time.monotonic()
+            if next_at < now:
+                next_at = now + KEEPALIVE_PERIOD_S
+
+    def _stop_feeder(self) -> None:
+        """End the feeder thread (`close`; a test that plays a dead ground station calls it alone)."""
+        self._feeder_stop.set()
+        feeder = self._feeder
+        if feeder is not None and feeder is not threading.current_thread():
+            feeder.join(1.0)
 
     def takeoff(self, name: str, height_m: float, duration_s: float) -> bool:
         def action(cf: Any, drone: _Drone) -> None:

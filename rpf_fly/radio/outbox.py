@@ -17,8 +17,13 @@ What an outbox keeps, and in which order (the rules that make a queued stream sa
 - a command that ends the stream (every high-level command but arming) drops a setpoint still waiting, so a setpoint
   queued before a landing can never reach the drone after it; a setpoint queued after the command goes after it;
 - extpos / extpose is latest-wins in a slot of its own (a stale mocap position only misleads the estimator);
-- each turn of a drone sends its oldest command first, then its setpoint, then its extpos, one action a turn: a
-  command is never overtaken by anything queued after it. A drone's actions never go out from two threads at once.
+- a keep-alive (the supervisor's emergency-stop watchdog, fed every 0.2 s) has a slot of its own too, and one
+  queued while the previous is still waiting is skipped, not stacked: behind a stuck link at most one waits, so
+  the link never sends a late burst of them (the firmware needs one a second, not their number);
+- each turn of a drone sends its keep-alive first (it changes nothing but the drone's watchdog, so it may overtake
+  anything, and a burst of commands never delays it), then its oldest command, then its setpoint, then its extpos,
+  one action a turn: a command is never overtaken by anything queued after it. A drone's actions never go out from
+  two threads at once.
 
 How the pool sends: one thread at a time does the work in the normal case, taking the drones in the order their
 work arrived, one action each turn; so a tick's ten setpoints cost one thread wake-up, not ten. A thread whose send
@@ -219,6 +224,7 @@ class Outbox:
         self._commands: deque[Action] = deque()
         self._setpoint: Action | None = None
         self._extpos: Action | None = None
+        self._keepalive: Action | None = None
         self._busy = False
         """One of its actions is being sent."""
         self._queued = False
@@ -226,6 +232,8 @@ class Outbox:
         self._closed = False
         self.setpoints_replaced = 0
         """Setpoints replaced by a newer one or dropped by a command before they were sent."""
+        self.keepalives_skipped = 0
+        """Keep-alives not queued because the previous one was still waiting (a slow or stuck link)."""
 
     # ------------------------------------------------------------------------------------------ queueing
 
@@ -262,6 +270,19 @@ class Outbox:
             self._pool._schedule(self)
             return True
 
+    def keepalive(self, action: Action) -> bool:
+        """Queue a keep-alive, unless the previous one is still waiting: then this one is skipped (counted in
+        `keepalives_skipped`). True when queued; False when skipped or once the outbox is closed."""
+        with self._pool._lock:
+            if self._closed:
+                return False
+            if self._keepalive is not None:
+                self.keepalives_skipped += 1
+                return False
+            self._keepalive = action
+            self._pool._schedule(self)
+            return True
+
     def clear(self, refuse: bool = False) -> None:
         """Drop everything not yet sent (what is being sent now still goes out); ``refuse``: and accept nothing
         more (an emergency stop: nothing may follow it)."""
@@ -270,20 +291,25 @@ class Outbox:
             if self._setpoint is not None:
                 self.setpoints_replaced += 1
             self._commands.clear()
-            self._setpoint = self._extpos = None
+            self._setpoint = self._extpos = self._keepalive = None
 
     # ------------------------------------------------------------------------------------------ state (lock held)
 
     def _pending(self) -> bool:
-        return bool(self._commands) or self._setpoint is not None or self._extpos is not None
+        return (bool(self._commands) or self._setpoint is not None or self._extpos is not None
+                or self._keepalive is not None)
 
     def _idle(self) -> bool:
         return not self._busy and not self._pending()
 
     def _take(self) -> Action | None:
-        """The next action to send (oldest command, then the setpoint, then the extpos), marking it under way."""
-        if self._commands:
-            action: Action | None = self._commands.popleft()
+        """The next action to send (the keep-alive, the oldest command, then the setpoint, then the extpos), marking
+        it under way."""
+        if self._keepalive is not None:
+            action: Action | None = self._keepalive
+            self._keepalive = None
+        elif self._commands:
+            action = self._commands.popleft()
         elif self._setpoint is not None:
             action, self._setpoint = self._setpoint, None
         else:
@@ -310,5 +336,5 @@ class Outbox:
         flushed = self.wait_idle(flush_s)
         with self._pool._lock:
             self._commands.clear()
-            self._setpoint = self._extpos = None
+            self._setpoint = self._extpos = self._keepalive = None
         return flushed

@@ -185,3 +185,34 @@ def test_a_cleared_and_refusing_outbox_takes_nothing_more() -> None:
     assert box.wait_idle(2.0)
     assert radio.sent == ["first"]
     pool.close()
+
+
+def test_keep_alives_never_stack_behind_a_stuck_link_and_go_out_first() -> None:
+    """A keep-alive queued while the previous one still waits is skipped: behind a stuck send at most one waits, so
+    the link sends no late burst when it comes back; it goes out before the commands queued ahead of it (it changes
+    nothing but the drone's watchdog)."""
+    box, radio, pool = blocked_outbox()
+    box.command(radio.packet("land"), ends_stream=True)
+    assert box.keepalive(radio.packet("alive0"))
+    for i in range(1, 5):  # a second of keep-alives at 0.2 s while the link is stuck
+        assert not box.keepalive(radio.packet(f"alive{i}"))
+    assert box.keepalives_skipped == 4
+    radio.hold.set()
+    assert box.wait_idle(2.0)
+    assert radio.sent == ["first", "alive0", "land"]
+    assert box.keepalive(radio.packet("alive5")) and box.wait_idle(2.0)  # sent: the slot is free again
+    assert radio.sent[-1] == "alive5"
+    pool.close()
+
+
+def test_keep_alives_are_dropped_by_clear_and_refused_once_closed() -> None:
+    box, radio, pool = blocked_outbox()
+    assert box.keepalive(radio.packet("alive0"))
+    box.clear(refuse=True)  # an emergency stop: nothing may follow it
+    assert not box.keepalive(radio.packet("alive1"))
+    radio.hold.set()
+    assert box.wait_idle(2.0)
+    assert radio.sent == ["first"]
+    other = pool.outbox("cf2", radio.runner("cf2"))
+    assert other.close(flush_s=1.0) and not other.keepalive(radio.packet("alive2"))
+    pool.close()
