@@ -406,7 +406,7 @@ def _preflight(loaded, factory, dry_run: bool) -> dict[str, str]:  # type: ignor
             source = rig.mocap if rig is not None else mocap_source(loaded)
         except ConnectionError as err:
             raise fail(f"mocap: {err}", code=1)
-        backend = CflibBackend(cache_dir=rig.cache_dir if rig is not None else DEFAULT_TOC_CACHE)
+        backend = CflibBackend.for_mission(loaded, rig.cache_dir if rig is not None else DEFAULT_TOC_CACHE)
         loop = FlightLoop(loaded, backend, source, factory, uris=rig.uris if rig is not None else None)
         problems = loop.preflight_only()
         if rig is None:

@@ -152,9 +152,9 @@ def run_flight(
     if live is not None and not log_path:
         raise ValueError("the live view serves what the flight log writes: give a log path")
     if rig is not None:
-        backend, source, uris = CflibBackend(cache_dir=rig.cache_dir), rig.mocap, rig.uris
+        backend, source, uris = CflibBackend.for_mission(mission, rig.cache_dir), rig.mocap, rig.uris
     else:
-        backend, source, uris = CflibBackend(cache_dir=DEFAULT_TOC_CACHE), mocap_source(mission), None
+        backend, source, uris = CflibBackend.for_mission(mission, DEFAULT_TOC_CACHE), mocap_source(mission), None
     recorder = None
     if log_path:
         truth = rig.truth_samples if rig is not None and rig.truth else None  # only a dry run has a truth

@@ -80,7 +80,7 @@ from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from functools import partial
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import cflib.crtp
 from cflib.crazyflie.log import LogConfig
@@ -103,6 +103,9 @@ from .backend import (
     SupervisorState,
     Vec3,
 )
+
+if TYPE_CHECKING:
+    from rpf_fly.mission.model import Mission
 
 logger = logging.getLogger(__name__)
 
@@ -261,6 +264,13 @@ class CflibBackend:
         self._feeder: threading.Thread | None = None
         """Feeds the armed drones' emergency-stop watchdogs (`arm_watchdog`), started by the first of them."""
         self._feeder_stop = threading.Event()
+
+    @classmethod
+    def for_mission(cls, mission: Mission, cache_dir: str | Path | None) -> CflibBackend:
+        """The backend a flight or a check of ``mission`` uses: ``use_extpose`` when its mocap poses go to the
+        drones whole (``radio.extpos: extpose``), so the estimator gets `locSrv.extQuatStdDev`. Every flight path
+        (the CLI's check and flight, a distributed worker) builds its backend here, so none forgets it."""
+        return cls(cache_dir=cache_dir, use_extpose=mission.radio.extpos == "extpose")
 
     # Connection -----------------------------------------------------------------------------------------------
 

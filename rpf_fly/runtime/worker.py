@@ -360,10 +360,10 @@ class WorkerRun:
             from rpf_fly.flight.session import DEFAULT_TOC_CACHE, mocap_source
 
             if relayed:
-                return CflibBackend(cache_dir=DEFAULT_TOC_CACHE), self._relayed(bus), None
+                return CflibBackend.for_mission(self.mission, DEFAULT_TOC_CACHE), self._relayed(bus), None
             source = mocap_source(self.mission)
             self._closers.append(source.close)
-            return CflibBackend(cache_dir=DEFAULT_TOC_CACHE), source, None
+            return CflibBackend.for_mission(self.mission, DEFAULT_TOC_CACHE), source, None
         from rpf_fly.emulator import fake_radio
         from rpf_fly.emulator.fake_world import RadioTiming
         from rpf_fly.emulator.world_process import RemoteWorld
@@ -382,4 +382,4 @@ class WorkerRun:
             client = rig_mocap(self.mission, rig, host)
             self._closers.append(client.close)
         uris = {d.name: fake_uri(d.uri) for d in self.mission.drones}
-        return CflibBackend(cache_dir=DRY_RUN_TOC_CACHE), client, uris
+        return CflibBackend.for_mission(self.mission, DRY_RUN_TOC_CACHE), client, uris
