@@ -23,6 +23,7 @@ FINAL_STATES = {
     "emergency": "stopped",
     "link_lost": "link lost",
     "failed": "grounded",
+    "grounded": "on the floor (did not lift off)",
     "landing": "landing, touchdown not confirmed",
 }
 """What the final table says of a drone's last phase (flight/phases.py): ``stopped`` is motors cut by an

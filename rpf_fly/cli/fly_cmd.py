@@ -104,6 +104,8 @@ def _planner_factory(mission, mission_path: Path):  # type: ignore[no-untyped-de
 def fly(
     mission: Path = typer.Argument(..., help="Mission YAML file."),
     dry_run: bool = typer.Option(False, "--dry-run", help="Simulated drones through the same stack (fake radio)."),
+    lab: bool = typer.Option(False, "--lab", help="Fly the simulated drones of the running `rpf-fly lab` (they keep "
+                             "their firmware state between commands) instead of private ones."),
     log: Optional[Path] = typer.Option(None, "--log", help="MCAP flight log (default flights/<mission>-<time>.mcap)."),
     mocap: Optional[str] = typer.Option(
         None, "--mocap", help="Dry run only: natnet (emulator over UDP), motioncapture (the emulator read by the "
@@ -133,11 +135,24 @@ def fly(
 ) -> None:
     """Fly MISSION: its mocap (NatNet or motioncapture) and cflib radios, or simulated drones with --dry-run."""
     loaded = _load(mission)
+    lab_info = None
+    if lab:
+        if dry_run:
+            raise fail("--lab and --dry-run: choose one (--lab flies a running lab's drones, --dry-run private ones)")
+        if distributed:
+            raise fail("--lab flies in one process (without --distributed)")
+        lab_info = _lab_info(loaded)
+        dry_run = True
     if (remote_dongles or listen) and not distributed:
         raise fail("--remote-dongles and --listen go with --distributed")
     if faults is not None and not dry_run:
         raise fail(f"--faults: {faults}: faults are injected into simulated drones only; add --dry-run")
     schedule = _load_faults(faults, loaded) if faults is not None else None
+    if lab_info is not None and schedule:
+        powered = next((f for f in schedule if f.at_s is None and f.drone is not None), None)
+        if powered is not None:
+            raise fail(f"{faults}:{powered.line}: {powered.kind}: the lab's drones are already powered on: give "
+                       "power-on faults to `rpf-fly lab --faults`")
     _check_radio_budget(loaded, mission)
     factory = _planner_factory(loaded, mission)
     from rpf_fly.flight.session import real_flight_problem
@@ -174,7 +189,7 @@ def fly(
     with route_logging(text_log_path(log_path), verbose) as logs:  # the live server's records too, to its close
         try:
             code = _run_flight(loaded, factory, dry_run, mocap, log_path, console, schedule, radio_loss,
-                               live_view=live)
+                               live_view=live, lab=lab_info)
         finally:
             if live is not None:
                 live.close()
@@ -183,6 +198,23 @@ def fly(
         libraries = "cflib, foxglove-sdk" if live is not None else "cflib"
         typer.echo(f"({logs.warnings} warning(s) from {libraries} and rpf_fly: {logs.path})", err=True)
     raise typer.Exit(code)
+
+
+def _lab_info(mission):  # type: ignore[no-untyped-def]
+    """The running lab's info, checked against ``mission``'s drones (one line, exit 2, when none runs or it has
+    not every drone)."""
+    from rpf_fly.flight.dry_run import uri_address
+    from rpf_fly.flight.lab import LabNotRunning, read_lab
+
+    try:
+        info = read_lab()
+    except LabNotRunning as err:
+        raise fail(f"--lab: {err}")
+    missing = [d.name for d in mission.drones if uri_address(d.uri) not in info.addresses.values()]
+    if missing:
+        raise fail(f"--lab: the running lab ({info.mission}) has no drone at the address of "
+                   f"{', '.join(missing)}: start the lab with this mission")
+    return info
 
 
 def _check_log_path(log_path: Path) -> None:
@@ -210,6 +242,16 @@ CHECK_LOG = Path("~/.cache/rpf_fly/check.log")
 """The libraries' log records of the last ``rpf-fly check`` (overwritten each time)."""
 
 
+def load_mission_or_fail(mission_path: Path):  # type: ignore[no-untyped-def]
+    """The mission at ``mission_path``; an invalid one is one line ``FILE:LINE: FIELD: problem``, exit 2."""
+    return _load(mission_path)
+
+
+def load_faults_or_fail(path: Path, mission):  # type: ignore[no-untyped-def]
+    """The fault schedule at ``path`` for ``mission``; an invalid one is one line, exit 2."""
+    return _load_faults(path, mission)
+
+
 def _load_faults(path: Path, mission):  # type: ignore[no-untyped-def]
     from rpf_fly.flight.faults import load_faults
     from rpf_fly.mission import MissionError
@@ -221,7 +263,7 @@ def _load_faults(path: Path, mission):  # type: ignore[no-untyped-def]
 
 
 def _run_flight(mission, factory, dry_run: bool, mocap_kind: str, log_path: Path, console: bool,  # type: ignore[no-untyped-def]
-                schedule=None, radio_loss: bool = True, live_view=None) -> int:
+                schedule=None, radio_loss: bool = True, live_view=None, lab=None) -> int:
     from rpf_fly.flight.dry_run import RADIO_LOSS, DryRun, world_exit_report_for
     from rpf_fly.flight.fault_injection import FaultInjection
     from rpf_fly.flight.session import run_flight
@@ -247,7 +289,7 @@ def _run_flight(mission, factory, dry_run: bool, mocap_kind: str, log_path: Path
                 start_faults = injection.start_faults() if injection is not None else None
                 with DryRun(mission, mocap=mocap_kind, start_faults=start_faults,
                             radio_loss=RADIO_LOSS if radio_loss else None,
-                            world_exit_report=world_exit_report_for(log_path)) as rig:
+                            world_exit_report=world_exit_report_for(log_path), lab=lab) as rig:
                     rig_holder["rig"] = rig
                     if injection is not None:
                         FaultInjection.wrap(rig)
@@ -266,6 +308,8 @@ def _run_flight(mission, factory, dry_run: bool, mocap_kind: str, log_path: Path
         for sig, handler in restore.items():
             signal.signal(sig, handler)
     _summary(report, log_path)
+    if report.host_sentence:
+        typer.echo(report.host_sentence)
     if report.interrupted:
         return 130
     return 0 if report.success else 1
@@ -353,6 +397,7 @@ def _summary(report, log_path: Path) -> None:  # type: ignore[no-untyped-def]
 def check(
     mission: Path = typer.Argument(..., help="Mission YAML file."),
     dry_run: bool = typer.Option(False, "--dry-run", help="Preflight the simulated drones instead of hardware."),
+    lab: bool = typer.Option(False, "--lab", help="Preflight the simulated drones of the running `rpf-fly lab`."),
     preflight: bool = typer.Option(True, "--preflight/--no-preflight", help="Connect and run the preflight checks."),
     verbose: bool = typer.Option(False, "--verbose", help="Also print the libraries' log records (cflib) on stderr; "
                                                           "they always go to ~/.cache/rpf_fly/check.log."),
@@ -362,6 +407,12 @@ def check(
     factory = _planner_factory(loaded, mission)
     from rpf_fly.flight.session import real_flight_problem
 
+    lab_info = None
+    if lab:
+        if dry_run:
+            raise fail("--lab and --dry-run: choose one (--lab checks a running lab's drones, --dry-run private ones)")
+        lab_info = _lab_info(loaded) if preflight else None
+        dry_run = True
     hardware = preflight and not dry_run and not real_flight_problem(loaded)
     if hardware:
         _resolve_server(loaded, mission)
@@ -386,7 +437,7 @@ def check(
     from rpf_fly.cli.logs import route_logging
 
     with route_logging(CHECK_LOG.expanduser(), verbose) as logs:
-        problems = _preflight(loaded, factory, dry_run)
+        problems = _preflight(loaded, factory, dry_run, lab_info)
     for name, problem in problems.items():
         typer.echo(f"{name}: {'ok' if not problem else problem}")
     if logs.warnings and logs.path is not None and not verbose:
@@ -394,13 +445,13 @@ def check(
     raise typer.Exit(0 if not any(problems.values()) else 1)
 
 
-def _preflight(loaded, factory, dry_run: bool) -> dict[str, str]:  # type: ignore[no-untyped-def]
+def _preflight(loaded, factory, dry_run: bool, lab=None) -> dict[str, str]:  # type: ignore[no-untyped-def]
     from rpf_fly.flight.dry_run import DryRun
     from rpf_fly.flight.loop import FlightLoop
     from rpf_fly.radio.cflib_backend import CflibBackend
     from rpf_fly.flight.session import DEFAULT_TOC_CACHE, mocap_source
 
-    rig = DryRun(loaded) if dry_run else None
+    rig = DryRun(loaded, lab=lab) if dry_run else None
     with (rig if rig is not None else _nothing()):
         try:
             source = rig.mocap if rig is not None else mocap_source(loaded)

@@ -25,6 +25,7 @@ from rpf_fly.mission.model import Obstacle
 
 from .fake_contact import ContactModel
 from .fake_firmware import FakeFirmware, FirmwareSnapshot, Packet
+from .host_lag import LagMeter
 from .fake_vehicle import VehicleConfig
 
 logger = logging.getLogger(__name__)
@@ -483,6 +484,8 @@ class FakeWorld:
         self._contacts = ContactModel(obstacles)
         self.appear_on_connect = appear_on_connect
         self._truth: deque[TruthSample] = deque(maxlen=max(1, round(TRUTH_BUFFER_S / step_s)))
+        self.lag = LagMeter()
+        """How late the dynamics thread's steps run (`rpf_fly.emulator.host_lag`)."""
 
     # Life cycle -----------------------------------------------------------------------------------------------
 
@@ -689,6 +692,7 @@ class FakeWorld:
             if now < next_s:
                 self._stop.wait(next_s - now)
                 continue
+            self.lag.record(now - next_s, now, self.step_s)
             next_s = now + self.step_s if now - next_s > 0.1 else next_s + self.step_s
             for drone in self._drones.values():
                 faults = drone.config.faults

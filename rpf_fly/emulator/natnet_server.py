@@ -31,6 +31,7 @@ import time
 from types import TracebackType
 from typing import Callable, Optional, Sequence
 
+from rpf_fly.emulator.host_lag import LagMeter
 from rpf_fly.mocap.frame import PoseCallable
 from rpf_fly.mocap.natnet_protocol import (
     FRAME_MODELS_CHANGED,
@@ -151,6 +152,8 @@ class NatNetServer:
         self._models_changed_left = 0
         self._frame_number = 0
         self._clients: list[tuple[str, int]] = []
+        self.lag = LagMeter()
+        """How late the paced frames go out (`rpf_fly.emulator.host_lag`)."""
         self._request_counts: dict[int, int] = {}
         self._frames_sent = 0
         self._t0 = time.monotonic()
@@ -481,6 +484,8 @@ class NatNetServer:
                         return
                     self._handle(packet, source)
             if period is not None and time.monotonic() >= next_frame:
+                sent_at = time.monotonic()
+                self.lag.record(sent_at - next_frame, sent_at, period)
                 try:
                     self.send_frame()
                 except ValueError as exc:  # e.g. too many bodies for one 64 KiB datagram: keep serving commands

@@ -56,6 +56,7 @@ from typing import Any, Optional
 from rpf_fly.mission.model import Obstacle
 
 from .fake_firmware import FirmwareSnapshot, Packet
+from .host_lag import HostLag, host_lag
 from .mocap_noise import MocapNoise, turned
 from .fake_world import DongleAir, DronePort, FakeDroneConfig, FakeWorld, LinkFaults, RadioCounters, RadioTiming, TruthSample
 
@@ -297,7 +298,84 @@ class RemoteWorld:
         return f"fake://0/80/2M/{address:010X}"
 
 
-class WorldProcess:
+class WorldCalls:
+    """The fault hooks and snapshots of a simulated world reached over a control connection, by the names of
+    `FakeWorld`'s and `SimulatedBodies`'s methods: `WorldProcess` (a dry run's private world) and
+    `rpf_fly.flight.lab.LabClient` (a running lab's)."""
+
+    def call(self, method: str, *args: Any) -> Any:
+        raise NotImplementedError
+
+    def drop_link(self, address: int) -> None:
+        self.call("drop_link", address)
+
+    def restore_link(self, address: int) -> None:
+        self.call("restore_link", address)
+
+    def disturb(self, address: int, offset_m: tuple[float, float, float]) -> None:
+        self.call("disturb", address, offset_m)
+
+    def set_battery(self, address: int, open_circuit_v: float) -> None:
+        self.call("set_battery", address, open_circuit_v)
+
+    def reboot(self, address: int) -> None:
+        self.call("reboot", address)
+
+    def packet_loss(self, address: int, rate: float, seconds: float) -> None:
+        self.call("packet_loss", address, rate, seconds)
+
+    def gust(self, address: int, accel_m_s2: tuple[float, float, float], seconds: float) -> None:
+        self.call("gust", address, accel_m_s2, seconds)
+
+    def estimator_divergence(self, address: int, rate_m_s: float) -> None:
+        self.call("estimator_divergence", address, rate_m_s)
+
+    def radio_counters(self, address: int) -> RadioCounters:
+        return self.call("radio_counters", address)
+
+    def radio_bursts(self, address: int, start_s: float, end_s: float) -> list[tuple[float, float]]:
+        return self.call("radio_bursts", address, start_s, end_s)
+
+    def host_lag(self) -> HostLag:
+        """How far the host let the simulated world fall behind its own time (`rpf_fly.emulator.host_lag`)."""
+        return self.call("host_lag")
+
+    def time_s(self) -> float:
+        """The child world's clock (seconds since it started)."""
+        return self.call("time_s")
+
+    def snapshot(self, address: int) -> FirmwareSnapshot:
+        return self.call("snapshot", address)
+
+    def true_poses(self) -> dict[int, tuple[tuple[float, float, float], tuple[float, float, float, float]]]:
+        return self.call("true_poses")
+
+    def truth_samples(self) -> list[TruthSample]:
+        """The world's truth samples since the previous call (`FakeWorld.truth_samples`): one round trip."""
+        return self.call("truth_samples")
+
+    def poses(self) -> dict[str, Pose]:
+        """The bodies as the mocap sees them (`SimulatedBodies.poses`)."""
+        return self.call("poses")
+
+    def hide(self, body: str, seconds: float) -> None:
+        self.call("hide", body, seconds)
+
+    def blackout(self, seconds: float) -> None:
+        self.call("blackout", seconds)
+
+    def pose_jump(self, body: str, offset_m: tuple[float, float, float], seconds: float) -> None:
+        self.call("pose_jump", body, offset_m, seconds)
+
+    def orientation_flip(self, body: str, deg: float, seconds: float) -> None:
+        self.call("orientation_flip", body, deg, seconds)
+
+    def mocap_delay(self, delay_s: float, seconds: float) -> None:
+        self.call("mocap_delay", delay_s, seconds)
+
+
+
+class WorldProcess(WorldCalls):
     """Starts the child process and speaks to it: the fault hooks and snapshots of `FakeWorld` and
     `SimulatedBodies`, by the same names. ``natnet``: the NatNet server's settings (``version``, ``rate_hz``,
     ``up_axis``, optionally ``multicast``), None for no NatNet server. ``obstacles``: the mission's obstacles, for
@@ -368,69 +446,6 @@ class WorldProcess:
         if status != "ok":
             raise RuntimeError(f"simulated drones: {method} failed: {value}")
         return value
-
-    def drop_link(self, address: int) -> None:
-        self.call("drop_link", address)
-
-    def restore_link(self, address: int) -> None:
-        self.call("restore_link", address)
-
-    def disturb(self, address: int, offset_m: tuple[float, float, float]) -> None:
-        self.call("disturb", address, offset_m)
-
-    def set_battery(self, address: int, open_circuit_v: float) -> None:
-        self.call("set_battery", address, open_circuit_v)
-
-    def reboot(self, address: int) -> None:
-        self.call("reboot", address)
-
-    def packet_loss(self, address: int, rate: float, seconds: float) -> None:
-        self.call("packet_loss", address, rate, seconds)
-
-    def gust(self, address: int, accel_m_s2: tuple[float, float, float], seconds: float) -> None:
-        self.call("gust", address, accel_m_s2, seconds)
-
-    def estimator_divergence(self, address: int, rate_m_s: float) -> None:
-        self.call("estimator_divergence", address, rate_m_s)
-
-    def radio_counters(self, address: int) -> RadioCounters:
-        return self.call("radio_counters", address)
-
-    def radio_bursts(self, address: int, start_s: float, end_s: float) -> list[tuple[float, float]]:
-        return self.call("radio_bursts", address, start_s, end_s)
-
-    def time_s(self) -> float:
-        """The child world's clock (seconds since it started)."""
-        return self.call("time_s")
-
-    def snapshot(self, address: int) -> FirmwareSnapshot:
-        return self.call("snapshot", address)
-
-    def true_poses(self) -> dict[int, tuple[tuple[float, float, float], tuple[float, float, float, float]]]:
-        return self.call("true_poses")
-
-    def truth_samples(self) -> list[TruthSample]:
-        """The world's truth samples since the previous call (`FakeWorld.truth_samples`): one round trip."""
-        return self.call("truth_samples")
-
-    def poses(self) -> dict[str, Pose]:
-        """The bodies as the mocap sees them (`SimulatedBodies.poses`)."""
-        return self.call("poses")
-
-    def hide(self, body: str, seconds: float) -> None:
-        self.call("hide", body, seconds)
-
-    def blackout(self, seconds: float) -> None:
-        self.call("blackout", seconds)
-
-    def pose_jump(self, body: str, offset_m: tuple[float, float, float], seconds: float) -> None:
-        self.call("pose_jump", body, offset_m, seconds)
-
-    def orientation_flip(self, body: str, deg: float, seconds: float) -> None:
-        self.call("orientation_flip", body, deg, seconds)
-
-    def mocap_delay(self, delay_s: float, seconds: float) -> None:
-        self.call("mocap_delay", delay_s, seconds)
 
     def close(self) -> None:
         """Stop the child (its world powers the drones off) and wait for it; idempotent."""
@@ -672,37 +687,30 @@ class _Orphan:
             pass
 
 
-def serve(settings: dict[str, Any], out: Any) -> None:
-    """The child process: world, radio server, NatNet server; reports its ports as one JSON line on ``out``, then
-    answers the parent's calls until it closes them, or until it goes away (then `_Orphan`)."""
-    world = FakeWorld(settings["drones"], seed=settings["seed"], obstacles=settings.get("obstacles", ())).start()
-    orphan = _Orphan(world, os.getppid(), settings.get("names", {}), settings.get("exit_report"),
-                     settings.get("orphan_cap_s", ORPHAN_CAP_S))
-    orphan.watch_parent()
-    bodies = settings["bodies"]
-    tracked = SimulatedBodies(world, bodies, settings.get("mocap_noise"), seed=settings["seed"])
-    host = settings.get("host", "127.0.0.1")
-    radio = _RadioServer(world, host).start()
-    server = None
-    natnet = settings["natnet"]
-    try:
+class WorldServer:
+    """The simulated world of a dry run or a lab, with what reaches it from outside: the radio server (UDP), the
+    NatNet emulator and the call table of the fault hooks and snapshots (by the names of `WorldProcess`'s methods).
+    ``settings``: as `WorldProcess` sends them. The caller serves the calls (`handle`) over its connections."""
+
+    def __init__(self, settings: Mapping[str, Any]) -> None:
+        self.world = FakeWorld(settings["drones"], seed=settings["seed"], obstacles=settings.get("obstacles", ()),
+                               timing=settings.get("timing")).start()
+        self.bodies: dict[int, str] = dict(settings["bodies"])
+        self.tracked = SimulatedBodies(self.world, self.bodies, settings.get("mocap_noise"), seed=settings["seed"])
+        self.host = settings.get("host", "127.0.0.1")
+        self.radio = _RadioServer(self.world, self.host).start()
+        self.natnet: Any = None
+        natnet = settings.get("natnet")
         if natnet is not None:
             from rpf_fly.emulator.natnet_server import NatNetServer
 
-            server = NatNetServer(
-                tracked.poses, version=natnet["version"], multicast=natnet.get("multicast", False),
-                local_ip=host,
-                rate_hz=natnet["rate_hz"], up_axis=natnet["up_axis"], bodies=list(bodies.values()),
-                extra_latency_s=tracked.extra_latency_s,
+            self.natnet = NatNetServer(
+                self.tracked.poses, version=natnet["version"], multicast=natnet.get("multicast", False),
+                local_ip=self.host, rate_hz=natnet["rate_hz"], up_axis=natnet["up_axis"],
+                bodies=list(self.bodies.values()), extra_latency_s=self.tracked.extra_latency_s,
             ).start()
-        with Listener(("127.0.0.1", 0), authkey=settings["authkey"]) as listener:
-            out.write(json.dumps({
-                "control": list(listener.address), "radio": list(radio.sock.getsockname()),
-                "natnet_command_port": server.command_port if server is not None else None,
-            }) + "\n")
-            out.flush()
-            conn = listener.accept()
-        calls = {
+        world, tracked = self.world, self.tracked
+        self.calls: dict[str, Any] = {
             "drop_link": world.drop_link, "restore_link": world.restore_link, "disturb": world.disturb,
             "set_battery": world.set_battery, "reboot": world.reboot, "snapshot": world.snapshot,
             "true_poses": world.true_poses, "truth_samples": world.truth_samples, "poses": tracked.poses,
@@ -712,8 +720,44 @@ def serve(settings: dict[str, Any], out: Any) -> None:
             "packet_loss": world.packet_loss, "gust": world.gust, "estimator_divergence": world.estimator_divergence,
             "radio_counters": world.radio_counters, "radio_bursts": world.radio_bursts, "time_s": world.time_s,
             "pose_jump": tracked.pose_jump, "orientation_flip": tracked.orientation_flip,
-            "mocap_delay": tracked.mocap_delay,
+            "mocap_delay": tracked.mocap_delay, "host_lag": self.host_lag,
         }
+
+    def host_lag(self) -> HostLag:
+        """How far the host let this world fall behind its own time so far (`HostLag`)."""
+        return host_lag(self.world.lag, self.natnet.lag if self.natnet is not None else None)
+
+    def ports(self) -> dict[str, Any]:
+        """Where the world is reached: the radio server's UDP address and the NatNet emulator's command port."""
+        return {"radio": list(self.radio.sock.getsockname()),
+                "natnet_command_port": self.natnet.command_port if self.natnet is not None else None}
+
+    def handle(self, method: str, args: Sequence[Any]) -> tuple[str, Any]:
+        """One call: ``("ok", value)`` or ``("error", "Type: message")`` (the caller stays up)."""
+        try:
+            return "ok", self.calls[method](*args)
+        except Exception as err:  # noqa: BLE001 - reported to the caller
+            return "error", f"{type(err).__name__}: {err}"
+
+    def close(self) -> None:
+        if self.natnet is not None:
+            self.natnet.close()
+        self.world.close()
+        self.radio.close()
+
+
+def serve(settings: dict[str, Any], out: Any) -> None:
+    """The child process: world, radio server, NatNet server; reports its ports as one JSON line on ``out``, then
+    answers the parent's calls until it closes them, or until it goes away (then `_Orphan`)."""
+    server = WorldServer(settings)
+    orphan = _Orphan(server.world, os.getppid(), settings.get("names", {}), settings.get("exit_report"),
+                     settings.get("orphan_cap_s", ORPHAN_CAP_S))
+    orphan.watch_parent()
+    try:
+        with Listener(("127.0.0.1", 0), authkey=settings["authkey"]) as listener:
+            out.write(json.dumps({"control": list(listener.address), **server.ports()}) + "\n")
+            out.flush()
+            conn = listener.accept()
         with conn:
             while True:
                 try:
@@ -725,15 +769,9 @@ def serve(settings: dict[str, Any], out: Any) -> None:
                     orphan.closing()
                     conn.send(("ok", None))
                     return
-                try:
-                    conn.send(("ok", calls[method](*args)))
-                except Exception as err:  # noqa: BLE001 - reported to the caller, the child stays up
-                    conn.send(("error", f"{type(err).__name__}: {err}"))
+                conn.send(server.handle(method, args))
     finally:
-        if server is not None:
-            server.close()
-        world.close()
-        radio.close()
+        server.close()
 
 
 def main() -> None:

@@ -120,6 +120,26 @@ class Commander:
             self._set(agent, DronePhase.TAKEOFF)
             return True
 
+    def retry_take_off(self, agent: DroneAgent, height_m: float, duration_s: float) -> bool:
+        """Send a drone that is taking off but has not left the floor its take-off again (the firmware refused
+        the first: its supervisor's short 'cannot fly' window answers EBUSY, which cflib does not report)."""
+        with self._locks[agent.name]:
+            if agent.phase != DronePhase.TAKEOFF:
+                return False
+            return self.backend.takeoff(agent.name, height_m, duration_s)
+
+    def ground(self, agent: DroneAgent, reason: str) -> bool:
+        """A drone commanded to take off that never left the floor: stop its plan and disarm it (it is on the
+        floor), and keep it as an obstacle where it stands (`DronePhase.GROUNDED`)."""
+        with self._locks[agent.name]:
+            if agent.phase != DronePhase.TAKEOFF:
+                return False
+            self.backend.stop(agent.name)
+            self.backend.arm(agent.name, False)
+            agent.outcome = FlightOutcome.NOT_FLOWN
+            self._set(agent, DronePhase.GROUNDED, reason, ERROR)
+            return True
+
     def begin_planning(self, agent: DroneAgent, measured: complex, now_s: float) -> bool:
         """Take-off done, or a hold over: plan from the measured position again."""
         with self._locks[agent.name]:

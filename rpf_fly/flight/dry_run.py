@@ -47,12 +47,15 @@ import os
 import tempfile
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any, Mapping, Optional
+from typing import TYPE_CHECKING, Any, Mapping, Optional
 
 from rpf_fly.mission.model import Mission
 from rpf_fly.mocap.frame import MocapSource
 from rpf_fly.emulator.fake_world import BurstLoss, FakeDroneConfig, FakeWorld, RadioTiming
 from rpf_fly.emulator.mocap_noise import MocapNoise
+
+if TYPE_CHECKING:
+    from rpf_fly.flight.lab import LabInfo
 
 
 AIR_TIME_S = 0.001
@@ -130,6 +133,28 @@ def mission_mocap_noise(mission: Mission) -> MocapNoise:
                       default.dropout if d.mocap_dropout is None else d.mocap_dropout)
 
 
+def simulated_drones(mission: Mission, drone_configs: Optional[Mapping[str, FakeDroneConfig]] = None,
+                     start_faults: Optional[Mapping[str, StartFault]] = None,
+                     radio_loss: Optional[BurstLoss] = RADIO_LOSS) -> dict[int, FakeDroneConfig]:
+    """The simulated Crazyflie of each drone of ``mission`` by radio address: at its mission start, mocap
+    positioning, every link with ``radio_loss``; ``drone_configs`` replaces a drone's (by name), ``start_faults``
+    then moves or turns it before power-on."""
+    addresses = {d.name: uri_address(d.uri) for d in mission.drones}
+    configs = dict(drone_configs or {})
+    faults = dict(start_faults or {})
+    unknown = sorted(set(faults) - set(addresses))
+    if unknown:
+        raise ValueError(f"start_faults for drones not in the mission: {', '.join(unknown)}")
+    drones = {}
+    for d in mission.drones:
+        default = FakeDroneConfig.at(d.start[0], d.start[1], 0.0, positioning="extpos")
+        config = configs.get(d.name, default)
+        if radio_loss is not None and config.faults.burst is None:
+            config = replace(config, faults=replace(config.faults, burst=radio_loss))
+        drones[addresses[d.name]] = _with_start_fault(config, faults.get(d.name))
+    return drones
+
+
 class DryRun:
     """Context manager owning the fake drones, the fake-radio registration and the mocap source of a dry run.
 
@@ -154,8 +179,10 @@ class DryRun:
         world_exit_report: Optional[Path] = None,
         host: str = "127.0.0.1",
         mocap_noise: Optional[MocapNoise] = None,
+        lab: Optional["LabInfo"] = None,
     ):
-        """``truth``: the flight log of a flight on this rig gets the world's truth (``/truth/<drone>``); False only
+        """``lab``: fly the drones of a running lab (`rpf_fly.flight.lab`, ``rpf-fly lab``) instead of starting
+        private ones; they keep their firmware state, and closing the dry run leaves them to the lab. ``truth``: the flight log of a flight on this rig gets the world's truth (``/truth/<drone>``); False only
         to measure what that costs (tools/bench_flight.py ``--no-truth``). ``air_time_s``: how long each radio
         transaction holds its dongle, shared by every link on it (default ``AIR_TIME_S``, a Crazyradio's; 0: an
         infinitely fast radio, only to measure what the radio costs). ``radio_loss``: the bursty loss of every
@@ -181,18 +208,11 @@ class DryRun:
         self.uris = {d.name: fake_uri(d.uri) for d in mission.drones}
         self.addresses = {d.name: uri_address(d.uri) for d in mission.drones}
         self.bodies = {d.name: d.rigid_body for d in mission.drones}
-        configs = dict(drone_configs or {})
-        faults = dict(start_faults or {})
-        unknown = sorted(set(faults) - set(self.addresses))
-        if unknown:
-            raise ValueError(f"start_faults for drones not in the mission: {', '.join(unknown)}")
-        self.drone_configs = {}
-        for d in mission.drones:
-            default = FakeDroneConfig.at(d.start[0], d.start[1], 0.0, positioning="extpos")
-            config = configs.get(d.name, default)
-            if radio_loss is not None and config.faults.burst is None:
-                config = replace(config, faults=replace(config.faults, burst=radio_loss))
-            self.drone_configs[self.addresses[d.name]] = _with_start_fault(config, faults.get(d.name))
+        if lab is not None and (drone_configs or start_faults):
+            raise ValueError("a running lab's drones are already powered on: give drone configs and power-on "
+                             "faults to the lab (rpf-fly lab --faults), not to a flight against it")
+        self.drone_configs = simulated_drones(mission, drone_configs, start_faults, radio_loss)
+        self.lab = lab
         self._names = {address: name for name, address in self.addresses.items()}
         self.seed = mission.dry_run.seed if seed is None else seed
         self.timing = RadioTiming(transaction_s=AIR_TIME_S if air_time_s is None else float(air_time_s))
@@ -229,7 +249,19 @@ class DryRun:
         served = self.mocap_kind in ("natnet", "motioncapture")  # by the NatNet emulator
         multicast = self.mocap_kind == "motioncapture"  # libmotioncapture receives no unicast frames (docs/mocap.md)
         natnet = {"version": self.natnet_version, "rate_hz": self.rate_hz, "up_axis": up, "multicast": multicast}
-        if self.in_process:
+        if self.lab is not None:
+            from rpf_fly.flight.lab import LabClient
+
+            self.world = self._bodies = LabClient(self.lab)
+            missing = sorted(set(self.drone_configs) - set(self.lab.addresses.values()))
+            if missing:
+                raise RuntimeError(f"the lab ({self.lab.mission}) has no drone at address "
+                                   f"{', '.join(f'{a:010X}' for a in missing)}: start the lab with this mission")
+            fake_radio.register(RemoteWorld(tuple(self.lab.radio), tuple(self.drone_configs), self.timing))  # type: ignore[arg-type]
+            command_port = self.lab.natnet_command_port
+            if served and command_port is None:
+                raise RuntimeError("the lab serves no NatNet emulator")
+        elif self.in_process:
             self.world = FakeWorld(self.drone_configs, seed=self.seed, obstacles=self.mission.obstacles,
                                    timing=self.timing).start()
             self._bodies = SimulatedBodies(self.world, body_of_address, self.mocap_noise, seed=self.seed)
@@ -344,6 +376,15 @@ class DryRun:
         """Brown-out of drone ``name``: motors off (it falls), radio silent for 1.5 s (its cflib link fails), then
         a fresh firmware on the floor that a new connection reaches."""
         self.world.reboot(self.addresses[name])
+
+    def host_lag(self) -> Any:
+        """How far the host let the simulated world fall behind its own time so far (`HostLag`); a lab's figures
+        count from the lab's start."""
+        if self.in_process and self.lab is None:
+            from rpf_fly.emulator.host_lag import host_lag
+
+            return host_lag(self.world.lag, self.server.lag if self.server is not None else None)
+        return self.world.host_lag()
 
     def snapshot(self, name: str):  # type: ignore[no-untyped-def]
         """The fake firmware's state of drone ``name`` (position, motors, flags, ...)."""

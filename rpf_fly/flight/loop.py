@@ -554,26 +554,84 @@ class FlightLoop:
             self.events.emit(ERROR, "takeoff", f"{', '.join(sorted(refused))} stay on the ground; the others fly")
         return [a for a in ready if a.phase == DronePhase.READY]
 
+    TAKEOFF_RETRY_S = 1.0
+    """A drone commanded to take off that has not risen `LIFT_OFF_M` this long after the command gets it again
+    (the firmware's supervisor answers EBUSY in its short 'cannot fly' window, and cflib does not report it)."""
+    LIFT_OFF_M = 0.05
+
     def _takeoff(self) -> None:
         self._set_phase(SwarmPhase.TAKEOFF)
         flight = self.mission.flight
         armed = self._arm()
-        if self.swarm is not None:
+        if self.swarm is not None and not self._stop.is_set():
             armed = self._await_takeoff(armed)
+        if self._stop.is_set():  # interrupted while arming: nothing takes off
+            for agent in armed:
+                self.commander.refuse_take_off(agent, "interrupted before take-off" + (
+                    f" ({self._stop_reason})" if self._stop_reason else ""))
+            return
+        floor = {a.name: p.position[2] for a in armed if (p := self.tracker.get(a.name)) is not None}
+        commanded = 0
         for agent in armed:
-            self.commander.take_off(agent, flight.height, flight.takeoff_s)
-        until = self.clock() + flight.takeoff_s + self.TAKEOFF_SETTLE_S
+            if self.commander.take_off(agent, flight.height, flight.takeoff_s):
+                self.backend_arm_watchdog(agent.name)
+                commanded += 1
+        self.events.emit(INFO, "takeoff", f"take-off commanded: {commanded} drone(s) to {flight.height:.2f} m in "
+                         f"{flight.takeoff_s:g} s")
+        started = self.clock()
+        until = started + flight.takeoff_s + self.TAKEOFF_SETTLE_S
+        retried = False
         while self.clock() < until and not self._stop.is_set():
-            self._spin_once(until)
+            self._spin_once(min(until, started + self.TAKEOFF_RETRY_S) if not retried else until)
+            if not retried and self.clock() >= started + self.TAKEOFF_RETRY_S:
+                retried = True
+                for agent in self.agents.values():
+                    pose = self.tracker.get(agent.name)
+                    if agent.phase == DronePhase.TAKEOFF and pose is not None and \
+                            pose.position[2] < floor.get(agent.name, 0.0) + self.LIFT_OFF_M:
+                        self.events.emit(WARNING, "takeoff", f"not rising {self.TAKEOFF_RETRY_S:.0f} s after its "
+                                         "take-off: sending it again", agent.name)
+                        self.commander.retry_take_off(agent, flight.height, max(1.0, flight.takeoff_s -
+                                                                                self.TAKEOFF_RETRY_S))
+        grounded: set[str] = set()
         for agent in self.agents.values():
             if agent.phase != DronePhase.TAKEOFF:
                 continue
             pose = self.tracker.get(agent.name)
-            if pose is None or abs(pose.position[2] - flight.height) > max(0.15, 0.3 * flight.height):
+            if pose is not None and pose.position[2] <= ON_FLOOR_Z_M:
+                if self.commander.ground(agent, f"take-off did not lift it off (z = {pose.position[2]:.2f} m): "
+                                                "it stays on the floor, an obstacle in every view"):
+                    grounded.add(agent.name)
+            elif pose is None or abs(pose.position[2] - flight.height) > max(0.15, 0.3 * flight.height):
                 z = "no pose" if pose is None else f"z = {pose.position[2]:.2f} m"
                 self.commander.land(agent, f"take-off did not reach {flight.height:.2f} m ({z})")
             elif self.commander.begin_planning(agent, pose.xy, self.clock()):
                 self.events.emit(INFO, "takeoff", f"airborne at {pose.position[2]:.2f} m: planning", agent.name)
+        if grounded:
+            self._keep_clear_of(grounded)
+
+    def backend_arm_watchdog(self, name: str) -> None:
+        """From its take-off on, the drone's firmware stops it about 1 s after the keep-alives stop (a killed
+        ground station, an unplugged dongle, a lost link), in every phase (docs/flight.md)."""
+        arm = getattr(self.commander.backend, "arm_watchdog", None)
+        if arm is not None:
+            arm(name)
+
+    def _keep_clear_of(self, grounded: set[str]) -> None:
+        """Drones that never left the floor stand where they are: a drone whose goal is within 2r of one would
+        land on it, so it lands now, where it took off, instead of flying there."""
+        r2 = 2 * self.mission.planner.safety_radius
+        spots = {n: p.xy for n in sorted(grounded) if (p := self.tracker.get(n)) is not None}
+        for agent in self.agents.values():
+            if agent.phase not in (DronePhase.PLANNING, DronePhase.HOLDING, DronePhase.TAKEOFF):
+                continue
+            why = next((f"its goal is {abs(agent.goal - xy):.2f} m from {name}, which did not lift off"
+                        for name, xy in spots.items() if abs(agent.goal - xy) < r2), None)
+            if why is not None:
+                self.commander.land(agent, f"{why}: it lands where it is", ERROR)
+        self.events.emit(ERROR, "takeoff", f"{', '.join(sorted(grounded))} did not lift off: on the floor where "
+                         f"{'it stands' if len(grounded) == 1 else 'they stand'}, in every view and the separation "
+                         "check; the others fly")
 
     def _await_takeoff(self, armed: list[DroneAgent]) -> list[DroneAgent]:
         """With a :class:`SwarmLink`: report the arming and wait, drones armed on the ground, for the coordinator's

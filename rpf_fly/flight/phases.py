@@ -29,6 +29,9 @@ class DronePhase(str, enum.Enum):
     LANDED = "landed"
     FAILED = "failed"
     """Never flew: connection or preflight failure."""
+    GROUNDED = "grounded"
+    """Commanded to take off, never left the floor (a take-off its firmware ignored): disarmed where it stands,
+    and an obstacle in every other drone's view and separation check until the flight ends."""
     LINK_LOST = "link_lost"
     """The radio link dropped: no command reaches it any more (the firmware's watchdog stops it)."""
     EMERGENCY = "emergency"
@@ -40,7 +43,8 @@ class DronePhase(str, enum.Enum):
 
     @property
     def terminal(self) -> bool:
-        return self in (DronePhase.LANDED, DronePhase.FAILED, DronePhase.LINK_LOST, DronePhase.EMERGENCY)
+        return self in (DronePhase.LANDED, DronePhase.FAILED, DronePhase.GROUNDED, DronePhase.LINK_LOST,
+                        DronePhase.EMERGENCY)
 
 
 class SwarmPhase(str, enum.Enum):

@@ -65,6 +65,20 @@ class FlightReport:
     """Messages the flight log dropped (queue full, or logged after close)."""
     log_failed: int = 0
     """Messages the flight log could not encode (a schema or value error)."""
+    host_behind_s: Optional[float] = None
+    """A dry run's or lab's: seconds during this flight that the host let the simulated world run behind its own
+    time (`rpf_fly.emulator.host_lag`); None for a real flight. Over 0, the flight's verdict is not evidence."""
+
+    @property
+    def host_sentence(self) -> str:
+        """The command's last line when the host could not keep up ('' when it did, or for a real flight)."""
+        from rpf_fly.emulator.host_lag import HOST_BEHIND_REPORT_S, HOST_LATE_BOUND_S
+
+        if not self.host_behind_s or self.host_behind_s < HOST_BEHIND_REPORT_S:
+            return ""
+
+        return (f"the host could not keep up for {self.host_behind_s:.1f} s (simulated steps or mocap frames more "
+                f"than {HOST_LATE_BOUND_S * 1000:.0f} ms late): this dry run is not evidence")
 
     @property
     def success(self) -> bool:

@@ -174,7 +174,18 @@ def run_flight(
             loop.events.subscribe(sink)
         if on_loop is not None:
             on_loop(loop)
-        report = loop.run()
+        watch = None
+        if rig is not None:
+            from rpf_fly.flight.host_watch import HostWatch
+
+            watch = HostWatch(rig.host_lag, loop.events).start()
+        try:
+            report = loop.run()
+        finally:
+            if watch is not None:
+                watch.stop()
+        if watch is not None:
+            report.host_behind_s = watch.behind_s
         if recorder is not None:
             report.log_dropped, report.log_failed = recorder.log.dropped, recorder.log.failed
         return report

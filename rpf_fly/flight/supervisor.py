@@ -303,6 +303,7 @@ class Supervisor:
         agents = [a for a in everyone if a.phase.airborne]
         uncommanded = [a for a in everyone if a.phase in (DronePhase.LINK_LOST, DronePhase.EMERGENCY)
                        and (p := tracker.get(a.name)) is not None and p.position[2] > ON_FLOOR_Z_M]
+        grounded = [a for a in everyone if a.phase == DronePhase.GROUNDED]  # on the floor, in everyone's way
         findings: list[Finding] = []
         findings += self._links(agents, states)
         findings += self._glitches(agents, tracker)
@@ -310,7 +311,7 @@ class Supervisor:
         findings += self._poses(now_s, agents, tracker)
         findings += self._geofence(agents, tracker)
         foreign = [n for n in others if (p := tracker.get(n)) is not None and p.position[2] > ON_FLOOR_Z_M]
-        findings += self._separation(agents + uncommanded, tracker, foreign)
+        findings += self._separation(agents + uncommanded + grounded, tracker, foreign)
         findings += self._blind(now_s, agents, uncommanded, foreign, tracker, states)
         findings += self._obstacles(agents, tracker)
         findings += self._battery(agents, states)

@@ -73,7 +73,10 @@ def in_the_way(phase: DronePhase, z: float, flight_height: float) -> bool:
     """Whether a drone in ``phase`` whose mocap height is ``z`` is in the other drones' views: airborne near the
     planning plane (above half the flight height: a drone on the floor is in nobody's way); a drone nobody commands
     any more (link lost, motors cut) until mocap shows it on the floor, since it may still hover, drift or fall
-    there for up to 2 s. Pure, so the flight loop and ``rpf-fly replay`` decide it by the same code."""
+    there for up to 2 s; a drone that never left the floor (`DronePhase.GROUNDED`) wherever it stands, so nobody
+    plans through its place. Pure, so the flight loop and ``rpf-fly replay`` decide it by the same code."""
+    if phase == DronePhase.GROUNDED:
+        return True
     if phase in (DronePhase.LINK_LOST, DronePhase.EMERGENCY):
         return z > ON_FLOOR_Z_M
     return z > 0.5 * flight_height and not phase.terminal

@@ -27,7 +27,7 @@ from rpf_fly.log.reader import LogData
 STATE_COLOURS = {
     "connecting": "#c7c7c7", "preflight": "#dbdb8d", "armed": "#ffbb78", "takeoff": "#98df8a", "planning": "#aec7e8",
     "arrived": "#2ca02c", "hover": "#9edae5", "landing": "#c5b0d5", "landed": "#8c8c8c", "error": "#ff9896",
-    "emergency": "#d62728",
+    "emergency": "#d62728", "grounded": "#8c564b",
 }
 LEVEL_COLOURS = {1: "0.5", 2: "#1f77b4", 3: "#ff7f0e", 4: "#d62728", 5: "#7f0000"}
 ALWAYS_LABELLED = ("interrupt", "error", "emergency", "loop", "touchdown")

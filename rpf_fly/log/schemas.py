@@ -402,6 +402,48 @@ RADIO_LOAD: dict[str, Any] = _obj(
     description="One dongle's measured radio load over one window, from cflib's link statistics",
 )
 
+FIRMWARE_STATE: dict[str, Any] = _obj(
+    {
+        "timestamp": _time("When the simulated firmware was in this state"),
+        "powered": {"type": "boolean", "description": "The flight stack runs (false while a reboot boots)"},
+        "supervisor": {"type": "string", "description": "The supervisor's state, named as in the firmware "
+                                                         "(supervisor_state_machine.c): 'Pre-flight checks passed', "
+                                                         "'Flying', 'Locked', ..."},
+        "armed": {"type": "boolean", "description": "The supervisor is armed"},
+        "motors": {"type": "boolean", "description": "The motors spin"},
+        "flying": {"type": "boolean", "description": "The supervisor's is-flying condition"},
+        "locked": {"type": "boolean", "description": "Locked: only a reboot leaves it"},
+        "crashed": {"type": "boolean", "description": "The drone hit another drone or an obstacle"},
+        "emergency_stop": {"type": "boolean", "description": "An emergency stop (command, parameter or the "
+                                                             "emergency-stop watchdog) is latched"},
+        "commander": {"type": "string", "description": "Who feeds the controller: the streamed (CRTP) setpoints or "
+                                                       "the high-level commander"},
+        "high_level": {"type": "string", "description": "The high-level commander's state"},
+        "setpoint_age_s": {"type": ["number", "null"], "description": "Seconds since the last streamed setpoint "
+                                                                      "(null: none since power-on)"},
+        "battery_v": _num("Battery voltage (V)"),
+        "boots": {"type": "integer", "description": "Reboots since the lab started"},
+    },
+    required=("timestamp", "supervisor", "motors", "locked", "commander", "high_level"),
+    title="rpf_fly.FirmwareState",
+    description="One simulated Crazyflie's firmware state in a lab (rpf-fly lab): what its supervisor and "
+                "commander do, whoever is connected",
+)
+
+HOST_LAG: dict[str, Any] = _obj(
+    {
+        "timestamp": _time("When the figures were read"),
+        "bound_s": _num("A step or frame later than this against its schedule counts as behind (s)"),
+        "behind_s": _num("Seconds so far during which the simulated world ran behind the bound"),
+        "world": {"type": "object", "description": "The 100 Hz physics steps: runs, late_runs, max_late_s, "
+                                                   "behind_s"},
+        "natnet": {"type": ["object", "null"], "description": "The NatNet emulator's frames (same fields)"},
+    },
+    required=("timestamp", "bound_s", "behind_s", "world"),
+    title="rpf_fly.HostLag",
+    description="How far the host let the simulated world fall behind its own time (rpf_fly/emulator/host_lag.py)",
+)
+
 SCHEMAS: dict[str, dict[str, Any]] = {
     "foxglove.PoseInFrame": POSE_IN_FRAME,
     "foxglove.SceneUpdate": SCENE_UPDATE,
@@ -411,8 +453,13 @@ SCHEMAS: dict[str, dict[str, Any]] = {
     "rpf_fly.DroneStatus": DRONE_STATUS,
     "rpf_fly.TruthState": TRUTH_STATE,
     "rpf_fly.RadioLoad": RADIO_LOAD,
+    "rpf_fly.FirmwareState": FIRMWARE_STATE,
+    "rpf_fly.HostLag": HOST_LAG,
 }
 """Every schema the log uses, by the schema name written into the file."""
+
+LAB_SCHEMAS = frozenset({"rpf_fly.FirmwareState", "rpf_fly.HostLag"})
+"""The schemas only a lab's own log uses (``rpf-fly lab``: rpf_fly/flight/lab.py)."""
 
 for _name, _schema in SCHEMAS.items():
     _schema["$schema"] = "http://json-schema.org/draft-07/schema#"
@@ -431,6 +478,10 @@ def topic_schema(topic: str) -> str:
         return "rpf_fly.TruthState"
     if topic.startswith("/radio/"):
         return "rpf_fly.RadioLoad"
+    if topic.startswith("/firmware/"):
+        return "rpf_fly.FirmwareState"
+    if topic == "/lab/host":
+        return "rpf_fly.HostLag"
     if topic.endswith("/planner"):
         return "rpf_fly.PlannerStep"
     if topic.endswith("/status"):

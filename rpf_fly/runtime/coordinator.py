@@ -56,7 +56,7 @@ LOGGER_WAIT_S = 30.0
 RELAY_WAIT_S = 30.0
 """How long the coordinator waits for the mocap relay's token (it imports, then its mocap must answer: 5 s)."""
 PREFLIGHT_STATES = {"ready", "failed"}
-DOWN_STATES = {"landed", "failed", "emergency", "link_lost", "landing"}
+DOWN_STATES = {"landed", "failed", "grounded", "emergency", "link_lost", "landing"}
 ARM_WAIT_S = 15.0
 """After the go: how long the coordinator waits for every worker to report its arming (each waits up to 3 s for its
 drones' supervisors) before it aborts, nothing taking off."""

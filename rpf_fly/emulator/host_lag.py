@@ -1,0 +1,109 @@
+"""How far the host lets the simulated world fall behind its own time.
+
+A dry run or a lab is evidence only while the machine that runs it keeps up: a world step that runs late, or a
+mocap frame the emulator sends late, is time the simulated drones did not have (their extpos arrives late, their
+estimators drift, their supervisors act on it), and a verdict taken then is the host's, not the stack's. Each
+periodic job of the world (the 100 Hz physics step of `rpf_fly.emulator.fake_world.FakeWorld`, the NatNet
+emulator's frames) records how late each of its runs starts against its own schedule; a run later than
+`HOST_LATE_BOUND_S` counts the wall time until the job is back on schedule as time behind.
+
+The bound: 0.05 s is five world steps and a whole mocap period at 20 Hz. A real Crazyflie's stabilizer runs every
+1 ms on its own processor and Motive sends every frame on its own machine; the emulated ones share this host's two
+cores with the flight, and a step or frame this late changes what a flight sees (a setpoint watchdog of 0.5 s, a
+pose age of 0.25 s, the supervisor's 0.2 s tracking window are 5-10 such delays). A few isolated late steps under
+the bound are the host's normal scheduling noise (measured: under 15 ms on an idle 2-core machine).
+"""
+
+from __future__ import annotations
+
+import threading
+from dataclasses import asdict, dataclass
+from typing import Any, Optional
+
+HOST_LATE_BOUND_S = 0.05
+"""A periodic emulator job that starts later than this against its schedule is behind (module doc)."""
+
+HOST_BEHIND_REPORT_S = 0.1
+"""Time behind, summed over a flight, from which it is said: one step a little over the bound is scheduling noise;
+0.1 s behind is two setpoint periods at 20 Hz, a fifth of the setpoint watchdog's first window."""
+
+
+@dataclass(frozen=True)
+class JobLag:
+    """One periodic job's lateness so far."""
+
+    runs: int
+    late_runs: int
+    """Runs that started more than `HOST_LATE_BOUND_S` late."""
+    max_late_s: float
+    behind_s: float
+    """Wall time during which the job ran later than the bound."""
+
+
+@dataclass(frozen=True)
+class HostLag:
+    """What the host did to the simulated world's time (`LagMeter.report` of each job)."""
+
+    bound_s: float
+    world: JobLag
+    natnet: Optional[JobLag]
+
+    @property
+    def behind_s(self) -> float:
+        """The longest any job of the world was behind: the time this world was not evidence."""
+        return max(self.world.behind_s, self.natnet.behind_s if self.natnet is not None else 0.0)
+
+    @property
+    def kept_up(self) -> bool:
+        return self.behind_s < HOST_BEHIND_REPORT_S
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"bound_s": self.bound_s, "behind_s": self.behind_s, "world": asdict(self.world),
+                "natnet": asdict(self.natnet) if self.natnet is not None else None}
+
+    def sentence(self, since: Optional["HostLag"] = None) -> str:
+        """The line that says the host fell behind (since ``since``); '' when it kept up."""
+        behind = self.behind_since(since)
+        if behind < HOST_BEHIND_REPORT_S:
+            return ""
+        return (f"the host could not keep up for {behind:.1f} s (simulated steps or mocap frames more than "
+                f"{self.bound_s * 1000:.0f} ms late): this dry run is not evidence")
+
+    def behind_since(self, since: Optional["HostLag"] = None) -> float:
+        """Seconds behind since ``since`` (an earlier reading of the same world; None: since it started)."""
+        return max(0.0, self.behind_s - (since.behind_s if since is not None else 0.0))
+
+
+class LagMeter:
+    """One periodic job's lateness: `record` at the start of each run with how late it is; one writer thread,
+    any reader (`snapshot`)."""
+
+    def __init__(self, bound_s: float = HOST_LATE_BOUND_S) -> None:
+        self.bound_s = bound_s
+        self._lock = threading.Lock()
+        self._runs = 0
+        self._late_runs = 0
+        self._max_late_s = 0.0
+        self._behind_s = 0.0
+        self._last_s: Optional[float] = None
+        self._was_late = False
+
+    def record(self, late_s: float, now_s: float, period_s: float) -> None:
+        """A run started at ``now_s`` (any clock in seconds), ``late_s`` after its scheduled time."""
+        late = late_s > self.bound_s
+        with self._lock:
+            self._runs += 1
+            self._max_late_s = max(self._max_late_s, late_s)
+            if late:
+                self._late_runs += 1
+                since = now_s - self._last_s if self._was_late and self._last_s is not None else late_s
+                self._behind_s += max(0.0, since)
+            self._last_s, self._was_late = now_s, late
+
+    def snapshot(self) -> JobLag:
+        with self._lock:
+            return JobLag(self._runs, self._late_runs, self._max_late_s, self._behind_s)
+
+
+def host_lag(world: LagMeter, natnet: Optional[LagMeter]) -> HostLag:
+    return HostLag(world.bound_s, world.snapshot(), natnet.snapshot() if natnet is not None else None)
