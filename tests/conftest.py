@@ -31,6 +31,26 @@ def fake_drivers() -> list[type]:
     return [c for c in cflib.crtp.CLASSES if isinstance(c, type) and issubclass(c, fake_radio.FakeRadioDriver)]
 
 
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo) -> Iterator[None]:
+    """A failed test whose dry run fell behind on a host that could not keep up says so first: its verdict is the
+    host's, not the stack's (rpf_fly/emulator/host_lag.py)."""
+    from rpf_fly.emulator.host_lag import HOST_BEHIND_REPORT_S
+    from rpf_fly.flight.host_watch import WATCHED
+
+    if call.when == "setup":
+        WATCHED.clear()
+    outcome = yield
+    report = outcome.get_result()
+    if call.when == "call" and report.failed:
+        behind = sum(WATCHED)
+        if behind >= HOST_BEHIND_REPORT_S:
+            report.sections.append(("host", f"the host could not keep up for {behind:.1f} s: this dry run is not "
+                                            "evidence (rerun on an idle machine)"))
+            report.longrepr = f"the host could not keep up for {behind:.1f} s: this dry run is not evidence\n" \
+                f"{report.longrepr}"
+
+
 @pytest.hookimpl(trylast=True)
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     """Refuse to run when pytest-xdist's ``--dist loadgroup`` (pyproject addopts) has not grouped the marked tests.

@@ -20,6 +20,10 @@ logger = logging.getLogger(__name__)
 
 PERIOD_S = 1.0
 
+WATCHED: list[float] = []
+"""Every finished watch's seconds behind, in this process, oldest first: a test runner names a failed flight test
+whose host could not keep up (tests/conftest.py); nothing of the product reads it."""
+
 
 class HostWatch(PeriodicFeed):
     """Reads ``fetch()`` (a `HostLag`) every `PERIOD_S`; the first reading is the baseline."""
@@ -40,6 +44,8 @@ class HostWatch(PeriodicFeed):
         and the command's last line carry it)."""
         self._quiet = True
         super().stop()
+        WATCHED.append(self.behind_s)
+        del WATCHED[:-100]
 
     def _once(self) -> bool:
         if self.failed:
