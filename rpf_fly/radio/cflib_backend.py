@@ -799,7 +799,10 @@ class CflibBackend:
     def takeoff(self, name: str, height_m: float, duration_s: float) -> bool:
         def action(cf: Any, drone: _Drone) -> None:
             cf.high_level_commander.takeoff(height_m, duration_s, yaw=None)
-            self._release_stream(cf, drone)
+            if drone.streaming:
+                self._release_stream(cf, drone)
+            else:  # a drone on the floor: a priority latched since the connection (another program) released too
+                cf.commander.send_notify_setpoint_stop()
 
         return self._queue(name, action, "ends_stream")
 
