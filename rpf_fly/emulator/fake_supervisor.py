@@ -24,6 +24,16 @@ Key behaviours kept from the firmware:
 - Disarming in flight resets (motors off). Entering any state outside arming/ready/flying/level-out/landed disarms.
 - Auto-arming (the Crazyflie 2.x default) re-arms whenever pre-flight checks pass.
 
+Rate: the firmware updates its supervisor at RATE_SUPERVISOR = 25 Hz (`stabilizer_types.h` line 375; line 377's
+RATE_DO_EXECUTE gates it on the 1 kHz stabilizer step, `supervisor.c` line 589), so one update in every 40 steps of
+the stabilizer loop (`stabilizer.c` line 347); between updates the loop reads the state the last update left
+(`supervisorCanFly`, line 332; `supervisorOverrideSetpoint`, line 354; `supervisorAreMotorsAllowedToRun`, line 360).
+The owning vehicle calls :meth:`Supervisor.update` at that rate (`UPDATE_PERIOD_S`, on the lattice of its clock:
+rpf_fly/emulator/fake_vehicle.py), so every window here (watchdog 0.5 s and 2 s, emergency-stop watchdog 1 s,
+pre-flight, landing and spin-up timeouts, the is-flying hysteresis) takes effect at the first update past it, up to
+40 ms late, as on the firmware. The commands (arming, emergency stop, the watchdog's feed) are latched and read at
+the next update; a crash (:meth:`Supervisor.crash`) acts at once.
+
 Times are seconds on the caller's clock.
 """
 
@@ -50,7 +60,10 @@ ARMING_SPINUP_TIMEOUT_S = 2.0
 """Arming this long without the motors' RPM check passing -> back to pre-flight checks not passed
 (ARMING_SPINUP_TIMEOUT_MS, platform_defaults.h)."""
 EMERGENCY_STOP_WATCHDOG_S = 1.0
-"""Once an emergency-stop watchdog notification was received, silence this long triggers an emergency stop."""
+"""Once an emergency-stop watchdog notification was received, silence this long triggers an emergency stop (an
+update at or past the notification plus 1000 ms: `supervisor.c` line 366)."""
+UPDATE_PERIOD_S = 0.04
+"""The supervisor updates once every this many seconds: RATE_SUPERVISOR, 25 Hz (`stabilizer_types.h` line 375)."""
 
 
 class SupervisorStateName(enum.Enum):
@@ -195,7 +208,7 @@ class Supervisor:
             self._latest_thrust_s = now_s
         is_flying = self._latest_thrust_s is not None and now_s - self._latest_thrust_s < IS_FLYING_HYSTERESIS_S
         estop = self.emergency_stop_requested or param_emergency_stop
-        if self._estop_watchdog_s is not None and now_s > self._estop_watchdog_s + EMERGENCY_STOP_WATCHDOG_S:
+        if self._estop_watchdog_s is not None and now_s >= self._estop_watchdog_s + EMERGENCY_STOP_WATCHDOG_S - 1e-9:
             estop = True
         return Conditions(
             armed=self.armed,
@@ -216,7 +229,8 @@ class Supervisor:
     def update(
         self, now_s: float, *, thrust_over_idle: bool, setpoint_age_s: float, param_emergency_stop: bool = False
     ) -> None:
-        """One supervisor tick: at most one state transition, then its side effects."""
+        """One supervisor update (the owner calls it every `UPDATE_PERIOD_S`): at most one state transition, then
+        its side effects."""
         c = self.conditions(
             now_s,
             thrust_over_idle=thrust_over_idle,

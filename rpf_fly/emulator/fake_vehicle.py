@@ -3,6 +3,13 @@
 One `Vehicle.step(now_s)` runs the firmware's stabilizer loop in the firmware's order (estimator, high-level
 commander, commander, supervisor update, supervisor override, controller, motors), sub-stepped at 10 ms.
 
+Supervisor rate: the supervisor updates at the firmware's 25 Hz (RATE_SUPERVISOR, `stabilizer_types.h` line 375;
+`supervisor.c` line 589), in the first sub-step that reaches each multiple of 40 ms of the caller's clock (the
+world's time: the drones of one world update together). Every other sub-step reads the state the last update left:
+whether the high-level commander may run and the motors may turn, and the override (level out, motors off), as the
+firmware's loop does between updates (`stabilizer.c` lines 332, 354, 360). So a watchdog or timeout acts at the
+first update past it, up to 40 ms after the instant (rpf_fly/emulator/fake_supervisor.py). A crash acts at once.
+
 Rule: a simulated Crazyflie is never kinder than a real one. Where the model simplifies, it does not simplify away
 a failure a real drone has (the yaw fly-away, drift without mocap).
 
@@ -117,7 +124,7 @@ from dataclasses import dataclass, replace
 
 from .fake_planner import HighLevelCommander
 from .fake_setpoint import AxisMode, Setpoint, Vec3, null_setpoint, wrap_angle, yaw_from_quaternion
-from .fake_supervisor import Supervisor, SupervisorStateName
+from .fake_supervisor import UPDATE_PERIOD_S, Supervisor, SupervisorStateName
 
 logger = logging.getLogger(__name__)
 
@@ -271,6 +278,8 @@ class Vehicle:
         self._onboard_variance_m2 = self.ext_pos_std_dev**2  # an onboard system is settled at power-on
         self.supervisor = Supervisor(auto_arm=config.auto_arm, tumbled=config.upside_down,
                                      spinup_fails=config.motor_fault)
+        self._supervisor_slot = self._supervisor_lattice(now_s)
+        """The last lattice point (in `UPDATE_PERIOD_S`) at which the supervisor updated (`_tick`)."""
         self.hl = HighLevelCommander(self.estimate, self.estimate_yaw)
         self.priority = PRIORITY_DISABLE
         self.setpoint: Setpoint = null_setpoint(-math.inf)
@@ -517,12 +526,15 @@ class Vehicle:
             if hl_setpoint is not None:
                 self._commander_set(hl_setpoint, PRIORITY_HIGH_LEVEL, now_s)
         setpoint = self.setpoint if can_fly else null_setpoint(0.0)
-        self.supervisor.update(
-            now_s,
-            thrust_over_idle=self.thrusting,
-            setpoint_age_s=now_s - setpoint.timestamp_s,
-            param_emergency_stop=self.param_emergency_stop,
-        )
+        slot = self._supervisor_lattice(now_s)
+        if slot > self._supervisor_slot:  # 25 Hz, as the firmware's; between updates its last decision stands
+            self._supervisor_slot = slot
+            self.supervisor.update(
+                now_s,
+                thrust_over_idle=self.thrusting,
+                setpoint_age_s=now_s - setpoint.timestamp_s,
+                param_emergency_stop=self.param_emergency_stop,
+            )
         setpoint = self._override(setpoint)
         self.control_setpoint = setpoint
         self.motors_on = self.supervisor.motors_allowed and setpoint.commands_thrust
@@ -538,6 +550,12 @@ class Vehicle:
             floor = self.ext_pos_std_dev**2
             self._onboard_variance_m2 = floor + (self._onboard_variance_m2 - floor) * math.exp(
                 -dt / VARIANCE_DECAY_TAU_S)
+
+    @staticmethod
+    def _supervisor_lattice(now_s: float) -> int:
+        """The index of the last supervisor update instant at or before ``now_s``: the multiples of
+        `UPDATE_PERIOD_S` (40 ms) of the caller's clock (module doc, "Supervisor rate")."""
+        return math.floor(now_s / UPDATE_PERIOD_S + 1e-6)
 
     def _turbulent(self, dt: float, push: Vec3 | None) -> Vec3:
         """Advance the random push one step (an Ornstein-Uhlenbeck process per axis, exact over ``dt``) and add it

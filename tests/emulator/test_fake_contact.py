@@ -147,7 +147,7 @@ def test_a_long_step_cannot_carry_a_drone_through_another_or_through_a_thin_wall
 def test_crash_on_synthetic_time_cuts_the_motors_at_once_and_locks_for_good() -> None:
     fw = FakeFirmware(VehicleConfig())
     t = 0.0
-    for _ in range(10):
+    for _ in range(15):  # ready to fly: three supervisor updates at 25 Hz
         t += 0.01
         fw.step(t)
     assert fw.handle(8, 0, struct.pack("<BBff?f", 7, 0, 0.5, 0.0, True, 1.0), t)[0][2][3] == 0

@@ -20,6 +20,9 @@ from rpf_fly.emulator.fake_trajectory import normalize_radians, shortest_signed_
 from rpf_fly.emulator.fake_vehicle import SUBSTEP_S, VehicleConfig
 
 DT = 0.01
+READY_S = 0.15
+"""Power-on to ready to fly: three supervisor updates at the firmware's 25 Hz (pre-flight checks passed, arming,
+ready to fly: 0.12 s), with a tick to spare."""
 HL_ACTIVE, HL_FINISHED, HL_DISABLED = 0x0100, 0x0200, 0x0400
 
 
@@ -56,7 +59,7 @@ class Sim:
         return reply[6:] if reply[5] == 0 else reply[5]
 
     def hover(self, height: float = 0.5) -> None:
-        self.run(0.1)
+        self.run(READY_S)
         assert self.hl(struct.pack("<BBff?f", 7, 0, height, 0.0, True, 1.0)) == 0
         self.run(1.5)
 
@@ -283,7 +286,7 @@ def test_define_and_start_answer_as_the_firmware() -> None:
     sim = Sim()
     assert sim.hl(define(31, 0, 1)) == errno.ENOEXEC  # NUM_TRAJECTORY_DEFINITIONS is 31
     assert sim.hl(define(30, 0, 1)) == 0
-    sim.run(0.1)
+    sim.run(READY_S)
     for silent in (start(31), start(7), start(30, group=0x02)):  # id too large, undefined, not in the group
         assert sim.hl(silent) == 0
         sim.run(0.05)
@@ -306,7 +309,7 @@ def test_define_and_start_answer_as_the_firmware() -> None:
 def test_a_trajectory_started_on_the_floor_takes_off_along_it() -> None:
     """plan_start_trajectory needs no state: an armed drone on the floor flies the trajectory from its start."""
     sim = Sim()
-    sim.run(0.1)
+    sim.run(READY_S)
     climb = Piece(((0.0,) * 8, (0.0,) * 8, (0.0, 0.0, 0.15, 0.05) + (0.0,) * 4, (0.0,) * 8), 2.0)
     upload(sim, [climb])
     assert sim.hl(start(1)) == 0
