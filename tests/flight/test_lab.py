@@ -185,3 +185,44 @@ def test_a_ground_station_killed_leaves_no_drone_flying_on(tmp_path, phase, line
         assert d.down_after_s is not None and d.down_after_s <= 1.5, (name, d)
         assert d.moved_m <= 1.0, (name, d)
         assert not d.flying_at_s[5.0], (name, d)
+
+
+def test_a_lab_whose_host_stops_it_says_so_in_its_log_and_last_line(tmp_path):
+    """The lab's process not scheduled for 0.6 s (SIGSTOP: what a starved host does to it, longer): its world steps
+    and mocap frames run late, the lab's log says how long on /lab/host and as an event, and its last line says
+    its verdicts are not evidence."""
+    mission = tmp_path / "lab-short-3.yaml"
+    mission.write_text(LAB_3)
+    lab = LabProcess(tmp_path, mission)
+    try:
+        time.sleep(1.5)
+        os.kill(lab.proc.pid, signal.SIGSTOP)
+        time.sleep(0.6)
+        os.kill(lab.proc.pid, signal.SIGCONT)
+        time.sleep(1.5)
+    finally:
+        out = lab.stop()
+    assert "the host could not keep up for" in out.strip().splitlines()[-1], out
+    data = read_log(lab.log)
+    host = [m.data for m in data.messages("/lab/host")]
+    assert host[-1]["behind_s"] >= 0.5 and host[-1]["world"]["max_late_s"] >= 0.5, host[-1]
+    assert host[0]["behind_s"] < 0.1, host[0]  # it kept up before
+    events = [m.data["message"] for m in data.messages("/events")]
+    assert any("could not keep up" in e and "not evidence" in e for e in events), events
+
+
+def test_a_dry_run_whose_simulated_drones_were_starved_says_it_is_not_evidence(tmp_path):
+    """The private world process of ``fly --dry-run`` stopped for 0.6 s mid-flight: the flight says so as it
+    happens and in its last line, whatever its verdict."""
+    from test_fly_signals import start_flight, wait_until_flying, world_process_of
+
+    proc, _ = start_flight(tmp_path)
+    world = world_process_of(proc.pid)
+    wait_until_flying(proc)
+    os.kill(world, signal.SIGSTOP)
+    time.sleep(0.6)
+    os.kill(world, signal.SIGCONT)
+    out, err = proc.communicate(timeout=90)
+    lines = out.strip().splitlines()
+    assert lines and "the host could not keep up for" in lines[-1] and "not evidence" in lines[-1], out
+    assert "[host]" in err, err
