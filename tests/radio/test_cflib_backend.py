@@ -169,6 +169,7 @@ def test_flight_cycle_with_arming_streaming_hand_over_and_landing(make_world: Ma
     for i, name in enumerate(backend.names()):
         assert backend.state(name).position_m == pytest.approx((0.5 * i + 0.2, 0.1, 0.6), abs=0.03)
     assert world.snapshot(address(0)).yaw_deg == pytest.approx(30.0, abs=2.0)  # yaw in degrees
+    notified = {i: world.snapshot(address(i)).packets_received[(7, 1)] for i in range(2)}  # connect, take-offs
     for name in backend.names():
         assert backend.hand_over(name, hold_duration_s=0.5)
     time.sleep(2.3)  # past the 2 s watchdog: the high-level commander holds the drones
@@ -176,7 +177,7 @@ def test_flight_cycle_with_arming_streaming_hand_over_and_landing(make_world: Ma
         snap = world.snapshot(address(i))
         assert snap.supervisor_state == "Flying" and snap.hl_state == "FLYING"
         assert snap.position == pytest.approx((0.5 * i + 0.2, 0.1, 0.6), abs=0.02)
-        assert snap.packets_received[(7, 1)] == 2  # notify-setpoint-stop: one at connect, exactly one at the hand-over
+        assert snap.packets_received[(7, 1)] == notified[i] + 1  # exactly one notify-setpoint-stop at the hand-over
     for name in backend.names():
         assert backend.land(name, 0.0, 0.8)
     assert wait_for(lambda: all(abs(s.position_m[2]) < 0.01 for s in backend.states().values()), 2.0)
@@ -194,11 +195,12 @@ def test_streaming_then_land_hands_over_with_notify(make_world: MakeWorld, toc_c
     for _ in range(6):
         backend.send_position_setpoint("cf0", 0.1, 0.0, 0.5, 0.0)
         time.sleep(0.05)
+    notified = world.snapshot(address(0)).packets_received[(7, 1)]  # at connect and after the take-off
     assert backend.land("cf0", 0.0, 0.6)
     assert world.wait_until(lambda w: w.snapshot(address(0)).hl_state == "LANDING", 0.5)
     assert world.wait_until(lambda w: w.snapshot(address(0)).position[2] == 0.0, 1.5)
     snap = world.snapshot(address(0))
-    assert snap.packets_received[(7, 1)] == 2 and not snap.locked  # one at connect, one at the landing
+    assert snap.packets_received[(7, 1)] == notified + 1 and not snap.locked  # one at the landing
     assert snap.position[0] == pytest.approx(0.1, abs=0.05)  # landed where it was, not dropped
 
 
