@@ -16,6 +16,7 @@ from cflib.crazyflie.syncCrazyflie import SyncCrazyflie
 
 from rpf_fly.emulator import fake_radio
 from rpf_fly.emulator.fake_world import FakeDroneConfig, FakeWorld
+from xdist_ids import keep_failures_by_plain_id
 
 ADDRESS_BASE = 0xE7E7E7E700
 HANG_GUARD_S = 120.0
@@ -83,6 +84,8 @@ def pytest_configure(config: pytest.Config) -> None:
                                 f"extra)")
     if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
         signal.signal(signal.SIGINT, signal.default_int_handler)
+    # `pytest --lf` reruns the failures alone after a run with or without -n (the grouped tests' ids: xdist_ids.py).
+    keep_failures_by_plain_id(config)
 
 
 @pytest.fixture(autouse=True)
