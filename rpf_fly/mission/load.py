@@ -4,8 +4,10 @@ Validation is strict: a mission that would arm a drone must be exactly what its 
 :class:`~rpf_fly.mission.errors.MissionError` as ``FILE:LINE: FIELD: message``, where the line is that of the
 offending value (of the mapping when a required key is missing; of the formation for drones it generated). Checks
 run in two stages: each section's shape, types and ranges (in document order; within a mapping, its keys before
-its values), then the layout of the whole mission (starts and goals against the arena, the obstacles and each
-other; the flight height against the arena). The format and every check are described in docs/mission-format.md.
+its values; speeds, rates and drone-scale lengths within what the firmware allows, so that a value written in the
+wrong unit says so), then the layout of the whole mission (starts and goals against the arena, the obstacles and
+each other; the flight height and circles against the arena; the mocap rate against the pose timeout). The format
+and every check are described in docs/mission-format.md.
 """
 
 from __future__ import annotations
@@ -324,20 +326,100 @@ def _mocap_kind(c: _Checker, n: YNode) -> str:
     return c.choice(n, kinds)
 
 
+# ------------------------------------------------------------------------------- plausible ranges (unit slips)
+
+FIRMWARE_VELOCITY_LIMIT_M_S = 1.0
+"""``posCtlPid.xVelMax`` (and ``yVelMax``), 1 m/s by default (crazyflie-firmware platform_defaults_cf2.h
+``PID_POS_VEL_X_MAX``): the firmware's position controller clamps the velocity it asks of the drone at this (times
+an overhead of 1.1, position_controller_pid.c), so a setpoint moving faster than ``flight.speed`` allows runs away
+from its drone. The bound of ``flight.speed``."""
+
+FIRMWARE_POSITION_RATE_HZ = 100.0
+"""The firmware's position and velocity loops run at 100 Hz (stabilizer_types.h ``POSITION_RATE``): a setpoint
+stream faster than that is never acted on, and every setpoint costs a radio packet. The bound of ``flight.rate_hz``."""
+
+FIRMWARE_MAIN_LOOP_HZ = 1000.0
+"""The Crazyflie's main (stabilizer) loop rate (stabilizer_types.h ``RATE_MAIN_LOOP``): no drone uses poses faster.
+The bound of ``mocap.rate_hz``."""
+
+MAX_DRONE_LENGTH_M = 1.0
+"""The largest plausible ``planner.safety_radius``, ``planner.margin``, ``planner.capture_radius`` and
+``flight.goal_tolerance``: a Crazyflie 2.x is 92 mm across and the defaults are 0.05-0.3 m, so a value above 1 m is
+a length written in centimetres (``safety_radius: 10``) rather than a drone kept 2 m from every other."""
+
+
+def _slip(v: float, unit: str, fits: Callable[[float], bool]) -> str:
+    """`` (40 cm/s is 0.4 m/s)``: ``v`` read as centimetres (or millimetres) when that value ``fits``; else ''."""
+    for prefix, scale in (("c", 100.0), ("m", 1000.0)):
+        if fits(v / scale):
+            return f" ({_g(v)} {prefix}{unit} is {_g(v / scale)} {unit})"
+    return ""
+
+
+def _period_slip(v: float, fits: Callable[[float], bool]) -> str:
+    """`` (a period of 0.1 s is 10 Hz)``: ``v`` read as a period in seconds when its rate ``fits``; else ''."""
+    return f" (a period of {_g(v)} s is {_g(1.0 / v)} Hz)" if v > 0 and fits(1.0 / v) else ""
+
+
+def _speed(c: _Checker, n: YNode) -> float:
+    v = c.number(n, POSITIVE)
+    limit = FIRMWARE_VELOCITY_LIMIT_M_S
+    if v > limit:
+        raise c.error(n, n.path, f"{_g(v)} m/s: above the firmware's {_g(limit)} m/s velocity limit "
+                      f"(posCtlPid.xVelMax); speeds are in m/s{_slip(v, 'm/s', lambda x: 0.05 <= x <= limit)}")
+    return v
+
+
+def _drone_length(what: str, default: float, bound: _Bound = POSITIVE) -> Reader:
+    """A length at the scale of a drone (at most :data:`MAX_DRONE_LENGTH_M`): ``what`` says what it is."""
+    def read(c: _Checker, n: YNode) -> float:
+        v = c.number(n, bound)
+        top = MAX_DRONE_LENGTH_M
+        if v > top:
+            hint = _slip(v, "m", lambda x: default / 5 <= x <= top)
+            raise c.error(n, n.path, f"{_g(v)} m: above {_g(top)} m, implausible for {what} (the default is "
+                          f"{_g(default)} m; a Crazyflie 2.x is 92 mm across); lengths are in m{hint}")
+        return v
+    return read
+
+
+def _flight_rate(c: _Checker, n: YNode) -> float:
+    v = c.number(n)
+    top = FIRMWARE_POSITION_RATE_HZ
+    if v < m.MIN_RATE_HZ:
+        hint = _period_slip(v, lambda x: m.MIN_RATE_HZ <= x <= top)
+        raise c.error(n, n.path, f"must be {RATE_HZ.text}, got {n.raw or _g(v)}{hint}")
+    if v > top:
+        raise c.error(n, n.path, f"{_g(v)} Hz: above the firmware's {_g(top)} Hz position loop (POSITION_RATE), "
+                      f"which never acts on a faster stream; rates are in Hz")
+    return v
+
+
+def _mocap_rate(c: _Checker, n: YNode) -> float:
+    v = c.number(n, POSITIVE)
+    top = FIRMWARE_MAIN_LOOP_HZ
+    if v > top:
+        raise c.error(n, n.path, f"{_g(v)} Hz: above the Crazyflie's {_g(top)} Hz main loop (RATE_MAIN_LOOP), "
+                      f"which could use no faster poses; rates are in Hz")
+    return v
+
+
 # YAML key -> (dataclass field, reader)
 RATE_HZ = _Bound(
     f"at least {m.MIN_RATE_HZ:g} Hz, so the loop watchdog acts before the Crazyflie's "
     f"{m.FIRMWARE_SETPOINT_WATCHDOG_S:g} s setpoint watchdog levels the drones out",
     lambda x: x >= m.MIN_RATE_HZ)
 FLIGHT_SPEC: dict[str, tuple[str, Reader]] = {
-    k: (k, _num(RATE_HZ if k == "rate_hz" else POSITIVE))
-    for k in ("height", "speed", "rate_hz", "goal_tolerance", "takeoff_s", "land_s", "timeout_s")
+    k: (k, _num(POSITIVE)) for k in ("height", "speed", "rate_hz", "goal_tolerance", "takeoff_s", "land_s", "timeout_s")
 }
+FLIGHT_SPEC["speed"] = ("speed", _speed)
+FLIGHT_SPEC["rate_hz"] = ("rate_hz", _flight_rate)
+FLIGHT_SPEC["goal_tolerance"] = ("goal_tolerance", _drone_length("a goal tolerance", 0.1))
 PLANNER_SPEC: dict[str, tuple[str, Reader]] = {
     "kind": ("kind", _planner_kind),
     "policy": ("policy", lambda c, n: c.string(n)),  # resolved to a file afterwards
     "sensing_range": ("sensing_range", _num(POSITIVE)),
-    "safety_radius": ("safety_radius", _num(POSITIVE)),
+    "safety_radius": ("safety_radius", _drone_length("a drone's radius", 0.1)),
     "influence_range": ("influence_range", _num(POSITIVE)),
     "wall_following": ("wall_following", lambda c, n: c.boolean(n)),
     "wall_threshold": ("wall_threshold", _num(NON_NEGATIVE)),
@@ -346,8 +428,8 @@ PLANNER_SPEC: dict[str, tuple[str, Reader]] = {
     "eta": ("eta", _num(NON_NEGATIVE)),
     "lambda": ("lam", _num(NON_NEGATIVE)),
     "guidance": ("guidance", _choice(m.GUIDANCE_MODES)),
-    "margin": ("margin", _num(NON_NEGATIVE)),
-    "capture_radius": ("capture_radius", _num(NON_NEGATIVE)),
+    "margin": ("margin", _drone_length("a clearance beyond contact", m.PRODUCT_MARGIN_M, NON_NEGATIVE)),
+    "capture_radius": ("capture_radius", _drone_length("the capture radius", m.CAPTURE_RADIUS_M, NON_NEGATIVE)),
 }
 MOCAP_SPEC: dict[str, tuple[str, Reader]] = {
     "kind": ("kind", lambda c, n: _mocap_kind(c, n)),
@@ -360,7 +442,7 @@ MOCAP_SPEC: dict[str, tuple[str, Reader]] = {
     "up_axis": ("up_axis", _choice(("y", "z"))),
     "noise_m": ("noise_m", _num(NON_NEGATIVE)),
     "latency_s": ("latency_s", _num(NON_NEGATIVE)),
-    "rate_hz": ("rate_hz", _num(POSITIVE)),
+    "rate_hz": ("rate_hz", _mocap_rate),
     "dropout": ("dropout", _num(FRACTION)),
     "timeout_s": ("timeout_s", _num(POSITIVE)),
     # kind motioncapture: read as they are here, checked against the library's table in _MissionParser.mocap
@@ -733,14 +815,18 @@ def _describe_obstacle(obstacle: m.Obstacle) -> str:
 
 
 def check_layout(mission: m.Mission, error: LayoutError) -> None:
-    """The whole-mission checks: flight height in arena.z; every start and goal inside arena.x/y, clear of every
-    obstacle by planner.safety_radius, start and goal at least flight.goal_tolerance apart, starts at least
-    2 safety_radius apart, goals at least 4 safety_radius apart. Raises ``error(path, message)``."""
+    """The whole-mission checks: flight height in arena.z; a pose at least every safety.pose_timeout_s; circular
+    obstacles no wider than the arena (and a formation radius written in cm or mm); every start and goal inside
+    arena.x/y, clear of every obstacle by planner.safety_radius, start and goal at least flight.goal_tolerance apart,
+    starts at least 2 safety_radius apart, goals at least 4 safety_radius apart. Raises ``error(path, message)``."""
     arena, r = mission.arena, mission.planner.safety_radius
     h = mission.flight.height
     if not arena.z[0] <= h <= arena.z[1]:
-        raise error("flight.height", f"{_g(h)} is outside arena.z [{_g(arena.z[0])}, {_g(arena.z[1])}]",
-                    at=("arena.z", "flight", "arena"))
+        hint = _slip(h, "m", lambda x: max(arena.z[0], 0.1) <= x <= arena.z[1])
+        raise error("flight.height", f"{_g(h)} is outside arena.z [{_g(arena.z[0])}, {_g(arena.z[1])}]"
+                    f"{'; heights are in m' + hint if hint else ''}", at=("arena.z", "flight", "arena"))
+    _check_rates(mission, error)
+    _check_radii(mission, error)
     tolerance = mission.flight.goal_tolerance
     for i, drone in enumerate(mission.drones):
         for what, p in (("start", drone.start), ("goal", drone.goal)):
@@ -767,6 +853,41 @@ def check_layout(mission: m.Mission, error: LayoutError) -> None:
     _check_spacing(mission, "start", 2 * r, "2 x planner.safety_radius", "they would start in collision", error)
     _check_spacing(mission, "goal", 4 * r, "4 x planner.safety_radius",
                    f"an arrived drone is held as an obstacle of radius {_g(r)} m", error)
+
+
+def _check_rates(mission: m.Mission, error: LayoutError) -> None:
+    """A pose at least once every ``safety.pose_timeout_s``: a slower mocap would hold every drone between frames."""
+    rate, timeout = mission.mocap.rate_hz, mission.safety.pose_timeout_s
+    if 1.0 / rate >= timeout:
+        hint = _period_slip(rate, lambda x: 1.0 / x < timeout and x <= FIRMWARE_MAIN_LOOP_HZ)
+        raise error("mocap.rate_hz", f"{_g(rate)} Hz: a pose every {_g(1.0 / rate)} s, not within "
+                    f"safety.pose_timeout_s ({_g(timeout)} s), so every drone would hold between frames; rates are "
+                    f"in Hz{hint}", at=("safety.pose_timeout_s", "mocap", "safety"))
+
+
+def _check_radii(mission: m.Mission, error: LayoutError) -> None:
+    """Circles that fit the arena: an obstacle no wider than the arena's larger side, a formation whose circle lies
+    in the arena (only when the radius reads as centimetres or millimetres; otherwise its drones' starts say it)."""
+    arena = mission.arena
+    width = max(arena.x[1] - arena.x[0], arena.y[1] - arena.y[0])
+    size = f"arena.x [{_g(arena.x[0])}, {_g(arena.x[1])}], arena.y [{_g(arena.y[0])}, {_g(arena.y[1])}]"
+    for k, obstacle in enumerate(mission.obstacles):
+        if isinstance(obstacle, m.CircleObstacle) and 2 * obstacle.radius > width:
+            hint = _slip(obstacle.radius, "m", lambda x: 0.01 <= x <= width / 2)
+            raise error(f"obstacles[{k}].radius", f"{_g(obstacle.radius)} m: a circle {_g(2 * obstacle.radius)} m "
+                        f"across, wider than the arena ({size}); lengths are in m{hint}")
+    formation = mission.formation
+    if formation is not None:
+        cx, cy = formation.center
+
+        def fits(radius: float) -> bool:
+            return (arena.x[0] <= cx - radius and cx + radius <= arena.x[1]
+                    and arena.y[0] <= cy - radius and cy + radius <= arena.y[1])
+
+        hint = _slip(formation.radius, "m", lambda x: x >= 0.1 and fits(x))
+        if hint and not fits(formation.radius):
+            raise error("formation.radius", f"{_g(formation.radius)} m: the circle around {_pt(formation.center)} "
+                        f"leaves the arena ({size}); lengths are in m{hint}")
 
 
 def _check_spacing(mission: m.Mission, what: str, minimum: float, label: str, why: str, error: LayoutError) -> None:

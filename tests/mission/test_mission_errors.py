@@ -509,6 +509,79 @@ def test_default_flight_height_outside_the_arena_points_at_arena_z(fail):
          "m.yaml:4: flight.height: 0.6 is outside arena.z [0, 0.5]")
 
 
+# ------------------------------------------------------------------ plausible ranges: what the firmware and arena allow
+
+
+def test_speed_in_cm_s_names_the_firmware_limit_and_the_slip(fail):
+    fail(BASE + "flight:\n  speed: 40\n", "m.yaml:6: flight.speed: 40 m/s: above the firmware's 1 m/s velocity "
+         "limit (posCtlPid.xVelMax); speeds are in m/s (40 cm/s is 0.4 m/s)")
+
+
+def test_speed_just_above_the_firmware_limit(fail, load):
+    fail(BASE + "flight: {speed: 1.5}\n", "m.yaml:5: flight.speed: 1.5 m/s: above the firmware's 1 m/s velocity "
+         "limit (posCtlPid.xVelMax); speeds are in m/s")
+    assert load(BASE + "flight: {speed: 1.0}\n").flight.speed == 1.0
+
+
+def test_height_in_cm_says_so(fail):
+    fail(BASE + "flight:\n  height: 60\n",
+         "m.yaml:6: flight.height: 60 is outside arena.z [0, 1.5]; heights are in m (60 cm is 0.6 m)")
+    fail(BASE + "flight:\n  height: 600\n",
+         "m.yaml:6: flight.height: 600 is outside arena.z [0, 1.5]; heights are in m (600 mm is 0.6 m)")
+
+
+@pytest.mark.parametrize("section, key, value, message", [
+    ("planner", "safety_radius", "10", "10 m: above 1 m, implausible for a drone's radius (the default is 0.1 m; a "
+     "Crazyflie 2.x is 92 mm across); lengths are in m (10 cm is 0.1 m)"),
+    ("planner", "margin", "5", "5 m: above 1 m, implausible for a clearance beyond contact (the default is 0.05 m; a "
+     "Crazyflie 2.x is 92 mm across); lengths are in m (5 cm is 0.05 m)"),
+    ("planner", "capture_radius", "30", "30 m: above 1 m, implausible for the capture radius (the default is 0.3 m; a "
+     "Crazyflie 2.x is 92 mm across); lengths are in m (30 cm is 0.3 m)"),
+    ("flight", "goal_tolerance", "10", "10 m: above 1 m, implausible for a goal tolerance (the default is 0.1 m; a "
+     "Crazyflie 2.x is 92 mm across); lengths are in m (10 cm is 0.1 m)"),
+    ("flight", "rate_hz", "200", "200 Hz: above the firmware's 100 Hz position loop (POSITION_RATE), which never "
+     "acts on a faster stream; rates are in Hz"),
+    ("flight", "rate_hz", "0.1", "must be at least 7.5 Hz, so the loop watchdog acts before the Crazyflie's 0.5 s "
+     "setpoint watchdog levels the drones out, got 0.1 (a period of 0.1 s is 10 Hz)"),
+    ("mocap", "rate_hz", "5000", "5000 Hz: above the Crazyflie's 1000 Hz main loop (RATE_MAIN_LOOP), which could use "
+     "no faster poses; rates are in Hz"),
+])
+def test_implausible_values_one_line_each(fail, section, key, value, message):
+    fail(BASE + f"{section}:\n  {key}: {value}\n", f"m.yaml:6: {section}.{key}: {message}")
+
+
+def test_mocap_slower_than_the_pose_timeout(fail):
+    fail(BASE + "mocap:\n  rate_hz: 2\n",
+         "m.yaml:6: mocap.rate_hz: 2 Hz: a pose every 0.5 s, not within safety.pose_timeout_s (0.25 s), so every "
+         "drone would hold between frames; rates are in Hz")
+    fail(BASE + "mocap:\n  rate_hz: 0.01\n", "m.yaml:6: mocap.rate_hz: 0.01 Hz: ", "(a period of 0.01 s is 100 Hz)")
+    fail(BASE + "safety:\n  pose_timeout_s: 0.005\n", "m.yaml:6: mocap.rate_hz: 100 Hz: a pose every 0.01 s, not "
+         "within safety.pose_timeout_s (0.005 s)")
+
+
+def test_obstacle_wider_than_the_arena(fail):
+    fail(BASE + "obstacles:\n  - {shape: circle, center: [0, -1], radius: 10}\n",
+         "m.yaml:6: obstacles[0].radius: 10 m: a circle 20 m across, wider than the arena (arena.x [-2, 2], "
+         "arena.y [-2, 2]); lengths are in m (10 cm is 0.1 m)")
+
+
+def test_formation_radius_in_cm(fail):
+    fail("arena: {x: [-3, 3], y: [-3, 3]}\nformation:\n  kind: circle_swap\n  count: 8\n  radius: 200\n",
+         "m.yaml:5: formation.radius: 200 m: the circle around (0, 0) leaves the arena (arena.x [-3, 3], "
+         "arena.y [-3, 3]); lengths are in m (200 cm is 2 m)")
+
+
+def test_the_shipped_missions_are_plausible():
+    from pathlib import Path
+
+    from rpf_fly.mission import load_mission
+
+    missions = sorted((Path(__file__).resolve().parents[2] / "missions").rglob("*.yaml"))
+    assert len(missions) >= 10
+    for path in missions:
+        load_mission(path)
+
+
 def test_formation_errors_point_at_the_formation(fail):
     fail("# an 8 m circle does not fit a 6 m arena\narena: {x: [-3, 3], y: [-3, 3]}\n"
          "formation:\n  kind: circle_swap\n  count: 8\n  radius: 4\n",

@@ -372,8 +372,15 @@ def test_with_planner_checks_override_values(lab):
 
 def test_with_planner_override_rechecks_the_layout(lab):
     with pytest.raises(MissionError) as info:
-        with_planner(lab, "rpf", safety_radius=1.7)
-    assert str(info.value).startswith("missions/m.yaml:0: --safety-radius: drones[1].start: ")
+        with_planner(lab, "rpf", safety_radius=0.9)
+    assert str(info.value).startswith("missions/m.yaml:0: --safety-radius: drones[1].goal: ")
+
+
+def test_with_planner_override_keeps_the_plausible_range(lab):
+    with pytest.raises(MissionError) as info:
+        with_planner(lab, "rpf", safety_radius=10)
+    assert str(info.value).startswith("missions/m.yaml:0: --safety-radius: 10 m: above 1 m")
+    assert str(info.value).endswith("lengths are in m (10 cm is 0.1 m)")
 
 
 def test_with_planner_unknown_override_is_a_programming_error(lab):
