@@ -25,7 +25,11 @@ Each link runs a thread that emulates cflib's Crazyradio driver with safelink (s
   radio over its budget slows the sender down, never builds an ever-longer queue of stale setpoints), and fails
   the link after `SEND_TIMEOUT_S` (2 s), with cflib's message;
 - closing a link first transmits the uplink packets already queued, so the zero-thrust setpoint that cflib's
-  `close_link` sends always reaches the drone (with a Crazyradio it is a race): the fake takes the pessimistic side.
+  `close_link` sends always reaches the drone (with a Crazyradio it is a race): the fake takes the pessimistic side;
+- `unplug(devid)` pulls that dongle out (the ``dongle_unplug`` fault): every open link on it fails at once with
+  cflib's link-error callback and the message cflib's radio driver gives on a USB error (`UNPLUGGED`), nothing more
+  reaches its drones, and a link opened on it later fails the same way on its first transaction; `replug(devid)`
+  puts it back for links opened after, and `register` / `unregister` put every dongle back.
 Empty acks are not queued to cflib (the real driver queues them as port-15 channel-3 packets, which cflib ignores).
 """
 
@@ -35,6 +39,7 @@ import logging
 import queue
 import threading
 import time
+import weakref
 from collections import deque
 from dataclasses import dataclass
 from typing import Any, ClassVar, Protocol
@@ -62,6 +67,44 @@ acknowledged)."""
 SEND_TIMEOUT_S = 2.0
 """How long `send` waits for room before failing the link, as cflib's ``RadioDriver.send_packet`` does
 (``out_queue.put(pk, True, 2)``, then the link error "RadioDriver: Could not send packet to copter")."""
+
+
+UNPLUGGED = ("Error communicating with crazy radio ,it has probably been unplugged!\n"
+             "Exception:[Errno 19] No such device (it may have been disconnected)\n\n")
+"""The link error of a link whose dongle was pulled out: cflib's ``RadioDriver`` thread says this (with the traceback
+of pyusb's ``USBError``) when a transaction raises."""
+
+_dongles_lock = threading.Lock()
+_unplugged: set[int] = set()
+_links: "weakref.WeakSet[FakeLink]" = weakref.WeakSet()
+
+
+def unplug(devid: int) -> int:
+    """Pull dongle ``devid`` out: each open fake link on it fails at once (its thread calls cflib's link-error
+    callback with `UNPLUGGED`, sends nothing more, flushes nothing at close), and so does every link opened on it
+    until `replug`. Returns how many open links it failed."""
+    with _dongles_lock:
+        _unplugged.add(devid)
+        links = [link for link in _links if link.devid == devid and not link.closed]
+    for link in links:
+        link.wake()
+    return len(links)
+
+
+def replug(devid: int | None = None) -> None:
+    """Plug dongle ``devid`` back in (None: every dongle) for the links opened from now on (a failed link stays
+    failed, as cflib's does)."""
+    with _dongles_lock:
+        if devid is None:
+            _unplugged.clear()
+        else:
+            _unplugged.discard(devid)
+
+
+def unplugged() -> frozenset[int]:
+    """The dongles pulled out (`unplug`) and not put back."""
+    with _dongles_lock:
+        return frozenset(_unplugged)
 
 
 class RadioWorld(Protocol):
@@ -147,10 +190,30 @@ class FakeLink:
         """Notified when an uplink packet leaves `_up` or the link closes (a blocked `send` waits on it)."""
         self._closed = threading.Event()
         self._flush_on_close = False
+        self._failed = False
+        self._fail_lock = threading.Lock()
+        with _dongles_lock:
+            _links.add(self)
+            self._opened_unplugged = uri.devid in _unplugged
         if self._drone is not None:
             self._drone.attach(self._wake)
         self._thread = threading.Thread(target=self._run, name=f"FakeLink-{uri.address:010X}", daemon=True)
         self._thread.start()
+
+    @property
+    def devid(self) -> int:
+        return self._uri.devid
+
+    @property
+    def closed(self) -> bool:
+        return self._closed.is_set()
+
+    def wake(self) -> None:
+        """Wake the transaction thread (it finds its dongle unplugged at once)."""
+        self._wake.set()
+
+    def _pulled_out(self) -> bool:
+        return self._uri.devid in _unplugged
 
     # Called by cflib ------------------------------------------------------------------------------------------
 
@@ -234,8 +297,9 @@ class FakeLink:
         return max(timeout, 0.0)
 
     def _flush(self) -> None:
-        """On close: transmit the uplink packets already queued (a few tries each, no latency), drop the rest."""
-        while self._up and self._drone is not None:
+        """On close: transmit the uplink packets already queued (a few tries each, no latency), drop the rest (all
+        of them when the dongle is unplugged)."""
+        while self._up and self._drone is not None and not self._pulled_out():
             _, header, payload = self._up.popleft()
             for _ in range(3):
                 ok, _retry, _down = self._transact((header, payload))
@@ -246,10 +310,17 @@ class FakeLink:
         lost = 0
         last_tx = -float("inf")
         timing = self._timing
+        if self._opened_unplugged:
+            # opened on a dongle already pulled out: its first transaction fails, one idle poll on (not at once:
+            # cflib's open_link stores the driver only after connect returns, and its error callback expects that)
+            self._closed.wait(timing.idle_poll_s)
         while True:
             if self._closed.is_set():
                 if self._flush_on_close:
                     self._flush()
+                return
+            if self._pulled_out():
+                self._fail(UNPLUGGED)
                 return
             now = time.monotonic()
             self._release_downlink(now)
@@ -310,8 +381,12 @@ class FakeLink:
                 logger.exception("radio link statistics failed")
 
     def _fail(self, message: str) -> None:
+        with self._fail_lock:
+            if self._failed:
+                return
+            self._failed = True
         callback = self._error_callback
-        logger.info("fake link %010X: %s", self._uri.address, message)
+        logger.info("fake link %010X: %s", self._uri.address, message.splitlines()[0])
         self._closed.set()
         self._taken()
         self._in.put(None)
@@ -385,7 +460,8 @@ class FakeRadioDriver(CRTPDriver):
 
 
 def register(world: RadioWorld | None = None) -> type[FakeRadioDriver]:
-    """Make ``fake://`` URIs reach `world` through cflib (replacing any previously registered fake driver).
+    """Make ``fake://`` URIs reach `world` through cflib (replacing any previously registered fake driver; every
+    dongle plugged in).
 
     Without a world, any unchanged cflib program works: a world of drones that appear on their first connection,
     on the floor, on a 0.5 m grid in the order they connect (ten a row along +x, rows along +y), or where the URI's
@@ -401,7 +477,9 @@ def register(world: RadioWorld | None = None) -> type[FakeRadioDriver]:
 
 
 def unregister() -> None:
-    """Remove every fake driver from cflib's driver list (open links keep working until closed)."""
+    """Remove every fake driver from cflib's driver list (open links keep working until closed) and plug every
+    unplugged dongle back in (`replug`)."""
+    replug()
     cflib.crtp.CLASSES[:] = [
         cls for cls in cflib.crtp.CLASSES if not (isinstance(cls, type) and issubclass(cls, FakeRadioDriver))
     ]
