@@ -33,9 +33,11 @@ when a command that ends the stream (take-off, go-to, hand-over, land, stop) is 
 queued before a landing reaches the drone after it. `wait_sent` waits until the queued commands went out. Packets go
 through `Crazyflie.send_packet`, which holds cflib's own send lock. `emergency_stop` drops the drones' pending
 commands, refuses any after it, and sends at once from a thread per drone (not through the pool), waiting a bounded
-time, so a blocked link delays no other drone's stop nor its caller. Telemetry and link callbacks run on cflib's threads (the link's receive thread, the
-radio thread on link loss). `connect`, `reset_estimators` and `close` block and must not run concurrently with each
-other. Link-lost callbacks must be short and must not call `close`.
+time, so a blocked link delays no other drone's stop nor its caller. The keep-alives of `arm_watchdog` are queued by a
+thread of the backend's own (started by the first call, ended by `close`), never by the caller's. Telemetry and
+link callbacks run on cflib's threads (the link's receive thread, the radio thread on link loss). `connect`,
+`reset_estimators` and `close` block and must not run concurrently with each other. Link-lost callbacks must be
+short and must not call `close`.
 
 Hand-over rule (crazyflie-firmware `commander.c`, `crtp_commander_high_level.c`): a streamed setpoint stops the
 high-level plan; notify-setpoint-stop relaxes the commander's priority, and at its next tick (100 Hz) the
