@@ -7,6 +7,7 @@
     python tools/fault_campaign.py --random 20 --seed 10 --faults-per-run 2   # two faults of different kinds a flight
     python tools/fault_campaign.py --random 16 --seed 16 --extpose --faults-per-run 2 --vary-world --only 14 \
         --keep /tmp/run14 --out -                         # re-fly one run of that campaign, keeping its log
+    python tools/fault_campaign.py --kinds ground_station_kill,dongle_unplug --out -   # the lab kinds' 10 runs
 
 Each run is ``rpf-fly fly MISSION --dry-run --faults F --no-console --log L`` in a process of its own, with a
 schedule of ONE fault (the kind's default parameters below) naming the mission's middle drone. The verdict does
@@ -26,6 +27,18 @@ not trust the stack: it reads the flight log with the mcap library itself and ju
 - the log reviews (``rpf-fly review --json``); the process exits by itself within the flight timeout plus 10 s
   of its planning phase, 0 when every drone reached, 1 otherwise, and never with a traceback.
 
+Two kinds need a lab (``rpf-fly lab``): ``ground_station_kill`` (the flight's process SIGKILLed at a phase) and
+``dongle_unplug`` (a Crazyradio pulled out). Each of their runs (`LAB_RUNS`, on missions of their own: every phase
+of the kill on lab-3 and circle-8-r3, the unplug on the two-dongle missions pillars-6 and radio-split-10) starts
+``rpf-fly lab MISSION --log LAB`` with a lab file of its own, flies ``rpf-fly fly MISSION --lab --faults F`` against
+it, stops the lab (SIGTERM) 6 s after the fault, and judges the lab's log (`judge_lab`): the truth as above (no
+crash, no contact, the arena, every drone down at the end), and `rpf_fly.flight.lab.after_ground_station` from the
+fault's moment for the drones it leaves without a ground station (all of them for a kill, the dongle's for an
+unplug): each down (motors off or on the floor) within 1.5 s, none moved more than 1 m horizontally, none flying
+5 s after. A kill must strike in the phase it names, the flight die by SIGKILL and its cut log still review; an
+unplug's flight lives on: the other dongles' drones reach their goals, each of the dongle's drones is said lost
+within 1 s, and it exits 1 without a traceback. The random campaign does not draw these two kinds.
+
 Writes the table (markdown) to ``--out`` (default docs/fault-campaign.md) and the verdicts as JSON to ``--json``.
 """
 
@@ -35,10 +48,13 @@ import argparse
 import contextlib
 import json
 import math
+import os
 import random
+import signal
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -51,6 +67,7 @@ import yaml  # noqa: E402
 from mcap.reader import make_reader  # noqa: E402
 
 from rpf_fly.mission import load_mission  # noqa: E402
+from rpf_fly.radio.budget import dongle_of  # noqa: E402
 
 CONTACT_M = 0.13
 """Two airborne drones' true centres closer than this touch (a Crazyflie 2.1's rotor-tip span)."""
@@ -79,6 +96,25 @@ DEFAULTS: dict[str, dict[str, Any]] = {
     "estimator_divergence": {"rate_m_s": 0.3},
     "reboot": {},
 }
+LAB_RUNS: list[tuple[str, str, dict[str, Any]]] = [
+    *[("ground_station_kill", mission, {"at_phase": phase, "at_s": at_s}) for mission in ("lab-3", "circle-8-r3")
+      for phase, at_s in (("takeoff", 1.0), ("settle", 0.2), ("planning", 3.0), ("landing", 0.7))],
+    ("dongle_unplug", "campaign/pillars-6", {"dongle": 1, "at_s": 3.0}),
+    ("dongle_unplug", "radio/split-10", {"dongle": 1, "at_s": 3.0}),
+]
+"""The runs of the kinds that need a lab (kind, mission under missions/, the fault's fields): the kill in each phase
+on the fixed campaign's two missions (at_s: half way up a 2 s take-off, inside the 0.5 s settle, 3 s into the
+planning, half way down a 2 s landing's first metre); the unplug on the shipped missions with two dongles."""
+LAB_KINDS = {kind for kind, _, _ in LAB_RUNS}
+DOWN_WITHIN_S = 1.5
+"""A drone left without its ground station is down (motors off or on the floor) this soon (the firmware's 1 s
+emergency-stop watchdog and a fall)."""
+MOVED_M = 1.0
+"""... and moved no further than this horizontally from where it was."""
+STILL_FLYING_S = 5.0
+"""... and is not flying this long after."""
+LAB_AFTER_S = 6.0
+"""The lab runs on this long after the fault before it is stopped (its log then covers the judgement)."""
 SWARM_KINDS = {"blackout", "mocap_delay", "loop_stall"}
 POWER_ON = {"yaw_offset", "start_offset", "upside_down", "motor_fault"}
 UNSAFE_TO_FLY = {"start_offset", "upside_down", "motor_fault"}
@@ -281,6 +317,209 @@ def judge_faults(faults: list[dict[str, Any]], mission_path: Path, workdir: Path
     verdict.events += notes
     verdict.passed = not verdict.failures
     return verdict
+
+
+def judge_lab(fault: dict[str, Any], mission_path: Path, workdir: Path, tag: str = "") -> Verdict:
+    """Fly ``mission_path`` against a lab of its own with the one fault ``fault`` (a `LAB_KINDS` kind's schedule
+    entry) and judge it on the lab's log (module docstring)."""
+    from types import SimpleNamespace
+
+    from rpf_fly.flight.lab import after_ground_station
+
+    mission = load_mission(mission_path)
+    names = [d.name for d in mission.drones]
+    kind = fault["kind"]
+    kill = kind == "ground_station_kill"
+    orphans = names if kill else [d.name for d in mission.drones if dongle_of(d.uri) == fault["dongle"]]
+    verdict = Verdict(kind, mission.name, None if kill else ",".join(orphans),
+                      params={k: v for k, v in fault.items() if k != "kind"})
+    fail = verdict.failures.append
+    label = "-".join(str(v) for k, v in fault.items() if k != "kind")
+    stem = f"{mission.name}-{kind}-{label}{tag}"
+    schedule_file, log, lab_log = workdir / f"{stem}.yaml", workdir / f"{stem}.mcap", workdir / f"{stem}.lab.mcap"
+    schedule_file.write_text(schedule_of([fault]))
+    lab_file = workdir / f"{stem}.lab.json"
+    env = dict(os.environ, PYTHONUNBUFFERED="1", RPF_FLY_LAB=str(lab_file))
+    started = time.monotonic()
+    limit = mission.flight.timeout_s + 60.0 + 10.0
+    with open(workdir / f"{stem}.lab.out", "w+") as lab_out:
+        lab = subprocess.Popen([sys.executable, "-m", "rpf_fly", "lab", str(mission_path), "--log", str(lab_log)],
+                               stdout=lab_out, stderr=subprocess.STDOUT, text=True, env=env, cwd=workdir)
+        try:
+            deadline = time.monotonic() + 60.0
+            while not lab_file.exists() and lab.poll() is None and time.monotonic() < deadline:
+                time.sleep(0.05)
+            if not lab_file.exists():
+                fail("the lab did not start")
+                return verdict
+            flown = _fly_against_lab(mission_path, schedule_file, log, env, workdir, limit, kind)
+        finally:
+            lab.send_signal(signal.SIGTERM)
+            try:
+                lab.wait(timeout=60)
+            except subprocess.TimeoutExpired:
+                lab.kill()
+                fail("the lab did not stop on SIGTERM")
+        lab_out.seek(0)
+        if "Traceback" in lab_out.read():
+            fail("traceback in the lab's output")
+    verdict.seconds = time.monotonic() - started
+    if flown is None:
+        fail(f"the flight did not exit within {limit:.0f} s")
+        return verdict
+    code, stdout, stderr, struck_ns, exited_ns = flown
+    verdict.exit_code = code
+    if "Traceback" in stdout or "Traceback" in stderr:
+        fail("traceback in the flight's output")
+    for line in stdout.splitlines():
+        name, _, rest = line.partition(": ")
+        if name in names:
+            verdict.outcomes[name] = rest.split(" ")[0]
+    try:
+        lab_topics, _ = read_log(lab_log)
+    except Exception as err:  # noqa: BLE001 - an unreadable log is a verdict, not a crash of the campaign
+        fail(f"lab log unreadable: {err}")
+        return verdict
+    review = subprocess.run([sys.executable, "-m", "rpf_fly", "review", str(log), "--json"], capture_output=True,
+                            text=True, timeout=120, cwd=workdir)
+    if review.returncode != 0:
+        fail(f"the flight's log does not review: {review.stderr.strip()[-200:]}")
+    events: list[tuple[int, dict]] = []
+    if not kill:
+        try:
+            events = read_log(log)[0].get("/events", [])
+        except Exception as err:  # noqa: BLE001
+            fail(f"flight log unreadable: {err}")
+    # --- when it struck: an unplug's injection event (the flight lives on and closes its log); a kill's line on
+    # stderr, read as it came (the MCAP log is cut where the kill found it), else the process's end
+    at_ns = next((t for t, m in events if m.get("file") == "fault"
+                  and m.get("message", "").startswith(f"injected {kind}")), None) if not kill else struck_ns
+    if at_ns is None and kill:
+        at_ns = exited_ns
+        fail("no 'injected ground_station_kill' line on the flight's stderr")
+    if at_ns is None:
+        fail(f"{kind} was never injected")
+        return verdict
+    if kill:
+        if code != -signal.SIGKILL:
+            fail(f"exit {code}, expected death by SIGKILL ({-signal.SIGKILL})")
+        phase = _phase_at_kill(stderr)
+        expected = {"takeoff": "takeoff", "settle": "takeoff", "planning": "flying", "landing": "landing"}
+        if phase != expected[fault["at_phase"]]:
+            fail(f"struck in the swarm's phase {phase}, not {expected[fault['at_phase']]}")
+        if fault["at_phase"] == "takeoff" and "take-off commanded" not in stderr:
+            fail("struck before the take-off was commanded")
+    else:
+        expected_code = 0 if not orphans else 1
+        if code != expected_code:
+            fail(f"exit code {code}, expected {expected_code}")
+    # --- the truth
+    truth = {n: lab_topics.get(f"/truth/{n}", []) for n in names}
+    if any(not samples for samples in truth.values()):
+        fail("no /truth in the lab log for " + ", ".join(n for n, s in truth.items() if not s))
+        return verdict
+    crashed = sorted(n for n, s in truth.items() if any(m["crashed"] for _, m in s))
+    if crashed:
+        fail("crashed: " + ", ".join(crashed))
+    outside = _outside_arena(truth, mission.arena, mission.planner.safety_radius)
+    if outside:
+        fail("outside the arena by more than r: " + ", ".join(outside))
+    min_sep = _min_separation(truth)
+    verdict.min_separation_m = min_sep
+    if min_sep is not None and min_sep < CONTACT_M:
+        fail(f"two airborne drones {min_sep:.3f} m apart (< {CONTACT_M} m)")
+    for n, samples in truth.items():
+        last = samples[-1][1]
+        if last["motors"] or last["position"]["z"] > ON_FLOOR_M:
+            fail(f"{n} not down at the end (motors {last['motors']}, z {last['position']['z']:.2f} m)")
+    try:
+        after = after_ground_station({n: [SimpleNamespace(log_time=t, data=m) for t, m in truth[n]] for n in orphans},
+                                     at_ns, (STILL_FLYING_S,))
+    except ValueError as err:
+        fail(str(err))
+        return verdict
+    airborne = [n for n, d in after.items() if d.motors_at_death and d.z_at_death > ON_FLOOR_M]
+    if not airborne:
+        fail(f"no drone airborne at the {kind}: nothing was tested")
+    for n, d in after.items():
+        if d.down_after_s is None or d.down_after_s > DOWN_WITHIN_S:
+            fail(f"{n} not down within {DOWN_WITHIN_S:g} s of the {kind} "
+                 f"({'never' if d.down_after_s is None else f'{d.down_after_s:.2f} s'})")
+        if d.moved_m > MOVED_M:
+            fail(f"{n} moved {d.moved_m:.2f} m after the {kind} (> {MOVED_M:g} m)")
+        if d.flying_at_s[STILL_FLYING_S]:
+            fail(f"{n} still flying {STILL_FLYING_S:g} s after the {kind}")
+    down = [d.down_after_s for n, d in after.items() if n in airborne and d.down_after_s is not None]
+    verdict.events.append(f"{len(airborne)} of {len(after)} airborne at the {kind.replace('_', ' ')}"
+                          + (f"; down {min(down):.2f}-{max(down):.2f} s after" if down else "")
+                          + f"; moved at most {max(d.moved_m for d in after.values()):.2f} m")
+    behind = [m.get("message", "") for _, m in lab_topics.get("/events", [])
+              if "could not keep up" in m.get("message", "")]
+    if behind:  # the lab's world fell behind its own time: what the drones did is the host's as much as the stack's
+        verdict.events.append(f"lab: {behind[-1]}")
+    if not kill:
+        goals = {d.name: d.goal for d in mission.drones}
+        missed = [n for n in names if n not in orphans and not (
+            verdict.outcomes.get(n) == "reached"
+            and math.dist((truth[n][-1][1]["position"]["x"], truth[n][-1][1]["position"]["y"]), goals[n]) < GOAL_M)]
+        if missed:
+            fail("did not reach their goals: " + ", ".join(missed))
+        for n in orphans:
+            said = [m for t, m in events if at_ns <= t <= at_ns + EVENT_WINDOW_S * 1e9 and m.get("level", 0) >= 3
+                    and m.get("name") == n]
+            if not said:
+                fail(f"no warning naming {n} within {EVENT_WINDOW_S:g} s of the unplug")
+            elif n == orphans[0]:
+                verdict.events.append(f"{said[0].get('file')}: {said[0].get('message', '').splitlines()[0]}")
+    verdict.passed = not verdict.failures
+    return verdict
+
+
+def _fly_against_lab(mission_path: Path, schedule_file: Path, log: Path, env: dict[str, str], workdir: Path,
+                     limit: float, kind: str) -> Optional[tuple[int, str, str, Optional[int], int]]:
+    """``rpf-fly fly --lab --faults`` in a process of its own: (exit code, stdout, stderr, when the fault's line
+    came on stderr (Unix ns), when the process ended), or None when it outlived ``limit``. A kill's moment is the
+    stderr line the injection writes just before it; an unplug's flight lives on and returns when it ends."""
+    flight = subprocess.Popen([sys.executable, "-m", "rpf_fly", "fly", str(mission_path), "--lab", "--faults",
+                               str(schedule_file), "--no-console", "--log", str(log)], stdout=subprocess.PIPE,
+                              stderr=subprocess.PIPE, text=True, env=env, cwd=workdir)
+    lines: list[tuple[int, str]] = []
+    out: list[str] = []
+
+    def read_stderr() -> None:
+        for line in flight.stderr:  # type: ignore[union-attr]
+            lines.append((time.time_ns(), line))
+
+    def read_stdout() -> None:
+        out.append(flight.stdout.read())  # type: ignore[union-attr]
+
+    readers = [threading.Thread(target=read_stderr, daemon=True), threading.Thread(target=read_stdout, daemon=True)]
+    for reader in readers:
+        reader.start()
+    try:
+        code = flight.wait(timeout=limit)
+    except subprocess.TimeoutExpired:
+        flight.kill()
+        flight.wait()
+        return None
+    exited_ns = time.time_ns()
+    for reader in readers:
+        reader.join(timeout=10)
+    struck = next((t for t, line in lines if f"injected {kind}" in line), None)
+    if kind == "ground_station_kill" or struck is not None:
+        time.sleep(max(0.0, ((struck or exited_ns) + LAB_AFTER_S * 1e9 - time.time_ns()) / 1e9))
+    return code, "".join(out), "".join(line for _, line in lines), struck, exited_ns
+
+
+def _phase_at_kill(stderr: str) -> Optional[str]:
+    """The swarm's phase (its last ``[phase] swarm: X`` line) before the kill's line on the flight's stderr."""
+    phase = None
+    for line in stderr.splitlines():
+        if "injected ground_station_kill" in line:
+            return phase
+        if line.startswith("[phase] swarm: "):
+            phase = line.removeprefix("[phase] swarm: ").split(" ")[0]
+    return phase
 
 
 def _outside_arena(truth: dict[str, list[tuple[int, dict]]], arena: Any, r: float) -> list[str]:
@@ -629,11 +868,41 @@ def random_campaign(runs: int, seed: int, missions: list[str], planners: list[st
     return verdicts
 
 
+def lab_runs(kinds: list[str], missions: str, default_missions: str, planner: Optional[str], extpose: bool,
+             workdir: Path) -> list[tuple[str, Path, dict[str, Any]]]:
+    """The lab kinds' runs among ``kinds``: `LAB_RUNS`, or with ``--missions`` given each kind on those missions
+    (the kill in every phase; the unplug of each mission's highest dongle)."""
+    runs: list[tuple[str, Path, dict[str, Any]]] = []
+    if missions == default_missions:
+        chosen = [(kind, ROOT / "missions" / f"{name}.yaml", fields) for kind, name, fields in LAB_RUNS]
+    else:
+        chosen = []
+        for name in missions.split(","):
+            for kind, _, fields in LAB_RUNS:
+                if kind == "dongle_unplug":
+                    top = max(dongle_of(d.uri) for d in load_mission(mission_path(name)).drones)
+                    fields = {**fields, "dongle": top}
+                if (kind, mission_path(name), fields) not in chosen:
+                    chosen.append((kind, mission_path(name), fields))
+    for kind, path, fields in chosen:
+        if kind not in kinds:
+            continue
+        if planner:
+            path = with_planner_kind(path, planner, workdir)
+        if extpose:
+            path = with_extpose(path, workdir)
+        runs.append((kind, path, {"kind": kind, **fields}))
+    return runs
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--missions", default="lab-3,circle-8-r3",
                         help="comma-separated shipped mission names or mission file paths")
-    parser.add_argument("--kinds", default=",".join(DEFAULTS))
+    parser.add_argument("--kinds", default=",".join([*DEFAULTS, *sorted(LAB_KINDS)]),
+                        help="comma-separated fault kinds (default: every kind; ground_station_kill and "
+                             "dongle_unplug fly their own missions against a lab, LAB_RUNS, unless --missions "
+                             "is given)")
     parser.add_argument("--out", default=str(ROOT / "docs" / "fault-campaign.md"), help="markdown table, - for stdout")
     parser.add_argument("--json", default=None, help="verdicts as JSON")
     parser.add_argument("--planner", default=None,
@@ -667,21 +936,36 @@ def main() -> int:
             missions = RANDOM_MISSIONS.split(",") if args.missions == parser.get_default("missions") \
                 else args.missions.split(",")
             kinds = None if args.kinds == parser.get_default("kinds") else args.kinds.split(",")
+            if kinds is not None and LAB_KINDS & set(kinds):
+                parser.error(f"--random draws {', '.join(sorted(LAB_KINDS))} nowhere: they fly against a lab, in "
+                             "the fixed campaign only")
             verdicts = random_campaign(args.random, args.seed, missions, args.planners.split(","), Path(tmp), kinds,
                                        extpose=args.extpose, faults_per_run=args.faults_per_run,
                                        vary_world=args.vary_world,
                                        only={int(r) for r in args.only.split(",")} if args.only else None)
+        kinds = args.kinds.split(",")
+        unknown = [k for k in kinds if k not in DEFAULTS and k not in LAB_KINDS]
+        if unknown:
+            parser.error(f"--kinds: unknown {', '.join(unknown)}")
         for mission_name in ([] if args.random else args.missions.split(",")):
             path = mission_path(mission_name)
             if args.planner:
                 path = with_planner_kind(path, args.planner, Path(tmp))
             if args.extpose:
                 path = with_extpose(path, Path(tmp))
-            for kind in args.kinds.split(","):
+            for kind in kinds:
+                if kind in LAB_KINDS:
+                    continue
                 v = judge(kind, path, Path(tmp))
                 verdicts.append(v)
                 print(f"{v.mission:14s} {v.kind:22s} {'pass' if v.passed else 'FAIL'}  {'; '.join(v.failures)}",
                       flush=True)
+        for kind, path, fault in ([] if args.random else lab_runs(kinds, args.missions, parser.get_default(
+                "missions"), args.planner, args.extpose, Path(tmp))):
+            v = judge_lab(fault, path, Path(tmp))
+            verdicts.append(v)
+            print(f"{v.mission:14s} {v.kind:22s} {json.dumps(v.params)} {'pass' if v.passed else 'FAIL'}  "
+                  f"{'; '.join(v.failures)}", flush=True)
     text = table(verdicts)
     if args.random and args.out == parser.get_default("out"):
         args.out = str(ROOT / "docs" / "fault-campaign-random.md")
