@@ -25,7 +25,7 @@ Integration: `step(dt)` advances by dt with the rotor commands held. "midpoint" 
 step with one evaluation of the forces: the rotors by Heun's rule, then the accelerations at the rotors' mean speed
 and the orientation half a step on, then velocity and rates, and position and orientation with the mean of the old
 and new velocity and rates. "rk4" is the classic Runge-Kutta step, what the reference integrates with at 1 kHz, at
-four evaluations. At 1 kHz the two fly the public scenarios within 0.02 mm and 0.003 deg of each other
+four evaluations. At 1 kHz the two fly a 0.5 m step within 0.05 mm and 0.01 deg of each other
 (tests/emulator/test_cf_controller.py).
 """
 

@@ -177,7 +177,8 @@ class CfDrone:
         body.step(TICK_S)
         self.tick_count += 1
 
-    _last_thrust = 0.0
+    _last_thrust = math.nan
+    """The thrust of the last tick (NaN before the first: the first tick sets the motors)."""
 
     # Outputs ----------------------------------------------------------------------------------------------------
 
