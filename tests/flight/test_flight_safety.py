@@ -141,8 +141,9 @@ def test_an_emergency_stop_asked_during_a_radio_send_does_not_wait_for_it(tmp_pa
 
 
 def test_a_lost_link_drone_stays_in_the_others_views_until_it_is_down(tmp_path, short_mission):
-    """cf3's link drops: its firmware hovers, levels out at 0.5 s and falls at 2 s. Until mocap shows it on the
-    floor it is still in cf2's view (before, it vanished from every view at once, still in the air)."""
+    """cf3's link drops: its firmware's emergency-stop watchdog cuts its motors about 1 s after the last keep-alive
+    reached it, and it falls. Until mocap shows it on the floor it is still in cf2's view (before, it vanished from
+    every view at once, still in the air)."""
     base = default_factory(short_mission)
     seen: list[tuple[float, int]] = []  # (time, neighbours in cf2's view)
 
@@ -168,8 +169,9 @@ def test_a_lost_link_drone_stays_in_the_others_views_until_it_is_down(tmp_path, 
     slow = replace(short_mission, flight=replace(short_mission.flight, speed=0.3))
     flight = fly(slow, tmp_path, factory=factory, when_flying=drop)
     assert flight.report.outcomes["cf3"] == FlightOutcome.LINK_LOST
-    # cflib declares the link lost after 100 lost acks (~0.2 s); cf3 falls 2 s after its last setpoint.
-    soon = [n for t, n in seen if dropped_at[0] + 0.3 < t < dropped_at[0] + 1.5]
+    # cflib declares the link lost after 100 lost acks (~0.2 s); cf3's motors stop 0.8-1.0 s after the drop (its
+    # last keep-alive went out up to 0.2 s before it), and it falls from 0.5 m in 0.32 s.
+    soon = [n for t, n in seen if dropped_at[0] + 0.3 < t < dropped_at[0] + 0.75]
     assert soon and all(n == 2 for n in soon), soon
     late = [n for t, n in seen if t > dropped_at[0] + 3.5]
     assert late and all(n == 1 for n in late), late  # on the floor: out of the way
@@ -220,7 +222,8 @@ def test_a_drone_is_disarmed_only_after_its_supervisor_says_it_landed(tmp_path, 
 
 def test_a_flight_whose_last_drone_lost_its_link_ends_once_mocap_sees_it_down(tmp_path, short_mission):
     """A one-drone flight whose link drops: nothing is left flying its mission, but the flight waits, its log
-    open, until mocap shows the drone on the floor (its firmware cuts the motors 2 s after its last setpoint).
+    open, until mocap shows the drone on the floor (its firmware's emergency-stop watchdog cuts the motors about 1 s
+    after the last keep-alive).
     Before, the flight ended at once and its log closed with the drone still in the air, motors on."""
     solo = replace(short_mission, drones=short_mission.drones[:1])
     name = solo.drones[0].name
@@ -236,7 +239,10 @@ def test_a_flight_whose_last_drone_lost_its_link_ends_once_mocap_sees_it_down(tm
     truth = [m.data for m in flight.log.messages(f"/truth/{name}")]
     last = truth[-1]
     assert not last["motors"] and last["position"]["z"] < 0.05, last
-    assert flight.log.messages(f"/truth/{name}")[-1].log_time > dropped_at[0] + 2_000_000_000
+    assert flight.log.messages(f"/truth/{name}")[-1].log_time > dropped_at[0] + 1_000_000_000
+    cut = next(m.log_time for m in flight.log.messages(f"/truth/{name}")
+               if m.log_time > dropped_at[0] and not m.data["motors"])
+    assert 0.6e9 < cut - dropped_at[0] < 1.3e9, (cut - dropped_at[0]) / 1e9  # the watchdog, not the 2 s one
 
 
 def test_an_orientation_flip_under_extpose_is_not_fed_to_the_estimator(tmp_path, short_mission):
