@@ -3,7 +3,8 @@
 Scenes are the five paper missions (``missions/<name>.yaml``, seeds ``0..N-1`` draw each mission's start jitter)
 and ``arena-a-fresh``: training-arena-A scenes generated from seeds ``1_000_000 + i``, a range the trainer never
 draws (its scenes come from its own generator seeded with the training seed). Planners: ``rpf`` (RPF-1,
-attention), ``rpf-mean`` (RPF-2), ``apf`` (robust fixed gains), ``ppo`` (heading policy) and ``orca``. The
+attention), ``rpf-mean`` (RPF-2), ``apf`` (robust fixed gains), ``ppo`` (heading policy), ``orca`` and ``rpf3``
+(RPF-3, the product's default planner, with its guidance, margin and tuning). The
 learned kinds load ``<policies>/<kind>.onnx`` or a path given per kind; an absent or unusable policy makes that
 planner's rows ``missing`` with the reason.
 
@@ -25,8 +26,8 @@ from rpf_fly.sim.evaluate import Run, planner_settings, run_scenario, sim_params
 from rpf_fly.sim.rollout import DroneOutcome, SimParams
 from rpf_fly.sim.scenario import Scenario, arena_a, scenario_from_mission
 
-PLANNERS = ("rpf", "rpf-mean", "apf", "ppo", "orca")
-"""Bench planner kinds, in table order."""
+PLANNERS = ("rpf", "rpf-mean", "apf", "ppo", "orca", "rpf3")
+"""Bench planner kinds, in table order: the paper's, then RPF-3 (the product's default, judged in no paper claim)."""
 PLANNER_LABELS = {"rpf": "RPF-1", "rpf-mean": "RPF-2", "apf": "APF", "ppo": "PPO", "orca": "ORCA", "rpf3": "RPF-3"}
 PAPER_MISSIONS = ("arena-a-6", "arena-b-6", "circle-8-r3", "circle-8-r8", "lab-3")
 FRESH_SCENE = "arena-a-fresh"

@@ -10,7 +10,7 @@ import typer
 from rpf_fly.cli import app
 from rpf_fly.cli.errors import fail
 
-_PLANNERS = "rpf,rpf-mean,apf,ppo,orca"
+_PLANNERS = "rpf,rpf-mean,apf,ppo,orca,rpf3"  # rpf_fly.bench.runner.PLANNERS (not imported: the CLI starts fast)
 _SCENES = "arena-a-6,arena-b-6,circle-8-r3,circle-8-r8,lab-3,arena-a-fresh"
 
 

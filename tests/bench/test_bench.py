@@ -141,6 +141,22 @@ def test_cli_bench_json_and_missing_rows(tmp_path):
     assert result.exit_code == 2 and "unknown planner 'bogus'" in result.output
 
 
+def test_the_bench_runs_the_default_planner_rpf3_by_default():
+    """RPF-3, the product's default planner, is among the bench's planners (the library's and the CLI's) and flies
+    a paper mission with its shipped policy (one seed of lab-3: a few seconds)."""
+    from rpf_fly.bench.runner import PLANNERS
+    from rpf_fly.cli import bench_cmd
+    from rpf_fly.mission.model import DEFAULT_KIND
+
+    assert DEFAULT_KIND in PLANNERS and BenchConfig().planners == PLANNERS
+    assert tuple(bench_cmd._PLANNERS.split(",")) == PLANNERS  # noqa: SLF001
+    plan = prepare(BenchConfig(planners=("rpf3",), scenes=("lab-3",), episodes=1, policies_dir=ROOT / "policies",
+                               missions_dir=MISSIONS, trajectory_scenes=()))
+    assert not plan.missing and plan.policies["rpf3"].path.name == "rpf3.onnx"
+    (row,) = run_bench(plan).rows
+    assert row["status"] == "ok" and row["planner"] == "rpf3" and row["success_rate"] == 1.0
+
+
 # -- claims on hand-made results ------------------------------------------------------------------------------------
 
 

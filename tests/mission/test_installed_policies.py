@@ -35,8 +35,8 @@ def test_the_wheel_ships_every_policy_a_kind_defaults_to_where_the_loader_looks(
 def test_a_wheel_layout_without_a_checkout_loads_the_default_planner(tmp_path):
     """The package and the data files laid out as pip installs a wheel into a prefix, imported without the
     editable install (``python -S``, the prefix's site-packages first): a mission naming no planner loads RPF-3's
-    policy from ``<prefix>/share/rpf_fly/policies``, and one naming ``../policies/rpf.onnx`` (a mission copied out
-    of the checkout's ``missions/``) finds the shipped one there by file name."""
+    policy from ``<prefix>/share/rpf_fly/policies``, and one naming ``../policies/rpf3.onnx`` (lab-3 copied out of
+    the checkout's ``missions/``) finds the shipped one there by file name."""
     prefix = tmp_path / "prefix"
     site = prefix / Path(sysconfig.get_path("purelib")).relative_to(sysconfig.get_path("data"))
     shutil.copytree(ROOT / "rpf_fly", site / "rpf_fly", ignore=shutil.ignore_patterns("__pycache__"))
@@ -60,4 +60,4 @@ def test_a_wheel_layout_without_a_checkout_loads_the_default_planner(tmp_path):
     package, default_policy, copied_policy = done.stdout.split()
     assert Path(package).is_relative_to(site)
     assert Path(default_policy) == (prefix / INSTALLED_POLICIES / "rpf3.onnx").resolve()
-    assert Path(copied_policy) == (prefix / INSTALLED_POLICIES / "rpf.onnx").resolve()
+    assert Path(copied_policy) == (prefix / INSTALLED_POLICIES / "rpf3.onnx").resolve()

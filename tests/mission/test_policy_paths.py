@@ -22,20 +22,20 @@ def test_the_project_policies_are_the_shipped_ones():
 def test_a_copied_mission_finds_the_shipped_policy(tmp_path, monkeypatch):
     mission = tmp_path / "my-lab.yaml"
     shutil.copy(ROOT / "missions" / "lab-3.yaml", mission)
-    assert "policy: ../policies/rpf.onnx" in mission.read_text()
+    assert "policy: ../policies/rpf3.onnx" in mission.read_text()
     elsewhere = tmp_path / "somewhere"
     elsewhere.mkdir()
     monkeypatch.chdir(elsewhere)
     loaded = load_mission(mission)
-    assert loaded.planner.policy == (ROOT / "policies" / "rpf.onnx").resolve()
+    assert loaded.planner.policy == (ROOT / "policies" / "rpf3.onnx").resolve()
     # --planner of another learned kind takes its default from the shipped policies too.
     assert with_planner(loaded, "rpf-mean").planner.policy == (ROOT / "policies" / "rpf-mean.onnx").resolve()
 
 
 def test_a_policy_beside_the_mission_wins_over_the_shipped_one(tmp_path):
     (tmp_path / "policies").mkdir()
-    mine = tmp_path / "policies" / "rpf.onnx"
-    shutil.copy(ROOT / "policies" / "rpf.onnx", mine)
+    mine = tmp_path / "policies" / "rpf3.onnx"
+    shutil.copy(ROOT / "policies" / "rpf3.onnx", mine)
     mission = tmp_path / "m.yaml"
     mission.write_text((ROOT / "missions" / "lab-3.yaml").read_text().replace("../policies/", "policies/"))
     assert load_mission(mission).planner.policy == mine.resolve()
@@ -44,7 +44,7 @@ def test_a_policy_beside_the_mission_wins_over_the_shipped_one(tmp_path):
 def test_a_policy_of_ones_own_has_no_fallback(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     mission = tmp_path / "m.yaml"
-    mission.write_text((ROOT / "missions" / "lab-3.yaml").read_text().replace("../policies/rpf.onnx", "mine/rpf.onnx"))
+    mission.write_text((ROOT / "missions" / "lab-3.yaml").read_text().replace("../policies/rpf3.onnx", "mine/rpf.onnx"))
     with pytest.raises(MissionError) as info:
         load_mission(mission)
     message = str(info.value)
@@ -55,7 +55,7 @@ def test_a_policy_of_ones_own_has_no_fallback(tmp_path, monkeypatch):
 def test_a_missing_policy_names_each_place_once_with_dots_folded(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     mission = tmp_path / "m.yaml"
-    mission.write_text((ROOT / "missions" / "lab-3.yaml").read_text().replace("../policies/rpf.onnx",
+    mission.write_text((ROOT / "missions" / "lab-3.yaml").read_text().replace("../policies/rpf3.onnx",
                                                                                 "../policies/nope.onnx"))
     with pytest.raises(MissionError) as info:
         load_mission(mission)
@@ -68,4 +68,4 @@ def test_sim_of_a_copied_mission_in_a_real_process(tmp_path):
     proc = subprocess.run([sys.executable, "-m", "rpf_fly", "sim", "lab.yaml", "--json"], capture_output=True,
                           text=True, cwd=tmp_path, timeout=120)
     assert proc.returncode == 0, proc.stderr
-    assert json.loads(proc.stdout)["planner"] == "rpf"
+    assert json.loads(proc.stdout)["planner"] == "rpf3"

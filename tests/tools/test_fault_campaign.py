@@ -46,9 +46,9 @@ def test_planner_option_flies_a_copy_of_the_mission_with_that_kind_and_its_defau
 
     campaign = load_campaign()
     original = load_mission(ROOT / "missions" / "lab-3.yaml")
-    copy = load_mission(campaign.with_planner_kind(ROOT / "missions" / "lab-3.yaml", "rpf3", tmp_path))
-    assert original.planner.kind == "rpf" and copy.planner.kind == "rpf3"
-    assert copy.planner.policy is not None and copy.planner.policy.name == "rpf3.onnx"
+    copy = load_mission(campaign.with_planner_kind(ROOT / "missions" / "lab-3.yaml", "rpf", tmp_path))
+    assert original.planner.kind == "rpf3" and copy.planner.kind == "rpf"
+    assert copy.planner.policy is not None and copy.planner.policy.name == "rpf.onnx"
     assert copy.name == original.name and copy.drones == original.drones and copy.obstacles == original.obstacles
     assert copy.planner.safety_radius == original.planner.safety_radius
 
