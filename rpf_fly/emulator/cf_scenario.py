@@ -11,10 +11,10 @@ Start states: a setpoint scenario starts from a settled hover at `start` (`CfDro
 t = 0); a command scenario from the floor under `start` (z 0), motors off, 1 s before t = 0. A setpoint or command
 acts from the instant it is sent (no radio or mocap latency).
 
-Trace (JSON, strict: no NaN or Infinity): `name`, `t` (50 Hz samples at 0.004 + 0.02 k s, the sample instants of
-the reference traces this is compared with), `sp` (the setpoint in effect, or the high-level plan's position; the
-start at z 0 before any plan), `pos` (true position), `tilt_deg` (angle between the body z axis and the vertical),
-`figures`.
+Trace (JSON, strict: no NaN or Infinity): `name`, `t` (50 Hz samples at 0.004 + 0.02 k s before `duration_s`, the
+sample instants of the reference traces this is compared with), `sp` (the setpoint in effect, or the high-level
+plan's position; the start at z 0 before any plan), `pos` (true position), `tilt_deg` (angle between the body z
+axis and the vertical), `figures`.
 
 Figures (`figures(trace, scenario)`), by scenario kind (from its name: `step`, `carrot`, `hold`, `circle`, `hl`):
 - settling time to a target within a band from a start time over a set of samples: the time of the last sample at
@@ -201,7 +201,7 @@ def fly(scenario: Scenario, *, integrator: str = "midpoint", sample_offset_s: fl
             j += 1
     samples = []
     t = sample_offset_s
-    while t <= scenario.duration_s + 1e-9:
+    while t < scenario.duration_s - 1e-9:  # as the reference: no sample at the end instant itself
         samples.append(t)
         t = sample_offset_s + len(samples) * sample_period_s
     sample_ticks = {_ticks(t): t for t in samples}

@@ -78,7 +78,7 @@ def test_public_scenario_matches_the_reference(name: str, flown: dict[str, dict]
         assert abs(mine[key] - value) <= close, (key, mine[key], value)
 
 
-@pytest.mark.parametrize("name", ["a_step_0p5", "p_hl_slow"])
+@pytest.mark.parametrize("name", NAMES)
 def test_trace_follows_the_reference_trace(name: str, flown: dict[str, dict]) -> None:
     ref = reference(name)
     trace = flown[name]
