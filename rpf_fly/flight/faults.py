@@ -8,7 +8,8 @@ real drones. Some kinds act at power-on instead (``yaw_offset``, ``start_offset`
 choosing: ``ground_station_kill`` (``at_phase``: takeoff, settle, planning or landing; ``at_s`` default 0).
 
 The file is validated like a mission (one line ``FILE:LINE: FIELD: problem``, exit 2), against the mission: every
-``drone`` must be one of its drones, every ``dongle`` one of its dongles. Loading is pure; :mod:`rpf_fly.flight.fault_injection` applies a schedule.
+``drone`` must be one of its drones, every ``dongle`` one of its dongles. Loading is pure;
+:mod:`rpf_fly.flight.fault_injection` applies a schedule.
 """
 
 from __future__ import annotations
