@@ -71,6 +71,40 @@ def _fmt(value, unit: str = "", digits: int = 2) -> str:  # type: ignore[no-unty
     return "-" if value is None else f"{value:.{digits}f}{unit}"
 
 
+def _print_tracking_expected(console, result) -> None:  # type: ignore[no-untyped-def]
+    """What tracking error to expect while cruising, each drone's against it, and a line for each drone outside."""
+    from rich.markup import escape
+
+    from rpf_fly.log.review import CRAZYFLIE_LAG_S, tracking_lag
+
+    if not result.tracking_expected:
+        return
+    lag_s, who = tracking_lag(result.source)
+    aside = f" (a Crazyflie with the firmware's default gains: about {CRAZYFLIE_LAG_S:g} s)" \
+        if lag_s != CRAZYFLIE_LAG_S else ""
+    judged = {n: e for n, e in result.tracking_expected.items() if e.expected_m is not None}
+    alike = {(f"{e.expected_m:.2f}", f"{e.speed_m_s:.2f}") for e in judged.values()}
+    if not judged:
+        said = "no drone cruised long enough to judge"
+    elif len(alike) == 1:
+        ((expected, speed),) = alike
+        said = (f"{expected} m at the flown {speed} m/s; measured (median) "
+                + ", ".join(f"{n} {e.measured_m:.2f}" for n, e in judged.items()) + " m")
+    else:
+        said = "measured (median) " + ", ".join(f"{n} {e.measured_m:.2f} m (expected {e.expected_m:.2f} at "
+                                                 f"{e.speed_m_s:.2f} m/s)" for n, e in judged.items())
+    console.print(escape(f"expected while cruising: {who} trail a moving setpoint by about {lag_s:g} s x its speed"
+                         f"{aside}: {said}"))
+    for name, e in judged.items():
+        if e.outside:
+            low, high = e.band_m
+            console.print(f"  [yellow]{escape(name)}: {e.measured_m:.2f} m from its setpoint while cruising at "
+                          f"{e.speed_m_s:.2f} m/s, outside the expected {low:.2f}-{high:.2f} m"
+                          + escape(" (pushed: a gust, a contact; late poses; other gains than expected)"
+                                   if e.measured_m > high else " (other gains than expected, or a setpoint that "
+                                   "waits for its drone)") + "[/yellow]")
+
+
 def _print_summary(result, plot: Optional[Path], csv_dir: Optional[Path]) -> None:  # type: ignore[no-untyped-def]
     from rich.markup import escape
     from rich.table import Table
@@ -107,6 +141,7 @@ def _print_summary(result, plot: Optional[Path], csv_dir: Optional[Path]) -> Non
                         if name != "all")
         console.print(f"setpoint tracking error |setpoint - pose|: RMS {_fmt(overall[0], ' m', 3)}, max "
                       f"{_fmt(overall[1], ' m', 3)} (RMS/max per drone: {per})")
+        _print_tracking_expected(console, result)
     if result.battery:
         console.print("battery: " + ", ".join(f"{name} {a:.2f} -> {c:.2f} V (lowest {b:.2f})"
                                                 for name, (a, b, c) in result.battery.items()))

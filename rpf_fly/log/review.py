@@ -91,6 +91,71 @@ class Series:
     values: np.ndarray
 
 
+CRAZYFLIE_LAG_S = 0.55
+"""How far a Crazyflie with the firmware's default gains trails a moving position setpoint, in seconds of the
+setpoint's speed: 0.5 s from the position gain (``posCtlPid.xKp`` 2 /s; the setpoint carries no velocity to feed
+forward), plus the velocity error its velocity loop needs to hold the tilt that balances drag. The Crazyflie dynamics
+reference (the firmware's control code against the identified Crazyflie 2.1+ body) trails carrots by 16.4 cm at
+0.3 m/s, 27.3 cm at 0.5 m/s and 55.6 cm at 1 m/s, and a circle the same. A planner's setpoint stream moves at the
+flight's speed, so its tracking error while cruising is mostly this lag, not a fault."""
+
+DRY_RUN_LAG_S = 0.25
+"""The dry run's simulated drone: a first-order follower of its position setpoint with a time constant of 0.25 s
+(rpf_fly/emulator/fake_vehicle.py ``TRACK_TAU_S``), which trails a moving setpoint by 0.25 s x speed, less than a
+Crazyflie (docs/flight.md, *Known gap*)."""
+
+TRACKING_SLACK_M = 0.05
+TRACKING_SLACK_FRACTION = 0.3
+"""A drone's median tracking error while cruising is *outside* its expectation when it is further from the
+expected ``lag x speed`` than the larger of these: 5 cm (a hovering drone's own wander, mocap jitter) and 30 % (the
+speed's spread within the window, a lab's other gains, mocap latency)."""
+
+CRUISE_MIN_SPEED_M_S = 0.1
+"""A setpoint moving at least this fast (mean over the last two lags) is cruising; hovering, arriving and holding
+setpoints are not judged."""
+
+
+@dataclass(frozen=True)
+class TrackingExpectation:
+    """One drone's setpoint tracking error while cruising against what its kind of drone gives at the flown speed:
+    ``lag_s`` x the setpoint's speed (the mean over the last ``2 lag_s``), medians over the cruising setpoints.
+    None where the drone did not cruise long enough to judge (fewer than 5 such setpoints)."""
+
+    drone: str
+    lag_s: float
+    samples: int
+    speed_m_s: Optional[float] = None
+    expected_m: Optional[float] = None
+    measured_m: Optional[float] = None
+
+    @property
+    def band_m(self) -> Optional[tuple[float, float]]:
+        """The range of measured errors that is as expected."""
+        if self.expected_m is None:
+            return None
+        slack = max(TRACKING_SLACK_M, TRACKING_SLACK_FRACTION * self.expected_m)
+        return max(0.0, self.expected_m - slack), self.expected_m + slack
+
+    @property
+    def outside(self) -> bool:
+        band = self.band_m
+        return band is not None and self.measured_m is not None and not band[0] <= self.measured_m <= band[1]
+
+    def to_json_dict(self) -> dict[str, Any]:
+        band = self.band_m
+        return {"cruise_samples": self.samples, "speed_m_s": self.speed_m_s, "expected_m": self.expected_m,
+                "measured_m": self.measured_m, "low_m": band[0] if band else None,
+                "high_m": band[1] if band else None, "outside": self.outside}
+
+
+def tracking_lag(source: str) -> tuple[float, str]:
+    """The lag (s) with which the log's drones trail a moving setpoint, and what those drones are: the dry run's
+    simulated drone for a dry run, a Crazyflie with the firmware's default gains otherwise."""
+    if source == "dry-run":
+        return DRY_RUN_LAG_S, "the dry run's simulated drones"
+    return CRAZYFLIE_LAG_S, "Crazyflies with the firmware's default gains"
+
+
 @dataclass
 class Review:
     """Everything ``rpf-fly review`` shows."""
@@ -118,6 +183,9 @@ class Review:
     interruptions: list[Interruption] = field(default_factory=list)
     tracking: dict[str, tuple[Optional[float], Optional[float]]] = field(default_factory=dict)
     """Per drone, and ``all``: RMS and max setpoint tracking error (m); only drones with setpoints and poses."""
+    tracking_expected: dict[str, TrackingExpectation] = field(default_factory=dict)
+    """Per drone with setpoints and poses (not for a simulation): its tracking error while cruising against what
+    its kind of drone gives at the flown speed (:func:`tracking_lag`)."""
     battery: dict[str, tuple[float, float, float]] = field(default_factory=dict)
     """Per drone with battery telemetry: first, lowest and last voltage (V)."""
     radio: list[RadioSummary] = field(default_factory=list)
@@ -151,6 +219,7 @@ class Review:
                 ],
             },
             "tracking": {name: {"rms_m": rms, "max_m": peak} for name, (rms, peak) in self.tracking.items()},
+            "tracking_expected": self.tracking_expected_json(),
             "battery": {name: {"first_v": a, "min_v": b, "last_v": c} for name, (a, b, c) in self.battery.items()},
             "radio": {str(r.dongle): {"drones": list(r.drones), "windows": r.windows,
                                       "mean_packets_per_s": r.mean_packets_per_s,
@@ -163,6 +232,14 @@ class Review:
         if self.metrics is None:
             doc["metrics_error"] = self.metrics_error
         return doc
+
+    def tracking_expected_json(self) -> dict[str, Any]:
+        """``{lag_s, drones, per_drone: {drone: TrackingExpectation.to_json_dict()}}``; ``{}`` without any."""
+        if not self.tracking_expected:
+            return {}
+        lag_s, who = tracking_lag(self.source)
+        return {"lag_s": lag_s, "drones": who,
+                "per_drone": {name: e.to_json_dict() for name, e in self.tracking_expected.items()}}
 
 
 # ---------------------------------------------------------------------------------------------- metadata
@@ -405,6 +482,10 @@ def review(data: LogData) -> Review:
             errors.append(e.values)
     if errors:
         tracking["all"] = rms_max(np.concatenate(errors))
+    expected = {}
+    if source != "sim":  # a simulation's setpoint is one planning step ahead by construction: no drone trails it
+        lag_s = tracking_lag(source)[0]
+        expected = {name: tracking_expectation(data, name, start, lag_s) for name in tracking if name != "all"}
     battery = {}
     for name in drones:
         b = battery_series(data, name, start)
@@ -430,6 +511,7 @@ def review(data: LogData) -> Review:
         clean_end=clean,
         interruptions=interruptions_of(data, events, clean, (end - start) / 1e9),
         tracking=tracking,
+        tracking_expected=expected,
         battery=battery,
         radio=radio_of(data),
     )
@@ -509,6 +591,31 @@ def tracking_error(data: LogData, drone: str, start_ns: int) -> Series:
     err = np.linalg.norm(setpoints.values - at, axis=1) if setpoints.t.size else np.zeros(0)
     keep = np.isfinite(err)
     return Series(setpoints.t[keep], err[keep])
+
+
+def tracking_expectation(data: LogData, drone: str, start_ns: int, lag_s: float) -> TrackingExpectation:
+    """The drone's tracking error while cruising against ``lag_s`` x the setpoint's speed. At each setpoint whose
+    last ``2 lag_s`` of setpoints lie in the log (the lag has built up: 86 % of it for a first-order follower), the
+    speed is the setpoints' path over that window divided by it; a setpoint is cruising at
+    :data:`CRUISE_MIN_SPEED_M_S` or more. Medians over the cruising setpoints: the flown speed, the expected
+    ``lag_s x speed`` and the measured ``|setpoint - pose|``."""
+    setpoints = pose_series(data, drone, start_ns, f"/{drone}/setpoint")
+    poses = pose_series(data, drone, start_ns)
+    none = TrackingExpectation(drone, lag_s, 0)
+    if setpoints.t.size < 2:
+        return none
+    err = np.linalg.norm(setpoints.values - _interp(setpoints.t, poses), axis=1)
+    path = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(setpoints.values, axis=0), axis=1))])
+    window = 2.0 * lag_s
+    full = setpoints.t - window >= setpoints.t[0]
+    speed = (path - np.interp(setpoints.t - window, setpoints.t, path)) / window
+    cruising = full & (speed >= CRUISE_MIN_SPEED_M_S) & np.isfinite(err)
+    count = int(cruising.sum())
+    if count < 5:
+        return TrackingExpectation(drone, lag_s, count)
+    v = float(np.median(speed[cruising]))
+    return TrackingExpectation(drone, lag_s, count, speed_m_s=v, expected_m=float(np.median(lag_s * speed[cruising])),
+                               measured_m=float(np.median(err[cruising])))
 
 
 def rms_max(values: np.ndarray) -> tuple[Optional[float], Optional[float]]:

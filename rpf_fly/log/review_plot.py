@@ -279,6 +279,13 @@ def review_figure(data: LogData, result: R.Review):  # type: ignore[no-untyped-d
         for d, e in tracking.items():
             rms, peak = R.rms_max(e.values)
             ax.plot(e.t, e.values, lw=1.0, color=colour[d], label=f"{d}: RMS {rms:.3f}, max {peak:.3f} m")
+        judged = [x for x in result.tracking_expected.values() if x.expected_m is not None]
+        if judged:  # what a drone of the log's kind trails by while cruising at the flown speed
+            low, high = (float(np.median([x.band_m[k] for x in judged])) for k in (0, 1))
+            lag_s = judged[0].lag_s
+            speed = float(np.median([x.speed_m_s for x in judged]))
+            ax.axhspan(low, high, color="0.85", zorder=0,
+                       label=f"expected while cruising: {lag_s:g} s x {speed:.2f} m/s")
         rms, peak = R.rms_max(np.concatenate([e.values for e in tracking.values()]))
         ax.set_title(f"setpoint tracking error |setpoint - pose|: RMS {rms:.3f} m, max {peak:.3f} m", fontsize=10)
         ax.set_ylabel("error [m]")
