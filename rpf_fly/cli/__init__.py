@@ -67,8 +67,8 @@ def _flags_show_no_type() -> None:
 
 def get_app() -> typer.Typer:
     """The app with every command module imported (idempotent)."""
-    from rpf_fly.cli import (bench_cmd, fly_cmd, lab_cmd, mocap_cmd, replay_cmd, review_cmd, sim_cmd,  # noqa: F401
-                             train_cmd, worker_cmd)
+    from rpf_fly.cli import (bench_cmd, fly_cmd, lab_cmd, mocap_cmd, replay_cmd, review_cmd,  # noqa: F401
+                             scenario_cmd, sim_cmd, train_cmd, worker_cmd)
 
     _flags_show_no_type()
     return app

@@ -200,6 +200,11 @@ def fly(
     raise typer.Exit(code)
 
 
+def lab_info_or_fail(mission):  # type: ignore[no-untyped-def]
+    """The running lab's info for ``mission`` (one line, exit 2, when there is none)."""
+    return _lab_info(mission)
+
+
 def _lab_info(mission):  # type: ignore[no-untyped-def]
     """The running lab's info, checked against ``mission``'s drones (one line, exit 2, when none runs or it has
     not every drone)."""
