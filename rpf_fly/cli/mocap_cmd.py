@@ -136,6 +136,70 @@ class WatchStats:
         return lines
 
 
+FLOOR_BELOW_M = 0.05
+"""A tracked body this far below z = 0 (the floor, Motive's ground plane) cannot be there: the up axis is wrong."""
+FLAT_Y_M = 0.1
+TALL_Z_M = 0.3
+"""Bodies at rest whose y all lie within ``FLAT_Y_M`` of 0 while one's z reaches ``TALL_Z_M``: if they stand on the
+floor, their height is in y, the stream's up axis is the other one."""
+REST_M = 0.01
+"""A body whose position spans at most this over the check's frames is at rest."""
+UP_AXIS_CHECK_S = 1.0
+"""The check judges the first second of frames (or all of them when the watch is shorter)."""
+
+
+class UpAxisCheck:
+    """Whether the bodies look streamed with the other up axis than the one ``watch`` assumed (``--up-axis``; NatNet
+    does not carry Motive's Up Axis setting, so nothing else can tell): a tracked body below the floor (a Y-up
+    stream read as Z-up shows a depth as its z, z -0.999), or bodies at rest all with y near 0 and z up to 0.3 m or
+    more (their height is in y). Fed every frame; :meth:`add` returns the hint once, when the first second is in."""
+
+    def __init__(self, assumed: str):
+        self.assumed = assumed
+        self.first_s: float | None = None
+        self.positions: dict[str, list[tuple[float, float, float]]] = {}
+        self.hint: str | None = None
+        self.done = False
+
+    def add(self, frame) -> str | None:  # noqa: ANN001 - MocapFrame
+        if self.done:
+            return None
+        self.first_s = frame.receive_time_s if self.first_s is None else self.first_s
+        for name, pose in frame.bodies.items():
+            if pose.valid and all(math.isfinite(v) for v in pose.position):
+                self.positions.setdefault(name, []).append(tuple(pose.position))
+        return self.finish() if frame.receive_time_s - self.first_s >= UP_AXIS_CHECK_S else None
+
+    def finish(self) -> str | None:
+        """Judge what came so far (once): the hint, or None when the data look as assumed."""
+        if self.done:
+            return None
+        self.done = True
+        self.hint = self._judge()
+        return self.hint
+
+    def _judge(self) -> str | None:
+        other = "y" if self.assumed == "z" else "z"
+        means = {n: tuple(sum(p[k] for p in ps) / len(ps) for k in range(3)) for n, ps in self.positions.items()}
+        if not means:
+            return None
+        default = " (Motive's default)" if other == "y" else ""
+        fix = (f"the stream looks {other.upper()}-up{default}, not the "
+               f"{self.assumed.upper()}-up assumed (--up-axis {self.assumed}): watch with --up-axis {other}, and fly "
+               f"with mocap.up_axis: {other}")
+        name, lowest = min(((n, p[2]) for n, p in means.items()), key=lambda item: item[1])
+        if lowest < -FLOOR_BELOW_M:
+            return f"hint: {name} is at z {lowest:+.3f} m, below the floor: {fix}"
+        resting = {n: means[n] for n, ps in self.positions.items()
+                   if max(max(p[k] for p in ps) - min(p[k] for p in ps) for k in range(3)) <= REST_M}
+        if resting and all(abs(p[1]) <= FLAT_Y_M for p in resting.values()):
+            name, top = max(((n, p[2]) for n, p in resting.items()), key=lambda item: abs(item[1]))
+            if abs(top) >= TALL_Z_M:
+                return (f"hint: every body at rest has y within {FLAT_Y_M:g} m of 0 while {name} is at z {top:+.3f} m: "
+                        f"if they stand on the floor, {fix}")
+        return None
+
+
 def _watch_table(frame, stats: WatchStats):  # noqa: ANN001, ANN202 - MocapFrame, rich Table
     from rich.table import Table
 
@@ -217,6 +281,7 @@ def watch(
         typer.echo(f"error: cannot listen for NatNet from {natnet}: {exc}", err=True)
         raise typer.Exit(1) from None
     stats = WatchStats()
+    up_check = UpAxisCheck(up_axis.value)
     started = time.monotonic()
     live = None
     with client:
@@ -266,6 +331,12 @@ def watch(
                     continue
                 last_frame = time.monotonic()
                 stats.add(frame)
+                hint = up_check.add(frame)
+                if hint is not None:
+                    if json_output or live is None:
+                        typer.echo(hint, err=json_output)
+                    else:
+                        console.print(hint, markup=False)
                 if json_output:
                     typer.echo(_frame_json(frame))
                 elif live is not None:
@@ -281,7 +352,8 @@ def watch(
             if live is not None:
                 live.__exit__(None, None, None)
         lines = stats.summary(time.monotonic() - started, client.stats)
-    for line in lines:
+    hint = up_check.finish() or up_check.hint  # a watch shorter than the check judges what it saw
+    for line in lines + ([hint] if hint else []):
         typer.echo(line, err=json_output)
 
 
@@ -292,7 +364,8 @@ def _watch_header(client, natnet: str, multicast: bool, up_axis: str) -> str:  #
     names = sorted(client.rigid_body_names.values())
     bodies = f", {len(names)} rigid bodies ({', '.join(names)})" if names else ""
     transport = "multicast" if multicast else "unicast"
-    return f"{server} at {natnet}, {transport}, streaming {up_axis}-up (shown Z-up){bodies}"
+    return (f"{server} at {natnet}, {transport}, assuming {up_axis.upper()}-up (--up-axis {up_axis}; NatNet does not "
+            f"say which Motive streams), shown Z-up{bodies}")
 
 
 def _circle_poses(n_bodies: int, radius: float, speed: float, t0: float):  # noqa: ANN202

@@ -55,7 +55,7 @@ def watch_library(
     options."""
     from rich.console import Console
 
-    from rpf_fly.cli.mocap_cmd import WatchStats, _frame_json, _frame_line
+    from rpf_fly.cli.mocap_cmd import UpAxisCheck, WatchStats, _frame_json, _frame_line
     from rpf_fly.mocap.motioncapture_options import check_hostname, system_type
     from rpf_fly.mocap.motioncapture_source import MotioncaptureSource
 
@@ -80,9 +80,11 @@ def watch_library(
         typer.echo("note: the mock has no rigid bodies unless given, e.g. --option 'rigid_bodies=cf1(0,0,0.5,1,0,0,0)'"
                    " (name(x,y,z,qw,qx,qy,qz))", err=True)
     stats = WatchStats()
+    up_check = UpAxisCheck(up_axis)
     if not json_output:
         every = f"at most {rate:g} lines a second (--rate)" if rate > 0 else "every frame"
-        console.print(f"motioncapture {system} at {host or 'its default host'}, shown Z-up; printing {every}")
+        console.print(f"motioncapture {system} at {host or 'its default host'}, assuming {up_axis.upper()}-up "
+                      f"(--up-axis {up_axis}), shown Z-up; printing {every}")
     started = time.monotonic()
     end = started + duration if duration > 0 else float("inf")
     next_line = 0.0
@@ -105,6 +107,9 @@ def watch_library(
                 last_frame = time.monotonic()
                 count += 1
                 stats.add(frame)
+                hint = up_check.add(frame)
+                if hint is not None:
+                    typer.echo(hint, err=json_output)
                 if json_output:
                     typer.echo(_frame_json(frame))
                 elif rate <= 0 or last_frame >= next_line:
@@ -112,5 +117,6 @@ def watch_library(
                     console.print(_frame_line(frame))
         except KeyboardInterrupt:
             pass
-    for line in stats.summary(time.monotonic() - started):
+    hint = up_check.finish() or up_check.hint  # a watch shorter than the check judges what it saw
+    for line in stats.summary(time.monotonic() - started) + ([hint] if hint else []):
         typer.echo(line, err=json_output)

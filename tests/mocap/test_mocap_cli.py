@@ -208,3 +208,51 @@ def test_watch_stops_on_ctrl_c_with_the_summary():
     assert "Traceback" not in err
     head, valid = summary_of(out)
     assert int(head.split()[1]) > 50 and valid["cf2"] == 100.0
+
+
+# -- the up axis: watch says which it assumed, and hints at the other when the bodies look streamed with it --------
+
+ON_THE_FLOOR = {"cf1": ((0.5, -0.999, 0.03), (0.0, 0.0, 0.0, 1.0), True),
+                "cf2": ((-1.0, 1.0, 0.03), (0.0, 0.0, 0.0, 1.0), True)}
+"""Two drones on the floor (Z-up world), one of them at y -0.999."""
+
+
+def up_axis_watch(streams: str, poses: dict, *args: str):  # type: ignore[no-untyped-def]
+    with NatNetServer(lambda: poses, version=(4, 1), multicast=False, rate_hz=100, up_axis=streams) as server:
+        return runner.invoke(app, ["mocap", "watch", "--command-port", str(server.command_port), "--unicast",
+                                   "--duration", "1.5", "--rate", "2", *args])
+
+
+def test_a_y_up_stream_watched_as_z_up_says_what_it_assumed_and_how_to_change_it():
+    result = up_axis_watch("y", ON_THE_FLOOR)  # the watch's default --up-axis z
+    assert result.exit_code == 0, result.output
+    lines = result.stdout.splitlines()
+    assert "assuming Z-up (--up-axis z; NatNet does not say which Motive streams), shown Z-up" in lines[0]
+    assert "cf2 (-1.000, +0.030, -1.000) ok" in lines[1]  # its depth shown as z, below the floor
+    hint = ("hint: cf2 is at z -1.000 m, below the floor: the stream looks Y-up (Motive's default), not the Z-up "
+            "assumed (--up-axis z): watch with --up-axis y, and fly with mocap.up_axis: y")
+    assert lines.count(hint) == 2 and lines[-1] == hint  # once the first second is in, and after the summary
+
+
+def test_a_z_up_stream_watched_as_y_up_hints_at_z():
+    result = up_axis_watch("z", ON_THE_FLOOR, "--up-axis", "y")
+    assert result.exit_code == 0, result.output
+    assert "assuming Y-up (--up-axis y;" in result.stdout.splitlines()[0]
+    assert result.stdout.splitlines()[-1] == (
+        "hint: cf1 is at z -0.999 m, below the floor: the stream looks Z-up, not the Y-up assumed (--up-axis y): "
+        "watch with --up-axis z, and fly with mocap.up_axis: z")
+    # bodies at rest, all at y near 0 and one high: their height is in y (said if they stand on the floor)
+    result = up_axis_watch("z", {"cf1": ((1.0, 2.0, 0.03), (0.0, 0.0, 0.0, 1.0), True),
+                                 "cf2": ((0.0, 0.5, 0.03), (0.0, 0.0, 0.0, 1.0), True)}, "--up-axis", "y", "--json")
+    assert result.exit_code == 0, result.output
+    assert result.stderr.splitlines()[-1] == (
+        "hint: every body at rest has y within 0.1 m of 0 while cf1 is at z +2.000 m: if they stand on the floor, "
+        "the stream looks Z-up, not the Y-up assumed (--up-axis y): watch with --up-axis z, and fly with "
+        "mocap.up_axis: z")
+    assert all(line.startswith("{") for line in result.stdout.splitlines())  # the JSON lines stay JSON
+
+
+def test_the_right_up_axis_gives_no_hint():
+    result = up_axis_watch("y", ON_THE_FLOOR, "--up-axis", "y")
+    assert result.exit_code == 0, result.output
+    assert "hint" not in result.stdout and "cf1 (+0.500, -0.999, +0.030) ok" in result.stdout
