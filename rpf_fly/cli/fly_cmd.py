@@ -312,7 +312,7 @@ def _run_flight(mission, factory, dry_run: bool, mocap_kind: str, log_path: Path
     finally:
         for sig, handler in restore.items():
             signal.signal(sig, handler)
-    _summary(report, log_path)
+    _summary(report, log_path, final_table=live is not None and "loop" in rig_holder)
     if report.host_sentence:
         typer.echo(report.host_sentence)
     if report.interrupted:
@@ -383,9 +383,16 @@ class _Console:
         self.out.final(report.phase.value, rows)
 
 
-def _summary(report, log_path: Path) -> None:  # type: ignore[no-untyped-def]
+def _summary(report, log_path: Path, final_table: bool = False) -> None:  # type: ignore[no-untyped-def]
+    """What a flight prints last on stdout: each drone's outcome, the loop's summary line, the log. The outcome
+    lines only where no final table (``final_table``: the status console's, on stderr) already showed them on the
+    same screen: with ``--no-console``, or when stdout or stderr is not a terminal (a script reading stdout gets
+    them as ever)."""
+    from rpf_fly.cli.output import console
+
     stats = report.stats.summary()
-    for name, outcome in report.outcomes.items():
+    on_screen = final_table and console().is_terminal and console(stderr=True).is_terminal
+    for name, outcome in report.outcomes.items() if not on_screen else ():
         reason = report.reasons.get(name) or ""
         typer.echo(f"{name}: {outcome.value}{' (' + reason + ')' if reason and outcome.value != 'reached' else ''}")
     if stats["latency_p50_s"] is not None:
