@@ -67,6 +67,13 @@ def _frame_line(frame) -> str:  # noqa: ANN001 - MocapFrame, imported lazily
     return "  |  ".join(parts)
 
 
+def printing(rate: float) -> str:
+    """What a piped watch prints at ``--rate``: ``at most 1 line a second (--rate)``, ``... 10 lines ...``."""
+    if rate <= 0:
+        return "every frame"
+    return f"at most {rate:g} line{'' if rate == 1 else 's'} a second (--rate)"
+
+
 class WatchStats:
     """What ``watch`` saw: frames, their rate, frame numbers the server skipped (frames lost on the way), and per
     body how often it was tracked. Fed one frame at a time; :meth:`summary` is the closing report."""
@@ -311,8 +318,7 @@ def watch(
                 live = Live(console=console, auto_refresh=False, transient=False)
                 live.__enter__()
             else:
-                every = f"at most {rate:g} lines a second (--rate)" if rate > 0 else "every frame"
-                console.print(f"{title}; printing {every}")
+                console.print(f"{title}; printing {printing(rate)}")
             started = time.monotonic()
             end = started + duration if duration > 0 else math.inf
             last_frame = time.monotonic()

@@ -55,7 +55,7 @@ def watch_library(
     options."""
     from rich.console import Console
 
-    from rpf_fly.cli.mocap_cmd import UpAxisCheck, WatchStats, _frame_json, _frame_line
+    from rpf_fly.cli.mocap_cmd import UpAxisCheck, WatchStats, _frame_json, _frame_line, printing
     from rpf_fly.mocap.motioncapture_options import check_hostname, system_type
     from rpf_fly.mocap.motioncapture_source import MotioncaptureSource
 
@@ -82,9 +82,8 @@ def watch_library(
     stats = WatchStats()
     up_check = UpAxisCheck(up_axis)
     if not json_output:
-        every = f"at most {rate:g} lines a second (--rate)" if rate > 0 else "every frame"
         console.print(f"motioncapture {system} at {host or 'its default host'}, assuming {up_axis.upper()}-up "
-                      f"(--up-axis {up_axis}), shown Z-up; printing {every}")
+                      f"(--up-axis {up_axis}), shown Z-up; printing {printing(rate)}")
     started = time.monotonic()
     end = started + duration if duration > 0 else float("inf")
     next_line = 0.0

@@ -256,3 +256,15 @@ def test_the_right_up_axis_gives_no_hint():
     result = up_axis_watch("y", ON_THE_FLOOR, "--up-axis", "y")
     assert result.exit_code == 0, result.output
     assert "hint" not in result.stdout and "cf1 (+0.500, -0.999, +0.030) ok" in result.stdout
+
+
+def test_the_header_counts_lines_in_the_singular_and_the_plural():
+    from rpf_fly.cli.mocap_cmd import printing
+
+    assert printing(1) == "at most 1 line a second (--rate)"
+    assert printing(2) == "at most 2 lines a second (--rate)" and printing(0.5) == "at most 0.5 lines a second (--rate)"
+    assert printing(0) == "every frame"
+    with NatNetServer(lambda: POSES, version=(4, 1), multicast=False, rate_hz=100, up_axis="y") as server:
+        result = runner.invoke(app, watch_args(server, False, "--frames", "2", "--rate", "1"))
+    assert result.exit_code == 0, result.output
+    assert result.stdout.splitlines()[0].endswith("; printing at most 1 line a second (--rate)")
