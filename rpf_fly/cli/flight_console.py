@@ -78,8 +78,8 @@ class FlightConsole:
         if event.level >= 3 or (event.drone is None and event.kind == "phase"):
             who = f"{event.drone}: " if event.drone else ""
             style = {3: "yellow", 4: "red", 5: "bold red"}.get(event.level, "")
-            text = escape(f"{who}{event.message}")
-            self.console.print(f"[{style}]{event.kind}[/{style}] {text}" if style else f"{event.kind} {text}")
+            kind, text = escape(f"[{event.kind}]"), escape(f"{who}{event.message}")  # as every flight's lines spell it
+            self.console.print(f"[{style}]{kind}[/{style}] {text}" if style else f"{kind} {text}")
 
     def show(self, phase: str, rows_of: Any) -> None:
         """Redraw the live table (a terminal only, at most every :data:`REFRESH_S`); ``rows_of()`` gives the rows,

@@ -46,9 +46,9 @@ def test_a_ctrl_c_is_said_once_plainly(landed_cli_flight):
     flight = landed_cli_flight
     assert flight.returncode == 130, flight.stderr
     lines = flight.stderr.splitlines()
-    events = [line for line in lines[lines.index("phase swarm: flying") + 1:lines.index("phase swarm: done")]
-              if line.startswith(("interrupt", "phase"))]
-    assert events == ["interrupt Ctrl-C: all drones land (Ctrl-C again: emergency stop)", "phase swarm: landing"]
+    events = [line for line in lines[lines.index("[phase] swarm: flying") + 1:lines.index("[phase] swarm: done")]
+              if line.startswith(("[interrupt]", "[phase]"))]
+    assert events == ["[interrupt] Ctrl-C: all drones land (Ctrl-C again: emergency stop)", "[phase] swarm: landing"]
     for cells in rows(final_table(flight.stderr)).values():
         assert cells[1:3] == ["landed", "landed_early"] and cells[-1] == "interrupted by Ctrl-C", cells
     assert "cf1: landed_early (interrupted by Ctrl-C)" in flight.stdout.splitlines()

@@ -42,3 +42,21 @@ def test_without_a_final_table_on_the_screen_every_drone_has_its_line(capsys, mo
     lines = printed(capsys, monkeypatch, final_table, terminals)
     assert len(lines) == 41 + 2 and lines[0] == "cf1: reached" and lines[40] == "cf41: landed_early (low battery)"
     assert lines[41:] == SUMMARY
+
+
+def test_the_event_lines_are_spelt_alike_with_and_without_the_status_console(capsys):
+    """``[phase] swarm: flying``: the status console (a single process's default), ``--no-console`` and a distributed
+    flight's coordinator (tests/cli/test_fly_console.py) print an event's kind in brackets alike."""
+    from rpf_fly.cli.flight_console import FlightConsole
+    from rpf_fly.cli.fly_cmd import _print_event
+    from rpf_fly.flight.events import FlightEvent
+
+    events = [FlightEvent(1.0, 2, "phase", "swarm: flying"), FlightEvent(2.0, 3, "pose_late", "no pose for 100 ms", "cf2")]
+    console = FlightConsole("m")
+    for event in events:
+        console.event(event)
+    with_console = capsys.readouterr().err.splitlines()
+    for event in events:
+        _print_event(event)
+    assert with_console == capsys.readouterr().err.splitlines() == [
+        "[phase] swarm: flying", "[pose_late] cf2: no pose for 100 ms"]
