@@ -6,3 +6,10 @@ MCAP; ``cli`` is the ``rpf-fly`` command.
 """
 
 __version__ = "0.1.0"
+
+
+def install_hint(extra: str) -> str:
+    """How a message names an optional extra to install, one spelling everywhere: ``pip install 'rpf_fly[live]'``
+    (the distribution's name as pyproject.toml spells it; pip adds the extra's packages to the installed rpf_fly,
+    editable or not, from any directory)."""
+    return f"pip install 'rpf_fly[{extra}]'"

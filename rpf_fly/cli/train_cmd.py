@@ -82,7 +82,9 @@ def train(
     try:
         import torch  # noqa: F401
     except ImportError:
-        raise fail("rpf-fly train needs torch: pip install -e '.[train]' (torch==2.13.0, CPU build)")
+        from rpf_fly import install_hint
+
+        raise fail(f"rpf-fly train needs torch: {install_hint('train')} (torch==2.13.0, CPU build)")
     from rpf_fly.learn.ppo import PPOConfig, Trainer
 
     radius = obstacle_radius if obstacle_radius is not None else (0.1 if kind == "ppo" else 0.5)

@@ -24,6 +24,7 @@ import logging
 import threading
 from typing import Any
 
+from rpf_fly import install_hint
 from rpf_fly.log import schemas as S
 
 DEFAULT_PORT = 8765
@@ -40,7 +41,7 @@ further behind than that is better served by dropping than by showing the past."
 LATCHED = ("/scene",)
 """Topics written once (or rarely): the last message is sent again when a client subscribes."""
 
-INSTALL_HINT = "pip install 'rpf-fly[live]'"
+INSTALL_HINT = install_hint("live")
 
 SDK_DROP_LOGGER = "foxglove.websocket.connected_client.send_lossy"
 """Where foxglove-sdk (0.30) reports a client's full outbox, through Python logging."""

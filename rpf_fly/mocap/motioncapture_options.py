@@ -21,6 +21,8 @@ import re
 from dataclasses import dataclass, field
 from typing import Mapping, Optional
 
+from rpf_fly import install_hint
+
 __all__ = [
     "LIBRARY_VERSION", "Option", "SystemType", "TYPES", "WHEEL_TYPES", "MISSING_LIBRARY",
     "system_type", "check_hostname", "check_option", "check_options", "parse_rigid_bodies", "MockBody",
@@ -30,7 +32,7 @@ LIBRARY_VERSION = "1.1"
 """The libmotioncapture release this table, the type list and docs/mocap.md's findings were checked against."""
 
 MISSING_LIBRARY = ("the motioncapture package is not installed: install the extra with "
-                   "pip install 'rpf_fly[motioncapture]'")
+                   f"{install_hint('motioncapture')}")
 """The one line every entry point prints when the optional ``motioncapture`` package is missing."""
 
 _HOST_NAME = re.compile(r"(?!-)[A-Za-z0-9-]{1,63}(?<!-)(\.(?!-)[A-Za-z0-9-]{1,63}(?<!-))*\.?")

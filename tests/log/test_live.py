@@ -77,7 +77,7 @@ def test_without_the_sdk_the_live_view_names_the_extra(no_sdk: None):
 
     with pytest.raises(LiveUnavailable, match="foxglove-sdk") as err:
         LiveView(0)
-    assert INSTALL_HINT in str(err.value) and INSTALL_HINT == "pip install 'rpf-fly[live]'"
+    assert INSTALL_HINT in str(err.value) and INSTALL_HINT == "pip install 'rpf_fly[live]'"
 
 
 def test_fly_foxglove_without_the_sdk_refuses_in_one_line_before_anything_flies(no_sdk: None, tmp_path: Path):
@@ -90,7 +90,7 @@ def test_fly_foxglove_without_the_sdk_refuses_in_one_line_before_anything_flies(
                                             "--log", str(log), "--foxglove"])
     assert result.exit_code == 2
     assert result.output.strip().splitlines() == [
-        "--foxglove: the live view needs foxglove-sdk, which is not installed: pip install 'rpf-fly[live]'"]
+        "--foxglove: the live view needs foxglove-sdk, which is not installed: pip install 'rpf_fly[live]'"]
     assert not log.exists()  # refused before the log was opened, let alone a drone connected
 
 
