@@ -390,10 +390,10 @@ class FakeLink:
         self._closed.set()
         self._taken()
         self._in.put(None)
+        if callback is not None:  # first, as cflib's driver does: a world process slow to answer the detach's
+            callback(message)     # round trip must not delay the link error
         if self._drone is not None:
             self._drone.detach(self._wake)
-        if callback is not None:
-            callback(message)
 
 
 def _sleep_until(t_s: float) -> None:
