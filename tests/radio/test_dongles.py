@@ -45,7 +45,7 @@ def test_no_crazyradio_is_one_line_exit_2_and_nothing_connects(tmp_path, command
     assert proc.returncode == 2, proc.stderr
     assert proc.stderr == NO_RADIO + "\n"
     if command[0] == "check":
-        assert f"{mission.name}: valid mission 'lab-3' with 3 drones, planner rpf (" in proc.stdout
+        assert f"{mission.name}: valid mission 'lab-3' with 3 drones, planner rpf3 (" in proc.stdout
     else:
         assert proc.stdout == ""
     assert not (tmp_path / "flights").exists()  # no log: nothing was started
