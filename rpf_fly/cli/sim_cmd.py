@@ -33,7 +33,10 @@ def sim(
                                                              "planner mode as the line style."),
     log: Optional[Path] = typer.Option(None, "--log", help="Write the run as an MCAP flight log (rpf-fly review)."),
 ) -> None:
-    """Simulate MISSION with its planner (no radio, no mocap) and report success, collisions and path quality."""
+    """Simulate MISSION with its planner (no radio, no mocap) and report success, collisions and path quality.
+
+    Exit 0 when at least one drone reached its goal, 1 when none did (the table or JSON still printed), 2 for an
+    invalid mission or option."""
     from rpf_fly.mission import MissionError, load_mission, with_planner
     from rpf_fly.sim import SimParams, compute_metrics, rollout, scenario_from_mission
     from rpf_fly.planning.onnx_policy import PolicyError
@@ -83,8 +86,10 @@ def sim(
         plot_rollout(result, plot, metrics)
     if json_output:
         typer.echo(json.dumps(metrics.to_json_dict()))
-        return
-    _print_table(metrics, result, plot, loaded.planner.guidance_mode)
+    else:
+        _print_table(metrics, result, plot, loaded.planner.guidance_mode)
+    if metrics.reached == 0:
+        raise typer.Exit(1)  # no drone reached: not a run to build on (docs: README, *Commands*)
 
 
 def _print_table(metrics, result, plot: Optional[Path], guidance: str = "none") -> None:  # type: ignore[no-untyped-def]

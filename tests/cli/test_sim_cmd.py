@@ -62,9 +62,11 @@ def test_no_wall_following_is_the_vanilla_apf(tmp_path):
     mission.write_text(WALL_MISSION)
     # without guidance (the apf kind's default is path: docs/algorithm.md, *Global guidance*)
     with_wf = json.loads(run(mission, "--json", "--guidance", "none").stdout)
-    without = json.loads(run(mission, "--json", "--no-wall-following", "--guidance", "none").stdout)
+    stuck = run(mission, "--json", "--no-wall-following", "--guidance", "none")
+    without = json.loads(stuck.stdout)
     assert with_wf["success"] and not without["success"]
     assert without["reached"] == 0 and without["per_drone"][0]["time_to_goal_s"] is None
+    assert stuck.exit_code == 1  # no drone reached: exit 1, the JSON still printed
     # the path around the wall gets the vanilla APF past it too
     assert json.loads(run(mission, "--json", "--no-wall-following").stdout)["success"]
 
@@ -128,3 +130,16 @@ def test_help_lists_commands_in_a_real_process():
     proc = subprocess.run([sys.executable, "-m", "rpf_fly", "--help"], capture_output=True, text=True, timeout=60)
     assert proc.returncode == 0
     assert "sim" in proc.stdout
+
+
+def test_exit_1_when_no_drone_reached_0_when_one_did(tmp_path):
+    """A drone stuck behind the wall (vanilla APF without guidance) is exit 1 with the table; a second drone that
+    reaches its goal makes it exit 0 (a failure still, said in the table)."""
+    mission = tmp_path / "wall.yaml"
+    mission.write_text(WALL_MISSION)
+    stuck = run(mission, "--no-wall-following", "--guidance", "none")
+    assert stuck.exit_code == 1 and "failure: 0/1 reached" in stuck.stdout
+    mission.write_text(WALL_MISSION + "  - {name: cf2, uri: radio://0/80/2M/E7E7E7E702, start: [0.0, 3.0], "
+                                      "goal: [6.0, 3.0]}\n")
+    one = run(mission, "--no-wall-following", "--guidance", "none")
+    assert one.exit_code == 0 and "failure: 1/2 reached" in one.stdout
