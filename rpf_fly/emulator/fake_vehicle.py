@@ -58,25 +58,32 @@ Estimator with `positioning="extpos"` (a mocap drone; the Kalman estimator fed b
 - Position: the estimate starts at `kalman.initialX/Y/Z` (0, 0, 0) at power-on and on reset, at rest, with variance
   `VARIANCE_AFTER_RESET_M2` (1 m^2; velocity 0.01 (m/s)^2). Initial values written later act at the next reset.
   Writing `kalman.resetEstimation` non-zero resets at once and the flag reads 0 again.
-- Between measurements the estimate integrates a biased, noisy IMU: each drone has a constant accelerometer bias of
-  norm `ACCEL_BIAS_M_S2` (0.08 m/s^2, direction drawn from the drone's seed) and white noise of
-  `ACCEL_NOISE_M_S2` (0.1 m/s^2) per 10 ms; both enter the velocity error, which enters the position error. With a
-  yaw error the true horizontal acceleration is integrated rotated by it (the IMU's body-frame reading turned into
-  the world by the wrong yaw). The estimate drifts on the ground too, as a real one does.
+- Between measurements the estimate integrates a biased, noisy IMU through a slightly wrong attitude: each drone
+  has a constant accelerometer bias of norm `ACCEL_BIAS_M_S2` (0.196 m/s^2, the BMI088's typical zero-g offset of
+  20 mg; direction drawn from the drone's seed), a constant roll/pitch error of its attitude estimate,
+  `TILT_ERROR_RAD` (0.01 rad, the Kalman estimator's own roll/pitch standard deviation), which makes up a
+  horizontal acceleration of g sin(0.01) = 0.098 m/s^2 (direction drawn from the seed), and white noise of
+  `ACCEL_NOISE_M_S2` (0.1 m/s^2) per 10 ms. Bias and tilt error add to a constant acceleration error of 0.098 to
+  0.294 m/s^2 (`BLIND_DRIFT_MAX_M_S2`) by drone; it and the noise enter the velocity error, which enters the
+  position error. With a yaw error the true horizontal acceleration is integrated rotated by it (the IMU's
+  body-frame reading turned into the world by the wrong yaw). The estimate drifts on the ground too, as a real one
+  does.
 - Each extpos or extpose is a Kalman update of a position-velocity filter, one covariance shared by the three axes:
   predicted with the filter's process noise (velocity variance + `ACCEL_PROCESS_NOISE` = 1 (m/s)^2 a second),
   gains k_pos = P_pp / (P_pp + s^2) and k_vel = P_pv / (P_pp + s^2) with s = `locSrv.extPosStdDev` (0.01 m). After
   a reset or a blind spell P_pp is large and the next measurement is taken almost whole.
-- Measured (tests/radio/test_fake_firmware.py, `test_imu_drift_without_extpos_and_the_kalman_pull_back`; 40 seeds,
-  hovering): with extpos at 50 Hz the estimate stays within 0.3 mm of the truth; 1 s without extpos it is 3.2-6.1
-  cm off (median 4.5), 2 s without 12-21 cm (median 17), and the first extpos after that brings it back under 1 mm.
-  The controller holds the *estimate* on its setpoint, so the true drone drifts the other way.
+- Measured (tests/emulator/test_fake_firmware.py, `test_imu_drift_without_extpos_and_the_kalman_pull_back`, and
+  tests/emulator/test_blind_drift.py; 200 seeds, hovering): with extpos at 50 Hz the estimate stays within 0.6 mm
+  of the truth, its velocity within 0.021 m/s (the filter has no bias state: it lags the acceleration error);
+  1 s without extpos it is 4.7-17.5 cm off (median 12.8), 2 s without 19-64 cm (median 48), and the first extpos
+  after that brings it back within 1.1 mm. The controller holds the *estimate* on its setpoint, so the true drone
+  drifts the other way.
 - `kalman.varPX/PY/PZ` is P_pp.
 With `"onboard"` (a Lighthouse-like onboard system that observes position and yaw): the estimate is the truth; an
 extpos sets a position offset that then moves with the truth (extpose also a yaw offset); a reset clears the
 offsets and sets the variance to 1 m^2, decaying to `locSrv.extPosStdDev`^2 with a 0.05 s time constant.
-Not modelled: gyro drift of the yaw estimate, tilt, outlier rejection, the weight of `locSrv.extQuatStdDev` (an
-extpose sets the yaw whole).
+Not modelled: gyro drift of the yaw estimate, the tilt error's growth with the gyro's drift (it is constant here),
+outlier rejection, the weight of `locSrv.extQuatStdDev` (an extpose sets the yaw whole).
 
 Faults a test injects while the drone flies (each as a real Crazyflie would suffer it):
 - Gust (`Vehicle.gust`): an external acceleration on the true body for a while. The position controller fights it
@@ -143,8 +150,25 @@ BATTERY_DRAIN_FLYING_V_PER_S = 0.0017
 BATTERY_SAG_V = 0.25
 BATTERY_LOW_DURATION_S = 5.0
 
-ACCEL_BIAS_M_S2 = 0.08
-"""Norm of each drone's constant accelerometer bias (seeded direction): 4 cm of drift after 1 s blind."""
+ACCEL_BIAS_M_S2 = 0.196
+"""Norm of each drone's constant accelerometer bias (seeded direction, world frame): the Crazyflie 2.1's IMU, the
+Bosch BMI088, has a typical zero-g offset of 20 mg (BMI088 data sheet, BST-BMI088-DS001, section 1.1, the
+accelerometer's specification table, row "Zero-g offset" Off_acc: typ. +-20 mg), 20e-3 x 9.81 = 0.196 m/s^2. The
+firmware scales the accelerometer at rest but takes no offset off it (`sensors_bmi088_bmp3xx.c` lines 322, 337-339),
+and its Kalman estimator has no bias state (`kalman_core.h` line 64), so the offset is integrated while it is
+blind."""
+TILT_ERROR_RAD = 0.01
+"""Each drone's constant error of the estimated roll/pitch (seeded horizontal direction): the Kalman estimator's own
+roll/pitch standard deviation after a reset, `stdDevInitialAttitude_rollpitch` = 0.01 rad, 0.57 degrees
+(`kalman_core_params_defaults.h` line 68, "roughly flat"). Flying, the estimator takes only the body-z acceleration
+and subtracts gravity through its attitude (`kalman_core.c` lines 506-541), so a tilt error of the estimate is a
+horizontal acceleration the drone does not have: g sin(1 degree) = 0.17 m/s^2 per degree."""
+TILT_ERROR_M_S2 = GRAVITY_M_S2 * math.sin(TILT_ERROR_RAD)
+"""The horizontal acceleration error of `TILT_ERROR_RAD`: 0.098 m/s^2."""
+BLIND_DRIFT_MAX_M_S2 = ACCEL_BIAS_M_S2 + TILT_ERROR_M_S2
+"""The largest constant acceleration error of a blind estimate (bias and tilt error in line): 0.294 m/s^2, 0.147 m
+after 1 s and 0.59 m after 2 s (0.5 a t^2), before the noise (`ACCEL_NOISE_M_S2`) and the velocity error the
+estimate had when it went blind."""
 ACCEL_NOISE_M_S2 = 0.1
 """Standard deviation of the accelerometer noise over one 10 ms sub-step."""
 _NOISE_PER_SUBSTEP = ACCEL_NOISE_M_S2 * SUBSTEP_S
@@ -262,6 +286,13 @@ class Vehicle:
         self._rng = random.Random(f"fake-imu-{seed}")
         self.accel_bias: Vec3 = self._draw_bias() if self.kalman else (0.0, 0.0, 0.0)
         """The accelerometer's constant bias in m/s^2 (world frame; norm `ACCEL_BIAS_M_S2`), per drone."""
+        self.tilt_accel: Vec3 = self._draw_tilt() if self.kalman else (0.0, 0.0, 0.0)
+        """The horizontal acceleration (m/s^2, world frame; norm `TILT_ERROR_M_S2`) the attitude estimate's tilt
+        error makes up, per drone."""
+        self.drift_accel: Vec3 = (self.accel_bias[0] + self.tilt_accel[0], self.accel_bias[1] + self.tilt_accel[1],
+                                  self.accel_bias[2] + self.tilt_accel[2])
+        """The estimate's constant acceleration error while blind: bias plus tilt error (norm at most
+        `BLIND_DRIFT_MAX_M_S2`)."""
         self.initial_estimate: Vec3 = (0.0, 0.0, 0.0)
         """`kalman.initialX/Y/Z`, metres."""
         self.initial_yaw = 0.0
@@ -324,6 +355,12 @@ class Vehicle:
             if norm > 1e-6:
                 scale = ACCEL_BIAS_M_S2 / norm
                 return (x * scale, y * scale, z * scale)
+
+    def _draw_tilt(self) -> Vec3:
+        """The horizontal acceleration of a roll/pitch error `TILT_ERROR_RAD` in a direction drawn from this drone's
+        seed (its own stream: the IMU's noise is not disturbed)."""
+        angle = random.Random(f"fake-tilt-{self._seed}").uniform(0.0, 2.0 * math.pi)
+        return (TILT_ERROR_M_S2 * math.cos(angle), TILT_ERROR_M_S2 * math.sin(angle), 0.0)
 
     @property
     def estimate(self) -> Vec3:
@@ -425,7 +462,7 @@ class Vehicle:
         error; with a yaw error the true horizontal velocity change (dv) is integrated rotated (the IMU's body-frame
         acceleration turned into the world by the wrong yaw). The covariance grows with the filter's process
         noise."""
-        vel_error, offset, bias = self.vel_error, self.offset, self.accel_bias
+        vel_error, offset, bias = self.vel_error, self.offset, self.drift_accel
         if self.yaw_offset != 0.0:
             c, s = math.cos(self.yaw_offset), math.sin(self.yaw_offset)
             vel_error[0] += (c - 1.0) * dv_x - s * dv_y

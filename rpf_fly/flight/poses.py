@@ -158,8 +158,9 @@ class PoseTracker:
         """drone -> (its on-board position estimate, when the drone made it, on the receive clock) while it flies
         (None on the ground, before its estimator was reset to mocap, or without telemetry), or None: the check of a
         sample after a gap (``GAP_S``). The flight loop sets it."""
-        self.blind_drift_m_s2 = 0.1
-        """How fast a blind estimate may drift off the truth (the mission's ``safety.blind_drift_m_s2``)."""
+        self.blind_drift_m_s2 = 0.45
+        """How fast a blind estimate may drift off the truth (the mission's ``safety.blind_drift_m_s2``; its
+        default, `rpf_fly.flight.supervisor.BLIND_DRIFT_M_S2`)."""
         self.last_jump_from_estimate: dict[str, bool] = {}
         """drone -> whether its newest refused jump was measured from its on-board estimate after a gap (else from
         its previous sample)."""

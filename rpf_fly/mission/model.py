@@ -244,11 +244,13 @@ class SafetySettings:
     """A drone that fails its preflight stays on the ground; ``ground``: the others fly (those whose start or goal
     is within 2r of a grounded drone stay down too: they could not take off or land there); ``abort``: nothing
     takes off. A connection failure always aborts."""
-    blind_drift_m_s2: float = 0.1
+    blind_drift_m_s2: float = 0.45
     """How fast a drone without mocap may drift off where it believes it is (m/s^2: 0.5 a t^2 after t s blind): the
     supervisor's blind rule lands a drone near something, or cuts its motors, before that drift could reach it
-    (docs/flight.md, "Blind"). 0.1 is an assumption with a margin over the dry run's drones (0.08); a lab that has
-    measured its own drones' drift without a position source sets its figure here."""
+    (docs/flight.md, "Blind"). 0.45 (rpf_fly/flight/supervisor.py, `BLIND_DRIFT_M_S2`) covers with a margin the
+    dry run's drones, whose drift comes from the Crazyflie 2.1 IMU's typical zero-g offset and a small tilt error
+    of the attitude estimate (at most 0.294 m/s^2); a lab that has measured its own drones' drift without a
+    position source sets its figure here."""
 
 @dataclass(frozen=True)
 class CircleObstacle:

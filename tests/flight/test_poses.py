@@ -212,11 +212,12 @@ def test_without_a_flying_estimate_or_without_a_gap_the_sample_is_judged_on_moti
 
 
 @pytest.mark.parametrize("made_s, back_frame, off_m, refused", [
-    (0.73, 93, 0.45, False), (0.73, 93, 0.48, True),      # estimate 0.2 s old: 0.15 + 0.30 + 0.01 m
-    (2.49, 250, 0.36, False), (2.49, 250, 0.40, True)])   # 2 s blind: 0.15 + 0.015 + 0.20 m
+    (0.73, 93, 0.47, False), (0.73, 93, 0.51, True),      # estimate 0.2 s old: 0.15 + 0.30 + 0.04 m
+    (2.49, 250, 1.03, False), (2.49, 250, 1.10, True)])   # 2 s blind: 0.15 + 0.015 + 0.90 m
 def test_the_estimates_age_and_the_blind_drift_widen_what_may_be_taken(made_s, back_frame, off_m, refused):
     """An estimate made 0.2 s before the sample may be 0.3 m behind a drone at 1.5 m/s, and after 2 s blind its
-    drift may reach 0.5 x 0.1 m/s^2 x (2 s)^2 = 0.2 m: within those the sample is the drone, beyond them it is not."""
+    drift may reach 0.5 x 0.45 m/s^2 (the default ``safety.blind_drift_m_s2``) x (2 s)^2 = 0.9 m: within those the
+    sample is the drone, beyond them it is not."""
     tracker = PoseTracker({"cf1": "cf1"})
     tracker.airborne_estimate_of = lambda name: ((0.30, 0.0, 1.0), made_s)
     fly_along_x(tracker, 0, 50)

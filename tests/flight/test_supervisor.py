@@ -410,8 +410,13 @@ def test_mocap_is_said_back_only_when_a_pose_is_back_not_when_the_blind_drones_l
     assert [(f.level, f.message) for f in back] == [(2, "mocap poses are back")]  # INFO
 
 
+LOW_DRIFT_MISSION = SHORT_MISSION + "safety: {blind_drift_m_s2: 0.1}\n"
+"""The blind rule's geometry below is worked out at a lab's measured 0.1 m/s^2 (at the default, 0.45, a blind drone
+0.5 m up lands before pose_lost_land_s within 1.76 m of something: `test_a_lab_that_measured_...`)."""
+
+
 def fly_blind(cf3_at: tuple[float, float, float], seconds: float = 3.0,  # type: ignore[no-untyped-def]
-              telemetry: bool = False, mission_text: str = SHORT_MISSION):
+              telemetry: bool = False, mission_text: str = LOW_DRIFT_MISSION):
     """cf3 loses its mocap at t = 0 (the others keep theirs); a ``land`` finding lands it as the loop would
     (phase LANDING, touchdown after the finding's duration). ``telemetry``: its status keeps coming at 10 Hz with
     an estimate that descends with the landing (else its last status is from t = 0). The blind findings of cf3,
@@ -488,12 +493,16 @@ def test_a_blind_landing_whose_estimate_is_low_is_cut_as_a_fall_from_there():
 
 
 def test_a_lab_that_measured_a_larger_blind_drift_lands_its_blind_drones_sooner_and_farther_from_things():
-    """``safety.blind_drift_m_s2`` replaces the assumed 0.1 m/s^2. The drone far from everything (room 0.47 m to the
-    next drone) rides out 1.5 s at 0.1; at 1.0 m/s^2 a 1 s landing begun at 0.5 s would end with 1.1 m of possible
-    drift, so it lands at once (after the 0.25 s hold) and is dropped before it could reach its neighbour."""
+    """``safety.blind_drift_m_s2`` replaces the default 0.45 m/s^2. The drone 0.47 m from the next drone lands at
+    once at the default (after the 0.25 s hold: a 1 s landing begun at 1.5 s would end with 1.4 m of possible
+    drift), and rides out 1.5 s where a lab measured 0.1; at 1.0 m/s^2 a 1 s landing begun at 0.5 s would end with
+    1.1 m of possible drift, so it lands at once and is dropped before it could reach its neighbour."""
     measured = SHORT_MISSION + "safety: {blind_drift_m_s2: 1.0}\n"
-    assumed = fly_blind((-1.0, 0.6, 0.5))
+    default = fly_blind((-1.0, 0.6, 0.5), mission_text=SHORT_MISSION)
+    assumed = fly_blind((-1.0, 0.6, 0.5))  # 0.1
     drifty = fly_blind((-1.0, 0.6, 0.5), mission_text=measured)
+    assert default and default[0][1].response == "land" and default[0][0] <= 0.35, default
+    assert [f.response for _, f in default] == ["land"], default  # down (1.3 s) with 0.38 m of drift: not dropped
     assert assumed and assumed[0][0] > 1.5, assumed
     assert drifty and drifty[0][1].response == "land" and drifty[0][0] <= 0.35, drifty
     assert "0.47 m of room to cf2" in drifty[0][1].message, drifty

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import pytest
 
+from rpf_fly.flight.supervisor import BLIND_DRIFT_M_S2
+
 # Two drones crossing a 4 m arena; the tests rely on its line numbers (drones[0] on line 3, drones[1] on line 4).
 BASE = """\
 arena: {x: [-2, 2], y: [-2, 2], z: [0, 1.5]}
@@ -645,7 +647,7 @@ def test_dry_run_bad_values(fail):
 
 def test_blind_drift_is_read_and_defaults_to_the_supervisors_assumption(load):
     assert load(BASE + "safety: {blind_drift_m_s2: 0.25}\n").safety.blind_drift_m_s2 == 0.25
-    assert load(BASE).safety.blind_drift_m_s2 == 0.1
+    assert load(BASE).safety.blind_drift_m_s2 == BLIND_DRIFT_M_S2 == 0.45
 
 
 def test_blind_drift_must_be_positive(fail):
