@@ -25,32 +25,41 @@ from rpf_fly.log import review as R
 from rpf_fly.log.reader import LogData
 
 STATE_COLOURS = {
-    "connecting": "#c7c7c7", "preflight": "#dbdb8d", "armed": "#ffbb78", "takeoff": "#98df8a", "planning": "#aec7e8",
-    "arrived": "#2ca02c", "hover": "#9edae5", "landing": "#c5b0d5", "landed": "#8c8c8c", "error": "#ff9896",
-    "emergency": "#d62728", "grounded": "#8c564b",
+    # a flight's drone phases (rpf_fly.flight.phases.DronePhase), each its own colour
+    "waiting": "#c7c7c7", "ready": "#dbdb8d", "takeoff": "#98df8a", "planning": "#aec7e8", "holding": "#ffbb78",
+    "arrived": "#2ca02c", "landing": "#c5b0d5", "landed": "#7f7f7f", "failed": "#ff9896", "grounded": "#8c564b",
+    "link_lost": "#e377c2", "emergency": "#d62728",
+    # a simulation's last state, and the states of older logs
+    "hover": "#9edae5", "connecting": "#f7b6d2", "preflight": "#bcbd22", "armed": "#ff7f0e", "error": "#c49c94",
 }
+"""The flight phases' colours in the events panel and its legend: every state its own (a state not here is
+``UNKNOWN_STATE_COLOUR``)."""
+UNKNOWN_STATE_COLOUR = "#e0e0e0"
 LEVEL_COLOURS = {1: "0.5", 2: "#1f77b4", 3: "#ff7f0e", 4: "#d62728", 5: "#7f0000"}
 ALWAYS_LABELLED = ("interrupt", "error", "emergency", "loop", "touchdown")
 """Event kinds labelled every time (with every event of level error or fatal)."""
 
 
 def event_key(event: R.ReviewEvent) -> str:
-    """What "the same kind of event" means for labelling: the flight event's kind (each swarm phase apart), or (logs
-    without kinds, such as simulated ones) the message with the drone names and numbers taken out."""
+    """What "the same kind of event" means for labelling: the flight event's kind and what its message says it is
+    (the message up to its first ": ", drone names and numbers taken out), so that one label never stands for
+    different things (an injected occlusion, gust and low battery are three faults; a take-off commanded is not a
+    drone airborne); each swarm phase apart; for logs without kinds, such as simulated ones, the message with the
+    drone names and numbers taken out."""
+    import re
+
     if event.kind == "phase" and event.name == "flight":
         return event.message.split(" (")[0]  # each of the swarm's phases is its own milestone
     if event.kind == "phase":
         return "phase " + event.message.split(":")[0]  # a drone's phases: the first drone ready, arrived, landed...
     if event.kind:
-        return event.kind
-    import re
-
+        return f"{event.kind}: " + re.sub(r"\b(cf\w*|\d[\d.]*)\b", "#", event.message.split(": ")[0])
     return re.sub(r"\b(cf\w*|\d[\d.]*)\b", "#", event.message)[:24]
 
 
 def labelled_events(events: list[R.ReviewEvent]) -> list[tuple[R.ReviewEvent, str]]:
-    """The events to name on the figure, with their text: the first of each kind, every error or worse, every
-    interruption. A repeated kind says so (``kind (x3)``)."""
+    """The events to name on the figure, with their text: the first of each kind (:func:`event_key`), every error or
+    worse, every interruption. A repeated kind says so (``kind (x3)``): the events it counts are the same thing."""
     counts: dict[str, int] = {}
     for e in events:
         counts[event_key(e)] = counts.get(event_key(e), 0) + 1
@@ -338,7 +347,7 @@ def review_figure(data: LogData, result: R.Review):  # type: ignore[no-untyped-d
     for row, d in enumerate(drones):
         for t0, t1, state in R.phases(data, d, start, end_s):
             ax.broken_barh([(t0, max(t1 - t0, 1e-3))], (-row - 1.4, 0.8),
-                           facecolors=STATE_COLOURS.get(state, "#e0e0e0"))
+                           facecolors=STATE_COLOURS.get(state, UNKNOWN_STATE_COLOUR))
             seen_states[state] = None
     for e in result.events:
         ax.plot(e.t_s, e.level, "v", ms=7, color=LEVEL_COLOURS.get(e.level, "0.3"), zorder=3, gid="event-marker")
@@ -361,7 +370,7 @@ def review_figure(data: LogData, result: R.Review):  # type: ignore[no-untyped-d
                  fontsize=10)
     if seen_states:
         spot = ax.get_position()
-        fig.legend(handles=[Patch(color=STATE_COLOURS.get(s, "#e0e0e0"), label=s) for s in seen_states],
+        fig.legend(handles=[Patch(color=STATE_COLOURS.get(s, UNKNOWN_STATE_COLOUR), label=s) for s in seen_states],
                    fontsize=7.5, loc="lower center", bbox_to_anchor=(spot.x0 + spot.width / 2, 0.0),
                    ncol=min(11, len(seen_states)), frameon=False, title="flight phases", title_fontsize=7.5)
 

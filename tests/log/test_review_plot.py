@@ -194,3 +194,29 @@ def test_no_time_panel_legend_covers_a_curve(flight, request):
                 assert not inside.any(), (name, line.get_label(), int(inside.sum()))
     finally:
         plt.close(fig)
+
+
+def test_a_label_counts_only_events_that_are_the_same_thing():
+    """Three faults injected into cf2 are three labels, not ``cf2: injected occlusion (x3)``; two occlusions share
+    one; a take-off commanded is not a drone airborne."""
+    from rpf_fly.log.review import ReviewEvent
+
+    events = [ReviewEvent(1.0, 2, "take-off commanded: 3 drone(s) to 0.60 m in 2 s", "flight", "takeoff"),
+              ReviewEvent(3.0, 2, "airborne at 0.60 m: planning", "cf1", "takeoff"),
+              ReviewEvent(3.1, 2, "airborne at 0.59 m: planning", "cf2", "takeoff"),
+              ReviewEvent(4.0, 2, "injected occlusion for 0.6 s", "cf2", "fault"),
+              ReviewEvent(6.0, 2, "injected gust for 1 s: accel (0.0, 1.5, 0.0)", "cf2", "fault"),
+              ReviewEvent(8.0, 2, "injected low_battery", "cf2", "fault"),
+              ReviewEvent(9.0, 2, "injected occlusion for 0.3 s", "cf1", "fault")]
+    assert [t for _, t in labelled_events(events)] == [
+        "take-off commanded: 3 drone(s) to 0.60 m in 2 s", "cf1: airborne at 0.60 m: planning (x2)",
+        "cf2: injected occlusion for 0.6 s (x2)", "cf2: injected gust for 1 s: accel (0.0, 1.5, 0.0)",
+        "cf2: injected low_battery"]
+
+
+def test_every_flight_phase_has_a_colour_of_its_own():
+    from rpf_fly.flight.phases import DronePhase
+    from rpf_fly.log.review_plot import STATE_COLOURS
+
+    assert {p.value for p in DronePhase} <= set(STATE_COLOURS)  # waiting, ready, holding... none falls to the grey
+    assert len({to_rgba(c) for c in STATE_COLOURS.values()}) == len(STATE_COLOURS)
