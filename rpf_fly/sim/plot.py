@@ -2,7 +2,9 @@
 
 Each drone has its own colour (its track, its start circle, its goal star and a thin line from start to goal), so
 crossing tracks can be told apart; the planner's mode is the line style along the track (solid APF, dashed
-wall-following, dotted soft rule). The legend sits beside the arena, never over it.
+wall-following, dotted soft rule). The legend sits beside the arena, never over it; the constrained layout makes
+room for it and the axis labels whatever the arena's shape (a 40-drone legend beside a square arena is cut off by
+no edge).
 
 Computation lives in :mod:`rpf_fly.sim.rollout` and :mod:`rpf_fly.sim.metrics`; this module only draws. Uses the
 Agg backend (no display needed).
@@ -43,7 +45,7 @@ def plot_rollout(result: Rollout, path: str | Path, metrics: Optional[Metrics] =
 
     fig = rollout_figure(result, metrics, title)
     path = Path(path)
-    fig.savefig(path)
+    fig.savefig(path, bbox_inches="tight", pad_inches=0.15)  # a wide arena leaves no empty bands above and below
     plt.close(fig)
     return path
 
@@ -60,7 +62,7 @@ def rollout_figure(result: Rollout, metrics: Optional[Metrics] = None, title: st
 
     scenario = result.scenario
     names = list(scenario.names)
-    fig, ax = plt.subplots(figsize=(9.5, 7.5), dpi=120)
+    fig, ax = plt.subplots(figsize=(9.5, 7.5), dpi=120, layout="constrained")
     x0, x1 = scenario.arena_x
     y0, y1 = scenario.arena_y
     ax.add_patch(Rectangle((x0, y0), x1 - x0, y1 - y0, fill=False, ls="--", lw=1.0, ec="0.5"))
@@ -120,5 +122,4 @@ def rollout_figure(result: Rollout, metrics: Optional[Metrics] = None, title: st
             f"{metrics.collisions_drone_drone + metrics.collisions_drone_obstacle} collisions)"
         )
     ax.set_title(heading, fontsize=10)
-    fig.tight_layout()
     return fig

@@ -75,3 +75,25 @@ def test_the_modes_drawn_are_the_rollouts():
             assert line.get_xdata()[0] == track[a].real and line.get_xdata()[-1] == track[b].real
     finally:
         plt.close(fig)
+
+
+def test_forty_drones_legend_and_labels_are_cut_off_by_no_edge(tmp_path):
+    """The 40-drone missions: beside the wide lanes arena and the square cross one, the legend (20 names, the rest
+    counted, the modes) and the axis labels lie inside the figure."""
+    from rpf_fly.sim.plot import plot_rollout
+
+    for mission in ("lanes-40-4dongles", "cross-40-4dongles"):
+        result = run(mission)
+        fig = rollout_figure(result)
+        try:
+            fig.canvas.draw()
+            renderer = fig.canvas.get_renderer()
+            (ax,) = fig.axes
+            inside = fig.bbox.padded(-1)
+            for artist in (ax.get_legend(), ax.xaxis.label, ax.yaxis.label, ax.title):
+                box = artist.get_window_extent(renderer)
+                assert inside.contains(box.x0, box.y0) and inside.contains(box.x1, box.y1), (mission, artist, box)
+        finally:
+            plt.close(fig)
+        png = plot_rollout(result, tmp_path / f"{mission}.png")
+        assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
