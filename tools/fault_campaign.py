@@ -467,6 +467,9 @@ def judge_lab(fault: dict[str, Any], mission_path: Path, workdir: Path, tag: str
         for n in orphans:
             said = [m for t, m in events if at_ns <= t <= at_ns + EVENT_WINDOW_S * 1e9 and m.get("level", 0) >= 3
                     and m.get("name") == n]
+            if not said and not after[n].motors_at_death and after[n].z_at_death <= ON_FLOOR_M:
+                verdict.events.append(f"{n} on the floor, motors off, at the unplug: no link of a flight to lose")
+                continue
             if not said:
                 fail(f"no warning naming {n} within {EVENT_WINDOW_S:g} s of the unplug")
             elif n == orphans[0]:
