@@ -300,7 +300,11 @@ def test_a_killed_relay_is_noticed_and_every_drone_lands(tmp_path):
     for name in ("cf1", "cf2", "cf3", "cf4"):
         statuses = log.messages(f"/{name}/status")
         final = statuses[-1].data
-        assert final["state"] == "landed" and final["outcome"] == "landed_early", (name, final)
+        # landed, or (blind, 4 drones in a line: the blind drift of safety.blind_drift_m_s2 could reach a neighbour
+        # before a landing ends) landing at once and dropped near the floor (docs/flight.md, "Blind")
+        assert (final["state"], final["outcome"]) in (("landed", "landed_early"), ("emergency", "emergency")), \
+            (name, final)
+        assert log.messages(f"/truth/{name}")[-1].data["position"]["z"] < 0.02, name
         landing = next(m.log_time for m in statuses if m.log_time > killed_ns and m.data["state"] == "landing")
         assert (landing - killed_ns) / 1e9 < 1.0, (name, (landing - killed_ns) / 1e9)  # a supervisor: 1.5 s
         assert all(not m.data["crashed"] for m in log.messages(f"/truth/{name}")), name
