@@ -150,8 +150,8 @@ class TrackingExpectation:
 
 def tracking_lag(source: str) -> tuple[float, str]:
     """The lag (s) with which the log's drones trail a moving setpoint, and what those drones are: the dry run's
-    simulated drone for a dry run, a Crazyflie with the firmware's default gains otherwise."""
-    if source == "dry-run":
+    simulated drone for a dry run or a lab, a Crazyflie with the firmware's default gains otherwise."""
+    if source in ("dry-run", "lab"):
         return DRY_RUN_LAG_S, "the dry run's simulated drones"
     return CRAZYFLIE_LAG_S, "Crazyflies with the firmware's default gains"
 

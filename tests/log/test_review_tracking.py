@@ -88,3 +88,10 @@ def test_the_dry_run_lag_is_the_simulated_drones():
     from rpf_fly.emulator.fake_vehicle import TRACK_TAU_S
 
     assert DRY_RUN_LAG_S == TRACK_TAU_S  # a first-order follower trails a moving setpoint by tau x speed
+
+
+def test_the_simulated_drones_logs_are_judged_on_their_lag():
+    from rpf_fly.log.review import tracking_lag
+
+    assert tracking_lag("dry-run")[0] == tracking_lag("lab")[0] == DRY_RUN_LAG_S
+    assert tracking_lag("flight")[0] == tracking_lag("")[0] == CRAZYFLIE_LAG_S
