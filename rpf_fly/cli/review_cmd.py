@@ -75,11 +75,11 @@ def _print_tracking_expected(console, result) -> None:  # type: ignore[no-untype
     """What tracking error to expect while cruising, each drone's against it, and a line for each drone outside."""
     from rich.markup import escape
 
-    from rpf_fly.log.review import CRAZYFLIE_LAG_S, tracking_lag
+    from rpf_fly.log.review import CRAZYFLIE_LAG_S
 
     if not result.tracking_expected:
         return
-    lag_s, who = tracking_lag(result.source)
+    lag_s, who = result.tracking_lag
     aside = f" (a Crazyflie with the firmware's default gains: about {CRAZYFLIE_LAG_S:g} s)" \
         if lag_s != CRAZYFLIE_LAG_S else ""
     judged = {n: e for n, e in result.tracking_expected.items() if e.expected_m is not None}

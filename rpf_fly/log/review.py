@@ -148,12 +148,27 @@ class TrackingExpectation:
                 "high_m": band[1] if band else None, "outside": self.outside}
 
 
-def tracking_lag(source: str) -> tuple[float, str]:
-    """The lag (s) with which the log's drones trail a moving setpoint, and what those drones are: the dry run's
-    simulated drone for a dry run or a lab, a Crazyflie with the firmware's default gains otherwise."""
+def tracking_lag(source: str, dynamics: str = "") -> tuple[float, str]:
+    """The lag (s) with which the log's drones trail a moving setpoint, and what those drones are: for a dry run or
+    a lab, the simulated drone (its first-order follower, or with ``dynamics`` ``firmware`` the firmware's cascade,
+    which trails as a Crazyflie does); a Crazyflie with the firmware's default gains otherwise."""
     if source in ("dry-run", "lab"):
+        if dynamics == "firmware":
+            return CRAZYFLIE_LAG_S, "the dry run's simulated Crazyflies (the firmware's default gains)"
         return DRY_RUN_LAG_S, "the dry run's simulated drones"
     return CRAZYFLIE_LAG_S, "Crazyflies with the firmware's default gains"
+
+
+def dry_run_dynamics(mission_yaml: str) -> str:
+    """``dry_run.dynamics`` of the logged mission text ("" when it names none or does not read)."""
+    import yaml
+
+    try:
+        doc = yaml.safe_load(mission_yaml or "") or {}
+        value = (doc.get("dry_run") or {}).get("dynamics", "")
+    except (yaml.YAMLError, AttributeError):
+        return ""
+    return value if isinstance(value, str) else ""
 
 
 @dataclass
@@ -185,7 +200,9 @@ class Review:
     """Per drone, and ``all``: RMS and max setpoint tracking error (m); only drones with setpoints and poses."""
     tracking_expected: dict[str, TrackingExpectation] = field(default_factory=dict)
     """Per drone with setpoints and poses (not for a simulation): its tracking error while cruising against what
-    its kind of drone gives at the flown speed (:func:`tracking_lag`)."""
+    its kind of drone gives at the flown speed (:attr:`tracking_lag`)."""
+    tracking_lag: tuple[float, str] = (CRAZYFLIE_LAG_S, "Crazyflies with the firmware's default gains")
+    """The lag (s) the log's drones trail a moving setpoint by, and what they are (:func:`tracking_lag`)."""
     battery: dict[str, tuple[float, float, float]] = field(default_factory=dict)
     """Per drone with battery telemetry: first, lowest and last voltage (V)."""
     radio: list[RadioSummary] = field(default_factory=list)
@@ -237,7 +254,7 @@ class Review:
         """``{lag_s, drones, per_drone: {drone: TrackingExpectation.to_json_dict()}}``; ``{}`` without any."""
         if not self.tracking_expected:
             return {}
-        lag_s, who = tracking_lag(self.source)
+        lag_s, who = self.tracking_lag
         return {"lag_s": lag_s, "drones": who,
                 "per_drone": {name: e.to_json_dict() for name, e in self.tracking_expected.items()}}
 
@@ -483,8 +500,9 @@ def review(data: LogData) -> Review:
     if errors:
         tracking["all"] = rms_max(np.concatenate(errors))
     expected = {}
+    lag = tracking_lag(source, dry_run_dynamics(str(mission.get("yaml", ""))))
     if source != "sim":  # a simulation's setpoint is one planning step ahead by construction: no drone trails it
-        lag_s = tracking_lag(source)[0]
+        lag_s = lag[0]
         expected = {name: tracking_expectation(data, name, start, lag_s) for name in tracking if name != "all"}
     battery = {}
     for name in drones:
@@ -512,6 +530,7 @@ def review(data: LogData) -> Review:
         interruptions=interruptions_of(data, events, clean, (end - start) / 1e9),
         tracking=tracking,
         tracking_expected=expected,
+        tracking_lag=lag,
         battery=battery,
         radio=radio_of(data),
     )

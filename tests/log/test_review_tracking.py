@@ -18,10 +18,10 @@ MS = 1_000_000
 SPEED = 0.5
 
 
-def carrot_log(path, source: str, behind: dict[str, float]):  # type: ignore[no-untyped-def]
+def carrot_log(path, source: str, behind: dict[str, float], yaml: str = "name: carrot\n"):  # type: ignore[no-untyped-def]
     """Each drone's setpoint moves along x at 0.5 m/s for 6 s (10 Hz) from a 1 s hover; the drone (mocap at 100 Hz)
     is ``behind[drone]`` metres behind it once moving (the lag building up over the first second)."""
-    mission = {"name": "carrot", "yaml": "name: carrot\n", "seed": 0, "source": source, "planner": "apf"}
+    mission = {"name": "carrot", "yaml": yaml, "seed": 0, "source": source, "planner": "apf"}
     scenario = {"json": json.dumps({"names": list(behind), "goals": [[3.0, float(i)] for i in range(len(behind))],
                                     "obstacles": [], "dt": 0.1, "goal_tolerance": 0.1, "safety_radius": 0.1})}
 
@@ -95,3 +95,17 @@ def test_the_simulated_drones_logs_are_judged_on_their_lag():
 
     assert tracking_lag("dry-run")[0] == tracking_lag("lab")[0] == DRY_RUN_LAG_S
     assert tracking_lag("flight")[0] == tracking_lag("")[0] == CRAZYFLIE_LAG_S
+
+
+def test_a_dry_run_whose_drones_fly_the_firmwares_cascade_is_judged_as_crazyflies(tmp_path):
+    """``dry_run: {dynamics: firmware}`` in the logged mission: the simulated drones trail as a default-gain Crazyflie."""
+    from rpf_fly.log.review import dry_run_dynamics, tracking_lag
+
+    assert dry_run_dynamics("name: m\ndry_run: {dynamics: firmware}\n") == "firmware"
+    assert dry_run_dynamics("name: m\n") == dry_run_dynamics("{not yaml") == ""
+    assert tracking_lag("dry-run", "firmware")[0] == CRAZYFLIE_LAG_S
+    assert tracking_lag("dry-run", "first-order")[0] == DRY_RUN_LAG_S
+    path = carrot_log(tmp_path / "cascade.mcap", "dry-run", {"cf1": CRAZYFLIE_LAG_S * SPEED},
+                      yaml="name: carrot\ndry_run: {dynamics: firmware}\n")
+    result = review(read_log(path))
+    assert result.tracking_lag[0] == CRAZYFLIE_LAG_S and not result.tracking_expected["cf1"].outside
