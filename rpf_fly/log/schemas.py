@@ -37,10 +37,11 @@ MODE_NAMES = {0: "apf", 1: "wall", 2: "soft", -1: "arrived"}
 """Planner mode codes (``PlanStep.mode``, ``Rollout.modes``) to their log names."""
 
 DRONE_STATES = (
-    "connecting", "preflight", "armed", "takeoff", "planning", "arrived", "hover", "landing", "landed", "error",
-    "emergency",
+    "waiting", "ready", "takeoff", "planning", "holding", "arrived", "landing", "landed", "failed", "grounded",
+    "link_lost", "emergency",
 )
-"""The flight states a ``rpf_fly.DroneStatus`` names (the schema accepts any string; these are the ones we use)."""
+"""The flight states a ``rpf_fly.DroneStatus`` names: the drone phases (rpf_fly/flight/phases.py; a test keeps them
+equal). The schema accepts any string."""
 
 LOG_LEVELS = {1: "debug", 2: "info", 3: "warning", 4: "error", 5: "fatal"}
 """``foxglove.Log`` levels (0 is Foxglove's "unknown")."""

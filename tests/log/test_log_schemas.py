@@ -189,3 +189,9 @@ def test_fast_encoders_raise_what_the_builders_raise():
         S.planner_json(T, dict(tick=0, position=(0, 0, 0), goal=(1, 0), mode="apf", colour="red"))
     poses = {"cf1": ((1, 2, 3), None), "cf2": (np.array([1.0, 2.0, 3.0]), (0, 0, 0.1, 0.9)), 'q"uote': ((0, 0, 0), None)}
     assert S.tf_json(T, poses) == S.encode(S.frame_transforms(T, poses))
+
+
+def test_the_status_schema_names_every_drone_phase():
+    from rpf_fly.flight.phases import DronePhase
+
+    assert set(S.DRONE_STATES) == {p.value for p in DronePhase}
