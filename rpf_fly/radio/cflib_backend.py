@@ -607,14 +607,15 @@ class CflibBackend:
 
     def _on_connection_lost(self, name: str, uri: str, message: str) -> None:
         drone = self._drones[name]
+        full, message = message, " ".join((message.strip().splitlines() or ["no reason given"])[0].split())
         with self._lock:
             report = drone.configured and not drone.closing and not drone.lost_reported
             drone.lost_reported = drone.lost_reported or report
             drone.up = False
-            drone.error = f"connection lost: {message}"
+            drone.error = f"connection lost: {message}"  # one line: cflib appends a traceback to its reason
             drone.lost_at_s = time.monotonic()
             callbacks = list(self._callbacks) if report else []
-        logger.warning("drone %s (%s): link lost: %s", name, uri, message)
+        logger.warning("drone %s (%s): link lost: %s", name, uri, full)  # the whole of it, for the text log
         for callback in callbacks:
             try:
                 callback(name, message)
