@@ -42,6 +42,9 @@ def lab(
         log_path.parent.mkdir(parents=True, exist_ok=True)
     except OSError as err:
         raise fail(f"--log {log_path}: cannot make its folder: {err.strerror or err}")
+    from rpf_fly.emulator.host_lag import ahead_of_the_ground_station
+
+    ahead_of_the_ground_station()  # the lab's process is the drones' and Motive's, not a ground station's
     the_lab = Lab(loaded, mission, log_path, start_faults=start_faults)
     stop = {"signal": ""}
 

@@ -56,7 +56,7 @@ from typing import Any, Optional
 from rpf_fly.mission.model import Obstacle
 
 from .fake_firmware import FirmwareSnapshot, Packet
-from .host_lag import HostLag, host_lag
+from .host_lag import HostLag, ahead_of_the_ground_station, host_lag
 from .mocap_noise import MocapNoise, turned
 from .fake_world import DongleAir, DronePort, FakeDroneConfig, FakeWorld, LinkFaults, RadioCounters, RadioTiming, TruthSample
 
@@ -777,6 +777,7 @@ def serve(settings: dict[str, Any], out: Any) -> None:
 def main() -> None:
     """``python -m rpf_fly.emulator.world_process``: settings as one pickle on stdin (from `WorldProcess` only)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # a Ctrl-C reaches the whole process group: the parent lands first
+    ahead_of_the_ground_station()
     out = sys.stdout
     sys.stdout = sys.stderr  # nothing else may write on the parent's pipe
     try:
