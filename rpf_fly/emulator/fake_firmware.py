@@ -28,7 +28,7 @@ import struct
 import threading
 from collections import Counter
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from types import MappingProxyType
 from typing import NamedTuple
 
@@ -39,7 +39,8 @@ from .fake_memory import (
 from .fake_setpoint import AxisMode, decode_generic, decode_rpyt, wrap_angle
 from .fake_supervisor import Transition
 from .fake_toc import EXTENDED_TYPE_PERSISTENT, LOG_TYPE_NAMES, Toc, make_toc, pack_value, unpack_value, value_size
-from .fake_vehicle import HOVER_THRUST, Vehicle, VehicleConfig
+from .cf_controller import CfGains
+from .fake_vehicle import CONTROLLER_PARAMS, HOVER_THRUST, Vehicle, VehicleConfig
 
 logger = logging.getLogger(__name__)
 
@@ -122,10 +123,22 @@ _LOG_VARIABLES: tuple[tuple[str, str, Callable[[FakeFirmware], float]], ...] = (
     ("memTst.errCntW", "uint32_t", lambda f: f.memory_tester.write_errors),
 )
 
+_CONTROLLER_PARAM_TYPES: Mapping[str, str] = MappingProxyType({"posCtlPid.thrustBase": "uint16_t",
+                                                                "posCtlPid.thrustMin": "uint16_t"})
+"""The controller parameters that are not floats (`position_controller_pid.c:521-603`: PARAM_UINT16)."""
+_CONTROLLER_PARAMS: tuple[tuple[str, str, float, bool, bool], ...] = tuple(
+    (name, _CONTROLLER_PARAM_TYPES.get(name, "float"), default, False, True)
+    for name, default in CfGains().params().items())
+"""The PID controller's gains and limits under their firmware names, types and defaults (cf_controller.CfGains,
+checked against the PARAM_GROUP blocks of `position_controller_pid.c:462-603` (velCtlPid, posCtlPid) and
+`attitude_pid_controller.c:318-450` (pid_attitude, pid_rate) at crazyflie-firmware 2a18fc29: every one
+PARAM_PERSISTENT, floats but posCtlPid.thrustBase and thrustMin, uint16). Written, they act on the simulated
+drone's controller at once (`Vehicle.set_controller_param`: all of them with the "firmware" dynamics, the velocity
+limits with the first-order one); the filter switches and cut-offs of those groups are not here (not modelled)."""
+
 # (name, ctype, default, read_only, persistent). Names and defaults of the firmware's groups that cflib programs and
-# Bitcraze's examples touch (crazyflie-firmware's param definitions and platform defaults: attitude PID 6/3/0 roll and
-# pitch, 6/1/0.35 yaw; rate PID 250/500/2.5 roll and pitch, 120/16.7/0 yaw); only their values are kept, the
-# simulated controller does not use them.
+# Bitcraze's examples touch (crazyflie-firmware's param definitions and platform defaults), the controller's with
+# them (`_CONTROLLER_PARAMS`).
 _PARAMS: tuple[tuple[str, str, float, bool, bool], ...] = (
     ("stabilizer.estimator", "uint8_t", 0, False, False),
     ("stabilizer.controller", "uint8_t", 0, False, False),
@@ -140,30 +153,10 @@ _PARAMS: tuple[tuple[str, str, float, bool, bool], ...] = (
     ("kalman.initialYaw", "float", 0.0, False, False),
     ("hlCommander.vtoff", "float", 0.5, False, False),
     ("hlCommander.vland", "float", 0.5, False, False),
-    ("posCtlPid.xVelMax", "float", 1.0, False, True),
-    ("posCtlPid.yVelMax", "float", 1.0, False, True),
-    ("posCtlPid.zVelMax", "float", 1.0, False, True),
     ("pm.lowVoltage", "float", 3.2, False, True),
     ("pm.criticalLowVoltage", "float", 3.0, False, True),
     ("led.bitmask", "uint8_t", 0, False, False),
-    ("pid_attitude.roll_kp", "float", 6.0, False, True),
-    ("pid_attitude.roll_ki", "float", 3.0, False, True),
-    ("pid_attitude.roll_kd", "float", 0.0, False, True),
-    ("pid_attitude.pitch_kp", "float", 6.0, False, True),
-    ("pid_attitude.pitch_ki", "float", 3.0, False, True),
-    ("pid_attitude.pitch_kd", "float", 0.0, False, True),
-    ("pid_attitude.yaw_kp", "float", 6.0, False, True),
-    ("pid_attitude.yaw_ki", "float", 1.0, False, True),
-    ("pid_attitude.yaw_kd", "float", 0.35, False, True),
-    ("pid_rate.roll_kp", "float", 250.0, False, True),
-    ("pid_rate.roll_ki", "float", 500.0, False, True),
-    ("pid_rate.roll_kd", "float", 2.5, False, True),
-    ("pid_rate.pitch_kp", "float", 250.0, False, True),
-    ("pid_rate.pitch_ki", "float", 500.0, False, True),
-    ("pid_rate.pitch_kd", "float", 2.5, False, True),
-    ("pid_rate.yaw_kp", "float", 120.0, False, True),
-    ("pid_rate.yaw_ki", "float", 16.7, False, True),
-    ("pid_rate.yaw_kd", "float", 0.0, False, True),
+    *_CONTROLLER_PARAMS,
     ("memTst.resetW", "uint8_t", 0, False, False),
     # deck drivers of the default build register their parameters whether or not their deck is there
     # (ledring12.c: effect 6, CONFIG_DECK_LEDRING_DEFAULT_EFFECT, neffect 18; activeMarkerDeck.c: ids 1 3 4 2, mode 3
@@ -356,10 +349,8 @@ class FakeFirmware:
             return
         if old.pos[2] > old.floor_z or old.vel[2] != 0.0:
             return  # still falling: it boots where it lands
-        self.config = VehicleConfig((old.pos[0], old.pos[1], old.floor_z), math.degrees(old.yaw), old.battery.open_v,
-                                    self.config.auto_arm, self.config.positioning,
-                                    upside_down=self.config.upside_down, motor_fault=self.config.motor_fault,
-                                    turbulence_m_s2=self.config.turbulence_m_s2)
+        self.config = replace(self.config, position=(old.pos[0], old.pos[1], old.floor_z),
+                              yaw_deg=math.degrees(old.yaw), initial_vbat_v=old.battery.open_v)
         self.vehicle = Vehicle(self.config, now_s, self.seed)
         self.vehicle.gust(old.gust_accel, old.gust_until_s)  # the wind does not care
         self._params = dict(_PARAM_DEFAULTS)
@@ -691,10 +682,8 @@ class FakeFirmware:
         elif full_name.startswith("kalman.initial"):
             v.initial_estimate = (self._params["kalman.initialX"], self._params["kalman.initialY"],
                                   self._params["kalman.initialZ"])
-        elif full_name in ("posCtlPid.xVelMax", "posCtlPid.yVelMax"):
-            v.xy_vel_max = min(self._params["posCtlPid.xVelMax"], self._params["posCtlPid.yVelMax"])
-        elif full_name == "posCtlPid.zVelMax":
-            v.z_vel_max = float(value)
+        elif full_name in CONTROLLER_PARAMS:
+            v.set_controller_param(full_name, float(value))
         elif full_name == "pm.lowVoltage":
             v.low_voltage_v = float(value)
         elif full_name == "pm.criticalLowVoltage":

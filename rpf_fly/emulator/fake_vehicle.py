@@ -1,19 +1,21 @@
 """The simulated vehicle behind a fake Crazyflie: commander priorities, estimator, dynamics and battery.
 
 One `Vehicle.step(now_s)` runs the firmware's stabilizer loop in the firmware's order (estimator, high-level
-commander, commander, supervisor update, supervisor override, controller, motors), sub-stepped at 10 ms.
+commander, commander, supervisor update, supervisor override, controller, motors), sub-stepped at 10 ms (the
+"firmware" dynamics: in the firmware's 1 ms ticks, "Firmware dynamics" below).
 
 Supervisor rate: the supervisor updates at the firmware's 25 Hz (RATE_SUPERVISOR, `stabilizer_types.h` line 375;
-`supervisor.c` line 589), in the first sub-step that reaches each multiple of 40 ms of the caller's clock (the
-world's time: the drones of one world update together). Every other sub-step reads the state the last update left:
-whether the high-level commander may run and the motors may turn, and the override (level out, motors off), as the
-firmware's loop does between updates (`stabilizer.c` lines 332, 354, 360). So a watchdog or timeout acts at the
-first update past it, up to 40 ms after the instant (rpf_fly/emulator/fake_supervisor.py). A crash acts at once.
+`supervisor.c` line 589), in the first sub-step (100 Hz tick) that reaches each multiple of 40 ms of the caller's
+clock (the world's time: the drones of one world update together). Every other sub-step reads the state the last
+update left: whether the high-level commander may run and the motors may turn, and the override (level out, motors
+off), as the firmware's loop does between updates (`stabilizer.c` lines 332, 354, 360). So a watchdog or timeout
+acts at the first update past it, up to 40 ms after the instant (rpf_fly/emulator/fake_supervisor.py). A crash acts
+at once.
 
 Rule: a simulated Crazyflie is never kinder than a real one. Where the model simplifies, it does not simplify away
 a failure a real drone has (the yaw fly-away, drift without mocap).
 
-Dynamics (documented model, not physics):
+Dynamics (documented model, not physics; the default `VehicleConfig.dynamics`, "first_order"):
 - The controller acts on the *estimate* (position, velocity, yaw), as the real one does, so an external position
   that disagrees with the truth moves the true drone.
 - Absolute position axes track the setpoint with a first-order lag of time constant `TRACK_TAU_S` (0.25 s), plus the
@@ -51,6 +53,36 @@ Dynamics (documented model, not physics):
 - A crash (`Vehicle.crash`, called by the fake world on a contact): motors off at once and the horizontal velocity
   lost in the impact, so the drone drops where it hit (an inelastic impact: a Crazyflie that clips a pole or
   another drone does not sail on), then rests on the floor; its supervisor is crashed, tumbled and locked.
+
+Firmware dynamics (`VehicleConfig.dynamics="firmware"`; "first_order", the model above, is the default until the
+stack's figures tuned on it are re-derived): the body is the identified Crazyflie 2.1+ rigid body and rotors
+(cf_body.py) flown by the firmware's default PID cascade (cf_controller.py), at the firmware's 1 kHz ticks on the
+caller's clock (tick k at k ms, the 100 Hz loops on the ticks whose number, counted from 1, is a multiple of 10:
+`CfDrone`'s phase, so the drones of one world tick together). Docs/dynamics.md has the model's facts; here what
+the vehicle gives it:
+- The controller acts on what the firmware's acts on: the setpoint the commander selects (a streamed CRTP setpoint
+  in its modes, from the tick after it came; the high-level commander's plan, this vehicle's `hl`, at the 100 Hz
+  ticks, its velocity dropped by the position loop in absolute mode; the null setpoint of an idle commander), with
+  the supervisor's override (level out: x, y off, level attitude, yaw rate 0; the mode change resets every PID, so
+  the height sags from thrustBase as a Crazyflie's does; null where flying is not allowed), and the motors run only
+  while the supervisor allows them (`stabilizer.c`: motorsStop otherwise).
+- The state it sees, refreshed at each 100 Hz tick, is the estimate's: this module's position and velocity
+  estimate (extpos or onboard, with their errors, drift and divergence as above), the true roll and pitch (the
+  estimate's tilt error stays in the drift figures, as for the first-order model) and the estimated yaw. So a yaw
+  estimate that is wrong turns the controller's frame and flies away, as above, and a diverged estimate drags the
+  true drone.
+- A gust (and the turbulence) is an external force on the body, mass x acceleration; the cascade fights it (a
+  steady push of a m/s^2 holds it about 0.117 a m downwind through the velocity loop's P term, docs/dynamics.md; the
+  velocity integrator then takes it back over tens of seconds).
+- On the floor the body stands level on its feet: it neither slides nor tips (its x, y and its roll and pitch stay
+  as they were while it rests; the rest rule of cf_body.py); a body at rest with its rotors still is not stepped.
+- A crash stops the rotors at once (the impact) and the body drops where it hit; a power cut (reboot, flat battery)
+  cuts the motors' command and the rotors coast down; a reboot's new stack flies the same dynamics.
+- The controller's gains and limits are the firmware's parameters (`posCtlPid.xKp`, `velCtlPid.vzKi`,
+  `pid_attitude.roll_kp`, `pid_rate.yaw_kd`, `posCtlPid.thrustBase`, ...: `CONTROLLER_PARAMS`), written through
+  the parameter port (`set_controller_param`), acting at once.
+Cost: about 125 us of CPU per drone per 10 ms (the model's 10 ticks), against 15 us for the first-order model: a
+40-drone world steps in 5 ms of each 10 ms (tools/bench_vehicle.py's hover, docs/dynamics.md).
 
 Estimator with `positioning="extpos"` (a mocap drone; the Kalman estimator fed by CRTP 6:0 / 6:1):
 - Yaw: the estimate starts at `kalman.initialYaw` (radians, 0) at power-on and on `kalman.resetEstimation`, not at
@@ -129,6 +161,9 @@ import math
 import random
 from dataclasses import dataclass, replace
 
+from .cf_body import CfBody, quaternion_to_rpy_deg
+from .cf_controller import ATTITUDE_EVERY, NULL_SETPOINT, PARAM_NAMES, POSITION_EVERY, CfGains, ControlSetpoint, \
+    Lpf2p, PidController, motor_thrust_n
 from .fake_planner import HighLevelCommander
 from .fake_setpoint import AxisMode, Setpoint, Vec3, null_setpoint, wrap_angle, yaw_from_quaternion
 from .fake_supervisor import UPDATE_PERIOD_S, Supervisor, SupervisorStateName
@@ -204,6 +239,13 @@ ATTITUDE_TAU_S = 1.0 / 6.0
 `PID_PITCH_KP` = 6 /s) over a rate loop fast enough to be ideal."""
 MAX_TILT_DEG = 80.0
 """The model's bound on roll and pitch (rate modes integrate; a real drone past this flips)."""
+DYNAMICS = ("first_order", "firmware")
+"""`VehicleConfig.dynamics`: the documented first-order model above, or the firmware's PID cascade on the identified
+body (module doc, "Firmware dynamics")."""
+TICK_S = 0.001
+"""The firmware's stabilizer tick (1 kHz): the step of the "firmware" dynamics."""
+CONTROLLER_PARAMS = frozenset(PARAM_NAMES)
+"""The controller's parameters by firmware name (`posCtlPid.xKp`, ...: cf_controller.CfGains)."""
 
 
 @dataclass(frozen=True)
@@ -231,8 +273,16 @@ class VehicleConfig:
     turbulence_m_s2: float | None = None
     """The random push on the flying body (module doc, "Turbulence"); None: `TURBULENCE_M_S2` as it is when the
     config is made; 0 for a body that tracks its setpoints exactly (the emulator's tests of its own figures)."""
+    dynamics: str = "first_order"
+    """How the body flies: "first_order" (the documented lags of the module doc, "Dynamics") or "firmware" (the
+    firmware's default PID cascade on the identified Crazyflie 2.1+ body, module doc "Firmware dynamics");
+    "first-order" (the mission file's spelling) is taken for "first_order"."""
 
     def __post_init__(self) -> None:
+        if self.dynamics == "first-order":
+            object.__setattr__(self, "dynamics", "first_order")
+        if self.dynamics not in DYNAMICS:
+            raise ValueError(f"dynamics must be 'first_order' or 'firmware', not {self.dynamics!r}")
         if self.positioning not in ("onboard", "extpos"):
             raise ValueError(f"positioning must be 'onboard' or 'extpos', not {self.positioning!r}")
         if self.turbulence_m_s2 is None:
@@ -280,6 +330,15 @@ class Vehicle:
         self.vel: list[float] = [0.0, 0.0, 0.0]
         self.yaw = math.radians(config.yaw_deg)
         self.floor_z = float(config.position[2])
+        self.gains = CfGains()
+        """The position controller's gains and limits by firmware parameter (`set_controller_param`): all of them
+        act on the "firmware" dynamics, the velocity limits (`posCtlPid.x/y/zVelMax`) on the first-order one too."""
+        self.body: CfBody | None = None
+        """The identified rigid body and rotors of the "firmware" dynamics (None for "first_order"); `pos` and
+        `vel` are its own lists (the same objects), so whoever moves the one moves the other."""
+        self.controller: PidController | None = None
+        if config.dynamics == "firmware":
+            self._init_firmware_dynamics(now_s)
         self.kalman = config.positioning == "extpos"
         """True when the estimate is the mocap-fed filter; False for "onboard" (an ideal onboard system)."""
         self._seed = seed
@@ -345,6 +404,35 @@ class Vehicle:
         self._turbulence_rng = random.Random(f"fake-turbulence-{seed}")
         self._last_s = now_s
 
+    def _init_firmware_dynamics(self, now_s: float) -> None:
+        """The "firmware" dynamics' state (module doc, "Firmware dynamics"): body, controller, gyro filter, the
+        1 kHz tick counter on the caller's clock."""
+        self.body = CfBody(self.pos, self.yaw, floor_z=self.floor_z)
+        self.pos, self.vel = self.body.pos, self.body.vel
+        self.controller = PidController(self.gains)
+        self._gyro_filter = Lpf2p()
+        self._tick_ms = math.ceil(now_s / TICK_S - 1e-6)
+        """The next tick's number: it runs at `_tick_ms` ms of the caller's clock and flies the body to the next."""
+        self._slot_s = (self._tick_ms - POSITION_EVERY) * TICK_S
+        """The time of the last 100 Hz tick (the estimator's, high-level commander's and position loop's)."""
+        self._slot_vel = (0.0, 0.0)
+        """The true horizontal velocity at the last 100 Hz tick (the IMU's velocity change since: `_predict`)."""
+        self._control: ControlSetpoint = NULL_SETPOINT
+        """The controller's setpoint (the commander's selection, overridden by the supervisor)."""
+        self._control_idle = True
+        """`_control` is the null setpoint's (all modes off, no thrust): motors off."""
+        self._control_of: Setpoint | None = None
+        """The `Setpoint` `_control` was made from."""
+        self._selected_from: Setpoint | None = None
+        """The commander's setpoint when the control was last selected."""
+        self._motors_allowed = False
+        """The supervisor's verdict at the last selection (`stabilizer.c`: motors run only when allowed)."""
+        self._state: tuple[float, ...] = (0.0,) * 9
+        """What the controller sees: the estimate (x, y, z, vx, vy, vz), true roll, pitch (legacy sign) and the
+        estimated yaw, degrees; refreshed every 10 ms."""
+        self._last_thrust = math.nan
+        self.motor_commands = (0, 0, 0, 0)
+
     # Estimator ------------------------------------------------------------------------------------------------
 
     def _draw_bias(self) -> Vec3:
@@ -391,6 +479,8 @@ class Vehicle:
         stack runs again (the firmware boots a new one)."""
         self.power_cut = True
         self.motors_on = self.thrusting = False
+        if self.body is not None:  # the motors lose their power: the rotors coast down
+            self._stop_motors()
 
     def gust(self, accel_m_s2: Vec3, until_s: float) -> None:
         """Push the true body with ``accel_m_s2`` (m/s^2, world frame) until ``until_s`` (module doc, "Gust");
@@ -524,6 +614,10 @@ class Vehicle:
         self.vel[0] = self.vel[1] = 0.0
         self.vel[2] = min(self.vel[2], 0.0)
         self.control_setpoint = null_setpoint(now_s, "crash")
+        if self.body is not None:  # the propellers stop in the impact; the body drops as it is
+            self._stop_motors()
+            self.body.rotor_rpm = [0.0, 0.0, 0.0, 0.0]
+            self.body.omega = [0.0, 0.0, 0.0]
         self.supervisor.crash(now_s)
         if self.crash_s is not None:
             return False
@@ -534,7 +628,11 @@ class Vehicle:
     # Stabilizer loop ------------------------------------------------------------------------------------------
 
     def step(self, now_s: float) -> None:
-        """Advance to `now_s` (seconds) in sub-steps of at most `SUBSTEP_S`."""
+        """Advance to `now_s` (seconds) in sub-steps of at most `SUBSTEP_S` (the "firmware" dynamics: in the
+        firmware's 1 ms ticks)."""
+        if self.body is not None:
+            self._step_firmware(now_s)
+            return
         remaining = now_s - self._last_s
         t = self._last_s
         while remaining > 1e-9:
@@ -741,3 +839,150 @@ class Vehicle:
         c, s = math.cos(self.yaw), math.sin(self.yaw)  # the attitude loop holds the TRUE body (its IMU)
         forward, left = math.sin(pitch) * math.cos(roll), -math.sin(roll)
         return (force * (c * forward - s * left), force * (s * forward + c * left), vertical)
+
+    # Firmware dynamics ------------------------------------------------------------------------------------------
+
+    def set_controller_param(self, name: str, value: float) -> None:
+        """A controller parameter written (`posCtlPid.xKp`, ...; KeyError for another name): it acts at once, as
+        the firmware's PID objects read their gains each update."""
+        gains = self.gains
+        if self.controller is not None:
+            self.controller.set_param(name, value)
+        else:
+            gains.set_param(name, value)
+        self.xy_vel_max = min(gains.x_vel_max, gains.y_vel_max)
+        self.z_vel_max = gains.z_vel_max
+
+    def _stop_motors(self) -> None:
+        """Motors off now (power cut, crash): no command reaches them until the next selection allows it."""
+        self._motors_allowed = False
+        self._control = NULL_SETPOINT
+        self._control_of = None
+        self._control_idle = True
+        self.motor_commands = (0, 0, 0, 0)
+        assert self.body is not None
+        self.body.command_thrusts((0.0, 0.0, 0.0, 0.0))
+
+    def _select(self, setpoint: Setpoint) -> None:
+        """The controller's setpoint from the commander's (`setpoint`, already null where flying is not allowed):
+        the supervisor's override on its current state, and whether the motors may run."""
+        setpoint = self._override(setpoint)
+        self.control_setpoint = setpoint
+        if setpoint is not self._control_of:
+            control = self._control = ControlSetpoint.from_setpoint(setpoint)
+            self._control_of = setpoint
+            self._control_idle = control.thrust == 0.0 and control.modes == NULL_SETPOINT.modes
+        self._motors_allowed = self.powered and self.supervisor.motors_allowed
+
+    def _update_motors_on(self) -> None:
+        self.motors_on = self.thrusting = self._motors_allowed and any(
+            motor_thrust_n(m) > 0.0 for m in self.motor_commands)
+
+    def _step_firmware(self, now_s: float) -> None:
+        """Fly the 1 ms ticks up to `now_s` (module doc, "Firmware dynamics")."""
+        end = math.floor(now_s / TICK_S + 1e-6)
+        body, controller, gyro_filter = self.body, self.controller, self._gyro_filter
+        assert body is not None and controller is not None
+        if self._tick_ms < end and self.setpoint is not self._selected_from and self.powered:
+            # a streamed setpoint that came since the last tick acts from this one (commanderGetSetpoint each tick)
+            self._selected_from = self.setpoint
+            self._select(self.setpoint if self.supervisor.motors_allowed else null_setpoint(0.0))
+        degrees = math.degrees
+        while self._tick_ms < end:
+            k = self._tick_ms + 1  # the firmware's tick counter starts at 1 on the loop's first tick (CfDrone)
+            o = body.omega
+            gyro = gyro_filter.apply(degrees(o[0]), degrees(o[1]), degrees(o[2]))
+            if k % POSITION_EVERY == 0:
+                self._firmware_slot(self._tick_ms * TICK_S)
+            control = self._control
+            if self._motors_allowed and not self._control_idle:
+                controller.tick(k, control, self._state, gyro)
+                if k % ATTITUDE_EVERY == 0 or controller.thrust != self._last_thrust:
+                    motors = controller.motors()
+                    if motors != self.motor_commands:
+                        self.motor_commands = motors
+                        body.command_thrusts([motor_thrust_n(m) for m in motors])
+                self._last_thrust = controller.thrust
+            else:
+                # the null setpoint (or motors not allowed, which the override makes null): the controller's output
+                # is 0 and it resets on the state every tick, which changes every 10 ms: ticked then, and until
+                # its mode set and thrust are the null's
+                if k % POSITION_EVERY == 0 or controller.thrust != 0.0 or controller.previous_modes != control.modes:
+                    controller.tick(k, control, self._state, gyro)
+                    self._last_thrust = controller.thrust
+                if self.motor_commands != (0, 0, 0, 0):
+                    self.motor_commands = (0, 0, 0, 0)
+                    body.command_thrusts((0.0, 0.0, 0.0, 0.0))
+            if not (body.on_floor and body.rotor_rpm == _STILL_ROTORS and body.rotor_cmd_rpm == _STILL_ROTORS
+                    and body.external_force == _NO_FORCE):  # at rest on the floor with rotors still, nothing moves
+                x, y, was_on_floor = body.pos[0], body.pos[1], body.on_floor
+                body.step(TICK_S)
+                if body.on_floor:  # it stands on its feet: level, and it can neither slide nor tip
+                    body.pos[0], body.pos[1] = x, y
+                    qz, qw = body.quat[2], body.quat[3]
+                    if not was_on_floor or body.quat[0] or body.quat[1]:
+                        norm = math.hypot(qz, qw)
+                        body.quat = [0.0, 0.0, qz / norm, qw / norm]
+            self._tick_ms += 1
+        self.pos, self.vel = body.pos, body.vel
+        self._update_motors_on()
+        self._last_s = max(self._last_s, now_s)
+
+    def _firmware_slot(self, t: float) -> None:
+        """The 100 Hz part of the tick at `t`: the interval since the last one closed (battery, estimator), the
+        truth's attitude read, the push of gusts and turbulence set, then the high-level commander, the
+        commander's selection, the supervisor (at its 25 Hz) and its override, and the estimate the controller
+        sees for the next 10 ms."""
+        body = self.body
+        assert body is not None
+        self.pos, self.vel = body.pos, body.vel  # the body's lists of now (each step makes new ones)
+        dt = t - self._slot_s
+        self._slot_s = t
+        self._update_motors_on()
+        vel = body.vel
+        if dt > 0.0:
+            self.battery.step(t, dt, self.motors_on, self.low_voltage_v, self.critical_voltage_v)
+            if self.divergence_velocity is not None:
+                self._run_away(dt)
+            elif self.kalman:
+                self._predict(dt, vel[0] - self._slot_vel[0], vel[1] - self._slot_vel[1])
+            else:
+                floor = self.ext_pos_std_dev**2
+                self._onboard_variance_m2 = floor + (self._onboard_variance_m2 - floor) * math.exp(
+                    -dt / VARIANCE_DECAY_TAU_S)
+        self._slot_vel = (vel[0], vel[1])
+        roll, pitch, yaw = quaternion_to_rpy_deg(*body.quat)
+        self.yaw = math.radians(yaw)
+        self.attitude_deg[0], self.attitude_deg[1] = roll, -pitch
+        push = self.gust_accel if t <= self.gust_until_s else None
+        if self.config.turbulence_m_s2 and self.motors_on and body.pos[2] > self.floor_z + TURBULENCE_MIN_HEIGHT_M:
+            push = self._turbulent(POSITION_EVERY * TICK_S, push)
+        elif self._turbulence[0] or self._turbulence[1] or self._turbulence[2]:
+            self._turbulence = [0.0, 0.0, 0.0]
+        mass = body.params.mass
+        body.external_force = _NO_FORCE if push is None else (mass * push[0], mass * push[1], mass * push[2])
+        if not self.powered:
+            self.control_setpoint = null_setpoint(t, "power-off")
+            self._stop_motors()
+            return
+        can_fly = self.supervisor.motors_allowed
+        self.hl.block(not can_fly)
+        if can_fly:
+            hl_setpoint = self.hl.get_setpoint(t, self.estimate, self.estimate_velocity, self.estimate_yaw)
+            if hl_setpoint is not None:
+                self._commander_set(hl_setpoint, PRIORITY_HIGH_LEVEL, t)
+        setpoint = self.setpoint if can_fly else null_setpoint(0.0)
+        slot = self._supervisor_lattice(t)
+        if slot > self._supervisor_slot:
+            self._supervisor_slot = slot
+            self.supervisor.update(t, thrust_over_idle=self.thrusting, setpoint_age_s=t - setpoint.timestamp_s,
+                                   param_emergency_stop=self.param_emergency_stop)
+        self._selected_from = self.setpoint
+        self._select(setpoint)
+        est, est_vel = self.estimate, self.estimate_velocity
+        self._state = (est[0], est[1], est[2], est_vel[0], est_vel[1], est_vel[2], roll, -pitch,
+                       math.degrees(self.estimate_yaw))
+
+
+_STILL_ROTORS = [0.0, 0.0, 0.0, 0.0]
+_NO_FORCE = (0.0, 0.0, 0.0)
