@@ -11,12 +11,12 @@ import signal
 import subprocess
 import sys
 import time
-from pathlib import Path
 
 import jsonschema
 import pytest
 from mcap.reader import make_reader
 
+from lab_harness import LabProcess
 from rpf_fly.flight.lab import after_ground_station
 from rpf_fly.log.reader import read_log
 
@@ -63,38 +63,6 @@ with SyncCrazyflie(sys.argv[1], cf=Crazyflie(rw_cache=sys.argv[2])) as scf:
     scf.cf.commander.send_setpoint(0, 0, 0, 0)
     time.sleep(0.2)
 """
-
-
-class LabProcess:
-    """``rpf-fly lab`` in a process of its own, with its own lab file."""
-
-    def __init__(self, tmp_path: Path, mission: Path) -> None:
-        self.env = dict(os.environ, PYTHONUNBUFFERED="1", RPF_FLY_LAB=str(tmp_path / "lab.json"))
-        self.log = tmp_path / "lab.mcap"
-        self.tmp_path = tmp_path
-        self.mission = mission
-        self.proc = subprocess.Popen([sys.executable, "-m", "rpf_fly", "lab", str(mission), "--log", str(self.log)],
-                                     stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=self.env,
-                                     cwd=tmp_path)
-        deadline = time.monotonic() + 60
-        while not (tmp_path / "lab.json").exists():
-            assert self.proc.poll() is None, self.proc.stdout.read()  # type: ignore[union-attr]
-            assert time.monotonic() < deadline, "the lab did not start"
-            time.sleep(0.05)
-
-    def run(self, *args: str, timeout: float = 120) -> subprocess.CompletedProcess:
-        return subprocess.run([sys.executable, "-m", "rpf_fly", *args], capture_output=True, text=True,
-                              env=self.env, cwd=self.tmp_path, timeout=timeout)
-
-    def start(self, *args: str) -> subprocess.Popen:
-        return subprocess.Popen([sys.executable, "-m", "rpf_fly", *args], stdout=subprocess.DEVNULL,
-                                stderr=subprocess.PIPE, text=True, env=self.env, cwd=self.tmp_path)
-
-    def stop(self) -> str:
-        self.proc.send_signal(signal.SIGTERM)
-        out, _ = self.proc.communicate(timeout=30)
-        assert self.proc.returncode == 0, out
-        return out
 
 
 def test_check_then_fly_against_one_lab_flies_every_drone_also_one_latched_by_a_cflib_program(tmp_path):

@@ -5,15 +5,14 @@ drones are stopped the same way, the other dongle's reach their goals, and the f
 
 from __future__ import annotations
 
-import os
 import signal
 import subprocess
-import sys
 import time
 from pathlib import Path
 
 import pytest
 
+from lab_harness import LabProcess
 from rpf_fly.flight.lab import after_ground_station
 from rpf_fly.log.reader import read_log
 
@@ -41,19 +40,10 @@ def _lab_and_flight(tmp_path: Path, faults: str) -> tuple[subprocess.CompletedPr
     mission.write_text(FOUR)
     schedule = tmp_path / "faults.yaml"
     schedule.write_text(faults)
-    env = dict(os.environ, PYTHONUNBUFFERED="1", RPF_FLY_LAB=str(tmp_path / "lab.json"))
-    lab_log = tmp_path / "lab.mcap"
-    lab = subprocess.Popen([sys.executable, "-m", "rpf_fly", "lab", str(mission), "--log", str(lab_log)],
-                           stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env, cwd=tmp_path)
+    lab = LabProcess(tmp_path, mission)
     try:
-        deadline = time.monotonic() + 60
-        while not (tmp_path / "lab.json").exists():
-            assert lab.poll() is None, lab.stdout.read()  # type: ignore[union-attr]
-            assert time.monotonic() < deadline, "the lab did not start"
-            time.sleep(0.05)
-        flight = subprocess.Popen([sys.executable, "-m", "rpf_fly", "fly", str(mission), "--lab", "--faults",
-                                   str(schedule), "--no-console", "--log", str(tmp_path / "flight.mcap")],
-                                  stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=tmp_path)
+        flight = lab.start("fly", str(mission), "--lab", "--faults", str(schedule), "--no-console", "--log",
+                           str(tmp_path / "flight.mcap"), stdout=subprocess.PIPE)
         struck = None
         err = []
         for line in flight.stderr:  # type: ignore[union-attr]
@@ -65,10 +55,8 @@ def _lab_and_flight(tmp_path: Path, faults: str) -> tuple[subprocess.CompletedPr
         assert struck is not None, "".join(err)
         time.sleep(max(0.0, (struck + 6e9 - time.time_ns()) / 1e9))
     finally:
-        lab.send_signal(signal.SIGTERM)
-        lab_out, _ = lab.communicate(timeout=30)
-    assert lab.returncode == 0, lab_out
-    return subprocess.CompletedProcess(flight.args, code, out, "".join(err)), struck, lab_log
+        lab.stop()
+    return subprocess.CompletedProcess(flight.args, code, out, "".join(err)), struck, lab.log
 
 
 def test_a_ground_station_killed_in_its_planning_phase_leaves_no_drone_flying(tmp_path):
