@@ -135,10 +135,13 @@ def mission_mocap_noise(mission: Mission) -> MocapNoise:
 
 def simulated_drones(mission: Mission, drone_configs: Optional[Mapping[str, FakeDroneConfig]] = None,
                      start_faults: Optional[Mapping[str, StartFault]] = None,
-                     radio_loss: Optional[BurstLoss] = RADIO_LOSS) -> dict[int, FakeDroneConfig]:
+                     radio_loss: Optional[BurstLoss] = RADIO_LOSS,
+                     dynamics: Optional[str] = None) -> dict[int, FakeDroneConfig]:
     """The simulated Crazyflie of each drone of ``mission`` by radio address: at its mission start, mocap
     positioning, every link with ``radio_loss``; ``drone_configs`` replaces a drone's (by name), ``start_faults``
-    then moves or turns it before power-on."""
+    then moves or turns it before power-on. ``dynamics`` (``"firmware"`` or ``"first-order"``; default the
+    mission's ``dry_run.dynamics``) is how every one of them flies (`VehicleConfig.dynamics`)."""
+    chosen = mission.dry_run.dynamics if dynamics is None else dynamics
     addresses = {d.name: uri_address(d.uri) for d in mission.drones}
     configs = dict(drone_configs or {})
     faults = dict(start_faults or {})
@@ -151,6 +154,7 @@ def simulated_drones(mission: Mission, drone_configs: Optional[Mapping[str, Fake
         config = configs.get(d.name, default)
         if radio_loss is not None and config.faults.burst is None:
             config = replace(config, faults=replace(config.faults, burst=radio_loss))
+        config = replace(config, vehicle=replace(config.vehicle, dynamics=chosen))
         drones[addresses[d.name]] = _with_start_fault(config, faults.get(d.name))
     return drones
 
@@ -180,6 +184,7 @@ class DryRun:
         host: str = "127.0.0.1",
         mocap_noise: Optional[MocapNoise] = None,
         lab: Optional["LabInfo"] = None,
+        dynamics: Optional[str] = None,
     ):
         """``lab``: fly the drones of a running lab (`rpf_fly.flight.lab`, ``rpf-fly lab``) instead of starting
         private ones; they keep their firmware state, and closing the dry run leaves them to the lab. ``truth``: the flight log of a flight on this rig gets the world's truth (``/truth/<drone>``); False only
@@ -195,8 +200,10 @@ class DryRun:
         network; a distributed flight's coordinator gives its listen address: docs/distributed.md).
         ``mocap_noise``: the jitter and single-frame dropouts of every pose the mocap serves (default
         `MocapNoise.default()`, a real room's: rpf_fly/emulator/mocap_noise.py; ``MocapNoise(0, 0, 0)``: the exact
-        truth, for tests that compare poses to the millimetre). ``seed`` and ``mocap_noise`` default to the
-        mission's ``dry_run`` section (docs/mission-format.md)."""
+        truth, for tests that compare poses to the millimetre). ``dynamics``: how the simulated drones fly,
+        ``"firmware"`` (the firmware's PID cascade on the identified body, docs/dynamics.md) or ``"first-order"``
+        (`VehicleConfig.dynamics`). ``seed``, ``mocap_noise`` and ``dynamics`` default to the mission's ``dry_run``
+        section (docs/mission-format.md); a lab's drones fly the lab mission's."""
         if mocap is None:  # the mission's kind decides: its own client against the emulator
             mocap = "motioncapture" if mission.mocap.kind == "motioncapture" else "natnet"
         if mocap not in ("natnet", "sim", "motioncapture"):
@@ -211,7 +218,8 @@ class DryRun:
         if lab is not None and (drone_configs or start_faults):
             raise ValueError("a running lab's drones are already powered on: give drone configs and power-on "
                              "faults to the lab (rpf-fly lab --faults), not to a flight against it")
-        self.drone_configs = simulated_drones(mission, drone_configs, start_faults, radio_loss)
+        self.dynamics = mission.dry_run.dynamics if dynamics is None else dynamics
+        self.drone_configs = simulated_drones(mission, drone_configs, start_faults, radio_loss, self.dynamics)
         self.lab = lab
         self._names = {address: name for name, address in self.addresses.items()}
         self.seed = mission.dry_run.seed if seed is None else seed

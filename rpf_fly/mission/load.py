@@ -477,6 +477,7 @@ DRY_RUN_SPEC: dict[str, tuple[str, Reader]] = {
     "mocap_noise_m": ("mocap_noise_m", _num(NON_NEGATIVE)),
     "mocap_noise_deg": ("mocap_noise_deg", _num(NON_NEGATIVE)),
     "mocap_dropout": ("mocap_dropout", _num(FRACTION)),
+    "dynamics": ("dynamics", _choice(("first-order", "firmware"))),
 }
 SIM_SPEC: dict[str, tuple[str, Reader]] = {
     "time_limit_s": ("time_limit_s", _num(POSITIVE)),

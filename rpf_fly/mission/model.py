@@ -306,13 +306,16 @@ class DryRunSettings:
     the radio's loss bursts and the mocap's jitter: the same seed flies the same draws, another seed other ones.
     ``mocap_noise_m`` / ``mocap_noise_deg`` (per-axis jitter of every served pose) and ``mocap_dropout`` (the
     share of a body's frames left untracked): None keeps the emulator's figures (rpf_fly/emulator/mocap_noise.py:
-    0.5 mm, 0.5 deg, 0.1 %).
+    0.5 mm, 0.5 deg, 0.1 %). ``dynamics``: how the simulated drones fly, ``first-order`` (the emulator's
+    documented lags, rpf_fly/emulator/fake_vehicle.py) or ``firmware`` (the firmware's PID cascade on the identified
+    Crazyflie 2.1+ body, docs/dynamics.md).
     """
 
     seed: int = 0
     mocap_noise_m: Optional[float] = None
     mocap_noise_deg: Optional[float] = None
     mocap_dropout: Optional[float] = None
+    dynamics: str = "first-order"
 
 
 @dataclass(frozen=True)
