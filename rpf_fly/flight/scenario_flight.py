@@ -12,13 +12,21 @@ its pose from the mocap, extpos fed to its estimator, the emergency-stop watchdo
   the reference's start state), then t = 0. After ``duration_s`` it lands.
 - A command scenario starts on the floor under ``start``: the drone is armed and each command is sent at its time.
 
+The simulated drone of a dry run flies the firmware model (`VehicleConfig.dynamics` "firmware": the firmware's PID
+cascade on the identified Crazyflie 2.1+ body, docs/dynamics.md) in the reference's environment: still air (no
+turbulence) and a radio that loses nothing (no loss bursts); what the stack adds stays (the radio's and the mocap's
+latency, the mocap's noise, the estimator). A lab's drones fly what the lab's mission says, and a lab whose drones
+do not fly the firmware model is refused.
+
 The trace (`rpf_fly.emulator.cf_scenario` trace format, 50 Hz): ``t``, ``sp`` (the setpoint in effect; for commands
 the plan: the firmware's rest-to-rest degree-7 piece from where the drone was to the command's goal), ``pos`` (the
-simulated drone's true position in a dry run or lab, the mocap position of a real one), and ``figures``.
+simulated drone's true position in a dry run or lab at each sample's instant, `resample_truth`; the mocap position
+of a real one), ``figures`` and, simulated, ``host_behind_s`` (`_host_verdict`).
 """
 
 from __future__ import annotations
 
+import bisect
 import math
 import time
 from dataclasses import dataclass, field
@@ -29,9 +37,11 @@ from rpf_fly.emulator.cf_scenario import Scenario, figures
 from rpf_fly.mission.load import parse_mission
 from rpf_fly.mission.model import Mission
 
-HOVER_SETTLE_S = 6.0
-"""How long a setpoint scenario's drone hovers at the start before t = 0: the height and vertical-velocity
-integrators build up the hover thrust that thrustBase lacks within a few seconds (docs/dynamics.md)."""
+HOVER_SETTLE_S = 10.0
+"""How long a setpoint scenario's drone hovers at the start before t = 0, as the reference's start state
+(tests/data/crazyflie_dynamics/README.md, "Start states": 10 s): the height and vertical-velocity integrators,
+wound up by the take-off from the floor, unwind slowly (height ki 0.5); after 6 s the drone still hovered 1.7 cm
+high, after 10 s 0.6 cm (docs/dynamics.md, "The simulated drone")."""
 TAKEOFF_S = 2.0
 GOTO_S = 2.5
 LAND_S = 2.0
@@ -61,6 +71,7 @@ arena: {{x: [{min(xs) - ARENA_MARGIN_M:.3f}, {max(xs) + ARENA_MARGIN_M:.3f}], y:
 flight: {{height: {height:.3f}, speed: 0.5, rate_hz: 10, takeoff_s: {TAKEOFF_S}, land_s: {LAND_S}, timeout_s: 120}}
 planner: {{kind: apf}}
 mocap: {{kind: natnet, server: 127.0.0.1, rate_hz: 100}}
+dry_run: {{dynamics: firmware}}
 drones:
   - {{name: {name}, uri: {uri}, start: [{sx:.3f}, {sy:.3f}], goal: [{sx + 0.5:.3f}, {sy:.3f}]}}
 """
@@ -119,6 +130,8 @@ class ScenarioFlight:
         self.pose: Optional[tuple[float, float, float]] = None
         self._last_extpos = -math.inf
         self._armed = False
+        self.t0: Optional[float] = None
+        """`time.monotonic()` at the scenario's t = 0 (None before)."""
 
     # ------------------------------------------------------------------------------------------- helpers
 
@@ -223,7 +236,7 @@ class ScenarioFlight:
             self._spin(min(settle_until, time.monotonic() + period))
         self._event("t = 0")
         trace, sample = self._sampler()
-        t0 = time.monotonic()
+        t0 = self.t0 = time.monotonic()
         sp = start
         held: Optional[tuple[float, float, float]] = None
         index = -1
@@ -267,7 +280,7 @@ class ScenarioFlight:
         plan = _Plan((floor[0], floor[1], 0.0))
         trace, sample = self._sampler()
         events = sorted((float(r[0]), r) for r in s.commands)
-        t0 = time.monotonic()
+        t0 = self.t0 = time.monotonic()
         next_sample = 0.0
         for t_cmd, row in events + [(s.duration_s, None)]:
             while next_sample < min(t_cmd, s.duration_s) - 1e-9:
@@ -318,6 +331,62 @@ def write_json_trace(trace: dict[str, Any], path: Optional[Path] = None) -> str:
     return text
 
 
+def _check_lab_dynamics(lab: Any, say: Callable[[str], None] = lambda message: None) -> None:
+    """A lab's drones fly the dynamics of the mission the lab was started with (`rpf_fly.flight.dry_run`); a scenario
+    is flown on the firmware model only: a lab of first-order drones is refused (ScenarioError). A lab whose mission
+    file cannot be read from here (a path relative to where the lab started, a file moved since) is flown, and
+    ``say`` tells so."""
+    from rpf_fly.mission.load import load_mission
+
+    try:
+        dynamics = load_mission(Path(lab.mission)).dry_run.dynamics
+    except Exception as err:  # noqa: BLE001 - the lab's file cannot be read from here: the lab itself cannot say
+        say(f"the lab's mission {lab.mission} cannot be read from here ({type(err).__name__}): its drones fly the "
+            "dynamics it says (dry_run.dynamics), not checked")
+        return
+    if dynamics != "firmware":
+        raise ScenarioError(f"the lab's drones fly the {dynamics} model (its mission {lab.mission}, dry_run.dynamics): "
+                            "a scenario is flown on the firmware model; start the lab with dry_run: "
+                            "{dynamics: firmware}")
+
+
+def resample_truth(trace: dict[str, Any], track: list[tuple[float, tuple[float, float, float]]], t0: float) -> bool:
+    """Replace the trace's ``pos`` by the simulated world's truth at each sample's own instant (t0 + t, monotonic):
+    linear between the world's 10 ms steps (`track`: its stamped truth samples). The live samples are read when
+    the flight's loop gets to them, a few ms late and later still on a busy host, which a forward difference (a
+    step's ``peak_speed_m_s``) turns into nonsense. False (the trace as it was) where the track does not cover the
+    samples (the truth feed failed)."""
+    stamps = [stamp for stamp, _ in track]
+    if not stamps or any(not stamps[0] <= t0 + t <= stamps[-1] for t in (trace["t"][0], trace["t"][-1])):
+        return False
+    pos = []
+    for t in trace["t"]:
+        at = t0 + t
+        i = min(max(bisect.bisect_right(stamps, at), 1), len(stamps) - 1)
+        (s0, p0), (s1, p1) = track[i - 1], track[i]
+        w = (at - s0) / (s1 - s0) if s1 > s0 else 0.0
+        pos.append([a + (b - a) * w for a, b in zip(p0, p1)])
+    trace["pos"] = pos
+    return True
+
+
+def _host_verdict(trace: dict[str, Any], rig: Any, flight: ScenarioFlight) -> None:
+    """``host_behind_s`` in the trace: how long the host let the simulated world fall behind its time during the
+    flight (`rpf_fly.emulator.host_lag`: a late world step or mocap frame is time the drone did not have: extpos
+    late, the estimate drifting blind, a setpoint watchdog firing); from `HOST_BEHIND_REPORT_S` on an event says
+    the figures are not evidence."""
+    from rpf_fly.emulator.host_lag import HOST_BEHIND_REPORT_S
+
+    try:
+        behind = float(rig.host_lag().behind_s)
+    except Exception:  # noqa: BLE001 - the world is gone or cannot say: no verdict
+        return
+    trace["host_behind_s"] = behind
+    if behind >= HOST_BEHIND_REPORT_S:
+        flight._event(f"the host could not keep up for {behind:.1f} s (simulated steps or mocap frames late): these "
+                      "figures are not evidence")
+
+
 def run_scenario(scenario: Scenario, mission: Mission, name: str, *, dry_run: bool, lab: Any = None,
                  log_path: Optional[Path] = None, on_event: Callable[[str], None] = lambda m: None
                  ) -> dict[str, Any]:
@@ -341,7 +410,15 @@ def run_scenario(scenario: Scenario, mission: Mission, name: str, *, dry_run: bo
         if dry_run or lab is not None:
             from rpf_fly.flight.dry_run import DryRun
 
-            rig = DryRun(one, lab=lab).__enter__()
+            if lab is not None:
+                _check_lab_dynamics(lab, on_event)
+                rig = DryRun(one, lab=lab).__enter__()
+            else:
+                from rpf_fly.emulator.fake_world import FakeDroneConfig
+
+                still = FakeDroneConfig.at(drone.start[0], drone.start[1], 0.0, positioning="extpos",
+                                           turbulence_m_s2=0.0)
+                rig = DryRun(one, dynamics="firmware", drone_configs={name: still}, radio_loss=None).__enter__()
             backend, mocap, uri = CflibBackend.for_mission(one, rig.cache_dir), rig.mocap, rig.uris[name]
             address = rig.addresses[name]
             world = rig.world
@@ -355,12 +432,27 @@ def run_scenario(scenario: Scenario, mission: Mission, name: str, *, dry_run: bo
             meta = S.mission_metadata(one, 0, source="scenario")
             meta["scenario"] = scenario.name
             log = FlightLog(log_path, meta, S.scenario_metadata(one))
-            if rig is not None:
-                offset_ns = time.time_ns() - time.monotonic_ns()
-                feed = TruthFeed(rig.truth_samples, lambda stamp, states: log.truth(offset_ns + int(stamp * 1e9),
-                                                                                   states)).start()
+        truth_track: list[tuple[float, tuple[float, float, float]]] = []
+        if rig is not None:
+            offset_ns = time.time_ns() - time.monotonic_ns()
+
+            def sink(stamp: float, states: dict[str, Any]) -> None:
+                if log is not None:
+                    log.truth(offset_ns + int(stamp * 1e9), states)
+                state = states.get(name)
+                if state is not None:
+                    truth_track.append((stamp, tuple(state[0])))  # type: ignore[arg-type]
+
+            feed = TruthFeed(rig.truth_samples, sink).start()
         flight = ScenarioFlight(one, name, scenario, backend, mocap, uri, truth=truth, on_event=on_event, log=log)
-        return flight.run()
+        trace = flight.run()
+        if feed is not None and flight.t0 is not None:
+            feed.stop()  # its last fetch: the world's truth up to now
+            if resample_truth(trace, truth_track, flight.t0):
+                trace["figures"] = figures(trace, scenario)
+        if rig is not None:
+            _host_verdict(trace, rig, flight)
+        return trace
     finally:
         if feed is not None:
             feed.stop()
