@@ -69,6 +69,7 @@ def get_app() -> typer.Typer:
     """The app with every command module imported (idempotent)."""
     from rpf_fly.cli import (bench_cmd, fly_cmd, lab_cmd, mocap_cmd, replay_cmd, review_cmd,  # noqa: F401
                              scenario_cmd, sim_cmd, train_cmd, worker_cmd)
+    from rpf_fly.cli import campaign_cmd  # noqa: F401
 
     _flags_show_no_type()
     return app

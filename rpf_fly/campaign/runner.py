@@ -1,0 +1,263 @@
+"""The campaigns, flown one run after another and judged: a lab's campaign on its own mission (`mission_campaign`,
+``rpf-fly campaign``) and the maintainers' over several shipped missions (`maintainers_campaign`,
+tools/fault_campaign.py). docs/fault-campaign.md says what each flies and judges.
+
+Every run is a real-time dry run in a process of its own, so the runs go one at a time: two at once on a small host
+would make the simulated worlds fall behind and the verdicts the host's.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import random
+import shlex
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable, Iterator, Optional
+
+from rpf_fly.campaign.flights import fly_against_lab, fly_dry_run
+from rpf_fly.campaign.judge import Verdict, judge_flight, judge_lab
+from rpf_fly.campaign.missions import (FIXED_MISSIONS, RANDOM_MISSIONS, ROOT, mission_path, with_extpose,
+                                       with_planner_kind, with_world_seed)
+from rpf_fly.campaign.report import as_json, markdown, source_revision
+from rpf_fly.campaign.schedules import (ALL_KINDS, DEFAULTS, LAB_KINDS, LAB_RUNS, ScheduleError, check_kinds,
+                                        draw_faults, lab_faults, middle_drone_fault)
+from rpf_fly.mission import MissionError, load_mission
+
+OnVerdict = Callable[[Verdict], None]
+"""Told each run's verdict as it ends (a campaign takes minutes: the user sees it go)."""
+
+
+class CampaignError(ValueError):
+    """Bad input to a campaign (a mission that does not load, an unknown kind, an option out of range): one line
+    naming the file or option and what was expected."""
+
+
+@dataclass
+class CampaignResult:
+    """A flown campaign: the command that reproduces it, the source it flew and every run's verdict."""
+
+    command: str
+    revision: str
+    verdicts: list[Verdict]
+
+    @property
+    def passed(self) -> bool:
+        """Every run passed (and there was one)."""
+        return bool(self.verdicts) and all(v.passed for v in self.verdicts)
+
+    def markdown(self) -> str:
+        """The report (docs/fault-campaign.md's tables are such reports)."""
+        return markdown(self.command, self.revision, self.verdicts)
+
+    def json(self) -> dict[str, Any]:
+        """The verdicts as one JSON document."""
+        return as_json(self.command, self.revision, self.verdicts)
+
+
+def _ignore(_: Verdict) -> None:
+    return None
+
+
+@contextlib.contextmanager
+def _workdir(keep: Optional[Path]) -> Iterator[Path]:
+    """``keep`` (made, and left with every run's mission copy, schedule and logs), or a folder removed after."""
+    if keep is not None:
+        keep.mkdir(parents=True, exist_ok=True)
+        yield keep.resolve()
+        return
+    with tempfile.TemporaryDirectory(prefix="rpf-fly-campaign-") as tmp:
+        yield Path(tmp)
+
+
+def fly_and_judge(faults: list[dict[str, Any]], mission_file: Path, workdir: Path, tag: str = "") -> Verdict:
+    """One dry run of ``mission_file`` with the schedule ``faults``, judged on its truth."""
+    return judge_flight(fly_dry_run(mission_file, faults, workdir, tag))
+
+
+def fly_and_judge_lab(fault: dict[str, Any], mission_file: Path, workdir: Path, tag: str = "") -> Verdict:
+    """One run of a lab kind against a lab of its own, judged on the lab's log."""
+    return judge_lab(fly_against_lab(mission_file, fault, workdir, tag))
+
+
+def fixed_runs(mission_file: Path, kinds: list[str], workdir: Path, on_verdict: OnVerdict = _ignore) -> list[Verdict]:
+    """Each dry-run kind of ``kinds`` once on ``mission_file``: its default fault, on the middle drone, at 3 s into
+    the planning phase (the lab kinds are left to `lab_runs`)."""
+    mission = load_mission(mission_file)
+    verdicts = []
+    for kind in kinds:
+        if kind in LAB_KINDS:
+            continue
+        verdicts.append(fly_and_judge([middle_drone_fault(kind, mission)], mission_file, workdir))
+        on_verdict(verdicts[-1])
+    return verdicts
+
+
+def random_campaign(runs: int, seed: int, missions: list[str], planners: list[str], workdir: Path,
+                    kinds: Optional[list[str]] = None, extpose: bool = False, faults_per_run: int = 1,
+                    vary_world: bool = False, only: Optional[set[int]] = None,
+                    on_verdict: OnVerdict = _ignore) -> list[Verdict]:
+    """``runs`` flights, each a mission and planner (``mission``: its own) drawn from ``seed`` and ``faults_per_run``
+    faults of different kinds (of ``kinds``, default every dry-run kind), each with its drone, time and parameters
+    drawn (`rpf_fly.campaign.schedules.draw_faults`). ``vary_world``: run k of seed S flies the simulated world of
+    seed ``S * 1000 + k`` instead of every dry run's 0, so a drone's IMU bias (where it drifts blind) differs from
+    run to run. ``only``: fly just these runs (every run's draw is still made, in order, so run k is the campaign's
+    run k)."""
+    rng = random.Random(seed)
+    verdicts = []
+    for run in range(runs):
+        mission_name = rng.choice(missions)
+        planner = rng.choice(planners)
+        path = mission_path(mission_name)
+        if planner != "mission":
+            path = with_planner_kind(path, planner, workdir)
+        if extpose:
+            path = with_extpose(path, workdir)
+        if vary_world:
+            path = with_world_seed(path, seed * 1000 + run, workdir)
+        faults, draws = draw_faults(rng, load_mission(path), kinds, faults_per_run)
+        if only is not None and run not in only:
+            continue
+        v = fly_and_judge(faults, path, workdir, tag=f"-r{run}")
+        v.params = {"run": run, "planner": planner, **({"world_seed": seed * 1000 + run} if vary_world else {}),
+                    **({k: x for k, x in draws[0].items() if k not in ("kind", "drone")} if len(draws) == 1
+                       else {"faults": draws})}
+        verdicts.append(v)
+        on_verdict(v)
+    return verdicts
+
+
+def lab_runs(kinds: list[str], missions: Optional[list[str]], planner: Optional[str], extpose: bool,
+             workdir: Path) -> list[tuple[str, Path, dict[str, Any]]]:
+    """The lab kinds' runs among ``kinds`` (kind, mission file, fault): `LAB_RUNS` without ``missions``, else each
+    lab kind on each of those missions (`rpf_fly.campaign.schedules.lab_faults`)."""
+    if missions is None:
+        chosen = [(kind, ROOT / "missions" / f"{name}.yaml", {"kind": kind, **fields})
+                  for kind, name, fields in LAB_RUNS if kind in kinds]
+    else:
+        chosen = [(f["kind"], path, f) for path in map(mission_path, missions)
+                  for f in lab_faults(load_mission(path), kinds)]
+    runs = []
+    for kind, path, fault in chosen:
+        if planner:
+            path = with_planner_kind(path, planner, workdir)
+        if extpose:
+            path = with_extpose(path, workdir)
+        runs.append((kind, path, fault))
+    return runs
+
+
+def _kinds(kinds: Optional[list[str]], random_runs: int) -> Optional[list[str]]:
+    """``kinds`` checked; a random campaign draws no lab kind (they fly against a lab, one fault a run)."""
+    if kinds is None:
+        return None
+    try:
+        check_kinds(kinds)
+    except ScheduleError as err:
+        raise CampaignError(str(err)) from None
+    if random_runs and LAB_KINDS & set(kinds):
+        raise CampaignError(f"--kinds: --random draws {', '.join(sorted(LAB_KINDS & set(kinds)))} nowhere: they fly "
+                            "against a lab, in the campaign without --random only")
+    return kinds
+
+
+def _check_numbers(random_runs: int, faults_per_run: int) -> None:
+    if random_runs < 0:
+        raise CampaignError(f"--random: expected a number of runs, 0 or more, got {random_runs}")
+    if not 1 <= faults_per_run <= len(DEFAULTS):
+        raise CampaignError(f"--faults-per-run: expected 1 to {len(DEFAULTS)} faults a run, got {faults_per_run}")
+
+
+def _check_out(out: Optional[Path]) -> None:
+    if out is not None and not out.parent.is_dir():
+        raise CampaignError(f"--out: {out}: its folder {out.parent} does not exist")
+
+
+def mission_campaign(mission_file: Path, kinds: Optional[list[str]] = None, random_runs: int = 0, seed: int = 0,
+                     faults_per_run: int = 2, out: Optional[Path] = None, keep: Optional[Path] = None,
+                     on_verdict: OnVerdict = _ignore) -> CampaignResult:
+    """A lab's campaign on its own mission before a first flight. Without ``random_runs``: each kind of ``kinds``
+    (default every kind) on its own dry run, its default fault on the middle drone, the lab kinds against a lab of
+    their own (the kill in each phase, the unplug of the highest dongle). With ``random_runs``: that many dry runs,
+    each with ``faults_per_run`` faults of different kinds drawn from ``seed`` (drone, time, parameters) in a
+    simulated world of its own. The report goes to ``out`` when given. Bad input is a `CampaignError` before
+    anything flies."""
+    try:
+        mission = load_mission(mission_file)
+    except MissionError as err:
+        raise CampaignError(str(err)) from None
+    except OSError as err:
+        raise CampaignError(f"{mission_file}: {err.strerror or err}") from None
+    _check_numbers(random_runs, faults_per_run)
+    checked = _kinds(kinds, random_runs)
+    _check_out(out)
+    command = f"rpf-fly campaign {shlex.quote(str(mission_file))}"
+    mission_file = mission_file.resolve()  # the runs fly in their work folder
+    command += f" --kinds {','.join(checked)}" if checked is not None else ""
+    if random_runs:
+        command += f" --random {random_runs} --seed {seed} --faults-per-run {faults_per_run}"
+    with _workdir(keep) as workdir:
+        if random_runs:
+            verdicts = random_campaign(random_runs, seed, [str(mission_file)], ["mission"], workdir, checked,
+                                       faults_per_run=faults_per_run, vary_world=True, on_verdict=on_verdict)
+        else:
+            every = checked or list(ALL_KINDS)
+            verdicts = fixed_runs(mission_file, every, workdir, on_verdict)
+            for fault in lab_faults(mission, every):
+                verdicts.append(fly_and_judge_lab(fault, mission_file, workdir))
+                on_verdict(verdicts[-1])
+    result = CampaignResult(command, source_revision(), verdicts)
+    if out is not None:
+        out.write_text(result.markdown())
+    return result
+
+
+def default_report(planner: Optional[str], random_runs: int, seed: int, faults_per_run: int, extpose: bool) -> Path:
+    """Where the maintainers' campaign writes its report: docs/fault-campaign/<name>.md, the name saying what flew
+    (fixed, the planner's kind, random or compound with the seed; -extpose)."""
+    if random_runs:
+        name = f"{'compound' if faults_per_run > 1 else 'random'}{'-extpose' if extpose else ''}-seed{seed}"
+    else:
+        name = f"{planner or 'fixed'}{'-extpose' if extpose else ''}"
+    return ROOT / "docs" / "fault-campaign" / f"{name}.md"
+
+
+def maintainers_campaign(missions: Optional[list[str]] = None, kinds: Optional[list[str]] = None,
+                         planner: Optional[str] = None, random_runs: int = 0, seed: int = 0,
+                         planners: Optional[list[str]] = None, faults_per_run: int = 1, vary_world: bool = False,
+                         extpose: bool = False, only: Optional[set[int]] = None, keep: Optional[Path] = None,
+                         on_verdict: OnVerdict = _ignore) -> CampaignResult:
+    """The maintainers' campaign over shipped missions (tools/fault_campaign.py; its options, the same names).
+    Fixed: each kind on each of ``missions`` (default lab-3, circle-8-r3), ``planner`` instead of each mission's
+    own; the lab kinds on `LAB_RUNS` (on ``missions`` when given). Random: `random_campaign` over ``missions``
+    (default `RANDOM_MISSIONS`) and ``planners`` (default the mission's own and rpf3)."""
+    _check_numbers(random_runs, faults_per_run)
+    checked = _kinds(kinds, random_runs)
+    planners = planners or ["mission", "rpf3"]
+    command = "python tools/fault_campaign.py"
+    command += f" --missions {','.join(missions)}" if missions else ""
+    command += f" --kinds {','.join(checked)}" if checked else ""
+    command += f" --planner {planner}" if planner and not random_runs else ""
+    if random_runs:
+        command += f" --random {random_runs} --seed {seed} --planners {','.join(planners)}"
+        command += f" --faults-per-run {faults_per_run}" if faults_per_run != 1 else ""
+        command += " --vary-world" if vary_world else ""
+        command += f" --only {','.join(map(str, sorted(only)))}" if only else ""
+    command += " --extpose" if extpose else ""
+    with _workdir(keep) as workdir:
+        if random_runs:
+            verdicts = random_campaign(random_runs, seed, missions or RANDOM_MISSIONS.split(","), planners, workdir,
+                                       checked, extpose, faults_per_run, vary_world, only, on_verdict)
+        else:
+            every = checked or list(ALL_KINDS)
+            verdicts = []
+            for name in missions or FIXED_MISSIONS.split(","):
+                path = mission_path(name)
+                path = with_planner_kind(path, planner, workdir) if planner else path
+                path = with_extpose(path, workdir) if extpose else path
+                verdicts += fixed_runs(path, every, workdir, on_verdict)
+            for _kind, path, fault in lab_runs(every, missions, planner, extpose, workdir):
+                verdicts.append(fly_and_judge_lab(fault, path, workdir))
+                on_verdict(verdicts[-1])
+    return CampaignResult(command, source_revision(), verdicts)
