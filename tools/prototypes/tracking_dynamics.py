@@ -3,13 +3,13 @@ what that does to the supervisor's tracking follower.
 
     python tools/prototypes/tracking_dynamics.py
 
-Why it exists (2026-12-04, docs/flight.md "Known gap: the simulated position loop is stiffer than a default
-Crazyflie's"). The simulated drone (rpf_fly/emulator/fake_vehicle.py) takes a position setpoint as a first-order
+Why it exists (docs/flight.md, "Known gap: the default simulated drone is stiffer than a default Crazyflie"). The
+default simulated drone (rpf_fly/emulator/fake_vehicle.py) takes a position setpoint as a first-order
 lag of 0.25 s (4 /s) with no momentum: its velocity is whatever the position loop asks, at once. The firmware's
 default PID is a cascade: a position loop of ``posCtlPid.xKp`` 2 /s asking a velocity, and a velocity loop of
 ``velCtlPid.vxKp`` 25 degrees of tilt per m/s (g tan(25 deg x v) = about 4.3 m/s^2 per m/s: 0.23 s), tilt capped at
 ``posCtlPid.rLimit`` 20 degrees (3.57 m/s^2), speed at 1.1 m/s. The supervisor's flight follower
-(rpf_fly/flight/supervisor.py ``_Follower`` with ``TRACKING_TAU_S``) was set on the simulated drone.
+(rpf_fly/flight/supervisor.py ``_Follower`` with ``TRACKING_TAU_S``) is set on the simulated drone.
 
 Each pattern streams a 10 Hz carrot as the agent does (0.05 m a tick at 0.5 m/s, never more than 0.3 m ahead of
 the drone), flies a "truth" model on it, and prints the largest distance of the truth from a follower envelope: the
