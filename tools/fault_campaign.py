@@ -70,6 +70,7 @@ def parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Parse the options, fly the campaign (`rpf_fly.campaign.maintainers_campaign`), write and print its report."""
     p = parser()
     args = p.parse_args(argv)
     if args.out not in (None, "-") and not Path(args.out).parent.is_dir():

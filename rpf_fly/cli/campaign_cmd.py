@@ -31,9 +31,10 @@ def campaign(
 ) -> None:
     """Inject each fault kind into dry runs of MISSION and judge every run on the simulated truth."""
     from rpf_fly.campaign import CampaignError, mission_campaign
+    from rpf_fly.campaign.judge import Verdict
     from rpf_fly.campaign.report import progress_line, summary
 
-    def said(verdict) -> None:  # type: ignore[no-untyped-def]
+    def said(verdict: Verdict) -> None:  # each run's line as it ends: a campaign takes minutes
         typer.echo(progress_line(verdict), err=True)
 
     try:
