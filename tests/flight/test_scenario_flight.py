@@ -5,7 +5,9 @@ Acceptance (docs/dynamics.md, "The simulated drone"): the dry run flies the firm
 scenario of tests/data/crazyflie_dynamics/scenarios, and two of the same kinds that are not there, match the
 reference's figures (the offline model's for the two): lags and overshoots within 4 cm or 20 %, settling times
 within 0.3 s, high-level lags within 8 cm or 20 %. Each flight is 20-45 s of real time; each scenario is flown once
-per worker (`flown`) and the tests that read it share it, on one worker (`xdist_group`)."""
+per worker (`flown`) and the tests that read it share it, on one worker (`xdist_group`). The first test that needs
+a flight starts all of them, `CONCURRENT` at a time (each dry run is its own processes and uses about a fifth of a
+core: the sweep takes a quarter of the time it would one after the other)."""
 
 from __future__ import annotations
 
@@ -13,6 +15,7 @@ import json
 import math
 import subprocess
 import sys
+from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
@@ -35,21 +38,64 @@ def run(tmp_path: Path, scenario: Path) -> subprocess.CompletedProcess:
                           cwd=tmp_path, timeout=240)
 
 
-_FLOWN: dict[str, tuple[dict[str, Any], Path]] = {}
+MADE = (carrot_scenario(0.7, name="c_carrot_0p7"), hold_scenario(0.45, name="p_hold_0p45"))
+"""Scenarios of the same kinds that are not in the folder, judged against the offline model."""
+CONCURRENT = 4
+"""Scenario dry runs flown at once by one worker."""
+
+_FLOWN: dict[str, Future] = {}
+_POOL: list[ThreadPoolExecutor] = []
+_WANTED: list[str] = []
+"""The scenarios this session's selected tests read (stems): only those are flown ahead."""
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _selected(request: pytest.FixtureRequest) -> None:
+    fixed = {"test_a_carrot_scenario_flies_through_the_stack_and_prints_its_trace": "c_carrot_0p5",
+             "test_a_command_scenario_traces_the_high_level_plan": "p_hl_slow"}
+    for item in request.session.items:
+        if getattr(item, "module", None) is not request.module:
+            continue
+        params = getattr(getattr(item, "callspec", None), "params", {})
+        stem = params.get("name") or getattr(params.get("scenario"), "name", None) or fixed.get(item.originalname)
+        if stem is not None and stem not in _WANTED:
+            _WANTED.append(stem)
+
+
+def made_path(scenario: Scenario, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A made scenario written as a scenario file (the same file for every test of this worker)."""
+    path = tmp_path_factory.getbasetemp() / "made-scenarios" / f"{scenario.name}.yaml"
+    if not path.exists():
+        path.parent.mkdir(exist_ok=True)
+        path.write_text(yaml.safe_dump({
+            "name": scenario.name, "start": list(scenario.start), "duration_s": scenario.duration_s,
+            "stream_hz": scenario.stream_hz, "setpoints": [list(row) for row in scenario.setpoints],
+            **({"hold_at": scenario.hold_at} if scenario.hold_at is not None else {})}))
+    return path
+
+
+def _fly(scenario: Path, folder: Path) -> tuple[dict[str, Any], Path]:
+    done = run(folder, scenario)
+    assert done.returncode == 0, done.stderr
+    (folder / "trace.json").write_text(done.stdout)  # to read a miss by
+    return json.loads(done.stdout), folder
 
 
 def flown(scenario: Path, tmp_path_factory: pytest.TempPathFactory, *, again: bool = False
           ) -> tuple[dict[str, Any], Path]:
     """The trace of ``rpf-fly scenario SCENARIO --dry-run --json`` and its log's folder, flown once per worker
-    (``again``: flown anew)."""
+    (``again``: flown anew, alone). The first call starts every scenario's flight, `CONCURRENT` at a time."""
+    if not _POOL:
+        _POOL.append(ThreadPoolExecutor(CONCURRENT, thread_name_prefix="scenario"))
+        every = [DATA / f"{name}.yaml" for name in PUBLIC] + [made_path(s, tmp_path_factory) for s in MADE]
+        ahead = [path for path in every if path.stem in _WANTED or path == scenario]
+        for path in sorted(ahead, key=lambda path: path != scenario):  # the one asked for first
+            _FLOWN[str(path)] = _POOL[0].submit(_fly, path, tmp_path_factory.mktemp(path.stem))
     key = str(scenario)
     if key not in _FLOWN or again:
-        folder = tmp_path_factory.mktemp(scenario.stem)
-        done = run(folder, scenario)
-        assert done.returncode == 0, done.stderr
-        (folder / "trace.json").write_text(done.stdout)  # to read a miss by
-        _FLOWN[key] = (json.loads(done.stdout), folder)
-    return _FLOWN[key]
+        _FLOWN[key] = Future()
+        _FLOWN[key].set_result(_fly(scenario, tmp_path_factory.mktemp(scenario.stem)))
+    return _FLOWN[key].result()
 
 
 LAGS = ("lag_cm", "along_cm", "radial_cm", "err_mean_cm", "err_max_cm", "z_dev_cm", "z_err_at_goto_cm")
@@ -135,15 +181,10 @@ def test_a_public_scenario_flies_as_the_reference(name: str, tmp_path_factory: p
     assert_flies_as(DATA / f"{name}.yaml", reference, tmp_path_factory)
 
 
-@pytest.mark.parametrize("scenario", [carrot_scenario(0.7, name="c_carrot_0p7"),
-                                      hold_scenario(0.45, name="p_hold_0p45")], ids=lambda s: s.name)
+@pytest.mark.parametrize("scenario", MADE, ids=lambda s: s.name)
 def test_a_scenario_not_in_the_folder_flies_as_the_offline_model(scenario: Scenario,
                                                                  tmp_path_factory: pytest.TempPathFactory) -> None:
-    path = tmp_path_factory.mktemp("made") / f"{scenario.name}.yaml"
-    path.write_text(yaml.safe_dump({
-        "name": scenario.name, "start": list(scenario.start), "duration_s": scenario.duration_s,
-        "stream_hz": scenario.stream_hz, "setpoints": [list(row) for row in scenario.setpoints],
-        **({"hold_at": scenario.hold_at} if scenario.hold_at is not None else {})}))
+    path = made_path(scenario, tmp_path_factory)
     assert Scenario.load(path) == scenario
     assert_flies_as(path, fly(scenario)["figures"], tmp_path_factory)
 
