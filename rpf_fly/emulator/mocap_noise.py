@@ -1,7 +1,7 @@
 """What a real motion-capture system does to every frame of a dry run: jitter on each body's position and
 orientation, and now and then a body left untracked for a frame.
 
-Why: until 2026-12-02 the dry run's mocap served the simulated world's truth, exact, every body tracked in every
+Why: without it the dry run's mocap would serve the simulated world's truth, exact, every body tracked in every
 frame, which no Motive, Vicon or Qualisys room does. A stack tuned on that (a velocity estimate from differences of
 exact positions, a glitch check with no noise to ride through, an extpos stream that never misses a frame) is
 tried on something kinder than the lab it will fly in. The simulated drones already wander as real ones do

@@ -108,7 +108,8 @@ class FlightLoop:
     """How long the end of a flight waits, after a drone's link was lost or its motors were cut, for mocap to see it
     on the floor: its firmware levels it 0.5 s and cuts its motors 2 s after the last setpoint that reached it, and
     it falls from 1.5 m in 0.6 s. Until then it may still hover or drift where the others land, and the log should
-    show where it came down (a one-drone flight used to end, and close its log, with that drone still in the air)."""
+    show where it came down (without the wait a one-drone flight would end, and close its log, with that drone still
+    in the air)."""
     PREFLIGHT_TIMEOUT_S = 8.0
     """The longest the preflight waits for every drone to pass (a link, telemetry, a pose still to come)."""
     PREFLIGHT_SETTLED_S = 2.0

@@ -8,15 +8,15 @@ Glitches: a pose that jumped further from the previous sample than a Crazyflie c
 swap, a reflection taken for a marker) is not followed. The body's pose freezes (and ages, so the supervisor holds
 the drone) until the track jumps back near the frozen pose, or until the new track has been consistent for
 ``REACQUIRE_S`` (the drone really is there: Motive fixed its model) and, in flight, the drone's own on-board
-estimate is nearer the new track than the frozen pose (2026-12-02: a swap that stayed was taken after 0.5 s and flew
+estimate is nearer the new track than the frozen pose (a swap that stays, taken after 0.5 s on its own, would fly
 the drone into a neighbour). The raw samples are compared
 frame to frame, so a swap is caught however long it lasts, and so is the swap back.
 
 After a gap (``GAP_S``: an occlusion, a blackout, a stalled loop) the frame-to-frame bound allows metres, so the
 first sample after it must also lie near where the drone's own on-board estimate says it is, while it flies
-(2026-12-04: a marker swap that began inside a blackout was taken and fed to the estimator).
+(a marker swap that begins inside a blackout is not taken and fed to the estimator).
 
-Orientation glitches (2026-12-02): an orientation that turned further from the previous sample than a Crazyflie can
+Orientation glitches: an orientation that turned further from the previous sample than a Crazyflie can
 turn in that time (``MAX_TURN_RATE_DEG_S`` times the interval plus ``TURN_TOLERANCE_DEG``) is a wrong fit of the
 rigid body's markers: the flip Motive makes on a nearly symmetric marker set, a complaint of Crazyswarm and cflib
 users. The position is judged on its own (a fit about the body's pivot keeps it), and followed; the orientation
@@ -27,7 +27,7 @@ itself says which of the two fits is right, and one wrong yaw fed to the estimat
 flight does with that (docs/flight.md): extpose forwards the position only, a drone on the ground does not take
 off, the supervisor says so.
 
-Times on a 1 us grid (2026-12, for ``rpf-fly replay``): the tracker rounds every receive time to a whole
+Times on a 1 us grid (for ``rpf-fly replay``): the tracker rounds every receive time to a whole
 microsecond before it uses it (:func:`stamp_on_grid`). The flight log's times are integer nanoseconds; with the
 stamps on this grid the log carries them exactly (:func:`stamp_us`), so a replay feeds the same floats to the same
 code and rebuilds the same velocities bit for bit (docs/replay.md). Half a microsecond is far below the receive
@@ -258,7 +258,7 @@ class PoseTracker:
     def _estimate_agrees(self, name: str, position: tuple[float, float, float],
                          frozen: Optional[TrackedPose]) -> bool:
         """Whether a jumped track that held for ``REACQUIRE_S`` is the drone: without an ``estimate_of`` (a replay,
-        a bare tracker) it is taken, as before 2026-12-02; with one, only when the drone's on-board estimate (which
+        a bare tracker) it is taken; with one, only when the drone's on-board estimate (which
         flew on its IMU alone while the glitch lasted: centimetres of drift) is nearer the new track than the frozen
         pose. A marker swap that stays is otherwise taken, fed to the estimator as extpos, and the controller flies
         the true drone the jump's length the other way (random fault campaign, seed 8: two crashes)."""

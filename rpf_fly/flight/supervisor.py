@@ -60,10 +60,10 @@ ESTIMATE_WRONG_M = 0.10
 """In flight, an on-board estimate this far from the mocap pose OF ITS OWN TIME (the telemetry's firmware
 timestamp, `DroneState.estimate_stamp_s`; in 2 status samples in a row) is wrong, not late: motors off. With extpos
 streaming the two agree within 1-3 cm (the mocap's own lag and the stamp's few milliseconds at flight speed), so
-10 cm is a diverged estimator 0.2 s after it diverged at 0.5 m/s. Before 2026-12-02 the check had no stamp and
-had to find the estimate far from EVERY pose of the last `ESTIMATE_HISTORY_S` to tell wrong from late: a drone
-whose estimator ran away at 0.57 m/s was stopped 0.75 s after, 0.6 m off its track, and fell into a wall (random
-fault campaign, seed 9)."""
+10 cm is a diverged estimator 0.2 s after it diverged at 0.5 m/s. Without the stamp the check must find the
+estimate far from EVERY pose of the last `ESTIMATE_HISTORY_S` to tell wrong from late: a drone whose estimator runs
+away at 0.57 m/s is then stopped 0.75 s after, 0.6 m off its track (into a wall, in random fault campaign seed
+9)."""
 
 ESTIMATE_HISTORY_S = 0.5
 """How far back an on-board estimate may be matched against mocap: telemetry queued behind a full radio arrives
@@ -74,25 +74,25 @@ LINK_QUALITY_WARN_PCT = 96.0
 (1 - p) for a loss p of the radio's attempts): below 96 % 0.4 retries a packet (over 28 % of the attempts lost),
 setpoints and extpos arrive late, and the link is on its way to the 100 lost acks in a row after which cflib drops
 it. Crazyswarm2 warns under an ack rate of 0.9. A lab's bursts (the dry run's default `RADIO_LOSS`) dip it to 97 %
-at worst, so a loss that costs fewer retries than a burst cannot be told from one and is not said. 95 % (a third of
-the attempts lost) until 2026-12-02: a random fault campaign's 30 % loss would have passed silently."""
+at worst, so a loss that costs fewer retries than a burst cannot be told from one and is not said. At 95 % (a third
+of the attempts lost) a random fault campaign's 30 % loss would pass silently."""
 
 LINK_QUALITY_CLEAR_PCT = 99.0
-"""Back at or above this, a poor link's episode ends (an info event), so the next one is said again. Until
-2026-12-02 the end was 10 points above the warning, 105 %, above cflib's 100 % maximum: after its first episode a
-drone's link was never said poor again."""
+"""Back at or above this, a poor link's episode ends (an info event), so the next one is said again. It must be
+reachable: cflib's link quality is at most 100 %, so an end above that would leave a drone's link never said poor
+again after its first episode."""
 
 TRACKING_WARN_M = 0.07
 """A drone this far from where its setpoints should have brought it, for ``TRACKING_WARN_S``: something pushes it
 (a gust, a contact, a failing motor). "Should have": a first-order follower of the streamed setpoints with the
 position loop's time constant ``TRACKING_TAU_S`` and speed limit (a disturbance observer; the carrot's lead and lag
 are in it, so they are not taken for a push). A Crazyflie under mocap follows that within 2-5 cm, so the line sits
-above that: 5 cm (2026-12-02, morning) was set while the simulated drone followed within 1.3 cm, kinder than a real
+above that: 5 cm would suit the simulated drone without turbulence (within 1.3 cm), kinder than a real
 one; with its turbulence (rpf_fly/emulator/fake_vehicle.py, "Turbulence") it wanders 2.2-4.0 cm from the model in
 normal flight (lab-3 and circle-8-r3 dry runs, truth), and 5 cm would cry wolf on a real flight. Pushed for 1 s,
 the simulated drone is held about 0.06 m off by 0.6 m/s^2, 0.09 m by 1.0 and 0.18 m by 1.5: a push under about
 0.8 m/s^2 or shorter than about 0.7 s moves a drone less than its normal tracking error, cannot be told from it,
-and is not said. Was 0.1 m until 2026-12-02."""
+and is not said."""
 TRACKING_WARN_S = 0.2
 TRACKING_TAU_S = 0.25
 """The Crazyflie position loop's time constant (docs/flight.md: drones trail their setpoints by about v tau)."""
@@ -127,9 +127,9 @@ it is one swarm-wide ``mocap_late`` warning instead of one per drone."""
 MOCAP_LATENCY_WARN_S = 0.02
 """Mocap latency (camera to receipt, as the mocap measures it) above this: the estimators and the planners act on
 a picture that old (Crazyswarm2 warns at 10 ms over unicast; a healthy Motive link is 3-8 ms). 20 ms: over twice
-the worst healthy link, so a healthy system never warns, and 2 cm of lag at 1 m/s. Was 50 ms until 2026-12-02: the
-random fault campaign delayed the mocap by 33 ms (plus the emulated camera's 4 ms), a picture five times older than a
-healthy one, and nothing said so."""
+the worst healthy link, so a healthy system never warns, and 2 cm of lag at 1 m/s. At 50 ms the
+random fault campaign's 33 ms of mocap delay (plus the emulated camera's 4 ms), a picture five times older than a
+healthy one, would go unsaid."""
 
 class _Follower:
     """Where a drone's setpoints should have brought it: two first-order followers of the setpoint (time constants
@@ -349,16 +349,15 @@ class Supervisor:
             self._mocap_lost = True
             out.append(Finding("mocap_lost", ERROR, "no fresh mocap pose for any drone: all hold", None, "hold"))
         elif self._mocap_lost and any(tracker.age(a.name, now_s) <= s.pose_timeout_s for a in agents):
-            # a fresh pose of any airborne drone, landing ones included: until 2026-12-02 this said "mocap poses
-            # are back" the moment every blind drone began its landing, with no pose back at all
+            # a fresh pose of any airborne drone, landing ones included (not the moment every blind drone begins its
+            # landing, with no pose back at all)
             self._mocap_lost = False
             out.append(Finding("mocap_lost", INFO, "mocap poses are back", None, "resume"))
         late = {n for n, age in ages.items() if age > POSE_LATE_S}
         all_late = bool(flying) and len(late) == len(flying)
         # Landing drones are not held on a lost pose (their landing stands), but a pose they miss is said: they
-        # land on their estimates, and a review must tell why one ended off its spot. Until 2026-12-03 neither an
-        # occlusion of a landing drone nor a blackout while every drone landed left a word (extpose campaign seed
-        # 16, run 11: a watchdog's landing, then cf3 occluded for 1.3 s).
+        # land on their estimates, and a review must tell why one ended off its spot (extpose campaign seed 16, run 11:
+        # a watchdog's landing, then cf3 occluded for 1.3 s).
         landing = {a.name: tracker.age(a.name, now_s) for a in agents if a.phase == DronePhase.LANDING}
         late_landing = {n for n, age in landing.items() if age > POSE_LATE_S}
         landing_only = not flying and bool(landing) and len(late_landing) == len(landing)
@@ -407,8 +406,8 @@ class Supervisor:
         """Pose gaps of at least ``POSE_LATE_S`` that began and ended between two frames the loop was given (it was
         stalled; the mocap source saw them: `MocapFrame.unseen_untracked_s`), said after the fact: the gap cost
         nothing the stall had not already (no extpos went out either way), but a lab wants to know its cameras
-        lost the drones. Every airborne drone in one: one ``mocap_late``. Until 2026-12-04 they left no trace
-        (compound campaign seed 17, run 15: a 0.47 s blackout inside a 1.58 s loop stall)."""
+        lost the drones. Every airborne drone in one: one ``mocap_late`` (compound campaign seed 17, run 15: a
+        0.47 s blackout inside a 1.58 s loop stall)."""
         unseen = tracker.take_unseen()
         named = {a.name: unseen[a.name] for a in agents if a.name in unseen}
         if not named:
@@ -569,8 +568,8 @@ class Supervisor:
     def _battery(self, agents: list[DroneAgent], states: dict[str, DroneState]) -> list[Finding]:
         """Land after ``LOW_BATTERY_SAMPLES`` consecutive new samples that are low (each sample counted once). A
         landing drone's low battery is said too, without a second landing (it would restart the one under way): the
-        person at the bench should not fly that pack again (until 2026-12-04 a landing drone's battery was not
-        watched: random fault campaign seed 19, run 10, a low battery during a planner fault's landing)."""
+        person at the bench should not fly that pack again (random fault campaign seed 19, run 10: a low battery during
+        a planner fault's landing)."""
         out = []
         limit = self.mission.radio.min_battery_v - FLIGHT_SAG_V
         for a in agents:
@@ -664,9 +663,9 @@ class Supervisor:
         """The on-board estimate against mocap (``ESTIMATE_DIVERGENCE_M``), in two steps. Off the newest pose in 2
         samples: a warning (also what late telemetry on a full radio looks like at flight speed). Off EVERY pose of
         the last ``ESTIMATE_HISTORY_S`` in 2 samples: the estimate is not just late, it is wrong; motors off.
-        Take-off and landing are watched as the planning is (until 2026-12-03 they were not: a landing flies the
-        estimate's way, and a drone whose estimator diverged mid-landing slid 0.16 m sideways in its last half second
-        without a word); a taking-off or landing drone whose mocap height is within ``ON_FLOOR_Z_M`` of the floor gets
+        Take-off and landing are watched as the planning is (a landing flies the estimate's way: unwatched, a drone
+        whose estimator diverged mid-landing slides 0.16 m sideways in its last half second without a word); a
+        taking-off or landing drone whose mocap height is within ``ON_FLOOR_Z_M`` of the floor gets
         a warning instead (a cut there buys nothing, and a landed drone's outcome stays landed)."""
         out = []
         for a in agents:
@@ -747,8 +746,8 @@ class Supervisor:
         drone surges or drops back until its estimate settles (compound campaign seed 17, run 13: 137 ms of mocap
         delay at 0.5 m/s said 6 drones "pushed"). Under a healthy latency (3-8 ms) the widening is under 1 cm.
 
-        Until 2026-12-04 take-off and landing were not watched: a gust during a watchdog's landing moved cf2
-        0.13 m without a word (extpose compound campaign seed 16, run 14)."""
+        Take-off and landing are watched too: a gust during a watchdog's landing moves cf2 0.13 m (extpose compound
+        campaign seed 16, run 14)."""
         out = []
         latencies = self._latencies
         latencies.append((now_s, tracker.latency_s or 0.0))
@@ -770,8 +769,8 @@ class Supervisor:
                 self._off_track.pop(a.name, None)
                 self._predicted.pop(a.name, None)
                 continue
-            if not pose.valid:  # a frame or a few without it: the model waits (2026-12-02: it restarted at the
-                continue        # next pose, and one dropped frame in a push hid the push)
+            if not pose.valid:  # a frame or a few without it: the model waits (restarted at the next pose, one
+                continue        # dropped frame in a push would hide the push)
             on_floor = planned and pose.position[2] <= ON_FLOOR_Z_M
             key = a.phase_since_s if planned else None  # a take-off or landing starts the model afresh
             follower = self._predicted.get(a.name)

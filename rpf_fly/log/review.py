@@ -206,7 +206,7 @@ class Review:
     battery: dict[str, tuple[float, float, float]] = field(default_factory=dict)
     """Per drone with battery telemetry: first, lowest and last voltage (V)."""
     radio: list[RadioSummary] = field(default_factory=list)
-    """Per dongle, its measured load (``/radio/<dongle>``; none in logs before 2026-12-01)."""
+    """Per dongle, its measured load (``/radio/<dongle>``; none in older logs)."""
 
     @property
     def interrupted(self) -> bool:
@@ -317,7 +317,7 @@ class RadioSummary:
 
 
 def radio_of(data: LogData) -> list[RadioSummary]:
-    """Every dongle of the log's ``/radio/<dongle>`` topics, in dongle order ([] for logs before 2026-12-01)."""
+    """Every dongle of the log's ``/radio/<dongle>`` topics, in dongle order ([] for older logs without them)."""
     out = []
     for topic in data.topics:
         if not topic.startswith("/radio/"):

@@ -66,8 +66,7 @@ class MocapFrame:
     """Bodies that went untracked and came back entirely within frames the caller never got (it was busy: a
     stalled loop reads only the newest frame of those the socket queued), tracked in the caller's previous frame
     and in this one: body name -> the longest such stretch (source clock, seconds). Empty unless the source
-    knows (the NatNet client; 2026-12-04); without it an occlusion or a blackout during a loop stall left no
-    trace."""
+    knows (the NatNet client); without it an occlusion or a blackout during a loop stall leaves no trace."""
 
 
 NO_UNSEEN: Mapping[str, float] = MappingProxyType({})
