@@ -4,8 +4,9 @@ Why: every packet to a Crazyflie is one radio transaction with an acknowledgemen
 turns, and cflib has no broadcast, so a dongle's capacity is shared by every drone on it. Bitcraze's figures
 (github.com/bitcraze/crazyradio2-firmware/issues/9, /16, /22 and /pull/25): about 1000 transactions a second per
 radio in total. A mission over that does not fail loudly: setpoints and extpos queue up, latency grows, and the
-estimators starve of mocap until the drones drift (the dry run's radio, with its 1 ms air time, shows it). So the load is computed before
-anything connects and a mission over budget is refused unless it says ``radio.allow_over_budget: true``.
+estimators starve of mocap until the drones drift (the dry run's radio, with its 1 ms air time, shows it). So the
+load is computed before anything connects and a mission over budget is refused unless it says
+``radio.allow_over_budget: true``.
 
 What counts, per drone, every second:
 - the streamed setpoints: ``flight.rate_hz`` (one packet each);
