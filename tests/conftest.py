@@ -58,8 +58,8 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
 
     The CLI flights, crash logs and bench runs are shared by the tests of one ``xdist_group`` only while those tests
     share a worker; otherwise each worker flies them again (minutes) and two workers race over one install
-    (tools/mcap_js). pytest 9.2 made xdist 3.8's grouping a silent no-op (it renames ``item._nodeid``, which 9.2 no
-    longer reads): found when CI failed on 2026-12-04. pyproject pins pytest below 9.2."""
+    (tools/mcap_js). Under pytest 9.2 xdist 3.8's grouping is a silent no-op (it renames ``item._nodeid``, which 9.2
+    does not read), so pyproject pins pytest below 9.2."""
     if not getattr(config.option, "loadgroup", False):
         return  # not a loadgroup worker: a run without -n, or another --dist (the controller checks the version)
     ungrouped = [item.nodeid for item in items

@@ -1,8 +1,8 @@
 """The fake Crazyflie's attitude modes (RPYT, z-distance, manual, CPPM) through real cflib: its thrust lock, a raw
 thrust that climbs or sinks instead of holding a height, and roll and pitch that accelerate the drone the way the
-firmware signs them (rpf_fly/emulator/fake_setpoint.py, fake_vehicle.py "Attitude modes"). Until 2026-12-02 any
-thrust above zero was modelled as "level, hold the height": a script that would fly a real drone into the ceiling
-or across the room hovered in place in a dry run."""
+firmware signs them (rpf_fly/emulator/fake_setpoint.py, fake_vehicle.py "Attitude modes"). Modelled as "level,
+hold the height" for any thrust above zero, a script that would fly a real drone into the ceiling or across the
+room would hover in place in a dry run."""
 
 from __future__ import annotations
 

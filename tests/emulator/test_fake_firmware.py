@@ -669,8 +669,7 @@ def test_persistent_parameters_are_stored_survive_a_reboot_and_clear() -> None:
 def test_a_drone_on_the_floor_with_its_motors_on_does_not_slide_to_a_setpoint_at_floor_height() -> None:
     """A position setpoint on the floor 0.5 m away, streamed to a drone standing there with its motors on: the
     height controller asks for no lift, so the body stands on its feet (a real one scrapes or tips, it does not
-    glide). Until 2026-12-03 it slid to the setpoint at flying speed. A setpoint above the floor still lifts it and
-    takes it there."""
+    glide to the setpoint at flying speed). A setpoint above the floor still lifts it and takes it there."""
     sim = Sim(position=(1.0, 1.0, 0.0))
     sim.run(READY_S)
     sim.run(1.0, lambda t: sim.send(7, 0, position(1.5, 1.0, 0.0)))

@@ -304,8 +304,8 @@ def test_a_dongle_is_held_for_the_air_time_only_not_for_a_slow_drone_answer(make
                                                                              toc_cache: Path) -> None:
     """Two cflib links on one dongle (1 ms of air a transaction); one drone's answer takes 4 ms (as a loaded world
     process's round trip can): the other link keeps the dongle's air to itself meanwhile, so it gets its 150 extpos
-    through while the slow one gets about one in five. Held for the whole round trip (the emulator before
-    2026-12-01), the dongle alternated and both links crawled at the slow one's pace."""
+    through while the slow one gets about one in five. Held for the whole round trip instead, the dongle would
+    alternate and both links crawl at the slow one's pace."""
     world = make_world(2, timing=RadioTiming(transaction_s=0.001))
     slow, fast = address(0), address(1)
     got: dict[int, list[float]] = {slow: [], fast: []}

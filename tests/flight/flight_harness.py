@@ -19,11 +19,11 @@ from rpf_fly.mission import parse_mission
 from rpf_fly.sim.planners import make_planner
 from rpf_fly.sim.scenario import obstacle_set
 
-# margin 0: before the capture rule, with the product's 0.05 m (planner.margin) the outer drones of this line of
-# goals 0.6 m apart circled their goals (arrived drones repel as if 5 cm closer), and the flight took 17.5 s or
-# more instead of 7.5 s. Since the rule (docs/algorithm.md, *Arrival*) a dry run at 0.05 m takes 7.5 s too; the
-# tests keep margin 0, the setting they were written and timed with (tried 2026-12-02: the replay tests build
-# their rpf missions from this planner line, and the separation-hold test's geometry holds at margin 0 only).
+# margin 0: with the capture rule (docs/algorithm.md, *Arrival*) a dry run at the product's 0.05 m
+# (planner.margin) takes 7.5 s too (without it the outer drones of this line of goals 0.6 m apart circle their
+# goals, arrived drones repelling as if 5 cm closer, for 17.5 s or more); the tests keep margin 0, the setting they
+# are timed with: the replay tests build their rpf missions from this planner line, and the separation-hold test's
+# geometry holds at margin 0 only.
 SHORT_MISSION = """\
 name: short-3
 arena: {x: [-2.0, 2.0], y: [-2.0, 2.0], z: [0.0, 1.5]}

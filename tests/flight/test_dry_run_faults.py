@@ -44,7 +44,7 @@ def test_a_push_during_a_mid_flight_landing_is_said_and_the_other_landing_drones
     """Every drone is landed mid-flight at flight speed (as a Ctrl-C or a watchdog lands them), then a gust pushes
     cf2 while it descends. The landing's point is the firmware's own target, read from its telemetry
     (`ctrltargetZ`), so the push is said "while landing", within 1 s, and the drones that just stopped are not
-    (until 2026-12-04 nothing was said during a landing: extpose compound campaign seed 16, run 14)."""
+    (as in extpose compound campaign seed 16, run 14)."""
     from rpf_fly.flight.events import WARNING
 
     mission = replace(short_mission, flight=replace(short_mission.flight, land_s=2.0))
@@ -74,8 +74,8 @@ def test_a_push_during_a_mid_flight_landing_is_said_and_the_other_landing_drones
 def test_a_blackout_inside_a_loop_stall_is_said_when_the_loop_reads_again(tmp_path, short_mission):
     """The loop thread blocks for 1.3 s (its watchdog lands the swarm), and inside that the mocap loses every body
     for 0.4 s and finds them again. The loop then reads only the newest frame, but the NatNet client saw the gap
-    in the frames it drained, so one swarm-wide warning says it after the fact (until 2026-12-04 it left no trace:
-    compound campaign seed 17, run 15)."""
+    in the frames it drained, so one swarm-wide warning says it after the fact (as in compound campaign seed 17,
+    run 15)."""
     def stall_then_black_out(loop, rig):
         time.sleep(0.5)
         rig.mocap.stall(1.3)
@@ -91,11 +91,11 @@ def test_a_blackout_inside_a_loop_stall_is_said_when_the_loop_reads_again(tmp_pa
 
 def test_a_body_re_acquired_on_the_wrong_markers_after_a_blackout_is_not_fed_to_its_estimator(tmp_path, short_mission):
     """Every body is lost for 0.45 s and cf2 comes back 0.6 m off (a swap towards cf3's lane that began inside the
-    blackout). The frame-to-frame bound allows 2.3 m over that gap, so until 2026-12-04 the pose was taken and sent
-    as extpos: the estimate jumped and stayed 0.6 m off (the true track was then refused as the jump), and in an
-    8-drone swarm the controller flew the true drone the jump's length into a neighbour (random fault campaign,
-    seed 19, run 2). Now the pose is checked against cf2's own estimate, refused and said; the estimate stays on
-    the truth and cf2 in its lane."""
+    blackout). The frame-to-frame bound allows 2.3 m over that gap; taken and sent as extpos on that bound alone,
+    the estimate would jump and stay 0.6 m off (the true track then refused as the jump), and in an 8-drone swarm
+    the controller would fly the true drone the jump's length into a neighbour (random fault campaign, seed 19,
+    run 2). The pose is checked against cf2's own estimate, refused and said; the estimate stays on the truth and
+    cf2 in its lane."""
     def black_out_and_swap(loop, rig):
         time.sleep(1.0)
         rig.blackout(0.45)

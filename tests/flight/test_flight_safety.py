@@ -246,10 +246,10 @@ def test_a_flight_whose_last_drone_lost_its_link_ends_once_mocap_sees_it_down(tm
 
 
 def test_an_orientation_flip_under_extpose_is_not_fed_to_the_estimator(tmp_path, short_mission):
-    """Motive flips cf2's rigid body 180 degrees (a wrong fit of its markers) for 1.5 s mid-flight. With extpose the
-    stack used to forward that orientation: the estimator took the flipped yaw, the position controller then acted
-    in a frame turned 180 degrees, and cf2 flew off. Now the tracker refuses the flip, extpose carries the position
-    only until the fit turns back, and the supervisor says so within a frame."""
+    """Motive flips cf2's rigid body 180 degrees (a wrong fit of its markers) for 1.5 s mid-flight. Forwarded with
+    extpose, that orientation would give the estimator the flipped yaw, the position controller would act in a frame
+    turned 180 degrees, and cf2 would fly off. The tracker refuses the flip, extpose carries the position only until
+    the fit turns back, and the supervisor says so within a frame."""
     mission = replace(short_mission, radio=replace(short_mission.radio, extpos="extpose"))
     injected: list[float] = []
 

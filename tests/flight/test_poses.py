@@ -156,8 +156,8 @@ def test_a_flip_that_stays_is_never_taken_as_the_drones_orientation():
 @pytest.mark.parametrize("estimate, taken", [((0.25, 0.0, 1.0), False), ((1.98, 1.0, 1.0), True), (None, False)])
 def test_a_jump_that_stays_is_taken_only_where_the_drones_own_estimate_is(estimate, taken):
     """In flight the drone's on-board estimate says which track is the drone: a marker swap that stays is not
-    taken (it used to be after REACQUIRE_S, fed to the estimator, and the drone flew the jump's length into a
-    neighbour: random fault campaign seed 8); Motive fixing its model is. No estimate known: not taken."""
+    taken (taken after REACQUIRE_S alone, it would be fed to the estimator, and the drone would fly the jump's
+    length into a neighbour: random fault campaign seed 8); Motive fixing its model is. No estimate known: not taken."""
     tracker = PoseTracker({"cf1": "cf1"})
     tracker.estimate_of = lambda name: estimate
     fly_along_x(tracker, 0, 50)

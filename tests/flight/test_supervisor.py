@@ -216,9 +216,9 @@ def test_a_drone_held_eight_cm_off_its_setpoints_is_a_tracking_warning_and_five_
 
 def test_a_push_is_said_through_frames_the_mocap_dropped():
     """A real room leaves a body untracked for a frame now and then (the dry run's mocap: 0.1 % of frames). The
-    tracking model used to restart at the next pose after each: a campaign gust on circle-8-r3 went unsaid (3 runs
-    of 3) because one frame of the pushed drone was dropped during the push. Here cf2 is pushed 12 cm over 0.3 s and
-    one frame in 25 of it is dropped: it is said within 1 s of the push."""
+    tracking model waits for the next pose rather than restart there: restarted, a campaign gust on circle-8-r3 goes
+    unsaid (3 runs of 3) because one frame of the pushed drone is dropped during the push. Here cf2 is pushed 12 cm
+    over 0.3 s and one frame in 25 of it is dropped: it is said within 1 s of the push."""
     agents, tracker, supervisor, states = holding_their_spots()
     said = []
     for k in range(150):
@@ -404,7 +404,7 @@ def test_mocap_is_said_back_only_when_a_pose_is_back_not_when_the_blind_drones_l
         agent.set_phase(DronePhase.LANDING, 1.6)
     landing = [f for t in (1.6, 1.8) for f in supervisor.check(t, agents.values(), tracker, states)
                if f.kind == "mocap_lost"]
-    assert landing == []  # before 2026-12-02: "mocap poses are back", with none back
+    assert landing == []  # not "mocap poses are back" with none back
     see(tracker, 2, 2.0, POSITIONS)
     back = [f for f in supervisor.check(2.0, agents.values(), tracker, states) if f.kind == "mocap_lost"]
     assert [(f.level, f.message) for f in back] == [(2, "mocap poses are back")]  # INFO
@@ -571,8 +571,8 @@ def test_a_push_during_a_landing_is_said_and_the_landing_drones_own_moves_are_no
     firmware logs as its target. cf1 stays where it is; its first telemetry, made before the land command reached
     it, still holds the streamed carrot 0.25 m ahead, which is not the landing's target. cf3's estimate had drifted
     (a loop stall: no extpos) and snaps back, so it moves 6 cm to its target as the position loop does. cf2 is
-    pushed 12 cm from 0.5 s on. Only cf2 is said, within 1 s of its push (until 2026-12-04 nothing was said in a
-    landing: extpose compound campaign seed 16, run 14)."""
+    pushed 12 cm from 0.5 s on. Only cf2 is said, within 1 s of its push (as in extpose compound campaign seed 16,
+    run 14)."""
     tau = 0.25
     target = {"cf1": (-1.0, -0.6), "cf2": (-1.0, 0.0), "cf3": (-0.94, 0.6)}
 

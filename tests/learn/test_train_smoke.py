@@ -2,7 +2,7 @@
 untrained policy's, and the exported ONNX policy matches torch (about 15 s on 2 cores).
 
 Sized for the suite's time: 20 updates of 8 arenas (seed 0, one torch thread) raise the mean return from 34 to 148
-and the success rate from 0.79 to 0.83 (2026-12-01); the assertion asks for +40. One thread: two xdist workers with
+and the success rate from 0.79 to 0.83; the assertion asks for +40. One thread: two xdist workers with
 torch's two threads each on two cores took 190 s on a loaded machine, one thread 69 s."""
 
 import dataclasses

@@ -37,8 +37,8 @@ def foxglove_reader() -> Path:
         pytest.fail("Node.js and npm are needed to read the logs with Foxglove's reader (tools/mcap_js; Node 18+)")
     # The module's tests can run on both xdist workers at once (the CLI-flight fixtures set their own groups), so
     # the install is serialised with a lock and counted done only by a marker written after ``npm ci`` succeeded:
-    # a package directory that exists is not one that is complete (CI, 2026-12-04: the second worker ran the reader
-    # while the first was still unpacking @mcap/core, ERR_MODULE_NOT_FOUND).
+    # a package directory that exists is not one that is complete (without the marker a second worker can run the
+    # reader while the first is still unpacking @mcap/core: ERR_MODULE_NOT_FOUND).
     lock_digest = hashlib.sha256((JS / "package-lock.json").read_bytes()).hexdigest()
     marker = JS / "node_modules" / ".rpf-installed"
     lock_path = Path(tempfile.gettempdir()) / f"rpf-mcap-js-{hashlib.sha256(bytes(JS)).hexdigest()[:16]}.lock"

@@ -101,7 +101,7 @@ def test_minimal_mission_takes_the_dataclass_defaults(load):
     assert mission.source == Path("m.yaml")
     assert mission.arena == Arena(x=(-2.0, 2.0), y=(-2.0, 2.0), z=(0.0, 1.5))
     assert mission.flight == FlightSettings()
-    # the default planner is RPF-3, with the shipped policy found for it (the product's default, issue #11)
+    # the default planner is RPF-3, with the shipped policy found for it (the product's default, docs/bench/rpf3.md)
     assert mission.planner == PlannerSettings(policy=PROJECT_POLICIES.resolve() / "rpf3.onnx")
     assert mission.planner.kind == "rpf3"
     assert mission.mocap == MocapSettings()

@@ -1,5 +1,5 @@
-"""tools/log_margin.py, the independent reader of a dry run's margin (issue #11): it reads a real MCAP file written
-by the flight log's writer and judges the airborne truth against 2r + margin and r + margin, both ways."""
+"""tools/log_margin.py, the independent reader of a dry run's margin (docs/bench/rpf3.md): it reads a real MCAP file
+written by the flight log's writer and judges the airborne truth against 2r + margin and r + margin, both ways."""
 
 from __future__ import annotations
 

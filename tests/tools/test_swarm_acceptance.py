@@ -1,6 +1,7 @@
-"""The swarm acceptance tool's smoke test (tools/swarm_acceptance.py, issue #12): the kill run on the tests' 4-drone,
-2-dongle mission, flown through the CLI and judged exactly as the 40-drone runs are (its own reader of the log, the
-/truth topics, the dongles' loads, the review), so the command cannot rot between runs; and its judge can fail."""
+"""The swarm acceptance tool's smoke test (tools/swarm_acceptance.py, docs/distributed.md): the kill run on the tests'
+4-drone, 2-dongle mission, flown through the CLI and judged exactly as the 40-drone runs are (its own reader of the
+log, the /truth topics, the dongles' loads, the review), so the command cannot rot between runs; and its judge can
+fail."""
 
 from __future__ import annotations
 
