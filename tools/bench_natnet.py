@@ -7,7 +7,7 @@ packets/s over ``--repeats`` timed runs of rpf_fly's ``decode_packet`` (header i
 silenced). The sample client (``NatNetClient.py`` with its ``MoCapData.py`` and ``DataDescriptions.py`` beside it,
 from the NatNet SDK's PythonClient) is not part of this repository: point at a copy outside it.
 
-    python tools/bench_natnet.py --sample-client /tmp/natnet_sdk_sample/NatNetClient.py
+    python tools/bench_natnet.py --sample-client PATH/TO/PythonClient/NatNetClient.py
 """
 
 from __future__ import annotations

@@ -124,7 +124,7 @@ def bench_guidance(repeats: int) -> dict[str, dict[str, float]]:
 def bench_rpf3(repeats: int) -> dict[str, dict[str, float]]:
     """RPF-3 as shipped (kind ``rpf3``: guidance, margin 0.05 and RPF-3's tuning, policies/rpf3.onnx): the
     per-drone step on each mission's mid-flight views beside the onnxruntime call alone on the same observations
-    (issue #11's line: at most 1.5x), and one batched tick of 10 and 100 drones (the line: 100 under 2 ms)."""
+    (the line: at most 1.5x), and one batched tick of 10 and 100 drones (the line: 100 under 2 ms)."""
     from dataclasses import replace
 
     from rpf_fly.mission.model import PlannerSettings

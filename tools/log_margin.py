@@ -1,6 +1,6 @@
 """Did a dry run keep the planner's margin? Read with the mcap library alone (not rpf_fly's reader): the simulated
 world's truth (``/truth/<drone>``) of every airborne moment, against 2r + margin between drones and r + margin from
-the mission's obstacles (issue #11's dry-run line; docs/bench/rpf3.md).
+the mission's obstacles (RPF-3's dry-run line; docs/bench/rpf3.md).
 
     python tools/log_margin.py LOG MISSION [--margin 0.05]
 

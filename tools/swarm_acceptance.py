@@ -1,4 +1,4 @@
-"""The distributed swarm's acceptance flights (issue #12), each judged on the simulated world's truth.
+"""The distributed swarm's acceptance flights (docs/distributed.md), each judged on the simulated world's truth.
 
     python tools/swarm_acceptance.py                         # the 40-drone flight, then the kill (about 2 minutes)
     python tools/swarm_acceptance.py --runs flight --json out.json

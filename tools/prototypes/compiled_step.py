@@ -3,9 +3,9 @@
     pip install numba==0.68.1      # not a dependency of rpf_fly: this script alone uses it
     python tools/prototypes/compiled_step.py
 
-Why it exists: issue #11's line (the one-drone RPF-3 step at most 1.5x the onnxruntime call alone) and issue #13's
-(the flight's latency at most 1.5x a floor that does not plan) are out of reach of the numpy planner in CPython
-(docs/performance.md, nineteenth session). Meeting them means compiling the planner, which is the project's
+Why it exists: two lines, the one-drone RPF-3 step at most 1.5x the onnxruntime call alone and the flight's latency
+at most 1.5x a floor that does not plan, are out of reach of the numpy planner in CPython (docs/performance.md,
+*Lines not met*). Meeting them means compiling the planner, which is the project's
 decision (a dependency, and the planning package rewritten as per-drone loops that serve training in batches too).
 This measures what that would buy, so the decision is taken on a number.
 
