@@ -13,7 +13,8 @@ messages the client received against those served.
 
 The dry run's radio air time is off by default (``--air-time-ms 0``): at a Crazyradio's 1 ms a transaction, 10 drones
 at 100 Hz ask one dongle for more than it carries, extpos reaches some drones late and their supervisors cut their
-motors mid-flight (docs/radio.md, "Over budget in the dry run"), so the two sides of a pair would not fly the same flight.
+motors mid-flight (docs/radio.md, "Over budget in the dry run"), so the two sides of a pair would not fly the same
+flight.
 
 Not a test: the machine is shared, read the medians of the pairs.
 """
