@@ -17,9 +17,9 @@ Sources (facts only, read for this module):
   above 100 and 250 kbps never acknowledged, the status byte), ``src/esb.c`` (``esb_send_packet``: ARC attempts, a
   500 us acknowledgement timeout after each transmission, ARD ignored), ``VERSION`` 5.4 and ``src/main.c``
   (bcdDevice = the firmware version in BCD, 0x0504);
-- bitcraze/crazyradio2-firmware issue #9 (2025-07-02, a Crazyradio 2.0 under libusb): a vendor control transfer
+- github.com/bitcraze/crazyradio2-firmware/issues/9 (a Crazyradio 2.0 under libusb): a vendor control transfer
   about 2.5 ms, a bulk write and read together about 0.7 ms, so about 300 packets/s when every packet needs one
-  setup call; issue #23: one link without setup calls, about 1270 packets/s;
+  setup call; .../issues/23: one link without setup calls, about 1270 packets/s;
 - USB 2.0 specification 7.1.7.5: reset signalling lasts at least 10 ms.
 """
 
@@ -157,9 +157,9 @@ SOURCES: dict[str, dict[str, str]] = {
                          "1500 us at 250 kbps for cflib's 32-byte ARD)",
     },
     "crazyradio_2": {
-        "control_s": "about 2.5 ms: bitcraze/crazyradio2-firmware issue #9 (libusb_control_transfer timed)",
+        "control_s": "about 2.5 ms: github.com/bitcraze/crazyradio2-firmware/issues/9 (libusb_control_transfer timed)",
         "bulk_out_s": "estimate: with bulk_in_s and the radio time of a short packet, the ~0.7 ms of a bulk "
-                      "write and read in crazyradio2-firmware issue #9",
+                      "write and read in github.com/bitcraze/crazyradio2-firmware/issues/9",
         "bulk_in_s": "estimate, as bulk_out_s",
         "reset_s": "lower bound: USB 2.0 spec 7.1.7.5, reset signalling >= 10 ms (re-enumeration not counted)",
         "ramp_s": "estimate: the nRF24LU1+'s 130 us; crazyradio2-firmware esb.c keeps the nRF52840's default "
