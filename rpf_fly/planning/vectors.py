@@ -3,8 +3,8 @@
 Why: a planar vector operation is then ONE numpy operation (``abs(z)`` is the norm, ``1j * z`` the 90-degree
 counter-clockwise turn, ``z * exp(i a)`` a rotation), and the same code runs on numpy scalars (one drone in
 flight: operators on scalars cost ~70 ns, a numpy call on a tiny array ~0.5-2 us) and on arrays (thousands of
-drones in training). Measured: the per-drone step went from 189 us with ``(..., 2)`` float arrays to the figure
-in docs/performance.md. Convert at the edges with :func:`to_complex` and :func:`to_xy`.
+drones in training). Measured: the per-drone step costs the figure in docs/performance.md (*Planning*), against
+189 us with ``(..., 2)`` float arrays. Convert at the edges with :func:`to_complex` and :func:`to_xy`.
 
 Conventions (docs/architecture.md): metres, Z-up world, angles from +x counter-clockwise in (-pi, pi].
 """
