@@ -29,9 +29,10 @@ import threading
 import time
 from concurrent.futures import Future
 from dataclasses import dataclass
-from typing import Callable, Optional, Protocol
+from typing import Callable, Mapping, Optional, Protocol
 
 from rpf_fly.flight.phases import DronePhase, FlightOutcome
+from rpf_fly.flight.response import braking_for
 from rpf_fly.mission.model import Arena, Drone, Mission
 from rpf_fly.planning.planner import PlanStep, plan_row
 from rpf_fly.planning.view import LocalView
@@ -144,6 +145,8 @@ class DroneAgent:
                  for lo, hi in (arena.x, arena.y, arena.z)]
         self._fence = tuple(inset)
         self.max_lead_m = max_lead_m
+        self.braking = braking_for(None)
+        """How this drone comes to rest once held, from its own controller's gains (`set_controller`)."""
         self._clock = clock
         self.phase = DronePhase.WAITING
         self.outcome: Optional[FlightOutcome] = None
@@ -192,9 +195,15 @@ class DroneAgent:
         self.heading = delta / abs(delta) if abs(delta) > 1e-9 else 1 + 0j
         self.set_phase(DronePhase.PLANNING, now_s)
 
-    def hold(self, at: complex, now_s: float, reason: str) -> None:
-        """Stop planning and hold ``at`` (the reference it was flying to)."""
-        self.hold_point = self.clamp(at)
+    def set_controller(self, params: Optional[Mapping[str, float]]) -> None:
+        """The drone's position controller's gains as its parameters hold them (None: the firmware's defaults)."""
+        self.braking = braking_for(params)
+
+    def hold(self, at: complex, now_s: float, reason: str, velocity: complex = 0j) -> None:
+        """Stop planning and bring the drone to rest near ``at`` (where it is), moving at ``velocity``: the hold
+        setpoint is the one its own controller stops it nearest with (`Braking.hold_point`: a real drone held where
+        it is flies past that point, by its braking distance)."""
+        self.hold_point = self.clamp(self.braking.hold_point(at, velocity))
         self.set_phase(DronePhase.HOLDING, now_s, reason)
 
     # ---------------------------------------------------------------------------------------- planning

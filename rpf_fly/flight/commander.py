@@ -148,12 +148,13 @@ class Commander:
             agent.begin_planning(measured, now_s)
             return True
 
-    def hold(self, agent: DroneAgent, at: complex, now_s: float, reason: str) -> bool:
-        """Stop planning and hover at ``at`` (where the drone is)."""
+    def hold(self, agent: DroneAgent, at: complex, now_s: float, reason: str, velocity: complex = 0j) -> bool:
+        """Stop planning and bring the drone to rest near ``at`` (where it is, moving at ``velocity``:
+        `DroneAgent.hold`)."""
         with self._locks[agent.name]:
             if agent.phase != DronePhase.PLANNING:
                 return False
-            agent.hold(at, now_s, reason)
+            agent.hold(at, now_s, reason, velocity)
             return True
 
     def arrive(self, agent: DroneAgent, now_s: float) -> bool:

@@ -329,6 +329,8 @@ class FlightLoop:
         if failures:
             self._abort(f"{len(failures)} drone(s) failed to connect: no drone takes off")
             return False
+        for name, agent in self.agents.items():
+            agent.set_controller(self.backend.state(name).controller_params)
         return True
 
     def _preflight(self) -> bool:
@@ -918,7 +920,7 @@ class FlightLoop:
                    frame: Optional[MocapFrame], sent: list, records: list, planned: list) -> None:
         """Stream a drone's planned setpoint, or hold and land it on its planner's fault."""
         if isinstance(outcome, PlannerFault):
-            self.commander.hold(agent, pose.xy, now, str(outcome))
+            self.commander.hold(agent, pose.xy, now, str(outcome), pose.velocity)
             self.events.emit(ERROR, "planner_fault", f"{outcome}: holding, then landing", agent.name)
             self.commander.land(agent, "planner fault")
             records.append((agent, pose, None, "hold"))
@@ -966,7 +968,10 @@ class FlightLoop:
                     self.commander.land(agent, f.message, duration_s=f.land_s)
                 elif f.response == "hold":
                     pose = self.tracker.get(agent.name)
-                    self.commander.hold(agent, pose.xy if pose is not None else agent.reference, now, f.kind)
+                    if pose is not None:
+                        self.commander.hold(agent, pose.xy, now, f.kind, pose.velocity)
+                    else:
+                        self.commander.hold(agent, agent.reference, now, f.kind)
                 elif f.response == "resume" and agent.phase == DronePhase.HOLDING and agent.reason == f.kind:
                     pose = self.tracker.get(agent.name)
                     if pose is not None and pose.valid and f.kind in self.RESUMABLE:

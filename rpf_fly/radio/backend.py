@@ -20,6 +20,11 @@ from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
+CONTROLLER_PARAMS = ("posCtlPid.xKp", "posCtlPid.xKi", "posCtlPid.xVelMax", "posCtlPid.pLimit", "velCtlPid.vxKp",
+                     "velCtlPid.vxKi")
+"""The position controller's parameters a backend reads at connect (`DroneState.controller_params`): what the
+ground station's model of the drone's response needs (rpf_fly/flight/response.py)."""
+
 Vec3 = tuple[float, float, float]
 """x, y, z in metres."""
 
@@ -154,6 +159,10 @@ class DroneState:
     streamed setpoint, or the high-level commander's plan (a take-off or landing keeps the x, y where it began);
     None where the firmware does not log it. Garbage while the motors are off (the firmware's setpoint then holds
     nothing)."""
+    controller_params: Mapping[str, float] | None = None
+    """The position controller's gains and limits the drone flies with (firmware parameter names, e.g.
+    ``posCtlPid.xKp``: `CONTROLLER_PARAMS`), read from its parameters at connect; None where the backend cannot
+    read them (the flight then assumes the firmware's defaults: rpf_fly/flight/response.py)."""
 
 
 @runtime_checkable

@@ -96,6 +96,7 @@ from rpf_fly.radio.schedule import LinkCount
 from rpf_fly.radio.telemetry_clock import TelemetryClock
 
 from .backend import (
+    CONTROLLER_PARAMS,
     BatteryState,
     DroneState,
     LinkLostCallback,
@@ -148,6 +149,20 @@ def status_variables(log_toc: Any) -> tuple[tuple[str, str], ...]:
         return STATUS_VARIABLES
     return STATUS_VARIABLES_FLOAT
 
+def _read_params(cf: Any, names: tuple[str, ...]) -> dict[str, float] | None:
+    """The values of ``names`` the drone's parameters hold (cflib fetched them all at connect); those its TOC lacks
+    or whose value is not a number are left out; None when none is there."""
+    out = {}
+    for name in names:
+        if cf.param.toc.get_element_by_complete_name(name) is None:
+            continue
+        try:
+            out[name] = float(cf.param.get_value(name))
+        except Exception:  # cflib raises bare Exception when its values are not there
+            continue
+    return out or None
+
+
 INITIAL_STATE_PARAMS: tuple[str, ...] = ("kalman.initialX", "kalman.initialY", "kalman.initialZ", "kalman.initialYaw")
 """The Kalman estimator's initial state (metres, radians), used at its next reset."""
 
@@ -194,6 +209,8 @@ class _Drone:
     stamp_s: float | None = None
     measured_s: float | None = None
     """When the last status packet's values were true (its firmware timestamp mapped by `clock`)."""
+    controller_params: dict[str, float] | None = None
+    """`CONTROLLER_PARAMS` as the drone's parameters held them at connect."""
     clock: TelemetryClock = field(default_factory=TelemetryClock)
     watchdog: bool = False
     """`arm_watchdog` was called: the backend feeds the drone's emergency-stop watchdog until `close`."""
@@ -376,6 +393,7 @@ class CflibBackend:
             self._set_param(cf, "locSrv.extQuatStdDev", self._ext_quat_std_dev)
         if self._ext_pos_std_dev is not None:
             self._set_param(cf, "locSrv.extPosStdDev", self._ext_pos_std_dev)
+        drone.controller_params = _read_params(cf, CONTROLLER_PARAMS)
         stats = cf.link_statistics
         stats.link_quality_updated.add_callback(partial(self._on_quality, drone.name))
         stats.latency_updated.add_callback(partial(self._on_latency, drone.name))
@@ -686,6 +704,7 @@ class CflibBackend:
                 yaw_deg=d.yaw_deg,
                 estimate_stamp_s=d.measured_s,
                 target_m=d.target,
+                controller_params=d.controller_params,
             )
 
     def states(self) -> dict[str, DroneState]:

@@ -46,7 +46,7 @@ CONCURRENT = 4
 _FLOWN: dict[str, Future] = {}
 _POOL: list[ThreadPoolExecutor] = []
 _WANTED: list[str] = []
-"""The scenarios this session's selected tests read (stems): only those are flown ahead."""
+"""The scenarios the selected tests of this run read (stems): only those are flown ahead."""
 
 
 @pytest.fixture(scope="module", autouse=True)

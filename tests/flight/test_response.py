@@ -1,0 +1,63 @@
+"""rpf_fly/flight/response.py: the ground station's model of how a drone's firmware answers a position setpoint,
+against the full model of the firmware's PID cascade on the identified body (rpf_fly/emulator/cf_scenario.py)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from rpf_fly.emulator.cf_scenario import fly, hold_scenario
+from rpf_fly.flight.response import DEFAULT_GAINS, Braking, ResponseGains, braking_for, overshoot_m, respond
+
+
+@pytest.mark.parametrize("speed", [0.3, 0.45, 0.7, 1.0])
+def test_a_hold_where_the_drone_is_overshoots_as_the_full_model_does(speed: float) -> None:
+    full = fly(hold_scenario(speed, duration_s=6.0))["figures"]["overshoot_cm"] / 100.0
+    reduced = overshoot_m(DEFAULT_GAINS, speed)
+    assert abs(reduced - full) <= max(0.01, 0.1 * full), (speed, reduced, full)
+
+
+def test_a_steady_carrot_is_trailed_by_speed_over_gain_and_the_drag() -> None:
+    """Chasing a setpoint that moves at v, the drone settles v / posCtlPid.xKp behind it, plus what holding its
+    speed against drag costs the velocity loop (the reference's 27 cm at 0.5 m/s)."""
+    for speed, reference in ((0.5, 0.27), (1.0, 0.56)):
+        steps = np.arange(800)  # 8 s at 100 Hz, the carrot streamed at 10 Hz
+        carrot = np.stack([speed * 0.1 * (steps // 10 + 1), np.zeros(len(steps))], axis=1)
+        track = respond(DEFAULT_GAINS, np.zeros(2), np.zeros(2), carrot, 8.0)
+        lag = np.mean(carrot[-200:, 0] - 0.05 * speed - track[-200:, 0])  # against the carrot's mean over a period
+        assert abs(lag - reference) <= 0.2 * reference, (speed, lag)
+
+
+def test_the_gains_come_from_the_drones_parameters() -> None:
+    soft = ResponseGains.from_params({"posCtlPid.xKp": 1.0, "velCtlPid.vxKp": 12.5, "posCtlPid.pLimit": 10.0,
+                                      "unrelated.param": 3.0})
+    assert (soft.pos_kp, soft.vel_kp, soft.tilt_limit_deg, soft.vel_ki) == (1.0, 12.5, 10.0, DEFAULT_GAINS.vel_ki)
+    assert braking_for(None).gains == DEFAULT_GAINS
+    # a 10 degree tilt limit brakes at half the deceleration: the drone needs further to stop
+    assert braking_for({"posCtlPid.pLimit": 10.0}).stop_m(0.8) > 1.3 * braking_for(None).stop_m(0.8)
+    assert braking_for({"posCtlPid.pLimit": 10.0}) is braking_for({"posCtlPid.pLimit": 10.0})  # one table
+
+
+def test_the_stop_grows_with_the_speed_and_is_no_further_than_holding_where_it_was() -> None:
+    braking = Braking()
+    speeds = [0.1, 0.3, 0.5, 0.7, 1.0, 1.3]
+    stops = [braking.stop_m(v) for v in speeds]
+    assert stops == sorted(stops) and stops[0] < 0.03 and 0.2 < braking.stop_m(1.0) < 0.35
+    for v in speeds:
+        assert braking.stop_m(v) <= overshoot_m(DEFAULT_GAINS, v) + 0.006
+    assert braking.stop_m(2.0) > braking.stop_m(1.5)  # beyond the table: grows with the square
+    assert braking.stop_m(0.0) == 0.0
+
+
+def test_the_hold_point_lies_along_the_drones_way_and_brings_it_to_rest_there() -> None:
+    braking = Braking()
+    at, velocity = 1.0 + 2.0j, 0.0 + 1.0j  # flying +y at 1 m/s
+    hold = braking.hold_point(at, velocity)
+    assert hold.real == pytest.approx(1.0) and abs(hold.imag - 2.0) <= braking.stop_m(1.0)
+    assert braking.hold_point(at, 0j) == at
+    # flown on the model: the drone comes to rest within the stop distance of where it was, past no further
+    track = respond(DEFAULT_GAINS, np.array([1.0, 2.0]), np.array([0.0, 1.0]), np.array([hold.real, hold.imag]), 4.0)
+    assert track[:, 1].max() - 2.0 <= braking.stop_m(1.0) + 1e-9
+    # at rest after 4 s, near the hold point (the velocity integrator, wound up against drag, unwinds slowly)
+    assert abs(track[-1, 1] - track[-2, 1]) / 0.01 < 0.05 and abs(track[-1, 1] - hold.imag) < 0.05
+    assert abs(track[-1, 0] - 1.0) < 1e-6
