@@ -20,7 +20,8 @@ from rpf_fly.flight.events import FlightEvent
 from rpf_fly.flight.poses import TrackedPose, stamp_us
 from rpf_fly.flight.radio_load import RadioLoadFeed
 from rpf_fly.flight.truth import TruthBatch, TruthFeed
-from rpf_fly.log import schemas as S
+from rpf_fly.log.encoding import planner_json
+from rpf_fly.log.metadata import mission_metadata, obstacle_dict, scenario_metadata
 from rpf_fly.log.writer import FlightLog, Out, Sink
 from rpf_fly.mission.model import Mission
 from rpf_fly.planning.obstacles import FAR
@@ -65,9 +66,9 @@ class McapRecorder:
         self._offset_ns = time.time_ns() - time.monotonic_ns()
         """Unix-epoch ns minus the loop's monotonic ns, an integer: logged (``mission.monotonic_offset_ns``) so that
         a replay gets the loop's own times back from the log, exactly for the tracker's stamps."""
-        meta = S.mission_metadata(mission, seed, source=source)
+        meta = mission_metadata(mission, seed, source=source)
         meta["monotonic_offset_ns"] = str(self._offset_ns)
-        self.log = FlightLog(path, meta, S.scenario_metadata(mission), poll_interval_s=POLL_FALLBACK_S, sink=sink,
+        self.log = FlightLog(path, meta, scenario_metadata(mission), poll_interval_s=POLL_FALLBACK_S, sink=sink,
                              out=out)
         self._last_drain_s = -math.inf
         self._sensing = mission.planner.sensing_range
@@ -75,7 +76,7 @@ class McapRecorder:
         now = self._ns(time.monotonic())
         arena = {"x": list(mission.arena.x), "y": list(mission.arena.y), "z": list(mission.arena.z)}
         goals = {d.name: complex(*d.goal) for d in mission.drones}
-        self.log.scene(now, [S._obstacle_dict(o) for o in mission.obstacles], goals, arena, mission.flight.height)  # noqa: SLF001
+        self.log.scene(now, [obstacle_dict(o) for o in mission.obstacles], goals, arena, mission.flight.height)
         self.truth_feed = TruthFeed(truth, self._truth).start() if truth is not None else None
         self._plan = {load.dongle: load for load in radio_loads(mission)}
         self.radio_feed = None
@@ -132,7 +133,7 @@ class McapRecorder:
                 eta=float(step.eta), lam=float(step.lam), f_a=complex(step.f_a), f_r=complex(step.f_r),
                 f_in=complex(step.f_in), direction=complex(step.direction), neighbours=int(step.neighbours),
                 obstacle_distance=d_o if d_o < min(FAR, self._sensing + 1e-9) else None)
-        return S.planner_json(t_ns, fields)
+        return planner_json(t_ns, fields)
 
     def _truth(self, stamp_s: float, states: dict[str, Any]) -> None:
         """The feed's thread: one world sample (``time.monotonic()`` seconds, shared with this process)."""

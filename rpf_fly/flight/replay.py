@@ -503,7 +503,7 @@ def find_flown_policy(text: str, kind: str, log: Path, sha256: str) -> Optional[
     the log, above it, or in this checkout. None if no file there has that hash."""
     import yaml
 
-    from rpf_fly.log.schemas import file_sha256
+    from rpf_fly.log.metadata import file_sha256
 
     if not sha256:
         return None
@@ -564,7 +564,7 @@ def replay_setup(data: LogData, kind: Optional[str] = None, policy: Optional[Pat
                  tolerance: Optional[float] = None) -> ReplaySetup:
     """The logged mission with ``kind`` and ``policy`` (None: the flight's own, from the mission metadata) and
     the planner factory the flight loop would have used. Raises :class:`ReplayError` (one line)."""
-    from rpf_fly.log.schemas import file_sha256
+    from rpf_fly.log.metadata import file_sha256
     from rpf_fly.mission import MissionError, with_planner
     from rpf_fly.mission.model import POLICY_KINDS
     from rpf_fly.planning.gains import FixedGains

@@ -395,7 +395,7 @@ def run_scenario(scenario: Scenario, mission: Mission, name: str, *, dry_run: bo
     flight (``log_path``: poses, setpoints, events and, simulated, the truth). Returns the trace."""
     from rpf_fly.flight.session import DEFAULT_TOC_CACHE, mocap_source
     from rpf_fly.flight.truth import TruthFeed
-    from rpf_fly.log import schemas as S
+    from rpf_fly.log.metadata import mission_metadata, scenario_metadata
     from rpf_fly.log.writer import FlightLog
     from rpf_fly.radio.cflib_backend import CflibBackend
 
@@ -429,9 +429,9 @@ def run_scenario(scenario: Scenario, mission: Mission, name: str, *, dry_run: bo
             backend, mocap, uri = CflibBackend.for_mission(one, DEFAULT_TOC_CACHE), mocap_source(one), drone.uri
             truth = None  # type: ignore[assignment]
         if log_path is not None:
-            meta = S.mission_metadata(one, 0, source="scenario")
+            meta = mission_metadata(one, 0, source="scenario")
             meta["scenario"] = scenario.name
-            log = FlightLog(log_path, meta, S.scenario_metadata(one))
+            log = FlightLog(log_path, meta, scenario_metadata(one))
         truth_track: list[tuple[float, tuple[float, float, float]]] = []
         if rig is not None:
             offset_ns = time.time_ns() - time.monotonic_ns()

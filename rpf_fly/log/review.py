@@ -26,7 +26,7 @@ from typing import Any, NamedTuple, Optional
 import numpy as np
 
 from rpf_fly.log.reader import LogData
-from rpf_fly.log.schemas import LOG_LEVELS
+from rpf_fly.log.foxglove_schemas import LOG_LEVELS
 from rpf_fly.sim.metrics import Metrics, compute_metrics
 
 GAP_FACTOR = 3.0

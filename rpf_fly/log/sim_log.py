@@ -18,7 +18,8 @@ from typing import Any
 
 import numpy as np
 
-from rpf_fly.log import schemas as S
+from rpf_fly.log.messages import IDENTITY
+from rpf_fly.log.metadata import mission_metadata, obstacle_dict, scenario_metadata
 from rpf_fly.log.writer import FlightLog
 from rpf_fly.sim.collisions import collision_flags, pair_distances
 from rpf_fly.sim.rollout import DroneOutcome, Rollout
@@ -76,11 +77,11 @@ def write_sim_log(path: str | Path, mission: Any, scenario: Any, rollout: Rollou
             heading = np.where(moving, np.angle(d), heading)
         headings[k] = heading
 
-    shapes = [S.obstacle_dict(s) for s in scenario.shapes]
+    shapes = [obstacle_dict(s) for s in scenario.shapes]
     arena = {"x": list(scenario.arena_x), "y": list(scenario.arena_y), "z": list(mission.arena.z)}
-    ident = S.IDENTITY
+    ident = IDENTITY
 
-    log = FlightLog(path, S.mission_metadata(mission, seed, source="sim"), S.scenario_metadata(mission, scenario),
+    log = FlightLog(path, mission_metadata(mission, seed, source="sim"), scenario_metadata(mission, scenario),
                     clock=None, block_when_full=True)
     with log:
         log.scene(start_ns, shapes, {name: complex(g) for name, g in zip(names, goals)}, arena, height)

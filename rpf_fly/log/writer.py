@@ -43,6 +43,8 @@ from typing import Any, Callable, Iterable, Mapping, Optional, Sequence
 from mcap.writer import CompressionType, Writer
 
 from rpf_fly.log import schemas as S
+from rpf_fly.log.encoding import encode, planner_json, pose_json, tf_json, truth_json
+from rpf_fly.log.messages import drone_status, log_message, radio_load, scene_update, yaw_quaternion
 
 logger = logging.getLogger(__name__)
 
@@ -50,8 +52,6 @@ DEFAULT_MAX_QUEUE = 50_000
 FLUSH_INTERVAL_S = 1.0
 POLL_INTERVAL_S = 0.05
 CHUNK_SIZE = 1 << 20
-
-encode = S.encode
 
 Sink = Callable[[str, int, bytes], None]
 """``sink(topic, log_time_ns, data)``: called on the writer thread for each message written (see :class:`FlightLog`)."""
@@ -98,15 +98,15 @@ def _raw_message(t_ns: int, data: bytes) -> bytes:
 
 
 def _status_message(t_ns: int, fields: dict[str, Any]) -> dict[str, Any]:
-    return S.drone_status(t_ns, **fields)
+    return drone_status(t_ns, **fields)
 
 
 def _setpoint_message(t_ns: int, position: Any, yaw: float) -> bytes:
-    return S.pose_json(t_ns, position, S.yaw_quaternion(yaw))
+    return pose_json(t_ns, position, yaw_quaternion(yaw))
 
 
 def _scene_message(t_ns: int, fields: dict[str, Any]) -> dict[str, Any]:
-    return S.scene_update(t_ns, **fields)
+    return scene_update(t_ns, **fields)
 
 
 class FlightLog:
@@ -114,8 +114,8 @@ class FlightLog:
     queue policy and docs/log-format.md for the topics.
 
     ``mission_meta`` and ``scenario_meta`` become the ``mission`` and ``scenario`` metadata records (string values;
-    other values are stored as JSON); build them with :func:`rpf_fly.log.schemas.mission_metadata` and
-    :func:`rpf_fly.log.schemas.scenario_metadata`. Opening the file happens here, so a bad path raises at once
+    other values are stored as JSON); build them with :func:`rpf_fly.log.metadata.mission_metadata` and
+    :func:`rpf_fly.log.metadata.scenario_metadata`. Opening the file happens here, so a bad path raises at once
     (``OSError``), before the flight.
 
     ``clock``: the log-time source (ns since the Unix epoch; None: log time = ``t_ns``). ``block_when_full``:
@@ -217,13 +217,13 @@ class FlightLog:
              quaternion_xyzw: Optional[Sequence[float]] = None) -> None:
         """``/mocap/<drone>``: the pose as received (frame ``world``; quaternion ``(qx, qy, qz, qw)``, None:
         identity). ``t_ns``: the mocap frame time."""
-        self._put(self._poses.get(drone) or self._topic(self._poses, "/mocap/{}", drone), t_ns, S.pose_json,
+        self._put(self._poses.get(drone) or self._topic(self._poses, "/mocap/{}", drone), t_ns, pose_json,
                   (position_xyz, quaternion_xyzw))
 
     def poses(self, t_ns: int, poses: Mapping[str, tuple[Sequence[float], Optional[Sequence[float]]]]) -> None:
         """``/mocap/<drone>`` of several drones at one frame time ``{drone: (position, quaternion)}``: the same
         messages as :meth:`pose` per drone, queued as one entry (a flight logs every frame of every drone)."""
-        self._put_batch(self._poses, "/mocap/{}", [(d, t_ns, v) for d, v in poses.items()], S.pose_json)
+        self._put_batch(self._poses, "/mocap/{}", [(d, t_ns, v) for d, v in poses.items()], pose_json)
 
     def setpoints(self, setpoints: Iterable[tuple[str, int, Sequence[float], float]]) -> None:
         """``/<drone>/setpoint`` of several drones, ``(drone, t_ns, position, yaw)`` each (each its own send time):
@@ -232,7 +232,7 @@ class FlightLog:
                         _setpoint_message)
 
     def planner_steps(self, t_ns: int, steps: Mapping[str, Any],
-                      build: Callable[[int, Any], bytes | dict] = S.planner_json) -> None:
+                      build: Callable[[int, Any], bytes | dict] = planner_json) -> None:
         """``/<drone>/planner`` of several drones at one tick, queued as one entry. ``steps``: ``{drone: value}``;
         ``build(t_ns, value)`` makes each message on the writer thread (default: ``value`` is the fields mapping of
         :meth:`planner_step`). A flight's recorder passes its own ``build`` so that the loop thread only hands
@@ -243,9 +243,9 @@ class FlightLog:
               ) -> None:
         """``/truth/<drone>`` of every drone at one sample of a dry run's simulated world, queued as one entry:
         ``{drone: (position, yaw, motors, crashed, estimate)}`` (metres, radians; see
-        :func:`rpf_fly.log.schemas.truth_state`). ``t_ns``: when the world was in that state. Log time = ``t_ns``
+        :func:`rpf_fly.log.messages.truth_state`). ``t_ns``: when the world was in that state. Log time = ``t_ns``
         (not the clock at the call): the samples reach the flight's process in batches (docs/log-format.md)."""
-        self._put_batch(self._truth, "/truth/{}", [(d, t_ns, v) for d, v in states.items()], S.truth_json,
+        self._put_batch(self._truth, "/truth/{}", [(d, t_ns, v) for d, v in states.items()], truth_json,
                         log_at_publish=True)
 
     def setpoint(self, drone: str, t_ns: int, position_xyz: Sequence[float], yaw_rad: float = 0.0) -> None:
@@ -254,10 +254,10 @@ class FlightLog:
                   _setpoint_message, (position_xyz, yaw_rad))
 
     def planner_step(self, drone: str, t_ns: int, **fields: Any) -> None:
-        """``/<drone>/planner``: one planning tick (fields of :func:`rpf_fly.log.schemas.planner_step`: tick,
+        """``/<drone>/planner``: one planning tick (fields of :func:`rpf_fly.log.messages.planner_step`: tick,
         position, goal, mode, eta, lam or lambda, f_a, f_r, f_in, direction, heading, neighbours,
         obstacle_distance, goal_distance)."""
-        self._put(self._planner.get(drone) or self._topic(self._planner, "/{}/planner", drone), t_ns, S.planner_json,
+        self._put(self._planner.get(drone) or self._topic(self._planner, "/{}/planner", drone), t_ns, planner_json,
                   (fields,))
 
     def status(self, drone: str, t_ns: int, **fields: Any) -> None:
@@ -267,11 +267,11 @@ class FlightLog:
 
     def radio(self, t_ns: int, dongle: int, **fields: Any) -> None:
         """``/radio/<dongle>``: one window of a dongle's measured load (fields of
-        :func:`rpf_fly.log.schemas.radio_load`: drones, window_s, packets, transactions, planned_per_s,
+        :func:`rpf_fly.log.messages.radio_load`: drones, window_s, packets, transactions, planned_per_s,
         budget_per_s, optionally setpoints_superseded). Once a second per dongle: never dropped for a full queue
         (as events)."""
         topic = self._radio.get(str(dongle)) or self._topic(self._radio, "/radio/{}", str(dongle))
-        self._put(topic, t_ns, S.radio_load, (dongle, *(fields[k] for k in (
+        self._put(topic, t_ns, radio_load, (dongle, *(fields[k] for k in (
             "drones", "window_s", "packets", "transactions", "planned_per_s", "budget_per_s")),
             float(fields.get("setpoints_superseded", 0.0))), priority=True)
 
@@ -284,11 +284,11 @@ class FlightLog:
 
     def tf(self, t_ns: int, poses: Mapping[str, tuple[Sequence[float], Optional[Sequence[float]]]]) -> None:
         """``/tf``: transforms world -> each drone, ``{drone: (position, quaternion)}``."""
-        self._put(self._fixed["/tf"], t_ns, S.tf_json, (dict(poses),))
+        self._put(self._fixed["/tf"], t_ns, tf_json, (dict(poses),))
 
     def event(self, t_ns: int, level: int, message: str, name: str = "rpf_fly", file: str = "", line: int = 0) -> None:
         """``/events``: a ``foxglove.Log`` (level 1 debug, 2 info, 3 warning, 4 error, 5 fatal)."""
-        self._put(self._fixed["/events"], t_ns, S.log_message, (level, message, name, file, line),
+        self._put(self._fixed["/events"], t_ns, log_message, (level, message, name, file, line),
                   priority=True)
 
     def message(self, topic: str, t_ns: int, log_time: int, data: bytes) -> None:
@@ -501,7 +501,7 @@ class FlightLog:
         logger.warning("%s: %s", self.path, text)
         now = time.time_ns() if self._clock is None else self._clock()
         topic, counter = self._fixed["/events"]
-        self._write(topic, next(counter), now, now, S.log_message(now, 3, text, self.name))
+        self._write(topic, next(counter), now, now, log_message(now, 3, text, self.name))
 
     def _flush(self) -> None:
         if self.error is not None:

@@ -139,14 +139,14 @@ class FrameRelay:
     def _poses(self, frame: Any) -> None:
         """Each drone's valid pose of ``frame`` on ``mocap/<drone>``, stamped with the frame's receipt (the log's
         ``/mocap/<drone>``; the bus drops what it cannot send)."""
-        from rpf_fly.log import schemas as S
+        from rpf_fly.log.encoding import pose_json
 
         t_ns = round(frame.receive_time_s * 1e9) + self.offset_ns
         out, topics = self.bus.out, self.topics
         for body in frame.bodies.values():
             topic = topics.get(body.name)
             if topic is not None and body.valid:
-                out(topic, t_ns, t_ns, S.pose_json(t_ns, body.position, body.quaternion))
+                out(topic, t_ns, t_ns, pose_json(t_ns, body.position, body.quaternion))
 
     def cpu_pct(self) -> Optional[float]:
         if self.first_at is None or time.monotonic() <= self.first_at[0]:
@@ -183,7 +183,8 @@ def main(argv: Optional[list[str]] = None) -> int:
     parser.add_argument("--dry-run", action="store_true")
     args = parser.parse_args(argv)
     from rpf_fly.cli.logs import route_logging
-    from rpf_fly.log import schemas as S
+    from rpf_fly.log.encoding import encode
+    from rpf_fly.log.messages import log_message
     from rpf_fly.mission import load_mission
     from rpf_fly.runtime.auth import SECRET_ENV
     from rpf_fly.runtime.bus import FlightBus
@@ -212,8 +213,8 @@ def main(argv: Optional[list[str]] = None) -> int:
         def event(level: int, message: str) -> None:
             t_ns = time.monotonic_ns() + offset_ns
             logger.log(10 * level, "relay: %s", message)
-            bus.out("/events", t_ns, t_ns, S.encode(S.log_message(t_ns, level, message, name=RELAY,
-                                                                  file="mocap_relay")))
+            bus.out("/events", t_ns, t_ns, encode(log_message(t_ns, level, message, name=RELAY,
+                                                              file="mocap_relay")))
 
         def info(state: str, **extra: Any) -> None:
             bus.put_json(f"workers/{RELAY}", json.dumps({

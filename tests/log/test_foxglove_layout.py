@@ -10,6 +10,7 @@ import sys
 from pathlib import Path
 
 from rpf_fly.log import schemas as S
+from rpf_fly.log.messages import WORLD_FRAME
 from rpf_fly.log.reader import read_log
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -48,7 +49,7 @@ def test_the_layout_has_the_panels_the_flight_needs_and_its_tree_names_each_once
     assert sorted(p.split("!")[0] for p in panels) == ["3D", "Plot", "Plot", "RosOut"]  # RosOut: the Log panel
     assert layout["configById"]["RosOut!rpf-events"]["topicToRender"] == "/events"
     three_d = layout["configById"]["3D!rpf-scene"]
-    assert three_d["followTf"] == S.WORLD_FRAME and three_d["topics"]["/scene"]["visible"]
+    assert three_d["followTf"] == WORLD_FRAME and three_d["topics"]["/scene"]["visible"]
     assert all(three_d["topics"][f"/cf{i}/setpoint"]["visible"] for i in range(1, 11))
 
 

@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 from mcap.reader import make_reader
 
-from rpf_fly.log import schemas as S
+from rpf_fly.log import messages as M
 from rpf_fly.log.reader import read_log
 from rpf_fly.log.writer import FlightLog
 
@@ -253,7 +253,7 @@ def test_a_client_that_subscribes_late_still_gets_the_scene(sdk: None, tmp_path:
     with open(path, "rb") as f:
         logged = [(m.log_time, m.data) for _, _, m in make_reader(f).iter_messages(topics=["/scene"])]
     assert scene == logged  # once, with the file's log time and bytes
-    assert json.loads(scene[0][1])["entities"] == S.scene_update(T0, goals={"cf1": (1.0, 1.0)},
+    assert json.loads(scene[0][1])["entities"] == M.scene_update(T0, goals={"cf1": (1.0, 1.0)},
                                                                   arena={"x": [-2, 2], "y": [-2, 2], "z": [0, 1.5]},
                                                                   height=0.6)["entities"]
 

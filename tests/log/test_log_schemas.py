@@ -10,6 +10,9 @@ import numpy as np
 import pytest
 from mcap.reader import make_reader
 
+from rpf_fly.log import encoding as E
+from rpf_fly.log import messages as M
+from rpf_fly.log import rpf_schemas as R
 from rpf_fly.log import schemas as S
 from rpf_fly.log.schemas import SCHEMAS
 
@@ -114,7 +117,7 @@ def test_topic_schema_names_follow_the_contract():
 
 def test_builders_reject_what_the_schemas_forbid():
     planner = jsonschema.Draft7Validator(SCHEMAS["rpf_fly.PlannerStep"])
-    step = S.planner_step(0, tick=0, position=(0, 0, 0), goal=(1, 0), mode=-1, eta=float("nan"))
+    step = M.planner_step(0, tick=0, position=(0, 0, 0), goal=(1, 0), mode=-1, eta=float("nan"))
     planner.validate(step)
     assert step["mode"] == "arrived" and step["eta"] is None and step["goal_distance"] == 1.0
     with pytest.raises(jsonschema.ValidationError):
@@ -123,8 +126,8 @@ def test_builders_reject_what_the_schemas_forbid():
         planner.validate({k: v for k, v in step.items() if k != "lambda"})
     status = jsonschema.Draft7Validator(SCHEMAS["rpf_fly.DroneStatus"])
     with pytest.raises(jsonschema.ValidationError):
-        status.validate(S.drone_status(0, "planning", link_quality=1.5))
-    assert S.stamp(1_700_000_000_123_456_789) == {"sec": 1_700_000_000, "nsec": 123_456_789}
+        status.validate(M.drone_status(0, "planning", link_quality=1.5))
+    assert M.stamp(1_700_000_000_123_456_789) == {"sec": 1_700_000_000, "nsec": 123_456_789}
 
 
 T = 1_700_000_000_123_456_789
@@ -135,7 +138,7 @@ T = 1_700_000_000_123_456_789
     (1 + 2j, None), ((1.0, 2.0), None), ((float("nan"), 0.0, 0.0), None), ((np.float32(0.1), 1.0, 1.0), None),
 ])
 def test_fast_pose_encoder_equals_the_builder(position, quaternion):
-    assert S.pose_json(T, position, quaternion) == S.encode(S.pose_in_frame(T, position, quaternion))
+    assert E.pose_json(T, position, quaternion) == E.encode(M.pose_in_frame(T, position, quaternion))
 
 
 @pytest.mark.parametrize("fields", [
@@ -151,18 +154,18 @@ def test_fast_pose_encoder_equals_the_builder(position, quaternion):
     dict(tick=5, position=(0.1, 0.2, 0.5), goal=(1, 0), mode="apf", reference=(np.float64(0.3), 0.1)),
 ])
 def test_fast_planner_encoder_equals_the_builder(fields):
-    assert S.planner_json(T, fields) == S.encode(S.planner_step(T, **fields))
+    assert E.planner_json(T, fields) == E.encode(M.planner_step(T, **fields))
 
 
 def test_planner_reference_is_optional_exact_and_valid():
     """``reference`` (where the drone planned from, for rpf-fly replay) is written only when given, as the exact
     doubles, and validates against the schema either way."""
     validator = jsonschema.Draft7Validator(SCHEMAS["rpf_fly.PlannerStep"])
-    without = json.loads(S.planner_json(T, dict(tick=0, position=(0, 0, 0.5), goal=(1, 0), mode="hold")))
+    without = json.loads(E.planner_json(T, dict(tick=0, position=(0, 0, 0.5), goal=(1, 0), mode="hold")))
     assert "reference" not in without
     validator.validate(without)
     ref = complex(0.1 + 0.2, -1 / 3)
-    with_ref = json.loads(S.planner_json(T, dict(tick=1, position=(0, 0, 0.5), goal=(1, 0), mode="apf",
+    with_ref = json.loads(E.planner_json(T, dict(tick=1, position=(0, 0, 0.5), goal=(1, 0), mode="apf",
                                                  reference=ref)))
     assert complex(with_ref["reference"]["x"], with_ref["reference"]["y"]) == ref
     validator.validate(with_ref)
@@ -175,8 +178,8 @@ def test_planner_reference_is_optional_exact_and_valid():
     ((1.0, 2.0), 0.0, True, False, 1 + 2j),
 ])
 def test_fast_truth_encoder_equals_the_builder_and_validates(state):
-    assert S.truth_json(T, *state) == S.encode(S.truth_state(T, *state))
-    message = json.loads(S.truth_json(T, *state))
+    assert E.truth_json(T, *state) == E.encode(M.truth_state(T, *state))
+    message = json.loads(E.truth_json(T, *state))
     if all(v is not None for v in (*message["position"].values(), message["yaw"])):
         jsonschema.Draft7Validator(SCHEMAS["rpf_fly.TruthState"]).validate(message)
     assert type(message["motors"]) is bool and type(message["crashed"]) is bool
@@ -184,14 +187,14 @@ def test_fast_truth_encoder_equals_the_builder_and_validates(state):
 
 def test_fast_encoders_raise_what_the_builders_raise():
     with pytest.raises(ValueError):
-        S.planner_json(T, dict(tick=0, position=(0, 0, 0), goal=(1, 0), mode="dancing"))
+        E.planner_json(T, dict(tick=0, position=(0, 0, 0), goal=(1, 0), mode="dancing"))
     with pytest.raises(TypeError):
-        S.planner_json(T, dict(tick=0, position=(0, 0, 0), goal=(1, 0), mode="apf", colour="red"))
+        E.planner_json(T, dict(tick=0, position=(0, 0, 0), goal=(1, 0), mode="apf", colour="red"))
     poses = {"cf1": ((1, 2, 3), None), "cf2": (np.array([1.0, 2.0, 3.0]), (0, 0, 0.1, 0.9)), 'q"uote': ((0, 0, 0), None)}
-    assert S.tf_json(T, poses) == S.encode(S.frame_transforms(T, poses))
+    assert E.tf_json(T, poses) == E.encode(M.frame_transforms(T, poses))
 
 
 def test_the_status_schema_names_every_drone_phase():
     from rpf_fly.flight.phases import DronePhase
 
-    assert set(S.DRONE_STATES) == {p.value for p in DronePhase}
+    assert set(R.DRONE_STATES) == {p.value for p in DronePhase}
