@@ -59,6 +59,9 @@ the firmware's start-up) until its radio answers again. The fake's choice within
 
 PORT_CONSOLE, PORT_PARAM, PORT_COMMANDER, PORT_MEM, PORT_LOG = 0, 2, 3, 4, 5
 PORT_LOCALIZATION, PORT_COMMANDER_GENERIC, PORT_SETPOINT_HL, PORT_SUPERVISOR = 6, 7, 8, 9
+_PACKED_ITEM = struct.Struct("<Bhhh")
+"""One item of a packed external position (crazyflie-firmware crtp_localization_service.c lines 105-111,
+``extPositionPackedItem``; read by ``extPositionPackedHandler``, lines 350-369)."""
 PORT_PLATFORM, PORT_LINK = 13, 15
 NRF_TARGET = 0xFE
 """First payload byte of a link channel-3 packet the nRF51 takes for itself (crazyflie2-nrf-firmware main.c)."""
@@ -300,6 +303,9 @@ class FakeFirmware:
         self._reset_init = False
         """The nRF51 took a reset-init command: a reset command now reboots (a static of its main loop, so a reboot
         clears it)."""
+        self.packed_id = radio_address & 0xFF
+        """The id packed external positions address it by: the radio address's last byte (crazyflie-firmware
+        crtp_localization_service.c lines 168-169, ``configblockGetRadioAddress() & 0xFF``)."""
         self._device_address = radio_address.to_bytes(6, "little")
         """What reset-init answers: a real nRF51's factory DEVICEADDR (6 bytes); the fake's is its radio address."""
         self._eeprom = eeprom_image(radio_channel, 2, radio_address)
@@ -719,6 +725,11 @@ class FakeFirmware:
         v = self.vehicle
         if channel == 0:
             v.external_position(struct.unpack("<fff", data[:12]), now_s)
+        elif channel == 2:  # EXT_POSITION_PACKED: size / 7 items of id, int16 mm x, y, z; its own id only
+            for k in range(len(data) // _PACKED_ITEM.size):  # (others go to peer localization: not simulated)
+                ident, x, y, z = _PACKED_ITEM.unpack_from(data, k * _PACKED_ITEM.size)
+                if ident == self.packed_id:
+                    v.external_position((x / 1000.0, y / 1000.0, z / 1000.0), now_s)
         elif channel == 1 and data:
             kind = data[0]
             if kind == 8:

@@ -1,0 +1,92 @@
+"""``rpf-fly calibrate TRACE``: each reference trace of the Crazyflie dynamics reference (the firmware's default
+gains, tests/data/crazyflie_dynamics) calibrated from a start 30 % off the defaults gives the defaults back, within
+15 %, for the axes its setpoints move; the others are reported not identified. And bad input is one line, exit 2."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from rpf_fly.calibrate.profile import load_profile
+from rpf_fly.cli import get_app
+from rpf_fly.emulator.cf_controller import CfGains
+from rpf_fly.log import schemas as S
+from rpf_fly.log.writer import FlightLog
+from rpf_fly.mission import parse_mission
+
+TRACES = Path(__file__).resolve().parents[1] / "data" / "crazyflie_dynamics" / "traces"
+OFF = {"posCtlPid.xKp": 1.4, "velCtlPid.vxKp": 32.5, "posCtlPid.yKp": 2.6, "velCtlPid.vyKp": 17.5,
+       "posCtlPid.zKp": 2.6, "velCtlPid.vzKp": 17.5, "posCtlPid.zKi": 0.35}
+"""The fit's start: each gain x0.7 or x1.3 of the firmware's."""
+GAINS = {"x": ("posCtlPid.xKp", "velCtlPid.vxKp"), "y": ("posCtlPid.yKp", "velCtlPid.vyKp"),
+         "z": ("posCtlPid.zKp", "velCtlPid.vzKp", "posCtlPid.zKi")}
+MOVED = {"p_circle_r0p5_v0p3": "xy", "p_hl_slow": "xz"}
+"""The axes each trace's setpoints move (the others: x only)."""
+
+
+@pytest.fixture(scope="module")
+def start(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    path = tmp_path_factory.mktemp("start") / "off.yaml"
+    path.write_text("format: 1\nparams:\n" + "".join(f"  {k}: {v}\n" for k, v in OFF.items()))
+    return path
+
+
+@pytest.mark.parametrize("trace", sorted(p.stem for p in TRACES.glob("*.json")))
+def test_a_reference_trace_gives_the_default_gains_back(trace: str, start: Path, tmp_path: Path) -> None:
+    out = tmp_path / "profile.yaml"
+    done = CliRunner().invoke(get_app(), ["calibrate", str(TRACES / f"{trace}.json"), "--start", str(start),
+                                          "--out", str(out), "--json"])
+    assert done.exit_code == 0, done.output
+    fit = json.loads(done.stdout)["drones"][trace]
+    defaults = CfGains().params()
+    moved = MOVED.get(trace, "x")
+    print(f"| {trace} | " + ", ".join(f"{n} x{fit['params'][n] / defaults[n]:.3f}" for a in moved for n in GAINS[a])
+          + f" | {fit['residual_rms_m'] * 1000:.2f} |")  # docs/dynamics.md's table (pytest -s)
+    for axis, names in GAINS.items():
+        for name in names:
+            if axis in moved:
+                assert fit["params"][name] == pytest.approx(defaults[name], rel=0.15), (name, fit)
+                assert name not in fit["not_identified"]
+            else:  # an axis held still says nothing: the start's value stays, and the fit says so
+                assert fit["params"][name] == OFF[name]
+                assert "moved 0.000 m" in fit["not_identified"][name]
+    for axis in moved:  # the same model: the reference's positions within a millimetre
+        assert fit["residual_axis_rms_m"][axis] < 0.001, fit
+    assert (fit["latency_s"], fit["noise_m"], fit["latency_from"]) == (0.0, 0.0, "none")
+    profile = load_profile(out)  # what a mission's dry_run.vehicle reads
+    assert dict(profile.params) == pytest.approx(fit["params"], rel=1e-5)
+
+
+def run_cli(*args: str, cwd: Path) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "rpf_fly", "calibrate", *args], capture_output=True, text=True,
+                          cwd=cwd, timeout=60)
+
+
+def test_not_a_log_is_one_line_and_exit_2(tmp_path: Path) -> None:
+    junk = tmp_path / "notes.mcap"
+    junk.write_text("flew fine, battery 3.9 V\n")
+    done = run_cli(str(junk), "--out", "p.yaml", cwd=tmp_path)
+    assert done.returncode == 2
+    assert done.stderr == f"{junk}: neither an MCAP flight log nor a trace JSON with t, sp and pos " \
+                          "(tests/data/crazyflie_dynamics/README.md)\n"
+    assert not (tmp_path / "p.yaml").exists()
+
+
+def test_a_log_without_setpoints_is_one_line_and_exit_2(tmp_path: Path) -> None:
+    """A real MCAP flight log (the recorder's writer) with poses and events but no setpoint stream."""
+    mission = parse_mission("arena: {x: [-1, 1], y: [-1, 1]}\nplanner: {kind: apf}\ndrones:\n"
+                            "  - {name: cf1, uri: radio://0/80/2M/E7E7E7E701, start: [0, 0], goal: [0.5, 0]}\n")
+    log = tmp_path / "hover.mcap"
+    with FlightLog(log, S.mission_metadata(mission, 0, "flight"), S.scenario_metadata(mission)) as flight:
+        for k in range(50):
+            flight.pose("cf1", 1_800_000_000_000_000_000 + k * 10_000_000, (0.0, 0.0, 0.5), (0.0, 0.0, 0.0, 1.0))
+        flight.event(1_800_000_000_500_000_000, 2, "cf1: hover")
+    done = run_cli(str(log), cwd=tmp_path)
+    assert done.returncode == 2
+    assert done.stderr == f"{log}: no setpoints in the log (no /<drone>/setpoint topic): calibrate needs a streamed " \
+                          "flight's log (rpf-fly fly or rpf-fly scenario with --log)\n"
