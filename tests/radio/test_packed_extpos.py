@@ -1,0 +1,61 @@
+"""Packed extpos: the layout the firmware reads (crtp_localization_service.c), the ids, the groups, and the
+simulated firmware taking its own position out of a packed packet (synthetic time, packet level)."""
+
+from __future__ import annotations
+
+import struct
+
+import pytest
+
+from rpf_fly.emulator.fake_firmware import FakeFirmware
+from rpf_fly.emulator.fake_vehicle import VehicleConfig
+from rpf_fly.radio.packed_extpos import (HEADER, decode, drone_id, encode, packed_groups, parse_link, shared_ids,
+                                         to_mm)
+
+
+def test_the_layout_is_the_firmwares_item_four_a_packet() -> None:
+    data = encode([(0x01, (1.0, -2.5, 0.0305)), (0xE7, (-32.768, 32.767, 0.0004))])
+    # extPositionPackedItem: uint8 id, int16 x, y, z in mm, little-endian, packed (7 bytes)
+    assert data == bytes([0x01, 0xE8, 0x03, 0x3C, 0xF6, 0x1E, 0x00, 0xE7, 0x00, 0x80, 0xFF, 0x7F, 0x00, 0x00])
+    assert HEADER == 0x6E  # port 6, channel 2 (EXT_POSITION_PACKED), cflib's link bits
+    assert len(encode([(k, (0.0, 0.0, 0.0)) for k in range(4)])) == 28  # 4 items fit the 30 data bytes
+    with pytest.raises(ValueError, match="1 to 4"):
+        encode([(k, (0.0, 0.0, 0.0)) for k in range(5)])
+    with pytest.raises(ValueError, match="int16 millimetres"):
+        to_mm(32.8)
+    assert decode(data + b"\x05\x00") == [(1, (1.0, -2.5, 0.030)), (0xE7, (-32.768, 32.767, 0.0))]  # tail ignored
+
+
+def test_a_drones_id_is_its_addresss_last_byte_and_groups_follow_dongle_channel_and_rate() -> None:
+    assert drone_id(parse_link("radio://0/80/2M/E7E7E7E70A?rate_limit=40").address) == 0x0A
+    uris = {f"cf{i}": f"radio://{0 if i <= 6 else 1}/80/2M/E7E7E7E7{i:02X}" for i in range(1, 9)}
+    uris["cf9"] = "radio://0/90/2M/E7E7E7E709"
+    groups = packed_groups(uris)
+    assert [(g.dongle, g.channel, g.names) for g in groups] == [
+        (0, 80, ("cf1", "cf2", "cf3", "cf4")), (0, 80, ("cf5", "cf6")), (1, 80, ("cf7", "cf8")),
+        (0, 90, ("cf9",))]
+    assert groups[0].ids == (1, 2, 3, 4)
+    assert shared_ids(uris) == []
+    uris["cf10"] = "radio://1/80/2M/A1A1A1A101"  # cf1's id on cf1's channel (another dongle: the same air)
+    assert shared_ids(uris) == [(80, 1, ("cf1", "cf10"))]
+
+
+def test_each_simulated_firmware_takes_its_own_position_from_a_packed_packet() -> None:
+    firmwares = {address: FakeFirmware(VehicleConfig(position=(0.0, 0.0, 0.0), positioning="extpos"),
+                                       radio_address=address, seed=k)
+                 for k, address in enumerate((0xE7E7E7E701, 0xE7E7E7E702, 0xE7E7E7E703, 0xE7E7E7E704,
+                                              0xE7E7E7E705))}
+    truth = {0x01: (1.0, 0.5, 0.0), 0x02: (-1.25, 2.0, 0.0), 0x03: (0.0, -3.0, 0.0), 0x04: (2.5, 2.5, 0.0)}
+    packet = encode(list(truth.items()))
+    for fw in firmwares.values():
+        fw.handle(6, 2, packet, 0.01)
+    for address, fw in firmwares.items():
+        estimate = fw.snapshot().estimate
+        if address & 0xFF in truth:  # power-on variance 1 m^2: the first measurement is taken almost whole
+            assert estimate == pytest.approx(truth[address & 0xFF], abs=1e-3), hex(address)
+        else:  # not in the packet: nothing moved its estimate (only the IMU, micrometres)
+            assert estimate == pytest.approx((0.0, 0.0, 0.0), abs=1e-3)
+    # an id another drone's own unicast extpos never confuses: channel 0 still takes three floats
+    fw = firmwares[0xE7E7E7E705]
+    fw.handle(6, 0, struct.pack("<fff", 0.25, 0.25, 0.0), 0.02)
+    assert fw.snapshot().estimate == pytest.approx((0.25, 0.25, 0.0), abs=1e-3)
