@@ -277,6 +277,10 @@ class VehicleConfig:
     """How the body flies: "first_order" (the documented lags of the module doc, "Dynamics") or "firmware" (the
     firmware's default PID cascade on the identified Crazyflie 2.1+ body, module doc "Firmware dynamics");
     "first-order" (the mission file's spelling) is taken for "first_order"."""
+    stored_params: tuple[tuple[str, float], ...] = ()
+    """Persistent parameters stored in the drone's EEPROM at power-on, by firmware name (a vehicle profile's gains,
+    rpf_fly/calibrate/profile.py): applied at boot as the firmware applies stored values (`FakeFirmware`), and kept
+    through a reboot."""
 
     def __post_init__(self) -> None:
         if self.dynamics == "first-order":
