@@ -43,6 +43,7 @@ in seconds from the call; each behaves as the real thing would, see docs/radio.m
 
 from __future__ import annotations
 
+import math
 import os
 import tempfile
 from dataclasses import dataclass, replace
@@ -125,9 +126,11 @@ class StartFault:
 
 
 def mission_mocap_noise(mission: Mission) -> MocapNoise:
-    """The mocap jitter and dropouts of the mission's ``dry_run`` section, the emulator's figures where it says
-    nothing."""
+    """The mocap jitter and dropouts of the mission's ``dry_run`` section, its vehicle profile's position noise where
+    it gives none, the emulator's figures where neither says anything."""
     default, d = MocapNoise.default(), mission.dry_run
+    if d.mocap_noise_m is None and d.vehicle is not None and d.vehicle.mocap_noise_m is not None:
+        default = replace(default, position_m=d.vehicle.mocap_noise_m)  # the vehicle profile's (dry_run.vehicle)
     return MocapNoise(default.position_m if d.mocap_noise_m is None else d.mocap_noise_m,
                       default.orientation_deg if d.mocap_noise_deg is None else d.mocap_noise_deg,
                       default.dropout if d.mocap_dropout is None else d.mocap_dropout)
@@ -140,7 +143,9 @@ def simulated_drones(mission: Mission, drone_configs: Optional[Mapping[str, Fake
     """The simulated Crazyflie of each drone of ``mission`` by radio address: at its mission start, mocap
     positioning, every link with ``radio_loss``; ``drone_configs`` replaces a drone's (by name), ``start_faults``
     then moves or turns it before power-on. ``dynamics`` (``"firmware"`` or ``"first-order"``; default the
-    mission's ``dry_run.dynamics``) is how every one of them flies (`VehicleConfig.dynamics`)."""
+    mission's ``dry_run.dynamics``) is how every one of them flies (`VehicleConfig.dynamics`); the mission's
+    ``dry_run.vehicle`` profile's parameters are stored in each one's EEPROM (`VehicleConfig.stored_params`)
+    unless its config stores its own."""
     chosen = mission.dry_run.dynamics if dynamics is None else dynamics
     addresses = {d.name: uri_address(d.uri) for d in mission.drones}
     configs = dict(drone_configs or {})
@@ -155,6 +160,8 @@ def simulated_drones(mission: Mission, drone_configs: Optional[Mapping[str, Fake
         if radio_loss is not None and config.faults.burst is None:
             config = replace(config, faults=replace(config.faults, burst=radio_loss))
         config = replace(config, vehicle=replace(config.vehicle, dynamics=chosen))
+        if mission.dry_run.vehicle is not None and not config.vehicle.stored_params:  # its EEPROM holds the profile
+            config = replace(config, vehicle=replace(config.vehicle, stored_params=mission.dry_run.vehicle.params))
         drones[addresses[d.name]] = _with_start_fault(config, faults.get(d.name))
     return drones
 
@@ -293,6 +300,9 @@ class DryRun:
             )
             fake_radio.register(RemoteWorld(self.world.radio, tuple(self.drone_configs), self.timing))
             command_port = self.world.natnet_command_port
+        vehicle = self.mission.dry_run.vehicle
+        if self.lab is None and vehicle is not None and vehicle.mocap_delay_s(self.rate_hz) > 0.0:
+            self._bodies.mocap_delay(vehicle.mocap_delay_s(self.rate_hz), math.inf)  # the profile's mocap latency
         if self.mocap_kind == "natnet":
             from rpf_fly.mocap.natnet_client import NatNetClient
 

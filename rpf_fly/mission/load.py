@@ -478,6 +478,7 @@ DRY_RUN_SPEC: dict[str, tuple[str, Reader]] = {
     "mocap_noise_deg": ("mocap_noise_deg", _num(NON_NEGATIVE)),
     "mocap_dropout": ("mocap_dropout", _num(FRACTION)),
     "dynamics": ("dynamics", _choice(("first-order", "firmware"))),
+    "vehicle": ("vehicle", lambda c, n: c.vehicle_profile(n)),
 }
 SIM_SPEC: dict[str, tuple[str, Reader]] = {
     "time_limit_s": ("time_limit_s", _num(POSITIVE)),
@@ -622,6 +623,28 @@ class _MissionParser(_Checker):
             raise self.error(node, "runtime.zenoh.config", f"Zenoh cannot read {str(found)!r}: {first}") from None
         return found
 
+    def dry_run(self, node: YNode) -> m.DryRunSettings:
+        settings: m.DryRunSettings = self.settings(node, m.DryRunSettings, DRY_RUN_SPEC)
+        if settings.vehicle is not None and settings.dynamics != "firmware":
+            at = node.value["vehicle"]  # type: ignore[index]
+            raise self.error(at, "dry_run.vehicle", "a vehicle profile sets the firmware model's gains: give "
+                             f"dry_run.dynamics: firmware with it (it is {settings.dynamics})")
+        return settings
+
+    def vehicle_profile(self, node: YNode) -> Any:
+        """``dry_run.vehicle``: a vehicle profile file (relative to the mission's folder, then the current one),
+        read and checked now (rpf_fly/calibrate/profile.py); one line naming the file and the field at fault."""
+        from rpf_fly.calibrate.profile import ProfileError, load_profile
+
+        raw = self.string(node)
+        found, looked = _find_file(raw, _search_dirs(self.base_dir))
+        if found is None:
+            raise self.error(node, "dry_run.vehicle", f"vehicle profile {raw!r} not found ({_looked(looked)})")
+        try:
+            return load_profile(found)
+        except ProfileError as err:
+            raise self.error(node, "dry_run.vehicle", str(err)) from None
+
     def endpoint(self, node: YNode) -> str:
         text = self.string(node)
         proto, sep, rest = text.partition("/")
@@ -756,7 +779,7 @@ class _MissionParser(_Checker):
             "sim": lambda n: self.settings(n, m.SimSettings, SIM_SPEC),
             "safety": lambda n: self.settings(n, m.SafetySettings, SAFETY_SPEC),
             "runtime": self.runtime,
-            "dry_run": lambda n: self.settings(n, m.DryRunSettings, DRY_RUN_SPEC),
+            "dry_run": self.dry_run,
         }
         for key, node in entries.items():  # document order
             parts[key] = readers[key](node)

@@ -11,7 +11,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Literal, Optional
+from typing import TYPE_CHECKING, Literal, Optional
+
+if TYPE_CHECKING:
+    from rpf_fly.calibrate.profile import VehicleProfile
 
 Vec2 = tuple[float, float]
 
@@ -308,7 +311,10 @@ class DryRunSettings:
     share of a body's frames left untracked): None keeps the emulator's figures (rpf_fly/emulator/mocap_noise.py:
     0.5 mm, 0.5 deg, 0.1 %). ``dynamics``: how the simulated drones fly, ``first-order`` (the emulator's
     documented lags, rpf_fly/emulator/fake_vehicle.py) or ``firmware`` (the firmware's PID cascade on the identified
-    Crazyflie 2.1+ body, docs/dynamics.md).
+    Crazyflie 2.1+ body, docs/dynamics.md). ``vehicle``: a vehicle profile (``rpf-fly calibrate``'s, read at load
+    time, its path relative to the mission's folder): its firmware parameters in every simulated drone's TOC, its
+    mocap latency and noise in the simulated mocap (docs/dynamics.md, "Calibrating a vehicle profile"); it needs
+    ``dynamics: firmware``.
     """
 
     seed: int = 0
@@ -316,6 +322,7 @@ class DryRunSettings:
     mocap_noise_deg: Optional[float] = None
     mocap_dropout: Optional[float] = None
     dynamics: str = "first-order"
+    vehicle: Optional["VehicleProfile"] = None
 
 
 @dataclass(frozen=True)
