@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from rpf_fly.log import review as R
+from rpf_fly.log import review_series as series
 from rpf_fly.log.reader import LogData
 
 STATE_COLOURS = {
@@ -189,11 +190,11 @@ def review_figure(data: LogData, result: R.Review):  # type: ignore[no-untyped-d
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     colour = {d: colours[i % len(colours)] for i, d in enumerate(drones)}
     scenario = result.scenario or {}
-    poses = {d: R.pose_series(data, d, start) for d in drones}
-    tracking = {d: R.tracking_error(data, d, start) for d in drones} if result.source != "sim" else {}
+    poses = {d: series.pose_series(data, d, start) for d in drones}
+    tracking = {d: series.tracking_error(data, d, start) for d in drones} if result.source != "sim" else {}
     tracking = {d: e for d, e in tracking.items() if e.t.size}
-    batteries = {d: b for d in drones if (b := R.battery_series(data, d, start)).t.size}
-    clearances = {d: c for d in drones if (c := R.obstacle_clearance(data, d, start, scenario)).t.size}
+    batteries = {d: b for d in drones if (b := series.battery_series(data, d, start)).t.size}
+    clearances = {d: c for d in drones if (c := series.obstacle_clearance(data, d, start, scenario)).t.size}
     r = scenario.get("safety_radius")
 
     panels = ["altitude"]
@@ -286,7 +287,7 @@ def review_figure(data: LogData, result: R.Review):  # type: ignore[no-untyped-d
     if "tracking" in axes:
         ax = axes["tracking"]
         for d, e in tracking.items():
-            rms, peak = R.rms_max(e.values)
+            rms, peak = series.rms_max(e.values)
             ax.plot(e.t, e.values, lw=1.0, color=colour[d], label=f"{d}: RMS {rms:.3f}, max {peak:.3f} m")
         judged = [x for x in result.tracking_expected.values() if x.expected_m is not None]
         if judged:  # what a drone of the log's kind trails by while cruising at the flown speed
@@ -295,7 +296,7 @@ def review_figure(data: LogData, result: R.Review):  # type: ignore[no-untyped-d
             speed = float(np.median([x.speed_m_s for x in judged]))
             ax.axhspan(low, high, color="0.85", zorder=0,
                        label=f"expected while cruising: {lag_s:g} s x {speed:.2f} m/s")
-        rms, peak = R.rms_max(np.concatenate([e.values for e in tracking.values()]))
+        rms, peak = series.rms_max(np.concatenate([e.values for e in tracking.values()]))
         ax.set_title(f"setpoint tracking error |setpoint - pose|: RMS {rms:.3f} m, max {peak:.3f} m", fontsize=10)
         ax.set_ylabel("error [m]")
         ax.set_ylim(bottom=0)
@@ -305,7 +306,7 @@ def review_figure(data: LogData, result: R.Review):  # type: ignore[no-untyped-d
     # separation
     if "separation" in axes:
         ax = axes["separation"]
-        sep = R.min_separation(data, drones, start)
+        sep = series.min_separation(data, drones, start)
         if sep.t.size:
             ax.plot(sep.t, sep.values, lw=1.2, color="k", label=f"min separation ({sep.values.min():.3f} m)")
         if r is not None:
@@ -345,7 +346,7 @@ def review_figure(data: LogData, result: R.Review):  # type: ignore[no-untyped-d
     ax = axes["events"]
     seen_states: dict[str, None] = {}
     for row, d in enumerate(drones):
-        for t0, t1, state in R.phases(data, d, start, end_s):
+        for t0, t1, state in series.phases(data, d, start, end_s):
             ax.broken_barh([(t0, max(t1 - t0, 1e-3))], (-row - 1.4, 0.8),
                            facecolors=STATE_COLOURS.get(state, UNKNOWN_STATE_COLOUR))
             seen_states[state] = None

@@ -14,7 +14,7 @@ import pytest
 
 from rpf_fly.flight.loop import FlightLoop
 from rpf_fly.flight.phases import FlightOutcome, SwarmPhase
-from rpf_fly.log.review import metrics_of
+from rpf_fly.log.review_metrics import metrics_of
 from rpf_fly.mission import load_mission
 from rpf_fly.emulator.fake_world import FakeDroneConfig
 from rpf_fly.flight.dry_run import StartFault

@@ -114,7 +114,7 @@ def test_gaps_and_missing_sequences_are_found(tmp_path):
 def test_truth_topics_name_drones_not_a_drone_called_truth(tmp_path):
     """A dry run's /truth/<drone> is a drone topic like /mocap/<drone> when the review names the drones from the
     topics (a log without its scenario record)."""
-    from rpf_fly.log.review import drones_of
+    from rpf_fly.log.review_scenario import drones_of
     from rpf_fly.log.writer import FlightLog
 
     path = tmp_path / "truth.mcap"

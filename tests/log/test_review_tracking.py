@@ -10,7 +10,8 @@ from typer.testing import CliRunner
 
 from rpf_fly.cli import get_app
 from rpf_fly.log.reader import read_log
-from rpf_fly.log.review import CRAZYFLIE_LAG_S, DRY_RUN_LAG_S, review
+from rpf_fly.log.review import review
+from rpf_fly.log.review_tracking import CRAZYFLIE_LAG_S, DRY_RUN_LAG_S
 from rpf_fly.log.writer import FlightLog
 
 T0 = 1_700_000_000_000_000_000
@@ -91,7 +92,7 @@ def test_the_dry_run_lag_is_the_simulated_drones():
 
 
 def test_the_simulated_drones_logs_are_judged_on_their_lag():
-    from rpf_fly.log.review import tracking_lag
+    from rpf_fly.log.review_tracking import tracking_lag
 
     assert tracking_lag("dry-run")[0] == tracking_lag("lab")[0] == DRY_RUN_LAG_S
     assert tracking_lag("flight")[0] == tracking_lag("")[0] == CRAZYFLIE_LAG_S
@@ -99,7 +100,7 @@ def test_the_simulated_drones_logs_are_judged_on_their_lag():
 
 def test_a_dry_run_whose_drones_fly_the_firmwares_cascade_is_judged_as_crazyflies(tmp_path):
     """``dry_run: {dynamics: firmware}`` in the logged mission: the simulated drones trail as a default-gain Crazyflie."""
-    from rpf_fly.log.review import dry_run_dynamics, tracking_lag
+    from rpf_fly.log.review_tracking import dry_run_dynamics, tracking_lag
 
     assert dry_run_dynamics("name: m\ndry_run: {dynamics: firmware}\n") == "firmware"
     assert dry_run_dynamics("name: m\n") == dry_run_dynamics("{not yaml") == ""
