@@ -31,6 +31,11 @@ Each link runs a thread that emulates cflib's Crazyradio driver with safelink (s
   reaches its drones, and a link opened on it later fails the same way on its first transaction; `replug(devid)`
   puts it back for links opened after, and `register` / `unregister` put every dongle back.
 Empty acks are not queued to cflib (the real driver queues them as port-15 channel-3 packets, which cflib ignores).
+
+Broadcasts (packed extpos, rpf_fly/radio/broadcast.py): `register` also registers `FakeBroadcast` for ``fake://``
+links. A broadcast holds its dongle's air for one transaction and reaches every drone listening on its channel as
+cflib's does on a Crazyradio (`packed_extpos.BROADCAST_COPIES` transmissions, each heard unless the drone's link
+loses it: `FakeWorld.broadcast`).
 """
 
 from __future__ import annotations
@@ -50,6 +55,9 @@ from cflib.crtp.crtpdriver import CRTPDriver
 from cflib.crtp.crtpstack import CRTPPacket
 from cflib.crtp.exceptions import WrongUriType
 from cflib.crtp.radio_link_statistics import RadioLinkStatistics
+
+from rpf_fly.radio import broadcast as radio_broadcast
+from rpf_fly.radio.packed_extpos import BROADCAST_COPIES
 
 from .fake_world import DongleAir, DronePort, LinkFaults, RadioTiming
 
@@ -119,6 +127,7 @@ class RadioWorld(Protocol):
     def port(self, address: int) -> DronePort | None: ...
     def dongle(self, devid: int) -> DongleAir: ...
     def uri(self, address: int) -> str: ...
+    def broadcast(self, channel: int, uplink: tuple[int, bytes], copies: int) -> Any: ...
 
 
 @dataclass(frozen=True)
@@ -396,6 +405,33 @@ class FakeLink:
             self._drone.detach(self._wake)
 
 
+class FakeBroadcast:
+    """Broadcasts of one fake dongle on one channel (`rpf_fly.radio.broadcast.Broadcaster`): each holds the dongle's
+    air for one transaction (`RadioTiming.transaction_s`), then every drone listening on the channel hears it
+    (`FakeWorld.broadcast`); nothing when the dongle is unplugged."""
+
+    def __init__(self, world: RadioWorld, devid: int, channel: int) -> None:
+        self._world, self._devid, self._channel = world, devid, channel
+        self.sent = 0
+
+    def send(self, packet: bytes) -> bool:
+        if self._devid in _unplugged:
+            return False
+        air_s = self._world.timing.transaction_s
+        end = 0.0
+        if air_s > 0.0:
+            start, end = self._world.dongle(self._devid).reserve(air_s, time.monotonic())
+            _sleep_until(start)
+        self._world.broadcast(self._channel, (packet[0], bytes(packet[1:])), BROADCAST_COPIES)
+        self.sent += 1
+        if air_s > 0.0:
+            _sleep_until(end)
+        return True
+
+    def close(self) -> None:
+        pass
+
+
 def _sleep_until(t_s: float) -> None:
     delay = t_s - time.monotonic()
     if delay > 0.0:
@@ -473,13 +509,16 @@ def register(world: RadioWorld | None = None) -> type[FakeRadioDriver]:
     unregister()
     driver = type("BoundFakeRadioDriver", (FakeRadioDriver,), {"world": world})
     cflib.crtp.CLASSES.append(driver)
+    bound = world
+    radio_broadcast.register("fake", lambda devid, channel, rate: FakeBroadcast(bound, devid, channel))
     return driver
 
 
 def unregister() -> None:
-    """Remove every fake driver from cflib's driver list (open links keep working until closed) and plug every
-    unplugged dongle back in (`replug`)."""
+    """Remove every fake driver from cflib's driver list (open links keep working until closed) and the fake
+    broadcasts, and plug every unplugged dongle back in (`replug`)."""
     replug()
+    radio_broadcast.unregister("fake")
     cflib.crtp.CLASSES[:] = [
         cls for cls in cflib.crtp.CLASSES if not (isinstance(cls, type) and issubclass(cls, FakeRadioDriver))
     ]

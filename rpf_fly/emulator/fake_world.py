@@ -387,22 +387,38 @@ class SimDrone:
     def has_downlink(self) -> bool:
         return bool(self._tx)
 
+    def hear(self, channel: int, uplink: tuple[int, bytes], now_s: float, copies: int) -> int:
+        """A broadcast on ``channel`` (no acknowledgement, no downlink, no transaction counted): each of its
+        ``copies`` transmissions reaches the firmware unless lost with the drone's attempt loss now; returns how
+        many it heard."""
+        if not self.reachable(channel):
+            return 0
+        loss = self.packet_loss(now_s)
+        heard = sum(1 for _ in range(copies) if loss <= 0.0 or self.rng.random() >= loss)
+        for _ in range(heard):
+            self.deliver(uplink, now_s)
+        return heard
+
+    def deliver(self, uplink: tuple[int, bytes], now_s: float) -> None:
+        """Hand one uplink packet (header, payload) to the firmware, queue its replies, tell the observers."""
+        header, payload = uplink
+        port, channel = (header >> 4) & 0x0F, header & 0x03
+        replies = self.firmware.handle(port, channel, payload, now_s)
+        self.enqueue(replies)
+        with self._lock:
+            observers = list(self._observers)
+        stamp = time.monotonic()
+        for observer in observers:
+            try:
+                observer(port, channel, payload, stamp)
+            except Exception:  # an observer must not break the radio
+                logger.exception("packet observer failed")
+
     def exchange(self, uplink: tuple[int, bytes] | None, now_s: float) -> Packet | None:
         """One acknowledged radio transaction: deliver `uplink` (header, payload) to the firmware, return at most one
         queued downlink packet (the ack payload)."""
         if uplink is not None:
-            header, payload = uplink
-            port, channel = (header >> 4) & 0x0F, header & 0x03
-            replies = self.firmware.handle(port, channel, payload, now_s)
-            self.enqueue(replies)
-            with self._lock:
-                observers = list(self._observers)
-            stamp = time.monotonic()
-            for observer in observers:
-                try:
-                    observer(port, channel, payload, stamp)
-                except Exception:  # an observer must not break the radio
-                    logger.exception("packet observer failed")
+            self.deliver(uplink, now_s)
         with self._lock:
             self.transactions += 1
             return self._tx.popleft() if self._tx else None
@@ -564,6 +580,12 @@ class FakeWorld:
         """The radio side of the drone at `address` for a fake link, None if there is none."""
         drone = self._drones.get(parse_address(address))
         return DronePort(self, drone) if drone is not None else None
+
+    def broadcast(self, channel: int, uplink: tuple[int, bytes], copies: int) -> int:
+        """One broadcast (a packed extpos) on ``channel``: every drone listening there hears each of its ``copies``
+        transmissions unless its link loses it (`SimDrone.hear`); returns the copies heard in all."""
+        now = self.time_s()
+        return sum(drone.hear(channel, uplink, now, copies) for drone in self._drones.values())
 
     def firmware(self, address: int | str) -> FakeFirmware:
         """The firmware at `address` (KeyError if none)."""

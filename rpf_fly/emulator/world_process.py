@@ -62,7 +62,9 @@ from .fake_world import DongleAir, DronePort, FakeDroneConfig, FakeWorld, LinkFa
 
 logger = logging.getLogger(__name__)
 
-OPEN, TRANSACT, CLOSE = 1, 2, 3
+OPEN, TRANSACT, CLOSE, BROADCAST = 1, 2, 3, 4
+"""Requests of a fake link to the child; BROADCAST (a packed extpos: no acknowledgement) carries its copies in the
+flags byte and reaches every drone (`FakeWorld.broadcast`)."""
 _REQUEST = struct.Struct("<BIQBB")
 _REPLY = struct.Struct("<IBBBB")
 _INFO = struct.Struct("<di")
@@ -274,6 +276,8 @@ class RemoteWorld:
         self.timing = timing or RadioTiming()
         self._dongles: dict[int, DongleAir] = {}
         self._lock = threading.Lock()
+        self._sock: Optional[socket.socket] = None
+        self._seq = 0
 
     @property
     def addresses(self) -> tuple[int, ...]:
@@ -296,6 +300,25 @@ class RemoteWorld:
 
     def uri(self, address: int) -> str:
         return f"fake://0/80/2M/{address:010X}"
+
+    def broadcast(self, channel: int, uplink: tuple[int, bytes], copies: int) -> bool:
+        """`FakeWorld.broadcast` in the child: one request, answered once its drones have heard it (False when the
+        child did not answer in time)."""
+        with self._lock:
+            if self._sock is None:
+                self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+                self._sock.connect(self._radio)
+                self._sock.settimeout(REPLY_TIMEOUT_S)
+            self._seq = (self._seq + 1) & 0xFFFFFFFF
+            try:
+                request = _REQUEST.pack(BROADCAST, self._seq, 0, channel, copies)
+                self._sock.send(request + bytes((uplink[0],)) + uplink[1])
+                while True:
+                    data = self._sock.recv(2048)
+                    if len(data) >= _REPLY.size and _REPLY.unpack_from(data)[0] == self._seq:
+                        return True
+            except OSError:
+                return False
 
 
 class WorldCalls:
@@ -521,6 +544,10 @@ class _RadioServer:
 
     def _handle(self, data: bytes, peer: Any) -> bytes:
         op, seq, address, channel, flags = _REQUEST.unpack_from(data)
+        if op == BROADCAST:
+            body = data[_REQUEST.size:]
+            self._world.broadcast(channel, (body[0], bytes(body[1:])), flags)
+            return _REPLY.pack(seq, 1, 0, 0, 0)
         port = self._port(address)
         if op == OPEN:
             if port is None:

@@ -3,6 +3,7 @@ simulated firmware taking its own position out of a packed packet (synthetic tim
 
 from __future__ import annotations
 
+import math
 import struct
 
 import pytest
@@ -59,3 +60,49 @@ def test_each_simulated_firmware_takes_its_own_position_from_a_packed_packet() -
     fw = firmwares[0xE7E7E7E705]
     fw.handle(6, 0, struct.pack("<fff", 0.25, 0.25, 0.0), 0.02)
     assert fw.snapshot().estimate == pytest.approx((0.25, 0.25, 0.0), abs=1e-3)
+
+
+def test_the_sender_broadcasts_each_groups_positions_through_the_fake_radio_to_every_drone() -> None:
+    """Six drones on one fake dongle (two packets: four and two) and one on another channel that hears nothing of
+    the first channel's broadcasts; each estimator gets its own position, each position four times (cflib's
+    broadcast is sent ARC + 1 times, unacknowledged)."""
+    import time
+
+    from rpf_fly.emulator import fake_radio
+    from rpf_fly.emulator.fake_world import FakeDroneConfig, FakeWorld, RadioTiming
+    from rpf_fly.radio.broadcast import PackedExtposSender
+
+    addresses = {f"cf{i}": 0xE7E7E7E700 + i for i in range(1, 8)}
+    channels = {name: 90 if name == "cf7" else 80 for name in addresses}
+    world = FakeWorld({a: FakeDroneConfig.at(0.0, 0.0, 0.0, positioning="extpos", channel=channels[n])
+                       for n, a in addresses.items()}, timing=RadioTiming(transaction_s=0.001)).start()
+    heard: dict[str, int] = {name: 0 for name in addresses}
+    for name, address in addresses.items():
+        world.add_packet_observer(address, lambda port, ch, data, stamp, name=name: heard.__setitem__(
+            name, heard[name] + (port == 6 and ch == 2)))
+    fake_radio.register(world)
+    uris = {name: f"fake://0/{channels[name]}/2M/{address:010X}" for name, address in addresses.items()}
+    sender = PackedExtposSender({n: u for n, u in uris.items() if n != "cf7"})
+    try:
+        assert sender.start() == {}
+        truth = {name: (0.5 * k, -0.25 * k, 0.0) for k, name in enumerate(addresses, start=1)}
+        assert sender.put("cf7", truth["cf7"]) is False  # not in this sender's groups
+        for _ in range(30):  # 0.3 s of 100 Hz mocap: each estimate settles on its own drone's position
+            for name in addresses:
+                if name != "cf7":
+                    assert sender.put(name, truth[name])
+            time.sleep(0.01)
+        time.sleep(0.05)
+        assert sender.failed == 0 and sender.positions == 6 * sender.packets // 2
+        assert 2 * 25 <= sender.packets <= 2 * 30  # two a frame (a frame or two may fall in one packet)
+        for name, address in addresses.items():
+            estimate = world.snapshot(address).estimate
+            if name == "cf7":
+                assert heard[name] == 0 and math.dist(estimate, truth[name]) > 3.0  # its IMU's drift only
+            else:  # every packet on its channel (both groups'), four copies each (no loss in a bare world)
+                assert heard[name] == 4 * sender.packets
+                assert estimate == pytest.approx(truth[name], abs=0.005)
+    finally:
+        sender.close()
+        fake_radio.unregister()
+        world.close()
