@@ -32,25 +32,25 @@ decisions; the supervisor's holds and the arrivals stay the flight's). docs/repl
 
 from __future__ import annotations
 
-import bisect
 import math
 import time
-from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Optional
+from typing import Callable, Optional
 
 from rpf_fly.flight.agent import DroneAgent, PlannerFault, PlannerLike
 from rpf_fly.flight.phases import DronePhase
-from rpf_fly.flight.poses import PoseTracker, stamp_from_us
+from rpf_fly.flight.poses import PoseTracker
+from rpf_fly.flight.replay_inputs import (
+    FRAME_SLACK_NS, PLANNING_MODES, LoggedRow, ReplayError, TrackerClock, batching_switched_off_ns, logged_ticks,
+    missing_sequences, mocap_frame, phase_of_mode, reacquisitions,
+)
+from rpf_fly.flight.replay_mission import ReplaySetup, logged_mission, shipped_policy
+from rpf_fly.flight.replay_result import DroneReplay, ReplayResult, TickComparison
 from rpf_fly.flight.swarm_plan import Neighbourhood, SwarmPlanner, in_the_way
-from rpf_fly.log.mocap_frames import LoggedFrame, mocap_frames
+from rpf_fly.log.mocap_frames import mocap_frames
 from rpf_fly.log.reader import LogData
 from rpf_fly.mission.model import Drone, Mission
-from rpf_fly.mocap.frame import MocapFrame, RigidBodyPose
 from rpf_fly.planning.wall_following import MODE_NAMES
-
-PLANNING_MODES = frozenset({"apf", "wall", "soft"})
-"""Logged modes of a tick on which the drone planned (the others are what it did instead)."""
 
 UNKNOWN_PHASE = DronePhase.HOLDING
 """The phase assumed for a tracked drone without a row at a tick: in the others' way by its height alone. The
@@ -68,258 +68,6 @@ replay of the flight's own policy is bit-exact (docs/replay.md has the measureme
 
 REPLAY_HANG_S = 30.0
 """Wall-clock deadline of an isolated planner's call in a replay: nothing streams, so a slow call is not a fault."""
-
-FRAME_SLACK_NS = 1000
-"""A frame counts as received before a tick when its time is at most this much after the tick's: the tracker
-rounds receive times to the microsecond, which may put a frame's stamp up to 0.5 us after the loop's clock reading
-that fired the tick on it; the next frame is read only after the tick's planning (hundreds of microseconds)."""
-
-
-class ReplayError(ValueError):
-    """The log cannot be replayed; ``str()`` is one line naming the file and what is missing."""
-
-
-@dataclass(frozen=True)
-class LoggedRow:
-    """One ``/<drone>/planner`` message, as the replay needs it."""
-
-    tick: int
-    t_ns: int
-    log_time_ns: int
-    mode: str
-    direction: complex
-    position: tuple[float, float, float]
-    reference: Optional[complex]
-
-
-@dataclass
-class TickComparison:
-    """One planning tick of one drone: what the flight logged and what the replay decided."""
-
-    tick: int
-    t_ns: int
-    logged_mode: str
-    logged_direction: complex
-    replayed_mode: str
-    replayed_direction: complex
-
-    @property
-    def direction_diff(self) -> float:
-        """``|d_replay - d_log|``: the distance of the two planar direction vectors (each a unit vector or zero;
-        for two unit vectors ``2 sin(angle / 2)``, the angle itself to 1e-7 below 1e-2 rad)."""
-        return abs(self.replayed_direction - self.logged_direction)
-
-    @property
-    def angle_diff_rad(self) -> Optional[float]:
-        """The angle between the two directions (radians), None when either is zero (a stalled or faulted step)."""
-        if abs(self.replayed_direction) == 0 or abs(self.logged_direction) == 0:
-            return None
-        a, b = self.logged_direction, self.replayed_direction
-        return abs(math.atan2(a.real * b.imag - a.imag * b.real, a.real * b.real + a.imag * b.imag))
-
-
-@dataclass
-class DroneReplay:
-    """Every compared tick of one drone, and what the replay had to say about it."""
-
-    name: str
-    tolerance: float
-    ticks: list[TickComparison] = field(default_factory=list)
-    restarts: int = 0
-    """Planning (re)starts taken from the log (take-off, resumes after holds)."""
-    skipped: int = 0
-    """Logged planning ticks the replay could not plan: the drone had no tracked pose in the log then."""
-    pose_mismatches: int = 0
-    """Planning ticks where the rebuilt pose is not the logged one (a refused jump, a dropped frame)."""
-    note: str = ""
-
-    def diverges(self, c: TickComparison) -> bool:
-        return c.replayed_mode != c.logged_mode or not c.direction_diff <= self.tolerance
-
-    @property
-    def first_divergence_tick(self) -> Optional[int]:
-        return next((c.tick for c in self.ticks if self.diverges(c)), None)
-
-    @property
-    def max_direction_diff(self) -> float:
-        return max((c.direction_diff for c in self.ticks), default=0.0)
-
-    @property
-    def max_angle_diff_rad(self) -> float:
-        return max((a for c in self.ticks if (a := c.angle_diff_rad) is not None), default=0.0)
-
-    @property
-    def mode_changes(self) -> int:
-        """Ticks on which the replayed mode is not the logged one."""
-        return sum(c.replayed_mode != c.logged_mode for c in self.ticks)
-
-    @property
-    def divergent_ticks(self) -> int:
-        return sum(self.diverges(c) for c in self.ticks)
-
-    def to_json(self) -> dict[str, Any]:
-        out: dict[str, Any] = {
-            "ticks": len(self.ticks),
-            "first_divergence_tick": self.first_divergence_tick,
-            "max_direction_diff": self.max_direction_diff,
-            "mode_changes": self.mode_changes,
-            "max_angle_diff_rad": self.max_angle_diff_rad,
-            "divergent_ticks": self.divergent_ticks,
-            "restarts": self.restarts,
-            "skipped_ticks": self.skipped,
-            "pose_mismatches": self.pose_mismatches,
-        }
-        if self.note:
-            out["note"] = self.note
-        return out
-
-
-@dataclass
-class ReplayResult:
-    """A whole replay: the planner replayed, per drone the comparison, the cost, and the warnings to print."""
-
-    planner: str
-    policy: Optional[Path]
-    flown_planner: str
-    same_as_flown: bool
-    tolerance: float
-    drones: dict[str, DroneReplay]
-    ticks: int
-    seconds: float
-    exact_times: bool
-    warnings: list[str] = field(default_factory=list)
-
-    @property
-    def seconds_per_tick(self) -> float:
-        return self.seconds / self.ticks if self.ticks else 0.0
-
-    def to_json(self) -> dict[str, Any]:
-        """The JSON contract of ``rpf-fly replay --json`` (docs/replay.md)."""
-        return {
-            "planner": self.planner,
-            "policy": str(self.policy) if self.policy is not None else None,
-            "flown_planner": self.flown_planner,
-            "same_as_flown": self.same_as_flown,
-            "direction_diff": "unit-vector distance |d_replay - d_log| (0..2; ~ the angle in rad when small)",
-            "tolerance": self.tolerance,
-            "exact_times": self.exact_times,
-            "ticks": self.ticks,
-            "seconds_per_tick": self.seconds_per_tick,
-            "drones": {name: d.to_json() for name, d in self.drones.items()},
-            "warnings": list(self.warnings),
-        }
-
-
-# ---------------------------------------------------------------------------------------------------- the log
-
-
-def _row(message: Any) -> Optional[LoggedRow]:
-    d = message.data
-    try:
-        direction = complex(float(d["direction"]["x"]), float(d["direction"]["y"]))
-        p = d["position"]
-        position = (float(p["x"]), float(p["y"]), float(p["z"]))
-        ref = d.get("reference")
-        reference = complex(float(ref["x"]), float(ref["y"])) if ref is not None else None
-        return LoggedRow(int(d["tick"]), message.publish_time, message.log_time, str(d["mode"]), direction, position,
-                         reference)
-    except (KeyError, TypeError, ValueError):
-        return None
-
-
-def phase_of_mode(mode: str) -> DronePhase:
-    """The phase a drone was in at a tick, from its logged mode (as far as :func:`in_the_way` can tell them
-    apart): a planning mode is planning, ``arrived`` arrived, ``hold`` holding, a phase name that phase."""
-    if mode in PLANNING_MODES:
-        return DronePhase.PLANNING
-    if mode == "arrived":
-        return DronePhase.ARRIVED
-    try:
-        return DronePhase(mode)
-    except ValueError:
-        return DronePhase.HOLDING  # hold, stalled: airborne, in the others' way
-
-
-def _batching_off_ns(data: LogData) -> Optional[int]:
-    """When the flight switched batching off for good (event ``planner_batch``: a batched call over budget)."""
-    for message in data.topics.get("/events", ()):
-        d = message.data
-        if isinstance(d, dict) and d.get("file") == "planner_batch" and "from now on" in str(d.get("message", "")):
-            return message.publish_time
-    return None
-
-
-def _reacquisitions(data: LogData, frames: list[LoggedFrame]) -> dict[int, set[str]]:
-    """Frame index -> drones whose sample in that frame ended a pose glitch. The flight's tracker refused the
-    jumped samples (they are not in the log) and gave the sample that ended the glitch no velocity; the
-    supervisor's ``pose_glitch`` event "consistent again" comes in the same loop iteration, right after that
-    frame, so the sample is the drone's last logged one up to the event."""
-    out: dict[int, set[str]] = {}
-    times = [f.t_ns for f in frames]
-    for message in data.topics.get("/events", ()):
-        d = message.data
-        if not (isinstance(d, dict) and d.get("file") == "pose_glitch"
-                and str(d.get("message", "")).startswith("mocap track consistent again")):
-            continue
-        name = str(d.get("name", ""))
-        i = bisect.bisect_right(times, message.publish_time + FRAME_SLACK_NS) - 1
-        while i >= 0 and name not in frames[i].poses:
-            i -= 1
-        if i >= 0:
-            out.setdefault(i, set()).add(name)
-    return out
-
-
-def _missing_sequences(data: LogData, topic: str) -> int:
-    seqs = {m.sequence for m in data.topics.get(topic, ())}
-    return max(seqs) + 1 - len(seqs) if seqs else 0
-
-
-# -------------------------------------------------------------------------------------------------- the replay
-
-
-@dataclass
-class _Tick:
-    tick: int
-    t_ns: int
-    rows: dict[str, LoggedRow]
-
-
-def _ticks(data: LogData, names: list[str], last_pose_log_ns: int) -> tuple[list[_Tick], int]:
-    """The logged ticks in order, and how many were left out at a torn end: a tick is kept only when a mocap
-    message was logged after its rows (so the frame that fired it, logged right after them, is in the log)."""
-    ticks: dict[int, _Tick] = {}
-    for name in names:
-        for message in data.topics.get(f"/{name}/planner", ()):
-            row = _row(message)
-            if row is None:
-                continue
-            tick = ticks.setdefault(row.tick, _Tick(row.tick, row.t_ns, {}))
-            tick.rows[name] = row
-    ordered = sorted(ticks.values(), key=lambda t: (t.t_ns, t.tick))
-    kept = [t for t in ordered if max(r.log_time_ns for r in t.rows.values()) <= last_pose_log_ns]
-    return kept, len(ordered) - len(kept)
-
-
-class _Clock:
-    """Log nanoseconds back to the loop's monotonic seconds as the flight's tracker held them."""
-
-    def __init__(self, offset_ns: Optional[int], first_ns: int):
-        self.exact = offset_ns is not None
-        self.offset_ns = offset_ns if offset_ns is not None else first_ns
-
-    def seconds(self, t_ns: int) -> float:
-        delta = t_ns - self.offset_ns
-        if self.exact and delta % 1000 == 0:
-            return stamp_from_us(delta // 1000)
-        return delta / 1e9
-
-
-def _mocap_frame(number: int, frame: LoggedFrame, clock: _Clock) -> MocapFrame:
-    t = clock.seconds(frame.t_ns)
-    bodies = {name: RigidBodyPose(name, i + 1, position, quaternion, True)
-              for i, (name, (position, quaternion)) in enumerate(frame.poses.items())}
-    return MocapFrame(number, t, t, None, bodies)
 
 
 def replay_log(
@@ -348,18 +96,18 @@ def replay_log(
     if not frames:
         raise ReplayError(f"{log}: no mocap poses (/mocap/<drone>): the views cannot be rebuilt")
     last_pose_log_ns = max(f.log_time_ns for f in frames)
-    ticks, torn = _ticks(data, names, last_pose_log_ns)
+    ticks, torn = logged_ticks(data, names, last_pose_log_ns)
     if torn:
         warnings.append(f"{torn} final tick(s) left out: the log ends before the frame that fired them")
     offset = meta.get("monotonic_offset_ns")
-    times = _Clock(int(offset) if offset not in (None, "") else None, frames[0].t_ns)
+    times = TrackerClock(int(offset) if offset not in (None, "") else None, frames[0].t_ns)
     if not times.exact:
         warnings.append("the log has no mission.monotonic_offset_ns (written before rpf-fly replay existed): "
                         "its pose times are not the tracker's, so neighbour velocities are rebuilt only "
                         "approximately: a guide, not a check (two such dry runs differed by up to 2e-4 and 0.12 "
                         "from their third tick on, docs/replay.md)")
     for topic in [f"/mocap/{n}" for n in names] + [f"/{n}/planner" for n in names]:
-        missing = _missing_sequences(data, topic)
+        missing = missing_sequences(data, topic)
         if missing:
             warnings.append(f"{topic}: {missing} message(s) dropped by the flight's log queue: the replay may "
                             "differ from the flight from there")
@@ -381,8 +129,8 @@ def replay_log(
                            "neighbour, by height)")
     last_planned: dict[str, LoggedRow] = {}
     previous_mode: dict[str, str] = {}
-    batching_off_ns = _batching_off_ns(data)
-    reacquired = _reacquisitions(data, frames)
+    batching_off_ns = batching_switched_off_ns(data)
+    reacquired = reacquisitions(data, frames)
     height = mission.flight.height
     next_frame = 0
     before: dict[str, complex] = {}
@@ -391,7 +139,7 @@ def replay_log(
         for tick in ticks:
             while next_frame < len(frames) and frames[next_frame].t_ns <= tick.t_ns + FRAME_SLACK_NS:
                 before = {n: p.xy for n, p in tracker.poses.items()}
-                tracker.update(_mocap_frame(next_frame + 1, frames[next_frame], times),
+                tracker.update(mocap_frame(next_frame + 1, frames[next_frame], times),
                                reacquired.get(next_frame, ()))
                 next_frame += 1
             if batching_off_ns is not None and tick.t_ns > batching_off_ns:
@@ -464,102 +212,6 @@ def _restarts(row: LoggedRow, last: Optional[LoggedRow], previous_mode: Optional
     return moved_to != row.reference
 
 
-# ------------------------------------------------------------------------------------------ mission and planner
-
-
-@dataclass
-class ReplaySetup:
-    """The mission to replay with (the logged one, its planner possibly replaced), the planner factory, and what
-    the replay must say about them."""
-
-    mission: Mission
-    factory: Callable[[Drone], PlannerLike]
-    same_as_flown: bool
-    tolerance: float
-    warnings: list[str] = field(default_factory=list)
-
-
-def _with_policy(text: str, policy: Optional[Path]) -> str:
-    """The mission text with ``planner.policy`` set to ``policy`` (absolute), or without a policy at all (kind
-    ``apf``, for a replay that names its own planner). Only used when the logged policy path does not resolve:
-    it was relative to the mission's folder, which the log does not record."""
-    import yaml
-
-    doc = yaml.safe_load(text)
-    planner = doc.get("planner") if isinstance(doc, dict) else None
-    if not isinstance(planner, dict):
-        return text
-    if policy is None:
-        planner.pop("policy", None)
-        planner["kind"] = "apf"
-    else:
-        planner["policy"] = str(policy)
-    return yaml.safe_dump(doc, sort_keys=False)
-
-
-def find_flown_policy(text: str, kind: str, log: Path, sha256: str) -> Optional[Path]:
-    """The flown policy file, found by its SHA-256 (``mission.policy_sha256``): the mission's ``planner.policy``
-    (or ``policies/<kind>.onnx``) next to the log or here, then a file of that name in ``policies/`` here, next to
-    the log, above it, or in this checkout. None if no file there has that hash."""
-    import yaml
-
-    from rpf_fly.log.metadata import file_sha256
-
-    if not sha256:
-        return None
-    try:
-        doc = yaml.safe_load(text)
-        raw = str(doc["planner"].get("policy") or f"policies/{kind}.onnx")
-    except (yaml.YAMLError, KeyError, TypeError, AttributeError):
-        raw = f"policies/{kind}.onnx"
-    name = Path(raw).name
-    here, beside = Path.cwd(), log.parent
-    checkout = Path(__file__).resolve().parents[2]
-    candidates = [beside / raw, here / raw] + [d / name for d in (here / "policies", beside, beside / "policies",
-                                                                  beside.parent / "policies", checkout / "policies")]
-    for candidate in candidates:
-        try:
-            if candidate.is_file() and file_sha256(candidate) == sha256:
-                return candidate.resolve()
-        except OSError:
-            continue
-    return None
-
-
-def _shipped_policy(kind: str, log: Path) -> Optional[Path]:
-    """``policies/<kind>.onnx`` for a policy kind named with ``--planner`` alone: here, next to the log, or in
-    this checkout (None: let the mission loader say where it looked)."""
-    checkout = Path(__file__).resolve().parents[2]
-    for folder in (Path.cwd(), log.parent, checkout):
-        candidate = folder / "policies" / f"{kind}.onnx"
-        if candidate.is_file():
-            return candidate.resolve()
-    return None
-
-
-def _logged_mission(meta: dict[str, str], log: Path, kind: Optional[str], policy: Optional[Path]) -> Mission:
-    """The mission of the log's metadata, its policy resolved (see :func:`find_flown_policy`)."""
-    from rpf_fly.mission import MissionError, parse_mission
-
-    text = meta["yaml"]
-    flown_sha = meta.get("policy_sha256", "")
-    try:
-        try:
-            return parse_mission(text, log)  # a relative policy is looked up next to the log first, then here
-        except MissionError as err:
-            if err.field != "planner.policy":
-                raise
-            found = find_flown_policy(text, meta.get("planner", ""), log, flown_sha)
-            if found is None and kind is None and policy is None:
-                raise
-            return parse_mission(_with_policy(text, found), log)
-    except MissionError as err:
-        hint = ""
-        if err.field == "planner.policy":
-            hint = "; give --policy PATH" + (f" (the flown policy had sha256 {flown_sha[:12]}...)" if flown_sha else "")
-        raise ReplayError(f"{log}: metadata mission.yaml line {err.line}: {err.field}: {err.message}{hint}") from None
-
-
 def replay_setup(data: LogData, kind: Optional[str] = None, policy: Optional[Path] = None,
                  tolerance: Optional[float] = None) -> ReplaySetup:
     """The logged mission with ``kind`` and ``policy`` (None: the flight's own, from the mission metadata) and
@@ -583,11 +235,11 @@ def replay_setup(data: LogData, kind: Optional[str] = None, policy: Optional[Pat
                           "rebuild; replay a flight or dry-run log (rpf-fly fly [--dry-run] --log)")
     flown_kind = meta.get("planner", "")
     flown_sha = meta.get("policy_sha256", "")
-    mission = _logged_mission(meta, log, kind, policy)
+    mission = logged_mission(meta, log, kind, policy)
     warnings: list[str] = []
     kind = kind or flown_kind or mission.planner.kind
     if policy is None and kind != mission.planner.kind and kind in POLICY_KINDS:
-        policy = _shipped_policy(kind, log)
+        policy = shipped_policy(kind, log)
     try:
         mission = with_planner(mission, kind, policy)
     except MissionError as err:

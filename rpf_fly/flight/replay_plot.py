@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rpf_fly.flight.replay import ReplayResult, TickComparison
+from rpf_fly.flight.replay_result import ReplayResult, TickComparison
 
 FLOOR = 1e-17
 """Direction differences are drawn on a log axis; an exact match (0) sits on this floor."""

@@ -21,7 +21,8 @@ from typer.testing import CliRunner
 
 from rpf_fly.cli import get_app
 from rpf_fly.emulator.log_playback import PosePlayback
-from rpf_fly.flight.replay import PLANNING_MODES, replay_log, replay_setup
+from rpf_fly.flight.replay import replay_log, replay_setup
+from rpf_fly.flight.replay_inputs import PLANNING_MODES
 from rpf_fly.log.mocap_frames import mocap_frames
 from rpf_fly.log.reader import LogMessage, read_log
 from rpf_fly.mission import parse_mission
