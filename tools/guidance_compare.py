@@ -27,7 +27,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from rpf_fly.mission import load_mission  # noqa: E402
-from rpf_fly.planning.guidance import Guidance, cost_to_go, path_length  # noqa: E402
+from rpf_fly.planning.guidance import Guidance, path_length  # noqa: E402
+from rpf_fly.planning.visibility import cost_to_go  # noqa: E402
 from rpf_fly.sim.scenario import obstacle_set  # noqa: E402
 
 DELTA = 0.15

@@ -1,36 +1,23 @@
 """Global guidance: shortest paths around the mission's static obstacles, and each drone's next visible waypoint.
 
 The obstacles of a mission are known before take-off, so the planner does not have to discover a concave trap by
-falling into it. Each obstacle is inflated by ``delta = r + margin`` (the clearance the planner keeps) and replaced
-by the corners of a polygon that contains the inflated shape (a box: the box grown by ``delta``; a circle: the
-circumscribed ``CIRCLE_SIDES``-gon of radius ``rho + delta``). Those corners are the nodes of a *visibility graph*:
-two nodes are joined when the straight segment between them crosses no inflated obstacle, and the shortest path
-between any two points of the plane that stays out of the inflated obstacles runs along such segments. The
-all-pairs node distances are computed once per obstacle set (Floyd-Warshall); a goal adds one row, its cost-to-go
-``c_g(v)`` for every node (docs/algorithm.md, *Global guidance*, has the choice against a grid search and its
-measurements).
-
-Per tick a drone at ``p`` with goal ``g`` needs only its **next visible waypoint**: ``g`` itself when the segment
-``p -> g`` is free, else the node ``v`` visible from ``p`` that minimises ``|p - v| + c_g(v)``: the first corner of
-the shortest path from where the drone is now. Nothing is stored per drone: the path is re-derived from the
-drone's position every tick at the cost of one visibility test against each node, so a drone pushed off its
-path by the others (the reactive layer) is never guided back to a stale corridor, and a goal change costs one new
-cost-to-go row (cached per goal). Everything is numpy over leading shapes ``S``: the simulator, the training
-environment (one graph per arena, padded) and the flight loop call the same functions.
+falling into it. The mission's obstacles, inflated by the clearance the planner keeps, give a *visibility graph*
+(rpf_fly/planning/visibility.py); :class:`Guidance` holds it for one obstacle set, with a cost-to-go row cached per
+goal, and answers each drone's **next visible waypoint** (rpf_fly/planning/waypoints.py): the goal when it is in
+sight, else the first corner of the shortest path from where the drone is now (docs/algorithm.md, *Global
+guidance*, has the choice against a grid search and its measurements). Nothing is stored per drone: the path is
+re-derived from the drone's position every tick at the cost of one visibility test against each node, so a drone
+pushed off its path by the others (the reactive layer) is never guided back to a stale corridor, and a goal change
+costs one new cost-to-go row (cached per goal). Everything is numpy over leading shapes ``S``: the simulator, the
+training environment (one graph per arena, padded) and the flight loop call the same functions.
 
 A drone may also route round the drones it sees parked (static neighbours: arrived, or holding), which the map
 does not hold: :meth:`Guidance.detour` builds the graph of the map plus those drones from the map's own edges
-(docs/algorithm.md, *Guidance round parked drones*).
-
-Inflated obstacles that contain an end point of a segment are ignored for that segment: a drone that is already
-inside the inflated band of an obstacle (closer than ``delta``) still sees its way out, the repulsion is what
-pushes it back. Without a free path (every node hidden, or the goal cut off) the waypoint is the goal: plain APF.
-Metres; points complex.
+(docs/algorithm.md, *Guidance round parked drones*). Metres; points complex.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from collections import OrderedDict
 from dataclasses import dataclass, field
@@ -38,16 +25,12 @@ from typing import Sequence
 
 import numpy as np
 
-from rpf_fly.planning.obstacles import FAR, ObstacleSet
-
-CIRCLE_SIDES = 8
-"""Corners of the polygon that replaces an inflated circle (its circumscribed regular polygon)."""
-
-NODE_PUSH = 1e-6
-"""Relative outward push of every node off its polygon, so that segments along a polygon's edge are not blocked by
-rounding (metres per metre of the node's offset)."""
-
-UNREACHABLE = np.inf
+from rpf_fly.planning.obstacles import ObstacleSet
+from rpf_fly.planning.visibility import (
+    UNREACHABLE, Bounds, Inflated, adjacency, adjacency_between, all_pairs, blocked, cost_to_go, graph_nodes,
+    shortest_from,
+)
+from rpf_fly.planning.waypoints import free_one, inside_one, next_waypoint
 
 PARKED_QUANTUM = 0.05
 """Metres: parked drones are placed on a grid of this pitch before their detour graph is built, so a hovering
@@ -56,278 +39,6 @@ drone's few centimetres of wobble reuse one graph instead of building a new one 
 DETOUR_CACHE = 16
 """Detour graphs kept per :class:`Guidance` (least recently used dropped first). A run of the families bench builds
 1-3 (median; 14 at most) for all its drones together; each holds a dense ``V x V`` graph (0.5 MB for 250 nodes)."""
-
-
-@dataclass(frozen=True)
-class Inflated:
-    """Inflated obstacles as float arrays with a trailing obstacle axis (leading shapes broadcast against the
-    points, as :class:`ObstacleSet`'s): circles ``cx``, ``cy``, ``cr`` (radius grown by delta); boxes ``x0``, ``x1``,
-    ``y0``, ``y1`` (grown by delta on every side)."""
-
-    cx: np.ndarray
-    cy: np.ndarray
-    cr: np.ndarray
-    x0: np.ndarray
-    x1: np.ndarray
-    y0: np.ndarray
-    y1: np.ndarray
-
-    @staticmethod
-    def of(obstacles: ObstacleSet, delta: float) -> "Inflated":
-        c = np.asarray(obstacles.centers)
-        b = np.asarray(obstacles.box_center)
-        hx, hy = np.asarray(obstacles.box_half_x) + delta, np.asarray(obstacles.box_half_y) + delta
-        return Inflated(c.real, c.imag, np.asarray(obstacles.radii) + delta,
-                        b.real - hx, b.real + hx, b.imag - hy, b.imag + hy)
-
-    @property
-    def n_circles(self) -> int:
-        return int(self.cr.shape[-1])
-
-    @property
-    def n_boxes(self) -> int:
-        return int(self.x0.shape[-1])
-
-    def inside(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Points ``(x, y)`` (float arrays ``S``) strictly inside each inflated circle ``S + (Mc,)`` / box ``S + (Mb,)``."""
-        x, y = x[..., None], y[..., None]
-        in_c = (x - self.cx) ** 2 + (y - self.cy) ** 2 < self.cr**2
-        in_b = (x > self.x0) & (x < self.x1) & (y > self.y0) & (y < self.y1)
-        return in_c, in_b
-
-    def axis(self) -> "Inflated":
-        """The same obstacles with an axis inserted before the obstacle axis (for ``S + (T, M)`` tests)."""
-        return Inflated(*(getattr(self, f.name)[..., None, :] for f in dataclasses.fields(Inflated)))
-
-
-def blocked(a: np.ndarray, b: np.ndarray, inf: Inflated, a_inside: tuple[np.ndarray, np.ndarray] | None = None,
-            b_inside: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
-    """Whether each segment ``a -> b`` (complex, broadcasting shapes ``S``) crosses the interior of an inflated
-    obstacle that contains neither end point; ``inf``'s arrays broadcast as ``S + (M,)``. ``a_inside``,
-    ``b_inside``: which obstacles contain the end points, when the caller knows (``S + (M,)`` each kind).
-
-    Circle: the segment's closest approach to the centre is below the radius. Box: the segment's bounding box
-    overlaps the box and the box's corners lie strictly on both sides of the segment's line (grazing is free)."""
-    a = np.asarray(a, dtype=complex)
-    b = np.asarray(b, dtype=complex)
-    ax, ay = a.real[..., None], a.imag[..., None]
-    bx, by = b.real[..., None], b.imag[..., None]
-    dx, dy = bx - ax, by - ay
-    out = None
-    if inf.n_circles:
-        length2 = dx * dx + dy * dy
-        wx, wy = inf.cx - ax, inf.cy - ay
-        t = np.clip((wx * dx + wy * dy) / np.maximum(length2, 1e-300), 0.0, 1.0)
-        ex, ey = wx - t * dx, wy - t * dy
-        hit = ex * ex + ey * ey < inf.cr * inf.cr
-        ins_a = a_inside[0] if a_inside is not None else wx * wx + wy * wy < inf.cr * inf.cr
-        ins_b = b_inside[0] if b_inside is not None else (inf.cx - bx) ** 2 + (inf.cy - by) ** 2 < inf.cr * inf.cr
-        out = (hit & ~(ins_a | ins_b)).any(axis=-1)
-    if inf.n_boxes:
-        overlap = (np.maximum(ax, bx) > inf.x0) & (np.minimum(ax, bx) < inf.x1)
-        overlap &= (np.maximum(ay, by) > inf.y0) & (np.minimum(ay, by) < inf.y1)
-        q = dx * ay - dy * ax
-        u0, u1 = dx * inf.y0, dx * inf.y1
-        v0, v1 = dy * inf.x0, dy * inf.x1
-        low = np.minimum(u0, u1) - np.maximum(v0, v1) - q
-        high = np.maximum(u0, u1) - np.minimum(v0, v1) - q
-        hit = overlap & (low < 0.0) & (high > 0.0)
-        if a_inside is not None:
-            hit &= ~a_inside[1]
-        else:
-            hit &= ~((ax > inf.x0) & (ax < inf.x1) & (ay > inf.y0) & (ay < inf.y1))
-        if b_inside is not None:
-            hit &= ~b_inside[1]
-        else:
-            hit &= ~((bx > inf.x0) & (bx < inf.x1) & (by > inf.y0) & (by < inf.y1))
-        boxes = hit.any(axis=-1)
-        out = boxes if out is None else out | boxes
-    if out is None:
-        return np.zeros(np.broadcast_shapes(a.shape, b.shape), dtype=bool)
-    return out
-
-
-Bounds = tuple[tuple[float, float], tuple[float, float]]
-
-
-def graph_nodes(obstacles: ObstacleSet, delta: float, bounds: Bounds | None = None) -> np.ndarray:
-    """Corner nodes ``(V,)`` of one obstacle set (shared arrays ``(M,)``; FAR padding skipped): polygon corners
-    outside every other inflated obstacle and, with ``bounds`` ((x_lo, x_hi), (y_lo, y_hi)), inside the arena."""
-    inf = Inflated.of(obstacles, delta)
-    nodes = []
-    k = np.arange(CIRCLE_SIDES)
-    spoke = np.exp(1j * (2 * np.pi * (k + 0.5) / CIRCLE_SIDES))
-    scale = (1.0 + NODE_PUSH) / math.cos(math.pi / CIRCLE_SIDES)
-    for c, radius in zip(np.asarray(obstacles.centers).reshape(-1), inf.cr.reshape(-1)):
-        if abs(c) < FAR / 2:
-            nodes.append(c + radius * scale * spoke)
-    for x0, x1, y0, y1 in zip(inf.x0.reshape(-1), inf.x1.reshape(-1), inf.y0.reshape(-1), inf.y1.reshape(-1)):
-        corners = np.array([complex(x0, y0), complex(x1, y0), complex(x1, y1), complex(x0, y1)])
-        centre = complex((x0 + x1) / 2, (y0 + y1) / 2)
-        nodes.append(corners + NODE_PUSH * (corners - centre))
-    if not nodes:
-        return np.zeros(0, dtype=complex)
-    v = np.concatenate(nodes)
-    in_c, in_b = inf.inside(v.real, v.imag)
-    keep = ~(in_c.any(axis=-1) | in_b.any(axis=-1))
-    if bounds is not None:
-        (x0, x1), (y0, y1) = bounds
-        keep &= (v.real >= x0) & (v.real <= x1) & (v.imag >= y0) & (v.imag <= y1)
-    return v[keep]
-
-
-def adjacency(nodes: np.ndarray, inf: Inflated) -> np.ndarray:
-    """``(V, V)`` visibility graph: the straight distance between two nodes that see each other, inf otherwise."""
-    direct = abs(nodes[:, None] - nodes[None, :])
-    free = ~blocked(nodes[:, None], nodes[None, :], inf)
-    dist = np.where(free, direct, UNREACHABLE)
-    np.fill_diagonal(dist, 0.0)
-    return dist
-
-
-def all_pairs(nodes: np.ndarray, inf: Inflated, direct: np.ndarray | None = None) -> np.ndarray:
-    """``(V, V)`` shortest distances between nodes over the visibility graph (Floyd-Warshall; inf: no path).
-    ``direct``: the graph's :func:`adjacency`, when the caller has it."""
-    n = nodes.shape[0]
-    if n == 0:
-        return np.zeros((0, 0))
-    dist = (adjacency(nodes, inf) if direct is None else direct).copy()
-    for k in range(n):
-        np.minimum(dist, dist[:, k, None] + dist[None, k, :], out=dist)
-    return dist
-
-
-def shortest_from(start: np.ndarray, direct: np.ndarray) -> np.ndarray:
-    """Shortest distances ``(V,)`` over the graph ``direct`` (:func:`adjacency`) from a source whose distance to each
-    node is ``start`` (Dijkstra on the dense graph: one goal's cost-to-go without the all-pairs table)."""
-    dist = np.array(start, dtype=float, copy=True)
-    done = np.zeros(dist.shape[0], dtype=bool)
-    for _ in range(dist.shape[0]):
-        u = int(np.where(done, UNREACHABLE, dist).argmin())
-        if done[u] or not math.isfinite(dist[u]):
-            break
-        done[u] = True
-        np.minimum(dist, dist[u] + direct[u], out=dist)
-    return dist
-
-
-def cost_to_go(goals: np.ndarray, nodes: np.ndarray, pairs: np.ndarray, inf: Inflated) -> np.ndarray:
-    """``goals.shape + (V,)``: path length from each node to each goal (inf where cut off)."""
-    goals = np.asarray(goals, dtype=complex)
-    if nodes.shape[0] == 0:
-        return np.zeros(goals.shape + (0,))
-    seen = ~blocked(goals[..., None], nodes, inf)  # goals.shape + (V,)
-    leg = np.where(seen, abs(goals[..., None] - nodes), UNREACHABLE)
-    return (leg[..., :, None] + pairs).min(axis=-2)
-
-
-CANDIDATES = 6
-"""Nodes tested per drone and tick: those of smallest ``|p - v| + c_g(v)`` (a lower bound of the path through ``v``
-that ignores whether ``v`` is in sight). The first of them in sight is the answer; a drone that sees none of them
-(rare: deep in a cluttered corner) is tested against every node."""
-
-
-def _visible(position: np.ndarray, goal: np.ndarray, targets: np.ndarray, inf: Inflated, wide: Inflated) -> np.ndarray:
-    """``S + (T,)``: which targets (the goal first) each drone sees. Obstacles holding the drone are ignored for
-    every target, those holding the goal for the goal only."""
-    p_in = inf.inside(position.real, position.imag)
-    g_in = inf.inside(goal.real, goal.imag)
-    n = targets.shape[-1] - 1
-    t_in = tuple(np.concatenate([gi[..., None, :], np.zeros(gi.shape[:-1] + (n, gi.shape[-1]), bool)], axis=-2)
-                 for gi in g_in)
-    return ~blocked(position[..., None], targets, wide, tuple(pi[..., None, :] for pi in p_in), t_in)
-
-
-def next_waypoint(
-    position: np.ndarray, goal: np.ndarray, nodes: np.ndarray, cost: np.ndarray, inf: Inflated,
-    wide: Inflated | None = None, candidates: int | None = CANDIDATES,
-) -> tuple[np.ndarray, np.ndarray]:
-    """The waypoint each drone should fly to (complex ``S``) and its remaining path length (metres, ``S``).
-
-    ``nodes`` ``(V,)`` or ``S + (V,)`` (per arena, padded with FAR nodes whose cost is inf), ``cost`` ``S + (V,)``
-    each drone's cost-to-go row for its goal; ``inf`` broadcasts as ``S + (M,)`` (``wide``: ``inf.axis()``, when the
-    caller keeps it). The goal when it is in sight, or when no node leads there. Each drone tests the goal and its
-    ``candidates`` best nodes (:data:`CANDIDATES`; None: every node) against every obstacle."""
-    position = np.asarray(position, dtype=complex)
-    goal = np.asarray(goal, dtype=complex)
-    direct = abs(goal - position)
-    if nodes.shape[-1] == 0:
-        return (complex(goal), float(direct)) if goal.ndim == 0 else (goal, direct)
-    wide = inf.axis() if wide is None else wide
-    lead = np.broadcast_shapes(position.shape, goal.shape)
-    position = np.broadcast_to(position, lead)
-    goal = np.broadcast_to(goal, lead)
-    all_nodes = np.broadcast_to(nodes, lead + nodes.shape[-1:])
-    to_node = abs(all_nodes - position[..., None])
-    bound = np.where(to_node > 1e-9, to_node + cost, UNREACHABLE)  # S + (V,)
-    if candidates is not None and candidates < bound.shape[-1]:
-        pick = np.argpartition(bound, candidates - 1, axis=-1)[..., :candidates]
-    else:
-        pick = np.broadcast_to(np.arange(bound.shape[-1]), bound.shape)
-    waypoint, remaining, unresolved = _choose(position, goal, direct, all_nodes, bound, pick, inf, wide)
-    if unresolved.any() and pick.shape[-1] < bound.shape[-1]:
-        rows = np.nonzero(unresolved)
-        full = np.broadcast_to(np.arange(bound.shape[-1]), (rows[0].shape[0], bound.shape[-1]))
-        sub = Inflated(*(np.broadcast_to(a, lead + a.shape[-1:])[rows] for a in dataclasses.astuple(inf)))
-        w2, r2, _ = _choose(position[rows], goal[rows], direct[rows], all_nodes[rows], bound[rows], full, sub, sub.axis())
-        waypoint = waypoint.copy()
-        remaining = remaining.copy()
-        waypoint[rows] = w2
-        remaining[rows] = r2
-    if waypoint.ndim == 0:
-        return complex(waypoint), float(remaining)
-    return waypoint, remaining
-
-
-def _choose(position, goal, direct, nodes, bound, pick, inf, wide):  # type: ignore[no-untyped-def]
-    """Waypoint and remaining length among the goal and the ``pick``ed nodes; ``unresolved``: the goal is hidden
-    and no picked node with a finite bound is in sight."""
-    chosen = np.take_along_axis(nodes, pick, -1)
-    keys = np.take_along_axis(bound, pick, -1)
-    targets = np.concatenate([goal[..., None], chosen], axis=-1)
-    seen = _visible(position, goal, targets, inf, wide)
-    goal_seen = seen[..., 0]
-    key = np.where(seen[..., 1:], keys, UNREACHABLE)
-    best = key.argmin(axis=-1)[..., None]
-    best_key = np.take_along_axis(key, best, -1)[..., 0]
-    node = np.take_along_axis(chosen, best, -1)[..., 0]
-    use_node = ~goal_seen & np.isfinite(best_key)
-    unresolved = ~goal_seen & ~np.isfinite(best_key) & np.isfinite(keys).any(axis=-1)
-    return np.where(use_node, node, goal), np.where(use_node, best_key, direct), unresolved
-
-
-def _inside_one(x: float, y: float, circles: list, boxes: list) -> tuple[set, set]:
-    ic = {k for k, (cx, cy, r2) in enumerate(circles) if (x - cx) ** 2 + (y - cy) ** 2 < r2}
-    ib = {k for k, (x0, x1, y0, y1) in enumerate(boxes) if x0 < x < x1 and y0 < y < y1}
-    return ic, ib
-
-
-def _free_one(ax: float, ay: float, bx: float, by: float, circles: list, boxes: list, skip: tuple[set, set]) -> bool:
-    """:func:`blocked` for one segment, in plain Python (the flight's one-drone call: a few obstacles, early exit)."""
-    dx, dy = bx - ax, by - ay
-    length2 = dx * dx + dy * dy
-    for k, (cx, cy, r2) in enumerate(circles):
-        wx, wy = cx - ax, cy - ay
-        t = (wx * dx + wy * dy) / length2 if length2 > 0.0 else 0.0
-        t = 0.0 if t < 0.0 else (1.0 if t > 1.0 else t)
-        ex, ey = wx - t * dx, wy - t * dy
-        if ex * ex + ey * ey < r2 and k not in skip[0]:
-            return False
-    if not boxes:
-        return True
-    lo_x, hi_x = (ax, bx) if ax < bx else (bx, ax)
-    lo_y, hi_y = (ay, by) if ay < by else (by, ay)
-    q = dx * ay - dy * ax
-    for k, (x0, x1, y0, y1) in enumerate(boxes):
-        if hi_x > x0 and lo_x < x1 and hi_y > y0 and lo_y < y1:
-            u0, u1, v0, v1 = dx * y0, dx * y1, dy * x0, dy * x1
-            if u0 > u1:
-                u0, u1 = u1, u0
-            if v0 > v1:
-                v0, v1 = v1, v0
-            if u0 - v1 - q < 0.0 < u1 - v0 - q and k not in skip[1]:
-                return False
-    return True
 
 
 @dataclass
@@ -520,9 +231,9 @@ class Guidance:
         """Whether the segment ``p -> g`` is free (obstacles holding either end ignored), in plain Python."""
         circles, boxes = self._circles, self._boxes
         if skip is None:
-            skip = _inside_one(p.real, p.imag, circles, boxes)
-        goal_skip = _inside_one(g.real, g.imag, circles, boxes)
-        return _free_one(p.real, p.imag, g.real, g.imag, circles, boxes, (skip[0] | goal_skip[0], skip[1] | goal_skip[1]))
+            skip = inside_one(p.real, p.imag, circles, boxes)
+        goal_skip = inside_one(g.real, g.imag, circles, boxes)
+        return free_one(p.real, p.imag, g.real, g.imag, circles, boxes, (skip[0] | goal_skip[0], skip[1] | goal_skip[1]))
 
     def _waypoint_one(self, p: complex, g: complex) -> tuple[complex, float]:
         """:func:`next_waypoint` for one drone in plain Python: the goal's segment first, then the nodes in the order
@@ -532,7 +243,7 @@ class Guidance:
             return g, direct
         circles, boxes = self._circles, self._boxes
         ax, ay = p.real, p.imag
-        skip = _inside_one(ax, ay, circles, boxes)
+        skip = inside_one(ax, ay, circles, boxes)
         if self._sees_one(p, g, skip):
             return g, direct
         row = self._row_arrays.get(g)
@@ -544,7 +255,7 @@ class Guidance:
             if not math.isfinite(key):
                 break
             x, y = self._node_xy[k]
-            if (x - ax) ** 2 + (y - ay) ** 2 > 1e-18 and _free_one(ax, ay, x, y, circles, boxes, skip):
+            if (x - ax) ** 2 + (y - ay) ** 2 > 1e-18 and free_one(ax, ay, x, y, circles, boxes, skip):
                 return complex(x, y), key
         return g, direct
 
@@ -623,11 +334,6 @@ class _Detour(Guidance):
             self._index[g] = len(self._goals)
             self._goals.append(g)
         self._rows = np.concatenate([self._rows, np.array(rows).reshape(len(new), -1)])
-
-
-def adjacency_between(a: np.ndarray, b: np.ndarray, inf: Inflated) -> np.ndarray:
-    """``(A, B)``: the straight distance from each node of ``a`` to each of ``b`` it sees, inf otherwise."""
-    return np.where(~blocked(a[:, None], b[None, :], inf), abs(a[:, None] - b[None, :]), UNREACHABLE)
 
 
 def path_length(points: list[complex]) -> float:

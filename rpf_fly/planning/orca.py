@@ -44,7 +44,7 @@ import numpy as np
 
 from rpf_fly.planning.config import PlannerConfig
 from rpf_fly.planning.obstacles import ObstacleSet
-from rpf_fly.planning.guidance import Bounds
+from rpf_fly.planning.visibility import Bounds
 from rpf_fly.planning.planner import PlanStep, guided_view, make_guidance, sense_obstacles
 from rpf_fly.planning.view import LocalView
 
