@@ -38,6 +38,13 @@ from rpf_fly.planning.planner import PlanStep, plan_row
 from rpf_fly.planning.view import LocalView
 
 
+REFINE_HOLD_ABOVE_M_S = 0.05
+"""A held drone slower than this is at rest: its hold setpoint stays (`DroneAgent.refine_hold`)."""
+LEAD_ALLOWANCE = 1.25
+"""How far a drone's carrot may lead it, over its steady lag at the mission speed (`DroneAgent.set_controller`)."""
+MIN_LEAD_M = 0.3
+"""The carrot's lead is never held under this (a slow mission's drone still gets a firm pull)."""
+
 class PlannerLike(Protocol):
     def step(self, view: LocalView) -> PlanStep: ...
 
@@ -127,7 +134,7 @@ class DroneAgent:
         arena: Arena,
         budget_s: float,
         body_radius_m: float = 0.0,
-        max_lead_m: float = 0.3,
+        max_lead_m: Optional[float] = None,
         clock: Callable[[], float] = time.thread_time,
     ):
         self.drone = drone
@@ -144,8 +151,11 @@ class DroneAgent:
         inset = [(lo + body_radius_m, hi - body_radius_m) if hi - lo > 2 * body_radius_m else ((lo + hi) / 2,) * 2
                  for lo, hi in (arena.x, arena.y, arena.z)]
         self._fence = tuple(inset)
-        self.max_lead_m = max_lead_m
+        self._max_lead_given_m = max_lead_m
+        """How far the carrot may lead the drone when the caller fixed it; None: from the drone's steady lag."""
         self.braking = braking_for(None)
+        self.max_lead_m = MIN_LEAD_M
+        self.set_controller(None)
         """How this drone comes to rest once held, from its own controller's gains (`set_controller`)."""
         self._clock = clock
         self.phase = DronePhase.WAITING
@@ -154,6 +164,8 @@ class DroneAgent:
         self.heading = 1 + 0j
         self.reference = self.start
         self.hold_point: complex = self.start
+        self._hold_limit: complex = self.start
+        self._hold_way: complex = 0j
         self.phase_since_s = 0.0
         self.arrived_at_s: Optional[float] = None
         self.stale_since_s: Optional[float] = None
@@ -196,15 +208,41 @@ class DroneAgent:
         self.set_phase(DronePhase.PLANNING, now_s)
 
     def set_controller(self, params: Optional[Mapping[str, float]]) -> None:
-        """The drone's position controller's gains as its parameters hold them (None: the firmware's defaults)."""
+        """The drone's position controller's gains as its parameters hold them (None: the firmware's defaults): how
+        it brakes, and how far its carrot may lead it (`LEAD_ALLOWANCE` times the steady lag at the mission speed:
+        a drone trails a moving setpoint by `ResponseGains.steady_lag_s` x speed, 0.55 s with the defaults, and a
+        carrot held closer than that caps its speed below the mission's)."""
         self.braking = braking_for(params)
+        if self._max_lead_given_m is not None:
+            self.max_lead_m = self._max_lead_given_m
+        else:
+            self.max_lead_m = max(MIN_LEAD_M, LEAD_ALLOWANCE * self.speed * self.braking.gains.steady_lag_s)
 
     def hold(self, at: complex, now_s: float, reason: str, velocity: complex = 0j) -> None:
         """Stop planning and bring the drone to rest near ``at`` (where it is), moving at ``velocity``: the hold
         setpoint is the one its own controller stops it nearest with (`Braking.hold_point`: a real drone held where
         it is flies past that point, by its braking distance)."""
-        self.hold_point = self.clamp(self.braking.hold_point(at, velocity))
+        self.hold_point = self.clamp(self.braking.hold_point(at, velocity, self.last_setpoint))
+        self._hold_limit = self.braking.stop_point(at, velocity, self.last_setpoint)
+        self._hold_way = velocity / abs(velocity) if abs(velocity) > 1e-3 else 0j
         self.set_phase(DronePhase.HOLDING, now_s, reason)
+
+    def refine_hold(self, position: complex, velocity: complex) -> None:
+        """While a held drone still moves: the hold setpoint that brings it to rest from here (`Braking.hold_point`
+        from its present speed and tilt), never beyond where the hold was to stop it. The first hold setpoint brakes
+        it hardest, often behind where it stops; moved up as it slows, the drone stops where it braked to instead
+        of flying back to it."""
+        if self.phase != DronePhase.HOLDING or not self._hold_way or abs(velocity) < REFINE_HOLD_ABOVE_M_S:
+            return
+        if (velocity * self._hold_way.conjugate()).real <= 0.0:
+            return  # braked to a stop already, or turned: keep the point
+        way = self._hold_way
+        point = self.braking.hold_point(position, velocity, self.hold_point)
+        beyond = ((point - self._hold_limit) * way.conjugate()).real
+        if beyond > 0.0:
+            point -= way * beyond
+        if ((point - self.hold_point) * way.conjugate()).real > 0.0:  # only ever forward along its way
+            self.hold_point = self.clamp(point)
 
     # ---------------------------------------------------------------------------------------- planning
 

@@ -140,8 +140,11 @@ class FlightLoop:
         drones: Optional[Collection[str]] = None,
         swarm: Optional[SwarmLink] = None,
         tick_offset: Optional[float] = None,
+        first_order: Collection[str] = (),
     ):
-        """``drones``: the names of the drones this loop flies (default: all of the mission's); the others are only
+        """``first_order``: drones that are simulated with the first-order model (a dry run's `dynamics:
+        first-order`), whose tracking the supervisor follows with that model, not the firmware's cascade.
+        ``drones``: the names of the drones this loop flies (default: all of the mission's); the others are only
         seen, from mocap, as every drone sees its neighbours (a distributed flight's worker flies one dongle's).
         ``swarm``: the coordinator this loop waits for before take-off and whose ``finish`` ends it
         (:class:`SwarmLink`, :meth:`end`). ``tick_offset``: where in the planning period this loop's ticks fall, a
@@ -175,7 +178,7 @@ class FlightLoop:
         self.tracker.estimate_of = self._estimate_of  # a jumped track is taken only where the drone thinks it is
         self.tracker.airborne_estimate_of = self._airborne_estimate_of  # and so is the first pose after a gap
         self.tracker.blind_drift_m_s2 = mission.safety.blind_drift_m_s2
-        self.supervisor = Supervisor(mission, self.obstacles)
+        self.supervisor = Supervisor(mission, self.obstacles, first_order=frozenset(first_order))
         self.phase = SwarmPhase.CONNECTING
         self.stats = LoopStats()
         # A backend that queues setpoints for threads of its own measures their latency to the radio, and says
@@ -878,6 +881,8 @@ class FlightLoop:
                     continue
             if agent.phase in (DronePhase.HOLDING, DronePhase.ARRIVED):
                 mode = "arrived" if agent.phase == DronePhase.ARRIVED else "hold"
+                if fresh:
+                    agent.refine_hold(pose.xy, pose.velocity)
                 self._send(agent, agent.hold_point, frame, sent)
             if agent.phase not in (DronePhase.WAITING, DronePhase.READY, DronePhase.FAILED):
                 records.append((agent, pose, None, mode))
@@ -952,6 +957,7 @@ class FlightLoop:
     """Hold reasons that end when the supervisor says the condition cleared."""
 
     def _apply(self, findings: list[Finding], now: float) -> None:
+        sent: list[tuple[str, tuple[float, float, float], float]] = []
         for f in findings:
             self.events.emit(f.level, f.kind, f.message, f.drone)
             targets = [self.agents[f.drone]] if f.drone else list(self.agents.values())
@@ -969,13 +975,17 @@ class FlightLoop:
                 elif f.response == "hold":
                     pose = self.tracker.get(agent.name)
                     if pose is not None:
-                        self.commander.hold(agent, pose.xy, now, f.kind, pose.velocity)
+                        held = self.commander.hold(agent, pose.xy, now, f.kind, pose.velocity)
                     else:
-                        self.commander.hold(agent, agent.reference, now, f.kind)
+                        held = self.commander.hold(agent, agent.reference, now, f.kind)
+                    if held:  # now, not at the next planning tick: at 1 m/s a tick's wait is 0.1 m more
+                        self._send(agent, agent.hold_point, None, sent)
                 elif f.response == "resume" and agent.phase == DronePhase.HOLDING and agent.reason == f.kind:
                     pose = self.tracker.get(agent.name)
                     if pose is not None and pose.valid and f.kind in self.RESUMABLE:
                         self.commander.begin_planning(agent, pose.xy, now)
+        if sent:
+            self.recorder.setpoints(sent)
 
     def _late_tick(self, interval_s: float) -> None:
         """Say a gap between two planning ticks longer than the period plus `LATE_TICK_S` (the loop was blocked or

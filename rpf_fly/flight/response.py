@@ -70,6 +70,14 @@ class ResponseGains:
         return cls(**given)
 
     @property
+    def steady_lag_s(self) -> float:
+        """How far (in seconds of its speed) the drone trails a setpoint that moves at a steady speed: the position
+        loop's 1 / kp, plus the velocity error that holds the tilt against drag (the velocity integrator removes it
+        only over seconds): 0.55 s with the defaults, as the reference's carrots at 0.5 and 1 m/s."""
+        drag_deg_per_m_s = math.degrees(math.atan(DRAG_PER_S / GRAVITY))
+        return 1.0 / self.pos_kp + drag_deg_per_m_s / (self.vel_kp * self.pos_kp)
+
+    @property
     def max_brake_m_s2(self) -> float:
         """The largest horizontal deceleration the tilt limit allows."""
         return GRAVITY * math.tan(math.radians(self.tilt_limit_deg))
@@ -121,59 +129,108 @@ def overshoot_m(gains: ResponseGains, speed_m_s: float, offset_m: float = 0.0) -
     return float(max(0.0, track[:, 0].max()))
 
 
-SPEEDS_M_S = np.linspace(0.0, 1.5, 31)
+SPEEDS_M_S = np.linspace(0.0, 1.5, 16)
 """The speeds `Braking` tabulates (the firmware caps a streamed flight at 1.1 m/s; a push may go faster)."""
-OFFSETS = np.linspace(-1.0, 1.0, 41)
-"""Hold points searched, as fractions of the tilt-limited braking distance (plus 0.2 s of flight) along the
+TILTS_DEG = np.linspace(-20.0, 20.0, 9)
+"""The tilts along the drone's way it tabulates (positive: speeding up along it; the firmware's default limit)."""
+OFFSETS = np.linspace(-1.0, 1.0, 21)
+"""Hold points searched, as fractions of the tilt-limited braking distance (plus 0.3 s of flight) along the
 drone's way."""
 NEAR_SHORTEST_M = 0.005
+STEADY = None
+"""`Braking.stop_m`'s tilt for steady flight: what holds the speed against drag."""
+
+
+def commanded_tilt(gains: ResponseGains, position: complex, velocity: complex, setpoint: complex) -> complex:
+    """The tilt (degrees, x + iy: towards where it accelerates) the firmware's position and velocity loops ask for
+    at ``position`` and ``velocity`` with ``setpoint``, before the integrators (the tilt follows it in about
+    `ATTITUDE_TAU_S`)."""
+    cap, limit = gains.vel_max * OVERHEAD, gains.tilt_limit_deg
+
+    def axis(p: float, v: float, sp: float) -> float:
+        v_sp = min(max(gains.pos_kp * (sp - p), -cap), cap)
+        return min(max(gains.vel_kp * (v_sp - v), -limit), limit)
+
+    return complex(axis(position.real, velocity.real, setpoint.real), axis(position.imag, velocity.imag, setpoint.imag))
 
 
 class Braking:
-    """Where a drone of these gains comes to rest once held, by speed: tabulated once (a tenth of a second of numpy),
-    read by interpolation every tick.
+    """Where a drone of these gains comes to rest once held, by its speed and its tilt along its way: tabulated once
+    (a fifth of a second of numpy, shared by every drone of the same gains), read by interpolation every check.
 
-    For each speed, hold setpoints along the drone's way are tried (`OFFSETS`); the one kept is the furthest ahead
-    whose farthest point is within `NEAR_SHORTEST_M` of the shortest stop. Once the tilt saturates a setpoint further
-    behind brakes no harder and only sends the drone back further; one further ahead brakes softer and carries it
-    further. `stop_m` is that farthest point's distance, `hold_offset_m` the setpoint's."""
+    For each speed and tilt, hold setpoints along the drone's way are tried (`OFFSETS`); the one kept is the
+    furthest ahead whose farthest point is within `NEAR_SHORTEST_M` of the shortest stop. Once the tilt saturates a
+    setpoint further behind brakes no harder and only sends the drone back further; one further ahead brakes softer
+    and carries it further. `stop_m` is that farthest point's distance, `hold_offset_m` the setpoint's. A drone
+    speeding up (tilted along its way) needs further: its tilt must turn round first."""
 
     def __init__(self, gains: ResponseGains = DEFAULT_GAINS) -> None:
         self.gains = gains
-        reach = SPEEDS_M_S**2 / (2.0 * gains.max_brake_m_s2) + 0.2 * SPEEDS_M_S
-        offsets = reach[:, None] * OFFSETS[None, :]
-        n = offsets.size
-        start = np.zeros((n, 2))
-        velocity = np.stack([np.repeat(SPEEDS_M_S, len(OFFSETS)), np.zeros(n)], axis=1)
-        setpoints = np.stack([offsets.ravel(), np.zeros(n)], axis=1)
-        farthest = respond(gains, start, velocity, setpoints, 2.5)[:, :, 0].max(axis=0).reshape(offsets.shape)
-        farthest = np.maximum(farthest, 0.0)
-        near = farthest <= farthest.min(axis=1, keepdims=True) + NEAR_SHORTEST_M
-        chosen = np.array([int(np.flatnonzero(row).max()) for row in near])
-        rows = np.arange(len(SPEEDS_M_S))
-        self._stop = farthest[rows, chosen]
-        self._offset = offsets[rows, chosen]
+        reach = SPEEDS_M_S**2 / (2.0 * gains.max_brake_m_s2) + 0.3 * SPEEDS_M_S + 0.05
+        shape = (len(SPEEDS_M_S), len(TILTS_DEG), len(OFFSETS))
+        offsets = np.broadcast_to(reach[:, None, None] * OFFSETS[None, None, :], shape)
+        speeds = np.broadcast_to(SPEEDS_M_S[:, None, None], shape).ravel()
+        tilts = np.broadcast_to(TILTS_DEG[None, :, None], shape).ravel()
+        n = speeds.size
+        zeros = np.zeros(n)
+        track = respond(gains, np.zeros((n, 2)), np.stack([speeds, zeros], axis=1),
+                        np.stack([offsets.ravel(), zeros], axis=1), 3.0,
+                        tilt_deg=np.stack([tilts, zeros], axis=1))
+        farthest = np.maximum(track[:, :, 0].max(axis=0), 0.0).reshape(shape)
+        near = farthest <= farthest.min(axis=2, keepdims=True) + NEAR_SHORTEST_M
+        chosen = shape[2] - 1 - np.argmax(near[:, :, ::-1], axis=2)  # the last offset within reach of the shortest
+        self._stop = np.take_along_axis(farthest, chosen[:, :, None], axis=2)[:, :, 0]
+        self._offset = np.take_along_axis(offsets, chosen[:, :, None], axis=2)[:, :, 0]
 
-    def stop_m(self, speed_m_s: float) -> float:
-        """How far a drone flying at ``speed_m_s`` travels after its hold before it is at rest (at most: it may
-        come back a little)."""
-        return float(np.interp(speed_m_s, SPEEDS_M_S, self._stop, right=self._extrapolate(speed_m_s)))
-
-    def hold_offset_m(self, speed_m_s: float) -> float:
-        """Where to hold it, ahead of where it is along its way (negative: behind)."""
-        return float(np.interp(speed_m_s, SPEEDS_M_S, self._offset))
-
-    def hold_point(self, position: complex, velocity: complex) -> complex:
-        """The hold setpoint of a drone at ``position`` moving at ``velocity`` (x + iy, m and m/s)."""
-        speed = abs(velocity)
-        if speed < 1e-3:
-            return position
-        return position + velocity / speed * self.hold_offset_m(speed)
-
-    def _extrapolate(self, speed_m_s: float) -> float:
-        """Beyond the table: the braking distance grows with the square of the speed."""
+    def _read(self, table: np.ndarray, speed_m_s: float, tilt_deg: Optional[float]) -> float:
+        if tilt_deg is None:
+            tilt_deg = math.degrees(math.atan(DRAG_PER_S * speed_m_s / GRAVITY))
         top = SPEEDS_M_S[-1]
-        return float(self._stop[-1] * (speed_m_s / top) ** 2) if speed_m_s > top else float(self._stop[-1])
+        scale = (speed_m_s / top) ** 2 if speed_m_s > top and table is self._stop else 1.0
+        v = min(max(speed_m_s, 0.0), top)
+        t = min(max(tilt_deg, TILTS_DEG[0]), TILTS_DEG[-1])
+        i = min(int(v / (SPEEDS_M_S[1] - SPEEDS_M_S[0])), len(SPEEDS_M_S) - 2)
+        j = min(int((t - TILTS_DEG[0]) / (TILTS_DEG[1] - TILTS_DEG[0])), len(TILTS_DEG) - 2)
+        fv = (v - SPEEDS_M_S[i]) / (SPEEDS_M_S[i + 1] - SPEEDS_M_S[i])
+        ft = (t - TILTS_DEG[j]) / (TILTS_DEG[j + 1] - TILTS_DEG[j])
+        low = table[i, j] * (1 - ft) + table[i, j + 1] * ft
+        high = table[i + 1, j] * (1 - ft) + table[i + 1, j + 1] * ft
+        return float((low * (1 - fv) + high * fv) * scale)
+
+    def stop_m(self, speed_m_s: float, tilt_deg: Optional[float] = STEADY) -> float:
+        """How far a drone at ``speed_m_s`` tilted ``tilt_deg`` along its way (default: steady flight) travels
+        after its hold before it is at rest (at most: it may come back a little)."""
+        return self._read(self._stop, speed_m_s, tilt_deg)
+
+    def hold_offset_m(self, speed_m_s: float, tilt_deg: Optional[float] = STEADY) -> float:
+        """Where to hold it, ahead of where it is along its way (negative: behind)."""
+        return self._read(self._offset, speed_m_s, tilt_deg)
+
+    def _way(self, position: complex, velocity: complex, setpoint: Optional[complex]) -> tuple[complex, float,
+                                                                                                 Optional[float]]:
+        """The drone's way (unit, 0 when it goes nowhere), its speed along it and its tilt along it (None: steady,
+        when no setpoint is known)."""
+        speed = abs(velocity)
+        tilt = None if setpoint is None else commanded_tilt(self.gains, position, velocity, setpoint)
+        if speed >= 0.05:
+            way = velocity / speed
+        elif tilt is not None and abs(tilt) > 0.5:
+            way = tilt / abs(tilt)
+        else:
+            return 0j, 0.0, None
+        return way, speed, None if tilt is None else (tilt * way.conjugate()).real
+
+    def stop_point(self, position: complex, velocity: complex, setpoint: Optional[complex] = None) -> complex:
+        """Where a drone at ``position`` (x + iy), moving at ``velocity`` and streamed ``setpoint`` (None: in
+        steady flight), comes to rest at the farthest if it is held now."""
+        way, speed, tilt = self._way(position, velocity, setpoint)
+        return position + way * self.stop_m(speed, tilt) if way else position
+
+    def hold_point(self, position: complex, velocity: complex, setpoint: Optional[complex] = None) -> complex:
+        """The hold setpoint of a drone at ``position`` moving at ``velocity`` (x + iy, m and m/s) that was
+        streamed ``setpoint`` (None: in steady flight)."""
+        way, speed, tilt = self._way(position, velocity, setpoint)
+        return position + way * self.hold_offset_m(speed, tilt) if way else position
 
 
 @lru_cache(maxsize=32)
@@ -185,3 +242,48 @@ def braking_for(params: Optional[Mapping[str, float]]) -> Braking:
     """The `Braking` of a drone whose controller parameters are ``params`` (None: the firmware's defaults), shared
     by every drone with the same gains."""
     return _braking(ResponseGains.from_params(params) if params else DEFAULT_GAINS)
+
+
+class Follower:
+    """Where a drone's streamed setpoints should have brought it: the reduced cascade run forward on them, one
+    100 Hz step at a time (the supervisor's tracking check: a drone far from this was pushed). Plain floats: it runs
+    for every drone on every mocap frame."""
+
+    __slots__ = ("gains", "p", "v", "tilt", "i_pos", "i_vel", "_left")
+
+    def __init__(self, gains: ResponseGains, position: complex, velocity: complex) -> None:
+        self.gains = gains
+        self.p = [position.real, position.imag]
+        self.v = [velocity.real, velocity.imag]
+        self.tilt = [math.degrees(math.atan(DRAG_PER_S * v / GRAVITY)) for v in self.v]
+        self.i_pos = [0.0, 0.0]
+        self.i_vel = [t / gains.vel_ki if gains.vel_ki > 0 else 0.0 for t in self.tilt]
+        self._left = 0.0
+
+    @property
+    def position(self) -> complex:
+        return complex(self.p[0], self.p[1])
+
+    def step(self, setpoint: complex, dt_s: float) -> complex:
+        """Advance ``dt_s`` (whole 10 ms steps; the rest is carried) towards ``setpoint``; the new position."""
+        g = self.gains
+        vel_cap, tilt_cap, limit = g.vel_max * OVERHEAD, g.tilt_limit_deg * OVERHEAD, g.tilt_limit_deg
+        follow = 1.0 - math.exp(-DT / ATTITUDE_TAU_S)
+        self._left += dt_s
+        steps = int(self._left / DT + 1e-9)
+        self._left -= steps * DT
+        target = (setpoint.real, setpoint.imag)
+        for _ in range(steps):
+            for k in (0, 1):
+                error = target[k] - self.p[k]
+                self.i_pos[k] += error * DT
+                v_sp = min(max(g.pos_kp * error + g.pos_ki * self.i_pos[k], -vel_cap), vel_cap)
+                v_error = v_sp - self.v[k]
+                self.i_vel[k] += v_error * DT
+                tilt_sp = min(max(g.vel_kp * v_error + g.vel_ki * self.i_vel[k], -tilt_cap), tilt_cap)
+                tilt_sp = min(max(tilt_sp, -limit), limit)
+                self.tilt[k] += (tilt_sp - self.tilt[k]) * follow
+                accel = GRAVITY * math.tan(math.radians(self.tilt[k])) - DRAG_PER_S * self.v[k]
+                self.v[k] += accel * DT
+                self.p[k] += self.v[k] * DT
+        return self.position

@@ -164,8 +164,10 @@ def run_flight(
                                 sink=live.publish if live is not None else None, radio=backend.radio_counts)
     try:
         try:
+            first_order = ({name for name, config in rig.drone_configs.items() if config.vehicle.dynamics ==
+                            "first_order"} if rig is not None else set())
             loop = FlightLoop(mission, backend, source, planner_factory, uris=uris, recorder=recorder,
-                              status_hook=status_hook)
+                              status_hook=status_hook, first_order=first_order)
         except BaseException:
             if recorder is not None:  # the loop closes it once it exists; before that, nobody would
                 recorder.close()

@@ -32,11 +32,14 @@ from collections import deque
 from dataclasses import dataclass
 from typing import Iterable, Literal, Optional
 
+import numpy as np
+
 from rpf_fly.flight.agent import DroneAgent
-from rpf_fly.flight.commander import ON_FLOOR_Z_M
+from rpf_fly.flight.commander import ON_FLOOR_Z_M, STREAMING as STREAMING_PHASES
 from rpf_fly.flight.events import ERROR, INFO, WARNING
 from rpf_fly.flight.phases import DronePhase
-from rpf_fly.flight.poses import PoseTracker
+from rpf_fly.flight.poses import PoseTracker, TrackedPose
+from rpf_fly.flight.response import Follower, braking_for
 from rpf_fly.mission.model import Mission
 from rpf_fly.planning.obstacles import ObstacleSet
 from rpf_fly.radio.backend import DroneState
@@ -81,6 +84,18 @@ LINK_QUALITY_CLEAR_PCT = 99.0
 """Back at or above this, a poor link's episode ends (an info event), so the next one is said again. It must be
 reachable: cflib's link quality is at most 100 %, so an end above that would leave a drone's link never said poor
 again after its first episode."""
+
+RESUME_MARGIN_M = 0.05
+REST_M_S = 0.1
+"""A separation or clearance episode ends (its ``hold`` resumes) only once the drones are at rest (under this
+speed) and clear, braking from where they are, by this margin: a held drone brakes hard, its braking tilt makes its
+stop look short, and resuming then would restart the approach the hold stopped (a head-on pair at 1 m/s resumed
+10 ms into its hold and met)."""
+HOLD_REACTION_S = 0.1
+"""From the mocap picture of a breach to the hold setpoint acting on the drone: the supervisor's pass (every mocap
+frame), the hold setpoint sent at once through the radio's queue, the drone's estimator taking the extpos, and the
+firmware's next position-loop tick; twice what an idle host takes (a head-on pair at 1 m/s each met on a loaded
+2-core host with 0.05 s)."""
 
 TRACKING_WARN_M = 0.07
 """A drone this far from where its setpoints should have brought it, for ``TRACKING_WARN_S``: something pushes it
@@ -132,28 +147,35 @@ random fault campaign's 33 ms of mocap delay (plus the emulated camera's 4 ms), 
 healthy one, would go unsaid."""
 
 class _Follower:
-    """Where a drone's setpoints should have brought it: two first-order followers of the setpoint (time constants
-    ``fast_s`` and ``slow_s``, each at most the firmware's speed limit) and an overshoot ``momentum`` (m) that fades
-    with ``slow_s`` from ``since``; a pose anywhere on the segment between the two followers, or within the
-    overshoot past the slow one, follows. Once a landing drone reaches the floor (`touch`) it may stop there or
+    """Where a drone's setpoints should have brought it. While it streams: its own controller's response
+    (``model``: rpf_fly/flight/response.py, from its gains: it trails a moving setpoint by 0.55 s x speed and
+    overshoots a hold), one point; a drone simulated first-order: a first-order follower with ``fast_s``. While the
+    high-level commander flies it: two first-order followers of the firmware's target (time constants ``fast_s``
+    and ``slow_s``, each at most the firmware's speed limit) and an overshoot ``momentum`` (m) that fades with
+    ``slow_s`` from ``since``; a pose anywhere on the segment between the two followers, or within the overshoot
+    past the slow one, follows. Once a landing drone reaches the floor (`touch`) it may stop there or
     slide on to its point: anywhere from where the followers were then to where they are now follows too.
     ``key``: the take-off's or landing's start (a new one starts a new follower); None while the drone plans,
     holds or hovers (both constants then the position loop's: one point)."""
 
     def __init__(self, key: Optional[float], at: complex, now_s: float, momentum: complex, fast_s: float,
-                 slow_s: float) -> None:
+                 slow_s: float, model: Optional[Follower] = None) -> None:
         self.key = key
         self.fast = self.slow = at
         self.then = self.since = now_s
         self.momentum = momentum
         self.fast_s, self.slow_s = fast_s, slow_s
+        self.model = model
+        """While the drone streams: its own controller's response (`response.Follower`), the slow edge."""
         self.touched: Optional[tuple[complex, complex]] = None
 
     def step(self, setpoint: complex, now_s: float) -> None:
         """Advance to ``now_s`` towards ``setpoint``."""
         dt = max(0.0, min(now_s - self.then, 0.1))
         self.then = now_s
-        if dt > 0.0:
+        if self.model is not None:
+            self.fast = self.slow = self.model.step(setpoint, dt)
+        elif dt > 0.0:
             limit = TRACKING_SPEED_M_S * dt
             for name, tau in (("fast", self.fast_s), ("slow", self.slow_s)):
                 at = getattr(self, name)
@@ -262,7 +284,10 @@ class Finding:
 class Supervisor:
     """Stateless checks plus the memory needed for edge-triggered events."""
 
-    def __init__(self, mission: Mission, obstacles: ObstacleSet):
+    def __init__(self, mission: Mission, obstacles: ObstacleSet, first_order: frozenset[str] = frozenset()):
+        """``first_order``: drones simulated with the first-order model, whose tracking is followed with it (every
+        other drone's with its own controller's response: `_Follower`)."""
+        self.first_order = first_order
         self.mission = mission
         self.safety = mission.safety
         self.obstacles = obstacles
@@ -523,17 +548,25 @@ class Supervisor:
         tracked = [(n, p) for n, p in tracked[:own] if p is not None] + \
             [(n, p) for n, p in tracked[own:] if p is not None]
         mine = {n for n, _ in tracked} - set(foreign)
+        commanded = {a.name: a for a in agents if a.phase.airborne}
         for i, (ni, pi) in enumerate(tracked):
             if ni not in mine:
                 break  # two drones of other processes: theirs to check
             for nj, pj in tracked[i + 1 :]:
                 d = sum((u - v) ** 2 for u, v in zip(pi.position, pj.position)) ** 0.5
-                if d < 2 * self.r:
+                ahead = self._stopped_apart(pi, pj, commanded.get(ni), commanded.get(nj), tracker.latency_s)
+                pair = (ni, nj)
+                held = pair in self._close_pairs and (
+                    min(d, ahead) < 2 * self.r + RESUME_MARGIN_M or max(abs(pi.velocity), abs(pj.velocity)) > REST_M_S)
+                if min(d, ahead) < 2 * self.r or held:
                     pair = (ni, nj)
                     close_now.add(pair)
                     if pair not in self._close_pairs:
                         response = self.safety.on_separation
                         message = f"separation {d:.3f} m from {nj} is below 2r = {2 * self.r:.2f} m"
+                        if d >= 2 * self.r:
+                            message = (f"separation {d:.3f} m from {nj}, closing: braking from here they would "
+                                       f"come within {ahead:.3f} m, below 2r = {2 * self.r:.2f} m")
                         out.append(Finding("separation", ERROR, message, ni, response))
                         if response != "warn" and nj in mine:
                             out.append(Finding("separation", ERROR, f"separation {d:.3f} m from {ni}", nj, response))
@@ -543,6 +576,28 @@ class Supervisor:
                 out.append(Finding("separation", INFO, "separation restored: resuming", name, "resume"))
         self._close_pairs = close_now
         return out
+
+    @staticmethod
+    def _stop_point(pose: TrackedPose, agent: Optional[DroneAgent], latency_s: Optional[float]) -> complex:
+        """Where a drone at ``pose`` comes to rest if it is held now: its mocap picture is ``latency_s`` old and the
+        hold reaches it `HOLD_REACTION_S` later, flown at its speed, then it brakes as its own controller does from
+        the tilt its streamed setpoint asks for (`Braking.stop_point`; a drone this process does not command, as the
+        firmware's defaults in steady flight)."""
+        braking = agent.braking if agent is not None else braking_for(None)
+        setpoint = agent.last_setpoint if agent is not None and agent.phase in STREAMING_PHASES else None
+        ahead = pose.xy + pose.velocity * (HOLD_REACTION_S + (latency_s or 0.0))
+        return braking.stop_point(ahead, pose.velocity, setpoint)
+
+    def _stopped_apart(self, pi: TrackedPose, pj: TrackedPose, ai: Optional[DroneAgent], aj: Optional[DroneAgent],
+                       latency_s: Optional[float]) -> float:
+        """The closest two drones come if both are held now (3D, centre to centre): each flies on to its
+        `_stop_point`, both taken to cover their way in step."""
+        a0, b0 = pi.xy, pj.xy
+        a1, b1 = self._stop_point(pi, ai, latency_s), self._stop_point(pj, aj, latency_s)
+        start, change = b0 - a0, (b1 - b0) - (a1 - a0)
+        s = 0.0 if abs(change) < 1e-12 else min(1.0, max(0.0, -(start * change.conjugate()).real / abs(change) ** 2))
+        dz = pi.position[2] - pj.position[2]
+        return math.hypot(abs(start + s * change), dz)
 
     def _obstacles(self, agents: list[DroneAgent], tracker: PoseTracker) -> list[Finding]:
         if self.obstacles.is_empty:
@@ -554,10 +609,18 @@ class Supervisor:
             if pose is None:
                 continue
             clearance = float(self.obstacles.signed_distance(pose.xy))
-            if clearance < self.r:
+            stop = self._stop_point(pose, a, tracker.latency_s)
+            way = pose.xy + (stop - pose.xy) * np.linspace(0.25, 1.0, 4)  # on its way to rest
+            ahead = float(np.min(self.obstacles.signed_distance(way)))
+            held = a.name in self._near_obstacle and (
+                min(clearance, ahead) < self.r + RESUME_MARGIN_M or abs(pose.velocity) > REST_M_S)
+            if min(clearance, ahead) < self.r or held:
                 near_now.add(a.name)
                 if a.name not in self._near_obstacle:
                     message = f"obstacle clearance {clearance:.3f} m is below r = {self.r:.2f} m"
+                    if clearance >= self.r:
+                        message = (f"obstacle clearance {clearance:.3f} m, closing: braking from here it would come "
+                                   f"within {ahead:.3f} m, below r = {self.r:.2f} m")
                     out.append(Finding("obstacle", ERROR, message, a.name, self.safety.on_obstacle))
         if self.safety.on_obstacle == "hold":
             for name in self._near_obstacle - near_now:
@@ -778,8 +841,10 @@ class Supervisor:
                 if on_floor:  # first seen on the floor (landed blind, or not yet lifted): nothing to follow
                     self._predicted.pop(a.name, None)
                     continue
+                cascade = not planned and a.name not in self.first_order
+                model = Follower(a.braking.gains, pose.xy, pose.velocity) if cascade else None
                 follower = _Follower(key, pose.xy, now_s, pose.velocity * TRACKING_PLAN_TAU_S if planned else 0j,
-                                     TRACKING_TAU_S, TRACKING_PLAN_TAU_S if planned else TRACKING_TAU_S)
+                                     TRACKING_TAU_S, TRACKING_PLAN_TAU_S if planned else TRACKING_TAU_S, model)
                 self._predicted[a.name] = follower
             follower.step(setpoint, now_s)
             if on_floor:

@@ -98,3 +98,41 @@ def test_waiting_is_not_computing_the_drone_is_not_blamed_for_a_stalled_thread()
     agent.budget_s = 0.01
     agent.begin_planning(0j, 0.0)
     assert agent.plan(None, 0j).setpoint == pytest.approx(0.5 * 0.1)  # one step at the mission speed
+
+
+def test_the_carrot_may_lead_by_the_drones_steady_lag_at_the_mission_speed():
+    """A firmware-default drone trails a moving setpoint by 0.55 s x speed: held within 0.3 m, a 1 m/s mission's
+    carrot would cap it at 0.6 m/s. The lead allowed is 1.25 times the steady lag, at least what was given."""
+    fast = make_agent()
+    fast.speed = 1.0
+    fast.set_controller(None)
+    assert fast.max_lead_m == pytest.approx(1.25 * 1.0 * 0.5496, abs=0.002)
+    slow = make_agent()  # 0.5 m/s: 0.34 m
+    assert slow.max_lead_m == pytest.approx(1.25 * 0.5 * 0.5496, abs=0.002)
+    stiff = make_agent()
+    stiff.set_controller({"posCtlPid.xKp": 4.0})  # a stiffer position loop trails less: never under 0.3 m
+    assert stiff.max_lead_m == pytest.approx(0.3)
+    fixed = make_agent(max_lead_m=0.2)
+    fixed.set_controller(None)
+    assert fixed.max_lead_m == 0.2  # a caller's own lead stands
+
+
+def test_a_hold_at_speed_brings_the_drone_to_rest_ahead_and_moves_up_as_it_slows():
+    agent = make_agent()
+    agent.begin_planning(0j, 0.0)
+    agent.last_setpoint = 0.55 + 0j  # the carrot ahead of a drone flying +x at 1 m/s
+    agent.hold(0j, 1.0, "separation", velocity=1.0 + 0j)
+    first = agent.hold_point
+    stop = agent.braking.stop_point(0j, 1.0 + 0j, 0.55 + 0j)
+    assert abs(first.imag) < 1e-9 and first.real < stop.real  # on its way, short of where it stops
+    agent.refine_hold(0.2 + 0j, 0.4 + 0j)  # braked to 0.4 m/s 0.2 m on
+    assert first.real < agent.hold_point.real <= stop.real + 1e-9
+    before = agent.hold_point
+    agent.refine_hold(0.25 + 0j, -0.1 + 0j)  # turned back: the point stays
+    assert agent.hold_point == before
+    agent.last_setpoint = 0j
+    agent.hold(0j, 2.0, "separation")  # at rest where it was told to be: there
+    assert agent.hold_point == 0j
+    agent.last_setpoint = 0.55 + 0j
+    agent.hold(0j, 3.0, "separation")  # at rest, but asked ahead (tilting to go): a little behind, against it
+    assert -0.1 < agent.hold_point.real < 0.0
