@@ -8,9 +8,10 @@
     python tools/fault_campaign.py --random 16 --seed 16 --extpose --faults-per-run 2 --vary-world --only 14 \
         --keep /tmp/run14 --out -                         # re-fly one run of that campaign, keeping its log
     python tools/fault_campaign.py --kinds ground_station_kill,dongle_unplug --out -   # the lab kinds' 10 runs
+    python tools/fault_campaign.py --dynamics firmware   # every run's simulated drones on the firmware's PID cascade
 
 A lab flies the same campaign on its own mission with ``rpf-fly campaign MISSION``. The report goes to ``--out``
-(default docs/fault-campaign/<fixed|PLANNER|random-seedS|compound-seedS>[-extpose].md), the verdicts as JSON to
+(default docs/fault-campaign/<fixed|PLANNER|random|compound>[-extpose][-firmware][-seedS].md), the verdicts as JSON to
 ``--json``; exit 0 when every run passed, 1 otherwise, 2 for bad options.
 """
 
@@ -62,6 +63,8 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--vary-world", action="store_true", help="the random campaign's simulated world drawn from a "
                    "seed of each run's own (dry_run.seed = seed * 1000 + run) instead of 0")
     p.add_argument("--extpose", action="store_true", help="fly each mission with radio.extpos: extpose")
+    p.add_argument("--dynamics", default=None, choices=("first-order", "firmware"),
+                   help="how every run's simulated drones fly (dry_run.dynamics; default: each mission's own)")
     p.add_argument("--only", default=None, metavar="RUNS", help="the random campaign's runs to fly, comma-separated "
                    "(the draws are the whole campaign's)")
     p.add_argument("--keep", default=None, metavar="DIR", help="fly in DIR and keep each run's mission copy, fault "
@@ -83,14 +86,15 @@ def main(argv: list[str] | None = None) -> int:
         result = maintainers_campaign(_list(args.missions), _list(args.kinds), args.planner, args.random, args.seed,
                                       _list(args.planners), args.faults_per_run, args.vary_world, args.extpose, only,
                                       Path(args.keep) if args.keep else None,
-                                      on_verdict=lambda v: print(progress_line(v), flush=True))
+                                      on_verdict=lambda v: print(progress_line(v), flush=True),
+                                      dynamics=args.dynamics)
     except CampaignError as err:
         p.error(str(err))
     if args.out == "-":
         print(result.markdown())
     else:
         out = Path(args.out) if args.out else default_report(args.planner, args.random, args.seed,
-                                                             args.faults_per_run, args.extpose)
+                                                             args.faults_per_run, args.extpose, args.dynamics)
         out.write_text(result.markdown())
         print(f"report: {out}")
     if args.json:

@@ -1,8 +1,9 @@
 """The missions a campaign flies: shipped ones by name, and copies that change one thing (the planner, the extpos
-packet, the simulated world's seed) so one campaign can fly the same scenes another way.
+packet, the simulated drones' dynamics, the simulated world's seed) so one campaign can fly the same scenes another
+way.
 
 A copy keeps the mission's name (the report reads as the original's) and lives in the campaign's work folder; its
-policy path is made absolute, so it still finds the policy from there.
+policy and vehicle profile paths are made absolute, so it still finds them from there.
 """
 
 from __future__ import annotations
@@ -19,6 +20,8 @@ FIXED_MISSIONS = "lab-3,circle-8-r3"
 """The fixed campaign's missions."""
 RANDOM_MISSIONS = "lab-3,circle-8-r3,arena-a-6,arena-b-6,u-trap"
 """The shipped missions the random campaign draws from (the 40-drone ones are the distributed flight's)."""
+DYNAMICS = ("first-order", "firmware")
+"""How a dry run's simulated drones may fly (``dry_run.dynamics``, docs/dynamics.md "The simulated drone")."""
 
 
 def mission_path(name: str) -> Path:
@@ -36,6 +39,9 @@ def _copy(mission_path: Path, workdir: Path, suffix: str, change: Callable[[dict
     policy = (doc.get("planner") or {}).get("policy")
     if policy and (mission_path.parent / policy).exists():
         doc["planner"]["policy"] = str((mission_path.parent / policy).resolve())
+    vehicle = (doc.get("dry_run") or {}).get("vehicle")
+    if isinstance(vehicle, str) and (mission_path.parent / vehicle).exists():
+        doc["dry_run"]["vehicle"] = str((mission_path.parent / vehicle).resolve())
     doc.setdefault("name", mission_path.stem)
     copy = workdir / f"{mission_path.stem}.{suffix}.yaml"
     copy.write_text(yaml.safe_dump(doc, sort_keys=False))
@@ -50,6 +56,19 @@ def with_extpose(mission_path: Path, workdir: Path) -> Path:
         doc["radio"] = {**(doc.get("radio") or {}), "extpos": "extpose"}
 
     return _copy(mission_path, workdir, "extpose", change)
+
+
+def with_dynamics(mission_path: Path, dynamics: str, workdir: Path) -> Path:
+    """A copy whose simulated drones fly ``dynamics`` (``dry_run.dynamics``: ``first-order``, the emulator's lag,
+    or ``firmware``, the firmware's PID cascade on the identified body; a lab started on the copy flies it too), so
+    a campaign's verdicts can be had on either model."""
+    if dynamics not in DYNAMICS:
+        raise ValueError(f"dynamics: expected {' or '.join(DYNAMICS)}, got {dynamics!r}")
+
+    def change(doc: dict[str, Any]) -> None:
+        doc["dry_run"] = {**(doc.get("dry_run") or {}), "dynamics": dynamics}
+
+    return _copy(mission_path, workdir, dynamics, change)
 
 
 def with_planner_kind(mission_path: Path, kind: str, workdir: Path) -> Path:

@@ -18,8 +18,8 @@ from typing import Any, Callable, Iterator, Optional
 
 from rpf_fly.campaign.flights import fly_against_lab, fly_dry_run
 from rpf_fly.campaign.judge import Verdict, judge_flight, judge_lab
-from rpf_fly.campaign.missions import (FIXED_MISSIONS, RANDOM_MISSIONS, ROOT, mission_path, with_extpose,
-                                       with_planner_kind, with_world_seed)
+from rpf_fly.campaign.missions import (DYNAMICS, FIXED_MISSIONS, RANDOM_MISSIONS, ROOT, mission_path, with_dynamics,
+                                       with_extpose, with_planner_kind, with_world_seed)
 from rpf_fly.campaign.report import as_json, markdown, source_revision
 from rpf_fly.campaign.schedules import (ALL_KINDS, DEFAULTS, LAB_KINDS, LAB_RUNS, ScheduleError, check_kinds,
                                         draw_faults, lab_faults, middle_drone_fault)
@@ -97,13 +97,13 @@ def fixed_runs(mission_file: Path, kinds: list[str], workdir: Path, on_verdict: 
 def random_campaign(runs: int, seed: int, missions: list[str], planners: list[str], workdir: Path,
                     kinds: Optional[list[str]] = None, extpose: bool = False, faults_per_run: int = 1,
                     vary_world: bool = False, only: Optional[set[int]] = None,
-                    on_verdict: OnVerdict = _ignore) -> list[Verdict]:
+                    on_verdict: OnVerdict = _ignore, dynamics: Optional[str] = None) -> list[Verdict]:
     """``runs`` flights, each a mission and planner (``mission``: its own) drawn from ``seed`` and ``faults_per_run``
     faults of different kinds (of ``kinds``, default every dry-run kind), each with its drone, time and parameters
     drawn (`rpf_fly.campaign.schedules.draw_faults`). ``vary_world``: run k of seed S flies the simulated world of
     seed ``S * 1000 + k`` instead of every dry run's 0, so a drone's IMU bias (where it drifts blind) differs from
     run to run. ``only``: fly just these runs (every run's draw is still made, in order, so run k is the campaign's
-    run k)."""
+    run k). ``dynamics``: how the simulated drones fly (`with_dynamics`; default each mission's own)."""
     rng = random.Random(seed)
     verdicts = []
     for run in range(runs):
@@ -114,6 +114,8 @@ def random_campaign(runs: int, seed: int, missions: list[str], planners: list[st
             path = with_planner_kind(path, planner, workdir)
         if extpose:
             path = with_extpose(path, workdir)
+        if dynamics:
+            path = with_dynamics(path, dynamics, workdir)
         if vary_world:
             path = with_world_seed(path, seed * 1000 + run, workdir)
         faults, draws = draw_faults(rng, load_mission(path), kinds, faults_per_run)
@@ -129,9 +131,10 @@ def random_campaign(runs: int, seed: int, missions: list[str], planners: list[st
 
 
 def lab_runs(kinds: list[str], missions: Optional[list[str]], planner: Optional[str], extpose: bool,
-             workdir: Path) -> list[tuple[str, Path, dict[str, Any]]]:
+             workdir: Path, dynamics: Optional[str] = None) -> list[tuple[str, Path, dict[str, Any]]]:
     """The lab kinds' runs among ``kinds`` (kind, mission file, fault): `LAB_RUNS` without ``missions``, else each
-    lab kind on each of those missions (`rpf_fly.campaign.schedules.lab_faults`)."""
+    lab kind on each of those missions (`rpf_fly.campaign.schedules.lab_faults`); the lab's drones fly
+    ``dynamics`` when given."""
     if missions is None:
         chosen = [(kind, ROOT / "missions" / f"{name}.yaml", {"kind": kind, **fields})
                   for kind, name, fields in LAB_RUNS if kind in kinds]
@@ -144,6 +147,8 @@ def lab_runs(kinds: list[str], missions: Optional[list[str]], planner: Optional[
             path = with_planner_kind(path, planner, workdir)
         if extpose:
             path = with_extpose(path, workdir)
+        if dynamics:
+            path = with_dynamics(path, dynamics, workdir)
         runs.append((kind, path, fault))
     return runs
 
@@ -169,6 +174,24 @@ def _check_numbers(random_runs: int, faults_per_run: int) -> None:
         raise CampaignError(f"--faults-per-run: expected 1 to {len(DEFAULTS)} faults a run, got {faults_per_run}")
 
 
+def _check_dynamics(dynamics: Optional[str], missions: list[Path]) -> None:
+    """``--dynamics``: a model the simulated drone has, and one each mission can fly (a vehicle profile,
+    ``dry_run.vehicle``, sets the firmware model's gains)."""
+    if dynamics is None:
+        return
+    if dynamics not in DYNAMICS:
+        raise CampaignError(f"--dynamics: expected {' or '.join(DYNAMICS)}, got {dynamics!r}")
+    if dynamics == "first-order":
+        for path in missions:
+            try:
+                vehicle = load_mission(path).dry_run.vehicle
+            except MissionError as err:
+                raise CampaignError(str(err)) from None
+            if vehicle is not None:
+                raise CampaignError(f"--dynamics first-order: {path} gives a vehicle profile (dry_run.vehicle), "
+                                    "which sets the firmware model's gains: it flies firmware only")
+
+
 def _check_out(out: Optional[Path]) -> None:
     if out is not None and not out.parent.is_dir():
         raise CampaignError(f"--out: {out}: its folder {out.parent} does not exist")
@@ -176,13 +199,14 @@ def _check_out(out: Optional[Path]) -> None:
 
 def mission_campaign(mission_file: Path, kinds: Optional[list[str]] = None, random_runs: int = 0, seed: int = 0,
                      faults_per_run: int = 2, out: Optional[Path] = None, keep: Optional[Path] = None,
-                     on_verdict: OnVerdict = _ignore) -> CampaignResult:
+                     on_verdict: OnVerdict = _ignore, dynamics: Optional[str] = None) -> CampaignResult:
     """A lab's campaign on its own mission before a first flight. Without ``random_runs``: each kind of ``kinds``
     (default every kind) on its own dry run, its default fault on the middle drone, the lab kinds against a lab of
     their own (the kill in each phase, the unplug of the highest dongle). With ``random_runs``: that many dry runs,
     each with ``faults_per_run`` faults of different kinds drawn from ``seed`` (drone, time, parameters) in a
-    simulated world of its own. The report goes to ``out`` when given. Bad input is a `CampaignError` before
-    anything flies."""
+    simulated world of its own. ``dynamics``: how the simulated drones fly (``first-order`` or ``firmware``; default
+    the mission's own ``dry_run.dynamics``), in every run, the labs' too. The report goes to ``out`` when given. Bad
+    input is a `CampaignError` before anything flies."""
     try:
         mission = load_mission(mission_file)
     except MissionError as err:
@@ -191,13 +215,17 @@ def mission_campaign(mission_file: Path, kinds: Optional[list[str]] = None, rand
         raise CampaignError(f"{mission_file}: {err.strerror or err}") from None
     _check_numbers(random_runs, faults_per_run)
     checked = _kinds(kinds, random_runs)
+    _check_dynamics(dynamics, [mission_file])
     _check_out(out)
     command = f"rpf-fly campaign {shlex.quote(str(mission_file))}"
     mission_file = mission_file.resolve()  # the runs fly in their work folder
     command += f" --kinds {','.join(checked)}" if checked is not None else ""
     if random_runs:
         command += f" --random {random_runs} --seed {seed} --faults-per-run {faults_per_run}"
+    command += f" --dynamics {dynamics}" if dynamics else ""
     with _workdir(keep) as workdir:
+        if dynamics:
+            mission_file = with_dynamics(mission_file, dynamics, workdir)
         if random_runs:
             verdicts = random_campaign(random_runs, seed, [str(mission_file)], ["mission"], workdir, checked,
                                        faults_per_run=faults_per_run, vary_world=True, on_verdict=on_verdict)
@@ -213,13 +241,15 @@ def mission_campaign(mission_file: Path, kinds: Optional[list[str]] = None, rand
     return result
 
 
-def default_report(planner: Optional[str], random_runs: int, seed: int, faults_per_run: int, extpose: bool) -> Path:
+def default_report(planner: Optional[str], random_runs: int, seed: int, faults_per_run: int, extpose: bool,
+                   dynamics: Optional[str] = None) -> Path:
     """Where the maintainers' campaign writes its report: docs/fault-campaign/<name>.md, the name saying what flew
-    (fixed, the planner's kind, random or compound with the seed; -extpose)."""
+    (fixed, the planner's kind, random or compound with the seed; -extpose; -firmware on the firmware model)."""
+    variant = ("-extpose" if extpose else "") + ("-firmware" if dynamics == "firmware" else "")
     if random_runs:
-        name = f"{'compound' if faults_per_run > 1 else 'random'}{'-extpose' if extpose else ''}-seed{seed}"
+        name = f"{'compound' if faults_per_run > 1 else 'random'}{variant}-seed{seed}"
     else:
-        name = f"{planner or 'fixed'}{'-extpose' if extpose else ''}"
+        name = f"{planner or 'fixed'}{variant}"
     return ROOT / "docs" / "fault-campaign" / f"{name}.md"
 
 
@@ -227,13 +257,17 @@ def maintainers_campaign(missions: Optional[list[str]] = None, kinds: Optional[l
                          planner: Optional[str] = None, random_runs: int = 0, seed: int = 0,
                          planners: Optional[list[str]] = None, faults_per_run: int = 1, vary_world: bool = False,
                          extpose: bool = False, only: Optional[set[int]] = None, keep: Optional[Path] = None,
-                         on_verdict: OnVerdict = _ignore) -> CampaignResult:
+                         on_verdict: OnVerdict = _ignore, dynamics: Optional[str] = None) -> CampaignResult:
     """The maintainers' campaign over shipped missions (tools/fault_campaign.py; its options, the same names).
     Fixed: each kind on each of ``missions`` (default lab-3, circle-8-r3), ``planner`` instead of each mission's
     own; the lab kinds on `LAB_RUNS` (on ``missions`` when given). Random: `random_campaign` over ``missions``
-    (default `RANDOM_MISSIONS`) and ``planners`` (default the mission's own and rpf3)."""
+    (default `RANDOM_MISSIONS`) and ``planners`` (default the mission's own and rpf3). ``dynamics``: every run's
+    simulated drones fly that model (`with_dynamics`; default each mission's own)."""
     _check_numbers(random_runs, faults_per_run)
     checked = _kinds(kinds, random_runs)
+    flown = missions or (RANDOM_MISSIONS if random_runs else FIXED_MISSIONS).split(",")
+    labs = [] if random_runs or missions else [name for _k, name, _f in LAB_RUNS]
+    _check_dynamics(dynamics, [mission_path(name) for name in dict.fromkeys(flown + labs)])
     planners = planners or ["mission", "rpf3"]
     command = "python tools/fault_campaign.py"
     command += f" --missions {','.join(missions)}" if missions else ""
@@ -245,10 +279,11 @@ def maintainers_campaign(missions: Optional[list[str]] = None, kinds: Optional[l
         command += " --vary-world" if vary_world else ""
         command += f" --only {','.join(map(str, sorted(only)))}" if only else ""
     command += " --extpose" if extpose else ""
+    command += f" --dynamics {dynamics}" if dynamics else ""
     with _workdir(keep) as workdir:
         if random_runs:
             verdicts = random_campaign(random_runs, seed, missions or RANDOM_MISSIONS.split(","), planners, workdir,
-                                       checked, extpose, faults_per_run, vary_world, only, on_verdict)
+                                       checked, extpose, faults_per_run, vary_world, only, on_verdict, dynamics)
         else:
             every = checked or list(ALL_KINDS)
             verdicts = []
@@ -256,8 +291,9 @@ def maintainers_campaign(missions: Optional[list[str]] = None, kinds: Optional[l
                 path = mission_path(name)
                 path = with_planner_kind(path, planner, workdir) if planner else path
                 path = with_extpose(path, workdir) if extpose else path
+                path = with_dynamics(path, dynamics, workdir) if dynamics else path
                 verdicts += fixed_runs(path, every, workdir, on_verdict)
-            for _kind, path, fault in lab_runs(every, missions, planner, extpose, workdir):
+            for _kind, path, fault in lab_runs(every, missions, planner, extpose, workdir, dynamics):
                 verdicts.append(fly_and_judge_lab(fault, path, workdir))
                 on_verdict(verdicts[-1])
     return CampaignResult(command, source_revision(), verdicts)

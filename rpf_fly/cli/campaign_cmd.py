@@ -28,6 +28,10 @@ def campaign(
     keep: Optional[Path] = typer.Option(None, "--keep", help="Fly in this folder and keep each run's schedule, "
                                         "mission copy and logs (to review a failed run)."),
     json_out: bool = typer.Option(False, "--json", help="Print the verdicts as one JSON document."),
+    dynamics: Optional[str] = typer.Option(None, "--dynamics", metavar="first-order|firmware", help="How the "
+                                           "simulated drones fly in every run: first-order (the emulator's lag) or "
+                                           "firmware (the firmware's PID cascade; docs/dynamics.md). Default: the "
+                                           "mission's dry_run.dynamics."),
 ) -> None:
     """Inject each fault kind into dry runs of MISSION and judge every run on the simulated truth."""
     from rpf_fly.campaign import CampaignError, mission_campaign
@@ -39,7 +43,7 @@ def campaign(
 
     try:
         result = mission_campaign(mission, kinds.split(",") if kinds is not None else None, random_runs, seed,
-                                  faults_per_run, out, keep, on_verdict=said)
+                                  faults_per_run, out, keep, on_verdict=said, dynamics=dynamics)
     except CampaignError as err:
         raise fail(str(err))
     if json_out:
