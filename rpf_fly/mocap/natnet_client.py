@@ -33,15 +33,14 @@ from __future__ import annotations
 import dataclasses
 import ipaddress
 import logging
-import math
 import select
 import socket
-import sys
 import time
 from types import TracebackType
 from typing import Mapping
 
-from rpf_fly.mocap.frame import NO_UNSEEN, MocapFrame, MocapStats, RigidBodyPose
+from rpf_fly.mocap.frame import NO_UNSEEN, MocapFrame, MocapStats
+from rpf_fly.mocap.natnet_delivery import NewestFrame, camera_latency_s, rigid_body_poses
 from rpf_fly.mocap.natnet_protocol import (
     UNRECOGNIZED_REQUEST_ALT,
     ConnectRequest,
@@ -63,38 +62,23 @@ from rpf_fly.mocap.natnet_protocol import (
     encode_keepalive,
     encode_request_model_def,
 )
+from rpf_fly.mocap.natnet_sockets import open_command_socket, open_data_socket, resolve_ipv4
 
 __all__ = ["NatNetClient"]
 
 _log = logging.getLogger(__name__)
 
-#: Frames at most this many numbers older than the last one are stale (reordered or duplicated); a bigger jump
-#: back means Motive restarted or a take looped, and is accepted as new.
-REORDER_WINDOW = 16
 #: Most datagrams handled per drain, so a flood cannot trap ``receive()``.
 _MAX_DRAIN = 4096
 #: Minimum seconds between MODELDEF requests, and between re-requests caused by unknown rigid-body ids.
 _MODEL_REQUEST_GAP_S = 0.1
 _UNKNOWN_ID_INTERVAL_S = 1.0
-#: A body's untracked run inside frames the caller skipped is reported (`MocapFrame.unseen_untracked_s`) from this
-#: long: the flight supervisor's ``POSE_LATE_S``, what it says of a pose gap it sees live.
-_UNSEEN_S = 0.1
 #: Consecutive undecodable frames after which CONNECT is re-sent to re-learn the bitstream version.
 _BAD_FRAMES_RECONNECT = 10
 #: Minimum seconds between repeated warnings of one kind.
 _WARN_INTERVAL_S = 5.0
 #: NatNet identification we send in CONNECT (NatNetLib's 264-byte layout); our newest decodable bitstream.
 _CLIENT_NATNET_VERSION = (4, 2, 0, 0)
-
-
-def _resolve_ipv4(host: str) -> str:
-    """The IPv4 address of ``host`` (NatNet is IPv4 only)."""
-    return socket.getaddrinfo(host, None, socket.AF_INET, socket.SOCK_DGRAM)[0][4][0]
-
-
-def _is_newer(candidate: int, reference: int) -> bool:
-    """Frame ``candidate`` is newer than ``reference`` (allowing for restarts, see REORDER_WINDOW)."""
-    return candidate > reference or reference - candidate > REORDER_WINDOW
 
 
 class NatNetClient:
@@ -148,7 +132,7 @@ class NatNetClient:
         self._connect_retry_s = connect_retry_s
         self._model_retry_s = model_retry_s
         self._client_name = client_name
-        server_ip = _resolve_ipv4(server)
+        server_ip = resolve_ipv4(server)
         self._server_addr = (server_ip, command_port)
         self._server_ip = server_ip
         if local_ip in ("0.0.0.0", "") and ipaddress.IPv4Address(server_ip).is_loopback:
@@ -161,16 +145,7 @@ class NatNetClient:
         self._version: Version | None = None
         self._models: ModelDefinitions | None = None
         self._names: dict[int, str] = {}
-        self._pending: tuple[FrameOfData, float] | None = None
-        self._last_delivered: int | None = None
-        self._skipped_untracked: dict[int, list[float]] = {}
-        """Body id -> [start, end, longest] of its runs of untracked poses in the frames skipped since the last
-        delivery (superseded before the caller read them): the open run's first and last server time (start NaN
-        when none is open) and the longest closed one. Empty while the caller keeps up, so the normal path pays
-        nothing."""
-        self._skipped = 0
-        self._previous: FrameOfData | None = None
-        """The frame delivered last."""
+        self._frames = NewestFrame()
         self._last_connect = -1e9
         self._last_keepalive = -1e9
         self._last_model_request = -1e9
@@ -197,33 +172,13 @@ class NatNetClient:
     # ----------------------------------------------------------------------------------------------- sockets
 
     def _open_command_socket(self) -> socket.socket:
-        sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM, socket.IPPROTO_UDP)
-        try:
-            sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4 << 20)
-            sock.bind((self._local_ip, 0))
-            sock.setblocking(False)
-        except OSError:
-            sock.close()
-            raise
+        sock = open_command_socket(self._local_ip)
         self._sockets.append(sock)
         return sock
 
     def _open_data_socket(self, port: int) -> socket.socket:
-        sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM, socket.IPPROTO_UDP)
-        try:
-            sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-            sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4 << 20)
-            if self._multicast:
-                # Linux filters by destination when bound to the group; Windows can only bind INADDR_ANY.
-                sock.bind((self._group if sys.platform.startswith("linux") else "", port))
-                membership = socket.inet_aton(self._group) + socket.inet_aton(self._membership_ip)
-                sock.setsockopt(socket.IPPROTO_IP, socket.IP_ADD_MEMBERSHIP, membership)
-            else:
-                sock.bind((self._local_ip, port))
-            sock.setblocking(False)
-        except OSError:
-            sock.close()
-            raise
+        sock = open_data_socket(port, multicast=self._multicast, group=self._group,
+                                membership_ip=self._membership_ip, local_ip=self._local_ip)
         self._sockets.append(sock)
         _log.info(
             "NatNet data socket on port %d (%s)",
@@ -309,7 +264,7 @@ class NatNetClient:
             self._drain()
             now = time.monotonic()
             self._service(now)
-            if self._pending is not None:
+            if self._frames.pending is not None:
                 return self._deliver()
             if not self._wait(deadline, now):
                 return None
@@ -415,13 +370,8 @@ class NatNetClient:
                 self.handle_packet(packet, source, time.monotonic())
 
     def _deliver(self) -> MocapFrame:
-        pending = self._pending
-        if pending is None:
-            raise RuntimeError("no pending frame to deliver")
-        data, received = pending
-        self._pending = None
-        self._last_delivered = data.frame_number
-        frame = self._to_mocap_frame(data, received, self._unseen(data))
+        data, received, unseen = self._frames.take(self._names)
+        frame = self._to_mocap_frame(data, received, unseen)
         self._stats.delivered += 1
         return frame
 
@@ -559,85 +509,16 @@ class NatNetClient:
         stats.frames += 1
         if data.models_changed:
             self._model_stale = True
-        pending = self._pending
-        if pending is not None:
-            stats.superseded += 1
-            if _is_newer(data.frame_number, pending[0].frame_number):
-                self._skip(pending[0])
-                self._pending = (data, receive_time_s)
-        elif self._last_delivered is not None and not _is_newer(data.frame_number, self._last_delivered):
-            stats.superseded += 1  # duplicate or reordered: older than what the caller already has
-        else:
-            self._pending = (data, receive_time_s)
-
-    def _skip(self, data: FrameOfData) -> None:
-        """Note the untracked bodies of a frame the caller will never get (superseded by a newer one)."""
-        self._skipped += 1
-        t, runs = data.timestamp, self._skipped_untracked
-        for rb in data.rigid_bodies:
-            run = runs.get(rb.id)
-            if rb.params & 0x01:
-                if run is not None and run[0] == run[0]:  # an open run ends (NaN != NaN: none open)
-                    run[2] = max(run[2], run[1] - run[0])
-                    run[0] = math.nan
-            elif run is None:
-                runs[rb.id] = [t, t, 0.0]
-            else:
-                if run[0] != run[0]:
-                    run[0] = t
-                run[1] = t
-
-    def _unseen(self, data: FrameOfData) -> Mapping[str, float]:
-        """`MocapFrame.unseen_untracked_s` of the frame about to be delivered: the bodies' untracked runs in the
-        frames skipped since the last delivery, each plus one frame interval (it was tracked a frame before and a
-        frame after), of bodies tracked in the previous delivered frame and in this one (so the caller saw neither
-        end), at least ``_UNSEEN_S`` long."""
-        previous, self._previous = self._previous, data
-        skipped, self._skipped = self._skipped, 0
-        runs = self._skipped_untracked
-        if not runs:
-            return NO_UNSEEN
-        self._skipped_untracked = {}
-        if previous is None:
-            return NO_UNSEEN
-        interval = (data.timestamp - previous.timestamp) / (skipped + 1)
-        before = {rb.id for rb in previous.rigid_bodies if rb.params & 0x01}
-        now = {rb.id for rb in data.rigid_bodies if rb.params & 0x01}
-        unseen = {}
-        for i, (start, end, longest) in runs.items():
-            gap = max(longest, end - start if start == start else 0.0) + interval
-            if gap >= _UNSEEN_S and i in before and i in now:
-                unseen[self._names.get(i, str(i))] = gap
-        return unseen or NO_UNSEEN
+        if self._frames.offer(data, receive_time_s):
+            stats.superseded += 1  # the waiting frame, or a duplicate or reordered one older than the caller's
 
     def _to_mocap_frame(self, data: FrameOfData, received: float,
                         unseen: Mapping[str, float] = NO_UNSEEN) -> MocapFrame:
-        names = self._names
-        y_up = self._y_up
-        bodies: dict[str, RigidBodyPose] = {}
-        unknown = False
-        dropouts = 0
-        for rb in data.rigid_bodies:
-            name = names.get(rb.id)
-            if name is None:
-                name = str(rb.id)
-                unknown = True
-            if y_up:
-                position = (rb.x, -rb.z, rb.y)
-                quaternion = (rb.qx, -rb.qz, rb.qy, rb.qw)
-            else:
-                position = (rb.x, rb.y, rb.z)
-                quaternion = (rb.qx, rb.qy, rb.qz, rb.qw)
-            valid = bool(rb.params & 0x01)
-            dropouts += not valid
-            bodies[name] = RigidBodyPose(name, rb.id, position, quaternion, valid, rb.error)
+        bodies, unknown, dropouts = rigid_body_poses(data, self._names, self._y_up)
         self._stats.body_dropouts += dropouts
         if unknown and self._models is not None and received - self._last_unknown_id >= _UNKNOWN_ID_INTERVAL_S:
             self._last_unknown_id = received
             self._model_stale = True
-        latency = None
         info = self._server_info
-        frequency = info.clock_frequency_hz if info is not None else None
-        if frequency and data.camera_mid_exposure and data.camera_data_received >= data.camera_mid_exposure:
-            latency = (data.camera_data_received - data.camera_mid_exposure) / frequency
+        latency = camera_latency_s(data, info.clock_frequency_hz if info is not None else None)
         return MocapFrame(data.frame_number, data.timestamp, received, latency, bodies, unseen)
