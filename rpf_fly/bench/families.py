@@ -10,7 +10,9 @@ Guidance is an axis of planner settings: the modes are read from the ``guidance`
 :class:`~rpf_fly.mission.model.PlannerSettings` (its ``Literal`` values; ``("none",)`` while the field does not
 exist), and a run with mode ``m`` flies ``replace(settings, guidance=m)``. Separation and clearance are counted
 against one bar for every planner, :data:`BENCH_MARGIN` (0.05 m, ``planner.margin``'s default); each planner's own
-margin is reported beside it. Computation only; the Markdown is in :func:`to_markdown`. No torch.
+margin is reported beside it. ``dynamics`` ``firmware`` flies every run in the flight's closed loop on the firmware
+model (rpf_fly.sim.closed_loop: every planner, guidance mode and seed of a family in one simulated swarm) instead of the
+kinematic world. Computation only; the Markdown is in :func:`to_markdown`. No torch.
 """
 
 from __future__ import annotations
@@ -25,10 +27,11 @@ from typing import Any, Callable, Mapping, Optional, Sequence
 
 from rpf_fly.bench.claims import FAMILY_CLAIMS, evaluate_claims
 from rpf_fly.bench.runner import (
-    PLANNER_LABELS, POLICY_ACTIONS, BenchError, PolicyInfo, RunRecord, _record, load_policy_info, missing_row,
-    stat, summarise_runs,
+    PLANNER_LABELS, POLICY_ACTIONS, BenchError, PolicyInfo, RunRecord, _record, check_dynamics, closed_loop_json,
+    dynamics_line, load_policy_info, missing_row, stat, summarise_runs,
 )
 from rpf_fly.mission.model import PlannerSettings
+from rpf_fly.sim.closed_loop import FirmwareParams
 from rpf_fly.sim.generators import DEFAULT_MARGIN, FAMILIES, generate, split_seeds
 from rpf_fly.sim.rollout import SimParams
 
@@ -98,7 +101,9 @@ def label(planner: str) -> str:
 @dataclass(frozen=True)
 class FamiliesConfig:
     """What to run: ``seeds`` bench-stream seeds ``first_seed..first_seed+N-1`` per family (``first_seed`` 0 by
-    default; a later one gives scenes nobody has looked at); ``guidance`` None: every mode offered."""
+    default; a later one gives scenes nobody has looked at); ``guidance`` None: every mode offered; ``dynamics``:
+    ``kinematic`` or ``firmware`` (rpf_fly.sim.closed_loop.DYNAMICS); ``closed_loop``: the firmware closed loop's
+    settings (the bench's are the defaults; ``plan_from="truth"`` flies the planners on the true state as it is)."""
 
     planners: tuple[str, ...] = FAMILY_PLANNERS
     families: tuple[str, ...] = tuple(FAMILIES)
@@ -107,6 +112,8 @@ class FamiliesConfig:
     policies_dir: Path = Path("policies")
     policy_paths: Mapping[str, Path] = field(default_factory=dict)
     first_seed: int = 0
+    dynamics: str = "kinematic"
+    closed_loop: FirmwareParams = FirmwareParams()
 
     def seed_list(self) -> list[int]:
         return split_seeds(SPLIT, self.seeds, self.first_seed)
@@ -154,6 +161,7 @@ def prepare_families(config: FamiliesConfig) -> FamiliesPlan:
         raise BenchError(f"seeds must be at least 1, got {config.seeds}")
     if config.first_seed < 0:
         raise BenchError(f"first seed must be at least 0, got {config.first_seed}")
+    check_dynamics(config.dynamics)
     offered = guidance_modes()
     unknown = [m for m in config.modes() if m not in offered]
     if unknown or not config.modes():
@@ -196,7 +204,29 @@ def run_families(
             for record in outcome[0]:
                 on_run(record)
 
-    if jobs <= 1:
+    if config.dynamics == "firmware":  # one swarm per family: its groups' records come when its last run ends
+        by_family: dict[str, list[tuple[int, tuple[PlannerSettings, str, str]]]] = {}
+        for k, (family, planner, mode) in todo:
+            by_family.setdefault(family, []).append((k, (plan.settings[planner], planner, mode)))
+
+        def flown(family: str, outcomes: list[tuple[list[RunRecord], Optional[str]]]) -> None:
+            for (k, _), outcome in zip(by_family[family], outcomes):
+                finished(k, outcome, True)
+
+        if jobs <= 1:
+            for family, items in by_family.items():
+                flown(family, _run_family_firmware(family, seeds, [group for _, group in items], config.closed_loop))
+        else:
+            import multiprocessing
+            from concurrent.futures import ProcessPoolExecutor, as_completed
+
+            with ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
+                jobs_of = {pool.submit(_run_family_firmware, family, seeds, [group for _, group in items],
+                                       config.closed_loop): family
+                           for family, items in by_family.items()}
+                for future in as_completed(jobs_of):
+                    flown(jobs_of[future], future.result())
+    elif jobs <= 1:
         for k, (family, planner, mode) in todo:
             finished(k, _run_group(family, seeds, plan.settings[planner], planner, mode, on_run), False)
     else:
@@ -250,6 +280,38 @@ def _run_group(
     return records, None
 
 
+def _run_family_firmware(
+    family: str, seeds: Sequence[int], groups: Sequence[tuple[PlannerSettings, str, str]],
+    closed_loop: FirmwareParams = FirmwareParams(),
+) -> list[tuple[list[RunRecord], Optional[str]]]:
+    """Every (planner, guidance) group ``(settings, planner, mode)`` of one family over the seeds on the firmware
+    model, all in one simulated swarm (a swarm's tick costs little more for all of them than for one group); per
+    group its records, or the reason it cannot run (its planner could not be made: no run of it flies)."""
+    from rpf_fly.planning.onnx_policy import PolicyError
+    from rpf_fly.sim.closed_loop import run_firmware
+    from rpf_fly.sim.planners import UnsupportedPlanner, make_planner
+
+    scenes = [generate(family, seed, split=SPLIT) for seed in seeds]
+    errors: list[Optional[str]] = []
+    flown: list[tuple[int, PlannerSettings, object, int]] = []  # (group, settings, planner, seed index)
+    for g, (base, _, mode) in enumerate(groups):
+        settings = with_guidance(base, mode)
+        try:
+            made = [make_planner(settings, sc.obstacles, (sc.arena_x, sc.arena_y), sc.goals) for sc in scenes]
+        except (UnsupportedPlanner, PolicyError) as err:
+            errors.append(str(err))
+            continue
+        errors.append(None)
+        flown += [(g, settings, planner, i) for i, planner in enumerate(made)]
+    runs = run_firmware([scenes[i] for *_, i in flown], [st for _, st, _, _ in flown], SIM,
+                        [seeds[i] for *_, i in flown], [family] * len(flown), closed_loop, keep=True,
+                        planners=[pl for _, _, pl, _ in flown])
+    records: list[list[RunRecord]] = [[] for _ in groups]
+    for (g, _, _, _), run in zip(flown, runs):
+        records[g].append(_record(run, groups[g][1], family))
+    return list(zip(records, errors))
+
+
 def _missing(planner: str, family: str, mode: str, reason: str) -> dict[str, Any]:
     return {**missing_row(planner, family, reason), "guidance": mode}
 
@@ -283,6 +345,8 @@ def results_json(result: FamiliesResult, command: str = "") -> dict[str, Any]:
     doc: dict[str, Any] = {
         "bench": "rpf-fly bench --suite families",
         "version": 1,
+        "dynamics": c.dynamics,
+        **closed_loop_json(c.dynamics, c.closed_loop),
         "command": command,
         "wall_s": round(result.wall_s, 1),
         "split": SPLIT,
@@ -344,6 +408,7 @@ def to_markdown(results: Mapping[str, Any]) -> str:
         f"Guidance modes: {', '.join(modes)}. Default planner: `{results['default_kind']}`. "
         f"Wall time: {results['wall_s']:.0f} s.",
         f"Margin m of the counts: {results.get('bench_margin_m', 0.05):g} m for every planner (r = 0.1 m).",
+        dynamics_line(results),
     ]
     if results.get("command"):
         lines += ["", "```", results["command"], "```"]

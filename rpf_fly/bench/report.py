@@ -7,7 +7,7 @@ from pathlib import Path
 from typing import Any, Mapping, Optional, Sequence
 
 from rpf_fly.bench.claims import Claim, evaluate_claims
-from rpf_fly.bench.runner import PLANNER_LABELS, BenchResult
+from rpf_fly.bench.runner import PLANNER_LABELS, BenchResult, dynamics_line
 
 
 def results_json(result: BenchResult) -> dict[str, Any]:
@@ -141,6 +141,7 @@ def print_report(results: Mapping[str, Any], console: Any = None) -> None:
             end_section=last_of_scene,
         )
     console.print(table)
+    console.print(dynamics_line(results), width=min(REPORT_WIDTH, console.width))
     console.print(note, style="dim", width=min(REPORT_WIDTH, console.width))
     for reason, planner in reasons.items():
         console.print(f"[yellow]{escape(planner)} missing: {escape(reason)}[/yellow]")
@@ -198,6 +199,8 @@ def to_markdown(results: Mapping[str, Any]) -> str:
         "Path metrics: mean ± std over successful runs, and over all runs where the metric is defined (count in "
         "brackets). Failed runs by cause: collision / stalled / timeout. Drones not reached: stalled / timeout. "
         "See docs/bench.md.",
+        "",
+        dynamics_line(results),
         "",
         "## Policies",
         "",

@@ -8,6 +8,10 @@ attention), ``rpf-mean`` (RPF-2), ``apf`` (robust fixed gains), ``ppo`` (heading
 learned kinds load ``<policies>/<kind>.onnx`` or a path given per kind; an absent or unusable policy makes that
 planner's rows ``missing`` with the reason.
 
+``dynamics``: ``kinematic`` (the default) flies the kinematic world (rpf_fly.sim.rollout); ``firmware`` flies the
+firmware's PID cascade on the identified Crazyflie body in the flight's closed loop (rpf_fly.sim.closed_loop), all
+seeds of a (planner, scene) in one simulated swarm.
+
 Computation only: :mod:`rpf_fly.bench.report` prints and writes, :mod:`rpf_fly.bench.figure` draws,
 :mod:`rpf_fly.bench.claims` judges the paper's claims. No torch.
 """
@@ -17,11 +21,12 @@ from __future__ import annotations
 import hashlib
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Mapping, Optional, Sequence
+from typing import Any, Callable, Iterator, Mapping, Optional, Sequence
 
 import numpy as np
 
-from rpf_fly.mission.model import Mission, Obstacle
+from rpf_fly.mission.model import Mission, Obstacle, PlannerSettings
+from rpf_fly.sim.closed_loop import DYNAMICS, FirmwareParams
 from rpf_fly.sim.evaluate import Run, planner_settings, run_scenario, sim_params
 from rpf_fly.sim.rollout import DroneOutcome, SimParams
 from rpf_fly.sim.scenario import Scenario, arena_a, scenario_from_mission
@@ -43,7 +48,8 @@ POLICY_ACTIONS = {"rpf": "gains", "rpf-mean": "gains", "ppo": "heading", "rpf3":
 @dataclass(frozen=True)
 class BenchConfig:
     """What to run. ``episodes``: seeds per scene; ``policy_paths``: per-kind ONNX files overriding
-    ``<policies_dir>/<kind>.onnx``; ``missions_dir``: where the paper missions live."""
+    ``<policies_dir>/<kind>.onnx``; ``missions_dir``: where the paper missions live; ``dynamics``: one of
+    :data:`~rpf_fly.sim.closed_loop.DYNAMICS`."""
 
     planners: tuple[str, ...] = PLANNERS
     scenes: tuple[str, ...] = SCENES
@@ -52,6 +58,7 @@ class BenchConfig:
     policy_paths: Mapping[str, Path] = field(default_factory=dict)
     missions_dir: Path = Path("missions")
     trajectory_scenes: tuple[str, ...] = TRAJECTORY_SCENES
+    dynamics: str = "kinematic"
 
     def seeds(self, scene: str) -> list[int]:
         """The seeds of ``scene``: start jitter seeds ``0..N-1`` for missions, generator seeds for fresh scenes."""
@@ -173,6 +180,8 @@ class BenchResult:
         return {
             "bench": "rpf-fly bench",
             "version": 1,
+            "dynamics": c.dynamics,
+            **closed_loop_json(c.dynamics),
             "episodes": c.episodes,
             "planners": list(c.planners),
             "scenes": list(c.scenes),
@@ -202,6 +211,7 @@ def prepare(config: BenchConfig) -> BenchPlan:
         raise BenchError(f"unknown scene {unknown[0]!r} (expected some of {', '.join(SCENES)})")
     if config.episodes < 1:
         raise BenchError(f"episodes must be at least 1, got {config.episodes}")
+    check_dynamics(config.dynamics)
     missing: dict[tuple[str, str], str] = {}
     missions: dict[str, Mission] = {}
     for scene in config.scenes:
@@ -256,8 +266,7 @@ def run_bench(plan: BenchPlan, on_run: Optional[Callable[[RunRecord], None]] = N
             info = plan.policies.get(kind)
             policy = info.path if info is not None else None
             scene_runs = []
-            for seed in config.seeds(scene):
-                run, scenario = _run_one(plan, kind, policy, scene, seed)
+            for seed, run, scenario in _runs(plan, kind, policy, scene):
                 assert run.rollout is not None
                 record = _record(run, kind, scene)
                 scene_runs.append(record)
@@ -270,19 +279,63 @@ def run_bench(plan: BenchPlan, on_run: Optional[Callable[[RunRecord], None]] = N
     return BenchResult(config, runs, rows, dict(plan.policies), trajectories)
 
 
-def _run_one(plan: BenchPlan, kind: str, policy: Optional[Path], scene: str, seed: int) -> tuple[Run, Scenario]:
+def _runs(plan: BenchPlan, kind: str, policy: Optional[Path], scene: str) -> Iterator[tuple[int, Run, Scenario]]:
+    """The runs of one (planner, scene), seed by seed: one kinematic rollout at a time, or every seed flown
+    together on the firmware model."""
+    seeds = plan.config.seeds(scene)
+    setups = [_setup(plan, kind, policy, scene, seed) for seed in seeds]
+    if plan.config.dynamics == "kinematic":
+        for seed, (scenario, settings, params, _) in zip(seeds, setups):
+            yield seed, run_scenario(scenario, settings, params, seed, scene, keep=True), scenario
+        return
+    from rpf_fly.sim.closed_loop import run_firmware
+
+    _, settings, params, firmware = setups[0]  # the same for every seed of a (planner, scene)
+    scenarios = [s[0] for s in setups]
+    batch = run_firmware(scenarios, settings, params, seeds, [scene] * len(seeds), firmware, keep=True)
+    yield from zip(seeds, batch, scenarios)
+
+
+def _setup(
+    plan: BenchPlan, kind: str, policy: Optional[Path], scene: str, seed: int
+) -> tuple[Scenario, PlannerSettings, SimParams, FirmwareParams]:
+    """A run's scene, planner settings, kinematics and the closed loop's flight height (the mission's)."""
     from rpf_fly.mission import with_planner
 
     if scene == FRESH_SCENE:
         scenario = arena_a(np.random.default_rng(seed))
-        settings = planner_settings(kind, policy)
-        params = SimParams()
-    else:
-        chosen = with_planner(plan.missions[scene], kind, policy)
-        scenario = scenario_from_mission(chosen, seed)
-        settings = chosen.planner
-        params = sim_params(chosen)
-    return run_scenario(scenario, settings, params, seed, scene, keep=True), scenario
+        return scenario, planner_settings(kind, policy), SimParams(), FirmwareParams()
+    chosen = with_planner(plan.missions[scene], kind, policy)
+    firmware = FirmwareParams(chosen.flight.height, tuple(chosen.arena.z))  # type: ignore[arg-type]
+    return scenario_from_mission(chosen, seed), chosen.planner, sim_params(chosen), firmware
+
+
+def check_dynamics(dynamics: str) -> None:
+    """Raise :class:`BenchError` unless ``dynamics`` is one of :data:`~rpf_fly.sim.closed_loop.DYNAMICS`."""
+    if dynamics not in DYNAMICS:
+        raise BenchError(f"unknown dynamics {dynamics!r} (expected {' or '.join(DYNAMICS)})")
+
+
+def dynamics_line(results: Mapping[str, Any]) -> str:
+    """One line (under 110 columns) saying which dynamics a results document's runs flew (``kinematic`` where it
+    does not say: written before the closed loop)."""
+    if results.get("dynamics", "kinematic") != "firmware":
+        return "Dynamics: kinematic (every drone moves along its planned heading at the mission speed)."
+    loop = results.get("closed_loop", {})
+    views = "; planners on the true state" if loop.get("plan_from") == "truth" else ""
+    return (f"Dynamics: firmware (the flight's closed loop on the Crazyflie firmware model; safety on "
+            f"{loop.get('truth_hz', 100)} Hz truth{views}).")
+
+
+def closed_loop_json(dynamics: str, f: FirmwareParams = FirmwareParams()) -> dict[str, Any]:
+    """Beside ``"dynamics"`` in the results: for ``firmware``, ``closed_loop``, the closed loop's settings common to
+    every run (the flight height is each mission's); nothing for ``kinematic``."""
+    if dynamics != "firmware":
+        return {}
+    from rpf_fly.sim.closed_loop import STEP_S
+
+    return {"closed_loop": {"truth_hz": round(1.0 / STEP_S), "settle_s": f.settle_s, "hold_tail_s": f.hold_tail_s,
+                            "plan_from": f.plan_from}}
 
 
 def _record(run: Run, kind: str, scene: str) -> RunRecord:

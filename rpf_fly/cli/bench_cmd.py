@@ -12,6 +12,7 @@ from rpf_fly.cli.errors import fail
 
 _PLANNERS = "rpf,rpf-mean,apf,ppo,orca,rpf3"  # rpf_fly.bench.runner.PLANNERS (not imported: the CLI starts fast)
 _SCENES = "arena-a-6,arena-b-6,circle-8-r3,circle-8-r8,lab-3,arena-a-fresh"
+_DYNAMICS = ("kinematic", "firmware")  # rpf_fly.sim.closed_loop.DYNAMICS (a test keeps them equal)
 
 
 @app.command()
@@ -22,6 +23,10 @@ def bench(
     episodes: int = typer.Option(20, "--episodes", help="Seeds per scene (start jitter 0..N-1; fresh arena-A seeds 1000000..)."),
     seeds: Optional[int] = typer.Option(
         None, "--seeds", help="Seeds per scene or family (overrides --episodes; families: bench-stream seeds 0..N-1)."
+    ),
+    dynamics: str = typer.Option(
+        "kinematic", "--dynamics", help="kinematic: drones move along their planned headings; firmware: the flight's "
+        "closed loop on the simulated Crazyflie firmware (docs/bench.md)."
     ),
     first_seed: int = typer.Option(
         0, "--first-seed", help="families suite: the first bench-stream seed (seeds FIRST..FIRST+N-1; default 0)."
@@ -59,6 +64,8 @@ def bench(
 
     if suite not in ("paper", "families"):
         raise fail(f"--suite: expected paper or families, got {suite!r}")
+    if dynamics not in _DYNAMICS:
+        raise fail(f"--dynamics: expected {' or '.join(_DYNAMICS)}, got {dynamics!r}")
     if seeds is not None:
         episodes = seeds
     paths = {}
@@ -76,7 +83,7 @@ def bench(
         raise fail("--first-seed: only the families suite takes it (the paper suite's seeds are fixed per scene)")
     if suite == "families":
         _families(episodes, planners, families, guidance, policies, paths, json_output, json_file, markdown, figure, out,
-                  jobs, first_seed)
+                  jobs, first_seed, dynamics)
         return
     if families is not None or guidance is not None or jobs != 1:
         raise fail("--families, --guidance and --jobs belong to --suite families")
@@ -87,6 +94,7 @@ def bench(
         policies_dir=policies,
         policy_paths=paths,
         missions_dir=missions,
+        dynamics=dynamics,
     )
     try:
         plan = prepare(config)
@@ -128,7 +136,7 @@ def bench(
 
 
 def _families(episodes, planners, families, guidance, policies, paths, json_output, json_file, markdown, figure,  # type: ignore[no-untyped-def]
-              out, jobs, first_seed=0) -> None:
+              out, jobs, first_seed=0, dynamics="kinematic") -> None:
     """``--suite families``: run, print the Markdown report (at most 110 columns), write what was asked for."""
     from rpf_fly.bench.families import FAMILY_PLANNERS, FamiliesConfig, prepare_families, results_json, run_families
     from rpf_fly.bench.families import to_markdown
@@ -147,6 +155,7 @@ def _families(episodes, planners, families, guidance, policies, paths, json_outp
         policies_dir=policies,
         policy_paths=paths,
         first_seed=first_seed,
+        dynamics=dynamics,
     )
     try:
         plan = prepare_families(config)
@@ -170,6 +179,8 @@ def _families(episodes, planners, families, guidance, policies, paths, json_outp
         command += f" --planners {','.join(config.planners)}"
     if config.guidance is not None:
         command += f" --guidance {','.join(config.guidance)}"
+    if config.dynamics != "kinematic":
+        command += f" --dynamics {config.dynamics}"
     command += "".join(f" --policy {k}={v}" for k, v in paths.items())
     if jobs != 1:
         command += f" --jobs {jobs}"
