@@ -432,7 +432,7 @@ def check(
         _require_library(loaded, dry_run)
     from rpf_fly.radio.budget import budget_table, radio_loads
 
-    typer.echo("radio budget (packets a second per dongle):")
+    typer.echo("radio budget (transactions a second per dongle, cflib 0.1.34 on the dongle's figures; docs/radio.md):")
     for line in budget_table(radio_loads(loaded)):
         typer.echo(f"  {line}")
     _check_radio_budget(loaded, mission)

@@ -203,7 +203,8 @@ class FlightLoop:
         self._estop_reason = ""
         self._estop_lock = threading.Lock()
         self._estop_done = False
-        self._extpos = ExtposSchedule.for_uris(mission.radio.extpos_rate_hz, self.uris)
+        self._extpos = ExtposSchedule.for_uris(mission.radio.extpos_rate_hz, self.uris,
+                                               packed=mission.radio.extpos == "packed")  # a group's drones together
         self._last_status_s = -math.inf
         self._states: dict[str, DroneState] = {}
         self._watchdog = LoopWatchdog(self._on_loop_stall, stall_timeout_s(flight.dt),

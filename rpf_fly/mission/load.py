@@ -94,6 +94,11 @@ def parse_uri(uri: str) -> RadioUri:
         raise ValueError(f"address {address!r} in {uri!r} must be 10 hex digits (e.g. E7E7E7E701)")
     if has_query and not _QUERY.fullmatch(query):
         raise ValueError(f"query {query!r} in {uri!r} must be key=value pairs joined by '&'")
+    for pair in query.split("&") if has_query else ():
+        key, _, value = pair.partition("=")
+        if key == "rate_limit" and not re.fullmatch(r"[1-9][0-9]*", value):
+            raise ValueError(f"rate_limit {value!r} in {uri!r} must be a whole number of transactions a second "
+                             "(cflib's ?rate_limit=N, at least 1)")
     return RadioUri(scheme, int(dongle), int(channel), rate, address.upper(), query)
 
 
@@ -455,7 +460,7 @@ MOTIONCAPTURE_KEYS = ("type", "hostname", "options")
 RADIO_SPEC: dict[str, tuple[str, Reader]] = {
     "kind": ("kind", _choice(("cflib",))),
     "min_battery_v": ("min_battery_v", _num(POSITIVE)),
-    "extpos": ("extpos", _choice(("extpos", "extpose"))),
+    "extpos": ("extpos", _choice(("extpos", "extpose", "packed"))),
     "extpos_rate_hz": ("extpos_rate_hz", _num(POSITIVE)),
     "dongle_type": ("dongle_type", _choice(("crazyradio_pa", "crazyradio_2"))),
     "budget_packets_s": ("budget_packets_s", _num(POSITIVE)),
@@ -791,7 +796,24 @@ class _MissionParser(_Checker):
 
         mission = m.Mission(source=source, text=text, **parts)
         check_layout(mission, self.layout_error(mission, entries))
+        if mission.radio.extpos == "packed":
+            self.packed_extpos(mission, entries.get("radio", root.key_line))
         return mission
+
+    def packed_extpos(self, mission: m.Mission, at: YNode | int) -> None:
+        """``radio.extpos: packed``: every drone's id (its address's last byte) its own on its channel, and the
+        arena within the int16 millimetres a packed position carries (rpf_fly/radio/packed_extpos.py)."""
+        from rpf_fly.radio.packed_extpos import MAX_MM, shared_ids
+
+        for channel, ident, names in shared_ids({d.name: d.uri for d in mission.drones}):
+            raise self.error(at, "radio.extpos", f"packed: drones {' and '.join(names)} both have id 0x{ident:02X} "
+                             f"(the last byte of their radio address) on channel {channel}; the firmware takes a "
+                             "packed position by that byte, so each would fly on the other's: give them addresses "
+                             "with different last bytes, or use extpos")
+        reach = max(abs(v) for v in (*mission.arena.x, *mission.arena.y, *mission.arena.z))
+        if reach * 1000.0 > MAX_MM:
+            raise self.error(at, "radio.extpos", f"packed: positions go as int16 millimetres (+-{MAX_MM / 1000} m) "
+                             f"and the arena reaches {reach:g} m: use extpos")
 
     def index(self, node: YNode) -> None:
         self.nodes[node.path] = node

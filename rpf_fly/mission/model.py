@@ -182,14 +182,19 @@ class RadioSettings:
 
     kind: Literal["cflib"] = "cflib"
     min_battery_v: float = 3.7
-    extpos: Literal["extpos", "extpose"] = "extpos"
+    extpos: Literal["extpos", "extpose", "packed"] = "extpos"
+    """What each drone's estimator gets of its mocap pose: its position (extpos), its pose (extpose), both unicast,
+    one packet a drone; or ``packed``: the positions of up to four drones of a dongle in one broadcast
+    (rpf_fly/radio/packed_extpos.py)."""
     extpos_rate_hz: float = 30.0
-    """How often each drone's mocap pose is forwarded to its estimator (cflib has no broadcast: every drone costs
-    radio packets; 20-50 Hz is plenty for the Kalman filter)."""
+    """How often each drone's mocap pose is forwarded to its estimator (every extpos costs radio time; 20-50 Hz is
+    plenty for the Kalman filter)."""
     dongle_type: Literal["crazyradio_pa", "crazyradio_2"] = "crazyradio_pa"
-    """The Crazyradio model, for its budget (``rpf_fly.radio.budget.DONGLE_BUDGETS``)."""
+    """The Crazyradio model, for its budget: its figures (rpf_fly/emulator/crazyradio_timing.py,
+    rpf_fly/radio/budget.py)."""
     budget_packets_s: Optional[float] = None
-    """Transactions a second one dongle carries (None: the dongle type's figure); a lab's own measurement."""
+    """Transactions a second one dongle carries with its links taking turns (None: from the dongle type's figures);
+    a lab's own measurement (``rpf-fly radio probe``)."""
     allow_over_budget: bool = False
     """Fly even when a dongle is asked for more than its budget (the radio then delays setpoints and extpos)."""
 

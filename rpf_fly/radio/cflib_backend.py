@@ -91,7 +91,10 @@ from cflib.crazyflie.syncCrazyflie import SyncCrazyflie
 from cflib.crtp.crtpstack import CRTPPacket
 from cflib.crtp.radiodriver import RadioDriver
 
+from rpf_fly.radio.broadcast import PackedExtposSender
+from rpf_fly.radio.budget import link_uri
 from rpf_fly.radio.outbox import Action, Outbox, SenderPool
+from rpf_fly.radio.packed_extpos import PACKED_EXT_POS_STD_DEV_M
 from rpf_fly.radio.schedule import LinkCount
 from rpf_fly.radio.telemetry_clock import TelemetryClock
 
@@ -190,6 +193,8 @@ class _Drone:
 
     name: str
     uri: str
+    link_uri: str = ""
+    """What cflib opens: `uri` with the budget's ``?rate_limit=N`` for a ``radio://`` link (`budget.link_uri`)."""
     scf: SyncCrazyflie | None = None
     up: bool = False
     configured: bool = False
@@ -250,6 +255,8 @@ class CflibBackend:
         connect_timeout_s: float = 10.0,
         param_timeout_s: float = 2.0,
         init_drivers: bool = True,
+        packed_extpos: bool = False,
+        rate_limits: Mapping[str, int] | None = None,
     ) -> None:
         """
         Args:
@@ -262,6 +269,10 @@ class CflibBackend:
             connect_timeout_s: deadline for one drone's connection (link, TOCs, parameter values, first status).
             param_timeout_s: deadline for one parameter write to be echoed.
             init_drivers: call `cflib.crtp.init_drivers()` when the radio drivers are not registered yet.
+            packed_extpos: `send_extpos` broadcasts the positions packed, up to four drones a packet
+                (rpf_fly/radio/broadcast.py) instead of one unicast packet a drone.
+            rate_limits: drone name -> the ``rate_limit`` its ``radio://`` link is opened with (cflib's
+                ``?rate_limit=N``: at most N transactions a second, polls included; rpf_fly/radio/budget.py).
         """
         self._cache_dir = str(cache_dir) if cache_dir is not None else None
         self._use_extpose = use_extpose
@@ -272,6 +283,9 @@ class CflibBackend:
         self._connect_timeout_s = connect_timeout_s
         self._param_timeout_s = param_timeout_s
         self._init_drivers = init_drivers
+        self._packed_extpos = packed_extpos
+        self._rate_limits = dict(rate_limits or {})
+        self._packed: PackedExtposSender | None = None
         self._lock = threading.RLock()
         self._drones: dict[str, _Drone] = {}
         self._callbacks: list[LinkLostCallback] = []
@@ -287,9 +301,16 @@ class CflibBackend:
     @classmethod
     def for_mission(cls, mission: Mission, cache_dir: str | Path | None) -> CflibBackend:
         """The backend a flight or a check of ``mission`` uses: ``use_extpose`` when its mocap poses go to the
-        drones whole (``radio.extpos: extpose``), so the estimator gets `locSrv.extQuatStdDev`. Every flight path
+        drones whole (``radio.extpos: extpose``), so the estimator gets `locSrv.extQuatStdDev`; packed extpos
+        (``radio.extpos: packed``) with `PACKED_EXT_POS_STD_DEV_M` as ``locSrv.extPosStdDev`` (each drone hears
+        every broadcast four times); every ``radio://`` link's ``rate_limit`` from the budget. Every flight path
         (the CLI's check and flight, a distributed worker) builds its backend here, so none forgets it."""
-        return cls(cache_dir=cache_dir, use_extpose=mission.radio.extpos == "extpose")
+        from rpf_fly.radio.budget import link_rate_limits
+
+        packed = mission.radio.extpos == "packed"
+        return cls(cache_dir=cache_dir, use_extpose=mission.radio.extpos == "extpose", packed_extpos=packed,
+                   ext_pos_std_dev=PACKED_EXT_POS_STD_DEV_M if packed else None,
+                   rate_limits=link_rate_limits(mission))
 
     # Connection -----------------------------------------------------------------------------------------------
 
@@ -304,14 +325,18 @@ class CflibBackend:
                                           for c in cflib.crtp.CLASSES):
             cflib.crtp.init_drivers()
         with self._lock:
-            self._drones = {name: _Drone(name, uri) for name, uri in drones.items()}
-        self._swarm = Swarm(uris, factory=CachedCfFactory(rw_cache=self._cache_dir))
-        by_uri = {d.uri: d for d in self._drones.values()}
-        self._swarm.sequential(lambda scf, uri: setattr(by_uri[uri], "scf", scf), {u: [u] for u in uris})
+            self._drones = {name: _Drone(name, uri, link_uri(uri, self._rate_limits.get(name)))
+                            for name, uri in drones.items()}
+        links = [d.link_uri for d in self._drones.values()]
+        self._swarm = Swarm(links, factory=CachedCfFactory(rw_cache=self._cache_dir))
+        by_uri = {d.link_uri: d for d in self._drones.values()}
+        self._swarm.sequential(lambda scf, uri: setattr(by_uri[uri], "scf", scf), {u: [u] for u in links})
         errors = self._parallel(self._connect_one, list(self._drones.values()), self._connect_timeout_s + 5.0)
         for name, message in errors.items():
             if message == "timed out":  # its thread is still running: make sure it never comes up
                 self._give_up(self._drones[name], "connection timed out")
+        if self._packed_extpos:
+            errors.update(self._start_packed([n for n in self._drones if n not in errors]))
         if self._reset_on_connect:
             live = [n for n in self._drones if n not in errors]
             errors.update(self.reset_estimators(live))
@@ -367,7 +392,7 @@ class CflibBackend:
             caller.add_callback(callback)
         deadline = time.monotonic() + self._connect_timeout_s
         try:
-            cf.open_link(drone.uri)
+            cf.open_link(drone.link_uri)
             if not done.wait(self._connect_timeout_s) or failure:
                 message = failure[0] if failure else "connection timed out"
                 self._give_up(drone, message)
@@ -536,6 +561,8 @@ class CflibBackend:
             if drone.scf is not None:
                 drone.scf.cf.close_link()
 
+        if self._packed is not None:
+            self._packed.close()
         self._parallel(close_one, drones, 5.0)
         self._stop_feeder()
         self._pool.close()
@@ -914,8 +941,20 @@ class CflibBackend:
             logger.error("drone %s: %s", target, why)
         return errors
 
+    def _start_packed(self, names: list[str]) -> dict[str, str]:
+        """Open the packed extpos broadcasts of the connected drones' dongles; a drone whose broadcast cannot be
+        opened gets no mocap, so it is given up (name -> error)."""
+        self._packed = PackedExtposSender({n: self._drones[n].uri for n in names})
+        errors = self._packed.start()
+        for name, message in errors.items():
+            self._give_up(self._drones[name], message)
+        return errors
+
     def send_extpos(self, name: str, position: Vec3) -> bool:
-        """Queue a mocap position for the estimator (latest wins)."""
+        """Queue a mocap position for the estimator (latest wins): in the drone's outbox, or under packed extpos in
+        its group's next broadcast."""
+        if self._packed is not None:
+            return self._live_cf(name) is not None and self._packed.put(name, position)
         return self._queue(name, lambda cf, drone: cf.extpos.send_extpos(*position), "extpos")
 
     def send_extpose(self, name: str, position: Vec3, quaternion: Quaternion) -> bool:

@@ -33,17 +33,24 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 
 from rpf_fly.radio.budget import dongle_of
+from rpf_fly.radio.packed_extpos import packed_groups
 
 
-def extpos_phases(uris: Mapping[str, str]) -> dict[str, float]:
+def extpos_phases(uris: Mapping[str, str], packed: bool = False) -> dict[str, float]:
     """Drone name -> its phase in [0, 1) of the extpos period: ``(k + 1/2) / n`` for drone ``k`` (in the order
     given) of the ``n`` drones on its dongle (the URI's first number). The half keeps the slot boundaries off the
     frames for the usual rates (30 Hz extpos on 100 Hz mocap: a boundary on a frame would fall on either side of it
-    by a rounding error and put one more extpos on that frame)."""
-    per: dict[int, list[str]] = {}
-    for name, uri in uris.items():
-        per.setdefault(dongle_of(uri), []).append(name)
-    return {name: (k + 0.5) / len(names) for names in per.values() for k, name in enumerate(names)}
+    by a rounding error and put one more extpos on that frame). ``packed`` (``radio.extpos: packed``): the same
+    for the packed groups of a dongle (`packed_extpos.packed_groups`, up to four drones a packet), every drone of a
+    group in its group's phase, so a group's positions come due on the same frame and go out in one packet."""
+    per: dict[int, list[tuple[str, ...]]] = {}
+    if packed:
+        for group in packed_groups(uris):
+            per.setdefault(group.dongle, []).append(group.names)
+    else:
+        for name, uri in uris.items():
+            per.setdefault(dongle_of(uri), []).append((name,))
+    return {name: (k + 0.5) / len(units) for units in per.values() for k, unit in enumerate(units) for name in unit}
 
 
 def extpos_slot(t_s: float, rate_hz: float, phase: float) -> int:
@@ -67,8 +74,8 @@ class ExtposSchedule:
     _last: dict[str, int] = field(default_factory=dict)
 
     @classmethod
-    def for_uris(cls, rate_hz: float, uris: Mapping[str, str]) -> "ExtposSchedule":
-        return cls(float(rate_hz), extpos_phases(uris))
+    def for_uris(cls, rate_hz: float, uris: Mapping[str, str], packed: bool = False) -> "ExtposSchedule":
+        return cls(float(rate_hz), extpos_phases(uris, packed))
 
     def due(self, name: str, t_s: float) -> bool:
         """Whether ``name``'s extpos goes out with the frame at ``t_s`` (True at most once per slot; a drone's first

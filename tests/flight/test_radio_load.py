@@ -13,7 +13,7 @@ from rpf_fly.flight.recording import McapRecorder
 from rpf_fly.log.reader import read_log
 from rpf_fly.log.review import review
 from rpf_fly.mission import parse_mission
-from rpf_fly.radio.budget import LINK_PING_HZ
+from rpf_fly.radio.budget import KEEPALIVE_HZ, LINK_PING_HZ, radio_loads
 from rpf_fly.radio.cflib_backend import CflibBackend
 
 ADDRESSES = (0xE7E7E7E701, 0xE7E7E7E702, 0xE7E7E7E703)
@@ -86,8 +86,8 @@ def test_the_logged_load_of_each_dongle_is_what_the_firmwares_received(tmp_path:
         tolerance = 2 * 2 * len(members) + 0.01 * fired
         assert abs(logged - fired) <= tolerance, (dongle, logged, fired)
         assert all(w["transactions"] >= w["packets"] for w in windows)
-        assert windows[0]["planned_per_s"] == len(members) * (10 + 50 + LINK_PING_HZ)
-        assert windows[0]["budget_per_s"] == 1000.0
+        assert windows[0]["planned_per_s"] == len(members) * (10 + 50 + LINK_PING_HZ + KEEPALIVE_HZ)
+        assert windows[0]["budget_per_s"] == radio_loads(parse_mission(MISSION))[dongle].budget
         assert sum(w["setpoints_superseded"] for w in windows) == (superseded if dongle == 1 else 0)
     lines = [r.line() for r in review(data).radio]
     assert [line.split(":")[0] for line in lines] == ["radio dongle 0 (2 drones)", "radio dongle 1 (1 drones)"]

@@ -97,12 +97,13 @@ def test_a_simulated_log_ends_cleanly(lab_log):
 
 
 def test_a_dry_run_logs_each_dongles_measured_load_and_review_prints_it(clean_cli_flight):
-    """/radio/0 (three drones, setpoints at 10 Hz, extpos at 30 Hz, cflib's pings at 10 Hz: 150 packets/s planned):
-    a window a second, the busy ones near the plan; the review's line and JSON say the same."""
+    """/radio/0 (three drones, setpoints at 10 Hz, extpos at 30 Hz, cflib's pings at 10 Hz, keep-alives at 5 Hz: 165
+    transactions/s planned, of the about 536 a Crazyradio PA carries of them): a window a second, the busy ones near
+    the plan; the review's line and JSON say the same."""
     data = read_log(clean_cli_flight.log)
     windows = [m.data for m in data.messages("/radio/0")]
     assert len(windows) >= 10 and all(w["drones"] == ["cf1", "cf2", "cf3"] for w in windows)
-    assert all(w["planned_per_s"] == 150.0 and w["budget_per_s"] == 1000.0 for w in windows)
+    assert all(w["planned_per_s"] == 165.0 and 500.0 < w["budget_per_s"] < 572.0 for w in windows)
     full = [w for w in windows if w["window_s"] > 0.9]
     assert len(full) >= len(windows) - 2 and all(w["window_s"] < 1.5 for w in full)  # once a second
     busy = sorted(w["packets_per_s"] for w in full)[len(full) // 2:]
@@ -111,6 +112,7 @@ def test_a_dry_run_logs_each_dongles_measured_load_and_review_prints_it(clean_cl
     text, doc = text_and_json(clean_cli_flight.log)
     line = next(line for line in text.splitlines() if line.startswith("radio dongle 0"))
     peak = max(w["packets_per_s"] for w in windows)
-    assert f"{peak:.0f} packets/s in the busiest second" in line and "planned 150, budget 1000" in line
+    budget = windows[0]["budget_per_s"]
+    assert f"{peak:.0f} packets/s in the busiest second" in line and f"planned 165, budget {budget:.0f}" in line
     assert doc["radio"]["0"]["peak_packets_per_s"] == pytest.approx(peak)
     assert doc["radio"]["0"]["drones"] == ["cf1", "cf2", "cf3"]
