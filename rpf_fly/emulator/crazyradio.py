@@ -8,7 +8,8 @@ on any cflib program opens ``radio://0/80/2M/E7E7E7E7E1``: cflib's ``RadioDriver
 as the dongle's firmware does, spending the dongle's time (`crazyradio_timing`), and carries each packet into the
 simulated world (`crazyradio_air.Air`: the drones' own radio chips in front of the same `DronePort` a ``fake://``
 link reaches). Without a world, drones appear on their first connection, as ``fake_radio.register()`` does.
-``unplug()`` gives the real backend back.
+``unplug()`` gives the real backend back; ``pull_out(devid)`` makes one plugged dongle vanish from USB (the
+``dongle_unplug`` fault), and cflib does with it what it does with a real one (docs/radio.md, "A dongle pulled out").
 
 The firmware behaviour emulated (crazyradio-firmware ``main.c`` for the PA, crazyradio2-firmware ``legacy_usb.c``
 for the 2.0; details in docs/radio.md, "The emulated Crazyradio"):
@@ -31,6 +32,7 @@ import logging
 import threading
 import time
 from collections import Counter, deque
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -355,6 +357,7 @@ def plug(world: Any = None, dongles: int = 1, radio: str = "crazyradio_2") -> Pl
 
         world = lab_world(world)
     unplug()
+    _forget_dead_radios()
     kind = RADIO_TYPES[radio]
     air = Air(world)
     devices = [EmulatedCrazyradio(i, kind, air, world.dongle(i), serial_number(kind, i)) for i in range(dongles)]
@@ -385,3 +388,47 @@ def unplug() -> None:
 def plugged() -> Plugged | None:
     """The current `plug`, None when none."""
     return _plugged
+
+
+def pull_out(devid: int) -> bool:
+    """Pull the plugged dongle ``devid`` out (the ``dongle_unplug`` fault): from now on every transfer on it fails
+    with libusb's "No such device", and cflib does what it does with a vanished Crazyradio (docs/radio.md, "A
+    dongle pulled out"). False when no such dongle is plugged."""
+    current = _plugged
+    if current is None or not 0 <= devid < len(current.dongles):
+        return False
+    dongle = current.dongles[devid]
+    with dongle._lock:
+        dongle.present = False
+    return True
+
+
+def wait_released(devids: Iterable[int], timeout_s: float = 2.0) -> bool:
+    """Wait until cflib has closed dongles ``devids`` (its shared radio handles a link's close on its own thread, a
+    moment after ``close_link``), so that the next `plug` is the one cflib opens. False when one is still open at
+    ``timeout_s`` (a link still open, or a shared radio whose thread died)."""
+    from cflib.crtp.radiodriver import RadioManager
+
+    deadline = time.monotonic() + timeout_s
+    wanted = sorted(set(devids))
+    while True:
+        radios = RadioManager._radios
+        busy = [d for d in wanted if d < len(radios) and radios[d] is not None and radios[d]._radio is not None
+                and radios[d].is_alive()]
+        if not busy:
+            return True
+        if time.monotonic() >= deadline:
+            return False
+        time.sleep(0.01)
+
+
+def _forget_dead_radios() -> None:
+    """cflib keeps one shared radio thread per dongle number for the life of the process (``RadioManager._radios``).
+    When a dongle vanishes under several links, that thread dies on the USB error and every later link on the
+    number would wait on it for ever; a fresh process starts without it, and so does a fresh `plug`."""
+    from cflib.crtp.radiodriver import RadioManager
+
+    with RadioManager._lock:
+        for devid, radio in enumerate(RadioManager._radios):
+            if radio is not None and not radio.is_alive():
+                RadioManager._radios[devid] = None

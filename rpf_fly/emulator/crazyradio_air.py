@@ -16,7 +16,11 @@ its facts):
 - when nothing is queued the acknowledgement is one byte, ``0xF3 | down << 2`` (the default build: no
   ``RSSI_ACK_PACKET``), so an acknowledgement is never empty;
 - moving on drops the head of the nRF's transmit queue unless the last acknowledgement was the empty one (as the
-  firmware does, which also drops one never-sent packet after a service packet).
+  firmware does, which also drops one never-sent packet after a service packet);
+- the acknowledgement is chosen before the drone's firmware answers the packet it acknowledges: the nRF51 loads its
+  acknowledgement payload before the packet arrives and sends it 130 us after, while the STM32 gets the packet and
+  sends its answer over syslink (the UART between the two chips) later. So an answer (an echo, a parameter value)
+  rides on the link's next acknowledgement at the earliest, never on its own packet's.
 
 What the drone's firmware receives, and whether a transmission is heard at all (its channel, a dropped link, its
 packet loss and retries), stays the world's: `DronePort.transact` (fake_world.py), the same call a ``fake://`` link
@@ -112,8 +116,6 @@ class CrazyflieRadio:
                 return Heard(False, arc)
             if uplink is not None:
                 self.passed_on += 1
-            if down is not None:
-                self._tx.append(down)
             if safelink:
                 self.tuned = (channel, rate)
                 self._safelink = bool(packet[2])
@@ -127,6 +129,8 @@ class CrazyflieRadio:
                     ack = self._advance(None)
                 else:
                     ack = self._last_ack
+            if down is not None:  # queued behind the acknowledgement just chosen (module doc)
+                self._tx.append(down)
             if retries > arc:  # the drone heard it, the dongle gave up first: a lost acknowledgement
                 return Heard(False, arc)
             return Heard(True, retries, ack, self.port.rssi_dbm < 64)

@@ -255,9 +255,10 @@ class FaultInjection:
         elif kind == "reboot":
             rig.reboot(name)
         elif kind == "dongle_unplug":
-            from rpf_fly.emulator import fake_radio
+            from rpf_fly.emulator import crazyradio, fake_radio
 
             fake_radio.unplug(p["dongle"])
+            crazyradio.pull_out(p["dongle"])  # an emulated Crazyradio of that number (dry_run.radio: crazyradio)
         elif kind in ("planner_error", "planner_hang"):
             pass  # the drone's planner wrapper acts at its time (planner_factory)
         else:
