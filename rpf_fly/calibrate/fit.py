@@ -25,7 +25,7 @@ The Jacobian of the gains is by forward differences, one replay per kind of gain
 that kind changed at once (the axes barely couple: a change of x's gains moves y and z by well under a millimetre),
 refreshed after a rejected step and otherwise updated by Broyden's rule from each trial, so most iterations cost
 one replay; the delay's column is the model's velocity. Stops when a step changes every gain by under 0.3 % and
-the delay by under 0.5 ms, or after `MAX_ITERATIONS`.
+the delay by under 0.5 ms, or lowers the squared error by under `MIN_GAIN`, or after `MAX_ITERATIONS`.
 
 The mocap's latency and noise: against a dry run's ``/truth`` where the log has it (the shift that best lays the
 poses on the truth, and the poses' scatter about it); otherwise the noise from the poses' second differences (white
@@ -66,6 +66,12 @@ FD_STEP = 0.05
 MAX_STEP = 0.5
 """The largest change of a log gain in one iteration (a factor of 1.65)."""
 MAX_ITERATIONS = 12
+MIN_GAIN = 0.002
+"""A step that lowers the squared error by less than this share ends the fit: the bottom of the valley, where the
+gains move by well under 1 % (the replay's own resolution: the 1 ms tick, the setpoints' stamps)."""
+UNEXPLAINED_M = 0.005
+"""A residual over this (or 5 mocap noise widths) is reported: the fit explains the flight badly (a dry run's flight
+with the changed gains of tests/calibrate leaves 2-3 mm at 1 mm of noise)."""
 TOLERANCE = 3e-3
 
 
@@ -93,6 +99,8 @@ class FitResult:
     replays: int
     samples: int
     history: list[dict[str, float]] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+    """Why the fit may not describe the drone: the record's own warnings, a residual the model does not explain."""
 
 
 def _best_delay(track: Track, t: np.ndarray, measured: np.ndarray, axes: list[int], fixed: Optional[float]
@@ -238,10 +246,11 @@ def fit(record: FlightRecord, *, start: Optional[dict[str, float]] = None,
                 block = gains_jac[:, cols]
                 gains_jac[:, cols] = block + np.outer(change[:, i] - block @ g, g) / max(float(g @ g), 1e-18)
             if trial_cost < cost:
+                gained = (cost - trial_cost) / cost
                 theta, delay, track, model, cost = trial, trial_delay, trial_track, trial_model, trial_cost
                 mu = max(mu / 3.0, 1e-6)
                 fresh = False
-                done = float(np.max(np.abs(gain_step))) < TOLERANCE and abs(delay_step) < 5e-4
+                done = (float(np.max(np.abs(gain_step))) < TOLERANCE and abs(delay_step) < 5e-4) or gained < MIN_GAIN
             else:
                 mu *= 4.0
                 fresh = True
@@ -263,7 +272,14 @@ def fit(record: FlightRecord, *, start: Optional[dict[str, float]] = None,
         latency, latency_from = delay, "fit"
         frames = record.mocap_frames if record.mocap_frames is not None else record.positions
         noise = noise_from_frames(frames[(frames[:, 0] >= 0.0) & (frames[:, 0] <= record.end_s)])
+    warnings = list(record.warnings)
+    rms = float(np.sqrt(np.mean(distance ** 2)))
+    if rms > max(UNEXPLAINED_M, 5.0 * noise):
+        warnings.append(f"the fitted model leaves {rms * 1000:.1f} mm RMS unexplained ({noise * 1000:.2f} mm of mocap "
+                        "noise): the flight holds what the model does not (a stall, a gust, a crash, the floor, "
+                        "another drone's wash), or gains it does not fit")
     return FitResult(
+        warnings=warnings,
         params={**base, **(params_of(theta) if names else {})}, not_identified=not_identified, delay_s=delay,
         residual_rms_m=float(np.sqrt(np.mean(distance ** 2))), residual_max_m=float(np.max(distance)),
         residual_axis_rms_m={a: float(np.sqrt(np.mean(residual[:, i] ** 2))) for i, a in enumerate(AXES)},

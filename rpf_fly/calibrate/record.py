@@ -72,6 +72,8 @@ class FlightRecord:
     """At the window's start the drone stood on the floor, motors off (else it hovered there)."""
     epoch_ns: int
     """The window's t = 0 on the log's clock (0 for a trace)."""
+    warnings: tuple[str, ...] = ()
+    """What the file says against its own figures: a dry run whose host could not keep up (its ``/events``)."""
 
     @property
     def duration_s(self) -> float:
@@ -142,10 +144,12 @@ def _log_records(path: Path, drone: Optional[str]) -> list[FlightRecord]:
                               f"{', '.join(names)})")
         names = [drone]
     origin = data.metadata.get("mission", {}).get("source", "") or "flight"
-    return [_log_record(path, data, name, origin) for name in names]
+    warnings = tuple(str(m.data.get("message", "")) for m in data.topics.get("/events", [])
+                     if "could not keep up" in str(m.data.get("message", "")))  # rpf_fly/emulator/host_lag.py
+    return [_log_record(path, data, name, origin, warnings) for name in names]
 
 
-def _log_record(path: Path, data: Any, name: str, origin: str) -> FlightRecord:
+def _log_record(path: Path, data: Any, name: str, origin: str, warnings: tuple[str, ...]) -> FlightRecord:
     messages = data.topics[f"/{name}/setpoint"]
     stamps = np.array([m.publish_time for m in messages], dtype=np.int64)
     order = np.argsort(stamps, kind="stable")
@@ -183,7 +187,7 @@ def _log_record(path: Path, data: Any, name: str, origin: str) -> FlightRecord:
     first = frames[inside][0]
     return FlightRecord(path=path, drone=name, kind="log", origin=origin, setpoints=setpoints,
                         positions=frames[inside], truth=truth, mocap_frames=frames, end_s=end_s,
-                        on_floor=bool(first[3] < FLOOR_Z_M), epoch_ns=epoch_ns)
+                        on_floor=bool(first[3] < FLOOR_Z_M), epoch_ns=epoch_ns, warnings=warnings)
 
 
 # ----------------------------------------------------------------------------------------------- traces

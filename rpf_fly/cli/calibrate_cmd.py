@@ -40,6 +40,7 @@ def _profile(record: Any, result: Any) -> str:
     fit = {"residual_rms_m": result.residual_rms_m, "residual_max_m": result.residual_max_m,
            "residual_axis_rms_m": result.residual_axis_rms_m, "default_residual_rms_m": result.default_residual_rms_m,
            "delay_s": result.delay_s, "iterations": result.iterations, "not_identified": result.not_identified,
+           "warnings": result.warnings,
            "not_fitted": "kept as the firmware's (or --start's): " + ", ".join(NOT_FITTED)}
     return profile_text(record.drone, result.params, source=source, mocap=mocap, fit=fit)
 
@@ -88,6 +89,9 @@ def calibrate(
             path.parent.mkdir(parents=True, exist_ok=True)
             path.write_text(_profile(record, result), encoding="utf-8")
             written.append(str(path))
+    for record, result in fits:  # on stderr, whatever the output
+        for warning in result.warnings:
+            typer.echo(f"{log}: {record.drone}: warning: {warning}", err=True)
     if json_out:
         typer.echo(json.dumps({"log": str(log), "profiles": written, "drones": {
             record.drone: {"kind": record.kind, "origin": record.origin, "window_s": record.end_s,
@@ -96,7 +100,7 @@ def calibrate(
                            "residual_max_m": result.residual_max_m, "residual_axis_rms_m": result.residual_axis_rms_m,
                            "default_residual_rms_m": result.default_residual_rms_m, "latency_s": result.latency_s,
                            "latency_from": result.latency_from, "noise_m": result.noise_m,
-                           "iterations": result.iterations, "replays": result.replays}
+                           "iterations": result.iterations, "replays": result.replays, "warnings": result.warnings}
             for record, result in fits}}))
         return
     for record, result in fits:

@@ -90,3 +90,20 @@ def test_a_log_without_setpoints_is_one_line_and_exit_2(tmp_path: Path) -> None:
     assert done.returncode == 2
     assert done.stderr == f"{log}: no setpoints in the log (no /<drone>/setpoint topic): calibrate needs a streamed " \
                           "flight's log (rpf-fly fly or rpf-fly scenario with --log)\n"
+
+
+def test_a_flight_the_model_cannot_explain_is_calibrated_with_a_warning(tmp_path: Path) -> None:
+    """A reference carrot pushed 5 cm aside for a second (a gust the setpoints do not say): the fit leaves it
+    unexplained and says so on stderr, in the JSON and in the profile."""
+    doc = json.loads((TRACES / "c_carrot_0p5.json").read_text())
+    doc["pos"] = [[x + (0.05 if 4.0 <= t < 5.0 else 0.0), y, z] for t, (x, y, z) in zip(doc["t"], doc["pos"])]
+    trace = tmp_path / "gust.json"
+    trace.write_text(json.dumps(doc))
+    done = run_cli(str(trace), "--out", "p.yaml", "--json", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    fit = json.loads(done.stdout)["drones"]["c_carrot_0p5"]
+    assert fit["residual_rms_m"] > 0.01
+    assert len(fit["warnings"]) == 1 and fit["warnings"][0].startswith("the fitted model leaves ")
+    assert done.stderr == f"{trace}: c_carrot_0p5: warning: {fit['warnings'][0]}\n"
+    assert load_profile(tmp_path / "p.yaml").params  # written all the same: the warning says what it is worth
+    assert "the fitted model leaves" in (tmp_path / "p.yaml").read_text()
