@@ -33,18 +33,20 @@ import subprocess
 import sys
 import threading
 import time
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Mapping, Optional
 
-from rpf_fly.flight.events import ERROR, FATAL, INFO, WARNING, EventBus, FlightEvent
+from rpf_fly.flight.events import ERROR, EventBus
 from rpf_fly.mission.model import Mission
 from rpf_fly.radio.budget import dongle_of
 from rpf_fly.runtime.auth import SECRET_ENV, new_secret
 from rpf_fly.runtime.bus import FlightBus
-from rpf_fly.runtime.keys import COORDINATOR, LOGGER, RELAY, worker_name
-from rpf_fly.runtime.relay import RelayError, uses_relay
+from rpf_fly.runtime.keys import COORDINATOR, worker_name
+from rpf_fly.runtime.relay import uses_relay
+from rpf_fly.runtime.relay_process import MocapRelayProcess
 from rpf_fly.runtime.session import DEFAULT_PORT, StartError, free_loopback_endpoint, open_session, rig_host
+from rpf_fly.runtime.swarm_phases import SwarmPhases
+from rpf_fly.runtime.swarm_views import DroneView, SwarmViews, WorkerView
 
 logger = logging.getLogger(__name__)
 
@@ -53,45 +55,14 @@ LOCAL_WAIT_S = 60.0
 REMOTE_WAIT_S = 120.0
 """How long it waits for the remote workers (``--remote-dongles``) before it gives up, nothing armed."""
 LOGGER_WAIT_S = 30.0
-RELAY_WAIT_S = 30.0
-"""How long the coordinator waits for the mocap relay's token (it imports, then its mocap must answer: 5 s)."""
-PREFLIGHT_STATES = {"ready", "failed"}
-DOWN_STATES = {"landed", "failed", "grounded", "emergency", "link_lost", "landing"}
-ARM_WAIT_S = 15.0
-"""After the go: how long the coordinator waits for every worker to report its arming (each waits up to 3 s for its
-drones' supervisors) before it aborts, nothing taking off."""
 END_WAIT_S = 30.0
 """After the finish or a land command: how long the coordinator waits for the workers to land and exit."""
 
 
-@dataclass
-class DroneView:
-    """What the coordinator knows of one drone: its status messages (state, outcome, battery, link), where its
-    worker's ``tf`` last put it, and the reason its worker gave at the end."""
-    state: str = "connecting"
-    outcome: Optional[str] = None
-    battery_v: Optional[float] = None
-    link_pct: Optional[float] = None
-    position: Optional[tuple[float, float, float]] = None
-    reason: str = ""
-
-
-@dataclass
-class WorkerView:
-    name: str
-    dongle: int
-    drones: list[str]
-    remote: bool
-    alive: bool = False
-    seen: bool = False
-    done: bool = False
-    lost: bool = False
-    info: dict[str, Any] = field(default_factory=dict)
-    process: Optional[subprocess.Popen] = None
-
-
-class Coordinator:
-    """One distributed flight, from the coordinator's process."""
+class Coordinator(SwarmViews, MocapRelayProcess, SwarmPhases):
+    """One distributed flight, from the coordinator's process. Its parts: what it knows of the swarm and its console
+    (rpf_fly/runtime/swarm_views.py), the mocap relay's process (relay_process.py), the swarm's phases
+    (swarm_phases.py); here: its processes, from start to end."""
 
     def __init__(self, mission: Mission, mission_path: Path, log_path: Path, *, dry_run: bool,
                  remote_dongles: tuple[int, ...] = (), listen: tuple[str, ...] = (),
@@ -160,48 +131,6 @@ class Coordinator:
         self._closing = False
         """Set as :meth:`_close` begins: the logger's and the relay's tokens vanish because it ends them."""
 
-    # ------------------------------------------------------------------------------------------ console
-
-    def _print_event(self, event: FlightEvent) -> None:
-        if event.level >= WARNING or event.drone is None:
-            who = f"{event.drone}: " if event.drone else ""
-            self.say(f"[{event.kind}] {who}{event.message}")
-
-    def snapshot(self) -> list[dict[str, Any]]:
-        """Per-drone rows for the console, those of ``FlightLoop.snapshot`` (name, phase, position, goal distance,
-        battery, link quality, reason) from the drones' status and tf messages, with the drone's ``worker``, whether
-        that worker is ``lost`` and the drone's ``outcome`` once known (rpf_fly/cli/flight_console.py)."""
-        worker_of = {name: w for w in self.workers.values() for name in w.drones}
-        rows = []
-        for name, view in self.drones.items():
-            worker, pos = worker_of[name], view.position
-            reason = view.reason or (f"worker {worker.name} lost: left to its firmware's watchdog" if worker.lost
-                                     else "")
-            rows.append({"name": name, "phase": view.state, "position": pos,
-                         "goal_distance": abs(self._goals[name] - complex(pos[0], pos[1])) if pos is not None
-                         else None,
-                         "battery_v": view.battery_v, "link_pct": view.link_pct, "reason": reason,
-                         "outcome": view.outcome, "worker": worker.name, "lost": worker.lost})
-        return rows
-
-    def _show(self) -> None:
-        if self.status_hook is None:
-            return
-        try:
-            self.status_hook(self)
-        except Exception:  # noqa: BLE001 - the console never stops the flight
-            logger.exception("coordinator: the console's status hook failed")
-            self.status_hook = None
-
-    def _worker_event(self, sample: Any) -> None:
-        """The workers' events: the console shows warnings and errors, and the swarm-wide lines."""
-        message = json.loads(sample.payload.to_bytes())
-        level, name = int(message.get("level", 2)), message.get("name", "")
-        if level >= WARNING:
-            if name == "flight" or not name:
-                name = ""
-            self.say(f"[{message.get('file', '')}] {name + ': ' if name else ''}{message.get('message', '')}")
-
     # ------------------------------------------------------------------------------------------ signals
 
     def interrupt(self) -> None:
@@ -211,78 +140,6 @@ class Coordinator:
             self._stop_reason = "interrupted: landing every drone (Ctrl-C again: emergency stop)"
         else:
             self._estop = True
-        self._wake.set()
-
-    # ------------------------------------------------------------------------------------------ callbacks
-
-    def _status(self, sample: Any) -> None:
-        drone = str(sample.key_expr).rsplit("/", 1)[-1]
-        view = self.drones.get(drone)
-        if view is None:
-            return
-        message = json.loads(sample.payload.to_bytes())
-        battery, quality = message.get("battery_v"), message.get("link_quality")
-        battery, link = None if battery is None else float(battery), None if quality is None else 100.0 * float(quality)
-        view.state = str(message["state"])
-        view.outcome = message.get("outcome") or view.outcome
-        view.battery_v, view.link_pct = battery, link
-        self._wake.set()
-
-    def _tf(self, sample: Any) -> None:
-        """A worker's ``tf`` (20 Hz, its drones' mocap poses): where the console shows them."""
-        for transform in json.loads(sample.payload.to_bytes())["transforms"]:
-            view = self.drones.get(str(transform["child_frame_id"]))
-            if view is not None:
-                t = transform["translation"]
-                view.position = (float(t["x"]), float(t["y"]), float(t["z"]))
-
-    def _worker_info(self, sample: Any) -> None:
-        info = json.loads(sample.payload.to_bytes())
-        if info.get("name") == LOGGER:
-            self.logger_info = info
-            return
-        if info.get("name") == RELAY:
-            self.relay_info = info
-            return
-        worker = self.workers.get(str(info.get("name")))
-        if worker is None:
-            return
-        worker.info = info
-        if info.get("state") == "done":
-            worker.done = True
-            for name, outcome in (info.get("outcomes") or {}).items():
-                if name in self.drones:
-                    self.drones[name].outcome = outcome
-            for name, reason in (info.get("reasons") or {}).items():
-                if name in self.drones:
-                    self.drones[name].reason = str(reason)
-        self._wake.set()
-
-    def _alive(self, name: str, alive: bool) -> None:
-        if name == RELAY:
-            self._relay_alive(alive)
-            return
-        if name == LOGGER:
-            self.logger_alive = alive
-            if not alive and self.phase not in ("done",) and not self._closing:
-                self.events.emit(ERROR, "logger", "the logger is gone: the flight goes on, the log ends here "
-                                 f"(rpf-fly review --salvage {self.log_path})")
-            self._wake.set()
-            return
-        worker = self.workers.get(name)
-        if worker is None:
-            return
-        if alive:
-            worker.alive = worker.seen = True
-        else:
-            worker.alive = False
-            if not worker.done:
-                worker.lost = True
-                pid = worker.info.get("pid", "?")
-                host = worker.info.get("host", "?")
-                self.events.emit(FATAL, "worker_lost",
-                                 f"worker {name} (dongle {worker.dongle}, pid {pid} on {host}) is gone: its drones "
-                                 f"{', '.join(worker.drones)} are left to their firmware's watchdog; the others fly on")
         self._wake.set()
 
     def _serve_rig(self, query: Any) -> None:
@@ -363,78 +220,6 @@ class Coordinator:
             raise StartError(f"the logger did not come up within {LOGGER_WAIT_S:.0f} s (see "
                              f"{self.log_path.stem}.logger.log): nothing armed")
 
-    # ------------------------------------------------------------------------------------------ the mocap relay
-
-    def _start_relay(self) -> None:
-        """Start the mocap relay (rpf_fly/runtime/relay.py) and wait for its token before any worker starts;
-        :class:`RelayError` (one line: the relay's own reason when it exited) if it never comes."""
-        cmd = [sys.executable, "-m", "rpf_fly.runtime.relay", str(self.mission_path), "--flight", self.flight,
-               "--log", str(self.log_path), "--connect", self.local_endpoint] + (["--dry-run"] if self.dry_run else [])
-        self.relay_process = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stderr=subprocess.PIPE,
-                                              env=dict(os.environ, **{SECRET_ENV: self.secret}))
-        threading.Thread(target=self._relay_stderr, args=(self.relay_process,), name="relay-stderr",
-                         daemon=True).start()
-        deadline = time.monotonic() + RELAY_WAIT_S
-        while not self.relay_alive and time.monotonic() < deadline:
-            code = self.relay_process.poll()
-            if code is not None:
-                time.sleep(0.1)  # its last line
-                why = self._relay_said[-1] if self._relay_said else f"see {self.log_path.stem}.relay.log"
-                raise RelayError(f"the mocap relay exited at start (code {code}): {why}; nothing armed")
-            self._wake.wait(0.1)
-            self._wake.clear()
-        if not self.relay_alive:
-            raise RelayError(f"the mocap relay did not come up within {RELAY_WAIT_S:.0f} s (see "
-                             f"{self.log_path.stem}.relay.log); nothing armed")
-        if self.relayed:
-            self.say(f"mocap relay up (pid {self.relay_process.pid}): the workers fly on its frames "
-                     f"({self.bus.keys.mocap_frames if self.bus is not None else 'mocap_frames'})")
-        else:
-            self.say(f"mocap relay up (pid {self.relay_process.pid}): the log's mocap; the workers read their own")
-
-    def _relay_stderr(self, process: subprocess.Popen) -> None:
-        """The relay's stderr: kept (its last line explains a failed start) and, once it is up, on the console."""
-        assert process.stderr is not None
-        for raw in process.stderr:
-            line = raw.decode(errors="replace").rstrip()
-            self._relay_said.append(line)
-            if self.relay_alive:
-                self.say(line)
-
-    def _relay_alive(self, alive: bool) -> None:
-        if alive:
-            self.relay_alive = True
-        elif self.relay_alive:
-            self.relay_alive = False
-            if not self._closing:
-                pid, host = self.relay_info.get("pid", "?"), self.relay_info.get("host", "?")
-                if self.relayed:  # no worker sees anything any more: land now, not once each pose is stale
-                    self.events.emit(FATAL, "relay_lost", f"the mocap relay (pid {pid} on {host}) is gone: the "
-                                     "workers get no mocap; every drone lands")
-                    self._stop_reason = self._stop_reason or "the mocap relay is gone: landing every drone"
-                else:
-                    self.events.emit(WARNING, "relay_lost", f"the mocap relay (pid {pid} on {host}) is gone: the "
-                                     "workers fly on their own mocap; the log's /mocap ends here")
-        self._wake.set()
-
-    def _relay_record(self) -> dict[str, Any]:
-        """The ``runtime`` record's ``relay`` (the log's metadata): the process, and whether the workers fly on its
-        frames (``relayed``; else it publishes the log's mocap only)."""
-        return {"relay": {**{k: self.relay_info.get(k) for k in ("name", "host", "pid", "source", "key")},
-                          "relayed": self.relayed}}
-
-    def _stop_relay(self) -> None:
-        process = self.relay_process
-        if process is None:
-            return
-        if process.poll() is None:
-            process.send_signal(signal.SIGTERM)
-            try:
-                process.wait(10.0)
-            except subprocess.TimeoutExpired:
-                process.kill()
-                process.wait(5.0)
-
     def worker_command(self, dongle: int, endpoint: str) -> list[str]:
         return ["worker", str(self.mission_path), "--dongle", str(dongle), "--flight", self.flight,
                 "--connect", endpoint] + (["--dry-run"] if self.dry_run else []) + list(self.worker_args)
@@ -476,97 +261,6 @@ class Coordinator:
             self._wake.wait(0.2)
             self._wake.clear()
             self._show()
-
-    def _command(self, command: str, reason: str = "", grounded: tuple[str, ...] = ()) -> None:
-        assert self.bus is not None
-        self.events.emit(INFO if command in ("go", "takeoff", "finish") else WARNING, "command", f"{command}"
-                         f"{': ' + reason if reason else ''}")
-        self.bus.command(self.secret, command, reason, grounded)
-
-    def _live(self) -> list[WorkerView]:
-        return [w for w in self.workers.values() if w.alive and not w.done]
-
-    def _states(self, workers: list[WorkerView]) -> list[str]:
-        return [self.drones[n].state for w in workers for n in w.drones]
-
-    def _fly(self) -> None:
-        self.phase = "preflight"
-        self.events.emit(INFO, "phase", "swarm: preflight")
-        arrived_since: Optional[float] = None
-        arming_since = 0.0
-        sent_stop = sent_estop = False
-        timeout = self.mission.flight.timeout_s + 120.0
-        start = time.monotonic()
-        while True:
-            self._wake.wait(0.1)
-            self._wake.clear()
-            self._show()
-            now = time.monotonic()
-            live = self._live()
-            if self._estop and not sent_estop:
-                sent_estop = True
-                self._command("emergency_stop", "second Ctrl-C: emergency stop, motors off")
-            if self._stop_reason and not sent_stop:
-                sent_stop = True
-                self._command("land", self._stop_reason)
-                self.phase = "landing"
-            if not live:
-                break
-            if now - start > timeout:
-                self._command("land", "the coordinator's flight timeout")
-                self.phase = "landing"
-                break
-            states = self._states(live)
-            gone = [w.name for w in self.workers.values() if w.done or w.lost]
-            if self.phase == "preflight" and gone:
-                # As a single-process flight aborts when a drone fails to connect: a worker that ended (its links
-                # failed, it aborted) or died before take-off grounds the whole swarm.
-                self._command("abort", f"{', '.join(gone)} ended before take-off: no drone takes off")
-                self.phase = "aborted"
-            elif self.phase == "preflight" and all(s in PREFLIGHT_STATES for s in states):
-                failed = [n for w in live for n in w.drones if self.drones[n].state == "failed"]
-                if len(failed) == len(states) or (failed and self.mission.safety.on_preflight_failure == "abort"):
-                    self._command("abort", f"preflight failed for {', '.join(failed)}: no drone takes off")
-                    self.phase = "aborted"
-                else:  # the failed stay down; the go names them, each worker keeps down its drones beside them
-                    self._command("go", f"every worker finished its preflight; {', '.join(failed)} stay on the "
-                                  "ground, with every drone that could not take off or land beside them" if failed
-                                  else "every worker passed its preflight", tuple(failed))
-                    self.phase = "arming"
-                    arming_since = now
-            elif self.phase == "arming":
-                if all(w.info.get("state") == "armed" for w in live):
-                    down = self._grounded_at_takeoff(live)
-                    self._command("takeoff", "every worker armed" + (
-                        f"; {', '.join(down)} stay on the ground, with every drone that could not take off or land "
-                        "beside them" if down else ""), tuple(down))
-                    self.phase = "flying"
-                    self.events.emit(INFO, "phase", "swarm: flying")
-                elif now - arming_since > ARM_WAIT_S:
-                    waiting = [w.name for w in live if w.info.get("state") != "armed"]
-                    self._command("abort", f"{', '.join(waiting)} did not arm within {ARM_WAIT_S:.0f} s: no drone "
-                                  "takes off")
-                    self.phase = "aborted"
-            elif self.phase == "flying":
-                if states and all(s == "arrived" or s in DOWN_STATES for s in states) and "arrived" in states:
-                    arrived_since = arrived_since if arrived_since is not None else now
-                    if now - arrived_since >= self.mission.safety.arrival_hold_s:
-                        self._command("finish", "every drone of the swarm is at its goal")
-                        self.phase = "landing"
-                        self.events.emit(INFO, "phase", "swarm: landing")
-                else:
-                    arrived_since = None
-        self.phase = "done" if self.phase != "aborted" else self.phase
-
-    def _grounded_at_takeoff(self, live: list[WorkerView]) -> list[str]:
-        """Every drone that stays on the ground once the workers armed: their arming refusals (each worker's report
-        names them: their "failed" status may come later), every drone down since the go, and the drones of a
-        worker that ended or died meanwhile (on the ground where they stand). Each worker keeps down its drones
-        beside them, as a single process keeps its own down beside its refusals."""
-        down = {n for w in live for n in w.info.get("refused", ()) if n in self.drones}
-        down |= {n for n, view in self.drones.items() if view.state == "failed"}
-        down |= {n for w in self.workers.values() if w not in live for n in w.drones}
-        return sorted(down)
 
     def _end_workers(self) -> None:
         """Wait for the local workers to land and exit (a stuck one: land, then SIGTERM, then SIGKILL)."""
@@ -642,15 +336,3 @@ class Coordinator:
         lines += self._relay_summary()
         lines.append(f"log: {self.log_path}  (rpf-fly review {self.log_path})")
         return lines
-
-    def _relay_summary(self) -> list[str]:
-        """The relay's line: frames relayed, its CPU, and each worker's hop from the relay's receipt to its own."""
-        if not self.relay_info:
-            return []
-        hops = [f"{w.name} p50 {w.info['relay_transit_p50_s'] * 1e3:.2f} ms p99 "
-                f"{w.info['relay_transit_p99_s'] * 1e3:.2f} ms" for w in self.workers.values()
-                if w.info.get("relay_transit_p50_s") is not None]
-        cpu = self.relay_info.get("cpu_pct")
-        return [f"relay: {self.relay_info.get('frames', 0)} frames"
-                + (f", {cpu:.1f} % of a core" if cpu is not None else "")
-                + (f"; relay to worker: {', '.join(hops)}" if hops else "")]
