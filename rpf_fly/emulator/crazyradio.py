@@ -19,7 +19,9 @@ for the 2.0; details in docs/radio.md, "The emulated Crazyradio"):
 - a bulk OUT carries one packet (at most 32 bytes) at the current channel, address and data rate with up to ARC
   retransmissions; the bulk IN returns the status byte (bit 0 acknowledged, bit 1 power detector, bits 4-7 the
   retransmissions) and the acknowledgement's payload, or a single 0 when nothing acknowledged it; with ACK_ENABLE
-  off nothing is read back (a read times out), and what is sent reaches no simulated drone;
+  off nothing is read back (a read times out), and what is sent reaches no simulated drone unless it goes to the
+  broadcast address 0xFFE7E7E7E7: that reaches every drone on the channel at each of its attempts (once with
+  ACK_ENABLE off; ARC + 1 times with it on, as nobody acknowledges it: rpf_fly/radio/broadcast.py's packed extpos);
 - the PA ignores a channel above 125 or a data rate above 2 (keeps the old one); the 2.0 takes them but never
   acknowledges a packet on a channel above 100 or at 250 kbps; the PA in continuous-carrier mode takes no packet
   (the write times out), the 2.0 answers every one unacknowledged.
@@ -36,7 +38,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
-from .crazyradio_air import Air
+from .crazyradio_air import BROADCAST_ADDRESS, Air
 from .crazyradio_timing import (
     DR_2M,
     RADIO_TYPES,
@@ -104,6 +106,8 @@ class DongleCounters:
     address_switches: int = 0
     """Bulk writes to another address than the bulk write before."""
     channel_switches: int = 0
+    broadcasts: int = 0
+    """Bulk writes to the broadcast address (`crazyradio_air.BROADCAST_ADDRESS`): each goes out ARC + 1 times."""
     busy_s: float = 0.0
     """Time the dongle spent on transfers (USB and radio)."""
 
@@ -281,10 +285,18 @@ class EmulatedCrazyradio:
             is_poll = len(packet) == 1 and packet[0] & 0xF3 == 0xF3
             (self.counters.polls if is_poll else self.counters.packets)[address] += 1
         if not self.ack_enabled:
+            if self.address_int == BROADCAST_ADDRESS and rate in self.radio.rates and packet:
+                self.counters.broadcasts += 1
+                self.air.broadcast(channel, packet, 1)
             return 0, b"", self.radio.ramp_s + time_on_air_s(len(packet), rate)
         if self.carrier or rate not in self.radio.rates or channel > self.radio.max_channel or not packet:
             self.counters.unacked += 1
             return 0, b"", 0.0
+        if self.address_int == BROADCAST_ADDRESS:  # heard by every drone on the channel, acknowledged by none
+            self.counters.broadcasts += 1
+            self.counters.unacked += 1
+            self.air.broadcast(channel, packet, self.arc + 1)
+            return 0, b"", radio_s(self.radio, rate, len(packet), 0, self.arc + 1, False, ard_s(self.ard, rate))
         heard = self.air.transmit(self.address_int, channel, rate, packet, self.arc)
         attempts = heard.retries + 1 if heard.acked else self.arc + 1
         air_s = radio_s(self.radio, rate, len(packet), len(heard.payload), attempts, heard.acked,

@@ -46,6 +46,10 @@ if TYPE_CHECKING:
     from .fake_radio import RadioWorld
     from .fake_world import DronePort
 
+BROADCAST_ADDRESS = 0xFFE7E7E7E7
+"""The address every Crazyflie's nRF51 also listens on and never acknowledges (crazyflie2-nrf-firmware ``esb.c``):
+a packet sent there reaches every drone on the channel (packed extpos, rpf_fly/radio/broadcast.py)."""
+
 DEFAULT_CHANNEL = 80
 """A Crazyflie's channel out of the box (the fake firmware's EEPROM; FakeWorld gives a drone without a configured
 channel this one)."""
@@ -178,6 +182,19 @@ class Air:
         if radio is None:
             return Heard(False, arc)
         return radio.receive(channel, rate, packet, arc)
+
+    def broadcast(self, channel: int, packet: bytes, copies: int) -> None:
+        """``copies`` transmissions of ``packet`` to `BROADCAST_ADDRESS` on ``channel``: each reaches the firmware of
+        every drone listening there unless its link loses it (the world's ``broadcast``, as the ``fake://`` radio's);
+        nobody acknowledges them, nothing comes down, and no safelink bit counts (the nRF51 passes them on as they
+        are)."""
+        with self._lock:
+            if not self._started:
+                self.world.start()
+                self._started = True
+        hear = getattr(self.world, "broadcast", None)
+        if hear is not None and packet:
+            hear(channel, (packet[0], bytes(packet[1:])), copies)
 
     def _radio(self, address: int, may_spawn: bool) -> CrazyflieRadio | None:
         with self._lock:

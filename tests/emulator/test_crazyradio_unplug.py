@@ -162,3 +162,31 @@ def test_an_answer_rides_on_the_next_acknowledgement_never_on_its_own(worlds: li
     finally:
         radio.close()
     assert plug.air.radio(address(1)) is not None
+
+
+def test_a_broadcast_reaches_every_drone_on_the_channel_at_each_of_its_attempts(worlds: list[FakeWorld]) -> None:
+    """cflib 0.1.34's shared radio sends a packed extpos to 0xFFE7E7E7E7 (rpf_fly/radio/broadcast.py): nobody
+    acknowledges it, the dongle makes its ARC + 1 attempts, and each reaches every drone listening on the channel."""
+    from rpf_fly.emulator.crazyradio_timing import CRAZYRADIO_PA, radio_s
+    from rpf_fly.radio.broadcast import CflibBroadcast
+    from rpf_fly.radio.packed_extpos import BROADCAST_COPIES, HEADER, drone_id, encode
+
+    world = FakeWorld({address(i): FakeDroneConfig.at(0.5 * i, 0.0) for i in range(3)}
+                      | {address(9): FakeDroneConfig.at(0.0, 1.0, channel=90)})
+    worlds.append(world)
+    plug = crazyradio.plug(world, radio="crazyradio_pa")
+    sender = CflibBroadcast(0, 80, "2M")
+    try:
+        packet = bytes((HEADER,)) + encode([(drone_id(address(i)), (0.5 * i, 0.0, 0.0)) for i in range(3)])
+        start = time.monotonic()
+        assert sender.send(packet)
+        took = time.monotonic() - start
+    finally:
+        sender.close()
+    counters = plug.dongles[0].counters
+    assert counters.broadcasts == 1 and counters.acked == 0
+    assert took >= radio_s(CRAZYRADIO_PA, 2, len(packet), 0, BROADCAST_COPIES, False, 500e-6)
+    port, channel = (HEADER >> 4) & 0x0F, HEADER & 0x03
+    for i in range(3):
+        assert world.snapshot(address(i)).packets_received.get((port, channel)) == BROADCAST_COPIES
+    assert not world.snapshot(address(9)).packets_received.get((port, channel))  # on channel 90: hears none
