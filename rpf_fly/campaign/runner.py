@@ -12,11 +12,12 @@ import contextlib
 import random
 import shlex
 import tempfile
+import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Iterator, Optional
 
-from rpf_fly.campaign.flights import fly_against_lab, fly_dry_run
+from rpf_fly.campaign.flights import FlightRecord, LabRecord, fly_against_lab, fly_dry_run
 from rpf_fly.campaign.judge import Verdict, judge_flight, judge_lab
 from rpf_fly.campaign.missions import (DYNAMICS, FIXED_MISSIONS, RANDOM_MISSIONS, ROOT, mission_path, with_dynamics,
                                        with_extpose, with_planner_kind, with_world_seed)
@@ -27,6 +28,14 @@ from rpf_fly.mission import MissionError, load_mission
 
 OnVerdict = Callable[[Verdict], None]
 """Told each run's verdict as it ends (a campaign takes minutes: the user sees it go)."""
+
+HOST_TRIES = 3
+"""A run whose host fell behind its simulated world is no evidence either way: it is flown again, this many times
+in all (docs/flight.md, "When the host cannot keep up")."""
+HOST_RETRY_WAIT_S = 20.0
+"""How long a run whose host fell behind waits before it is flown again (a busy host may have calmed down)."""
+NOT_EVIDENCE = "this dry run is not evidence"
+"""The end of the line a dry run or lab says when its host could not keep up (`rpf_fly.emulator.host_lag`)."""
 
 
 class CampaignError(ValueError):
@@ -71,14 +80,42 @@ def _workdir(keep: Optional[Path]) -> Iterator[Path]:
         yield Path(tmp)
 
 
+def host_fell_behind(record: FlightRecord) -> bool:
+    """The run's simulated world fell behind its host: the flight's or its lab's events (or the flight's output,
+    all a killed flight leaves) say it is not evidence."""
+    topics = [record.topics] + ([record.lab_topics] if isinstance(record, LabRecord) else [])
+    said = any(NOT_EVIDENCE in m.get("message", "") for t in topics for _, m in t.get("/events", []))
+    return said or NOT_EVIDENCE in record.stderr or NOT_EVIDENCE in record.stdout
+
+
+def _evidence(fly: Callable[[], FlightRecord], judge: Callable[[FlightRecord], Verdict]) -> Verdict:
+    """``fly`` until its host kept up (at most `HOST_TRIES` times) and judge that flight. A verdict flown more than
+    once says so in its events; one whose host fell behind every time fails as no evidence."""
+    for tries in range(1, HOST_TRIES + 1):
+        record = fly()
+        if not host_fell_behind(record):
+            verdict = judge(record)
+            if tries > 1:
+                verdict.events.append(f"campaign: flown {tries} times, the host fell behind on the first {tries - 1}")
+            return verdict
+        if tries < HOST_TRIES:
+            time.sleep(HOST_RETRY_WAIT_S)
+    verdict = judge(record)
+    verdict.failures.append(f"the host fell behind on each of {HOST_TRIES} tries: not evidence, fly it again")
+    verdict.passed = False
+    return verdict
+
+
 def fly_and_judge(faults: list[dict[str, Any]], mission_file: Path, workdir: Path, tag: str = "") -> Verdict:
-    """One dry run of ``mission_file`` with the schedule ``faults``, judged on its truth."""
-    return judge_flight(fly_dry_run(mission_file, faults, workdir, tag))
+    """One dry run of ``mission_file`` with the schedule ``faults``, judged on its truth (flown again while its host
+    fell behind, `HOST_TRIES`)."""
+    return _evidence(lambda: fly_dry_run(mission_file, faults, workdir, tag), judge_flight)
 
 
 def fly_and_judge_lab(fault: dict[str, Any], mission_file: Path, workdir: Path, tag: str = "") -> Verdict:
-    """One run of a lab kind against a lab of its own, judged on the lab's log."""
-    return judge_lab(fly_against_lab(mission_file, fault, workdir, tag))
+    """One run of a lab kind against a lab of its own, judged on the lab's log (flown again while its host fell
+    behind, `HOST_TRIES`)."""
+    return _evidence(lambda: fly_against_lab(mission_file, fault, workdir, tag), judge_lab)  # type: ignore[arg-type]
 
 
 def fixed_runs(mission_file: Path, kinds: list[str], workdir: Path, on_verdict: OnVerdict = _ignore) -> list[Verdict]:
