@@ -61,6 +61,8 @@ MIN_DELAY_S = -0.05
 MAX_DELAY_S = 0.1
 """The delay's range: from a model 50 ms slower than the drone to one 100 ms ahead of the poses."""
 DELAY_STEP_S = 0.001
+MAX_TRUTH_LAG_S = 0.2
+"""The longest mocap latency measured against a dry run's truth (a profile's is at most 2 s, a dry run's own 10 ms)."""
 FD_STEP = 0.05
 """The forward difference's step in log gain (5 %)."""
 MAX_STEP = 0.5
@@ -105,8 +107,8 @@ class FitResult:
 
 def _best_delay(track: Track, t: np.ndarray, measured: np.ndarray, axes: list[int], fixed: Optional[float]
                 ) -> tuple[float, np.ndarray]:
-    """The delay (from 0 to `MAX_DELAY_S`, or ``fixed``) that best lays the replay on ``measured`` along ``axes``,
-    and the model's positions with it."""
+    """The delay (from `MIN_DELAY_S` to `MAX_DELAY_S` by 5 ms, then by 1 ms about the best; or ``fixed``) that best
+    lays the replay on ``measured`` along ``axes``, and the model's positions with it."""
     if fixed is not None:
         return fixed, track.at(t - fixed)
     best = (math.inf, 0.0)
@@ -121,9 +123,9 @@ def _best_delay(track: Track, t: np.ndarray, measured: np.ndarray, axes: list[in
 
 
 def mocap_against_truth(record: FlightRecord) -> Optional[tuple[float, float]]:
-    """(latency, noise) of the logged poses against the dry run's truth over the window: the shift (0 to 50 ms, by
-    0.5 ms) that minimises their distance, and their per-axis scatter about the truth so shifted; None without
-    truth."""
+    """(latency, noise) of the logged poses against the dry run's truth over the window: the shift (0 to
+    `MAX_TRUTH_LAG_S`, by 0.5 ms) that minimises their distance, and their per-axis scatter about the truth so
+    shifted; None without truth."""
     truth = record.truth
     if truth is None or len(truth) < 10:
         return None
@@ -133,7 +135,7 @@ def mocap_against_truth(record: FlightRecord) -> Optional[tuple[float, float]]:
         return None
     t, pos = t[inside], pos[inside]
     best = (math.inf, 0.0)
-    for lag in np.arange(0.0, 0.05 + 1e-9, 0.0005):
+    for lag in np.arange(0.0, MAX_TRUTH_LAG_S + 1e-9, 0.0005):
         shifted = np.column_stack([np.interp(t - lag, truth[:, 0], truth[:, i]) for i in (1, 2, 3)])
         best = min(best, (float(np.mean((pos - shifted) ** 2)), float(lag)))
     return best[1], math.sqrt(best[0])

@@ -143,9 +143,17 @@ def _log_records(path: Path, drone: Optional[str]) -> list[FlightRecord]:
             raise RecordError(f"{path}: --drone {drone}: no setpoints of {drone} in the log (drones with setpoints: "
                               f"{', '.join(names)})")
         names = [drone]
-    origin = data.metadata.get("mission", {}).get("source", "") or "flight"
+    mission = data.metadata.get("mission", {})
+    origin = mission.get("source", "") or "flight"
     warnings = tuple(str(m.data.get("message", "")) for m in data.topics.get("/events", [])
                      if "could not keep up" in str(m.data.get("message", "")))  # rpf_fly/emulator/host_lag.py
+    if origin in ("dry-run", "lab"):
+        from rpf_fly.log.review import dry_run_dynamics
+
+        dynamics = dry_run_dynamics(str(mission.get("yaml", ""))) or "first-order"
+        if dynamics != "firmware":
+            warnings += (f"its simulated drones flew the {dynamics} model (the logged mission's dry_run.dynamics), "
+                         "not the firmware's cascade: no gains describe them",)
     return [_log_record(path, data, name, origin, warnings) for name in names]
 
 

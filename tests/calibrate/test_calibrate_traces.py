@@ -10,6 +10,7 @@ import sys
 from pathlib import Path
 
 import pytest
+import yaml
 from typer.testing import CliRunner
 
 from rpf_fly.calibrate.profile import load_profile
@@ -107,3 +108,35 @@ def test_a_flight_the_model_cannot_explain_is_calibrated_with_a_warning(tmp_path
     assert done.stderr == f"{trace}: c_carrot_0p5: warning: {fit['warnings'][0]}\n"
     assert load_profile(tmp_path / "p.yaml").params  # written all the same: the warning says what it is worth
     assert "the fitted model leaves" in (tmp_path / "p.yaml").read_text()
+
+
+def test_a_log_written_from_a_trace_is_fitted_as_the_trace(tmp_path: Path) -> None:
+    """The log path on a known flight: the reference's carrot written as a dry run's MCAP log (its setpoint stream,
+    its positions as the mocap's poses and the truth, at the trace's instants) by the recorder's own writer and read
+    back: the default gains, no latency, no noise; and since the logged mission names no dynamics, its dry run flew
+    the first-order model, which the calibration says."""
+    doc = json.loads((TRACES / "c_carrot_1p0.json").read_text())
+    mission = parse_mission("arena: {x: [-1, 4], y: [-1, 1]}\nplanner: {kind: apf}\ndrones:\n"
+                            "  - {name: cf1, uri: radio://0/80/2M/E7E7E7E701, start: [0, 0], goal: [3, 0]}\n")
+    log, t0 = tmp_path / "carrot.mcap", 1_800_000_000_000_000_000
+    scenario = yaml.safe_load((TRACES.parent / "scenarios" / "c_carrot_1p0.yaml").read_text())
+    with FlightLog(log, S.mission_metadata(mission, 0, "dry-run"), S.scenario_metadata(mission)) as flight:
+        listed = {round(row[0] * 10): row[1:] for row in scenario["setpoints"]}
+        last = listed[0]
+        for k in range(round(scenario["duration_s"] * 10) + 1):  # the stream: every tick, the last listed point
+            last = listed.get(k, last)
+            flight.setpoint("cf1", t0 + k * 100_000_000, last)
+        for t, p in zip(doc["t"], doc["pos"]):
+            stamp = t0 + round(t * 1e9)
+            flight.pose("cf1", stamp, p)
+            flight.truth(stamp, {"cf1": (p, 0.0, True, False, p)})
+    done = run_cli(str(log), "--json", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    fit = json.loads(done.stdout)["drones"]["cf1"]
+    assert fit["kind"] == "log" and fit["origin"] == "dry-run"
+    for name in GAINS["x"]:
+        assert fit["params"][name] == pytest.approx(CfGains().params()[name], rel=0.02), fit
+    assert fit["latency_from"] == "truth" and fit["latency_s"] == 0.0 and fit["noise_m"] < 1e-6
+    assert abs(fit["delay_s"]) < 0.003 and fit["residual_axis_rms_m"]["x"] < 0.001, fit
+    assert fit["warnings"] == ["its simulated drones flew the first-order model (the logged mission's "
+                               "dry_run.dynamics), not the firmware's cascade: no gains describe them"]
