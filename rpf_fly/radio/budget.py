@@ -228,7 +228,8 @@ def _dongle_load(dongle: int, drones: tuple[tuple[str, str], ...], radio_type: s
 def _with_model(load: DongleLoad, uris: Mapping[str, str], groups: list, timing: Timing, mode: str, rate: float,
                 setpoint_hz: float, frame_hz: float, packets_hz: float) -> DongleLoad:
     """The load with its rate limits and modelled latencies: each candidate limit (`RATE_LIMIT_FACTORS`, or the
-    URIs' own) run through the dongle model, the lowest setpoint latency taken among those that keep up."""
+    URIs' own) run through the dongle model, the lowest setpoint latency taken among those on time (`DongleLoad.late`
+    false), else among all."""
     from rpf_fly.radio.schedule import extpos_phases  # (schedule imports this module)
 
     names = load.drones
@@ -252,8 +253,9 @@ def _with_model(load: DongleLoad, uris: Mapping[str, str], groups: list, timing:
         traffic = Traffic(tuple(links), setpoint_hz, frame_hz, rate, broadcasts, loss=EXPECTED_ATTEMPT_LOSS,
                           copies=BROADCAST_COPIES)
         run = simulate(traffic, timing, seconds=MODEL_SECONDS)
-        keeps_up = run.setpoints_superseded <= SUPERSEDED_LIMIT and run.extpos_delivered >= EXTPOS_DELIVERED_LIMIT
-        score = (not keeps_up, run.setpoint_p(0.99))
+        on_time = (run.setpoints_superseded <= SUPERSEDED_LIMIT and run.extpos_delivered >= EXTPOS_DELIVERED_LIMIT
+                   and run.setpoint_p(0.99) <= load.setpoint_period_s and run.extpos_p(0.99) <= load.extpos_period_s)
+        score = (not on_time, run.setpoint_p(0.99))
         if best is None or score < best[0]:
             best = (score, limits, run)
         if all(own.values()):
