@@ -71,7 +71,7 @@ def pct(values: list[float], q: float) -> float | None:
 
 
 def factory_of(mission):  # type: ignore[no-untyped-def]
-    from rpf_fly.sim.planners import make_planner
+    from rpf_fly.planning.factory import make_planner
     from rpf_fly.sim.scenario import obstacle_set
 
     obstacles = obstacle_set(mission.obstacles)

@@ -38,7 +38,7 @@ from rpf_fly.flight.dry_run import DryRun
 from rpf_fly.flight.recording import McapRecorder
 from rpf_fly.flight.session import run_flight
 from rpf_fly.mission import parse_mission
-from rpf_fly.sim.planners import make_planner
+from rpf_fly.planning.factory import make_planner
 from rpf_fly.sim.scenario import obstacle_set
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -36,7 +36,7 @@ from bench_flight import mission_text  # noqa: E402
 from rpf_fly.flight.dry_run import DryRun  # noqa: E402
 from rpf_fly.flight.session import run_flight  # noqa: E402
 from rpf_fly.mission import parse_mission  # noqa: E402
-from rpf_fly.sim.planners import make_planner  # noqa: E402
+from rpf_fly.planning.factory import make_planner  # noqa: E402
 from rpf_fly.sim.scenario import obstacle_set  # noqa: E402
 
 CLIENT = r"""

@@ -35,7 +35,7 @@ import numpy as np  # noqa: E402
 from rpf_fly.mission import load_mission  # noqa: E402
 from rpf_fly.planning import FixedGains, Planner, PlannerConfig, ObstacleSet, view_of_drone  # noqa: E402
 from rpf_fly.sim import SimParams, World, arena_a, circle_swap, rollout, scenario_from_mission  # noqa: E402
-from rpf_fly.sim.planners import make_planner  # noqa: E402
+from rpf_fly.planning.factory import make_planner  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 

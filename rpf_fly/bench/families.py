@@ -264,7 +264,7 @@ def _run_group(
     """The runs of one (family, planner, guidance) over the seeds, or the reason it cannot run."""
     from rpf_fly.planning.onnx_policy import PolicyError
     from rpf_fly.sim.evaluate import run_scenario
-    from rpf_fly.sim.planners import UnsupportedPlanner
+    from rpf_fly.planning.factory import UnsupportedPlanner
 
     settings = with_guidance(base, mode)
     records: list[RunRecord] = []
@@ -289,7 +289,7 @@ def _run_family_firmware(
     group its records, or the reason it cannot run (its planner could not be made: no run of it flies)."""
     from rpf_fly.planning.onnx_policy import PolicyError
     from rpf_fly.sim.closed_loop import run_firmware
-    from rpf_fly.sim.planners import UnsupportedPlanner, make_planner
+    from rpf_fly.planning.factory import UnsupportedPlanner, make_planner
 
     scenes = [generate(family, seed, split=SPLIT) for seed in seeds]
     errors: list[Optional[str]] = []

@@ -89,8 +89,7 @@ def _check_radios(mission, skip_dongles: tuple[int, ...] = (), only_dongle: Opti
 def _planner_factory(mission, mission_path: Path):  # type: ignore[no-untyped-def]
     """Each drone gets its own planner instance (its own ONNX session for learned planners)."""
     from rpf_fly.planning.onnx_policy import PolicyError
-    from rpf_fly.sim.planners import UnsupportedPlanner, mission_planner
-    from rpf_fly.sim.scenario import obstacle_set
+    from rpf_fly.planning.factory import UnsupportedPlanner, mission_planner, obstacle_set
 
     obstacles = obstacle_set(mission.obstacles)
     try:

@@ -40,7 +40,7 @@ def sim(
     from rpf_fly.mission import MissionError, load_mission, with_planner
     from rpf_fly.sim import SimParams, compute_metrics, rollout, scenario_from_mission
     from rpf_fly.planning.onnx_policy import PolicyError
-    from rpf_fly.sim.planners import UnsupportedPlanner, make_planner
+    from rpf_fly.planning.factory import UnsupportedPlanner, make_planner
 
     try:
         loaded = load_mission(mission)

@@ -29,8 +29,8 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from rpf_fly.mission.model import Obstacle
+from rpf_fly.planning.factory import obstacle_set
 from rpf_fly.planning.obstacles import nearest_obstacle
-from rpf_fly.sim.scenario import obstacle_set
 
 from .fake_firmware import Body
 

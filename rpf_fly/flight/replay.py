@@ -222,7 +222,7 @@ def replay_setup(data: LogData, kind: Optional[str] = None, policy: Optional[Pat
     from rpf_fly.planning.gains import FixedGains
     from rpf_fly.planning.onnx_policy import PolicyError
     from rpf_fly.planning.planner import Planner
-    from rpf_fly.sim.planners import UnsupportedPlanner, mission_planner
+    from rpf_fly.planning.factory import UnsupportedPlanner, mission_planner
     from rpf_fly.sim.scenario import obstacle_set
 
     log = data.path

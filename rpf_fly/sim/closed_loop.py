@@ -307,9 +307,9 @@ def run_firmware(
     """:func:`rpf_fly.sim.evaluate.run_scenario` on the firmware model, for many scenarios flown together: each
     with its planner settings (one for all, or one per scenario) and its own planner (``planners``, else made from
     the settings as the kinematic run makes it), each run scored by :func:`firmware_metrics`. Raises what
-    :func:`~rpf_fly.sim.planners.make_planner` raises (an unusable policy) before anything flies."""
+    :func:`~rpf_fly.planning.factory.make_planner` raises (an unusable policy) before anything flies."""
     from rpf_fly.sim.evaluate import Run
-    from rpf_fly.sim.planners import make_planner
+    from rpf_fly.planning.factory import make_planner
 
     chosen = [settings] * len(scenarios) if isinstance(settings, PlannerSettings) else list(settings)
     if planners is None:

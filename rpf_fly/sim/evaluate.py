@@ -15,7 +15,7 @@ import numpy as np
 from rpf_fly.mission.load import with_planner
 from rpf_fly.mission.model import Mission, PlannerSettings
 from rpf_fly.sim.metrics import Metrics, compute_metrics
-from rpf_fly.sim.planners import make_planner
+from rpf_fly.planning.factory import make_planner
 from rpf_fly.sim.rollout import Rollout, SimParams, rollout
 from rpf_fly.sim.scenario import Scenario, arena_a, scenario_from_mission
 

@@ -11,7 +11,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rpf_fly.mission.model import BoxObstacle, CircleObstacle, Mission, Obstacle
+from rpf_fly.mission.model import CircleObstacle, Mission, Obstacle
+from rpf_fly.planning.factory import obstacle_set
 from rpf_fly.planning.obstacles import ObstacleSet
 
 
@@ -32,13 +33,6 @@ class Scenario:
     @property
     def n_drones(self) -> int:
         return int(self.starts.shape[0])
-
-
-def obstacle_set(shapes: tuple[Obstacle, ...] | list[Obstacle]) -> ObstacleSet:
-    """Planner arrays from mission obstacle shapes."""
-    circles = [(o.center, o.radius) for o in shapes if isinstance(o, CircleObstacle)]
-    boxes = [(o.min, o.max) for o in shapes if isinstance(o, BoxObstacle)]
-    return ObstacleSet.from_shapes(circles, boxes)
 
 
 def make_scenario(

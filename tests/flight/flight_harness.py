@@ -16,7 +16,7 @@ from rpf_fly.flight.phases import SwarmPhase
 from rpf_fly.flight.session import run_flight
 from rpf_fly.log.reader import LogData, read_log
 from rpf_fly.mission import parse_mission
-from rpf_fly.sim.planners import make_planner
+from rpf_fly.planning.factory import make_planner
 from rpf_fly.sim.scenario import obstacle_set
 
 # margin 0: with the capture rule (docs/algorithm.md, *Arrival*) a dry run at the product's 0.05 m

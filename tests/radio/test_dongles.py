@@ -16,7 +16,7 @@ from rpf_fly.flight.loop import FlightLoop
 from rpf_fly.mission import load_mission
 from rpf_fly.radio.cflib_backend import CflibBackend
 from rpf_fly.radio.dongles import NO_RADIO, find_radios, radio_problem
-from rpf_fly.sim.planners import make_planner
+from rpf_fly.planning.factory import make_planner
 from rpf_fly.sim.scenario import obstacle_set
 
 ROOT = Path(__file__).resolve().parents[2]

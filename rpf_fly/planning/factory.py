@@ -1,26 +1,42 @@
-"""From a mission's planner settings to a :class:`~rpf_fly.planning.Planner` (used by sim, bench and flight).
+"""From a mission's planner settings to a :class:`~rpf_fly.planning.Planner`: the one factory the simulator, the
+bench, the trainer's evaluation, the flight, its dry run and its replay build their planners with.
 
-``apf`` is the vanilla APF with the robust preset, ``apf-paper`` the literal formulas (docs/algorithm.md, *Presets*); both use
-fixed gains (eta, lambda from the mission; the paper's 0.05 and 2 by default). ``rpf``, ``rpf-mean`` and ``rpf3`` (RPF-3) take
-their gains from an ONNX policy every step; ``ppo`` is the vanilla-PPO baseline that turns the heading with no APF.
+Beside the planners so that every layer above (sim, bench, flight, the application layer) reaches it without
+importing one another. It reads the mission's dataclasses (``rpf_fly.mission.model``: data only) and stays pure
+like the rest of planning/: no sockets, threads, clocks or torch; onnxruntime only through
+:mod:`rpf_fly.planning.onnx_policy`, for the learned kinds.
+
+``apf`` is the vanilla APF with the robust preset, ``apf-paper`` the literal formulas (docs/algorithm.md, *Presets*);
+both use fixed gains (eta, lambda from the mission; the paper's 0.05 and 2 by default). ``rpf``, ``rpf-mean`` and
+``rpf3`` (RPF-3) take their gains from an ONNX policy every step; ``ppo`` is the vanilla-PPO baseline that turns the
+heading with no APF; ``orca`` the ORCA baseline.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
-from rpf_fly.mission.model import Mission, PlannerSettings
+from rpf_fly.mission.model import BoxObstacle, CircleObstacle, Mission, Obstacle, PlannerSettings
 from rpf_fly.planning.config import RPF3_TUNING, PlannerConfig
 from rpf_fly.planning.gains import FixedGains
 from rpf_fly.planning.guidance import Bounds
 from rpf_fly.planning.heading_policy import HeadingPolicyPlanner
-from rpf_fly.planning.onnx_policy import OnnxGains, OnnxPolicy
 from rpf_fly.planning.obstacles import ObstacleSet
+from rpf_fly.planning.onnx_policy import OnnxGains, OnnxPolicy
 from rpf_fly.planning.planner import Planner
 
 
 class UnsupportedPlanner(ValueError):
     """The planner kind is valid in a mission but not available in this build."""
+
+
+def obstacle_set(shapes: Sequence[Obstacle]) -> ObstacleSet:
+    """Planner arrays from mission obstacle shapes."""
+    circles = [(o.center, o.radius) for o in shapes if isinstance(o, CircleObstacle)]
+    boxes = [(o.min, o.max) for o in shapes if isinstance(o, BoxObstacle)]
+    return ObstacleSet.from_shapes(circles, boxes)
 
 
 def planner_config(settings: PlannerSettings) -> PlannerConfig:
@@ -63,8 +79,6 @@ def mission_planner(mission: Mission, settings: PlannerSettings | None = None, o
     """The planner of a mission as the flight, its dry run and its replay build it: the mission's obstacles, its arena
     as the guidance bounds and every drone's goal prepared at load time (the flight's tick then only looks up the
     next visible waypoint)."""
-    from rpf_fly.sim.scenario import obstacle_set
-
     return make_planner(
         settings or mission.planner,
         obstacles if obstacles is not None else obstacle_set(mission.obstacles),
