@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from rpf_fly.emulator.mocap_noise import MocapNoise
-from rpf_fly.emulator.world_process import SimulatedBodies
+from rpf_fly.emulator.simulated_bodies import SimulatedBodies
 from rpf_fly.emulator.fake_world import FakeDroneConfig, FakeWorld
 
 

@@ -20,7 +20,8 @@ from cflib.crazyflie.syncCrazyflie import SyncCrazyflie
 from rpf_fly.mission.model import CircleObstacle
 from rpf_fly.emulator import fake_radio
 from rpf_fly.emulator.fake_world import FakeDroneConfig
-from rpf_fly.emulator.world_process import RemoteWorld, WorldProcess
+from rpf_fly.emulator.remote_world import RemoteWorld
+from rpf_fly.emulator.world_process import WorldProcess
 
 A1, A2 = 0xE7E7E7E701, 0xE7E7E7E702
 
@@ -152,7 +153,8 @@ from cflib.crazyflie import Crazyflie
 from cflib.crazyflie.syncCrazyflie import SyncCrazyflie
 from rpf_fly.emulator import fake_radio
 from rpf_fly.emulator.fake_world import FakeDroneConfig
-from rpf_fly.emulator.world_process import RemoteWorld, WorldProcess
+from rpf_fly.emulator.remote_world import RemoteWorld
+from rpf_fly.emulator.world_process import WorldProcess
 A1 = 0xE7E7E7E701
 process = WorldProcess({A1: FakeDroneConfig.at(0.0, 0.0)}, {A1: "cf1"}, natnet=None, names={A1: "cf1"},
                        exit_report=sys.argv[1], orphan_cap_s=float(sys.argv[2]))

@@ -17,7 +17,7 @@ from typing import Optional
 from flight_harness import SHORT_MISSION
 from mcap.reader import make_reader
 
-from rpf_fly.emulator.world_process import ORPHAN_CAP_S
+from rpf_fly.emulator.world_orphan import ORPHAN_CAP_S
 from rpf_fly.flight.dry_run import world_exit_report_for
 from rpf_fly.log.reader import read_log, salvage
 

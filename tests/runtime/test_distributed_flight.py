@@ -28,7 +28,7 @@ from pathlib import Path
 
 import pytest
 
-from rpf_fly.emulator.world_process import _REQUEST, CLOSE
+from rpf_fly.emulator.radio_wire import CLOSE, REQUEST
 from rpf_fly.flight.dry_run import StartFault
 from rpf_fly.log.reader import read_log
 from rpf_fly.log.review import review
@@ -351,7 +351,7 @@ def _answers(host: str, port: int) -> bool:
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
         s.settimeout(2.0)
         s.connect((host, port))
-        s.send(_REQUEST.pack(CLOSE, 1, 0, 0, 0))
+        s.send(REQUEST.pack(CLOSE, 1, 0, 0, 0))
         try:
             return len(s.recv(64)) > 0
         except OSError:  # refused: nothing listens there
