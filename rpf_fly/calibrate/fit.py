@@ -28,7 +28,7 @@ one replay; the delay's column is the model's velocity. Stops when a step change
 the delay by under 0.5 ms, or lowers the squared error by under `MIN_GAIN`, or after `MAX_ITERATIONS`.
 
 The mocap's latency and noise: against a dry run's ``/truth`` where the log has it (the shift that best lays the
-poses on the truth, and the poses' scatter about it); otherwise the noise from the poses' second differences (white
+poses on the truth, and the poses' scatter about it where the drone is nearly still); otherwise the noise from the poses' second differences (white
 noise of std s gives second differences of std s sqrt(6); a flight's own acceleration adds 0.1 mm a frame at 1 m/s^2
 and 100 Hz) and the latency the fitted delay, which then includes the radio's latency of the setpoints.
 """
@@ -62,6 +62,8 @@ MAX_DELAY_S = 0.1
 """The delay's range: from a model 50 ms slower than the drone to one 100 ms ahead of the poses."""
 DELAY_STEP_S = 0.001
 MAX_TRUTH_LAG_S = 0.2
+STILL_M_S = 0.05
+"""The mocap's noise is measured against the truth where the drone moves slower than this (at least 100 poses)."""
 """The longest mocap latency measured against a dry run's truth (a profile's is at most 2 s, a dry run's own 10 ms)."""
 FD_STEP = 0.05
 """The forward difference's step in log gain (5 %)."""
@@ -125,7 +127,7 @@ def _best_delay(track: Track, t: np.ndarray, measured: np.ndarray, axes: list[in
 def mocap_against_truth(record: FlightRecord) -> Optional[tuple[float, float]]:
     """(latency, noise) of the logged poses against the dry run's truth over the window: the shift (0 to
     `MAX_TRUTH_LAG_S`, by 0.5 ms) that minimises their distance, and their per-axis scatter about the truth so
-    shifted; None without truth."""
+    shifted where the drone is nearly still (`STILL_M_S`); None without truth."""
     truth = record.truth
     if truth is None or len(truth) < 10:
         return None
@@ -138,7 +140,14 @@ def mocap_against_truth(record: FlightRecord) -> Optional[tuple[float, float]]:
     for lag in np.arange(0.0, MAX_TRUTH_LAG_S + 1e-9, 0.0005):
         shifted = np.column_stack([np.interp(t - lag, truth[:, 0], truth[:, i]) for i in (1, 2, 3)])
         best = min(best, (float(np.mean((pos - shifted) ** 2)), float(lag)))
-    return best[1], math.sqrt(best[0])
+    lag = best[1]
+    # the noise where the drone is nearly still: there a frame a few ms later than the others is no error
+    speed = np.linalg.norm(np.gradient(truth[:, 1:], truth[:, 0], axis=0), axis=1)
+    still = np.interp(t - lag, truth[:, 0], speed) < STILL_M_S
+    if still.sum() >= 100:
+        t, pos = t[still], pos[still]
+    shifted = np.column_stack([np.interp(t - lag, truth[:, 0], truth[:, i]) for i in (1, 2, 3)])
+    return lag, math.sqrt(float(np.mean((pos - shifted) ** 2)))
 
 
 def noise_from_frames(frames: np.ndarray) -> float:

@@ -66,6 +66,7 @@ class VehicleProfile:
 
 
 def _number(value: Any, where: str, lo: float = 0.0, hi: float = math.inf) -> float:
+    """``value`` as a finite number in [lo, hi] (YAML's booleans are not numbers); `ProfileError` naming ``where``."""
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
         raise ProfileError(f"{where}: expected a finite number, got {value!r}")
     if not lo <= value <= hi:

@@ -76,10 +76,6 @@ class FlightRecord:
     """What the file says against its own figures: a dry run whose host could not keep up (its ``/events``)."""
 
     @property
-    def duration_s(self) -> float:
-        return self.end_s
-
-    @property
     def start_position(self) -> tuple[float, float, float]:
         """Where the drone was at t = 0 (the first measured position at or after it)."""
         row = self.positions[0]
@@ -105,11 +101,13 @@ def read_records(path: Path, drone: Optional[str] = None) -> list[FlightRecord]:
 
 
 def _quat_yaw_deg(q: dict[str, float]) -> float:
+    """The yaw (deg, counter-clockwise from +x) of a logged orientation: a setpoint's yaw is logged so."""
     x, y, z, w = (float(q.get(k, 0.0)) for k in ("x", "y", "z", "w"))
     return math.degrees(math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z)))
 
 
 def _poses(messages: list[Any]) -> np.ndarray:
+    """(n, 4): t (s on the log's clock, the frame's time), x, y, z of ``foxglove.PoseInFrame`` messages."""
     rows = []
     for m in messages:
         p = m.data["pose"]["position"]

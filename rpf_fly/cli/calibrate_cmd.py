@@ -14,6 +14,7 @@ from rpf_fly.cli.errors import fail
 
 
 def _summary(record: Any, result: Any, defaults: dict[str, float]) -> list[str]:
+    """The fit in words: where it came from, how well it explains the flight, each gain against the firmware's."""
     lines = [f"{record.drone} ({record.kind} {record.path}, {record.origin}, {record.end_s:.1f} s, "
              f"{result.samples} positions): residual {result.residual_rms_m * 1000:.2f} mm RMS, "
              f"{result.residual_max_m * 1000:.1f} mm max ({result.default_residual_rms_m * 1000:.2f} mm RMS with the "
@@ -31,6 +32,7 @@ def _summary(record: Any, result: Any, defaults: dict[str, float]) -> list[str]:
 
 
 def _profile(record: Any, result: Any) -> str:
+    """The profile file's text: what a dry run uses (params, mocap) and what says where it came from (source, fit)."""
     from rpf_fly.calibrate.fit import NOT_FITTED
     from rpf_fly.calibrate.profile import profile_text
 
