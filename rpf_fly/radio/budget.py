@@ -285,19 +285,20 @@ def over_budget_message(load: DongleLoad, mission_name: str = "") -> str:
 
 
 def budget_table(loads: list[DongleLoad]) -> list[str]:
-    """Plain lines for ``rpf-fly check``: one per dongle."""
-    lines = ["dongle  radio          drones  setpoints/s  extpos/s  packed/s  pings+keep-alives/s  needed/s  "
-             "carries/s  use   rate_limit  setpoint ms p50/p99  extpos ms p99"]
+    """Plain lines for ``rpf-fly check``: a header, then one per dongle."""
+    rows = [["dongle", "radio", "drones", "setpoints/s", "extpos/s", "packed/s", "pings+keep-alives/s", "needed/s",
+             "carries/s", "use", "rate_limit", "setpoint ms p50/p99", "extpos ms p99"]]
     for load in loads:
-        flag = "  OVER BUDGET" if load.over else ""
         limits = sorted(set(load.rate_limits.values()))
         limit = f"{limits[0]}" if len(limits) == 1 else f"{limits[0]}-{limits[-1]}"
-        carries = f"{load.budget:.0f}{'*' if load.measured else ''}"
-        lines.append(f"{load.dongle:>6}  {load.radio_type:<13}  {len(load.drones):>6}  {load.setpoints:>11.0f}  "
-                     f"{load.extpos:>8.0f}  {load.broadcasts:>8.0f}  {load.pings + load.keepalives:>19.0f}  "
-                     f"{load.needed:>8.0f}  {carries:>9}  {load.use:>4.0%}  {limit:>10}  "
-                     f"{_ms(load.setpoint_p50_s):>8} / {_ms(load.setpoint_p99_s):<8}  "
-                     f"{_ms(load.extpos_p99_s):>13}{flag}")
+        rows.append([str(load.dongle), load.radio_type, str(len(load.drones)), f"{load.setpoints:.0f}",
+                     f"{load.extpos:.0f}", f"{load.broadcasts:.0f}", f"{load.pings + load.keepalives:.0f}",
+                     f"{load.needed:.0f}", f"{load.budget:.0f}{'*' if load.measured else ''}", f"{load.use:.0%}",
+                     limit, f"{_ms(load.setpoint_p50_s)}/{_ms(load.setpoint_p99_s)}", _ms(load.extpos_p99_s)])
+    widths = [max(len(row[k]) for row in rows) for k in range(len(rows[0]))]
+    lines = ["  ".join(cell.ljust(w) if k == 1 else cell.rjust(w) for k, (cell, w) in enumerate(zip(row, widths)))
+             for row in rows]
+    lines = [lines[0]] + [line + ("  OVER BUDGET" if load.over else "") for line, load in zip(lines[1:], loads)]
     if any(load.measured for load in loads):
         lines.append("* scaled to radio.budget_packets_s, the lab's own figure")
     return lines

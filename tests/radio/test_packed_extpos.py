@@ -106,3 +106,21 @@ def test_the_sender_broadcasts_each_groups_positions_through_the_fake_radio_to_e
         sender.close()
         fake_radio.unregister()
         world.close()
+
+
+def test_the_schedule_brings_a_packed_groups_drones_due_together_and_spreads_the_groups() -> None:
+    from rpf_fly.radio.schedule import ExtposSchedule
+
+    uris = {f"cf{i}": f"radio://0/80/2M/E7E7E7E7{i:02X}" for i in range(1, 11)}  # groups of 4, 4 and 2
+    schedule = ExtposSchedule.for_uris(30.0, uris, packed=True)
+    due_frames: dict[str, list[int]] = {name: [] for name in uris}
+    for frame in range(300):  # 3 s of 100 Hz mocap
+        for name in uris:
+            if schedule.due(name, frame / 100.0):
+                due_frames[name].append(frame)
+    groups = (("cf1", "cf2", "cf3", "cf4"), ("cf5", "cf6", "cf7", "cf8"), ("cf9", "cf10"))
+    for group in groups:
+        assert len({tuple(due_frames[name]) for name in group}) == 1  # one packet a slot for the whole group
+        assert 89 <= len(due_frames[group[0]]) <= 91  # 30 Hz
+    firsts = [set(due_frames[group[0]]) - {0} for group in groups]  # (every drone's first frame is due)
+    assert not (firsts[0] & firsts[1]) and not (firsts[1] & firsts[2]) and not (firsts[0] & firsts[2])  # spread
