@@ -42,6 +42,12 @@ from typing import Callable, Collection, Mapping, Optional
 
 from rpf_fly.mocap.frame import MocapFrame
 
+POSE_LATE_S = 0.1
+"""A flying drone without a valid pose this long (10 frames at 100 Hz) is a warning, before the hold at
+``safety.pose_timeout_s`` (0.25 s): an occlusion or a mocap gap shorter than the hold is ridden through on the
+last pose, and still said, once (a lab wants to know where its cameras lose a drone). When no flying drone has one,
+it is one swarm-wide ``mocap_late`` warning instead of one per drone."""
+
 
 @dataclass
 class TrackedPose:

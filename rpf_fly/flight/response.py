@@ -220,10 +220,17 @@ class Braking:
             return 0j, 0.0, None
         return way, speed, None if tilt is None else (tilt * way.conjugate()).real
 
-    def stop_point(self, position: complex, velocity: complex, setpoint: Optional[complex] = None) -> complex:
+    def stop_point(self, position: complex, velocity: complex, setpoint: Optional[complex] = None,
+                   tilt_deg: Optional[complex] = None) -> complex:
         """Where a drone at ``position`` (x + iy), moving at ``velocity`` and streamed ``setpoint`` (None: in
-        steady flight), comes to rest at the farthest if it is held now."""
-        way, speed, tilt = self._way(position, velocity, setpoint)
+        steady flight), comes to rest at the farthest if it is held now; ``tilt_deg`` (x + iy, towards where it
+        accelerates): its tilt when known (a `Follower`'s), else the one its setpoint asks for."""
+        if tilt_deg is None:
+            way, speed, tilt = self._way(position, velocity, setpoint)
+        else:
+            speed = abs(velocity)
+            way = velocity / speed if speed >= 0.05 else (tilt_deg / abs(tilt_deg) if abs(tilt_deg) > 0.5 else 0j)
+            tilt = (tilt_deg * way.conjugate()).real if way else None
         return position + way * self.stop_m(speed, tilt) if way else position
 
     def hold_point(self, position: complex, velocity: complex, setpoint: Optional[complex] = None) -> complex:
@@ -263,6 +270,15 @@ class Follower:
     @property
     def position(self) -> complex:
         return complex(self.p[0], self.p[1])
+
+    @property
+    def velocity(self) -> complex:
+        return complex(self.v[0], self.v[1])
+
+    @property
+    def tilt_deg(self) -> complex:
+        """The tilt (degrees, x + iy: towards where it accelerates)."""
+        return complex(self.tilt[0], self.tilt[1])
 
     def step(self, setpoint: complex, dt_s: float) -> complex:
         """Advance ``dt_s`` (whole 10 ms steps; the rest is carried) towards ``setpoint``; the new position."""

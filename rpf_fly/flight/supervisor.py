@@ -29,17 +29,17 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from dataclasses import dataclass
-from typing import Iterable, Literal, Optional
+from typing import Iterable, Optional
 
-import numpy as np
 
 from rpf_fly.flight.agent import DroneAgent
-from rpf_fly.flight.commander import ON_FLOOR_Z_M, STREAMING as STREAMING_PHASES
+from rpf_fly.flight.commander import ON_FLOOR_Z_M
 from rpf_fly.flight.events import ERROR, INFO, WARNING
+from rpf_fly.flight.findings import Finding
 from rpf_fly.flight.phases import DronePhase
-from rpf_fly.flight.poses import PoseTracker, TrackedPose
-from rpf_fly.flight.response import Follower, braking_for
+from rpf_fly.flight.poses import POSE_LATE_S, PoseTracker
+from rpf_fly.flight.proximity_check import ProximityCheck
+from rpf_fly.flight.tracking_check import TrackingCheck
 from rpf_fly.mission.model import Mission
 from rpf_fly.planning.obstacles import ObstacleSet
 from rpf_fly.radio.backend import DroneState
@@ -85,129 +85,12 @@ LINK_QUALITY_CLEAR_PCT = 99.0
 reachable: cflib's link quality is at most 100 %, so an end above that would leave a drone's link never said poor
 again after its first episode."""
 
-RESUME_MARGIN_M = 0.05
-REST_M_S = 0.1
-"""A separation or clearance episode ends (its ``hold`` resumes) only once the drones are at rest (under this
-speed) and clear, braking from where they are, by this margin: a held drone brakes hard, its braking tilt makes its
-stop look short, and resuming then would restart the approach the hold stopped (a head-on pair at 1 m/s resumed
-10 ms into its hold and met)."""
-HOLD_REACTION_S = 0.1
-"""From the mocap picture of a breach to the hold setpoint acting on the drone: the supervisor's pass (every mocap
-frame), the hold setpoint sent at once through the radio's queue, the drone's estimator taking the extpos, and the
-firmware's next position-loop tick; twice what an idle host takes (a head-on pair at 1 m/s each met on a loaded
-2-core host with 0.05 s)."""
-
-TRACKING_WARN_M = 0.07
-"""A drone this far from where its setpoints should have brought it, for ``TRACKING_WARN_S``: something pushes it
-(a gust, a contact, a failing motor). "Should have": a first-order follower of the streamed setpoints with the
-position loop's time constant ``TRACKING_TAU_S`` and speed limit (a disturbance observer; the carrot's lead and lag
-are in it, so they are not taken for a push). A Crazyflie under mocap follows that within 2-5 cm, so the line sits
-above that: 5 cm would suit the simulated drone without turbulence (within 1.3 cm), kinder than a real
-one; with its turbulence (rpf_fly/emulator/fake_vehicle.py, "Turbulence") it wanders 2.2-4.0 cm from the model in
-normal flight (lab-3 and circle-8-r3 dry runs, truth), and 5 cm would cry wolf on a real flight. Pushed for 1 s,
-the simulated drone is held about 0.06 m off by 0.6 m/s^2, 0.09 m by 1.0 and 0.18 m by 1.5: a push under about
-0.8 m/s^2 or shorter than about 0.7 s moves a drone less than its normal tracking error, cannot be told from it,
-and is not said."""
-TRACKING_WARN_S = 0.2
-TRACKING_TAU_S = 0.25
-"""The Crazyflie position loop's time constant (docs/flight.md: drones trail their setpoints by about v tau)."""
-TRACKING_SPEED_M_S = 1.1
-"""The firmware's horizontal speed limit (posCtlPid.xyVelMax 1 m/s, plus its 10 % overhead)."""
-TRACKING_PLAN_TAU_S = 0.5
-"""While the high-level commander flies a take-off or landing the follower is an envelope between a first-order
-return with ``TRACKING_TAU_S`` (the simulated drone's) and one with this, the slowest a default Crazyflie gives;
-this is also how long the overshoot it allows lasts. The firmware's position PID (posCtlPid.xKp 2/s) alone is
-0.5 s; with its velocity loop (velCtlPid.vxKp 25 degrees per m/s, about 4.3 /s of acceleration per m/s) the pair is
-a damped oscillator (omega 2.95/s, zeta 0.74) that runs a landing begun at 1 m/s 15 cm past its point and brings it
-back in about a second. Against that model the slow follower with its overshoot stays within 2.8 cm (a 0.25 s one:
-9.4 cm, which would cry wolf); a drone whose estimate snaps back 0.35 m in the air (a blind spell's drift) and
-returns with the simulated drone's 0.25 s would leave a 0.5 s follower by 8.8 cm, hence the envelope. Worked out
-from the firmware's default gains, not measured on hardware."""
-TRACKING_LATENCY_WINDOW_S = 0.5
-"""The tracking line is widened by the drone's speed times the largest mocap latency of this long: long enough
-for the drone's estimate to settle after the latency changes."""
-PLAN_TARGET_AFTER_S = 0.15
-"""A take-off's or landing's firmware target is read from telemetry made at least this long after the command was
-sent (an outbox, a sender and a radio transaction: milliseconds on a healthy link, tens on a full one)."""
-PLAN_TARGET_AGREE_M = 0.01
-"""Two target samples this close are the plan's fixed x, y (a streamed setpoint at 0.3 m/s moves 3 cm in a 10 Hz
-sample; the compressed target's resolution is 1 mm)."""
-
-POSE_LATE_S = 0.1
-"""A flying drone without a valid pose this long (10 frames at 100 Hz) is a warning, before the hold at
-``safety.pose_timeout_s`` (0.25 s): an occlusion or a mocap gap shorter than the hold is ridden through on the
-last pose, and still said, once (a lab wants to know where its cameras lose a drone). When no flying drone has one,
-it is one swarm-wide ``mocap_late`` warning instead of one per drone."""
-
 MOCAP_LATENCY_WARN_S = 0.02
 """Mocap latency (camera to receipt, as the mocap measures it) above this: the estimators and the planners act on
 a picture that old (Crazyswarm2 warns at 10 ms over unicast; a healthy Motive link is 3-8 ms). 20 ms: over twice
 the worst healthy link, so a healthy system never warns, and 2 cm of lag at 1 m/s. At 50 ms the
 random fault campaign's 33 ms of mocap delay (plus the emulated camera's 4 ms), a picture five times older than a
 healthy one, would go unsaid."""
-
-class _Follower:
-    """Where a drone's setpoints should have brought it. While it streams: its own controller's response
-    (``model``: rpf_fly/flight/response.py, from its gains: it trails a moving setpoint by 0.55 s x speed and
-    overshoots a hold), one point; a drone simulated first-order: a first-order follower with ``fast_s``. While the
-    high-level commander flies it: two first-order followers of the firmware's target (time constants ``fast_s``
-    and ``slow_s``, each at most the firmware's speed limit) and an overshoot ``momentum`` (m) that fades with
-    ``slow_s`` from ``since``; a pose anywhere on the segment between the two followers, or within the overshoot
-    past the slow one, follows. Once a landing drone reaches the floor (`touch`) it may stop there or
-    slide on to its point: anywhere from where the followers were then to where they are now follows too.
-    ``key``: the take-off's or landing's start (a new one starts a new follower); None while the drone plans,
-    holds or hovers (both constants then the position loop's: one point)."""
-
-    def __init__(self, key: Optional[float], at: complex, now_s: float, momentum: complex, fast_s: float,
-                 slow_s: float, model: Optional[Follower] = None) -> None:
-        self.key = key
-        self.fast = self.slow = at
-        self.then = self.since = now_s
-        self.momentum = momentum
-        self.fast_s, self.slow_s = fast_s, slow_s
-        self.model = model
-        """While the drone streams: its own controller's response (`response.Follower`), the slow edge."""
-        self.touched: Optional[tuple[complex, complex]] = None
-
-    def step(self, setpoint: complex, now_s: float) -> None:
-        """Advance to ``now_s`` towards ``setpoint``."""
-        dt = max(0.0, min(now_s - self.then, 0.1))
-        self.then = now_s
-        if self.model is not None:
-            self.fast = self.slow = self.model.step(setpoint, dt)
-        elif dt > 0.0:
-            limit = TRACKING_SPEED_M_S * dt
-            for name, tau in (("fast", self.fast_s), ("slow", self.slow_s)):
-                at = getattr(self, name)
-                step = (setpoint - at) * (1.0 - math.exp(-dt / tau))
-                if abs(step) > limit:
-                    step *= limit / abs(step)
-                setattr(self, name, at + step)
-
-    def touch(self) -> None:
-        """The drone is on the floor now (the first call counts)."""
-        if self.touched is None:
-            self.touched = (self.fast, self.slow)
-
-    def off(self, position: complex) -> float:
-        """How far ``position`` is from where the drone should be now."""
-        overshoot = self.momentum * math.exp(-max(0.0, self.then - self.since) / self.slow_s)
-        off = min(_to_segment(position, self.fast, self.slow), _to_segment(position, self.slow, self.slow + overshoot))
-        if self.touched is not None:
-            fast, slow = self.touched
-            off = min(off, _to_segment(position, fast, self.fast), _to_segment(position, slow, self.slow),
-                      _to_segment(position, fast, slow))
-        return off
-
-
-def _to_segment(p: complex, a: complex, b: complex) -> float:
-    """Distance from ``p`` to the segment from ``a`` to ``b`` (a point when they coincide)."""
-    ab = b - a
-    if abs(ab) < 1e-12:
-        return abs(p - a)
-    w = ((p - a) * ab.conjugate()).real / (abs(ab) ** 2)
-    return abs(p - (a + min(max(w, 0.0), 1.0) * ab))
-
 
 def _pose_at(history: deque[tuple[float, tuple[float, float, float]]],
              stamp_s: Optional[float]) -> Optional[tuple[float, float, float]]:
@@ -265,35 +148,19 @@ def blind_land_s(height_m: float, land_s: float) -> float:
     return min(land_s, max(BLIND_LAND_MIN_S, BLIND_LAND_S_PER_M * height_m))
 
 
-Response = Literal["warn", "hold", "land", "lost", "resume", "crashed", "stop"]
-
-
-@dataclass(frozen=True)
-class Finding:
-    """What the supervisor saw and what to do: ``response`` for ``drone`` (None: the whole swarm)."""
-
-    kind: str
-    level: int
-    message: str
-    drone: Optional[str]
-    response: Response
-    land_s: Optional[float] = None
-    """For ``land``: how long the landing takes (None: the mission's ``land_s``)."""
-
 
 class Supervisor:
     """Stateless checks plus the memory needed for edge-triggered events."""
 
     def __init__(self, mission: Mission, obstacles: ObstacleSet, first_order: frozenset[str] = frozenset()):
         """``first_order``: drones simulated with the first-order model, whose tracking is followed with it (every
-        other drone's with its own controller's response: `_Follower`)."""
-        self.first_order = first_order
+        other drone's with its own controller's response: `tracking_check`)."""
         self.mission = mission
+        self._tracking = TrackingCheck(first_order)
+        self._proximity = ProximityCheck(mission, obstacles, self._tracking.model_of)
         self.safety = mission.safety
         self.obstacles = obstacles
         self.r = mission.planner.safety_radius
-        self._close_pairs: set[tuple[str, str]] = set()
-        self._near_obstacle: set[str] = set()
         self._stale: set[str] = set()
         self._late: set[str] = set()
         """Drones whose missing pose `POSE_LATE_S` was said (cleared once their pose is fresh)."""
@@ -308,16 +175,7 @@ class Supervisor:
         self._estimate_stopped: set[str] = set()
         self._history: dict[str, deque[tuple[float, tuple[float, float, float]]]] = {}
         self._poor_link: set[str] = set()
-        self._off_track: dict[str, float] = {}
-        self._predicted: dict[str, _Follower] = {}
-        """drone -> where its setpoints should have brought it (`_tracking`)."""
-        self._latencies: deque[tuple[float, float]] = deque()
-        """(when, the mocap's latency) of the last ``TRACKING_LATENCY_WINDOW_S``."""
-        self._plan_targets: dict[str, tuple[float, complex, bool, float]] = {}
-        """drone -> (the take-off's or landing's start, its firmware target x + iy, confirmed by a second sample,
-        when the last sample was made)."""
         self._late_landing: set[str] = set()
-        self._off_track_warned: set[str] = set()
         self._late_mocap = False
         self._blind_landed: set[str] = set()
         self._blind_stopped: set[str] = set()
@@ -340,15 +198,16 @@ class Supervisor:
         findings += self._poses(now_s, agents, tracker)
         findings += self._geofence(agents, tracker)
         foreign = [n for n in others if (p := tracker.get(n)) is not None and p.position[2] > ON_FLOOR_Z_M]
-        findings += self._separation(agents + uncommanded + grounded, tracker, foreign)
+        self._proximity.rest(now_s, agents + uncommanded, tracker)
+        findings += self._proximity.separation(agents + uncommanded + grounded, tracker, foreign)
         findings += self._blind(now_s, agents, uncommanded, foreign, tracker, states)
-        findings += self._obstacles(agents, tracker)
+        findings += self._proximity.clearance(agents, tracker)
         findings += self._battery(agents, states)
         findings += self._telemetry(now_s, agents, states)
         findings += self._crashes(agents, states)
         findings += self._estimates(now_s, agents, tracker, states)
         findings += self._link_quality(agents, states)
-        findings += self._tracking(now_s, agents, tracker, states)
+        findings += self._tracking.check(now_s, agents, tracker, states)
         findings += self._mocap_latency(tracker)
         return findings
 
@@ -540,94 +399,6 @@ class Supervisor:
                                    a.name, "land"))
         return out
 
-    def _separation(self, agents: list[DroneAgent], tracker: PoseTracker, foreign: list[str] = ()) -> list[Finding]:
-        out = []
-        close_now: set[tuple[str, str]] = set()
-        own = len(agents)
-        tracked = [(a.name, tracker.get(a.name)) for a in agents] + [(n, tracker.get(n)) for n in foreign]
-        tracked = [(n, p) for n, p in tracked[:own] if p is not None] + \
-            [(n, p) for n, p in tracked[own:] if p is not None]
-        mine = {n for n, _ in tracked} - set(foreign)
-        commanded = {a.name: a for a in agents if a.phase.airborne}
-        for i, (ni, pi) in enumerate(tracked):
-            if ni not in mine:
-                break  # two drones of other processes: theirs to check
-            for nj, pj in tracked[i + 1 :]:
-                d = sum((u - v) ** 2 for u, v in zip(pi.position, pj.position)) ** 0.5
-                ahead = self._stopped_apart(pi, pj, commanded.get(ni), commanded.get(nj), tracker.latency_s)
-                pair = (ni, nj)
-                held = pair in self._close_pairs and (
-                    min(d, ahead) < 2 * self.r + RESUME_MARGIN_M or max(abs(pi.velocity), abs(pj.velocity)) > REST_M_S)
-                if min(d, ahead) < 2 * self.r or held:
-                    pair = (ni, nj)
-                    close_now.add(pair)
-                    if pair not in self._close_pairs:
-                        response = self.safety.on_separation
-                        message = f"separation {d:.3f} m from {nj} is below 2r = {2 * self.r:.2f} m"
-                        if d >= 2 * self.r:
-                            message = (f"separation {d:.3f} m from {nj}, closing: braking from here they would "
-                                       f"come within {ahead:.3f} m, below 2r = {2 * self.r:.2f} m")
-                        out.append(Finding("separation", ERROR, message, ni, response))
-                        if response != "warn" and nj in mine:
-                            out.append(Finding("separation", ERROR, f"separation {d:.3f} m from {ni}", nj, response))
-        if self.safety.on_separation == "hold":
-            still_close = {n for pair in close_now for n in pair}
-            for name in {n for pair in self._close_pairs - close_now for n in pair if n in mine} - still_close:
-                out.append(Finding("separation", INFO, "separation restored: resuming", name, "resume"))
-        self._close_pairs = close_now
-        return out
-
-    @staticmethod
-    def _stop_point(pose: TrackedPose, agent: Optional[DroneAgent], latency_s: Optional[float]) -> complex:
-        """Where a drone at ``pose`` comes to rest if it is held now: its mocap picture is ``latency_s`` old and the
-        hold reaches it `HOLD_REACTION_S` later, flown at its speed, then it brakes as its own controller does from
-        the tilt its streamed setpoint asks for (`Braking.stop_point`; a drone this process does not command, as the
-        firmware's defaults in steady flight)."""
-        braking = agent.braking if agent is not None else braking_for(None)
-        setpoint = agent.last_setpoint if agent is not None and agent.phase in STREAMING_PHASES else None
-        ahead = pose.xy + pose.velocity * (HOLD_REACTION_S + (latency_s or 0.0))
-        return braking.stop_point(ahead, pose.velocity, setpoint)
-
-    def _stopped_apart(self, pi: TrackedPose, pj: TrackedPose, ai: Optional[DroneAgent], aj: Optional[DroneAgent],
-                       latency_s: Optional[float]) -> float:
-        """The closest two drones come if both are held now (3D, centre to centre): each flies on to its
-        `_stop_point`, both taken to cover their way in step."""
-        a0, b0 = pi.xy, pj.xy
-        a1, b1 = self._stop_point(pi, ai, latency_s), self._stop_point(pj, aj, latency_s)
-        start, change = b0 - a0, (b1 - b0) - (a1 - a0)
-        s = 0.0 if abs(change) < 1e-12 else min(1.0, max(0.0, -(start * change.conjugate()).real / abs(change) ** 2))
-        dz = pi.position[2] - pj.position[2]
-        return math.hypot(abs(start + s * change), dz)
-
-    def _obstacles(self, agents: list[DroneAgent], tracker: PoseTracker) -> list[Finding]:
-        if self.obstacles.is_empty:
-            return []
-        out = []
-        near_now = set()
-        for a in agents:
-            pose = tracker.get(a.name)
-            if pose is None:
-                continue
-            clearance = float(self.obstacles.signed_distance(pose.xy))
-            stop = self._stop_point(pose, a, tracker.latency_s)
-            way = pose.xy + (stop - pose.xy) * np.linspace(0.25, 1.0, 4)  # on its way to rest
-            ahead = float(np.min(self.obstacles.signed_distance(way)))
-            held = a.name in self._near_obstacle and (
-                min(clearance, ahead) < self.r + RESUME_MARGIN_M or abs(pose.velocity) > REST_M_S)
-            if min(clearance, ahead) < self.r or held:
-                near_now.add(a.name)
-                if a.name not in self._near_obstacle:
-                    message = f"obstacle clearance {clearance:.3f} m is below r = {self.r:.2f} m"
-                    if clearance >= self.r:
-                        message = (f"obstacle clearance {clearance:.3f} m, closing: braking from here it would come "
-                                   f"within {ahead:.3f} m, below r = {self.r:.2f} m")
-                    out.append(Finding("obstacle", ERROR, message, a.name, self.safety.on_obstacle))
-        if self.safety.on_obstacle == "hold":
-            for name in self._near_obstacle - near_now:
-                out.append(Finding("obstacle", INFO, "obstacle clearance restored: resuming", name, "resume"))
-        self._near_obstacle = near_now
-        return out
-
     def _battery(self, agents: list[DroneAgent], states: dict[str, DroneState]) -> list[Finding]:
         """Land after ``LOW_BATTERY_SAMPLES`` consecutive new samples that are low (each sample counted once). A
         landing drone's low battery is said too, without a second landing (it would restart the one under way): the
@@ -792,100 +563,6 @@ class Supervisor:
                 self._poor_link.discard(a.name)
                 out.append(Finding("radio", INFO, f"radio link quality back to {quality:.0f} %", a.name, "warn"))
         return out
-
-    def _tracking(self, now_s: float, agents: list[DroneAgent], tracker: PoseTracker,
-                  states: dict[str, DroneState]) -> list[Finding]:
-        """Measured position against a follower of where the drone is being taken (``TRACKING_WARN_M``): the
-        streamed setpoints while it plans, holds or hovers; while the high-level commander flies its take-off or
-        landing, the firmware's own target (`_plan_target`), which keeps the x, y where the plan began (the
-        estimate of that moment, not the mocap pose: after a stall or a blind spell the estimate snaps back to mocap
-        and the drone moves by the difference, which is no push). There the follower is an envelope (`_Follower`):
-        anywhere between a first-order return with the position loop's 0.25 s and one with 0.5 s, plus an overshoot
-        along the drone's velocity at its start; from the moment the drone reaches the floor (mocap height under
-        ``ON_FLOOR_Z_M``) it may also have stopped anywhere on the way (on the floor it cannot slide, and it reaches
-        it before it touches), and a follower starts only while the drone is off the floor. The line is widened by
-        the drone's speed times the mocap's latency (the largest of the last 0.5 s): the drone's estimator takes the
-        same late poses as extpos, so its truth runs ahead of them by that much, and when the latency changes the
-        drone surges or drops back until its estimate settles (compound campaign seed 17, run 13: 137 ms of mocap
-        delay at 0.5 m/s said 6 drones "pushed"). Under a healthy latency (3-8 ms) the widening is under 1 cm.
-
-        Take-off and landing are watched too: a gust during a watchdog's landing moves cf2 0.13 m (extpose compound
-        campaign seed 16, run 14)."""
-        out = []
-        latencies = self._latencies
-        latencies.append((now_s, tracker.latency_s or 0.0))
-        while len(latencies) > 1 and latencies[0][0] < now_s - TRACKING_LATENCY_WINDOW_S:
-            latencies.popleft()
-        late = max(latency for _, latency in latencies)
-        for a in agents:
-            pose = tracker.get(a.name)
-            planned = a.phase in (DronePhase.TAKEOFF, DronePhase.LANDING)
-            if planned:  # the target is read while the drone is unseen too, to be known the moment it is seen
-                setpoint = self._plan_target(a, states.get(a.name))
-                if a.phase == DronePhase.LANDING and a.touchdown_s is not None and now_s > a.touchdown_s:
-                    setpoint = None
-            else:
-                setpoint = a.last_setpoint
-            if pose is None or now_s - pose.stamp_s > POSE_LATE_S:
-                setpoint = None
-            if setpoint is None:
-                self._off_track.pop(a.name, None)
-                self._predicted.pop(a.name, None)
-                continue
-            if not pose.valid:  # a frame or a few without it: the model waits (restarted at the next pose, one
-                continue        # dropped frame in a push would hide the push)
-            on_floor = planned and pose.position[2] <= ON_FLOOR_Z_M
-            key = a.phase_since_s if planned else None  # a take-off or landing starts the model afresh
-            follower = self._predicted.get(a.name)
-            if follower is None or follower.key != key:
-                if on_floor:  # first seen on the floor (landed blind, or not yet lifted): nothing to follow
-                    self._predicted.pop(a.name, None)
-                    continue
-                cascade = not planned and a.name not in self.first_order
-                model = Follower(a.braking.gains, pose.xy, pose.velocity) if cascade else None
-                follower = _Follower(key, pose.xy, now_s, pose.velocity * TRACKING_PLAN_TAU_S if planned else 0j,
-                                     TRACKING_TAU_S, TRACKING_PLAN_TAU_S if planned else TRACKING_TAU_S, model)
-                self._predicted[a.name] = follower
-            follower.step(setpoint, now_s)
-            if on_floor:
-                follower.touch()
-            off = follower.off(pose.xy)
-            if off > TRACKING_WARN_M + abs(pose.velocity) * late:
-                started = self._off_track.setdefault(a.name, now_s)
-                if now_s - started >= TRACKING_WARN_S and a.name not in self._off_track_warned:
-                    self._off_track_warned.add(a.name)
-                    being = {DronePhase.LANDING: " while landing", DronePhase.TAKEOFF: " while taking off"}
-                    out.append(Finding("tracking", WARNING, f"{off:.2f} m from where its setpoints should have "
-                                       f"brought it{being.get(a.phase, '')}: something pushes it (a gust, a "
-                                       "contact?)", a.name, "warn"))
-            else:
-                self._off_track.pop(a.name, None)
-                if off < TRACKING_WARN_M / 2 and a.name in self._off_track_warned:
-                    self._off_track_warned.discard(a.name)
-                    out.append(Finding("tracking", INFO, "following its setpoints again", a.name, "warn"))
-        return out
-
-    def _plan_target(self, a: DroneAgent, state: Optional[DroneState]) -> Optional[complex]:
-        """The x, y the high-level commander's take-off or landing holds, from the firmware's logged target
-        (`DroneState.target_m`): two telemetry samples in a row, both made at least ``PLAN_TARGET_AFTER_S`` after
-        the command was sent, that agree within ``PLAN_TARGET_AGREE_M`` (a sample made before the command reached
-        the drone holds the last streamed setpoint, up to the carrot's lead ahead; a streamed setpoint moves
-        between samples, the plan's x, y does not). Kept for the rest of the phase; None until then, or where
-        the firmware logs no target."""
-        held = self._plan_targets.get(a.name)
-        if held is not None and held[0] != a.phase_since_s:
-            held = None
-        if held is not None and held[2]:
-            return held[1]
-        if state is None or state.target_m is None:
-            return None
-        made = state.estimate_stamp_s if state.estimate_stamp_s is not None else state.telemetry_stamp_s
-        if made is None or made < a.phase_since_s + PLAN_TARGET_AFTER_S or (held is not None and held[3] == made):
-            return None
-        target = complex(state.target_m[0], state.target_m[1])
-        agree = held is not None and abs(target - held[1]) <= PLAN_TARGET_AGREE_M
-        self._plan_targets[a.name] = (a.phase_since_s, held[1] if agree else target, agree, made)  # type: ignore[index]
-        return held[1] if agree else None  # type: ignore[index]
 
     def _mocap_latency(self, tracker: PoseTracker) -> list[Finding]:
         latency = tracker.latency_s

@@ -9,6 +9,7 @@ from dataclasses import replace
 from rpf_fly.flight.agent import DroneAgent
 from rpf_fly.flight.phases import DronePhase
 from rpf_fly.flight.poses import PoseTracker
+from rpf_fly.flight.proximity_check import REST_S
 from rpf_fly.flight.supervisor import LOW_BATTERY_SAMPLES, TELEMETRY_STALE_S, WARNING, Supervisor
 from rpf_fly.mission import parse_mission
 from rpf_fly.mocap.frame import MocapFrame, RigidBodyPose
@@ -113,12 +114,16 @@ def test_a_separation_hold_resumes_when_the_pair_is_clear_again():
     states = {n: state(n, 0.5) for n in agents}
     moving = [f for f in supervisor.check(0.5, agents.values(), tracker, states) if f.kind == "separation"]
     assert moving == []  # clear, but still moving apart: the hold ends only at rest
-    for frame in range(3, 40):
-        see(tracker, frame, 0.5 + 0.01 * (frame - 2), POSITIONS)  # at rest there
-    now = 0.5 + 0.01 * 37
-    states = {n: state(n, now) for n in agents}
-    resumed = [f for f in supervisor.check(now, agents.values(), tracker, states) if f.kind == "separation"]
-    assert {(f.drone, f.response) for f in resumed} == {("cf1", "resume"), ("cf2", "resume")}
+    for frame in range(3, 80):  # at rest there, for longer than REST_S
+        now = 0.5 + 0.01 * (frame - 2)
+        see(tracker, frame, now, POSITIONS)
+        states = {n: state(n, now) for n in agents}
+        early = [f for f in supervisor.check(now, agents.values(), tracker, states) if f.kind == "separation"]
+        if now < 0.5 + REST_S:
+            assert early == []
+        elif early:
+            break
+    assert {(f.drone, f.response) for f in early} == {("cf1", "resume"), ("cf2", "resume")}
 
 
 def test_a_drone_nobody_commands_stays_in_the_separation_check_until_it_is_on_the_floor():
@@ -171,7 +176,7 @@ def test_mocap_latency_four_times_a_healthy_links_is_a_warning_once_and_its_end_
 def test_a_pose_gap_shorter_than_the_hold_is_said_once_per_drone_and_a_swarm_wide_one_once():
     """An occlusion of 0.15 s (under the 0.25 s hold) is ridden through on the last pose and still a warning naming
     the drone; when every drone's pose is late at once it is one `mocap_late` warning, not one per drone."""
-    from rpf_fly.flight.supervisor import POSE_LATE_S
+    from rpf_fly.flight.poses import POSE_LATE_S
 
     _, agents, tracker, supervisor = setup()
     states = {n: state(n, 0.0) for n in agents}
@@ -203,7 +208,7 @@ def test_a_drone_held_eight_cm_off_its_setpoints_is_a_tracking_warning_and_five_
     for 1 s does that to the simulated drone, and the former 10 cm threshold let it pass); 5 cm, the top of a real
     Crazyflie's normal tracking error (the simulated one's turbulence reaches 4 cm), is not: the former 5 cm line
     would have said it on a healthy drone."""
-    from rpf_fly.flight.supervisor import TRACKING_WARN_M
+    from rpf_fly.flight.tracking_check import TRACKING_WARN_M
 
     for offset, said in ((0.03, False), (0.05, False), (0.08, True)):
         agents, tracker, supervisor, states = holding_their_spots()

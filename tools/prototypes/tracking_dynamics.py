@@ -28,7 +28,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
-from rpf_fly.flight.supervisor import _to_segment  # noqa: E402
+from rpf_fly.flight.tracking_check import _to_segment  # noqa: E402
 
 DT = 0.01
 PLAN_PERIOD_S = 0.1

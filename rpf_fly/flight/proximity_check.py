@@ -1,0 +1,170 @@
+"""Separation and clearance: two drones closer than 2r (3D), or a drone closer than r to an obstacle surface, now
+or before they could stop if held now (rpf_fly/flight/response.py), and when such an episode ends.
+
+A pair (or a drone and an obstacle) counts as breached when it is closer than 2r (r) now, or when, held now, it
+would come closer before it stops: each drone flies on for its mocap latency plus `HOLD_REACTION_S`, then brakes as
+its own controller does from the tilt its streamed setpoint asks for (`Braking.stop_point`); a pair's closest
+approach is taken with both on their ways in step. Edge-triggered: one finding when an episode starts, one (for a
+``hold`` response) when it ends, at rest and clear by `RESUME_MARGIN_M` (docs/flight.md, "How a held drone
+stops")."""
+
+from __future__ import annotations
+
+import math
+from typing import Callable, Optional
+
+import numpy as np
+
+from rpf_fly.flight.agent import DroneAgent
+from rpf_fly.flight.commander import STREAMING as STREAMING_PHASES
+from rpf_fly.flight.events import ERROR, INFO
+from rpf_fly.flight.findings import Finding
+from rpf_fly.flight.poses import PoseTracker, TrackedPose
+from rpf_fly.flight.response import Follower, braking_for
+from rpf_fly.mission.model import Mission
+from rpf_fly.planning.obstacles import ObstacleSet
+
+RESUME_MARGIN_M = 0.05
+REST_M_S = 0.1
+REST_S = 0.5
+"""A separation or clearance episode ends (its ``hold`` resumes) only once the drones have been at rest (under
+`REST_M_S` by the mocap and by their response model) for `REST_S` and are clear, braking from where they are, by
+`RESUME_MARGIN_M`: a held drone brakes hard and swings back, its braking tilt makes its stop look short, and
+resuming at the turn of a swing restarts the approach the hold stopped (a head-on pair at 1 m/s resumed 10 ms into
+its hold, or at the turn of its swing, and met)."""
+HOLD_REACTION_S = 0.1
+"""From the mocap picture of a breach to the hold setpoint acting on the drone: the supervisor's pass (every mocap
+frame), the hold setpoint sent at once through the radio's queue, the drone's estimator taking the extpos, and the
+firmware's next position-loop tick; twice what an idle host takes (a head-on pair at 1 m/s each met on a loaded
+2-core host with 0.05 s)."""
+
+
+class ProximityCheck:
+    """The separation and clearance checks with the memory their episodes need (the supervisor runs them)."""
+
+    def __init__(self, mission: Mission, obstacles: ObstacleSet,
+                 model_of: Callable[[str], Optional[Follower]] = lambda name: None) -> None:
+        """``model_of``: a streaming drone's response model (`TrackingCheck.model_of`), whose velocity and tilt
+        are the drone's state for its stop: the mocap's filtered velocity trails a drone that speeds up."""
+        self.safety = mission.safety
+        self.obstacles = obstacles
+        self.r = mission.planner.safety_radius
+        self.model_of = model_of
+        self._close_pairs: set[tuple[str, str]] = set()
+        self._near_obstacle: set[str] = set()
+        self._now_s = 0.0
+        self._moving_since: dict[str, float] = {}
+        """drone -> when it was last seen moving (faster than `REST_M_S`): an episode ends `REST_S` after."""
+
+    def rest(self, now_s: float, agents: list[DroneAgent], tracker: PoseTracker) -> None:
+        """Note which drones move (by the mocap or by their response model, whichever says faster)."""
+        for a in agents:
+            pose = tracker.get(a.name)
+            if pose is None:
+                continue
+            model = self.model_of(a.name)
+            speed = max(abs(pose.velocity), abs(model.velocity) if model is not None else 0.0)
+            if speed > REST_M_S or a.name not in self._moving_since:
+                self._moving_since[a.name] = now_s
+        self._now_s = now_s
+
+    def _resting(self, name: str) -> bool:
+        """At rest for `REST_S` (a drone another process flies: taken as at rest)."""
+        since = self._moving_since.get(name)
+        return since is None or self._now_s - since >= REST_S
+
+    def separation(self, agents: list[DroneAgent], tracker: PoseTracker, foreign: list[str] = ()) -> list[Finding]:
+        out = []
+        close_now: set[tuple[str, str]] = set()
+        own = len(agents)
+        tracked = [(a.name, tracker.get(a.name)) for a in agents] + [(n, tracker.get(n)) for n in foreign]
+        tracked = [(n, p) for n, p in tracked[:own] if p is not None] + \
+            [(n, p) for n, p in tracked[own:] if p is not None]
+        mine = {n for n, _ in tracked} - set(foreign)
+        commanded = {a.name: a for a in agents if a.phase.airborne}
+        for i, (ni, pi) in enumerate(tracked):
+            if ni not in mine:
+                break  # two drones of other processes: theirs to check
+            for nj, pj in tracked[i + 1 :]:
+                d = sum((u - v) ** 2 for u, v in zip(pi.position, pj.position)) ** 0.5
+                ahead = self._stopped_apart(pi, pj, commanded.get(ni), commanded.get(nj), tracker.latency_s)
+                pair = (ni, nj)
+                held = pair in self._close_pairs and (
+                    min(d, ahead) < 2 * self.r + RESUME_MARGIN_M or not (self._resting(ni) and self._resting(nj)))
+                if min(d, ahead) < 2 * self.r or held:
+                    pair = (ni, nj)
+                    close_now.add(pair)
+                    if pair not in self._close_pairs:
+                        response = self.safety.on_separation
+                        message = f"separation {d:.3f} m from {nj} is below 2r = {2 * self.r:.2f} m"
+                        if d >= 2 * self.r:
+                            message = (f"separation {d:.3f} m from {nj}, closing: braking from here they would "
+                                       f"come within {ahead:.3f} m, below 2r = {2 * self.r:.2f} m")
+                        out.append(Finding("separation", ERROR, message, ni, response))
+                        if response != "warn" and nj in mine:
+                            out.append(Finding("separation", ERROR, f"separation {d:.3f} m from {ni}", nj, response))
+        if self.safety.on_separation == "hold":
+            still_close = {n for pair in close_now for n in pair}
+            for name in {n for pair in self._close_pairs - close_now for n in pair if n in mine} - still_close:
+                out.append(Finding("separation", INFO, "separation restored: resuming", name, "resume"))
+        self._close_pairs = close_now
+        return out
+
+    def _stop_point(self, pose: TrackedPose, agent: Optional[DroneAgent], latency_s: Optional[float]) -> complex:
+        """Where a drone at ``pose`` comes to rest if it is held now: its mocap picture is ``latency_s`` old and the
+        hold reaches it `HOLD_REACTION_S` later, flown at its speed, then it brakes as its own controller does
+        (`Braking.stop_point`) from its state: a streaming drone's velocity and tilt from its response model (the
+        mocap's filtered velocity trails a drone that speeds up; the faster of the two is taken), else the tilt its
+        setpoint asks for; a drone this process does not command: the firmware's defaults in steady flight."""
+        braking = agent.braking if agent is not None else braking_for(None)
+        streaming = agent is not None and agent.phase in STREAMING_PHASES
+        setpoint = agent.last_setpoint if streaming else None
+        model = self.model_of(agent.name) if streaming and agent is not None else None
+        velocity, tilt = pose.velocity, None
+        if model is not None:
+            tilt = model.tilt_deg
+            if abs(model.velocity) > abs(velocity):
+                velocity = model.velocity
+        ahead = pose.xy + velocity * (HOLD_REACTION_S + (latency_s or 0.0))
+        return braking.stop_point(ahead, velocity, setpoint, tilt)
+
+    def _stopped_apart(self, pi: TrackedPose, pj: TrackedPose, ai: Optional[DroneAgent], aj: Optional[DroneAgent],
+                       latency_s: Optional[float]) -> float:
+        """The closest two drones come if both are held now (3D, centre to centre): each flies on to its
+        `_stop_point`, both taken to cover their way in step."""
+        a0, b0 = pi.xy, pj.xy
+        a1, b1 = self._stop_point(pi, ai, latency_s), self._stop_point(pj, aj, latency_s)
+        start, change = b0 - a0, (b1 - b0) - (a1 - a0)
+        s = 0.0 if abs(change) < 1e-12 else min(1.0, max(0.0, -(start * change.conjugate()).real / abs(change) ** 2))
+        dz = pi.position[2] - pj.position[2]
+        return math.hypot(abs(start + s * change), dz)
+
+    def clearance(self, agents: list[DroneAgent], tracker: PoseTracker) -> list[Finding]:
+        if self.obstacles.is_empty:
+            return []
+        out = []
+        near_now = set()
+        for a in agents:
+            pose = tracker.get(a.name)
+            if pose is None:
+                continue
+            clearance = float(self.obstacles.signed_distance(pose.xy))
+            stop = self._stop_point(pose, a, tracker.latency_s)
+            way = pose.xy + (stop - pose.xy) * np.linspace(0.25, 1.0, 4)  # on its way to rest
+            ahead = float(np.min(self.obstacles.signed_distance(way)))
+            held = a.name in self._near_obstacle and (
+                min(clearance, ahead) < self.r + RESUME_MARGIN_M or not self._resting(a.name))
+            if min(clearance, ahead) < self.r or held:
+                near_now.add(a.name)
+                if a.name not in self._near_obstacle:
+                    message = f"obstacle clearance {clearance:.3f} m is below r = {self.r:.2f} m"
+                    if clearance >= self.r:
+                        message = (f"obstacle clearance {clearance:.3f} m, closing: braking from here it would come "
+                                   f"within {ahead:.3f} m, below r = {self.r:.2f} m")
+                    out.append(Finding("obstacle", ERROR, message, a.name, self.safety.on_obstacle))
+        if self.safety.on_obstacle == "hold":
+            for name in self._near_obstacle - near_now:
+                out.append(Finding("obstacle", INFO, "obstacle clearance restored: resuming", name, "resume"))
+        self._near_obstacle = near_now
+        return out
+
