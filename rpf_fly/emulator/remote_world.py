@@ -10,8 +10,9 @@ import socket
 import threading
 from typing import Optional
 
+from .dongle_air import DongleAir, RadioTiming
 from .fake_firmware import Packet
-from .fake_world import DongleAir, LinkFaults, RadioTiming
+from .fake_world import LinkFaults
 from .radio_wire import BROADCAST, CLOSE, INFO, OPEN, REPLY, REPLY_TIMEOUT_S, REQUEST, TRANSACT
 
 

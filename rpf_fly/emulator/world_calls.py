@@ -8,8 +8,9 @@ from __future__ import annotations
 from typing import Any
 
 from .fake_firmware import FirmwareSnapshot
-from .fake_world import RadioCounters, TruthSample
+from .fake_world import TruthSample
 from .host_lag import HostLag
+from .sim_drone import RadioCounters
 from .simulated_bodies import Pose
 
 

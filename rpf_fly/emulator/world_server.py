@@ -12,9 +12,10 @@ import threading
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-from .fake_world import DronePort, FakeWorld
+from .fake_world import FakeWorld
 from .host_lag import HostLag, host_lag
 from .radio_wire import BROADCAST, CLOSE, INFO, OPEN, REPLY, REQUEST
+from .sim_drone import DronePort
 from .simulated_bodies import SimulatedBodies
 
 logger = logging.getLogger(__name__)

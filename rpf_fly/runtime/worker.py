@@ -365,7 +365,7 @@ class WorkerRun:
             self._closers.append(source.close)
             return CflibBackend.for_mission(self.mission, DEFAULT_TOC_CACHE), source, None
         from rpf_fly.emulator import fake_radio
-        from rpf_fly.emulator.fake_world import RadioTiming
+        from rpf_fly.emulator.dongle_air import RadioTiming
         from rpf_fly.emulator.remote_world import RemoteWorld
         from rpf_fly.flight.dry_run import AIR_TIME_S, fake_uri, uri_address
         from rpf_fly.runtime.session import rig_address

@@ -16,7 +16,9 @@ import pytest
 from cflib.crazyflie import Crazyflie
 from cflib.crazyflie.syncCrazyflie import SyncCrazyflie
 
-from rpf_fly.emulator.fake_world import BurstLoss, FakeDroneConfig, FakeWorld, LinkFaults, RadioTiming
+from rpf_fly.emulator.burst_loss import BurstLoss
+from rpf_fly.emulator.dongle_air import RadioTiming
+from rpf_fly.emulator.fake_world import FakeDroneConfig, FakeWorld, LinkFaults
 from rpf_fly.flight.dry_run import RADIO_LOSS, DryRun
 from rpf_fly.mission import parse_mission
 

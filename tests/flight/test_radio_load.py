@@ -8,7 +8,8 @@ import time
 from pathlib import Path
 
 from rpf_fly.emulator import fake_radio
-from rpf_fly.emulator.fake_world import FakeDroneConfig, FakeWorld, RadioTiming
+from rpf_fly.emulator.dongle_air import RadioTiming
+from rpf_fly.emulator.fake_world import FakeDroneConfig, FakeWorld
 from rpf_fly.flight.recording import McapRecorder
 from rpf_fly.log.reader import read_log
 from rpf_fly.log.review import review
