@@ -8,9 +8,9 @@ links with the budget's ``?rate_limit=N``, its status log block, cflib's pings),
 ``--seconds`` streams a position setpoint to every drone at each planning tick and their extpos on the mocap frames
 (each drone in its slots, or packed: the groups' broadcasts through cflib's RadioManager). The setpoint latency is
 from the tick to the simulated firmware receiving the setpoint (a packet observer on the world, this process's
-clock); extpos the same from the frame. The emulated dongle does not pass broadcasts on to the drones
-(rpf_fly/emulator/crazyradio_air.py routes by address), so packed extpos costs the dongle its time here but reaches
-no estimator: the drones stand on the floor, which the radio does not care about.
+clock); extpos the same from the frame to the first copy carrying the drone's own position (the emulated dongle
+passes a broadcast to every drone on its channel at each of its four attempts: rpf_fly/emulator/crazyradio_air.py).
+The drones stand on the floor, which the radio does not care about.
 
 Usage:
     python tools/bench_radio_budget.py [--radio crazyradio_pa] [--rate-hz 10] [--mocap-hz 50] [--extpos-hz 50]
@@ -29,6 +29,7 @@ from collections import defaultdict
 from rpf_fly.mission import parse_mission
 from rpf_fly.mission.model import Mission
 from rpf_fly.radio.budget import DongleLoad, radio_loads
+from rpf_fly.radio.packed_extpos import BROADCAST_COPIES, decode
 
 BASE_ADDRESS = 0xE7E7E7E700
 
@@ -68,7 +69,10 @@ def measure(mission: Mission, seconds: float, cache_dir: str) -> dict[str, float
     received: dict[tuple[str, int, int], list[float]] = defaultdict(list)
     lock = threading.Lock()
     for name, address in addresses.items():
-        def observer(port: int, channel: int, payload: bytes, stamp: float, name: str = name) -> None:
+        def observer(port: int, channel: int, payload: bytes, stamp: float, name: str = name,
+                     ident: int = address & 0xFF) -> None:
+            if (port, channel) == (6, 2) and all(i != ident for i, _ in decode(payload)):
+                return  # another group's packet: not this drone's position
             with lock:
                 received[(name, port, channel)].append(stamp)
         world.add_packet_observer(address, observer)
@@ -124,15 +128,15 @@ def measure(mission: Mission, seconds: float, cache_dir: str) -> dict[str, float
     for name in uris:
         stamps = sorted(received[(name, *extpos)])
         for t, sent in frames:
-            if packed or name in sent:
+            if name in sent:
                 later = next((s for s in stamps if s >= t), None)
                 if later is not None and later - t < 1.0:
                     extpos_latency.append(later - t)
-    made = sum(len(s) for _, s in frames) if not packed else 0
+    made = sum(len(s) for _, s in frames) * (BROADCAST_COPIES if packed else 1)  # each copy heard when packed
     delivered = sum(len([s for s in received[(n, *extpos)] if start <= s <= start + elapsed]) for n in uris)
     return {"setpoint_p50_s": quantile(setpoint_latency, 0.5), "setpoint_p99_s": quantile(setpoint_latency, 0.99),
             "setpoints_missing": len(ticks) * len(uris) - len(setpoint_latency),
-            "extpos_p99_s": quantile(extpos_latency, 0.99) if not packed else math.nan,
+            "extpos_p99_s": quantile(extpos_latency, 0.99),
             "extpos_delivered": delivered / made if made else math.nan,
             "busy": (busy1 - busy0) / elapsed}
 
@@ -157,7 +161,8 @@ def row(load: DongleLoad, measured: dict[str, float] | None) -> list[str]:
              f"{load.extpos_p99_s * 1e3:.0f}", f"{load.extpos_delivered:.0%}", "no" if load.over else "yes"]
     if measured is not None:
         cells += [f"{measured['busy']:.0%}", f"{measured['setpoint_p50_s'] * 1e3:.0f} / "
-                  f"{measured['setpoint_p99_s'] * 1e3:.0f}", f"{measured['setpoints_missing']:.0f}"]
+                  f"{measured['setpoint_p99_s'] * 1e3:.0f}", f"{measured['setpoints_missing']:.0f}",
+                  f"{measured['extpos_p99_s'] * 1e3:.0f}", f"{measured['extpos_delivered']:.0%}"]
     return cells
 
 
@@ -175,7 +180,8 @@ def main() -> None:
     header = ["drones", "extpos", "needed/s", "carries/s", "use", "rate_limit", "setpoint ms p50 / p99 (model)",
               "extpos ms p99", "extpos out", "within budget"]
     if args.measure:
-        header += ["dongle busy (measured)", "setpoint ms p50 / p99 (measured)", "setpoints missing"]
+        header += ["dongle busy (measured)", "setpoint ms p50 / p99 (measured)", "setpoints missing",
+                   "extpos ms p99 (measured)", "extpos out (measured)"]
     rows = []
     with tempfile.TemporaryDirectory(prefix="rpf-fly-toc-") as cache:
         for mode in ("extpos", "packed"):
