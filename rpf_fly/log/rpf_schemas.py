@@ -103,8 +103,10 @@ RADIO_LOAD: dict[str, Any] = _obj(
         "packets_per_s": _num("packets / window_s: the dongle's measured load"),
         "transactions_per_s": _num("transactions / window_s: the dongle's air in use (polls yield to packets)"),
         "planned_per_s": _num("What the radio budget counts for this dongle while the drones stream setpoints "
-                              "(rpf_fly.radio.budget: setpoints + extpos + pings)"),
-        "budget_per_s": _num("What this dongle carries (radio.budget_packets_s or the dongle type's figure)"),
+                              "(rpf_fly.radio.budget: setpoints + extpos or packed broadcasts + pings + "
+                              "keep-alives)"),
+        "budget_per_s": _num("What this dongle carries of that mix (the dongle type's figures, scaled to "
+                             "radio.budget_packets_s when given)"),
         "setpoints_superseded": _num("Setpoints of this dongle's drones replaced by a newer one before the radio took "
                                      "them (the radio lagged; rpf_fly/radio/outbox.py); absent in logs before "
                                      "2026-12-02"),
