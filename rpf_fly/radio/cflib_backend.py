@@ -2,7 +2,8 @@
 
 What it does per drone (cflib 0.1.34, firmware protocol 12):
 - connect: `Swarm` with `CachedCfFactory` builds the `SyncCrazyflie` objects (TOC cache in `cache_dir`); each link
-  is opened on its own thread with a deadline (``cf.open_link`` and cflib's connected / fully-connected /
+  (a ``radio://`` one with the radio budget's ``?rate_limit=N``, rpf_fly/radio/budget.py) is opened on its own
+  thread with a deadline (``cf.open_link`` and cflib's connected / fully-connected /
   connection-failed / connection-lost callbacks; not `SyncCrazyflie.open_link`, which waits forever when a link
   drops during the TOC download), so one drone's failure neither blocks nor fails the others;
 - configure: first notify-setpoint-stop (below, "Latched priority"), then `stabilizer.estimator` = 2 (Kalman), `commander.enHighLevel` = 1 (when the firmware still has it),
@@ -14,7 +15,8 @@ What it does per drone (cflib 0.1.34, firmware protocol 12):
 - estimator: `reset_estimator` sets `kalman.initialX/Y/Z/Yaw` (from mocap) and triggers `kalman.resetEstimation`
   without waiting for the variance; `reset_estimators` resets and waits until the variance settles;
 - commands: supervisor arming, high-level take-off / go-to / land / stop, streamed position setpoints (yaw in
-  degrees) with `send_notify_setpoint_stop` at every hand-over back to the high-level commander, extpos / extpose,
+  degrees) with `send_notify_setpoint_stop` at every hand-over back to the high-level commander, extpos / extpose
+  (or packed extpos broadcasts, rpf_fly/radio/broadcast.py),
   supervisor emergency stop (cflib falls back to the localization emergency stop for firmware older than protocol
   12);
 - watchdog: `arm_watchdog` feeds the supervisor's emergency-stop watchdog until `close`, which then reboots the
