@@ -28,9 +28,10 @@ one replay; the delay's column is the model's velocity. Stops when a step change
 the delay by under 0.5 ms, or lowers the squared error by under `MIN_GAIN`, or after `MAX_ITERATIONS`.
 
 The mocap's latency and noise: against a dry run's ``/truth`` where the log has it (the shift that best lays the
-poses on the truth, and the poses' scatter about it where the drone is nearly still); otherwise the noise from the poses' second differences (white
-noise of std s gives second differences of std s sqrt(6); a flight's own acceleration adds 0.1 mm a frame at 1 m/s^2
-and 100 Hz) and the latency the fitted delay, which then includes the radio's latency of the setpoints.
+poses on the truth, and the poses' scatter about it where the drone is nearly still); otherwise the noise from the
+poses' second differences (white noise of std s gives second differences of std s sqrt(6); a flight's own
+acceleration adds 0.1 mm a frame at 1 m/s^2 and 100 Hz) and the latency the fitted delay, which then includes the
+radio's latency of the setpoints.
 """
 
 from __future__ import annotations

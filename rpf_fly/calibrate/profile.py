@@ -157,7 +157,7 @@ def profile_text(drone: str, params: Mapping[str, float], *, source: Mapping[str
 
     doc = {"format": FORMAT, "drone": drone, "source": _plain(source), "params": _plain(dict(params)),
            "mocap": _plain(dict(mocap)), "fit": _plain(dict(fit))}
-    head = ("# rpf-fly vehicle profile: the firmware gains and mocap figures under which the simulated drone flies as\n"
-            "# this drone flew (rpf-fly calibrate; docs/dynamics.md, \"Calibrating a vehicle profile\"). A mission uses\n"
-            "# it with dry_run: {dynamics: firmware, vehicle: THIS_FILE}.\n")
+    head = ("# rpf-fly vehicle profile: the firmware gains and mocap figures under which the simulated drone flies\n"
+            "# as this drone flew (rpf-fly calibrate; docs/dynamics.md, \"Calibrating a vehicle profile\"). A mission\n"
+            "# uses it with dry_run: {dynamics: firmware, vehicle: THIS_FILE}.\n")
     return head + yaml.safe_dump(doc, sort_keys=False, default_flow_style=False, width=120)

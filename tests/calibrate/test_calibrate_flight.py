@@ -124,8 +124,8 @@ def test_the_changed_gains_come_back(calibrated: dict[str, Any]) -> None:
 def axis_figures(trace: dict[str, Any], axis: int) -> dict[str, Any]:
     """The carrot's figures (cf_scenario.figures: of x) of ``axis``, its coordinate swapped with x's."""
     order = [axis] + [k for k in range(3) if k != axis]
-    scenario = Scenario.from_dict({**SCENARIO, "start": [SCENARIO["start"][k] for k in order],
-                                   "setpoints": [[row[0], *[row[1 + k] for k in order]] for row in SCENARIO["setpoints"]]})
+    rows = [[row[0], *[row[1 + k] for k in order]] for row in SCENARIO["setpoints"]]
+    scenario = Scenario.from_dict({**SCENARIO, "start": [SCENARIO["start"][k] for k in order], "setpoints": rows})
     swapped = {"t": trace["t"], "sp": [[p[k] for k in order] for p in trace["sp"]],
                "pos": [[p[k] for k in order] for p in trace["pos"]]}
     return figures(swapped, scenario)
