@@ -311,6 +311,11 @@ class FakeFirmware:
         self._eeprom = eeprom_image(radio_channel, 2, radio_address)
         """Survives reboots (it is the EEPROM); everything else on the memory port is RAM."""
         self._memories = self._memory_subsystem()
+        for name, value in self.config.stored_params:  # stored at power-on (a vehicle profile): paramInit applies them
+            if name not in self._params:
+                raise ValueError(f"stored parameter {name!r}: not a parameter of the simulated firmware")
+            self._stored[name] = float(value)
+            self._param_set(name, float(value))
 
     def _memory_subsystem(self) -> MemorySubsystem:
         """The memory table of a fresh flight stack, in the firmware's registration order (`fake_memory`)."""
