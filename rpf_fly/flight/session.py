@@ -164,8 +164,8 @@ def run_flight(
                                 sink=live.publish if live is not None else None, radio=backend.radio_counts)
     try:
         try:
-            first_order = ({name for name, config in rig.drone_configs.items() if config.vehicle.dynamics ==
-                            "first_order"} if rig is not None else set())
+            first_order = ({name for name, address in rig.addresses.items()
+                            if rig.drone_configs[address].vehicle.dynamics == "first_order"} if rig is not None else set())
             loop = FlightLoop(mission, backend, source, planner_factory, uris=uris, recorder=recorder,
                               status_hook=status_hook, first_order=first_order)
         except BaseException:
