@@ -5,7 +5,7 @@ driver meets a dongle as slow as a real one; the tests and docs/radio.md ("The e
 bounds from the same figures. Each figure says where it comes from or that it is an estimate.
 
 Sources (facts only, read for this module):
-- crazyradio-firmware (Crazyradio PA, nRF24LU1+) at 92dd1d8: ``docs/functional-areas/usb_radio_protocol.md`` (the
+- crazyradio-firmware (Crazyradio PA, nRF24LU1+) at 92dd1d8: its USB protocol page ``functional-areas/usb_radio_protocol.md`` (the
   USB protocol, "the USB setup transaction ... takes about 1ms"), ``firmware/src/main.c`` (``handleUsbVendorSetup``,
   ``legacyRun``: the status byte), ``firmware/src/radio.c`` (``radioUpdateRetr``: the ARD table by ACK payload
   length, ``radioSetChannel``), ``firmware/src/usbDescriptor.c`` at tag 0.53 (bcdDevice 0x0053);
