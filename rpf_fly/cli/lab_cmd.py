@@ -26,7 +26,7 @@ def lab(
     """Run MISSION's simulated drones and mocap until stopped; `check --lab` and `fly --lab` fly them."""
     from rpf_fly.cli.fly_cmd import load_mission_or_fail, load_faults_or_fail
     from rpf_fly.flight.fault_injection import FaultInjection
-    from rpf_fly.flight.lab import Lab
+    from rpf_fly.flight.lab import Lab, crazyradio_plug_call
 
     loaded = load_mission_or_fail(mission)
     start_faults = None
@@ -63,6 +63,8 @@ def lab(
         typer.echo(f"  fly them:   rpf-fly check {mission} --lab   then   rpf-fly fly {mission} --lab")
         typer.echo("  from cflib: from rpf_fly.emulator import fake_radio; from rpf_fly.flight.lab import lab_world; "
                    "fake_radio.register(lab_world()); then fake:// URIs (the mission's radio paths)")
+        typer.echo("  or through cflib's radio driver: from rpf_fly.emulator import crazyradio; from rpf_fly.flight.lab "
+                   f"import lab_world; {crazyradio_plug_call(loaded)}; then the mission's radio:// URIs")
         typer.echo(f"  lab file:   {the_lab.path}   log: {log_path}")
         typer.echo("  Ctrl-C stops the lab (its drones power off)")
         while not the_lab.wait(1.0):

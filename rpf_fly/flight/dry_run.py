@@ -1,9 +1,12 @@
 """The dry run: the same flight stack on simulated drones, before anyone arms a real one.
 
 Every ``radio://`` URI of the mission becomes ``fake://`` with the same path, answered by a simulated Crazyflie of
-the fake radio (:mod:`rpf_fly.emulator.fake_world`) standing at the drone's mission start. Their true poses are
-served by the NatNet server emulator over UDP on 127.0.0.1 in the mission's up-axis convention, and the real NatNet
-client receives them; so the flight loop, the NatNet client, the cflib backend and cflib itself all run for real.
+the fake radio (:mod:`rpf_fly.emulator.fake_world`) standing at the drone's mission start (with
+``radio="crazyradio"``, the mission's ``dry_run.radio``, the URIs stay ``radio://`` and emulated Crazyradios are
+plugged into this process, :mod:`rpf_fly.emulator.crazyradio`: cflib's own radio driver carries every packet to the
+same simulated drones). Their true poses are served by the NatNet server emulator over UDP on 127.0.0.1 in the
+mission's up-axis convention, and the real NatNet client receives them; so the flight loop, the NatNet client, the
+cflib backend and cflib itself all run for real.
 ``mocap="sim"`` uses the simulated mocap source instead of the UDP round trip. ``mocap="motioncapture"`` (the
 default for a mission of kind ``motioncapture``, whatever its ``type``) has the emulator multicast on 127.0.0.1 and
 reads it with the ``motioncapture`` package's OptiTrack decoder, in the child process of
@@ -104,6 +107,17 @@ def fake_uri(uri: str) -> str:
     return "fake://" + rest if scheme in ("radio", "fake") else uri
 
 
+def radio_uri(uri: str) -> str:
+    """``fake://0/80/2M/E7E7E7E701`` -> ``radio://0/80/2M/E7E7E7E701`` (radio URIs pass through)."""
+    scheme, _, rest = uri.partition("://")
+    return "radio://" + rest if scheme in ("radio", "fake") else uri
+
+
+def uri_dongle(uri: str) -> int:
+    """The dongle number of a ``radio://`` or ``fake://`` URI (its first path element)."""
+    return int(uri.partition("://")[2].split("/")[0])
+
+
 def uri_address(uri: str) -> int:
     """The radio address of a URI, as an integer."""
     path = uri.partition("://")[2].partition("?")[0]
@@ -192,6 +206,8 @@ class DryRun:
         mocap_noise: Optional[MocapNoise] = None,
         lab: Optional["LabInfo"] = None,
         dynamics: Optional[str] = None,
+        radio: Optional[str] = None,
+        crazyradio: Optional[str] = None,
     ):
         """``lab``: fly the drones of a running lab (`rpf_fly.flight.lab`, ``rpf-fly lab``) instead of starting
         private ones; they keep their firmware state, and closing the dry run leaves them to the lab. ``truth``: the flight log of a flight on this rig gets the world's truth (``/truth/<drone>``); False only
@@ -210,7 +226,10 @@ class DryRun:
         truth, for tests that compare poses to the millimetre). ``dynamics``: how the simulated drones fly,
         ``"firmware"`` (the firmware's PID cascade on the identified body, docs/dynamics.md) or ``"first-order"``
         (`VehicleConfig.dynamics`). ``seed``, ``mocap_noise`` and ``dynamics`` default to the mission's ``dry_run``
-        section (docs/mission-format.md); a lab's drones fly the lab mission's."""
+        section (docs/mission-format.md); a lab's drones fly the lab mission's. ``radio``: ``"fake"`` (the
+        ``fake://`` link driver) or ``"crazyradio"`` (the mission's ``radio://`` URIs through cflib's own radio
+        driver and emulated dongles of type ``crazyradio``, plugged into this process until `close`); default the
+        mission's ``dry_run.radio`` and ``dry_run.crazyradio`` (else ``radio.dongle_type``)."""
         if mocap is None:  # the mission's kind decides: its own client against the emulator
             mocap = "motioncapture" if mission.mocap.kind == "motioncapture" else "natnet"
         if mocap not in ("natnet", "sim", "motioncapture"):
@@ -219,7 +238,15 @@ class DryRun:
         self.mocap_kind = mocap
         self.natnet_version = natnet_version
         self.rate_hz = mocap_rate_hz or mission.mocap.rate_hz
-        self.uris = {d.name: fake_uri(d.uri) for d in mission.drones}
+        self.radio = mission.dry_run.radio if radio is None else radio
+        if self.radio not in ("fake", "crazyradio"):
+            raise ValueError(f"dry-run radio must be 'fake' or 'crazyradio', not {self.radio!r}")
+        self.crazyradio = crazyradio or mission.dry_run.crazyradio or mission.radio.dongle_type
+        to_uri = radio_uri if self.radio == "crazyradio" else fake_uri
+        self.uris = {d.name: to_uri(d.uri) for d in mission.drones}
+        self.plugged: Any = None
+        """The emulated Crazyradios (`rpf_fly.emulator.crazyradio.Plugged`) with ``radio="crazyradio"``, once
+        started: their counters say what cflib's radio driver carried."""
         self.addresses = {d.name: uri_address(d.uri) for d in mission.drones}
         self.bodies = {d.name: d.rigid_body for d in mission.drones}
         if lab is not None and (drone_configs or start_faults):
@@ -256,7 +283,6 @@ class DryRun:
         return self
 
     def _start(self) -> None:
-        from rpf_fly.emulator import fake_radio
         from rpf_fly.emulator.world_process import RemoteWorld, SimulatedBodies, WorldProcess
 
         up = self.mission.mocap.up_axis
@@ -272,7 +298,8 @@ class DryRun:
             if missing:
                 raise RuntimeError(f"the lab ({self.lab.mission}) has no drone at address "
                                    f"{', '.join(f'{a:010X}' for a in missing)}: start the lab with this mission")
-            fake_radio.register(RemoteWorld(tuple(self.lab.radio), tuple(self.drone_configs), self.timing))  # type: ignore[arg-type]
+            lab_radio: Any = tuple(self.lab.radio)
+            self._connect_radio(RemoteWorld(lab_radio, tuple(self.drone_configs), self.timing))
             command_port = self.lab.natnet_command_port
             if served and command_port is None:
                 raise RuntimeError("the lab serves no NatNet emulator")
@@ -280,7 +307,7 @@ class DryRun:
             self.world = FakeWorld(self.drone_configs, seed=self.seed, obstacles=self.mission.obstacles,
                                    timing=self.timing).start()
             self._bodies = SimulatedBodies(self.world, body_of_address, self.mocap_noise, seed=self.seed)
-            fake_radio.register(self.world)
+            self._connect_radio(self.world)
             command_port = None
             if served:
                 from rpf_fly.emulator.natnet_server import NatNetServer
@@ -298,7 +325,7 @@ class DryRun:
                 natnet=natnet if served else None, obstacles=self.mission.obstacles,
                 names=self._names, exit_report=self.world_exit_report, host=self.host, mocap_noise=self.mocap_noise,
             )
-            fake_radio.register(RemoteWorld(self.world.radio, tuple(self.drone_configs), self.timing))
+            self._connect_radio(RemoteWorld(self.world.radio, tuple(self.drone_configs), self.timing))
             command_port = self.world.natnet_command_port
         vehicle = self.mission.dry_run.vehicle
         if self.lab is None and vehicle is not None and vehicle.mocap_delay_s(self.rate_hz) > 0.0:
@@ -325,6 +352,22 @@ class DryRun:
                 self.poses, rate_hz=self.rate_hz, noise_m=m.noise_m, latency_s=m.latency_s, dropout=m.dropout
             )
 
+    def _connect_radio(self, world: Any) -> None:
+        """Reach ``world``'s drones: the fake radio's ``fake://`` driver, or emulated Crazyradios (one per dongle
+        number the mission's URIs use) behind cflib's own ``radio://`` driver."""
+        from rpf_fly.emulator import fake_radio
+
+        if self.radio == "crazyradio":
+            from rpf_fly.emulator import crazyradio
+
+            if crazyradio.plugged() is not None:
+                raise RuntimeError("emulated Crazyradios are already plugged into this process (another dry run "
+                                   "through dry_run.radio: crazyradio): one at a time")
+            dongles = 1 + max(uri_dongle(u) for u in self.uris.values())
+            self.plugged = crazyradio.plug(world, dongles=dongles, radio=self.crazyradio)
+        else:
+            fake_radio.register(world)
+
     def __exit__(self, *exc: object) -> None:
         self.close()
 
@@ -335,6 +378,14 @@ class DryRun:
             self.mocap.close()
         if self.server is not None:
             self.server.close()
+        if self.plugged is not None:
+            from rpf_fly.emulator import crazyradio
+
+            # cflib closes a dongle on its shared radio's thread after the last close_link: wait for it, so the
+            # next dry run in this process opens its own dongles, not these
+            crazyradio.wait_released(range(len(self.plugged.dongles)))
+            crazyradio.unplug()
+            self.plugged = None
         if self.world is not None:
             self.world.close()
         fake_radio.unregister()

@@ -22,7 +22,8 @@ own MCAP log from start to stop, whatever happens to the processes that connect 
 How to reach a running lab is written to the lab file (`lab_file`: ``$RPF_FLY_LAB``, else
 ``<temp dir>/rpf-fly-lab-<uid>.json``, readable by its owner only: it holds the control connection's key); the lab
 removes it when it stops. A cflib program reaches the lab's drones with ``fake://`` URIs after
-``fake_radio.register(lab_world())``.
+``fake_radio.register(lab_world())``, or with the mission's ``radio://`` URIs through cflib's own radio driver after
+``crazyradio.plug(lab_world(), dongles=N, radio=TYPE)`` (`crazyradio_plug_call`).
 """
 
 from __future__ import annotations
@@ -167,10 +168,20 @@ class LabClient(WorldCalls):
 
 
 def lab_world(info: Optional[LabInfo] = None) -> RemoteWorld:
-    """What ``fake_radio.register`` takes to reach the running lab's drones from a cflib program (``fake://``
-    URIs with the mission's paths)."""
+    """What ``fake_radio.register`` (``fake://`` URIs with the mission's paths) or ``crazyradio.plug`` (the
+    mission's ``radio://`` URIs) takes to reach the running lab's drones from a cflib program."""
     info = read_lab() if info is None else info
     return RemoteWorld(info.radio, tuple(info.addresses.values()))
+
+
+def crazyradio_plug_call(mission: Mission) -> str:
+    """The call that plugs emulated Crazyradios (`rpf_fly.emulator.crazyradio.plug`) for a lab of ``mission`` into a
+    cflib program: one dongle per dongle number its URIs use, of its dry run's type."""
+    from rpf_fly.flight.dry_run import uri_dongle
+
+    dongles = 1 + max(uri_dongle(d.uri) for d in mission.drones)
+    kind = mission.dry_run.crazyradio or mission.radio.dongle_type
+    return f'crazyradio.plug(lab_world(), dongles={dongles}, radio="{kind}")'
 
 
 class _TruthFanout:

@@ -483,6 +483,8 @@ DRY_RUN_SPEC: dict[str, tuple[str, Reader]] = {
     "mocap_noise_deg": ("mocap_noise_deg", _num(NON_NEGATIVE)),
     "mocap_dropout": ("mocap_dropout", _num(FRACTION)),
     "dynamics": ("dynamics", _choice(("first-order", "firmware"))),
+    "radio": ("radio", _choice(("fake", "crazyradio"))),
+    "crazyradio": ("crazyradio", _choice(("crazyradio_pa", "crazyradio_2"))),
     "vehicle": ("vehicle", lambda c, n: c.vehicle_profile(n)),
 }
 SIM_SPEC: dict[str, tuple[str, Reader]] = {

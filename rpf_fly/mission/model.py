@@ -327,6 +327,12 @@ class DryRunSettings:
     mocap_noise_deg: Optional[float] = None
     mocap_dropout: Optional[float] = None
     dynamics: str = "first-order"
+    radio: Literal["fake", "crazyradio"] = "fake"
+    """How the flight's cflib reaches the simulated drones: ``fake`` (the ``fake://`` link driver in front of them)
+    or ``crazyradio`` (cflib's own ``radio://`` driver through emulated dongles, rpf_fly/emulator/crazyradio.py;
+    docs/radio.md, "Dry runs through cflib's radio driver")."""
+    crazyradio: Optional[Literal["crazyradio_pa", "crazyradio_2"]] = None
+    """The emulated dongles' type with ``radio: crazyradio`` (None: ``radio.dongle_type``, the lab's own)."""
     vehicle: Optional["VehicleProfile"] = None
 
 
