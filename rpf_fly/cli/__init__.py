@@ -70,6 +70,7 @@ def get_app() -> typer.Typer:
     from rpf_fly.cli import (bench_cmd, fly_cmd, lab_cmd, mocap_cmd, replay_cmd, review_cmd,  # noqa: F401
                              scenario_cmd, sim_cmd, train_cmd, worker_cmd)
     from rpf_fly.cli import campaign_cmd  # noqa: F401
+    from rpf_fly.cli import radio_cmd  # noqa: F401
     from rpf_fly.cli import calibrate_cmd  # noqa: F401
 
     _flags_show_no_type()
