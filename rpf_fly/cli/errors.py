@@ -2,10 +2,14 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import typer
+
+from rpf_fly.app.errors import UserError
 
 if TYPE_CHECKING:
     from rpf_fly.log.reader import LogData
@@ -27,3 +31,13 @@ def read_log_or_fail(log: Path) -> "LogData":
         raise fail(f"{log}: {err}")
     except OSError as err:
         raise fail(f"{log}: {err.strerror or err}")
+
+
+@contextmanager
+def refused() -> Iterator[None]:
+    """What the application layer refuses inside (:class:`~rpf_fly.app.errors.UserError`): its one line on stderr
+    and its exit code."""
+    try:
+        yield
+    except UserError as err:
+        raise fail(str(err), err.code) from None

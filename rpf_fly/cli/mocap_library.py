@@ -55,7 +55,8 @@ def watch_library(
     options."""
     from rich.console import Console
 
-    from rpf_fly.cli.mocap_cmd import UpAxisCheck, WatchStats, _frame_json, _frame_line, printing
+    from rpf_fly.app.mocap_watch import UpAxisCheck, WatchStats
+    from rpf_fly.cli.mocap_cmd import frame_json, frame_line, printing
     from rpf_fly.mocap.motioncapture_options import check_hostname, system_type
     from rpf_fly.mocap.motioncapture_source import MotioncaptureSource
 
@@ -110,10 +111,10 @@ def watch_library(
                 if hint is not None:
                     typer.echo(hint, err=json_output)
                 if json_output:
-                    typer.echo(_frame_json(frame))
+                    typer.echo(frame_json(frame))
                 elif rate <= 0 or last_frame >= next_line:
                     next_line = last_frame + (1.0 / rate if rate > 0 else 0.0)
-                    console.print(_frame_line(frame))
+                    console.print(frame_line(frame))
         except KeyboardInterrupt:
             pass
     hint = up_check.finish() or up_check.hint  # a watch shorter than the check judges what it saw

@@ -53,7 +53,7 @@ cached per logger at first use, so ``FOXGLOVE_LOG_LEVEL`` or :func:`foxglove.set
 client subscribes to a channel id that is gone or not yet advertised. With no handler anywhere, Python's last
 resort prints such a record on stderr; :func:`quiet_sdk` gives the SDK's loggers a handler that discards, so its
 records reach only the handlers on the root logger: during ``rpf-fly fly`` the flight's text log, and stderr with
-``--verbose`` (rpf_fly/cli/logs.py), as cflib's do."""
+``--verbose`` (rpf_fly/log/text_log.py), as cflib's do."""
 
 
 def quiet_sdk() -> None:

@@ -108,7 +108,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--connect", action="append", default=[])
     parser.add_argument("--source", default="flight")
     args = parser.parse_args(argv)
-    from rpf_fly.cli.logs import route_logging
+    from rpf_fly.log.text_log import route_logging
     from rpf_fly.mission import load_mission
     from rpf_fly.runtime.bus import FlightBus
     from rpf_fly.runtime.session import ZenohUnavailable, open_session

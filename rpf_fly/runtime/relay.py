@@ -182,7 +182,7 @@ def main(argv: Optional[list[str]] = None) -> int:
     parser.add_argument("--connect", action="append", default=[])
     parser.add_argument("--dry-run", action="store_true")
     args = parser.parse_args(argv)
-    from rpf_fly.cli.logs import route_logging
+    from rpf_fly.log.text_log import route_logging
     from rpf_fly.log.encoding import encode
     from rpf_fly.log.messages import log_message
     from rpf_fly.mission import load_mission

@@ -139,7 +139,7 @@ SUBSCRIBE_UNKNOWN = """
 import asyncio, json, logging, sys
 from rpf_fly.log.live import LiveView
 
-if sys.argv[1] == "routed":  # as rpf-fly fly does (cli/logs.py): a handler on the root logger
+if sys.argv[1] == "routed":  # as rpf-fly fly does (log/text_log.py): a handler on the root logger
     handler = logging.StreamHandler(sys.stdout)
     handler.setFormatter(logging.Formatter("%(levelname)s %(name)s: %(message)s"))
     logging.getLogger().addHandler(handler)

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from rpf_fly.cli.logs import route_logging
+from rpf_fly.log.text_log import route_logging
 from rpf_fly.emulator.simulated_mocap import SimulatedMocap
 from rpf_fly.flight.loop import FlightLoop
 from rpf_fly.mission import load_mission

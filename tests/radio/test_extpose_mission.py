@@ -33,7 +33,7 @@ def test_a_dry_run_check_sets_the_pose_std_dev_of_an_extpose_mission(
         extpos: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """``rpf-fly check --dry-run`` connects the mission's simulated drones as a flight does: with extpose each
     drone's estimator gets the backend's orientation standard deviation, with extpos it keeps the firmware's."""
-    from rpf_fly.cli import fly_cmd
+    from rpf_fly.app.flight import FlightApp
     from rpf_fly.flight import dry_run
 
     params: dict[str, dict[str, float]] = {}
@@ -51,7 +51,8 @@ def test_a_dry_run_check_sets_the_pose_std_dev_of_an_extpose_mission(
 
     monkeypatch.setattr(dry_run, "DryRun", Recorded)
     mission = parse_mission(MISSION.format(extpos=extpos))
-    problems = fly_cmd._preflight(mission, fly_cmd._planner_factory(mission, tmp_path / "mission.yaml"), True)
+    checked = FlightApp(tmp_path / "mission.yaml", mission=mission)
+    problems = checked.preflight(checked.planner_factory(), dry_run=True)
     assert not any(problems.values()), problems
     assert set(params) == {"cf1", "cf2"}
     backend_default = inspect.signature(CflibBackend).parameters["ext_quat_std_dev"].default
