@@ -72,6 +72,11 @@ locked (`_reboot_if_down`), over its own link, before closing it: a flight leave
 
 Safety: `close` must only be called on the ground: cflib's `close_link` sends a zero-thrust setpoint, which cuts the
 motors of a flying drone.
+
+Parts: connecting, configuring and the estimator resets are `CflibConnection` (rpf_fly/radio/cflib_connect.py); each
+drone's bookkeeping (`CflibDrone`), the status log block, cflib's callbacks and the state read from them are
+`CflibTelemetry` (rpf_fly/radio/cflib_telemetry.py); this module keeps the commands, the watchdog's feeder and
+`close`.
 """
 
 from __future__ import annotations
@@ -81,32 +86,21 @@ import math
 import threading
 import time
 from collections.abc import Callable, Iterable, Mapping
-from dataclasses import dataclass, field
 from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-import cflib.crtp
-from cflib.crazyflie.log import LogConfig
-from cflib.crazyflie.swarm import CachedCfFactory, Swarm
-from cflib.crazyflie.syncCrazyflie import SyncCrazyflie
+from cflib.crazyflie.swarm import Swarm
 from cflib.crtp.crtpstack import CRTPPacket
-from cflib.crtp.radiodriver import RadioDriver
 
 from rpf_fly.radio.broadcast import PackedExtposSender
-from rpf_fly.radio.budget import link_uri
-from rpf_fly.radio.outbox import Action, Outbox, SenderPool
+from rpf_fly.radio.cflib_connect import CflibConnection
+from rpf_fly.radio.cflib_telemetry import CflibDrone, CflibTelemetry
+from rpf_fly.radio.outbox import Action, SenderPool
 from rpf_fly.radio.packed_extpos import PACKED_EXT_POS_STD_DEV_M
-from rpf_fly.radio.schedule import LinkCount
-from rpf_fly.radio.telemetry_clock import TelemetryClock
 
 from .backend import (
-    CONTROLLER_PARAMS,
-    BatteryState,
-    DroneState,
     LinkLostCallback,
-    LinkState,
-    PmState,
     Quaternion,
     SupervisorState,
     Vec3,
@@ -117,61 +111,6 @@ if TYPE_CHECKING:
 
 logger = logging.getLogger(__name__)
 
-STATUS_VARIABLES: tuple[tuple[str, str], ...] = (
-    ("pm.vbat", "float"),
-    ("pm.state", "int8_t"),
-    ("supervisor.info", "uint16_t"),
-    ("stateEstimateZ.x", "int16_t"),
-    ("stateEstimateZ.y", "int16_t"),
-    ("stateEstimateZ.z", "int16_t"),
-    ("stateEstimate.yaw", "float"),
-    ("ctrltargetZ.x", "int16_t"),
-    ("ctrltargetZ.y", "int16_t"),
-    ("ctrltargetZ.z", "int16_t"),
-)
-"""The status log block (23 bytes; one log packet carries 26 bytes of values). The estimate and the controller's
-target in the firmware's compressed groups (millimetres as int16, stabilizer.c): the target is where the drone's own
-controller is taking it, which the supervisor needs while the high-level commander flies a take-off or a landing
-(docs/flight.md, "Tracking"), and the float groups would not fit both in one packet."""
-STATUS_VARIABLES_FLOAT: tuple[tuple[str, str], ...] = (
-    ("pm.vbat", "float"),
-    ("pm.state", "int8_t"),
-    ("supervisor.info", "uint16_t"),
-    ("stateEstimate.x", "float"),
-    ("stateEstimate.y", "float"),
-    ("stateEstimate.z", "float"),
-    ("stateEstimate.yaw", "float"),
-)
-"""The status block of a firmware without the compressed groups (none since 2021 lacks them): no target."""
-MM = 0.001
-"""Metres per unit of the compressed log groups."""
-
-
-def status_variables(log_toc: Any) -> tuple[tuple[str, str], ...]:
-    """The status block a drone's log TOC (cflib's `Toc`) can give: `STATUS_VARIABLES` when it has every one of
-    them, else `STATUS_VARIABLES_FLOAT`."""
-    if all(log_toc.get_element_by_complete_name(name) is not None for name, _ in STATUS_VARIABLES):
-        return STATUS_VARIABLES
-    return STATUS_VARIABLES_FLOAT
-
-def _read_params(cf: Any, names: tuple[str, ...]) -> dict[str, float] | None:
-    """The values of ``names`` the drone's parameters hold (cflib fetched them all at connect); those its TOC lacks
-    or whose value is not a number are left out; None when none is there."""
-    out = {}
-    for name in names:
-        if cf.param.toc.get_element_by_complete_name(name) is None:
-            continue
-        try:
-            out[name] = float(cf.param.get_value(name))
-        except Exception:  # cflib raises bare Exception when its values are not there
-            continue
-    return out or None
-
-
-INITIAL_STATE_PARAMS: tuple[str, ...] = ("kalman.initialX", "kalman.initialY", "kalman.initialZ", "kalman.initialYaw")
-"""The Kalman estimator's initial state (metres, radians), used at its next reset."""
-
-ESTIMATOR_KALMAN = 2
 KEEPALIVE_PERIOD_S = 0.2
 """How often each armed drone's emergency-stop watchdog is fed (the firmware stops the drone after 1 s without:
 supervisor.c DEFAULT_EMERGENCY_STOP_WATCHDOG_TIMEOUT), so four in a row may be lost or late before it trips."""
@@ -185,64 +124,9 @@ NRF_TARGET = 0xFE
 BOOTLOADER_CMD_RESET_INIT = 0xFF
 BOOTLOADER_CMD_RESET = 0xF0
 RESET_TO_FIRMWARE = 1
-VARIANCE_THRESHOLD_M2 = 0.001
-"""Spread of the Kalman position variance over 10 samples below which the estimate counts as settled (cflib's)."""
 
 
-@dataclass
-class _Drone:
-    """Bookkeeping of one drone (guarded by the backend lock)."""
-
-    name: str
-    uri: str
-    link_uri: str = ""
-    """What cflib opens: `uri` with the budget's ``?rate_limit=N`` for a ``radio://`` link (`budget.link_uri`)."""
-    scf: SyncCrazyflie | None = None
-    up: bool = False
-    configured: bool = False
-    """Connected and configured once (a later loss is reported to the link-lost callbacks)."""
-    closing: bool = False
-    lost_reported: bool = False
-    error: str | None = None
-    lost_at_s: float | None = None
-    quality_pct: float | None = None
-    latency_ms: float | None = None
-    vbat_v: float | None = None
-    pm_state: int | None = None
-    sup_bits: int | None = None
-    position: Vec3 | None = None
-    target: Vec3 | None = None
-    yaw_deg: float | None = None
-    stamp_s: float | None = None
-    measured_s: float | None = None
-    """When the last status packet's values were true (its firmware timestamp mapped by `clock`)."""
-    controller_params: dict[str, float] | None = None
-    """`CONTROLLER_PARAMS` as the drone's parameters held them at connect."""
-    clock: TelemetryClock = field(default_factory=TelemetryClock)
-    watchdog: bool = False
-    """`arm_watchdog` was called: the backend feeds the drone's emergency-stop watchdog until `close`."""
-    rebooted: bool = False
-    """`close` sent it the reboot commands."""
-    streaming: bool = False
-    last_setpoint: tuple[float, float, float, float] | None = None
-    """x, y, z (m), yaw (deg) of the last streamed setpoint."""
-    first_status: threading.Event = field(default_factory=threading.Event)
-    command_lock: threading.Lock = field(default_factory=threading.Lock)
-    """Serialises this drone's commands and guards `streaming` and `last_setpoint`."""
-    outbox: Outbox | None = None
-    """The drone's queued commands (sent by the backend's `SenderPool`), from the end of its configuration."""
-    log_config: LogConfig | None = None
-    radio_transactions: float = 0.0
-    """Acknowledged transactions since the first window of cflib's link statistics (empty polls included)."""
-    radio_packets: float = 0.0
-    """... of them with an uplink packet."""
-    radio_window_at: float | None = None
-    """`time.monotonic()` when the last window of cflib's ``uplink_rate`` closed."""
-    radio_pending: float | None = None
-    """Transactions of the window just reported by ``uplink_rate``, waiting for its ``uplink_congestion``."""
-
-
-class CflibBackend:
+class CflibBackend(CflibConnection, CflibTelemetry):
     """`DroneBackend` implementation on cflib. See the module docstring for behaviour and thread model."""
 
     def __init__(
@@ -289,7 +173,7 @@ class CflibBackend:
         self._rate_limits = dict(rate_limits or {})
         self._packed: PackedExtposSender | None = None
         self._lock = threading.RLock()
-        self._drones: dict[str, _Drone] = {}
+        self._drones: dict[str, CflibDrone] = {}
         self._callbacks: list[LinkLostCallback] = []
         self._swarm: Swarm | None = None
         self._pool = SenderPool()
@@ -314,232 +198,6 @@ class CflibBackend:
                    ext_pos_std_dev=PACKED_EXT_POS_STD_DEV_M if packed else None,
                    rate_limits=link_rate_limits(mission))
 
-    # Connection -----------------------------------------------------------------------------------------------
-
-    def connect(self, drones: Mapping[str, str]) -> dict[str, str]:
-        """Connect and configure all `drones` (name -> URI) in parallel; returns name -> error for failures."""
-        if self._drones:
-            raise RuntimeError("connect() was already called on this backend")
-        uris = list(drones.values())
-        if len(set(uris)) != len(uris):
-            raise ValueError("two drones share a URI")
-        if self._init_drivers and not any(isinstance(c, type) and issubclass(c, RadioDriver)
-                                          for c in cflib.crtp.CLASSES):
-            cflib.crtp.init_drivers()
-        with self._lock:
-            self._drones = {name: _Drone(name, uri, link_uri(uri, self._rate_limits.get(name)))
-                            for name, uri in drones.items()}
-        links = [d.link_uri for d in self._drones.values()]
-        self._swarm = Swarm(links, factory=CachedCfFactory(rw_cache=self._cache_dir))
-        by_uri = {d.link_uri: d for d in self._drones.values()}
-        self._swarm.sequential(lambda scf, uri: setattr(by_uri[uri], "scf", scf), {u: [u] for u in links})
-        errors = self._parallel(self._connect_one, list(self._drones.values()), self._connect_timeout_s + 5.0)
-        for name, message in errors.items():
-            if message == "timed out":  # its thread is still running: make sure it never comes up
-                self._give_up(self._drones[name], "connection timed out")
-        if self._packed_extpos:
-            errors.update(self._start_packed([n for n in self._drones if n not in errors]))
-        if self._reset_on_connect:
-            live = [n for n in self._drones if n not in errors]
-            errors.update(self.reset_estimators(live))
-        for name, message in errors.items():
-            logger.warning("drone %s: %s", name, message)
-        return errors
-
-    def _parallel(self, func: Callable[[_Drone], None], drones: list[_Drone], timeout_s: float) -> dict[str, str]:
-        """Run `func(drone)` on one thread per drone; name -> error for those that raised or overran."""
-        errors: dict[str, str] = {}
-
-        def run(drone: _Drone) -> None:
-            try:
-                func(drone)
-            except Exception as exc:  # per-drone errors are reported, not raised
-                with self._lock:
-                    errors[drone.name] = str(exc) or type(exc).__name__
-
-        threads = [threading.Thread(target=run, args=(d,), name=f"rpf-{d.name}", daemon=True) for d in drones]
-        for thread in threads:
-            thread.start()
-        deadline = time.monotonic() + timeout_s
-        for drone, thread in zip(drones, threads):
-            thread.join(max(deadline - time.monotonic(), 0.0))
-            if thread.is_alive():
-                with self._lock:
-                    errors.setdefault(drone.name, "timed out")
-        with self._lock:  # a thread that overran may still add its error later: hand out a copy
-            return dict(errors)
-
-    def _connect_one(self, drone: _Drone) -> None:
-        assert drone.scf is not None
-        cf = drone.scf.cf
-        done = threading.Event()
-        failure: list[str] = []
-
-        def on_fully_connected(uri: str) -> None:
-            done.set()
-
-        def on_failed(uri: str, message: str) -> None:
-            failure.append(f"connection failed: {message}")
-            done.set()
-
-        def on_lost(uri: str, message: str) -> None:
-            failure.append(f"connection lost while connecting: {message}")
-            done.set()
-
-        cf.connection_lost.add_callback(partial(self._on_connection_lost, drone.name))
-        cf.disconnected.add_callback(partial(self._on_disconnected, drone.name))
-        temporary = ((cf.fully_connected, on_fully_connected), (cf.connection_failed, on_failed),
-                     (cf.connection_lost, on_lost))
-        for caller, callback in temporary:
-            caller.add_callback(callback)
-        deadline = time.monotonic() + self._connect_timeout_s
-        try:
-            cf.open_link(drone.link_uri)
-            if not done.wait(self._connect_timeout_s) or failure:
-                message = failure[0] if failure else "connection timed out"
-                self._give_up(drone, message)
-                raise RuntimeError(message)
-        finally:
-            for caller, callback in temporary:
-                caller.remove_callback(callback)
-        try:
-            self._configure(drone, deadline)
-        except Exception as exc:
-            self._give_up(drone, f"configuration failed: {exc}")
-            raise RuntimeError(f"configuration failed: {exc}") from exc
-
-    def _configure(self, drone: _Drone, deadline: float) -> None:
-        cf = drone.scf.cf  # type: ignore[union-attr]
-        # before anything else: release a setpoint priority an earlier connection left latched (module docstring)
-        cf.commander.send_notify_setpoint_stop()
-        toc = cf.param.toc
-        self._set_param(cf, "stabilizer.estimator", ESTIMATOR_KALMAN)
-        if toc.get_element_by_complete_name("commander.enHighLevel") is not None:
-            self._set_param(cf, "commander.enHighLevel", 1)
-        if self._use_extpose:
-            self._set_param(cf, "locSrv.extQuatStdDev", self._ext_quat_std_dev)
-        if self._ext_pos_std_dev is not None:
-            self._set_param(cf, "locSrv.extPosStdDev", self._ext_pos_std_dev)
-        drone.controller_params = _read_params(cf, CONTROLLER_PARAMS)
-        stats = cf.link_statistics
-        stats.link_quality_updated.add_callback(partial(self._on_quality, drone.name))
-        stats.latency_updated.add_callback(partial(self._on_latency, drone.name))
-        stats.uplink_rate_updated.add_callback(partial(self._on_uplink_rate, drone.name))
-        stats.uplink_congestion_updated.add_callback(partial(self._on_uplink_congestion, drone.name))
-        config = LogConfig(name="rpf_status", period_in_ms=self._status_period_ms)
-        for variable, ctype in status_variables(cf.log.toc):
-            config.add_variable(variable, ctype)
-        cf.log.add_config(config)
-        config.data_received_cb.add_callback(partial(self._on_status, drone.name))
-        config.error_cb.add_callback(lambda conf, msg: logger.warning("drone %s: status log: %s", drone.name, msg))
-        drone.log_config = config
-        config.start()
-        if not drone.first_status.wait(max(deadline - time.monotonic(), 2.0)):
-            raise RuntimeError("no status log data")
-        with self._lock:
-            if drone.closing:
-                raise RuntimeError("given up while configuring")
-            drone.outbox = self._pool.outbox(drone.name, partial(self._send, drone))
-            drone.up, drone.configured, drone.error = True, True, None
-
-    def _set_param(self, cf: Any, name: str, value: float) -> None:
-        """Write one parameter and wait for the firmware's echo; raises on timeout or a different value."""
-        echoed: list[str] = []
-        event = threading.Event()
-        group, short = name.split(".")
-
-        def on_update(_name: str, text: str) -> None:
-            echoed.append(text)
-            event.set()
-
-        cf.param.add_update_callback(group=group, name=short, cb=on_update)
-        try:
-            cf.param.set_value(name, value)
-            if not event.wait(self._param_timeout_s):
-                raise RuntimeError(f"parameter {name} not confirmed")
-            if not math.isclose(float(echoed[-1]), float(value), rel_tol=1e-6, abs_tol=1e-9):
-                raise RuntimeError(f"parameter {name} is {echoed[-1]}, wanted {value}")
-        finally:
-            cf.param.remove_update_callback(group=group, name=short, cb=on_update)
-
-    def _give_up(self, drone: _Drone, message: str) -> None:
-        """Mark the drone failed and close its link (it never comes up afterwards)."""
-        with self._lock:
-            drone.up = False
-            drone.error = message
-            drone.closing = True
-        try:
-            if drone.scf is not None:
-                drone.scf.cf.close_link()  # also stops cflib's receive thread when the link already failed
-        except Exception:
-            logger.exception("drone %s: closing a failed link", drone.name)
-
-    def reset_estimators(self, names: list[str] | None = None, timeout_s: float = 10.0) -> dict[str, str]:
-        """Reset the Kalman estimators (`kalman.resetEstimation`) and wait until the position variance settles
-        (cflib's criterion: spread under 0.001 m^2 over ten samples at 2 Hz, so at least 5 s). Blocks; runs the
-        drones in parallel; returns name -> error. With mocap positioning, stream extpos meanwhile."""
-        targets = [self._drones[n] for n in (names if names is not None else list(self._drones))]
-        return self._parallel(partial(self._reset_one, timeout_s=timeout_s), targets, timeout_s + 2.0)
-
-    def _reset_one(self, drone: _Drone, timeout_s: float) -> None:
-        cf = self._live_cf(drone.name)
-        if cf is None:
-            raise RuntimeError("link is down")
-        samples: list[tuple[float, float, float]] = []
-        settled = threading.Event()
-
-        def on_data(_ts: int, data: dict[str, float], _conf: LogConfig) -> None:
-            samples.append((data["kalman.varPX"], data["kalman.varPY"], data["kalman.varPZ"]))
-            window = ([(1000.0,) * 3] * 10 + samples)[-10:]
-            if all(max(s[i] for s in window) - min(s[i] for s in window) < VARIANCE_THRESHOLD_M2 for i in range(3)):
-                settled.set()
-
-        self._set_param(cf, "kalman.resetEstimation", 1)
-        time.sleep(0.1)
-        self._set_param(cf, "kalman.resetEstimation", 0)
-        config = LogConfig(name="rpf_variance", period_in_ms=500)
-        for axis in ("X", "Y", "Z"):
-            config.add_variable(f"kalman.varP{axis}", "float")
-        cf.log.add_config(config)
-        config.data_received_cb.add_callback(on_data)
-        config.start()
-        try:
-            if not settled.wait(timeout_s):
-                raise RuntimeError("estimator did not settle")
-        finally:
-            config.stop()
-            config.delete()
-
-    def reset_estimator(self, name: str, position: Vec3, yaw_rad: float) -> bool:
-        """Restart one drone's Kalman estimate at `position` (metres) and `yaw_rad` (radians), e.g. its mocap pose.
-
-        Why: position-only extpos does not observe yaw, so the yaw estimate stays where the estimator started
-        (`kalman.initialYaw`, 0 at power-on); a drone facing elsewhere flies off under position control. Writes
-        `kalman.initialX/Y/Z/Yaw`, each confirmed by the firmware's echo, then `kalman.resetEstimation` = 1 (the
-        firmware resets at its next estimator step and clears the flag itself). Blocks only for those five
-        confirmations (milliseconds; `param_timeout_s` each at worst), not for the variance to settle: keep
-        streaming extpos, which the estimator takes almost whole after the reset. Takes no command lock, so the
-        drone's setpoints and extpos keep flowing meanwhile. Returns False when the link is down, a value is not
-        finite, or a write is not confirmed; never raises for a known drone."""
-        try:
-            values = tuple(float(v) for v in (*position, yaw_rad))
-        except (TypeError, ValueError):
-            values = ()
-        if len(values) != 4 or not all(math.isfinite(v) for v in values):
-            logger.warning("drone %s: estimator reset refused: %r, %r", name, position, yaw_rad)
-            return False
-        cf = self._live_cf(name)
-        if cf is None:
-            return False
-        try:
-            for param, value in zip(INITIAL_STATE_PARAMS, values):
-                self._set_param(cf, param, value)
-            self._set_param(cf, "kalman.resetEstimation", 1)
-        except Exception as exc:  # one drone's failure must not propagate
-            logger.warning("drone %s: estimator reset failed: %s", name, exc)
-            return False
-        return True
-
     def close(self) -> None:
         """Close every link (on the ground only: cflib sends a zero-thrust setpoint when closing). A drone whose
         emergency-stop watchdog was armed (`arm_watchdog`) and whose telemetry then says neither flying nor locked
@@ -550,7 +208,7 @@ class CflibBackend:
             for drone in drones:
                 drone.closing = True
 
-        def close_one(drone: _Drone) -> None:
+        def close_one(drone: CflibDrone) -> None:
             flushed = True
             if drone.outbox is not None:  # what was queued (a disarm after touchdown) goes out first
                 flushed = drone.outbox.close(flush_s=1.0)
@@ -572,7 +230,7 @@ class CflibBackend:
             for drone in drones:
                 drone.up = False
 
-    def _reboot_if_down(self, drone: _Drone) -> None:
+    def _reboot_if_down(self, drone: CflibDrone) -> None:
         """`close`, for a drone whose watchdog was armed, once its outbox is flushed: feed the watchdog directly
         (the outbox is closed) until a status packet newer than the last command arrives, then reboot the drone over
         its own link when that status says neither flying (the supervisor's flag: thrust above idle within 2 s)
@@ -623,128 +281,6 @@ class CflibBackend:
     def __exit__(self, *exc: object) -> None:
         self.close()
 
-    # cflib callbacks (cflib threads) --------------------------------------------------------------------------
-
-    def _on_status(self, name: str, timestamp: int, data: dict[str, float], _config: LogConfig) -> None:
-        drone = self._drones[name]
-        arrived = time.monotonic()
-        with self._lock:
-            drone.vbat_v = float(data["pm.vbat"])
-            drone.pm_state = int(data["pm.state"])
-            drone.sup_bits = int(data["supervisor.info"])
-            if "stateEstimateZ.x" in data:
-                drone.position = (data["stateEstimateZ.x"] * MM, data["stateEstimateZ.y"] * MM,
-                                  data["stateEstimateZ.z"] * MM)
-                drone.target = (data["ctrltargetZ.x"] * MM, data["ctrltargetZ.y"] * MM, data["ctrltargetZ.z"] * MM)
-            else:
-                drone.position = (float(data["stateEstimate.x"]), float(data["stateEstimate.y"]),
-                                  float(data["stateEstimate.z"]))
-            drone.yaw_deg = float(data["stateEstimate.yaw"])
-            drone.stamp_s = arrived
-            drone.measured_s = drone.clock.measured_at(int(timestamp), arrived)
-        drone.first_status.set()
-
-    def _on_quality(self, name: str, quality: float) -> None:
-        with self._lock:
-            self._drones[name].quality_pct = float(quality)
-
-    def _on_latency(self, name: str, latency_ms: float) -> None:
-        with self._lock:
-            self._drones[name].latency_ms = float(latency_ms)
-
-    def _on_connection_lost(self, name: str, uri: str, message: str) -> None:
-        drone = self._drones[name]
-        full, message = message, " ".join((message.strip().splitlines() or ["no reason given"])[0].split())
-        with self._lock:
-            report = drone.configured and not drone.closing and not drone.lost_reported
-            drone.lost_reported = drone.lost_reported or report
-            drone.up = False
-            drone.error = f"connection lost: {message}"  # one line: cflib appends a traceback to its reason
-            drone.lost_at_s = time.monotonic()
-            callbacks = list(self._callbacks) if report else []
-        logger.warning("drone %s (%s): link lost: %s", name, uri, full)  # the whole of it, for the text log
-        for callback in callbacks:
-            try:
-                callback(name, message)
-            except Exception:  # a user callback must not break cflib's thread
-                logger.exception("link-lost callback failed for %s", name)
-
-    def _on_disconnected(self, name: str, uri: str) -> None:
-        with self._lock:
-            self._drones[name].up = False
-
-    def add_link_lost_callback(self, callback: LinkLostCallback) -> None:
-        with self._lock:
-            self._callbacks.append(callback)
-
-    def _on_uplink_rate(self, name: str, rate: float) -> None:
-        """cflib's link statistics close a window (at least 0.1 s) with its transactions a second; the window's
-        share of them carrying a packet follows at once (``uplink_congestion``, same call). The first window seen
-        started before the callback was registered and is not counted."""
-        now = time.monotonic()
-        with self._lock:
-            drone = self._drones.get(name)
-            if drone is None:
-                return
-            drone.radio_pending = rate * (now - drone.radio_window_at) if drone.radio_window_at is not None else None
-            drone.radio_window_at = now
-
-    def _on_uplink_congestion(self, name: str, congestion: float) -> None:
-        with self._lock:
-            drone = self._drones.get(name)
-            if drone is None or drone.radio_pending is None:
-                return
-            drone.radio_transactions += drone.radio_pending
-            drone.radio_packets += drone.radio_pending * congestion
-            drone.radio_pending = None
-
-    def radio_counts(self) -> dict[str, LinkCount]:
-        """Each connected drone's radio traffic so far, as cflib's link statistics measured it (acknowledged
-        transactions, and those with an uplink packet), and the setpoints its outbox superseded before the radio
-        took them, by name; kept after `close` (the last window, under 0.1 s, is never reported by cflib)."""
-        with self._lock:
-            return {d.name: LinkCount(d.uri, d.radio_transactions, d.radio_packets,
-                                      float(d.outbox.setpoints_replaced) if d.outbox is not None else 0.0)
-                    for d in self._drones.values() if d.radio_window_at is not None}
-
-    # State ----------------------------------------------------------------------------------------------------
-
-    def names(self) -> tuple[str, ...]:
-        return tuple(self._drones)
-
-    def state(self, name: str) -> DroneState:
-        with self._lock:
-            d = self._drones[name]
-            battery = None
-            if d.vbat_v is not None and d.pm_state is not None:
-                try:
-                    pm = PmState(d.pm_state)
-                except ValueError:
-                    pm = PmState.BATTERY
-                battery = BatteryState(d.vbat_v, pm)
-            return DroneState(
-                name=d.name,
-                uri=d.uri,
-                link=LinkState(d.up, d.quality_pct, d.latency_ms, d.error, d.lost_at_s),
-                battery=battery,
-                supervisor=SupervisorState(d.sup_bits) if d.sup_bits is not None else None,
-                position_m=d.position,
-                telemetry_stamp_s=d.stamp_s,
-                yaw_deg=d.yaw_deg,
-                estimate_stamp_s=d.measured_s,
-                target_m=d.target,
-                controller_params=d.controller_params,
-            )
-
-    def states(self) -> dict[str, DroneState]:
-        return {name: self.state(name) for name in self._drones}
-
-    def battery(self, name: str) -> BatteryState | None:
-        return self.state(name).battery
-
-    def link(self, name: str) -> LinkState:
-        return self.state(name).link
-
     # Commands -------------------------------------------------------------------------------------------------
 
     def _live_cf(self, name: str) -> Any | None:
@@ -755,7 +291,7 @@ class CflibBackend:
                 return None
             return drone.scf.cf
 
-    def _queue(self, name: str, action: Callable[[Any, _Drone], None], kind: str) -> bool:
+    def _queue(self, name: str, action: Callable[[Any, CflibDrone], None], kind: str) -> bool:
         """Queue one command in the drone's outbox (``kind``: ``setpoint``, ``extpos``, ``keepalive``, ``command``
         or ``ends_stream``); False when its link is not up (KeyError for an unknown name)."""
         drone = self._drones[name]
@@ -771,7 +307,7 @@ class CflibBackend:
             return outbox.keepalive(bound)
         return outbox.command(bound, ends_stream=kind == "ends_stream")
 
-    def _send(self, drone: _Drone, action: Action) -> None:
+    def _send(self, drone: CflibDrone, action: Action) -> None:
         """A pool thread: hand one queued command to cflib (dropped when the link went down since)."""
         cf = self._live_cf(drone.name)
         if cf is None:
@@ -796,7 +332,7 @@ class CflibBackend:
         return taken
 
     @staticmethod
-    def _release_stream(cf: Any, drone: _Drone) -> None:
+    def _release_stream(cf: Any, drone: CflibDrone) -> None:
         """Hand the priority back to the high-level commander; call it right after the high-level command."""
         if drone.streaming:
             cf.commander.send_notify_setpoint_stop()
@@ -822,7 +358,7 @@ class CflibBackend:
         return True
 
     @staticmethod
-    def _keepalive(cf: Any, drone: _Drone) -> None:
+    def _keepalive(cf: Any, drone: CflibDrone) -> None:
         cf.supervisor.send_emergency_stop_watchdog()
 
     def _feed(self) -> None:
@@ -848,7 +384,7 @@ class CflibBackend:
             feeder.join(1.0)
 
     def takeoff(self, name: str, height_m: float, duration_s: float) -> bool:
-        def action(cf: Any, drone: _Drone) -> None:
+        def action(cf: Any, drone: CflibDrone) -> None:
             cf.high_level_commander.takeoff(height_m, duration_s, yaw=None)
             if drone.streaming:
                 self._release_stream(cf, drone)
@@ -858,7 +394,7 @@ class CflibBackend:
         return self._queue(name, action, "ends_stream")
 
     def go_to(self, name: str, position: Vec3, yaw_deg: float, duration_s: float) -> bool:
-        def action(cf: Any, drone: _Drone) -> None:
+        def action(cf: Any, drone: CflibDrone) -> None:
             x, y, z = position
             cf.high_level_commander.go_to(x, y, z, math.radians(yaw_deg), duration_s)
             self._release_stream(cf, drone)
@@ -870,7 +406,7 @@ class CflibBackend:
         """Queue one streamed setpoint (latest wins). ``origin_s``: the `time.monotonic()` its data came from
         (the mocap frame's receipt); the time from it to cflib taking the packet is kept for
         `take_setpoint_latencies`."""
-        def action(cf: Any, drone: _Drone) -> None:
+        def action(cf: Any, drone: CflibDrone) -> None:
             cf.commander.send_position_setpoint(x, y, z, yaw_deg)
             drone.streaming = True
             drone.last_setpoint = (x, y, z, yaw_deg)
@@ -882,7 +418,7 @@ class CflibBackend:
         return self._queue(name, action, "setpoint")
 
     def hand_over(self, name: str, hold_duration_s: float = 1.0) -> bool:
-        def action(cf: Any, drone: _Drone) -> None:
+        def action(cf: Any, drone: CflibDrone) -> None:
             if not drone.streaming or drone.last_setpoint is None:
                 return
             x, y, z, yaw_deg = drone.last_setpoint
@@ -892,14 +428,14 @@ class CflibBackend:
         return self._queue(name, action, "ends_stream")
 
     def land(self, name: str, height_m: float = 0.0, duration_s: float = 2.0) -> bool:
-        def action(cf: Any, drone: _Drone) -> None:
+        def action(cf: Any, drone: CflibDrone) -> None:
             cf.high_level_commander.land(height_m, duration_s, yaw=None)
             self._release_stream(cf, drone)
 
         return self._queue(name, action, "ends_stream")
 
     def stop(self, name: str) -> bool:
-        def action(cf: Any, drone: _Drone) -> None:
+        def action(cf: Any, drone: CflibDrone) -> None:
             if drone.streaming:
                 cf.commander.send_stop_setpoint()
             drone.streaming = False
@@ -927,7 +463,7 @@ class CflibBackend:
         else:
             targets = [self._drones[n].name for n in name]
 
-        def stop_one(drone: _Drone) -> None:
+        def stop_one(drone: CflibDrone) -> None:
             if drone.outbox is not None:
                 drone.outbox.clear(refuse=True)
             cf = self._live_cf(drone.name)
