@@ -13,10 +13,10 @@ import cflib.crtp
 import pytest
 from cflib.crazyflie import Crazyflie
 from cflib.crazyflie.syncCrazyflie import SyncCrazyflie
+from xdist_ids import keep_failures_by_plain_id
 
 from rpf_fly.emulator import fake_radio
 from rpf_fly.emulator.fake_world import FakeDroneConfig, FakeWorld
-from xdist_ids import keep_failures_by_plain_id
 
 ADDRESS_BASE = 0xE7E7E7E700
 HANG_GUARD_S = 120.0

@@ -10,7 +10,6 @@ import sys
 from pathlib import Path
 
 import pytest
-
 from xdist_ids import PlainIds, plain_nodeid
 
 TESTS = Path(__file__).resolve().parent

@@ -88,12 +88,11 @@ def bench_closed_loop(family: str, planner: str, seeds: int, alone: bool) -> dic
     """CPU seconds, runs, drones and simulated 10 ms steps of the bench's closed loop on `seeds` bench seeds of
     `family` with `planner` (its kind's default guidance and margin), flown together or each alone."""
     from rpf_fly.bench.families import SIM, SPLIT
+    from rpf_fly.bench.runner import POLICY_ACTIONS
     from rpf_fly.sim.closed_loop import STEP_S as LOOP_STEP_S
     from rpf_fly.sim.closed_loop import FirmwareParams, run_firmware
     from rpf_fly.sim.evaluate import planner_settings
     from rpf_fly.sim.generators import generate, split_seeds
-
-    from rpf_fly.bench.runner import POLICY_ACTIONS
 
     policy = Path(__file__).resolve().parents[1] / "policies" / f"{planner}.onnx" if planner in POLICY_ACTIONS else None
     settings = planner_settings(planner, policy)

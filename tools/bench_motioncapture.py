@@ -21,7 +21,8 @@ import argparse
 import json
 import statistics
 import time
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 from rpf_fly.emulator.natnet_server import NatNetServer
 from rpf_fly.mocap.motioncapture_source import MotioncaptureSource

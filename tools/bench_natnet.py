@@ -21,8 +21,9 @@ import statistics
 import sys
 import time
 import types
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 from rpf_fly.mocap.natnet_protocol import (
     FrameOfData,
@@ -99,7 +100,7 @@ def load_sample_client(path: Path) -> Any:
 
 def sample_unpacker(client: Any, packet: bytes, version: tuple[int, int]) -> Callable[[], Any]:
     """A call of the sample client's frame unpacking on ``packet`` (payload after the header, as it does)."""
-    unpack = getattr(client, "_NatNetClient__unpack_mocap_data")
+    unpack = client._NatNetClient__unpack_mocap_data
     payload = packet[4:]
     size = int.from_bytes(packet[2:4], "little")
     major, minor = version

@@ -24,8 +24,8 @@ import os
 import statistics
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
@@ -33,9 +33,9 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import numpy as np  # noqa: E402
 
 from rpf_fly.mission import load_mission  # noqa: E402
-from rpf_fly.planning import FixedGains, Planner, PlannerConfig, ObstacleSet, view_of_drone  # noqa: E402
-from rpf_fly.sim import SimParams, World, arena_a, circle_swap, rollout, scenario_from_mission  # noqa: E402
+from rpf_fly.planning import FixedGains, ObstacleSet, Planner, PlannerConfig, view_of_drone  # noqa: E402
 from rpf_fly.planning.factory import make_planner  # noqa: E402
+from rpf_fly.sim import SimParams, World, arena_a, circle_swap, rollout, scenario_from_mission  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -191,9 +191,10 @@ def bench_tick(n: int, repeats: int) -> dict[str, float]:
 def flight_tick(kind: str, drones: int = 10, batching: bool = True) -> Callable[[], None]:
     """The flight loop's planning tick (``SwarmPlanner``) for ``drones`` drones of the circle swap that
     tools/bench_flight.py flies, mid-flight, as a callable (fixed-gains APF: ``kind`` apf; RPF-1: rpf)."""
+    from bench_flight import mission_text as flight_bench_mission  # tools/ is on sys.path when run as a script
+
     from rpf_fly.flight.agent import DroneAgent
     from rpf_fly.flight.swarm_plan import Neighbourhood, SwarmPlanner
-    from bench_flight import mission_text as flight_bench_mission  # tools/ is on sys.path when run as a script
     from rpf_fly.mission import parse_mission
 
     mission = parse_mission(flight_bench_mission(drones, 100.0, kind))

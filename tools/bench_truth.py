@@ -28,10 +28,10 @@ import threading
 import time
 from pathlib import Path
 
-from rpf_fly.flight.truth import TruthFeed
-from rpf_fly.log.writer import FlightLog
 from rpf_fly.emulator.fake_world import FakeDroneConfig, FakeWorld
 from rpf_fly.emulator.world_process import WorldProcess
+from rpf_fly.flight.truth import TruthFeed
+from rpf_fly.log.writer import FlightLog
 
 BASE = 0xE7E7E7E700
 

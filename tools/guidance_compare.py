@@ -119,8 +119,8 @@ def main() -> None:
     ap.add_argument("--cell", type=float, default=0.05)
     ap.add_argument("--repeats", type=int, default=5)
     args = ap.parse_args()
-    print(f"| scene | nodes / cells | VG build [ms] | VG goal row [ms] | VG tick [us] | grid build [ms] | grid field per goal [ms] "
-          f"| grid tick [us] | VG path [m] | grid path [m] | grid shortcut [m] |")
+    print("| scene | nodes / cells | VG build [ms] | VG goal row [ms] | VG tick [us] | grid build [ms] | grid field per goal [ms] "
+          "| grid tick [us] | VG path [m] | grid path [m] | grid shortcut [m] |")
     print("|---|---|---|---|---|---|---|---|---|---|---|")
     for name in ("lab-3", "arena-a-6", "u-trap"):
         mission = load_mission(ROOT / "missions" / f"{name}.yaml")

@@ -34,7 +34,7 @@ import threading
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any, Optional
+from typing import Any
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -58,16 +58,16 @@ class Verdict:
     mission: str
     drones: int
     passed: bool = False
-    exit_code: Optional[int] = None
+    exit_code: int | None = None
     seconds: float = 0.0
     reached: int = 0
     failures: list[str] = field(default_factory=list)
-    min_separation_m: Optional[float] = None
+    min_separation_m: float | None = None
     radio_peak_per_s: dict[str, float] = field(default_factory=dict)
     radio_budget_per_s: dict[str, float] = field(default_factory=dict)
-    killed: Optional[str] = None
-    noticed_after_s: Optional[float] = None
-    notice: Optional[str] = None
+    killed: str | None = None
+    noticed_after_s: float | None = None
+    notice: str | None = None
     log: str = ""
 
 
@@ -89,7 +89,7 @@ def _worker_pid(flight_log: Path, dongle: int, timeout_s: float = 60.0) -> int:
     raise RuntimeError(f"no worker process for dongle {dongle} within {timeout_s:.0f} s")
 
 
-def fly(mission_path: Path, workdir: Path, kill_dongle: Optional[int] = None,
+def fly(mission_path: Path, workdir: Path, kill_dongle: int | None = None,
         kill_after_s: float = KILL_AFTER_PLANNING_S) -> Verdict:
     mission = load_mission(mission_path)
     names = [d.name for d in mission.drones]
@@ -114,7 +114,7 @@ def fly(mission_path: Path, workdir: Path, kill_dongle: Optional[int] = None,
 
     reader = threading.Thread(target=read, daemon=True)
     reader.start()
-    killed_ns: Optional[int] = None
+    killed_ns: int | None = None
     if kill_dongle is not None:
         pid = _worker_pid(log, kill_dongle)
         if flying.wait(limit):
@@ -194,7 +194,7 @@ def _judge_truth(verdict: Verdict, mission: Any, topics: dict, outcomes: dict[st
         fail(f"two drones {verdict.min_separation_m:.3f} m apart (< {CONTACT_M} m)")
 
 
-def _min_separation(truth: dict[str, list[tuple[int, dict]]], dead: set[str]) -> Optional[float]:
+def _min_separation(truth: dict[str, list[tuple[int, dict]]], dead: set[str]) -> float | None:
     """Smallest true distance between two drones at the same world step where at least one is airborne and one is
     a survivor (the dead worker's drones among themselves are not the others' business), vectorised over pairs."""
     import numpy as np
@@ -206,7 +206,7 @@ def _min_separation(truth: dict[str, list[tuple[int, dict]]], dead: set[str]) ->
     airborne = np.array([[m["motors"] or m["position"]["z"] > ON_FLOOR_M for _, m in truth[n][:length]]
                          for n in names])
     alive = np.array([n not in dead for n in names])
-    best: Optional[float] = None
+    best: float | None = None
     for i in range(len(names)):
         for j in range(i + 1, len(names)):
             if not (alive[i] or alive[j]):

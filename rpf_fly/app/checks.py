@@ -8,8 +8,9 @@ mission (``fly``, ``check``, ``worker``, ``lab``, ``scenario``) refuses it alike
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Callable, Optional
+from typing import TYPE_CHECKING, Any
 
 from rpf_fly.app.errors import UserError
 
@@ -23,7 +24,7 @@ PlannerFactory = Callable[[Any], Any]
 """A flight's planner factory: the drone (its mission entry) to its own planner instance."""
 
 
-def load_mission(mission_path: Path) -> "Mission":
+def load_mission(mission_path: Path) -> Mission:
     """The mission at ``mission_path``; an invalid one is one line ``FILE:LINE: FIELD: problem``."""
     from rpf_fly.mission import MissionError
     from rpf_fly.mission import load_mission as load
@@ -34,7 +35,7 @@ def load_mission(mission_path: Path) -> "Mission":
         raise UserError(str(err)) from None
 
 
-def load_faults(path: Path, mission: "Mission") -> list["Fault"]:
+def load_faults(path: Path, mission: Mission) -> list[Fault]:
     """The fault schedule at ``path`` for ``mission`` (docs/faults.md); an invalid one is one line."""
     from rpf_fly.flight.faults import load_faults as load
     from rpf_fly.mission import MissionError
@@ -53,14 +54,14 @@ def at(mission_path: Path, problem: str) -> str:
     return f"{mission_path}:{field_line(mission_path, problem.split(':', 1)[0])}: {problem}"
 
 
-def real_flight_problem(mission: "Mission") -> Optional[str]:
+def real_flight_problem(mission: Mission) -> str | None:
     """Why ``mission`` cannot fly real drones (``FIELD: problem``), or None (rpf_fly/flight/session.py)."""
     from rpf_fly.flight.session import real_flight_problem as problem
 
     return problem(mission)
 
 
-def resolve_server(mission: "Mission", mission_path: Path) -> None:
+def resolve_server(mission: Mission, mission_path: Path) -> None:
     """An unresolvable ``mocap.server`` is an invalid mission: one line, before anything connects."""
     from rpf_fly.flight.session import UnresolvableServer, resolve_mocap_server
 
@@ -70,7 +71,7 @@ def resolve_server(mission: "Mission", mission_path: Path) -> None:
         raise UserError(at(mission_path, f"{err.field}: {err}")) from None
 
 
-def require_library(mission: "Mission", dry_run: bool, mocap: Optional[str] = None) -> None:
+def require_library(mission: Mission, dry_run: bool, mocap: str | None = None) -> None:
     """A flight that needs the optional motioncapture package and lacks it: one line naming the extra, exit 1."""
     from rpf_fly.flight.session import motioncapture_missing
 
@@ -79,7 +80,7 @@ def require_library(mission: "Mission", dry_run: bool, mocap: Optional[str] = No
         raise UserError(f"mocap: {missing}", code=1)
 
 
-def check_radio_budget(mission: "Mission", mission_path: Path) -> list["DongleLoad"]:
+def check_radio_budget(mission: Mission, mission_path: Path) -> list[DongleLoad]:
     """Refuse a mission that asks a dongle for more than it carries (one line, before anything connects), unless it
     says ``radio.allow_over_budget: true``; the per-dongle loads otherwise (docs/radio.md)."""
     from rpf_fly.radio.budget import over_budget_message, radio_loads
@@ -91,7 +92,7 @@ def check_radio_budget(mission: "Mission", mission_path: Path) -> list["DongleLo
     return loads
 
 
-def check_radios(mission: "Mission", skip_dongles: tuple[int, ...] = (), only_dongle: Optional[int] = None) -> None:
+def check_radios(mission: Mission, skip_dongles: tuple[int, ...] = (), only_dongle: int | None = None) -> None:
     """Every ``radio://`` drone's Crazyradio on USB, before any link is tried: else one line. A distributed flight
     checks the dongles of this host only: not ``skip_dongles`` (remote workers'), or ``only_dongle`` (a worker's)."""
     from rpf_fly.radio.budget import dongle_of
@@ -104,7 +105,7 @@ def check_radios(mission: "Mission", skip_dongles: tuple[int, ...] = (), only_do
         raise UserError(problem)
 
 
-def planner_factory(mission: "Mission", mission_path: Path) -> PlannerFactory:
+def planner_factory(mission: Mission, mission_path: Path) -> PlannerFactory:
     """Each drone gets its own planner instance (its own ONNX session for learned planners); one is made now, so an
     unusable policy is refused before anything connects."""
     from rpf_fly.planning.factory import UnsupportedPlanner, mission_planner, obstacle_set
@@ -118,7 +119,7 @@ def planner_factory(mission: "Mission", mission_path: Path) -> PlannerFactory:
     return lambda drone: mission_planner(mission, obstacles=obstacles)
 
 
-def lab_info(mission: "Mission") -> "LabInfo":
+def lab_info(mission: Mission) -> LabInfo:
     """The running lab's info (rpf_fly/flight/lab.py), checked against ``mission``'s drones: one line when none runs
     or it has not every drone."""
     from rpf_fly.flight.dry_run import uri_address
@@ -151,7 +152,7 @@ def check_log_path(log_path: Path) -> None:
         raise UserError(f"--log {log_path}: cannot write it: {err.strerror or err}") from None
 
 
-def dongles(text: Optional[str]) -> tuple[int, ...]:
+def dongles(text: str | None) -> tuple[int, ...]:
     """``--remote-dongles K[,K...]``: the dongle numbers."""
     if not text:
         return ()

@@ -10,11 +10,12 @@ lines printed, the CLI passes in (:class:`StatusView`) and prints from what come
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from contextlib import nullcontext
 from dataclasses import dataclass
 from datetime import datetime
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Callable, Optional, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 from rpf_fly.app import checks
 from rpf_fly.app.checks import PlannerFactory
@@ -62,13 +63,13 @@ class FlightRequest:
 
     dry_run: bool = False
     lab: bool = False
-    log: Optional[Path] = None
-    mocap: Optional[str] = None
-    faults: Optional[Path] = None
+    log: Path | None = None
+    mocap: str | None = None
+    faults: Path | None = None
     radio_loss: bool = True
     live: bool = False
     distributed: bool = False
-    remote_dongles: Optional[str] = None
+    remote_dongles: str | None = None
     listen: tuple[str, ...] = ()
 
 
@@ -76,7 +77,7 @@ class FlightRequest:
 class FlightResult:
     """How a flight of one process ended: its report, and whether the status view showed the final table."""
 
-    report: "FlightReport"
+    report: FlightReport
     final_table: bool
 
 
@@ -92,7 +93,7 @@ class FlightApp:
     """A mission loaded from ``mission_path`` (or given as ``mission``: its problems still name the path), and what
     every command flying it checks and builds. Constructing it loads the mission (:class:`UserError` when invalid)."""
 
-    def __init__(self, mission_path: Path, mission: Optional["Mission"] = None) -> None:
+    def __init__(self, mission_path: Path, mission: Mission | None = None) -> None:
         self.path = mission_path
         self.mission = mission if mission is not None else checks.load_mission(mission_path)
 
@@ -100,31 +101,31 @@ class FlightApp:
         """``FILE:LINE: FIELD: problem`` for a problem of the mission's ``FIELD``."""
         return checks.at(self.path, problem)
 
-    def faults(self, path: Path) -> list["Fault"]:
+    def faults(self, path: Path) -> list[Fault]:
         return checks.load_faults(path, self.mission)
 
-    def real_flight_problem(self) -> Optional[str]:
+    def real_flight_problem(self) -> str | None:
         return checks.real_flight_problem(self.mission)
 
-    def check_radio_budget(self) -> list["DongleLoad"]:
+    def check_radio_budget(self) -> list[DongleLoad]:
         return checks.check_radio_budget(self.mission, self.path)
 
-    def check_radios(self, skip_dongles: tuple[int, ...] = (), only_dongle: Optional[int] = None) -> None:
+    def check_radios(self, skip_dongles: tuple[int, ...] = (), only_dongle: int | None = None) -> None:
         checks.check_radios(self.mission, skip_dongles, only_dongle)
 
     def resolve_server(self) -> None:
         checks.resolve_server(self.mission, self.path)
 
-    def require_library(self, dry_run: bool, mocap: Optional[str] = None) -> None:
+    def require_library(self, dry_run: bool, mocap: str | None = None) -> None:
         checks.require_library(self.mission, dry_run, mocap)
 
     def planner_factory(self) -> PlannerFactory:
         return checks.planner_factory(self.mission, self.path)
 
-    def lab_info(self) -> "LabInfo":
+    def lab_info(self) -> LabInfo:
         return checks.lab_info(self.mission)
 
-    def prepare_flight(self, request: FlightRequest) -> "Flight":
+    def prepare_flight(self, request: FlightRequest) -> Flight:
         """Every check of ``rpf-fly fly`` before anything connects, in the order the command has always made them
         (the first refusal is the one the user reads); the flight, ready to fly."""
         mission = self.mission
@@ -176,7 +177,7 @@ class FlightApp:
             listen = checks.endpoints(request.listen, "--listen")
         return Flight(self, request, factory, dry_run, mocap, log_path, schedule, lab, remote, listen)
 
-    def preflight(self, factory: PlannerFactory, dry_run: bool, lab: Optional["LabInfo"] = None) -> dict[str, str]:
+    def preflight(self, factory: PlannerFactory, dry_run: bool, lab: LabInfo | None = None) -> dict[str, str]:
         """Connect to the drones (simulated with ``dry_run``; a running lab's with ``lab``) and the mocap and run the
         preflight checks, nothing takes off: each drone's problem ('' when ready). No mocap: exit 1."""
         from rpf_fly.flight import dry_run as dry_runs
@@ -198,7 +199,7 @@ class FlightApp:
                 source.close()
         return problems
 
-    def prepare_check(self, dry_run: bool, lab: bool, preflight: bool) -> "Check":
+    def prepare_check(self, dry_run: bool, lab: bool, preflight: bool) -> Check:
         """``rpf-fly check``'s checks before its radio budget table: the planner, the running lab (``lab``), the
         mocap server of a real preflight, the motioncapture package; the check, ready to run."""
         factory = self.planner_factory()
@@ -215,13 +216,13 @@ class FlightApp:
             self.require_library(dry_run)
         return Check(self, factory, dry_run, lab_info)
 
-    def prepare_worker(self, request: "WorkerRequest") -> "Worker":
+    def prepare_worker(self, request: WorkerRequest) -> Worker:
         """``rpf-fly worker``: one dongle's drones of a distributed flight (rpf_fly/app/worker.py)."""
         from rpf_fly.app.worker import prepare_worker
 
         return prepare_worker(self, request)
 
-    def prepare_lab(self, faults: Optional[Path], log: Optional[Path]) -> "LabRun":
+    def prepare_lab(self, faults: Path | None, log: Path | None) -> LabRun:
         """``rpf-fly lab``: the mission's simulated drones and Motive emulator until stopped (rpf_fly/app/lab.py)."""
         from rpf_fly.app.lab import prepare_lab
 
@@ -235,9 +236,9 @@ class Check:
     app: FlightApp
     factory: PlannerFactory
     dry_run: bool
-    lab: Optional["LabInfo"]
+    lab: LabInfo | None
 
-    def log_records(self, verbose: bool) -> "LogRouting":
+    def log_records(self, verbose: bool) -> LogRouting:
         """The libraries' log records of the check: :data:`CHECK_LOG` (and stderr with ``verbose``)."""
         from rpf_fly.log.text_log import route_logging
 
@@ -258,27 +259,27 @@ class Flight:
     dry_run: bool
     mocap: str
     log_path: Path
-    schedule: Optional[list["Fault"]]
-    lab: Optional["LabInfo"]
+    schedule: list[Fault] | None
+    lab: LabInfo | None
     remote: tuple[int, ...] = ()
     listen: tuple[str, ...] = ()
 
     @property
-    def mission(self) -> "Mission":
+    def mission(self) -> Mission:
         return self.app.mission
 
     @property
     def distributed(self) -> bool:
         return self.request.distributed
 
-    def log_records(self, verbose: bool) -> "LogRouting":
+    def log_records(self, verbose: bool) -> LogRouting:
         """The libraries' log records of the flight: a text file beside its log (and stderr with ``verbose``)."""
         from rpf_fly.log.text_log import route_logging, text_log_path
 
         return route_logging(text_log_path(self.log_path), verbose)
 
-    def fly(self, view: Optional[StatusView], on_event: Callable[["FlightEvent"], None],
-            live: Optional["LiveView"] = None) -> FlightResult:
+    def fly(self, view: StatusView | None, on_event: Callable[[FlightEvent], None],
+            live: LiveView | None = None) -> FlightResult:
         """Fly in this process: the mission's drones, or a dry run's (its rig, faults injected) or the running lab's.
         ``view``: the status console (entered for the flight; its final table from the loop and the report),
         ``on_event``: every flight event, ``live``: the started live view. The first Ctrl-C (or SIGTERM) lands every
@@ -329,7 +330,7 @@ class Flight:
             signals.restore()
         return FlightResult(report, final_table=view is not None and "loop" in rig_holder)
 
-    def fly_distributed(self, view: Optional[StatusView], say: Callable[[str], None],
+    def fly_distributed(self, view: StatusView | None, say: Callable[[str], None],
                         verbose: bool) -> DistributedResult:
         """The coordinator of ``rpf-fly fly --distributed`` (docs/distributed.md): its workers, logger and relay,
         the swarm's phases; ``view``: the status console from the coordinator's snapshot, each drone with its worker;
@@ -365,7 +366,7 @@ class Flight:
         return DistributedResult(code, list(coordinator.summary()))
 
 
-def final_rows(loop: Any, report: "FlightReport") -> list[dict[str, Any]]:
+def final_rows(loop: Any, report: FlightReport) -> list[dict[str, Any]]:
     """The final table's rows: the loop's last snapshot, each drone with its outcome and why it ended so."""
     rows = loop.snapshot()
     for row in rows:

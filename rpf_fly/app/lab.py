@@ -7,10 +7,11 @@ until SIGINT or SIGTERM, for ``check|fly|scenario --lab`` and cflib programs to 
 from __future__ import annotations
 
 import signal
+from collections.abc import Callable
 from dataclasses import dataclass
 from datetime import datetime
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Callable, Optional
+from typing import TYPE_CHECKING, Any
 
 from rpf_fly.app.errors import UserError
 
@@ -26,18 +27,18 @@ class LabResult:
     world fall behind (None when it never started)."""
 
     stopped_by: str
-    lag: Optional["HostLag"]
+    lag: HostLag | None
 
 
 @dataclass(frozen=True)
 class LabRun:
     """A lab past its checks, ready to run (:meth:`run`)."""
 
-    app: "FlightApp"
+    app: FlightApp
     log_path: Path
     start_faults: Any = None
 
-    def run(self, on_started: Callable[["LabInfo", Path], None]) -> LabResult:
+    def run(self, on_started: Callable[[LabInfo, Path], None]) -> LabResult:
         """Start the lab (its drones on the floor at their mission starts), call ``on_started`` with its info and its
         lab file, and serve it until SIGINT or SIGTERM; the drones power off when it stops."""
         from rpf_fly.app.signals import on_signals, restore
@@ -67,7 +68,7 @@ class LabRun:
         return LabResult(stop["signal"], the_lab.host_lag() if the_lab.server is not None else None)
 
 
-def prepare_lab(app: "FlightApp", faults: Optional[Path], log: Optional[Path]) -> LabRun:
+def prepare_lab(app: FlightApp, faults: Path | None, log: Path | None) -> LabRun:
     """The lab's checks: its faults power-on ones only (timed faults are a flight's, ``fly --lab --faults``), its
     log's folder made (default ``flights/lab-<mission>-<time>.mcap``)."""
     from rpf_fly.flight.fault_injection import FaultInjection

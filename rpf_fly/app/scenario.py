@@ -6,10 +6,11 @@ docs/dynamics.md). The scenario file and the mission are checked here, the missi
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from datetime import datetime
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Callable, Optional
+from typing import TYPE_CHECKING, Any
 
 from rpf_fly.app import checks
 from rpf_fly.app.errors import UserError
@@ -27,20 +28,20 @@ class ScenarioRequest:
     file: Path
     dry_run: bool = False
     lab: bool = False
-    mission: Optional[Path] = None
-    drone: Optional[str] = None
-    log: Optional[Path] = None
+    mission: Path | None = None
+    drone: str | None = None
+    log: Path | None = None
 
 
 @dataclass(frozen=True)
 class ScenarioFlight:
     """A scenario past its checks: the scenario, the mission and drone that fly it, the lab, its log."""
 
-    scenario: "Scenario"
-    mission: "Mission"
+    scenario: Scenario
+    mission: Mission
     drone: str
     dry_run: bool
-    lab: Optional["LabInfo"]
+    lab: LabInfo | None
     log_path: Path
 
     def run(self, on_event: Callable[[str], None]) -> dict[str, Any]:

@@ -5,7 +5,8 @@ distributed flight) so both answer a signal alike; the handlers found are put ba
 from __future__ import annotations
 
 import signal
-from typing import Any, Callable, Optional
+from collections.abc import Callable
+from typing import Any
 
 Handler = Callable[[int, Any], None]
 
@@ -15,7 +16,7 @@ class LoopSignals:
     gave the loop is ignored), :meth:`restore` puts back the handlers that were there. ``drones``: who lands, as
     the stop notice says it (``all drones``; a worker's ``this worker's drones``)."""
 
-    def __init__(self, drones: Optional[str] = None) -> None:
+    def __init__(self, drones: str | None = None) -> None:
         self.drones = drones
         self.loop: Any = None
         self.presses = 0

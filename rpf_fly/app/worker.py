@@ -9,10 +9,10 @@ workers it starts (``RPF_FLY_SECRET``, ``RPF_FLY_WORKER_LOG``).
 from __future__ import annotations
 
 import os
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Callable, Optional
+from typing import TYPE_CHECKING
 
 from rpf_fly.app import checks
 from rpf_fly.app.errors import UserError
@@ -32,7 +32,7 @@ class WorkerRequest:
     """What ``rpf-fly worker`` is asked (its options); ``environ``: where the secret and the text log's name are."""
 
     dongle: int
-    flight: Optional[str] = None
+    flight: str | None = None
     dry_run: bool = False
     connect: tuple[str, ...] = ()
     environ: Mapping[str, str] = field(default_factory=lambda: os.environ)
@@ -42,9 +42,9 @@ class WorkerRequest:
 class Worker:
     """A worker past its checks, ready to join its flight (:meth:`run`)."""
 
-    app: "FlightApp"
+    app: FlightApp
     request: WorkerRequest
-    factory: "PlannerFactory"
+    factory: PlannerFactory
     secret: str
     connect: tuple[str, ...]
 
@@ -54,7 +54,7 @@ class Worker:
         default = f"rpf-fly-worker-{request.flight or 'flight'}-dongle-{request.dongle}.log"
         return Path(request.environ.get(WORKER_LOG_ENV, default))
 
-    def run(self, on_event: Callable[["FlightEvent"], None], verbose: bool) -> "FlightReport":
+    def run(self, on_event: Callable[[FlightEvent], None], verbose: bool) -> FlightReport:
         """Fly this dongle's drones until the coordinator ends the flight: ``on_event`` gets every flight event. The
         first Ctrl-C (or SIGTERM) lands this worker's drones, a second stops their motors."""
         from rpf_fly.app.signals import LoopSignals
@@ -78,7 +78,7 @@ class Worker:
             signals.restore()
 
 
-def prepare_worker(app: "FlightApp", request: WorkerRequest) -> Worker:
+def prepare_worker(app: FlightApp, request: WorkerRequest) -> Worker:
     """Every check of ``rpf-fly worker`` before anything connects, in the command's order: the radio budget, the
     planner, a real flight's mocap server (unless the relay brings the mocap) and this dongle's Crazyradio, the
     flight's secret, the flight id, the endpoints."""

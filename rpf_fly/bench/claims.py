@@ -17,8 +17,9 @@ policy is missing), with the numbers it was judged on. Rules (docs/bench.md):
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
-from typing import Any, Mapping, Optional
+from typing import Any
 
 from rpf_fly.bench.runner import FRESH_SCENE, PAPER_MISSIONS, PLANNER_LABELS
 
@@ -44,7 +45,7 @@ class Claim:
     note: str = ""
 
     @property
-    def held(self) -> Optional[bool]:
+    def held(self) -> bool | None:
         return None if self.status == NOT_EVALUATED else self.status == HELD
 
     def to_json_dict(self) -> dict[str, Any]:
@@ -125,7 +126,7 @@ def evaluate_claims(results: Mapping[str, Any], scenes: ClaimScenes = PAPER_CLAI
     return out
 
 
-def _per_scene(t: "_Rows", claim: str, wanted: tuple[str, ...], scenes: ClaimScenes, judge) -> Claim:  # type: ignore[no-untyped-def]
+def _per_scene(t: _Rows, claim: str, wanted: tuple[str, ...], scenes: ClaimScenes, judge) -> Claim:  # type: ignore[no-untyped-def]
     """A scene claim judged on every wanted scene: held when held on each that was evaluated."""
     parts = {scene: judge(t, scene) for scene in wanted}
     if scenes.only_run:
@@ -149,7 +150,7 @@ class _Rows:
         self.rows = {(r["planner"], r["scene"]): r for r in results.get("rows", [])}
         self.runs = list(results.get("runs", []))
 
-    def row(self, planner: str, scene: str) -> Optional[Mapping[str, Any]]:
+    def row(self, planner: str, scene: str) -> Mapping[str, Any] | None:
         """The row if it ran (status ok with at least one run), else None."""
         r = self.rows.get((planner, scene))
         return r if r is not None and r.get("status") == "ok" and r.get("runs", 0) > 0 else None
@@ -165,7 +166,7 @@ class _Rows:
         return [p for (p, s) in self.rows if s == scene and self.row(p, s) is not None]
 
 
-def _mean(row: Mapping[str, Any], metric: str) -> Optional[float]:
+def _mean(row: Mapping[str, Any], metric: str) -> float | None:
     s = row.get(metric, {}).get("successful")
     return None if s is None else float(s["mean"])
 

@@ -21,14 +21,26 @@ import dataclasses
 import time
 import types
 import typing
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, Callable, Mapping, Optional, Sequence
+from typing import Any
 
 from rpf_fly.bench.claims import FAMILY_CLAIMS, evaluate_claims
 from rpf_fly.bench.runner import (
-    PLANNER_LABELS, POLICY_ACTIONS, BenchError, PolicyInfo, RunRecord, _record, check_dynamics, closed_loop_json,
-    dynamics_line, load_policy_info, missing_row, stat, summarise_runs,
+    PLANNER_LABELS,
+    POLICY_ACTIONS,
+    BenchError,
+    PolicyInfo,
+    RunRecord,
+    _record,
+    check_dynamics,
+    closed_loop_json,
+    dynamics_line,
+    load_policy_info,
+    missing_row,
+    stat,
+    summarise_runs,
 )
 from rpf_fly.mission.model import PlannerSettings
 from rpf_fly.sim.closed_loop import FirmwareParams
@@ -80,7 +92,7 @@ BENCH_MARGIN = DEFAULT_MARGIN
 issue's bar), whatever margin the planner itself keeps (reported beside it)."""
 
 
-def planner_margin(settings: PlannerSettings) -> Optional[float]:
+def planner_margin(settings: PlannerSettings) -> float | None:
     """The margin the planner keeps by its own settings (``margin_m``, else ``margin``), None where it has none."""
     value = getattr(settings, "margin_m", None)
     if value is None:
@@ -108,7 +120,7 @@ class FamiliesConfig:
     planners: tuple[str, ...] = FAMILY_PLANNERS
     families: tuple[str, ...] = tuple(FAMILIES)
     seeds: int = 20
-    guidance: Optional[tuple[str, ...]] = None
+    guidance: tuple[str, ...] | None = None
     policies_dir: Path = Path("policies")
     policy_paths: Mapping[str, Path] = field(default_factory=dict)
     first_seed: int = 0
@@ -145,7 +157,7 @@ class FamiliesResult:
     rows: list[dict[str, Any]]
     policies: dict[str, PolicyInfo]
     wall_s: float
-    margins: dict[str, Optional[float]]
+    margins: dict[str, float | None]
     """Each planner's own margin (None: it has none)."""
 
 
@@ -185,7 +197,7 @@ def prepare_families(config: FamiliesConfig) -> FamiliesPlan:
 
 
 def run_families(
-    plan: FamiliesPlan, on_run: Optional[Callable[[RunRecord], None]] = None, jobs: int = 1
+    plan: FamiliesPlan, on_run: Callable[[RunRecord], None] | None = None, jobs: int = 1
 ) -> FamiliesResult:
     """Every (family, planner, guidance, seed); ``on_run`` after each run (progress). ``jobs > 1`` runs the
     (family, planner, guidance) groups in that many worker processes (spawned); the results are the same, in the
@@ -195,10 +207,10 @@ def run_families(
     seeds = config.seed_list()
     tasks: list[tuple[str, str, str]] = [(f, p, m) for f in config.families for p in config.planners
                                          for m in config.modes()]
-    done: dict[int, tuple[list[RunRecord], Optional[str]]] = {}
+    done: dict[int, tuple[list[RunRecord], str | None]] = {}
     todo = [(k, t) for k, t in enumerate(tasks) if t[1] not in plan.missing]
 
-    def finished(k: int, outcome: tuple[list[RunRecord], Optional[str]], report: bool) -> None:
+    def finished(k: int, outcome: tuple[list[RunRecord], str | None], report: bool) -> None:
         done[k] = outcome
         if report and on_run is not None:
             for record in outcome[0]:
@@ -209,7 +221,7 @@ def run_families(
         for k, (family, planner, mode) in todo:
             by_family.setdefault(family, []).append((k, (plan.settings[planner], planner, mode)))
 
-        def flown(family: str, outcomes: list[tuple[list[RunRecord], Optional[str]]]) -> None:
+        def flown(family: str, outcomes: list[tuple[list[RunRecord], str | None]]) -> None:
             for (k, _), outcome in zip(by_family[family], outcomes):
                 finished(k, outcome, True)
 
@@ -240,7 +252,7 @@ def run_families(
                 finished(futures[future], future.result(), True)
     runs: list[tuple[str, RunRecord]] = []
     rows: list[dict[str, Any]] = []
-    margins: dict[str, Optional[float]] = {}
+    margins: dict[str, float | None] = {}
     for k, (family, planner, mode) in enumerate(tasks):
         if planner in plan.missing:
             rows.append(_missing(planner, family, mode, plan.missing[planner]))
@@ -259,12 +271,12 @@ def run_families(
 
 def _run_group(
     family: str, seeds: Sequence[int], base: PlannerSettings, planner: str, mode: str,
-    on_run: Optional[Callable[[RunRecord], None]] = None,
-) -> tuple[list[RunRecord], Optional[str]]:
+    on_run: Callable[[RunRecord], None] | None = None,
+) -> tuple[list[RunRecord], str | None]:
     """The runs of one (family, planner, guidance) over the seeds, or the reason it cannot run."""
+    from rpf_fly.planning.factory import UnsupportedPlanner
     from rpf_fly.planning.onnx_policy import PolicyError
     from rpf_fly.sim.evaluate import run_scenario
-    from rpf_fly.planning.factory import UnsupportedPlanner
 
     settings = with_guidance(base, mode)
     records: list[RunRecord] = []
@@ -283,16 +295,16 @@ def _run_group(
 def _run_family_firmware(
     family: str, seeds: Sequence[int], groups: Sequence[tuple[PlannerSettings, str, str]],
     closed_loop: FirmwareParams = FirmwareParams(),
-) -> list[tuple[list[RunRecord], Optional[str]]]:
+) -> list[tuple[list[RunRecord], str | None]]:
     """Every (planner, guidance) group ``(settings, planner, mode)`` of one family over the seeds on the firmware
     model, all in one simulated swarm (a swarm's tick costs little more for all of them than for one group); per
     group its records, or the reason it cannot run (its planner could not be made: no run of it flies)."""
+    from rpf_fly.planning.factory import UnsupportedPlanner, make_planner
     from rpf_fly.planning.onnx_policy import PolicyError
     from rpf_fly.sim.closed_loop import run_firmware
-    from rpf_fly.planning.factory import UnsupportedPlanner, make_planner
 
     scenes = [generate(family, seed, split=SPLIT) for seed in seeds]
-    errors: list[Optional[str]] = []
+    errors: list[str | None] = []
     flown: list[tuple[int, PlannerSettings, object, int]] = []  # (group, settings, planner, seed index)
     for g, (base, _, mode) in enumerate(groups):
         settings = with_guidance(base, mode)
@@ -378,11 +390,11 @@ def claims_for(results: Mapping[str, Any], mode: str) -> list:
 
 # -- Markdown ----------------------------------------------------------------------------------------------------
 
-def _n(value: Optional[float], digits: int) -> str:
+def _n(value: float | None, digits: int) -> str:
     return "-" if value is None else f"{value:.{digits}f}"
 
 
-def _ms(s: Optional[Mapping[str, float]], digits: int) -> str:
+def _ms(s: Mapping[str, float] | None, digits: int) -> str:
     if not s:
         return "-"
     return f"{s['mean']:.{digits}f}" if s["n"] <= 1 else f"{s['mean']:.{digits}f}±{s['std']:.{digits}f}"

@@ -5,8 +5,9 @@ grid of small 1:1 panels. Drawing only (Agg backend); the numbers come from :mod
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 

@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any, Mapping, Optional, Sequence
+from typing import Any
 
 from rpf_fly.bench.claims import Claim, evaluate_claims
 from rpf_fly.bench.runner import PLANNER_LABELS, BenchResult, dynamics_line
@@ -40,7 +41,7 @@ def claims_of(results: Mapping[str, Any]) -> list[Claim]:
     return evaluate_claims(results)
 
 
-def fmt_stat(s: Optional[Mapping[str, float]], digits: int = 2, n: bool = False, sep: str = " ± ") -> str:
+def fmt_stat(s: Mapping[str, float] | None, digits: int = 2, n: bool = False, sep: str = " ± ") -> str:
     """``mean ± std`` (and the count with ``n``), ``-`` when undefined; the mean alone over one value (a standard
     deviation of one run is no spread)."""
     if s is None:
@@ -53,7 +54,7 @@ REPORT_WIDTH = 100
 """Columns the bench's table and claims are laid out for (a narrower console wraps them further)."""
 
 
-def _rate(value: Optional[float]) -> str:
+def _rate(value: float | None) -> str:
     return "-" if value is None else f"{value:.0%}"
 
 

@@ -19,9 +19,10 @@ Computation only: :mod:`rpf_fly.bench.report` prints and writes, :mod:`rpf_fly.b
 from __future__ import annotations
 
 import hashlib
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Iterator, Mapping, Optional, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -82,13 +83,13 @@ class RunRecord:
     success: bool
     collisions_drone_drone: int
     collisions_drone_obstacle: int
-    travel_distance_m: Optional[float]
-    smoothness: Optional[float]
-    makespan_s: Optional[float]
-    min_separation_m: Optional[float]
-    min_obstacle_clearance_m: Optional[float]
+    travel_distance_m: float | None
+    smoothness: float | None
+    makespan_s: float | None
+    min_separation_m: float | None
+    min_obstacle_clearance_m: float | None
     outcomes: dict[str, int]
-    failure: Optional[str]
+    failure: str | None
 
     @property
     def collisions(self) -> int:
@@ -136,8 +137,8 @@ class PolicyInfo:
 
     kind: str
     path: Path
-    sha256: Optional[str] = None
-    missing: Optional[str] = None
+    sha256: str | None = None
+    missing: str | None = None
 
     def to_json_dict(self) -> dict[str, Any]:
         out: dict[str, Any] = {"path": str(self.path)}
@@ -251,7 +252,7 @@ def load_policy_info(kind: str, path: Path) -> PolicyInfo:
     return PolicyInfo(kind, path.resolve(), sha256=hashlib.sha256(path.read_bytes()).hexdigest())
 
 
-def run_bench(plan: BenchPlan, on_run: Optional[Callable[[RunRecord], None]] = None) -> BenchResult:
+def run_bench(plan: BenchPlan, on_run: Callable[[RunRecord], None] | None = None) -> BenchResult:
     """Run every available (planner, scene, seed); ``on_run`` is called after each run (progress)."""
     config = plan.config
     runs: list[RunRecord] = []
@@ -279,7 +280,7 @@ def run_bench(plan: BenchPlan, on_run: Optional[Callable[[RunRecord], None]] = N
     return BenchResult(config, runs, rows, dict(plan.policies), trajectories)
 
 
-def _runs(plan: BenchPlan, kind: str, policy: Optional[Path], scene: str) -> Iterator[tuple[int, Run, Scenario]]:
+def _runs(plan: BenchPlan, kind: str, policy: Path | None, scene: str) -> Iterator[tuple[int, Run, Scenario]]:
     """The runs of one (planner, scene), seed by seed: one kinematic rollout at a time, or every seed flown
     together on the firmware model."""
     seeds = plan.config.seeds(scene)
@@ -297,7 +298,7 @@ def _runs(plan: BenchPlan, kind: str, policy: Optional[Path], scene: str) -> Ite
 
 
 def _setup(
-    plan: BenchPlan, kind: str, policy: Optional[Path], scene: str, seed: int
+    plan: BenchPlan, kind: str, policy: Path | None, scene: str, seed: int
 ) -> tuple[Scenario, PlannerSettings, SimParams, FirmwareParams]:
     """A run's scene, planner settings, kinematics and the closed loop's flight height (the mission's)."""
     from rpf_fly.mission import with_planner
@@ -394,7 +395,7 @@ METRICS = ("travel_distance_m", "smoothness", "makespan_s")
 """Path metrics summarised as mean +- std, over successful runs and over all runs where defined."""
 
 
-def stat(values: Sequence[Optional[float]]) -> Optional[dict[str, float]]:
+def stat(values: Sequence[float | None]) -> dict[str, float] | None:
     """``{"mean", "std", "n"}`` over the defined values (population std), None when there are none."""
     defined = [float(v) for v in values if v is not None]
     if not defined:
@@ -436,5 +437,5 @@ def missing_row(planner: str, scene: str, reason: str) -> dict[str, Any]:
     return {"planner": planner, "scene": scene, "status": "missing", "reason": reason, "runs": 0}
 
 
-def _round(value: Optional[float], digits: int = 4) -> Optional[float]:
+def _round(value: float | None, digits: int = 4) -> float | None:
     return None if value is None else round(float(value), digits)

@@ -37,8 +37,8 @@ radio's latency of the setpoints.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable, Optional
 
 import numpy as np
 
@@ -108,7 +108,7 @@ class FitResult:
     """Why the fit may not describe the drone: the record's own warnings, a residual the model does not explain."""
 
 
-def _best_delay(track: Track, t: np.ndarray, measured: np.ndarray, axes: list[int], fixed: Optional[float]
+def _best_delay(track: Track, t: np.ndarray, measured: np.ndarray, axes: list[int], fixed: float | None
                 ) -> tuple[float, np.ndarray]:
     """The delay (from `MIN_DELAY_S` to `MAX_DELAY_S` by 5 ms, then by 1 ms about the best; or ``fixed``) that best
     lays the replay on ``measured`` along ``axes``, and the model's positions with it."""
@@ -125,7 +125,7 @@ def _best_delay(track: Track, t: np.ndarray, measured: np.ndarray, axes: list[in
     return best[1], track.at(t - best[1])
 
 
-def mocap_against_truth(record: FlightRecord) -> Optional[tuple[float, float]]:
+def mocap_against_truth(record: FlightRecord) -> tuple[float, float] | None:
     """(latency, noise) of the logged poses against the dry run's truth over the window: the shift (0 to
     `MAX_TRUTH_LAG_S`, by 0.5 ms) that minimises their distance, and their per-axis scatter about the truth so
     shifted where the drone is nearly still (`STILL_M_S`); None without truth."""
@@ -161,7 +161,7 @@ def noise_from_frames(frames: np.ndarray) -> float:
     return 1.4826 * mad / math.sqrt(6.0)
 
 
-def fit(record: FlightRecord, *, start: Optional[dict[str, float]] = None,
+def fit(record: FlightRecord, *, start: dict[str, float] | None = None,
         progress: Callable[[str], None] = lambda message: None) -> FitResult:
     """Fit ``record`` (module doc). ``start``: firmware parameters to start from (an earlier profile's; default
     the firmware's): the fitted gains start at theirs, and the others are replayed as they say and kept."""
@@ -199,7 +199,7 @@ def fit(record: FlightRecord, *, start: Optional[dict[str, float]] = None,
     against_truth = mocap_against_truth(record) if record.kind == "log" else None
     late = 0.0 if against_truth is None else against_truth[0]
 
-    def run(th: Optional[np.ndarray]) -> Track:
+    def run(th: np.ndarray | None) -> Track:
         nonlocal replays
         replays += 1
         return replay(record, {} if th is None else {**base, **params_of(th)}, late)

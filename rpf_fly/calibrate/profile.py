@@ -21,9 +21,10 @@ not have, a value that is not a finite number >= 0, or an unknown key is refused
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Mapping, Optional
+from typing import Any
 
 FORMAT = 1
 TOP_KEYS = ("format", "drone", "source", "params", "mocap", "fit")
@@ -47,12 +48,12 @@ class ProfileError(ValueError):
 class VehicleProfile:
     """What a dry run takes from a profile (module doc)."""
 
-    path: Optional[Path]
+    path: Path | None
     drone: str
     params: tuple[tuple[str, float], ...]
     """Firmware parameters by name, in the file's order."""
-    mocap_latency_s: Optional[float] = None
-    mocap_noise_m: Optional[float] = None
+    mocap_latency_s: float | None = None
+    mocap_noise_m: float | None = None
 
     def mocap_delay_s(self, rate_hz: float) -> float:
         """The delay to give the simulated mocap (`SimulatedBodies.mocap_delay`) for this profile's latency: the
@@ -75,7 +76,7 @@ def _number(value: Any, where: str, lo: float = 0.0, hi: float = math.inf) -> fl
     return float(value)
 
 
-def parse_profile(doc: Any, path: Optional[Path] = None) -> VehicleProfile:
+def parse_profile(doc: Any, path: Path | None = None) -> VehicleProfile:
     """A profile from its parsed YAML ``doc`` (module doc); `ProfileError` names the field at fault."""
     from rpf_fly.emulator.cf_controller import PARAM_NAMES
 

@@ -22,7 +22,7 @@ import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Optional
+from typing import Any
 
 import numpy as np
 
@@ -62,9 +62,9 @@ class FlightRecord:
     """(n, 5): t, x, y, z (m), yaw (deg), as sent."""
     positions: np.ndarray
     """(m, 4): t, x, y, z: the mocap's poses (a log) or the trace's ``pos`` (a trace), within the window."""
-    truth: Optional[np.ndarray]
+    truth: np.ndarray | None
     """(k, 4): t, x, y, z of the simulated world's truth (a dry run's log), or None."""
-    mocap_frames: Optional[np.ndarray]
+    mocap_frames: np.ndarray | None
     """(j, 4): every logged mocap pose of the drone (t, x, y, z), the window's and the others (for the noise)."""
     end_s: float
     """The window's end: the last setpoint's time plus one stream period."""
@@ -82,7 +82,7 @@ class FlightRecord:
         return float(row[1]), float(row[2]), float(row[3])
 
 
-def read_records(path: Path, drone: Optional[str] = None) -> list[FlightRecord]:
+def read_records(path: Path, drone: str | None = None) -> list[FlightRecord]:
     """Every drone's record in ``path`` (an MCAP log or a trace JSON), or drone ``drone``'s; `RecordError` (one line)
     when the file cannot be read or holds no setpoint stream to fit."""
     try:
@@ -124,7 +124,7 @@ def _longest_stream(times: np.ndarray) -> tuple[int, int]:
     return int(a), int(b)
 
 
-def _log_records(path: Path, drone: Optional[str]) -> list[FlightRecord]:
+def _log_records(path: Path, drone: str | None) -> list[FlightRecord]:
     from rpf_fly.log.reader import LogError, read_log
 
     try:
@@ -199,7 +199,7 @@ def _log_record(path: Path, data: Any, name: str, origin: str, warnings: tuple[s
 # ----------------------------------------------------------------------------------------------- traces
 
 
-def _trace_record(path: Path, drone: Optional[str]) -> FlightRecord:
+def _trace_record(path: Path, drone: str | None) -> FlightRecord:
     expected = "a trace JSON with t, sp and pos (tests/data/crazyflie_dynamics/README.md)"
     try:
         doc = json.loads(Path(path).read_text(encoding="utf-8"))
@@ -229,7 +229,7 @@ def _trace_record(path: Path, drone: Optional[str]) -> FlightRecord:
                         end_s=end_s, on_floor=on_floor, epoch_ns=0)
 
 
-def _stream_rate(t: np.ndarray, sp: np.ndarray, on_floor: bool) -> Optional[float]:
+def _stream_rate(t: np.ndarray, sp: np.ndarray, on_floor: bool) -> float | None:
     """A trace's stream rate where it does not say: None for a high-level plan (a trace that starts on the floor:
     the reference's command scenarios take off with the high-level commander, its setpoint scenarios start from a
     hover); else from where ``sp`` changes, 100 Hz (the position loop's rate) where it changes at every sample."""
@@ -242,7 +242,7 @@ def _stream_rate(t: np.ndarray, sp: np.ndarray, on_floor: bool) -> Optional[floa
     return PLAN_RATE_HZ if gap < 1.5 * float(np.median(np.diff(t))) else 1.0 / gap
 
 
-def _trace_stream(t: np.ndarray, sp: np.ndarray, stream_hz: Optional[float]) -> np.ndarray:
+def _trace_stream(t: np.ndarray, sp: np.ndarray, stream_hz: float | None) -> np.ndarray:
     """The setpoints as sent: at each stream tick the ``sp`` of the samples it was in effect for (interpolated
     between samples where the stream is faster than them, or for a plan)."""
     sample_hz = 1.0 / float(np.median(np.diff(t)))

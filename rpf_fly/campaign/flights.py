@@ -17,7 +17,7 @@ import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Optional
+from typing import Any
 
 from mcap.reader import make_reader
 
@@ -45,15 +45,15 @@ class FlightRecord:
 
     mission: Mission
     faults: list[dict[str, Any]]
-    exit_code: Optional[int] = None
+    exit_code: int | None = None
     limit_s: float = 0.0
     seconds: float = 0.0
     stdout: str = ""
     stderr: str = ""
     topics: Topics = field(default_factory=dict)
-    log_error: Optional[str] = None
+    log_error: str | None = None
     """The flight's log could not be read (then ``topics`` is empty)."""
-    review_error: Optional[str] = None
+    review_error: str | None = None
     """``rpf-fly review LOG --json`` failed on the flight's log: the end of its stderr."""
 
 
@@ -67,11 +67,11 @@ class LabRecord(FlightRecord):
     lab_started: bool = True
     """False: the lab never wrote its lab file, so nothing flew."""
     lab_topics: Topics = field(default_factory=dict)
-    lab_log_error: Optional[str] = None
+    lab_log_error: str | None = None
     """The lab's log could not be read (then ``lab_topics`` is empty)."""
     lab_problems: list[str] = field(default_factory=list)
-    struck_ns: Optional[int] = None
-    exited_ns: Optional[int] = None
+    struck_ns: int | None = None
+    exited_ns: int | None = None
 
 
 def read_log(path: Path) -> Topics:
@@ -87,7 +87,7 @@ def _rpf_fly(*args: str) -> list[str]:
     return [sys.executable, "-m", "rpf_fly", *args]
 
 
-def _review(log: Path, workdir: Path) -> Optional[str]:
+def _review(log: Path, workdir: Path) -> str | None:
     """None when ``rpf-fly review LOG --json`` reads the log, else the end of its stderr."""
     done = subprocess.run(_rpf_fly("review", str(log), "--json"), capture_output=True, text=True, timeout=120,
                           cwd=workdir)
@@ -180,7 +180,7 @@ def fly_against_lab(mission_path: Path, fault: dict[str, Any], workdir: Path, ta
 
 
 def _fly(mission_path: Path, schedule_file: Path, log: Path, env: dict[str, str], workdir: Path, limit: float,
-         kind: str) -> Optional[tuple[int, str, str, Optional[int], int]]:
+         kind: str) -> tuple[int, str, str, int | None, int] | None:
     """``rpf-fly fly --lab --faults`` in a process of its own: (exit code, stdout, stderr, when the fault's line came
     on stderr, when the process ended), or None when it outlived ``limit``. A kill's moment is the stderr line the
     injection writes just before it; an unplug's flight lives on and returns when it ends. Returns `LAB_AFTER_S`

@@ -16,7 +16,7 @@ import math
 import signal
 from dataclasses import dataclass, field
 from types import SimpleNamespace
-from typing import Any, Optional
+from typing import Any
 
 from rpf_fly.campaign.flights import EXIT_EXTRA_S, FlightRecord, LabRecord
 from rpf_fly.campaign.owed import EVENT_WINDOW_S, owed_warnings, unsafe_to_fly
@@ -44,14 +44,14 @@ class Verdict:
 
     kind: str
     mission: str
-    drone: Optional[str]
+    drone: str | None
     passed: bool = False
-    exit_code: Optional[int] = None
+    exit_code: int | None = None
     seconds: float = 0.0
     outcomes: dict[str, str] = field(default_factory=dict)
     failures: list[str] = field(default_factory=list)
     events: list[str] = field(default_factory=list)
-    min_separation_m: Optional[float] = None
+    min_separation_m: float | None = None
     params: dict[str, Any] = field(default_factory=dict)
     """A random draw (planner, world seed, the faults' parameters) or a lab fault's fields; empty: the defaults."""
 
@@ -73,7 +73,7 @@ def _judge_process(record: FlightRecord, verdict: Verdict) -> None:
 
 
 def _truth_of(topics: dict[str, list[tuple[int, dict]]], names: list[str], verdict: Verdict,
-              source: str) -> Optional[Truth]:
+              source: str) -> Truth | None:
     """Every drone's ``/truth`` samples from ``topics``; None (and a failure) when a drone has none."""
     truth = {n: topics.get(f"/truth/{n}", []) for n in names}
     missing = [n for n, s in truth.items() if not s]
@@ -153,7 +153,7 @@ def judge_flight(record: FlightRecord) -> Verdict:
     return _finish(verdict)
 
 
-def phase_at_kill(stderr: str) -> Optional[str]:
+def phase_at_kill(stderr: str) -> str | None:
     """The swarm's phase (its last ``[phase] swarm: X`` line) before the kill's line on the flight's stderr."""
     phase = None
     for line in stderr.splitlines():

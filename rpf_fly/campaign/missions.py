@@ -8,8 +8,9 @@ policy and vehicle profile paths are made absolute, so it still finds them from 
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import yaml
 

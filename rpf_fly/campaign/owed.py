@@ -11,7 +11,7 @@ is narrow enough that a fault the stack should have said still fails.
 from __future__ import annotations
 
 import math
-from typing import Any, Optional
+from typing import Any
 
 from rpf_fly.campaign.schedules import POWER_ON, SWARM_KINDS
 from rpf_fly.campaign.truth import ON_FLOOR_M, Truth
@@ -50,7 +50,7 @@ def target(fault: dict[str, Any]) -> str:
     return fault.get("drone") or ("loop" if fault["kind"] == "loop_stall" else "mocap")
 
 
-def injected_at(fault: dict[str, Any], events: Events) -> Optional[int]:
+def injected_at(fault: dict[str, Any], events: Events) -> int | None:
     """When the fault's own injection event came (naming its drone, unless a swarm fault); None: never injected."""
     drone = fault.get("drone")
     return next((t for t, m in events if m.get("file") == "fault"
@@ -58,7 +58,7 @@ def injected_at(fault: dict[str, Any], events: Events) -> Optional[int]:
                  and (fault["kind"] in SWARM_KINDS or m.get("name") == drone)), None)
 
 
-def warnings_for(fault: dict[str, Any], events: Events, flying_at: Optional[int]) -> Optional[list[dict]]:
+def warnings_for(fault: dict[str, Any], events: Events, flying_at: int | None) -> list[dict] | None:
     """The warnings (level >= warning) naming the fault's target: before the planning phase for a power-on fault,
     else within `EVENT_WINDOW_S` of the fault's effect (its own injection event; for an estimator divergence, the
     moment it has carried the drone `TRACKING_NOISE_M` off); None when it was never injected."""
@@ -84,7 +84,7 @@ def warnings_for(fault: dict[str, Any], events: Events, flying_at: Optional[int]
     return [m for m in window if m.get("level", 0) >= 3 and names_target(m)]
 
 
-def uninjectable(fault: dict[str, Any], flying_at: Optional[int], all_kept_down: bool) -> bool:
+def uninjectable(fault: dict[str, Any], flying_at: int | None, all_kept_down: bool) -> bool:
     """A flight-time fault (its ``at_s`` counts from the planning phase) in a flight with no planning phase because
     other faults rightly kept every drone on the floor: it could not be injected, and nothing is owed for it.
     Without such a reason a missing injection stays a failure."""
@@ -140,7 +140,7 @@ def inside_loop_stall(fault: dict[str, Any], events: Events) -> bool:
 
 
 def stall_within_jitter(fault: dict[str, Any], events: Events, ticks: dict[str, list[int]],
-                        period_s: float) -> Optional[float]:
+                        period_s: float) -> float | None:
     """For a loop stall: the longest gap between two planning ticks of any drone around it (from a period before its
     injection to a period after its end), when that is at most the period plus `LATE_TICK_S`, else None. A stall
     that began while the loop waited for its next frame delays that tick by less than its length; no stack can tell
@@ -170,7 +170,7 @@ def corrected_by_extpose(fault: dict[str, Any], mission: Any, reached: dict[str,
             and reached.get(fault.get("drone") or "", False))
 
 
-def gust_push_bound(fault: dict[str, Any], events: Events, truth: Truth) -> Optional[float]:
+def gust_push_bound(fault: dict[str, Any], events: Events, truth: Truth) -> float | None:
     """The most a gust could have moved its drone: 0.5 |a| t^2 over the time its truth was airborne within the gust
     (no controller fighting it, so an upper bound; on the floor a gust moves nothing). None for other kinds."""
     if fault["kind"] != "gust" or fault.get("drone") is None:
@@ -213,7 +213,7 @@ def owed_warnings(faults: list[dict[str, Any]], events: Events, truth: Truth, mi
 
 
 def _owes_nothing(fault: dict[str, Any], events: Events, truth: Truth, mission: Mission, reached: dict[str, bool],
-                  ticks: dict[str, list[int]]) -> Optional[str]:
+                  ticks: dict[str, list[int]]) -> str | None:
     """Why a fault that left no warning owed none (the note the report shows), or None: it owed one."""
     if grounded_at_injection(fault, events, truth):
         return f"{fault['drone']} on the floor, motors off, at its {fault['kind']}: nothing for it to act on"

@@ -13,17 +13,36 @@ import random
 import shlex
 import tempfile
 import time
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Iterator, Optional
+from typing import Any
 
 from rpf_fly.campaign.flights import FlightRecord, LabRecord, fly_against_lab, fly_dry_run
 from rpf_fly.campaign.judge import Verdict, judge_flight, judge_lab
-from rpf_fly.campaign.missions import (DYNAMICS, FIXED_MISSIONS, RANDOM_MISSIONS, ROOT, mission_path, with_dynamics,
-                                       with_extpose, with_planner_kind, with_world_seed)
+from rpf_fly.campaign.missions import (
+    DYNAMICS,
+    FIXED_MISSIONS,
+    RANDOM_MISSIONS,
+    ROOT,
+    mission_path,
+    with_dynamics,
+    with_extpose,
+    with_planner_kind,
+    with_world_seed,
+)
 from rpf_fly.campaign.report import as_json, markdown, source_revision
-from rpf_fly.campaign.schedules import (ALL_KINDS, DEFAULTS, LAB_KINDS, LAB_RUNS, ScheduleError, check_kinds,
-                                        draw_faults, lab_faults, middle_drone_fault)
+from rpf_fly.campaign.schedules import (
+    ALL_KINDS,
+    DEFAULTS,
+    LAB_KINDS,
+    LAB_RUNS,
+    ScheduleError,
+    check_kinds,
+    draw_faults,
+    lab_faults,
+    middle_drone_fault,
+)
 from rpf_fly.mission import MissionError, load_mission
 
 OnVerdict = Callable[[Verdict], None]
@@ -70,7 +89,7 @@ def _ignore(_: Verdict) -> None:
 
 
 @contextlib.contextmanager
-def _workdir(keep: Optional[Path]) -> Iterator[Path]:
+def _workdir(keep: Path | None) -> Iterator[Path]:
     """``keep`` (made, and left with every run's mission copy, schedule and logs), or a folder removed after."""
     if keep is not None:
         keep.mkdir(parents=True, exist_ok=True)
@@ -132,9 +151,9 @@ def fixed_runs(mission_file: Path, kinds: list[str], workdir: Path, on_verdict: 
 
 
 def random_campaign(runs: int, seed: int, missions: list[str], planners: list[str], workdir: Path,
-                    kinds: Optional[list[str]] = None, extpose: bool = False, faults_per_run: int = 1,
-                    vary_world: bool = False, only: Optional[set[int]] = None,
-                    on_verdict: OnVerdict = _ignore, dynamics: Optional[str] = None) -> list[Verdict]:
+                    kinds: list[str] | None = None, extpose: bool = False, faults_per_run: int = 1,
+                    vary_world: bool = False, only: set[int] | None = None,
+                    on_verdict: OnVerdict = _ignore, dynamics: str | None = None) -> list[Verdict]:
     """``runs`` flights, each a mission and planner (``mission``: its own) drawn from ``seed`` and ``faults_per_run``
     faults of different kinds (of ``kinds``, default every dry-run kind), each with its drone, time and parameters
     drawn (`rpf_fly.campaign.schedules.draw_faults`). ``vary_world``: run k of seed S flies the simulated world of
@@ -167,8 +186,8 @@ def random_campaign(runs: int, seed: int, missions: list[str], planners: list[st
     return verdicts
 
 
-def lab_runs(kinds: list[str], missions: Optional[list[str]], planner: Optional[str], extpose: bool,
-             workdir: Path, dynamics: Optional[str] = None) -> list[tuple[str, Path, dict[str, Any]]]:
+def lab_runs(kinds: list[str], missions: list[str] | None, planner: str | None, extpose: bool,
+             workdir: Path, dynamics: str | None = None) -> list[tuple[str, Path, dict[str, Any]]]:
     """The lab kinds' runs among ``kinds`` (kind, mission file, fault): `LAB_RUNS` without ``missions``, else each
     lab kind on each of those missions (`rpf_fly.campaign.schedules.lab_faults`); the lab's drones fly
     ``dynamics`` when given."""
@@ -190,7 +209,7 @@ def lab_runs(kinds: list[str], missions: Optional[list[str]], planner: Optional[
     return runs
 
 
-def _kinds(kinds: Optional[list[str]], random_runs: int) -> Optional[list[str]]:
+def _kinds(kinds: list[str] | None, random_runs: int) -> list[str] | None:
     """``kinds`` checked; a random campaign draws no lab kind (they fly against a lab, one fault a run)."""
     if kinds is None:
         return None
@@ -211,7 +230,7 @@ def _check_numbers(random_runs: int, faults_per_run: int) -> None:
         raise CampaignError(f"--faults-per-run: expected 1 to {len(DEFAULTS)} faults a run, got {faults_per_run}")
 
 
-def _check_dynamics(dynamics: Optional[str], missions: list[Path]) -> None:
+def _check_dynamics(dynamics: str | None, missions: list[Path]) -> None:
     """``--dynamics``: a model the simulated drone has, and one each mission can fly (a vehicle profile,
     ``dry_run.vehicle``, sets the firmware model's gains)."""
     if dynamics is None:
@@ -229,14 +248,14 @@ def _check_dynamics(dynamics: Optional[str], missions: list[Path]) -> None:
                                     "which sets the firmware model's gains: it flies firmware only")
 
 
-def _check_out(out: Optional[Path]) -> None:
+def _check_out(out: Path | None) -> None:
     if out is not None and not out.parent.is_dir():
         raise CampaignError(f"--out: {out}: its folder {out.parent} does not exist")
 
 
-def mission_campaign(mission_file: Path, kinds: Optional[list[str]] = None, random_runs: int = 0, seed: int = 0,
-                     faults_per_run: int = 2, out: Optional[Path] = None, keep: Optional[Path] = None,
-                     on_verdict: OnVerdict = _ignore, dynamics: Optional[str] = None) -> CampaignResult:
+def mission_campaign(mission_file: Path, kinds: list[str] | None = None, random_runs: int = 0, seed: int = 0,
+                     faults_per_run: int = 2, out: Path | None = None, keep: Path | None = None,
+                     on_verdict: OnVerdict = _ignore, dynamics: str | None = None) -> CampaignResult:
     """A lab's campaign on its own mission before a first flight. Without ``random_runs``: each kind of ``kinds``
     (default every kind) on its own dry run, its default fault on the middle drone, the lab kinds against a lab of
     their own (the kill in each phase, the unplug of the highest dongle). With ``random_runs``: that many dry runs,
@@ -278,8 +297,8 @@ def mission_campaign(mission_file: Path, kinds: Optional[list[str]] = None, rand
     return result
 
 
-def default_report(planner: Optional[str], random_runs: int, seed: int, faults_per_run: int, extpose: bool,
-                   dynamics: Optional[str] = None) -> Path:
+def default_report(planner: str | None, random_runs: int, seed: int, faults_per_run: int, extpose: bool,
+                   dynamics: str | None = None) -> Path:
     """Where the maintainers' campaign writes its report: docs/fault-campaign/<name>.md, the name saying what flew
     (fixed, the planner's kind, random or compound with the seed; -extpose; -firmware on the firmware model)."""
     variant = ("-extpose" if extpose else "") + ("-firmware" if dynamics == "firmware" else "")
@@ -290,11 +309,11 @@ def default_report(planner: Optional[str], random_runs: int, seed: int, faults_p
     return ROOT / "docs" / "fault-campaign" / f"{name}.md"
 
 
-def maintainers_campaign(missions: Optional[list[str]] = None, kinds: Optional[list[str]] = None,
-                         planner: Optional[str] = None, random_runs: int = 0, seed: int = 0,
-                         planners: Optional[list[str]] = None, faults_per_run: int = 1, vary_world: bool = False,
-                         extpose: bool = False, only: Optional[set[int]] = None, keep: Optional[Path] = None,
-                         on_verdict: OnVerdict = _ignore, dynamics: Optional[str] = None) -> CampaignResult:
+def maintainers_campaign(missions: list[str] | None = None, kinds: list[str] | None = None,
+                         planner: str | None = None, random_runs: int = 0, seed: int = 0,
+                         planners: list[str] | None = None, faults_per_run: int = 1, vary_world: bool = False,
+                         extpose: bool = False, only: set[int] | None = None, keep: Path | None = None,
+                         on_verdict: OnVerdict = _ignore, dynamics: str | None = None) -> CampaignResult:
     """The maintainers' campaign over shipped missions (tools/fault_campaign.py; its options, the same names).
     Fixed: each kind on each of ``missions`` (default lab-3, circle-8-r3), ``planner`` instead of each mission's
     own; the lab kinds on `LAB_RUNS` (on ``missions`` when given). Random: `random_campaign` over ``missions``

@@ -11,7 +11,7 @@ import difflib
 import json
 import math
 import random
-from typing import Any, Optional
+from typing import Any
 
 from rpf_fly.flight.faults import GROUND_STATION_PHASES
 from rpf_fly.mission.model import Mission
@@ -83,7 +83,7 @@ def check_kinds(kinds: list[str], allowed: tuple[str, ...] = ALL_KINDS, option: 
     return kinds
 
 
-def fault_fields(kind: str, drone: Optional[str], params: Optional[dict[str, Any]] = None,
+def fault_fields(kind: str, drone: str | None, params: dict[str, Any] | None = None,
                  at_s: float = AT_S) -> dict[str, Any]:
     """One fault's schedule entry: the kind's `DEFAULTS` unless ``params`` are given (a random draw's)."""
     return {"kind": kind, **({} if kind in SWARM_KINDS else {"drone": drone}),
@@ -95,7 +95,7 @@ def schedule_of(faults: list[dict[str, Any]]) -> str:
     return "faults:\n" + "".join(f"  - {json.dumps(f)}\n" for f in faults)
 
 
-def schedule(kind: str, drone: Optional[str], params: Optional[dict[str, Any]] = None, at_s: float = AT_S) -> str:
+def schedule(kind: str, drone: str | None, params: dict[str, Any] | None = None, at_s: float = AT_S) -> str:
     """The one-fault schedule's text."""
     return schedule_of([fault_fields(kind, drone, params, at_s)])
 
@@ -157,7 +157,7 @@ def random_fault(rng: random.Random, kind: str, start_tolerance_m: float) -> dic
     return draws[kind]()
 
 
-def draw_faults(rng: random.Random, mission: Mission, kinds: Optional[list[str]],
+def draw_faults(rng: random.Random, mission: Mission, kinds: list[str] | None,
                 faults_per_run: int) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
     """One random run's faults: ``faults_per_run`` of different kinds (of ``kinds``, default every dry-run kind),
     each with its drone, time (0.5-6 s into the planning phase) and parameters drawn from ``rng``; and the draws as

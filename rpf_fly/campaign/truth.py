@@ -8,7 +8,7 @@ fails here.
 from __future__ import annotations
 
 import math
-from typing import Any, Optional
+from typing import Any
 
 Truth = dict[str, list[tuple[int, dict]]]
 """Drone name -> its ``/truth`` samples [(log time ns, message)], one a world step."""
@@ -39,10 +39,10 @@ def outside_arena(truth: Truth, arena: Any, r: float) -> list[str]:
     return outside
 
 
-def min_separation(truth: Truth) -> Optional[float]:
+def min_separation(truth: Truth) -> float | None:
     """Smallest true distance between two airborne drones at the same sample index (samples are per world step);
     None when no two drones were airborne together."""
-    best: Optional[float] = None
+    best: float | None = None
     length = min(len(s) for s in truth.values())
     for k in range(length):
         airborne = []
@@ -64,7 +64,7 @@ def at_goal(samples: list[tuple[int, dict]], goal: tuple[float, float]) -> bool:
     return math.dist((p["x"], p["y"]), goal) < GOAL_M
 
 
-def truth_failures(truth: Truth, arena: Any, r: float) -> tuple[list[str], Optional[float]]:
+def truth_failures(truth: Truth, arena: Any, r: float) -> tuple[list[str], float | None]:
     """Every run's truth checks: no crash, no true position outside the arena by more than ``r``, no two airborne
     drones closer than `CONTACT_M`, every drone's motors off and on the floor at the end. The failures, and the
     smallest separation (for the report)."""

@@ -67,11 +67,21 @@ def _flags_show_no_type() -> None:
 
 def get_app() -> typer.Typer:
     """The app with every command module imported (idempotent)."""
-    from rpf_fly.cli import (bench_cmd, fly_cmd, lab_cmd, mocap_cmd, replay_cmd, review_cmd,  # noqa: F401
-                             scenario_cmd, sim_cmd, train_cmd, worker_cmd)
-    from rpf_fly.cli import campaign_cmd  # noqa: F401
-    from rpf_fly.cli import radio_cmd  # noqa: F401
-    from rpf_fly.cli import calibrate_cmd  # noqa: F401
+    from rpf_fly.cli import (  # noqa: F401
+        bench_cmd,
+        calibrate_cmd,  # noqa: F401
+        campaign_cmd,  # noqa: F401
+        fly_cmd,
+        lab_cmd,
+        mocap_cmd,
+        radio_cmd,  # noqa: F401
+        replay_cmd,
+        review_cmd,
+        scenario_cmd,
+        sim_cmd,
+        train_cmd,
+        worker_cmd,
+    )
 
     _flags_show_no_type()
     return app

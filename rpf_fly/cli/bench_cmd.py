@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Optional
 
 import typer
 
@@ -21,7 +20,7 @@ def bench(
         "paper", "--suite", help="paper: the paper missions and arena-a-fresh; families: the generated scene families."
     ),
     episodes: int = typer.Option(20, "--episodes", help="Seeds per scene (start jitter 0..N-1; fresh arena-A seeds 1000000..)."),
-    seeds: Optional[int] = typer.Option(
+    seeds: int | None = typer.Option(
         None, "--seeds", help="Seeds per scene or family (overrides --episodes; families: bench-stream seeds 0..N-1)."
     ),
     dynamics: str = typer.Option(
@@ -31,13 +30,13 @@ def bench(
     first_seed: int = typer.Option(
         0, "--first-seed", help="families suite: the first bench-stream seed (seeds FIRST..FIRST+N-1; default 0)."
     ),
-    planners: Optional[str] = typer.Option(
+    planners: str | None = typer.Option(
         None, "--planners", help=f"Comma-separated planner kinds (paper: {_PLANNERS}; families: also default)."
     ),
     scenes: str = typer.Option(_SCENES, "--scenes", help="Comma-separated scenes: paper missions and arena-a-fresh."),
-    families: Optional[str] = typer.Option(None, "--families", help="families suite: comma-separated families (all)."),
+    families: str | None = typer.Option(None, "--families", help="families suite: comma-separated families (all)."),
     jobs: int = typer.Option(1, "--jobs", help="families suite: worker processes (same results; default 1)."),
-    guidance: Optional[str] = typer.Option(
+    guidance: str | None = typer.Option(
         None, "--guidance", help="families suite: comma-separated guidance modes (every mode the planner offers)."
     ),
     policies: Path = typer.Option(Path("policies"), "--policies", help="Folder of <kind>.onnx policies."),
@@ -48,10 +47,10 @@ def bench(
     json_output: bool = typer.Option(
         False, "--json", help="Print the results JSON to stdout instead of the table (progress goes to stderr)."
     ),
-    json_file: Optional[Path] = typer.Option(None, "--json-file", help="Also write the results JSON to this file."),
-    markdown: Optional[Path] = typer.Option(None, "--markdown", help="Write the results as Markdown."),
-    figure: Optional[Path] = typer.Option(None, "--figure", help="Write the comparison figure (PNG)."),
-    out: Optional[Path] = typer.Option(
+    json_file: Path | None = typer.Option(None, "--json-file", help="Also write the results JSON to this file."),
+    markdown: Path | None = typer.Option(None, "--markdown", help="Write the results as Markdown."),
+    figure: Path | None = typer.Option(None, "--figure", help="Write the comparison figure (PNG)."),
+    out: Path | None = typer.Option(
         None, "--out", help="Write results.json, results.md and comparison.png into this folder (families suite: "
         "families.json and families.md)."
     ),
@@ -100,9 +99,8 @@ def bench(
         plan = prepare(config)
     except BenchError as err:
         raise fail(f"rpf-fly bench: {err}")
-    from rpf_fly.cli.output import console as make_console
-
     from rpf_fly.bench.report import REPORT_WIDTH
+    from rpf_fly.cli.output import console as make_console
 
     console = make_console(pipe_width=REPORT_WIDTH)  # piped: the report as laid out, 100 columns
     errors = make_console(stderr=True)
@@ -138,8 +136,14 @@ def bench(
 def _families(episodes, planners, families, guidance, policies, paths, json_output, json_file, markdown, figure,  # type: ignore[no-untyped-def]
               out, jobs, first_seed=0, dynamics="kinematic") -> None:
     """``--suite families``: run, print the Markdown report (at most 110 columns), write what was asked for."""
-    from rpf_fly.bench.families import FAMILY_PLANNERS, FamiliesConfig, prepare_families, results_json, run_families
-    from rpf_fly.bench.families import to_markdown
+    from rpf_fly.bench.families import (
+        FAMILY_PLANNERS,
+        FamiliesConfig,
+        prepare_families,
+        results_json,
+        run_families,
+        to_markdown,
+    )
     from rpf_fly.bench.report import dumps, write_json
     from rpf_fly.bench.runner import BenchError
     from rpf_fly.cli.output import console as make_console
@@ -218,7 +222,14 @@ def _figure(results, result, path: Path) -> Path:  # type: ignore[no-untyped-def
 
 
 def _run_with_progress(plan, run_bench, console):  # type: ignore[no-untyped-def]
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
 
     from rpf_fly.cli.output import ProgressLines
 

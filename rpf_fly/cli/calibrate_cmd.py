@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Any, Optional
+from typing import Any
 
 import typer
 
@@ -50,11 +50,11 @@ def _profile(record: Any, result: Any) -> str:
 @app.command()
 def calibrate(
     log: Path = typer.Argument(..., help="Flight log (MCAP of rpf-fly fly or scenario) or a trace JSON."),
-    out: Optional[Path] = typer.Option(None, "--out", help="Write the vehicle profile here ({drone} in the path: "
+    out: Path | None = typer.Option(None, "--out", help="Write the vehicle profile here ({drone} in the path: "
                                        "one per drone)."),
-    drone: Optional[str] = typer.Option(None, "--drone", help="Only this drone of the log (default: every drone "
+    drone: str | None = typer.Option(None, "--drone", help="Only this drone of the log (default: every drone "
                                         "with setpoints)."),
-    start: Optional[Path] = typer.Option(None, "--start", help="Start the fit from this profile's gains (default: "
+    start: Path | None = typer.Option(None, "--start", help="Start the fit from this profile's gains (default: "
                                          "the firmware's); its other parameters are kept."),
     json_out: bool = typer.Option(False, "--json", help="Print the fits as one JSON document."),
     verbose: bool = typer.Option(False, "--verbose", help="Print each iteration on stderr."),

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Optional
 
 import typer
 
@@ -16,7 +15,7 @@ from rpf_fly.cli.errors import fail
 @app.command()
 def campaign(
     mission: Path = typer.Argument(..., help="Mission YAML file to fly the faults on (dry runs: nothing real flies)."),
-    kinds: Optional[str] = typer.Option(None, "--kinds", help="Comma-separated fault kinds (docs/faults.md; "
+    kinds: str | None = typer.Option(None, "--kinds", help="Comma-separated fault kinds (docs/faults.md; "
                                         "default: every kind)."),
     random_runs: int = typer.Option(0, "--random", metavar="N", help="N runs of random compound faults (drones, "
                                     "times, parameters and the simulated world drawn from --seed) instead of each "
@@ -24,11 +23,11 @@ def campaign(
     seed: int = typer.Option(0, "--seed", help="The random runs' seed (the same seed flies the same draws)."),
     faults_per_run: int = typer.Option(2, "--faults-per-run", metavar="K", help="Faults of different kinds in each "
                                        "random run."),
-    out: Optional[Path] = typer.Option(None, "--out", help="Write the report (markdown table) to this file."),
-    keep: Optional[Path] = typer.Option(None, "--keep", help="Fly in this folder and keep each run's schedule, "
+    out: Path | None = typer.Option(None, "--out", help="Write the report (markdown table) to this file."),
+    keep: Path | None = typer.Option(None, "--keep", help="Fly in this folder and keep each run's schedule, "
                                         "mission copy and logs (to review a failed run)."),
     json_out: bool = typer.Option(False, "--json", help="Print the verdicts as one JSON document."),
-    dynamics: Optional[str] = typer.Option(None, "--dynamics", metavar="first-order|firmware", help="How the "
+    dynamics: str | None = typer.Option(None, "--dynamics", metavar="first-order|firmware", help="How the "
                                            "simulated drones fly in every run: first-order (the emulator's lag) or "
                                            "firmware (the firmware's PID cascade; docs/dynamics.md). Default: the "
                                            "mission's dry_run.dynamics."),

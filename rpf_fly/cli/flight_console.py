@@ -11,7 +11,7 @@ column; the final rows add ``outcome`` and ``reason``.
 from __future__ import annotations
 
 import time
-from typing import Any, Optional
+from typing import Any
 
 import typer
 
@@ -54,7 +54,7 @@ class FlightConsole:
             else None
         self._last = 0.0
 
-    def __enter__(self) -> "FlightConsole":
+    def __enter__(self) -> FlightConsole:
         if self.live is not None:
             self.live.__enter__()
         return self
@@ -122,7 +122,7 @@ def table(title: str, rows: list[dict[str, Any]], final: bool = False):  # type:
         left = column in ("drone", "worker", "state", "outcome", "why")
         made.add_column(escape(column), justify="left" if left else "right")
     for row in rows:
-        pos: Optional[Any] = row["position"]
+        pos: Any | None = row["position"]
         cells = [escape(str(row["name"]))] + ([escape(worker_cell(row))] if workers else [])
         cells += [escape(str(row["phase"]))] + ([escape(str(row["outcome"]))] if final else [])
         cells += [*(f"{v:.2f}" for v in pos)] if pos else ["-", "-", "-"]

@@ -13,7 +13,7 @@ and what is printed.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING, Optional
+from typing import TYPE_CHECKING
 
 import typer
 
@@ -34,30 +34,30 @@ def fly(
     dry_run: bool = typer.Option(False, "--dry-run", help="Simulated drones through the same stack (fake radio)."),
     lab: bool = typer.Option(False, "--lab", help="Fly the simulated drones of the running `rpf-fly lab` (they keep "
                              "their firmware state between commands) instead of private ones."),
-    log: Optional[Path] = typer.Option(None, "--log", help="MCAP flight log (default flights/<mission>-<time>.mcap)."),
-    mocap: Optional[str] = typer.Option(
+    log: Path | None = typer.Option(None, "--log", help="MCAP flight log (default flights/<mission>-<time>.mcap)."),
+    mocap: str | None = typer.Option(
         None, "--mocap", help="Dry run only: natnet (emulator over UDP), motioncapture (the emulator read by the "
         "motioncapture package in a child process) or sim. Default: motioncapture for mocap.kind motioncapture, "
         "else natnet."),
     console: bool = typer.Option(True, "--console/--no-console", help="Live status table while flying."),
-    faults: Optional[Path] = typer.Option(None, "--faults", help="Dry run only: a fault schedule (docs/faults.md)."),
+    faults: Path | None = typer.Option(None, "--faults", help="Dry run only: a fault schedule (docs/faults.md)."),
     radio_loss: bool = typer.Option(True, "--radio-loss/--no-radio-loss",
                                     help="Dry run only: bursty radio loss on every link (docs/radio.md)."),
     foxglove: bool = typer.Option(False, "--foxglove", help="Serve the flight live to Foxglove over WebSocket "
                                   "(ws://localhost:8765; the live extra; docs/foxglove.md)."),
-    foxglove_port: Optional[int] = typer.Option(None, "--foxglove-port", help="Port of the live view (default 8765; "
+    foxglove_port: int | None = typer.Option(None, "--foxglove-port", help="Port of the live view (default 8765; "
                                                 "0: any free port). Implies --foxglove."),
-    foxglove_host: Optional[str] = typer.Option(None, "--foxglove-host", help="Address the live view listens on "
+    foxglove_host: str | None = typer.Option(None, "--foxglove-host", help="Address the live view listens on "
                                                 "(default 127.0.0.1; 0.0.0.0: every network). Implies --foxglove."),
     verbose: bool = typer.Option(False, "--verbose", help="Also print the libraries' log records (cflib, foxglove-sdk) "
                                                           "on stderr; they always go to LOG.log beside the flight "
                                                           "log."),
     distributed: bool = typer.Option(False, "--distributed", help="One worker process per radio dongle, a "
                                      "coordinator and a logger, on Zenoh (docs/distributed.md)."),
-    remote_dongles: Optional[str] = typer.Option(None, "--remote-dongles", help="With --distributed: dongles "
+    remote_dongles: str | None = typer.Option(None, "--remote-dongles", help="With --distributed: dongles "
                                                  "(K[,K...]) whose workers run on other hosts (`rpf-fly worker`); "
                                                  "waits for them before any drone arms."),
-    listen: Optional[list[str]] = typer.Option(None, "--listen", help="With --distributed: the Zenoh endpoint the "
+    listen: list[str] | None = typer.Option(None, "--listen", help="With --distributed: the Zenoh endpoint the "
                                                "coordinator listens on (default 127.0.0.1 only, e.g. "
                                                "tcp/0.0.0.0:7447 for remote workers)."),
 ) -> None:
@@ -87,7 +87,7 @@ def fly(
     raise typer.Exit(code)
 
 
-def _fly_here(flight: "Flight", console: bool, live: Optional["LiveView"]) -> int:
+def _fly_here(flight: Flight, console: bool, live: LiveView | None) -> int:
     """The flight in this process, with its status console; what it prints last; its exit code."""
     view = _status_console(flight.mission) if console else None
     with refused():
@@ -101,7 +101,7 @@ def _fly_here(flight: "Flight", console: bool, live: Optional["LiveView"]) -> in
     return 0 if report.success else 1
 
 
-def _fly_distributed(flight: "Flight", console: bool, verbose: bool) -> None:
+def _fly_distributed(flight: Flight, console: bool, verbose: bool) -> None:
     """The coordinator of ``rpf-fly fly --distributed`` (raises typer.Exit with the flight's code). ``console``: the
     status table of ``rpf-fly fly`` (cli/flight_console.py) from the coordinator's snapshot, with each drone's worker:
     live on a terminal, the final table at the end."""
@@ -113,7 +113,7 @@ def _fly_distributed(flight: "Flight", console: bool, verbose: bool) -> None:
     raise typer.Exit(result.code)
 
 
-def _status_console(mission: "Mission") -> "FlightConsole":
+def _status_console(mission: Mission) -> FlightConsole:
     from rpf_fly.cli.flight_console import FlightConsole
 
     return FlightConsole(mission.name)
@@ -123,7 +123,7 @@ def _say(line: str) -> None:
     typer.echo(line, err=True)
 
 
-def _print_event(event: "FlightEvent") -> None:
+def _print_event(event: FlightEvent) -> None:
     if event.level >= 2 and event.kind != "phase" or event.drone is None:
         who = f"{event.drone}: " if event.drone else ""
         typer.echo(f"[{event.kind}] {who}{event.message}", err=True)

@@ -6,7 +6,7 @@ their ground station (rpf_fly/flight/lab.py, docs/flight.md "Lab"); the lab is r
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING, Optional
+from typing import TYPE_CHECKING
 
 import typer
 
@@ -20,9 +20,9 @@ if TYPE_CHECKING:
 @app.command()
 def lab(
     mission: Path = typer.Argument(..., help="Mission YAML file: its drones, starts, obstacles and mocap."),
-    faults: Optional[Path] = typer.Option(None, "--faults", help="Power-on faults of the drones (yaw_offset, "
+    faults: Path | None = typer.Option(None, "--faults", help="Power-on faults of the drones (yaw_offset, "
                                           "start_offset, upside_down, motor_fault; docs/faults.md)."),
-    log: Optional[Path] = typer.Option(None, "--log", help="The lab's MCAP log (default "
+    log: Path | None = typer.Option(None, "--log", help="The lab's MCAP log (default "
                                        "flights/lab-<mission>-<time>.mcap)."),
 ) -> None:
     """Run MISSION's simulated drones and mocap until stopped; `check --lab` and `fly --lab` fly them."""
@@ -35,7 +35,7 @@ def lab(
     loaded = flight_app.mission
     log_path = prepared.log_path
 
-    def started(info: "LabInfo", lab_file: Path) -> None:
+    def started(info: LabInfo, lab_file: Path) -> None:
         typer.echo(f"lab: {len(info.addresses)} simulated Crazyflies of '{loaded.name}' on the floor at their "
                    f"mission starts, Motive emulated on 127.0.0.1:{info.natnet_command_port}")
         typer.echo(f"  fly them:   rpf-fly check {mission} --lab   then   rpf-fly fly {mission} --lab")

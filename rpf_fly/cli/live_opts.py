@@ -15,7 +15,7 @@ and ``--foxglove PORT`` where the word after it is a port number (digits) that i
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING, Optional
+from typing import TYPE_CHECKING
 
 import typer
 
@@ -48,7 +48,7 @@ def foxglove_port_argv(args: list[str]) -> list[str]:
     return out
 
 
-def start_live(enabled: bool, port: Optional[int], host: Optional[str]) -> Optional["LiveView"]:
+def start_live(enabled: bool, port: int | None, host: str | None) -> LiveView | None:
     """The started live view when asked for (``--foxglove``, or a port or host given), else None. Missing
     foxglove-sdk, a taken port or a bad address: one line on stderr, exit 2, before anything connects."""
     if not (enabled or port is not None or host is not None):

@@ -17,7 +17,6 @@ import math
 import time
 from enum import Enum
 from pathlib import Path
-from typing import Optional
 
 import typer
 
@@ -101,7 +100,7 @@ def watch(
         "0.0.0.0", "--local-ip", help="Local interface facing Motive (choose it on hosts with several network cards)."
     ),
     command_port: int = typer.Option(1510, "--command-port", help="Server command port."),
-    data_port: Optional[int] = typer.Option(
+    data_port: int | None = typer.Option(
         None, "--data-port", help="Multicast data port (default: as announced by the server, normally 1511)."
     ),
     up_axis: UpAxis = typer.Option(UpAxis.z, "--up-axis", help="Up axis Motive streams; output is always Z-up."),
@@ -115,7 +114,7 @@ def watch(
     system: str = typer.Option(
         "natnet", "--system", help="natnet (our NatNet client, the default for OptiTrack) or a type of the "
         "motioncapture package: optitrack, vicon, qualisys, vrpn, mock, ... (docs/mocap.md)."),
-    host: Optional[str] = typer.Option(
+    host: str | None = typer.Option(
         None, "--host", help="The system's host (--system natnet: the same as --natnet)."),
     option: list[str] = typer.Option(
         [], "--option", help="KEY=VALUE: an option of the motioncapture type (repeat for several), e.g. "
@@ -273,7 +272,7 @@ def emulate(
     radius: float = typer.Option(1.0, "--radius", min=0.1, help="Radius of the innermost circle, metres."),
     speed: float = typer.Option(0.5, "--speed", min=0.0, help="Speed along the circles, m/s."),
     duration: float = typer.Option(0.0, "--duration", min=0.0, help="Stop after this many seconds (0: Ctrl-C)."),
-    replay: Optional[Path] = typer.Option(
+    replay: Path | None = typer.Option(
         None, "--replay", help="Serve a flight log's /mocap poses at their logged times instead of circles "
                                "(--bodies, --rate, --radius and --speed do not apply)."),
     replay_speed: float = typer.Option(1.0, "--replay-speed", min=0.01, help="With --replay: playback speed "
@@ -281,8 +280,8 @@ def emulate(
 ) -> None:
     """Run a NatNet server emulator streaming bodies on circles (or a flight log's mocap with --replay), so `mocap
     watch` and any NatNet client can be tried without Motive."""
-    from rpf_fly.mocap.natnet_protocol import SUPPORTED_VERSIONS, parse_version
     from rpf_fly.emulator.natnet_server import NatNetServer
+    from rpf_fly.mocap.natnet_protocol import SUPPORTED_VERSIONS, parse_version
 
     try:
         parsed = parse_version(version)

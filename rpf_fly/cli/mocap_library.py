@@ -10,7 +10,6 @@ line and prints its frames with the same line and JSON formats. ``--local-ip`` s
 from __future__ import annotations
 
 import time
-from typing import Optional
 
 import typer
 
@@ -38,7 +37,7 @@ def _options(system: str, pairs: list[str], local_ip: str, command_port: int) ->
 
 def watch_library(
     system: str,
-    host: Optional[str],
+    host: str | None,
     pairs: list[str],
     *,
     local_ip: str,

@@ -11,7 +11,8 @@ from __future__ import annotations
 
 import sys
 import time
-from typing import Any, Callable, Optional
+from collections.abc import Callable
+from typing import Any
 
 PIPE_WIDTH = 240
 """Columns of a console that is not a terminal: wide enough that no table of the commands is cut."""
@@ -43,7 +44,7 @@ class ProgressLines:
         self.period_s = period_s
         self.clock = clock
         self.started = clock()
-        self._last: Optional[float] = None
+        self._last: float | None = None
         self._done = False
         self.lines = 0
 

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import json
 from enum import Enum
-from typing import Optional
 
 import typer
 
@@ -26,14 +25,14 @@ class DongleType(str, Enum):
 
 @radio_app.command()
 def probe(
-    dongle: Optional[int] = typer.Option(None, "--dongle", help="The dongle number (the URI's first number; a dry "
+    dongle: int | None = typer.Option(None, "--dongle", help="The dongle number (the URI's first number; a dry "
                                          "run's emulated dongle: default 0)."),
-    drones: Optional[str] = typer.Option(None, "--drones", help="Powered-on drones on that dongle, radio:// URIs "
+    drones: str | None = typer.Option(None, "--drones", help="Powered-on drones on that dongle, radio:// URIs "
                                          "separated by commas (only link packets are sent: nothing flies)."),
     dry_run: bool = typer.Option(False, "--dry-run", help="Probe an emulated dongle carrying simulated drones."),
-    links: Optional[int] = typer.Option(None, "--links", help="Links in the second run (a dry run: simulated "
+    links: int | None = typer.Option(None, "--links", help="Links in the second run (a dry run: simulated "
                                         "drones, default 4; real: the first N of --drones)."),
-    radio: Optional[DongleType] = typer.Option(None, "--radio", help="A dry run's dongle type (default "
+    radio: DongleType | None = typer.Option(None, "--radio", help="A dry run's dongle type (default "
                                                "crazyradio_pa); real: the type to report (default: from its "
                                                "firmware version)."),
     seconds: float = typer.Option(2.0, "--seconds", help="How long each run measures."),

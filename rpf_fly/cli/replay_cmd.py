@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Optional
 
 import typer
 
@@ -21,14 +20,14 @@ from rpf_fly.mission.model import PLANNER_KINDS
 @app.command()
 def replay(
     log: Path = typer.Argument(..., help="Flight log (.mcap) written by `rpf-fly fly [--dry-run] --log`."),
-    planner: Optional[str] = typer.Option(None, "--planner", help=f"Replay with this planner kind: "
+    planner: str | None = typer.Option(None, "--planner", help=f"Replay with this planner kind: "
                                           f"{', '.join(PLANNER_KINDS)} (default: the one flown, from the log's "
                                           f"mission)."),
-    policy: Optional[Path] = typer.Option(None, "--policy", help="ONNX policy for a learned planner (default: the "
+    policy: Path | None = typer.Option(None, "--policy", help="ONNX policy for a learned planner (default: the "
                                                                  "mission's, checked against the flown SHA-256)."),
     json_output: bool = typer.Option(False, "--json", help="Print the replay JSON (docs/replay.md) only."),
-    plot: Optional[Path] = typer.Option(None, "--plot", help="Write logged vs replayed headings per drone to a PNG."),
-    tolerance: Optional[float] = typer.Option(
+    plot: Path | None = typer.Option(None, "--plot", help="Write logged vs replayed headings per drone to a PNG."),
+    tolerance: float | None = typer.Option(
         None, "--tolerance", min=0.0, help="Direction difference (unit-vector distance) above which a tick diverges "
                                            "(default 1e-6; 1e-5 for ONNX policies, their parity tolerance)."),
 ) -> None:
@@ -67,7 +66,7 @@ def replay(
     _print(result, log, plot)
 
 
-def _print(result, log: Path, plot: Optional[Path]) -> None:  # type: ignore[no-untyped-def]
+def _print(result, log: Path, plot: Path | None) -> None:  # type: ignore[no-untyped-def]
     from rich.markup import escape
     from rich.table import Table
 

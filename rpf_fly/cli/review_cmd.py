@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Optional
 
 import typer
 
@@ -17,16 +16,17 @@ def review(
     log: Path = typer.Argument(..., help="Flight log (.mcap) written by `rpf-fly fly --log` or `rpf-fly sim --log`."),
     json_output: bool = typer.Option(False, "--json", help="Print the review as JSON: the metrics JSON "
                                                            "(docs/metrics.md) and everything the summary says."),
-    plot: Optional[Path] = typer.Option(None, "--plot", help="Write the review figure (tracks, altitude, tracking, "
+    plot: Path | None = typer.Option(None, "--plot", help="Write the review figure (tracks, altitude, tracking, "
                                                              "separation, battery, events) to a PNG."),
-    csv_dir: Optional[Path] = typer.Option(None, "--csv", help="Write one CSV per topic into this directory."),
-    salvage_to: Optional[Path] = typer.Option(
+    csv_dir: Path | None = typer.Option(None, "--csv", help="Write one CSV per topic into this directory."),
+    salvage_to: Path | None = typer.Option(
         None, "--salvage", help="Also write a finished copy of the log here: every complete chunk of a log cut short "
                                 "by a kill, with the summary and footer indexed readers need."),
 ) -> None:
     """Review a flight log: message rates and gaps per topic, events, the mission's metrics; plots and CSV."""
     from rpf_fly.log.reader import LogError, salvage
-    from rpf_fly.log.review import export_csv, review as compute_review
+    from rpf_fly.log.review import export_csv
+    from rpf_fly.log.review import review as compute_review
 
     data = read_log_or_fail(log)
     if salvage_to is not None:
@@ -105,7 +105,7 @@ def _print_tracking_expected(console, result) -> None:  # type: ignore[no-untype
                                    "waits for its drone)") + "[/yellow]")
 
 
-def _print_summary(result, plot: Optional[Path], csv_dir: Optional[Path]) -> None:  # type: ignore[no-untyped-def]
+def _print_summary(result, plot: Path | None, csv_dir: Path | None) -> None:  # type: ignore[no-untyped-def]
     from rich.markup import escape
     from rich.table import Table
 

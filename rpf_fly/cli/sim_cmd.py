@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Optional
 
 import typer
 
@@ -16,31 +15,31 @@ from rpf_fly.mission.model import PLANNER_KINDS, POLICY_KINDS
 @app.command()
 def sim(
     mission: Path = typer.Argument(..., help="Mission YAML file."),
-    planner: Optional[str] = typer.Option(
+    planner: str | None = typer.Option(
         None, "--planner", help=f"Override the mission's planner: {', '.join(PLANNER_KINDS)}."
     ),
-    policy: Optional[Path] = typer.Option(None, "--policy", help=f"ONNX policy for {', '.join(POLICY_KINDS)}."),
+    policy: Path | None = typer.Option(None, "--policy", help=f"ONNX policy for {', '.join(POLICY_KINDS)}."),
     no_wall_following: bool = typer.Option(
         False, "--no-wall-following", help="Vanilla APF direction: no wall-following, no soft rule."
     ),
-    guidance: Optional[str] = typer.Option(
+    guidance: str | None = typer.Option(
         None, "--guidance", help="Override planner.guidance: none, or path (global guidance around the obstacles)."
     ),
-    margin: Optional[float] = typer.Option(None, "--margin", help="Override planner.margin (m)."),
+    margin: float | None = typer.Option(None, "--margin", help="Override planner.margin (m)."),
     seed: int = typer.Option(0, "--seed", help="Seed of the mission's start jitter (sim section)."),
     json_output: bool = typer.Option(False, "--json", help="Print the metrics JSON (docs/metrics.md) only."),
-    plot: Optional[Path] = typer.Option(None, "--plot", help="Write the XY tracks to a PNG: a colour per drone, the "
+    plot: Path | None = typer.Option(None, "--plot", help="Write the XY tracks to a PNG: a colour per drone, the "
                                                              "planner mode as the line style."),
-    log: Optional[Path] = typer.Option(None, "--log", help="Write the run as an MCAP flight log (rpf-fly review)."),
+    log: Path | None = typer.Option(None, "--log", help="Write the run as an MCAP flight log (rpf-fly review)."),
 ) -> None:
     """Simulate MISSION with its planner (no radio, no mocap) and report success, collisions and path quality.
 
     Exit 0 when at least one drone reached its goal, 1 when none did (the table or JSON still printed), 2 for an
     invalid mission or option."""
     from rpf_fly.mission import MissionError, load_mission, with_planner
-    from rpf_fly.sim import SimParams, compute_metrics, rollout, scenario_from_mission
-    from rpf_fly.planning.onnx_policy import PolicyError
     from rpf_fly.planning.factory import UnsupportedPlanner, make_planner
+    from rpf_fly.planning.onnx_policy import PolicyError
+    from rpf_fly.sim import SimParams, compute_metrics, rollout, scenario_from_mission
 
     try:
         loaded = load_mission(mission)
@@ -92,7 +91,7 @@ def sim(
         raise typer.Exit(1)  # no drone reached: not a run to build on (docs: README, *Commands*)
 
 
-def _print_table(metrics, result, plot: Optional[Path], guidance: str = "none") -> None:  # type: ignore[no-untyped-def]
+def _print_table(metrics, result, plot: Path | None, guidance: str = "none") -> None:  # type: ignore[no-untyped-def]
     from rich.markup import escape
     from rich.table import Table
 

@@ -6,7 +6,6 @@ import shlex
 import sys
 import time
 from pathlib import Path
-from typing import Optional
 
 import typer
 
@@ -45,7 +44,7 @@ def train(
                                 "threads on two busy cores spin against each other)."),
     resume: bool = typer.Option(False, "--resume", help="Continue from the run folder's checkpoint."),
     eval_seeds: int = typer.Option(20, "--eval-seeds", help="Seeds per scene in the model card's evaluation (0: none)."),
-    obstacle_radius: Optional[float] = typer.Option(
+    obstacle_radius: float | None = typer.Option(
         None, "--obstacle-radius", help="Arena A obstacle radius (default 0.5 m; 0.1 m for the ppo baseline)."
     ),
     missions_dir: Path = typer.Option(Path("missions"), "--missions", help="Paper missions for the evaluation."),
@@ -157,7 +156,7 @@ def _train_with_progress(trainer) -> None:  # type: ignore[no-untyped-def]
 
 
 def _finish(trainer, out: Path, command: str, eval_seeds: int, missions_dir: Path, wall_s: float, commit: str,  # type: ignore[no-untyped-def]
-            cpu_s: Optional[float] = None) -> None:
+            cpu_s: float | None = None) -> None:
     import dataclasses
 
     from rpf_fly.learn.card import machine, write_card
@@ -212,7 +211,7 @@ def _finish(trainer, out: Path, command: str, eval_seeds: int, missions_dir: Pat
     typer.echo(f"model card: {out.with_suffix('.yaml')}  curves: {curve_png}")
 
 
-def _load_average() -> Optional[list[float]]:
+def _load_average() -> list[float] | None:
     """The 1, 5 and 15 minute load averages (the machine may be shared: wall time alone misleads)."""
     import os
 

@@ -4,7 +4,7 @@ the application layer's (rpf_fly/app/worker.py), ``rpf-fly fly --distributed``'s
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING, Optional
+from typing import TYPE_CHECKING
 
 import typer
 
@@ -20,10 +20,10 @@ def worker(
     mission: Path = typer.Argument(..., help="Mission YAML file (the coordinator's)."),
     dongle: int = typer.Option(..., "--dongle", help="The radio dongle whose drones this worker flies (the URIs' "
                                "first number)."),
-    flight: Optional[str] = typer.Option(None, "--flight", help="The flight id the coordinator printed (its log's "
+    flight: str | None = typer.Option(None, "--flight", help="The flight id the coordinator printed (its log's "
                                          "stem); default: the one flight whose coordinator --connect reaches."),
     dry_run: bool = typer.Option(False, "--dry-run", help="The coordinator's simulated drones (its dry run)."),
-    connect: Optional[list[str]] = typer.Option(None, "--connect", help="The coordinator's Zenoh endpoint, e.g. "
+    connect: list[str] | None = typer.Option(None, "--connect", help="The coordinator's Zenoh endpoint, e.g. "
                                                 "tcp/HOST:7447 (default: the mission's runtime.zenoh.connect)."),
     verbose: bool = typer.Option(False, "--verbose", help="Also print the libraries' log records on stderr."),
 ) -> None:
@@ -43,7 +43,7 @@ def worker(
     raise typer.Exit(0 if report.success else 1)
 
 
-def _say(event: "FlightEvent") -> None:
+def _say(event: FlightEvent) -> None:
     if event.level >= 3 or event.drone is None:
         who = f"{event.drone}: " if event.drone else ""
         typer.echo(f"[{event.kind}] {who}{event.message}", err=True)

@@ -29,10 +29,26 @@ import math
 import struct
 
 from .cf_body import P250, CfBody, CfBodyParams, quaternion_to_rpy_deg
-from .cf_controller import (ATTITUDE_EVERY, NULL_SETPOINT, POSITION_EVERY, THRUST_MAX_N, UINT16_MAX, CfGains,
-                            ControlSetpoint, Lpf2p, PidController, motor_thrust_n)
-from .fake_planner import COMMAND_GO_TO_2, COMMAND_LAND_2, COMMAND_STOP, COMMAND_TAKEOFF_2, HighLevelCommander, \
-    PlanState
+from .cf_controller import (
+    ATTITUDE_EVERY,
+    NULL_SETPOINT,
+    POSITION_EVERY,
+    THRUST_MAX_N,
+    UINT16_MAX,
+    CfGains,
+    ControlSetpoint,
+    Lpf2p,
+    PidController,
+    motor_thrust_n,
+)
+from .fake_planner import (
+    COMMAND_GO_TO_2,
+    COMMAND_LAND_2,
+    COMMAND_STOP,
+    COMMAND_TAKEOFF_2,
+    HighLevelCommander,
+    PlanState,
+)
 from .fake_setpoint import Setpoint
 
 TICK_S = 0.001

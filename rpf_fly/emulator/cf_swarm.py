@@ -20,15 +20,41 @@ from collections.abc import Sequence
 import numpy as np
 
 from .cf_body import P250, CfBodyParams
-from .cf_controller import (ATTITUDE_DT, ATTITUDE_EVERY, DEFAULT_INTEGRATION_LIMIT, INT16_MAX, MODE_ABS,
-                            MODE_DISABLE, MODE_VELOCITY, PITCH_INTEGRATION_LIMIT, PITCH_RATE_INTEGRATION_LIMIT,
-                            POSITION_DT, POSITION_EVERY, ROLL_INTEGRATION_LIMIT, ROLL_RATE_INTEGRATION_LIMIT,
-                            RP_LIMIT_OVERHEAD, THRUST_MAX_N, THRUST_MIN_N, THRUST_SCALE, UINT16_MAX,
-                            VEL_MAX_OVERHEAD, YAW_INTEGRATION_LIMIT, YAW_RATE_INTEGRATION_LIMIT, CfGains,
-                            ControlSetpoint, lpf2p_coefficients)
+from .cf_controller import (
+    ATTITUDE_DT,
+    ATTITUDE_EVERY,
+    DEFAULT_INTEGRATION_LIMIT,
+    INT16_MAX,
+    MODE_ABS,
+    MODE_DISABLE,
+    MODE_VELOCITY,
+    PITCH_INTEGRATION_LIMIT,
+    PITCH_RATE_INTEGRATION_LIMIT,
+    POSITION_DT,
+    POSITION_EVERY,
+    ROLL_INTEGRATION_LIMIT,
+    ROLL_RATE_INTEGRATION_LIMIT,
+    RP_LIMIT_OVERHEAD,
+    THRUST_MAX_N,
+    THRUST_MIN_N,
+    THRUST_SCALE,
+    UINT16_MAX,
+    VEL_MAX_OVERHEAD,
+    YAW_INTEGRATION_LIMIT,
+    YAW_RATE_INTEGRATION_LIMIT,
+    CfGains,
+    ControlSetpoint,
+    lpf2p_coefficients,
+)
 from .cf_drone import PRIORITY_CRTP, PRIORITY_HIGH_LEVEL, PRIORITY_NONE, TICK_S
-from .fake_planner import COMMAND_GO_TO_2, COMMAND_LAND_2, COMMAND_STOP, COMMAND_TAKEOFF_2, HighLevelCommander, \
-    PlanState
+from .fake_planner import (
+    COMMAND_GO_TO_2,
+    COMMAND_LAND_2,
+    COMMAND_STOP,
+    COMMAND_TAKEOFF_2,
+    HighLevelCommander,
+    PlanState,
+)
 from .fake_setpoint import Setpoint
 
 _RPM_TO_RAD_S = 2.0 * math.pi / 60.0

@@ -23,8 +23,8 @@ happened; the world puts the drone back there (it stops where it hit).
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Mapping, Sequence
 
 import numpy as np
 

@@ -43,8 +43,7 @@ from dataclasses import dataclass
 
 from .fake_memory import TRAJECTORY_MEMORY_SIZE
 from .fake_setpoint import AxisMode, Setpoint, Vec3, null_setpoint, wrap_angle
-from .fake_trajectory import CompressedTrajectory, PiecewiseTrajectory, shortest_signed_angle_radians, \
-    normalize_radians
+from .fake_trajectory import CompressedTrajectory, PiecewiseTrajectory, normalize_radians, shortest_signed_angle_radians
 
 logger = logging.getLogger(__name__)
 

@@ -84,7 +84,7 @@ of pyusb's ``USBError``) when a transaction raises."""
 
 _dongles_lock = threading.Lock()
 _unplugged: set[int] = set()
-_links: "weakref.WeakSet[FakeLink]" = weakref.WeakSet()
+_links: weakref.WeakSet[FakeLink] = weakref.WeakSet()
 
 
 def unplug(devid: int) -> int:

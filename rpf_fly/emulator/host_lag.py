@@ -19,7 +19,7 @@ from __future__ import annotations
 import os
 import threading
 from dataclasses import asdict, dataclass
-from typing import Any, Optional
+from typing import Any
 
 HOST_LATE_BOUND_S = 0.05
 """A periodic emulator job that starts later than this against its schedule is behind (module doc)."""
@@ -47,7 +47,7 @@ class HostLag:
 
     bound_s: float
     world: JobLag
-    natnet: Optional[JobLag]
+    natnet: JobLag | None
 
     @property
     def behind_s(self) -> float:
@@ -62,7 +62,7 @@ class HostLag:
         return {"bound_s": self.bound_s, "behind_s": self.behind_s, "world": asdict(self.world),
                 "natnet": asdict(self.natnet) if self.natnet is not None else None}
 
-    def sentence(self, since: Optional["HostLag"] = None) -> str:
+    def sentence(self, since: HostLag | None = None) -> str:
         """The line that says the host fell behind (since ``since``); '' when it kept up."""
         behind = self.behind_since(since)
         if behind < HOST_BEHIND_REPORT_S:
@@ -70,7 +70,7 @@ class HostLag:
         return (f"the host could not keep up for {behind:.1f} s (simulated steps or mocap frames more than "
                 f"{self.bound_s * 1000:.0f} ms late): this dry run is not evidence")
 
-    def behind_since(self, since: Optional["HostLag"] = None) -> float:
+    def behind_since(self, since: HostLag | None = None) -> float:
         """Seconds behind since ``since`` (an earlier reading of the same world; None: since it started)."""
         return max(0.0, self.behind_s - (since.behind_s if since is not None else 0.0))
 
@@ -86,7 +86,7 @@ class LagMeter:
         self._late_runs = 0
         self._max_late_s = 0.0
         self._behind_s = 0.0
-        self._last_s: Optional[float] = None
+        self._last_s: float | None = None
         self._was_late = False
 
     def record(self, late_s: float, now_s: float, period_s: float) -> None:
@@ -123,5 +123,5 @@ def ahead_of_the_ground_station() -> bool:
     return True
 
 
-def host_lag(world: LagMeter, natnet: Optional[LagMeter]) -> HostLag:
+def host_lag(world: LagMeter, natnet: LagMeter | None) -> HostLag:
     return HostLag(world.bound_s, world.snapshot(), natnet.snapshot() if natnet is not None else None)

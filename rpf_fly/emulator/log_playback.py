@@ -15,8 +15,9 @@ from __future__ import annotations
 
 import threading
 import time
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Callable, Mapping, Optional, Protocol, Sequence
+from typing import Protocol
 
 Position = tuple[float, float, float]
 Quaternion = tuple[float, float, float, float]
@@ -63,7 +64,7 @@ class PosePlayback:
             return {}
         return {name: (p, q, True) for name, (p, q) in self.frames[self._current][1].items()}
 
-    def play(self, server: FrameSender, stop: Optional[threading.Event] = None,
+    def play(self, server: FrameSender, stop: threading.Event | None = None,
              clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep) -> int:
         """Send every frame at its time (blocking); returns how many were sent (fewer when ``stop`` is set)."""
         if not self.frames:

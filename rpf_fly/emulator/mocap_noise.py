@@ -42,7 +42,7 @@ class MocapNoise:
     dropout: float = DROPOUT
 
     @classmethod
-    def default(cls) -> "MocapNoise":
+    def default(cls) -> MocapNoise:
         """The module's figures as they are now (read at the call, so a test's monkeypatch of them holds)."""
         return cls(POSITION_NOISE_M, ORIENTATION_NOISE_DEG, DROPOUT)
 

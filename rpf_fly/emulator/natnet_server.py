@@ -28,13 +28,14 @@ import select
 import socket
 import threading
 import time
+from collections.abc import Callable, Sequence
 from types import TracebackType
-from typing import Callable, Optional, Sequence
 
 from rpf_fly.emulator.host_lag import LagMeter
 from rpf_fly.mocap.frame import PoseCallable
 from rpf_fly.mocap.natnet_protocol import (
     FRAME_MODELS_CHANGED,
+    SUPPORTED_VERSIONS,
     FrameOfData,
     LabeledMarker,
     MarkerSetData,
@@ -45,7 +46,6 @@ from rpf_fly.mocap.natnet_protocol import (
     RigidBodyData,
     RigidBodyDescription,
     RigidBodyMarker,
-    SUPPORTED_VERSIONS,
     ServerInfo,
     Version,
     decode_echo_request,
@@ -120,7 +120,7 @@ class NatNetServer:
         app_version: Sequence[int] = (3, 1, 0, 0),
         clock_frequency_hz: int = 10_000_000,
         camera_latency_s: float = 0.004,
-        extra_latency_s: Optional[Callable[[], float]] = None,
+        extra_latency_s: Callable[[], float] | None = None,
         markers_per_body: int = 3,
         models_changed_frames: int = 3,
     ) -> None:

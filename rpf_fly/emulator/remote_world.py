@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import socket
 import threading
-from typing import Optional
 
 from .dongle_air import DongleAir, RadioTiming
 from .fake_firmware import Packet
@@ -38,7 +37,7 @@ class RemotePort:
         self.faults = LinkFaults(latency_s=latency_s)
         self.rssi_dbm = rssi
 
-    def _call(self, op: int, channel: int, body: bytes) -> Optional[tuple[int, int, int, int, int, bytes]]:
+    def _call(self, op: int, channel: int, body: bytes) -> tuple[int, int, int, int, int, bytes] | None:
         with self._lock:
             self._seq = (self._seq + 1) & 0xFFFFFFFF
             seq = self._seq
@@ -83,7 +82,7 @@ class RemoteWorld:
         self.timing = timing or RadioTiming()
         self._dongles: dict[int, DongleAir] = {}
         self._lock = threading.Lock()
-        self._sock: Optional[socket.socket] = None
+        self._sock: socket.socket | None = None
         self._seq = 0
 
     @property

@@ -11,7 +11,6 @@ import threading
 import time
 from collections import deque
 from collections.abc import Mapping
-from typing import Optional
 
 from .fake_world import FakeWorld
 from .mocap_noise import MocapNoise, turned
@@ -32,7 +31,7 @@ class SimulatedBodies:
     Every pose served carries the jitter and the single-frame dropouts of a real mocap (`noise`, default
     `MocapNoise.default()`: rpf_fly/emulator/mocap_noise.py), seeded by ``seed``."""
 
-    def __init__(self, world: FakeWorld, bodies: Mapping[int, str], noise: Optional[MocapNoise] = None,
+    def __init__(self, world: FakeWorld, bodies: Mapping[int, str], noise: MocapNoise | None = None,
                  seed: int = 0) -> None:
         self._world = world
         self._noise = MocapNoise.default() if noise is None else noise

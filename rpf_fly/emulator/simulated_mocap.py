@@ -20,8 +20,8 @@ import collections
 import dataclasses
 import math
 import time
+from collections.abc import Callable, Sequence
 from types import TracebackType
-from typing import Callable, Sequence
 
 import numpy as np
 

@@ -16,7 +16,7 @@ import select
 import threading
 import time
 from collections.abc import Mapping
-from typing import Any, Optional
+from typing import Any
 
 from .fake_world import FakeWorld
 
@@ -41,7 +41,7 @@ class Orphan:
     down or `ORPHAN_CAP_S` passed, then write the exit report. The first caller (the control connection's end, or
     the parent watch) runs it; a second one waits until it is done."""
 
-    def __init__(self, world: FakeWorld, parent_pid: int, names: Mapping[int, str], report: Optional[str],
+    def __init__(self, world: FakeWorld, parent_pid: int, names: Mapping[int, str], report: str | None,
                  cap_s: float) -> None:
         self._world = world
         self._parent_pid = parent_pid

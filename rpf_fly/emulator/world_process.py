@@ -39,7 +39,7 @@ import sys
 import threading
 from collections.abc import Mapping, Sequence
 from multiprocessing.connection import Client, Listener
-from typing import Any, Optional
+from typing import Any
 
 from rpf_fly.mission.model import Obstacle
 
@@ -74,13 +74,13 @@ class WorldProcess(WorldCalls):
         bodies: Mapping[int, str],
         *,
         seed: int = 0,
-        natnet: Optional[Mapping[str, Any]] = None,
+        natnet: Mapping[str, Any] | None = None,
         obstacles: Sequence[Obstacle] = (),
-        names: Optional[Mapping[int, str]] = None,
-        exit_report: Optional[str | os.PathLike[str]] = None,
+        names: Mapping[int, str] | None = None,
+        exit_report: str | os.PathLike[str] | None = None,
         orphan_cap_s: float = ORPHAN_CAP_S,
         host: str = "127.0.0.1",
-        mocap_noise: Optional[MocapNoise] = None,
+        mocap_noise: MocapNoise | None = None,
     ) -> None:
         """``names``: the drones' names (radio address -> name) for the exit report (else their addresses).
         ``exit_report``: where the child writes its exit report if this process dies without closing it (None:
@@ -116,7 +116,7 @@ class WorldProcess(WorldCalls):
         self.pid: int = self._process.pid
         """The child's process id (a test watches it outlive a killed parent)."""
         self.radio: tuple[str, int] = (ready["radio"][0], ready["radio"][1])
-        self.natnet_command_port: Optional[int] = ready["natnet_command_port"]
+        self.natnet_command_port: int | None = ready["natnet_command_port"]
         self.addresses: tuple[int, ...] = tuple(drones)
 
     def call(self, method: str, *args: Any) -> Any:
@@ -148,7 +148,7 @@ class WorldProcess(WorldCalls):
             self._process.stdout.close()
 
 
-def _read_line(stream: Any, timeout_s: float) -> Optional[bytes]:
+def _read_line(stream: Any, timeout_s: float) -> bytes | None:
     """One line from a pipe; None after ``timeout_s`` or at its end (a thread: portable, unlike select on pipes)."""
     lines: queue.Queue[bytes] = queue.Queue()
     threading.Thread(target=lambda: lines.put(stream.readline()), daemon=True).start()

@@ -27,16 +27,16 @@ import math
 import queue
 import threading
 import time
+from collections.abc import Callable, Mapping
 from concurrent.futures import Future
 from dataclasses import dataclass
-from typing import Callable, Mapping, Optional, Protocol
+from typing import Protocol
 
 from rpf_fly.flight.phases import DronePhase, FlightOutcome
 from rpf_fly.flight.response import braking_for
 from rpf_fly.mission.model import Arena, Drone, Mission
 from rpf_fly.planning.planner import PlanStep, plan_row
 from rpf_fly.planning.view import LocalView
-
 
 REFINE_HOLD_ABOVE_M_S = 0.05
 """A held drone slower than this is at rest: its hold setpoint stays (`DroneAgent.refine_hold`)."""
@@ -73,8 +73,8 @@ class PlannerWorker:
 
     def __init__(self, step: Callable[[LocalView], tuple[PlanStep, complex, float]], name: str):
         self._step = step
-        self._requests: queue.Queue[Optional[tuple[LocalView, Future]]] = queue.Queue()
-        self._current: Optional[Future] = None
+        self._requests: queue.Queue[tuple[LocalView, Future] | None] = queue.Queue()
+        self._current: Future | None = None
         self._thread = threading.Thread(target=self._run, name=name, daemon=True)
         self._thread.start()
 
@@ -112,7 +112,7 @@ class PlanResult:
     setpoint: complex
     seconds: float
     planned: PlanStep
-    row: Optional[int] = None
+    row: int | None = None
     """None: ``planned`` is this drone's own one-drone step; else its row in the batched ``planned``."""
 
     @property
@@ -134,7 +134,7 @@ class DroneAgent:
         arena: Arena,
         budget_s: float,
         body_radius_m: float = 0.0,
-        max_lead_m: Optional[float] = None,
+        max_lead_m: float | None = None,
         clock: Callable[[], float] = time.thread_time,
     ):
         self.drone = drone
@@ -159,7 +159,7 @@ class DroneAgent:
         """How this drone comes to rest once held, from its own controller's gains (`set_controller`)."""
         self._clock = clock
         self.phase = DronePhase.WAITING
-        self.outcome: Optional[FlightOutcome] = None
+        self.outcome: FlightOutcome | None = None
         self.reason = ""
         self.heading = 1 + 0j
         self.reference = self.start
@@ -167,20 +167,20 @@ class DroneAgent:
         self._hold_limit: complex = self.start
         self._hold_way: complex = 0j
         self.phase_since_s = 0.0
-        self.arrived_at_s: Optional[float] = None
-        self.stale_since_s: Optional[float] = None
-        self.landing_until_s: Optional[float] = None
-        self.touchdown_s: Optional[float] = None
+        self.arrived_at_s: float | None = None
+        self.stale_since_s: float | None = None
+        self.landing_until_s: float | None = None
+        self.touchdown_s: float | None = None
         """When its landing's descent ends (the land command's duration from when it was sent)."""
-        self._worker: Optional[PlannerWorker] = None
+        self._worker: PlannerWorker | None = None
         self.planned_from: complex = self.start
         """The reference its newest planning step planned from (its own position in that view), for the log:
         a replay restarts a drone's planning from it (rpf_fly/flight/replay.py)."""
-        self.last_setpoint: Optional[complex] = None
+        self.last_setpoint: complex | None = None
         """The last position setpoint streamed to it (x + iy), for the supervisor's tracking check."""
 
     @classmethod
-    def for_mission(cls, drone: Drone, planner: PlannerLike, mission: Mission, **overrides: object) -> "DroneAgent":
+    def for_mission(cls, drone: Drone, planner: PlannerLike, mission: Mission, **overrides: object) -> DroneAgent:
         """The agent the flight loop flies ``drone`` with (height, speed, step, arena, budget and body radius from
         the mission); ``overrides`` replace keyword arguments (``rpf-fly replay`` lifts the time budget)."""
         flight = mission.flight
@@ -207,7 +207,7 @@ class DroneAgent:
         self.heading = delta / abs(delta) if abs(delta) > 1e-9 else 1 + 0j
         self.set_phase(DronePhase.PLANNING, now_s)
 
-    def set_controller(self, params: Optional[Mapping[str, float]]) -> None:
+    def set_controller(self, params: Mapping[str, float] | None) -> None:
         """The drone's position controller's gains as its parameters hold them (None: the firmware's defaults): how
         it brakes, and how far its carrot may lead it (`LEAD_ALLOWANCE` times the steady lag at the mission speed:
         a drone trails a moving setpoint by `ResponseGains.steady_lag_s` x speed, 0.55 s with the defaults, and a
@@ -285,7 +285,7 @@ class DroneAgent:
             self._worker.close()
 
     def accept(
-        self, step: PlanStep, direction: complex, measured: complex, seconds: float, row: Optional[int] = None
+        self, step: PlanStep, direction: complex, measured: complex, seconds: float, row: int | None = None
     ) -> PlanResult:
         """Take a checked planning result (from :meth:`plan`, or row ``row`` of a batched call): turn the heading
         and move the reference."""

@@ -20,7 +20,7 @@ near the floor and its supervisor no longer reporting flying (:meth:`Commander.c
 from __future__ import annotations
 
 import threading
-from typing import Callable, Iterable, Optional
+from collections.abc import Callable, Iterable
 
 from rpf_fly.flight.agent import DroneAgent
 from rpf_fly.flight.events import ERROR, FATAL, INFO, WARNING, EventBus
@@ -184,7 +184,7 @@ class Commander:
 
     # ---------------------------------------------------------------------------------------- commands
 
-    def stream(self, agent: DroneAgent, x: float, y: float, z: float, origin_s: Optional[float] = None) -> bool:
+    def stream(self, agent: DroneAgent, x: float, y: float, z: float, origin_s: float | None = None) -> bool:
         """Stream one position setpoint, only to a drone whose phase streams (never after ``land``); ``origin_s``:
         the receipt of the mocap frame it was planned from."""
         with self._locks[agent.name]:
@@ -193,7 +193,7 @@ class Commander:
             agent.last_setpoint = complex(x, y)
             return self.backend.send_position_setpoint(agent.name, x, y, z, 0.0, origin_s=origin_s)
 
-    def extpos(self, agent: DroneAgent, position: Vec3, quaternion: Optional[Quaternion]) -> bool:
+    def extpos(self, agent: DroneAgent, position: Vec3, quaternion: Quaternion | None) -> bool:
         """Forward a mocap pose to the drone's estimator (also while it lands: the landing needs it)."""
         if agent.phase in (DronePhase.LINK_LOST, DronePhase.FAILED):
             return False
@@ -201,7 +201,7 @@ class Commander:
             return self.backend.send_extpos(agent.name, position)
         return self.backend.send_extpose(agent.name, position, quaternion)
 
-    def land(self, agent: DroneAgent, reason: str, level: int = WARNING, duration_s: Optional[float] = None) -> bool:
+    def land(self, agent: DroneAgent, reason: str, level: int = WARNING, duration_s: float | None = None) -> bool:
         """High-level landing of an airborne drone (once; from any thread), over ``duration_s`` (the mission's
         ``land_s`` unless given: a drone without mocap lands faster, docs/flight.md). A land command that cannot be
         sent is followed by an emergency stop: a drone nobody can land must not fly on."""
@@ -224,8 +224,8 @@ class Commander:
         for agent in self.agents.values():
             self.land(agent, reason, level)
 
-    def confirm_touchdown(self, agent: DroneAgent, now_s: float, pose_z: Optional[float], pose_fresh: bool,
-                          state: Optional[DroneState]) -> bool:
+    def confirm_touchdown(self, agent: DroneAgent, now_s: float, pose_z: float | None, pose_fresh: bool,
+                          state: DroneState | None) -> bool:
         """A landing drone is down when its supervisor no longer says flying (its motors have idled for the
         firmware's hysteresis: the landing ended) and, where mocap sees it, its height is near the floor; only then
         is it disarmed (disarming in flight cuts the motors). With mocap lost the supervisor alone decides: the
@@ -257,8 +257,8 @@ class Commander:
     """How long the flight loop waits for an emergency stop it orders (:meth:`emergency_stop` ``wait_s``): the
     packets of a drone whose link is blocked go on from their own thread, and the loop ticks on."""
 
-    def emergency_stop(self, reason: str, names: Optional[Iterable[str]] = None,
-                       wait_s: Optional[float] = None) -> None:
+    def emergency_stop(self, reason: str, names: Iterable[str] | None = None,
+                       wait_s: float | None = None) -> None:
         """Motors off now (latched until reboot), from any thread but a signal handler (it does radio I/O). It takes
         no drone lock first: a drone whose link is blocked must not delay the stop of the others (the backend sends
         each drone's from a thread of its own, waiting ``wait_s`` at most: its default when None); the phase is

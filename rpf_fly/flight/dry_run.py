@@ -49,14 +49,15 @@ from __future__ import annotations
 import math
 import os
 import tempfile
+from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Mapping, Optional
+from typing import TYPE_CHECKING, Any
 
-from rpf_fly.mission.model import Mission
-from rpf_fly.mocap.frame import MocapSource
 from rpf_fly.emulator.fake_world import BurstLoss, FakeDroneConfig, FakeWorld, RadioTiming
 from rpf_fly.emulator.mocap_noise import MocapNoise
+from rpf_fly.mission.model import Mission
+from rpf_fly.mocap.frame import MocapSource
 
 if TYPE_CHECKING:
     from rpf_fly.flight.lab import LabInfo
@@ -150,10 +151,10 @@ def mission_mocap_noise(mission: Mission) -> MocapNoise:
                       default.dropout if d.mocap_dropout is None else d.mocap_dropout)
 
 
-def simulated_drones(mission: Mission, drone_configs: Optional[Mapping[str, FakeDroneConfig]] = None,
-                     start_faults: Optional[Mapping[str, StartFault]] = None,
-                     radio_loss: Optional[BurstLoss] = RADIO_LOSS,
-                     dynamics: Optional[str] = None) -> dict[int, FakeDroneConfig]:
+def simulated_drones(mission: Mission, drone_configs: Mapping[str, FakeDroneConfig] | None = None,
+                     start_faults: Mapping[str, StartFault] | None = None,
+                     radio_loss: BurstLoss | None = RADIO_LOSS,
+                     dynamics: str | None = None) -> dict[int, FakeDroneConfig]:
     """The simulated Crazyflie of each drone of ``mission`` by radio address: at its mission start, mocap
     positioning, every link with ``radio_loss``; ``drone_configs`` replaces a drone's (by name), ``start_faults``
     then moves or turns it before power-on. ``dynamics`` (``"firmware"`` or ``"first-order"``; default the
@@ -190,24 +191,24 @@ class DryRun:
         self,
         mission: Mission,
         *,
-        mocap: Optional[str] = None,
+        mocap: str | None = None,
         natnet_version: str = "4.1",
-        drone_configs: Optional[Mapping[str, FakeDroneConfig]] = None,
-        start_faults: Optional[Mapping[str, StartFault]] = None,
-        mocap_rate_hz: Optional[float] = None,
-        cache_dir: Optional[Path] = None,
-        seed: Optional[int] = None,
+        drone_configs: Mapping[str, FakeDroneConfig] | None = None,
+        start_faults: Mapping[str, StartFault] | None = None,
+        mocap_rate_hz: float | None = None,
+        cache_dir: Path | None = None,
+        seed: int | None = None,
         process: bool = True,
         truth: bool = True,
-        air_time_s: Optional[float] = None,
-        radio_loss: Optional[BurstLoss] = RADIO_LOSS,
-        world_exit_report: Optional[Path] = None,
+        air_time_s: float | None = None,
+        radio_loss: BurstLoss | None = RADIO_LOSS,
+        world_exit_report: Path | None = None,
         host: str = "127.0.0.1",
-        mocap_noise: Optional[MocapNoise] = None,
-        lab: Optional["LabInfo"] = None,
-        dynamics: Optional[str] = None,
-        radio: Optional[str] = None,
-        crazyradio: Optional[str] = None,
+        mocap_noise: MocapNoise | None = None,
+        lab: LabInfo | None = None,
+        dynamics: str | None = None,
+        radio: str | None = None,
+        crazyradio: str | None = None,
     ):
         """``lab``: fly the drones of a running lab (`rpf_fly.flight.lab`, ``rpf-fly lab``) instead of starting
         private ones; they keep their firmware state, and closing the dry run leaves them to the lab. ``truth``: the flight log of a flight on this rig gets the world's truth (``/truth/<drone>``); False only
@@ -270,11 +271,11 @@ class DryRun:
         self._cache = tempfile.TemporaryDirectory(prefix="rpf-fly-toc-") if cache_dir is None else None
         self.cache_dir = Path(self._cache.name) if self._cache is not None else Path(cache_dir)  # type: ignore[arg-type]
         self.server = None
-        self.mocap: Optional[MocapSource] = None
+        self.mocap: MocapSource | None = None
 
     # ------------------------------------------------------------------------------------------- life
 
-    def __enter__(self) -> "DryRun":
+    def __enter__(self) -> DryRun:
         try:
             self._start()
         except BaseException:
@@ -460,7 +461,7 @@ class DryRun:
         return self.world.snapshot(self.addresses[name])
 
 
-def _with_start_fault(config: FakeDroneConfig, fault: Optional[StartFault]) -> FakeDroneConfig:
+def _with_start_fault(config: FakeDroneConfig, fault: StartFault | None) -> FakeDroneConfig:
     """``config`` with the drone moved by ``fault.offset_m`` and turned by ``fault.yaw_deg`` (no fault: as is)."""
     if fault is None:
         return config

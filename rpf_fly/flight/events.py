@@ -7,8 +7,8 @@ from __future__ import annotations
 
 import logging
 import threading
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable, Optional
 
 DEBUG, INFO, WARNING, ERROR, FATAL = 1, 2, 3, 4, 5
 _LOGGING_LEVEL = {DEBUG: logging.DEBUG, INFO: logging.INFO, WARNING: logging.WARNING, ERROR: logging.ERROR,
@@ -27,7 +27,7 @@ class FlightEvent:
     level: int
     kind: str
     message: str
-    drone: Optional[str] = None
+    drone: str | None = None
 
 
 EventSink = Callable[[FlightEvent], None]
@@ -47,7 +47,7 @@ class EventBus:
         with self._lock:
             self._sinks.append(sink)
 
-    def emit(self, level: int, kind: str, message: str, drone: Optional[str] = None) -> FlightEvent:
+    def emit(self, level: int, kind: str, message: str, drone: str | None = None) -> FlightEvent:
         event = FlightEvent(self._clock(), level, kind, message, drone)
         with self._lock:
             self.history.append(event)
@@ -60,6 +60,6 @@ class EventBus:
                 logger.exception("event sink failed")
         return event
 
-    def of_kind(self, kind: str, drone: Optional[str] = None) -> list[FlightEvent]:
+    def of_kind(self, kind: str, drone: str | None = None) -> list[FlightEvent]:
         with self._lock:
             return [e for e in self.history if e.kind == kind and (drone is None or e.drone == drone)]

@@ -21,7 +21,8 @@ import os
 import signal
 import threading
 import time
-from typing import Any, Callable, Optional
+from collections.abc import Callable
+from typing import Any
 
 from rpf_fly.flight.events import INFO, FlightEvent
 from rpf_fly.flight.faults import LOW_BATTERY_OPEN_CIRCUIT_V, Fault
@@ -43,7 +44,7 @@ class StallableMocap:
     def stall(self, seconds: float) -> None:
         self._stall_s = seconds
 
-    def receive(self, timeout_s: float) -> Optional[MocapFrame]:
+    def receive(self, timeout_s: float) -> MocapFrame | None:
         if self._stall_s > 0.0:
             seconds, self._stall_s = self._stall_s, 0.0
             time.sleep(seconds)
@@ -59,7 +60,7 @@ class StallableMocap:
 class _FaultyPlanner:
     """A drone's own planner with its scheduled faults: raising from ``at_s`` on, or blocking once."""
 
-    def __init__(self, planner: Any, faults: list[Fault], clock: Callable[[], Optional[float]]):
+    def __init__(self, planner: Any, faults: list[Fault], clock: Callable[[], float | None]):
         self.planner = planner
         self.faults = faults
         self._clock = clock
@@ -90,17 +91,17 @@ class FaultInjection:
     POLL_S = 0.05
     """How often the injection thread looks whether the flight ended while it waits."""
 
-    def __init__(self, mission: Mission, faults: list[Fault], kill: Optional[Callable[[], None]] = None):
+    def __init__(self, mission: Mission, faults: list[Fault], kill: Callable[[], None] | None = None):
         self.mission = mission
         self.faults = faults
-        self.t0: Optional[float] = None
+        self.t0: float | None = None
         """``time.monotonic()`` at the start of the planning phase (None before)."""
         self.phases: dict[str, float] = {}
         """``time.monotonic()`` at the start of each phase a fault may count from (`faults.GROUND_STATION_PHASES`)
         that the flight reached so far."""
         self.applied: list[tuple[float, Fault]] = []
         self._kill = kill or _kill_this_process
-        self._thread: Optional[threading.Thread] = None
+        self._thread: threading.Thread | None = None
         self._stop = threading.Event()
         self._wake = threading.Event()
         self._lock = threading.Lock()
@@ -141,7 +142,7 @@ class FaultInjection:
 
         return factory
 
-    def elapsed(self) -> Optional[float]:
+    def elapsed(self) -> float | None:
         """Seconds since the planning phase started (None before)."""
         return None if self.t0 is None else time.monotonic() - self.t0
 
@@ -187,7 +188,7 @@ class FaultInjection:
         if self._thread is not None:
             self._thread.join(timeout=2.0)
 
-    def due(self, fault: Fault) -> Optional[float]:
+    def due(self, fault: Fault) -> float | None:
         """When ``fault`` is due (``time.monotonic()``): ``at_s`` after the start of its phase; None while the
         flight has not reached that phase."""
         with self._lock:

@@ -15,9 +15,10 @@ The file is validated like a mission (one line ``FILE:LINE: FIELD: problem``, ex
 from __future__ import annotations
 
 import difflib
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Optional
+from typing import Any
 
 from rpf_fly.mission.errors import MissionError
 from rpf_fly.mission.model import Mission
@@ -46,7 +47,7 @@ class FaultKind:
     """param -> (type: 'positive', 'fraction', 'number', 'vec2', 'vec3', 'choice', 'dongle'), required."""
     choices: dict[str, tuple[str, ...]] = field(default_factory=dict)
     """A 'choice' param -> the words it takes."""
-    at_s_default: Optional[float] = None
+    at_s_default: float | None = None
     """``at_s`` when the schedule leaves it out (None: required)."""
 
 
@@ -98,9 +99,9 @@ class Fault:
     ``ground_station_kill`` from the start of its ``at_phase`` (`phase`)."""
 
     kind: str
-    drone: Optional[str] = None
-    at_s: Optional[float] = None
-    duration_s: Optional[float] = None
+    drone: str | None = None
+    at_s: float | None = None
+    duration_s: float | None = None
     params: dict[str, Any] = field(default_factory=dict)
     line: int = 0
 
@@ -119,7 +120,7 @@ class Fault:
             self.kind, "mocap")
 
     @property
-    def ends_at_s(self) -> Optional[float]:
+    def ends_at_s(self) -> float | None:
         if self.at_s is None:
             return None
         return self.at_s + (self.duration_s or 0.0)

@@ -3,8 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Literal, Optional
-
+from typing import Literal
 
 Response = Literal["warn", "hold", "land", "lost", "resume", "crashed", "stop"]
 
@@ -16,8 +15,8 @@ class Finding:
     kind: str
     level: int
     message: str
-    drone: Optional[str]
+    drone: str | None
     response: Response
-    land_s: Optional[float] = None
+    land_s: float | None = None
     """For ``land``: how long the landing takes (None: the mission's ``land_s``)."""
 

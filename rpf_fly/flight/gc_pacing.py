@@ -66,7 +66,7 @@ class GcPacer:
         if self._was_enabled:
             gc.enable()
 
-    def __enter__(self) -> "GcPacer":
+    def __enter__(self) -> GcPacer:
         self.start()
         return self
 

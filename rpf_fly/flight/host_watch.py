@@ -10,7 +10,8 @@ line carry.
 from __future__ import annotations
 
 import logging
-from typing import Any, Callable, Optional
+from collections.abc import Callable
+from typing import Any
 
 from rpf_fly.emulator.host_lag import HOST_BEHIND_REPORT_S
 from rpf_fly.flight.events import WARNING, EventBus
@@ -32,7 +33,7 @@ class HostWatch(PeriodicFeed):
         super().__init__("host-watch", period_s)
         self._fetch = fetch
         self._events = events
-        self._baseline: Optional[Any] = None
+        self._baseline: Any | None = None
         self._said_s = 0.0
         self.behind_s = 0.0
         self.failed = False

@@ -36,10 +36,11 @@ import tempfile
 import threading
 import time
 from collections import deque
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass
 from multiprocessing.connection import Client, Listener
 from pathlib import Path
-from typing import Any, Mapping, Optional
+from typing import Any
 
 from rpf_fly.emulator.host_lag import HostLag
 from rpf_fly.emulator.world_process import RemoteWorld, WorldCalls, WorldServer
@@ -83,16 +84,16 @@ class LabInfo:
     authkey: str
     """The control connection's key, hex."""
     radio: tuple[str, int]
-    natnet_command_port: Optional[int]
+    natnet_command_port: int | None
     addresses: dict[str, int]
     """drone name -> radio address."""
-    log: Optional[str]
+    log: str | None
 
     def to_json(self) -> str:
         return json.dumps(asdict(self), indent=2) + "\n"
 
     @classmethod
-    def from_json(cls, text: str) -> "LabInfo":
+    def from_json(cls, text: str) -> LabInfo:
         d = json.loads(text)
         return cls(int(d["pid"]), str(d["mission"]), (d["control"][0], int(d["control"][1])), str(d["authkey"]),
                    (d["radio"][0], int(d["radio"][1])), d.get("natnet_command_port"),
@@ -109,7 +110,7 @@ def _alive(pid: int) -> bool:
     return True
 
 
-def read_lab(path: Optional[Path] = None) -> LabInfo:
+def read_lab(path: Path | None = None) -> LabInfo:
     """The running lab's `LabInfo`; `LabNotRunning` with the one line to say when there is none."""
     path = lab_file() if path is None else path
     try:
@@ -167,7 +168,7 @@ class LabClient(WorldCalls):
         conn.close()
 
 
-def lab_world(info: Optional[LabInfo] = None) -> RemoteWorld:
+def lab_world(info: LabInfo | None = None) -> RemoteWorld:
     """What ``fake_radio.register`` (``fake://`` URIs with the mission's paths) or ``crazyradio.plug`` (the
     mission's ``radio://`` URIs) takes to reach the running lab's drones from a cflib program."""
     info = read_lab() if info is None else info
@@ -223,9 +224,9 @@ class Lab:
     ``start_faults``: how drones stand at power-on (`rpf_fly.flight.dry_run.StartFault` by drone name);
     ``log_path``: the lab's MCAP log (None: no log); ``path``: the lab file (default `lab_file`)."""
 
-    def __init__(self, mission: Mission, mission_path: str | os.PathLike[str], log_path: Optional[Path], *,
-                 start_faults: Optional[Mapping[str, Any]] = None, seed: Optional[int] = None,
-                 host: str = "127.0.0.1", path: Optional[Path] = None) -> None:
+    def __init__(self, mission: Mission, mission_path: str | os.PathLike[str], log_path: Path | None, *,
+                 start_faults: Mapping[str, Any] | None = None, seed: int | None = None,
+                 host: str = "127.0.0.1", path: Path | None = None) -> None:
         from rpf_fly.flight.dry_run import RADIO_LOSS, mission_mocap_noise, simulated_drones, uri_address
 
         self.mission = mission
@@ -249,9 +250,9 @@ class Lab:
         self._threads: list[threading.Thread] = []
         self._connections = 0
         self._conn_lock = threading.Lock()
-        self.server: Optional[WorldServer] = None
+        self.server: WorldServer | None = None
         self.log: Any = None
-        self.info: Optional[LabInfo] = None
+        self.info: LabInfo | None = None
         self._listener: Any = None
         self._reported_behind_s = 0.0
 
@@ -291,7 +292,7 @@ class Lab:
             self._threads.append(thread)
         return self.info
 
-    def wait(self, timeout_s: Optional[float] = None) -> bool:
+    def wait(self, timeout_s: float | None = None) -> bool:
         """Block until `close` is called or ``timeout_s`` passed; True if stopped."""
         return self._stop.wait(timeout_s)
 
@@ -320,7 +321,7 @@ class Lab:
         if self.log is not None:
             self.log.close()
 
-    def __enter__(self) -> "Lab":
+    def __enter__(self) -> Lab:
         self.start()
         return self
 
@@ -443,7 +444,7 @@ class Lab:
 class AfterDeath:
     """What one drone did after its ground station died, on the lab's truth (`after_ground_station`)."""
 
-    down_after_s: Optional[float]
+    down_after_s: float | None
     """Seconds from the death until its motors were off or it stood on the floor (None: neither by the end)."""
     moved_m: float
     """The largest horizontal distance from where it was at the death, at any later truth sample."""

@@ -24,7 +24,7 @@ import math
 import signal
 import threading
 import time
-from typing import Callable, Collection, Optional
+from collections.abc import Callable, Collection
 
 from rpf_fly.flight.agent import DroneAgent, PlannerLike
 from rpf_fly.flight.commander import Commander
@@ -80,13 +80,13 @@ class FlightLoop(LoopPreflight, LoopSwarm, LoopTakeoff, LoopIteration, LoopLandi
         mocap: MocapSource,
         planner_factory: PlannerFactory,
         *,
-        uris: Optional[dict[str, str]] = None,
-        recorder: Optional[Recorder] = None,
-        status_hook: Optional[Callable[["FlightLoop"], None]] = None,
+        uris: dict[str, str] | None = None,
+        recorder: Recorder | None = None,
+        status_hook: Callable[[FlightLoop], None] | None = None,
         clock: Callable[[], float] = time.monotonic,
-        drones: Optional[Collection[str]] = None,
-        swarm: Optional[SwarmLink] = None,
-        tick_offset: Optional[float] = None,
+        drones: Collection[str] | None = None,
+        swarm: SwarmLink | None = None,
+        tick_offset: float | None = None,
         first_order: Collection[str] = (),
     ):
         """``first_order``: drones that are simulated with the first-order model (a dry run's `dynamics:
@@ -130,14 +130,14 @@ class FlightLoop(LoopPreflight, LoopSwarm, LoopTakeoff, LoopIteration, LoopLandi
         self.stats = LoopStats()
         # A backend that queues setpoints for threads of its own measures their latency to the radio, and says
         # when they went out (CflibBackend); with another, the loop measures to its own send.
-        self._take_latencies: Optional[Callable[[], list[float]]] = getattr(backend, "take_setpoint_latencies", None)
-        self._wait_sent: Optional[Callable[[Optional[list[str]], float], bool]] = getattr(backend, "wait_sent", None)
+        self._take_latencies: Callable[[], list[float]] | None = getattr(backend, "take_setpoint_latencies", None)
+        self._wait_sent: Callable[[list[str] | None, float], bool] | None = getattr(backend, "wait_sent", None)
         self.tick = 0
         if tick_offset is not None and not 0.0 <= tick_offset < 1.0:
             raise ValueError(f"tick_offset must be in [0, 1), not {tick_offset}")
         self.tick_offset = tick_offset
         self._ticks = TickSchedule(mission.flight.dt, 0.0)
-        self._last_tick_s: Optional[float] = None
+        self._last_tick_s: float | None = None
         self._stalls_seen = 0
         """The watchdog's stall count at the last planning tick (`_late_tick`)."""
         self._down_since: dict[str, float] = {}
@@ -199,7 +199,7 @@ class FlightLoop(LoopPreflight, LoopSwarm, LoopTakeoff, LoopIteration, LoopLandi
 
         A KeyboardInterrupt (library use: Python's own SIGINT handler) lands every drone like the first Ctrl-C of
         ``rpf-fly fly``; a second one during that landing stops every motor. The report then says interrupted."""
-        error: Optional[str] = None
+        error: str | None = None
         restore_interrupt = self._take_interrupts()
         self._watchdog.start()
         try:
@@ -276,7 +276,7 @@ class FlightLoop(LoopPreflight, LoopSwarm, LoopTakeoff, LoopIteration, LoopLandi
         started = self.clock()
         self._ticks = TickSchedule(self.mission.flight.dt, self._first_tick_s(started))
         self._last_tick_s = None
-        all_arrived_at: Optional[float] = None
+        all_arrived_at: float | None = None
         self._watchdog.arm(True)
         try:
             while not self._stop.is_set():

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import threading
 import time
-from typing import Callable, Optional
+from collections.abc import Callable
 
 from rpf_fly.flight.agent import DroneAgent
 from rpf_fly.flight.commander import ON_FLOOR_Z_M, TOUCHDOWN_TIMEOUT_S, Commander
@@ -50,8 +50,8 @@ class LoopLanding:
     _states: dict[str, DroneState]
     _down_since: dict[str, float]
     _emergency_now: Callable[[], None]
-    _spin_once: Callable[[Optional[float]], None]
-    _send: Callable[[DroneAgent, complex, Optional[MocapFrame], list[tuple[str, tuple[float, float, float], float]]],
+    _spin_once: Callable[[float | None], None]
+    _send: Callable[[DroneAgent, complex, MocapFrame | None, list[tuple[str, tuple[float, float, float], float]]],
                     None]
 
     def _land_all(self, reason: str, wait: bool = True, told: bool = False) -> None:

@@ -10,15 +10,22 @@ named in its body.
 from __future__ import annotations
 
 import threading
-from typing import TYPE_CHECKING, Callable, Optional
+from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 from rpf_fly.flight.agent import DroneAgent
 from rpf_fly.flight.commander import Commander
 from rpf_fly.flight.events import ERROR, WARNING, EventBus
 from rpf_fly.flight.phases import DronePhase, SwarmPhase
 from rpf_fly.flight.poses import PoseTracker
-from rpf_fly.flight.preflight import (awaits_data, estimate_problem, orientation_problem, preflight_problem,
-                                     yaw_of, yaw_problem)
+from rpf_fly.flight.preflight import (
+    awaits_data,
+    estimate_problem,
+    orientation_problem,
+    preflight_problem,
+    yaw_of,
+    yaw_problem,
+)
 from rpf_fly.mission.model import Mission
 from rpf_fly.radio.backend import DroneBackend, DroneState
 
@@ -46,14 +53,14 @@ class LoopPreflight:
     commander: Commander
     events: EventBus
     tracker: PoseTracker
-    swarm: Optional[SwarmLink]
+    swarm: SwarmLink | None
     phase: SwarmPhase
     clock: Callable[[], float]
     _stop: threading.Event
     _states: dict[str, DroneState]
     _set_phase: Callable[[SwarmPhase], None]
     _abort: Callable[[str], None]
-    _spin_once: Callable[[Optional[float]], None]
+    _spin_once: Callable[[float | None], None]
     _finish: Callable[[], None]
 
     def _connect(self) -> bool:
@@ -190,13 +197,13 @@ class LoopPreflight:
         finally:
             self._finish()
 
-    def _estimate_of(self, name: str) -> Optional[tuple[float, float, float]]:
+    def _estimate_of(self, name: str) -> tuple[float, float, float] | None:
         """The drone's newest on-board position estimate from its telemetry (None: not one of this loop's drones,
         or no estimate yet)."""
         state = self._states.get(name)
         return state.position_m if state is not None else None
 
-    def _airborne_estimate_of(self, name: str) -> Optional[tuple[tuple[float, float, float], float]]:
+    def _airborne_estimate_of(self, name: str) -> tuple[tuple[float, float, float], float] | None:
         """A flying drone's newest on-board estimate and when the drone made it (`PoseTracker.airborne_estimate_of`):
         None on the ground (before take-off the estimate may not have been reset to mocap yet) or without one."""
         agent = self.agents.get(name)

@@ -10,7 +10,8 @@ named in its body.
 from __future__ import annotations
 
 import threading
-from typing import TYPE_CHECKING, Callable, Collection, Optional, Protocol
+from collections.abc import Callable, Collection
+from typing import TYPE_CHECKING, Protocol
 
 from rpf_fly.flight.agent import DroneAgent
 from rpf_fly.flight.commander import Commander
@@ -26,10 +27,10 @@ class SwarmLink(Protocol):
     the swarm's coordinator. Without one the loop flies its drones alone: it takes off right after its preflight
     and ends once every drone arrived (``safety.arrival_hold_s``)."""
 
-    def preflight_done(self, loop: "FlightLoop") -> None:
+    def preflight_done(self, loop: FlightLoop) -> None:
         """This loop's drones passed (or failed) their preflight: tell the coordinator."""
 
-    def verdict(self) -> Optional[str]:
+    def verdict(self) -> str | None:
         """``go`` (take off), ``abort`` (nothing takes off) or None (not yet)."""
 
     def grounded(self) -> Collection[str]:
@@ -37,11 +38,11 @@ class SwarmLink(Protocol):
         ground``), whichever loop flies it; this loop keeps down its own drones beside them
         (:meth:`FlightLoop._ground_neighbours`)."""
 
-    def armed(self, loop: "FlightLoop", refused: Collection[str]) -> None:
+    def armed(self, loop: FlightLoop, refused: Collection[str]) -> None:
         """This loop armed its drones; ``refused``: those that stay down (their supervisors refused, or kept down
         beside them): tell the coordinator, which then says who takes off."""
 
-    def takeoff(self) -> Optional[Collection[str]]:
+    def takeoff(self) -> Collection[str] | None:
         """Once every loop armed: every drone of the swarm that stays on the ground (the arming refusals of every
         loop, and the drones down since the go), this loop keeping its own beside them down; None: not yet."""
 
@@ -57,12 +58,12 @@ class LoopSwarm:
     agents: dict[str, DroneAgent]
     commander: Commander
     events: EventBus
-    swarm: Optional[SwarmLink]
+    swarm: SwarmLink | None
     clock: Callable[[], float]
     _stop: threading.Event
     _stop_reason: str
     _abort: Callable[[str], None]
-    _spin_once: Callable[[Optional[float]], None]
+    _spin_once: Callable[[float | None], None]
     _ground_neighbours: Callable[[set[str]], None]
 
     def _await_go(self) -> bool:

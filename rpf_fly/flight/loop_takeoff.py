@@ -11,7 +11,8 @@ from __future__ import annotations
 
 import threading
 import time
-from typing import TYPE_CHECKING, Callable, Optional
+from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 from rpf_fly.flight.agent import DroneAgent
 from rpf_fly.flight.commander import ON_FLOOR_Z_M, Commander
@@ -44,13 +45,13 @@ class LoopTakeoff:
     commander: Commander
     events: EventBus
     tracker: PoseTracker
-    swarm: Optional[SwarmLink]
+    swarm: SwarmLink | None
     clock: Callable[[], float]
     _stop: threading.Event
     _stop_reason: str
     _states: dict[str, DroneState]
     _set_phase: Callable[[SwarmPhase], None]
-    _spin_once: Callable[[Optional[float]], None]
+    _spin_once: Callable[[float | None], None]
     _ground_neighbours: Callable[[set[str]], None]
     _await_takeoff: Callable[[list[DroneAgent]], list[DroneAgent]]
 

@@ -9,7 +9,7 @@ attributes named in its body.
 from __future__ import annotations
 
 import threading
-from typing import Callable, Optional, Union
+from collections.abc import Callable
 
 from rpf_fly.flight.agent import DroneAgent, PlannerFault, PlanResult
 from rpf_fly.flight.commander import Commander
@@ -53,11 +53,11 @@ class LoopIteration:
     supervisor: Supervisor
     recorder: Recorder
     stats: LoopStats
-    status_hook: Optional[Callable[..., None]]
+    status_hook: Callable[..., None] | None
     clock: Callable[[], float]
     tick: int
     _ticks: TickSchedule
-    _last_tick_s: Optional[float]
+    _last_tick_s: float | None
     _last_status_s: float
     _stalls_seen: int
     _states: dict[str, DroneState]
@@ -66,13 +66,13 @@ class LoopIteration:
     _watchdog: LoopWatchdog
     _gc: GcPacer
     _swarm_planner: SwarmPlanner
-    _take_latencies: Optional[Callable[[], list[float]]]
-    _wait_sent: Optional[Callable[[Optional[list[str]], float], bool]]
+    _take_latencies: Callable[[], list[float]] | None
+    _wait_sent: Callable[[list[str] | None, float], bool] | None
     _emergency_now: Callable[[], None]
     _apply: Callable[[list[Finding], float], None]
     _finish_landings: Callable[[float], None]
 
-    def _spin_once(self, until_s: Optional[float]) -> None:
+    def _spin_once(self, until_s: float | None) -> None:
         """Receive the newest frame (waiting until ``until_s`` at most); at a planning tick plan and send first (its
         latency is what the drones feel), then forward extpos, record, and supervise. ``until_s`` None: flying,
         the wait and the ticks follow the flight's :class:`TickSchedule` (ticks locked to the mocap frames)."""
@@ -132,7 +132,7 @@ class LoopIteration:
         drift or fall there for up to 2 s."""
         return in_the_way(agent.phase, pose.position[2], self.mission.flight.height)
 
-    def _plan_tick(self, now: float, frame: Optional[MocapFrame]) -> None:
+    def _plan_tick(self, now: float, frame: MocapFrame | None) -> None:
         """Plan and send every drone's setpoint; the log records are written after the last send."""
         self.stats.ticks += 1
         self.tick += 1
@@ -203,8 +203,8 @@ class LoopIteration:
         self.recorder.setpoints(sent)
         self.recorder.planner_steps(now, self.tick, records)
 
-    def _take_plan(self, agent: DroneAgent, pose: TrackedPose, outcome: Union[PlanResult, PlannerFault], now: float,
-                   frame: Optional[MocapFrame], sent: list, records: list, planned: list) -> None:
+    def _take_plan(self, agent: DroneAgent, pose: TrackedPose, outcome: PlanResult | PlannerFault, now: float,
+                   frame: MocapFrame | None, sent: list, records: list, planned: list) -> None:
         """Stream a drone's planned setpoint, or hold and land it on its planner's fault."""
         if isinstance(outcome, PlannerFault):
             self.commander.hold(agent, pose.xy, now, str(outcome), pose.velocity)
@@ -216,7 +216,7 @@ class LoopIteration:
         self._send(agent, outcome.setpoint, frame, sent)
         planned.append((agent, pose, outcome))
 
-    def _send(self, agent: DroneAgent, xy: complex, frame: Optional[MocapFrame],
+    def _send(self, agent: DroneAgent, xy: complex, frame: MocapFrame | None,
               sent: list[tuple[str, tuple[float, float, float], float]]) -> None:
         z = agent.clamp_height(self.mission.flight.height)
         xy = agent.clamp(xy)

@@ -19,7 +19,7 @@ class PeriodicFeed:
         self.cpu_s = 0.0
         """CPU time of the feed's thread, set when it ends."""
 
-    def start(self) -> "PeriodicFeed":
+    def start(self) -> PeriodicFeed:
         self._thread.start()
         return self
 

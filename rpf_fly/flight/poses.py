@@ -37,8 +37,8 @@ jitter of any mocap frame (tens of microseconds and more), so the velocity estim
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Collection, Mapping
 from dataclasses import dataclass
-from typing import Callable, Collection, Mapping, Optional
 
 from rpf_fly.mocap.frame import MocapFrame
 
@@ -142,8 +142,8 @@ class PoseTracker:
         self.bodies = dict(bodies)
         self.velocity_tau_s = velocity_tau_s
         self.poses: dict[str, TrackedPose] = {}
-        self.last_frame_s: Optional[float] = None
-        self.latency_s: Optional[float] = None
+        self.last_frame_s: float | None = None
+        self.latency_s: float | None = None
         """The newest frame's camera-to-receipt latency as the mocap measures it (None if it does not)."""
         self.glitching: set[str] = set()
         """Drones whose newest samples are refused as a jump."""
@@ -160,7 +160,7 @@ class PoseTracker:
         """Samples whose orientation was refused, per drone."""
         self.last_turn: dict[str, tuple[float, float]] = {}
         """drone -> (degrees, seconds) of its newest refused orientation jump, for the event that reports it."""
-        self.airborne_estimate_of: Optional[Callable[[str], Optional[tuple[tuple[float, float, float], float]]]] = None
+        self.airborne_estimate_of: Callable[[str], tuple[tuple[float, float, float], float] | None] | None = None
         """drone -> (its on-board position estimate, when the drone made it, on the receive clock) while it flies
         (None on the ground, before its estimator was reset to mocap, or without telemetry), or None: the check of a
         sample after a gap (``GAP_S``). The flight loop sets it."""
@@ -170,7 +170,7 @@ class PoseTracker:
         self.last_jump_from_estimate: dict[str, bool] = {}
         """drone -> whether its newest refused jump was measured from its on-board estimate after a gap (else from
         its previous sample)."""
-        self.estimate_of: Optional[Callable[[str], Optional[tuple[float, float, float]]]] = None
+        self.estimate_of: Callable[[str], tuple[float, float, float] | None] | None = None
         """drone -> its on-board position estimate (None: none known), or None (no estimates): see
         `_estimate_agrees`. The flight loop sets it from the drones' telemetry."""
         self._raw_turn: dict[str, tuple[tuple[float, float, float, float], float, float]] = {}
@@ -184,7 +184,7 @@ class PoseTracker:
         return math.dist(a, b) > MAX_SPEED_M_S * max(dt, 0.0) + JUMP_TOLERANCE_M
 
     def _accept(self, name: str, position: tuple[float, float, float], t: float, captured: float,
-                previous: Optional[TrackedPose]) -> bool:
+                previous: TrackedPose | None) -> bool:
         """Whether this sample may be followed (see the module docstring); updates the glitch state. The time a
         sample had to move is the longer of its receive and capture intervals: frames delayed and then received
         in a burst (a loaded host or network) are close in receive time but not in capture time."""
@@ -222,7 +222,7 @@ class PoseTracker:
         return False
 
     def _trust_orientation(self, name: str, quaternion: tuple[float, float, float, float], t: float,
-                           captured: float, trusted: Optional[tuple[float, float, float, float]]) -> bool:
+                           captured: float, trusted: tuple[float, float, float, float] | None) -> bool:
         """Whether this sample's orientation may be followed (module docstring); updates the orientation glitch
         state. ``trusted``: the orientation the drone's pose holds now (None before its first pose)."""
         raw = self._raw_turn.get(name)
@@ -245,7 +245,7 @@ class PoseTracker:
         self.last_turn[name] = (turned, dt)
         return False
 
-    def _off_estimate(self, name: str, position: tuple[float, float, float], t: float, gap_s: float) -> Optional[float]:
+    def _off_estimate(self, name: str, position: tuple[float, float, float], t: float, gap_s: float) -> float | None:
         """How far (m, horizontally) the first sample after a ``gap_s`` gap lies from the flying drone's on-board
         estimate, when that is further than the estimate can be off (``ESTIMATE_TOLERANCE_M``, plus what the drone
         may have flown since the estimate was made at ``ESTIMATE_SPEED_M_S``, plus its drift over the gap at
@@ -262,7 +262,7 @@ class PoseTracker:
         return off if off > allowed else None
 
     def _estimate_agrees(self, name: str, position: tuple[float, float, float],
-                         frozen: Optional[TrackedPose]) -> bool:
+                         frozen: TrackedPose | None) -> bool:
         """Whether a jumped track that held for ``REACQUIRE_S`` is the drone: without an ``estimate_of`` (a replay,
         a bare tracker) it is taken; with one, only when the drone's on-board estimate (which
         flew on its IMU alone while the glitch lasted: centimetres of drift) is nearer the new track than the frozen
@@ -322,7 +322,7 @@ class PoseTracker:
                 orientation_trusted=trusted,
             )
 
-    def get(self, name: str) -> Optional[TrackedPose]:
+    def get(self, name: str) -> TrackedPose | None:
         return self.poses.get(name)
 
     def take_unseen(self) -> dict[str, float]:

@@ -8,7 +8,6 @@ until every drone passes or the preflight times out.
 from __future__ import annotations
 
 import math
-from typing import Optional
 
 from rpf_fly.flight.agent import DroneAgent
 from rpf_fly.flight.poses import PoseTracker, TrackedPose
@@ -33,7 +32,7 @@ def awaits_data(problem: str) -> bool:
     return problem in (NO_LINK, NO_BATTERY) or problem.endswith(NOT_TRACKED)
 
 
-def preflight_problem(mission: Mission, agent: DroneAgent, state: Optional[DroneState], pose: Optional[TrackedPose],
+def preflight_problem(mission: Mission, agent: DroneAgent, state: DroneState | None, pose: TrackedPose | None,
                       pose_age_s: float) -> str:
     """The first reason ``agent``'s drone must not take off, or ""."""
     s, arena = mission.safety, mission.arena
@@ -85,7 +84,7 @@ def yaw_of(quaternion: tuple[float, float, float, float]) -> float:
     return math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
 
 
-def estimate_problem(state: Optional[DroneState], pose: TrackedPose, since_s: float) -> str:
+def estimate_problem(state: DroneState | None, pose: TrackedPose, since_s: float) -> str:
     """Whether the drone's on-board estimate agrees with mocap (position and yaw), from telemetry newer than
     ``since_s`` (the estimator reset); "" when it does."""
     if state is None or state.telemetry_stamp_s is None or state.telemetry_stamp_s <= since_s:
@@ -100,7 +99,7 @@ def estimate_problem(state: Optional[DroneState], pose: TrackedPose, since_s: fl
     return yaw_problem(state, pose)
 
 
-def yaw_problem(state: Optional[DroneState], pose: TrackedPose) -> str:
+def yaw_problem(state: DroneState | None, pose: TrackedPose) -> str:
     """Whether the drone's yaw estimate is off mocap's yaw by more than ``ESTIMATE_YAW_TOLERANCE_DEG``; "" if
     not (or if there is no yaw estimate yet)."""
     if state is None or state.yaw_deg is None:

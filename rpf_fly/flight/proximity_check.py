@@ -11,7 +11,7 @@ stops")."""
 from __future__ import annotations
 
 import math
-from typing import Callable, Optional
+from collections.abc import Callable
 
 import numpy as np
 
@@ -43,7 +43,7 @@ class ProximityCheck:
     """The separation and clearance checks with the memory their episodes need (the supervisor runs them)."""
 
     def __init__(self, mission: Mission, obstacles: ObstacleSet,
-                 model_of: Callable[[str], Optional[Follower]] = lambda name: None) -> None:
+                 model_of: Callable[[str], Follower | None] = lambda name: None) -> None:
         """``model_of``: a streaming drone's response model (`TrackingCheck.model_of`), whose velocity and tilt
         are the drone's state for its stop: the mocap's filtered velocity trails a drone that speeds up."""
         self.safety = mission.safety
@@ -110,7 +110,7 @@ class ProximityCheck:
         self._close_pairs = close_now
         return out
 
-    def _stop_point(self, pose: TrackedPose, agent: Optional[DroneAgent], latency_s: Optional[float]) -> complex:
+    def _stop_point(self, pose: TrackedPose, agent: DroneAgent | None, latency_s: float | None) -> complex:
         """Where a drone at ``pose`` comes to rest if it is held now: its mocap picture is ``latency_s`` old and the
         hold reaches it `HOLD_REACTION_S` later, flown at its speed, then it brakes as its own controller does
         (`Braking.stop_point`) from its state: a streaming drone's velocity and tilt from its response model (the
@@ -128,8 +128,8 @@ class ProximityCheck:
         ahead = pose.xy + velocity * (HOLD_REACTION_S + (latency_s or 0.0))
         return braking.stop_point(ahead, velocity, setpoint, tilt)
 
-    def _stopped_apart(self, pi: TrackedPose, pj: TrackedPose, ai: Optional[DroneAgent], aj: Optional[DroneAgent],
-                       latency_s: Optional[float]) -> float:
+    def _stopped_apart(self, pi: TrackedPose, pj: TrackedPose, ai: DroneAgent | None, aj: DroneAgent | None,
+                       latency_s: float | None) -> float:
         """The closest two drones come if both are held now (3D, centre to centre): each flies on to its
         `_stop_point`, both taken to cover their way in step."""
         a0, b0 = pi.xy, pj.xy

@@ -44,7 +44,7 @@ class RadioLoadFeed(PeriodicFeed):
         self.windows = 0
         self.error: BaseException | None = None
 
-    def start(self) -> "RadioLoadFeed":
+    def start(self) -> RadioLoadFeed:
         self._last, self._last_s = dict(self._fetch()), time.monotonic()
         super().start()
         return self

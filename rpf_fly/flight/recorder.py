@@ -5,7 +5,7 @@ the loop does not import the log (and its writer thread) to say what it needs.""
 from __future__ import annotations
 
 import time
-from typing import Optional, Protocol
+from typing import Protocol
 
 from rpf_fly.flight.agent import DroneAgent
 from rpf_fly.flight.events import FlightEvent
@@ -13,7 +13,7 @@ from rpf_fly.flight.poses import TrackedPose
 from rpf_fly.planning.planner import PlanStep
 from rpf_fly.radio.backend import DroneState
 
-PlannerRecord = tuple[DroneAgent, Optional[TrackedPose], Optional[PlanStep], str]
+PlannerRecord = tuple[DroneAgent, TrackedPose | None, PlanStep | None, str]
 """One drone's planner row of a tick: the agent, its pose, its step (None when it did not plan) and its mode."""
 
 
@@ -23,7 +23,7 @@ class Recorder(Protocol):
     def poses(self, t_s: float, poses: dict[str, TrackedPose]) -> None: ...
     def planner_steps(self, t_s: float, tick: int, records: list[PlannerRecord]) -> None: ...
     def setpoints(self, sent: list[tuple[str, tuple[float, float, float], float]]) -> None: ...
-    def status(self, t_s: float, agent: DroneAgent, state: Optional[DroneState]) -> None: ...
+    def status(self, t_s: float, agent: DroneAgent, state: DroneState | None) -> None: ...
     def event(self, event: FlightEvent) -> None: ...
     def after_tick(self, t_s: float) -> None: ...
     def close(self) -> None: ...
@@ -65,7 +65,7 @@ class MeteredRecorder:
         self.inner.setpoints(sent)
         self.cpu_s += time.thread_time() - c
 
-    def status(self, t_s: float, agent: DroneAgent, state: Optional[DroneState]) -> None:
+    def status(self, t_s: float, agent: DroneAgent, state: DroneState | None) -> None:
         c = time.thread_time()
         self.inner.status(t_s, agent, state)
         self.cpu_s += time.thread_time() - c

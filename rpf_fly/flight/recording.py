@@ -12,8 +12,9 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
-from typing import Any, Callable, Iterable, Mapping, Optional
+from typing import Any
 
 from rpf_fly.flight.agent import DroneAgent
 from rpf_fly.flight.events import FlightEvent
@@ -29,7 +30,6 @@ from rpf_fly.planning.planner import PlanStep
 from rpf_fly.radio.backend import DroneState
 from rpf_fly.radio.budget import radio_loads
 from rpf_fly.radio.schedule import LinkCount, MeasuredLoad
-
 
 TF_PERIOD_S = 0.05
 """/tf at 20 Hz: it repeats the mocap poses (logged at the full rate) for Foxglove's 3D panel, which needs no more."""
@@ -58,9 +58,9 @@ class McapRecorder:
     to the flight's mocap relay (rpf_fly/runtime/relay.py) and logs its drones' ``/tf`` only."""
 
     def __init__(self, path: str | Path, mission: Mission, seed: int = 0, source: str = "flight",
-                 truth: Optional[Callable[[], TruthBatch]] = None, sink: Optional[Sink] = None,
-                 radio: Optional[Callable[[], Mapping[str, LinkCount]]] = None, radio_period_s: Optional[float] = None,
-                 out: Optional[Out] = None, radio_dongles: Optional[Iterable[int]] = None, mocap: bool = True):
+                 truth: Callable[[], TruthBatch] | None = None, sink: Sink | None = None,
+                 radio: Callable[[], Mapping[str, LinkCount]] | None = None, radio_period_s: float | None = None,
+                 out: Out | None = None, radio_dongles: Iterable[int] | None = None, mocap: bool = True):
         self.mission = mission
         self._mocap = mocap
         self._offset_ns = time.time_ns() - time.monotonic_ns()
@@ -110,7 +110,7 @@ class McapRecorder:
             self.log.tf(t, items)
 
     def planner_steps(self, t_s: float, tick: int,
-                      records: list[tuple[DroneAgent, Optional[TrackedPose], Optional[PlanStep], str]]) -> None:
+                      records: list[tuple[DroneAgent, TrackedPose | None, PlanStep | None, str]]) -> None:
         """One tick's planner records. Only references cross to the writer thread (poses, goals and headings are
         immutable values, a step's fields numpy scalars); :meth:`_planner_message` builds the messages there."""
         steps = {agent.name: (tick, pose.position, agent.goal, agent.heading, step, mode,
@@ -161,7 +161,7 @@ class McapRecorder:
         ns = self._ns
         self.log.setpoints([(name, ns(t), position, 0.0) for name, position, t in sent])
 
-    def status(self, t_s: float, agent: DroneAgent, state: Optional[DroneState]) -> None:
+    def status(self, t_s: float, agent: DroneAgent, state: DroneState | None) -> None:
         battery = state.battery.voltage_v if state is not None and state.battery is not None else None
         quality = state.link.quality_pct / 100.0 if state is not None and state.link.quality_pct is not None else None
         latency = state.link.latency_ms if state is not None else None

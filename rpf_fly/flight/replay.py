@@ -34,15 +34,24 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable, Optional
 
 from rpf_fly.flight.agent import DroneAgent, PlannerFault, PlannerLike
 from rpf_fly.flight.phases import DronePhase
 from rpf_fly.flight.poses import PoseTracker
 from rpf_fly.flight.replay_inputs import (
-    FRAME_SLACK_NS, PLANNING_MODES, LoggedRow, ReplayError, TrackerClock, batching_switched_off_ns, logged_ticks,
-    missing_sequences, mocap_frame, phase_of_mode, reacquisitions,
+    FRAME_SLACK_NS,
+    PLANNING_MODES,
+    LoggedRow,
+    ReplayError,
+    TrackerClock,
+    batching_switched_off_ns,
+    logged_ticks,
+    missing_sequences,
+    mocap_frame,
+    phase_of_mode,
+    reacquisitions,
 )
 from rpf_fly.flight.replay_mission import ReplaySetup, logged_mission, shipped_policy
 from rpf_fly.flight.replay_result import DroneReplay, ReplayResult, TickComparison
@@ -77,7 +86,7 @@ def replay_log(
     *,
     tolerance: float = FIXED_GAINS_TOLERANCE,
     planner: str = "",
-    policy: Optional[Path] = None,
+    policy: Path | None = None,
     same_as_flown: bool = True,
     clock: Callable[[], float] = time.perf_counter,
 ) -> ReplayResult:
@@ -197,7 +206,7 @@ def replay_log(
     )
 
 
-def _restarts(row: LoggedRow, last: Optional[LoggedRow], previous_mode: Optional[str], shadow: DroneAgent) -> bool:
+def _restarts(row: LoggedRow, last: LoggedRow | None, previous_mode: str | None, shadow: DroneAgent) -> bool:
     """Whether the flight (re)started this drone's planning before ``row`` (``DroneAgent.begin_planning``: the
     reference back on the measured pose, the heading towards the goal): at its first planning tick, and wherever
     the logged reference is not where the flight's previous step moved it (after a hold, also one that began and
@@ -212,17 +221,17 @@ def _restarts(row: LoggedRow, last: Optional[LoggedRow], previous_mode: Optional
     return moved_to != row.reference
 
 
-def replay_setup(data: LogData, kind: Optional[str] = None, policy: Optional[Path] = None,
-                 tolerance: Optional[float] = None) -> ReplaySetup:
+def replay_setup(data: LogData, kind: str | None = None, policy: Path | None = None,
+                 tolerance: float | None = None) -> ReplaySetup:
     """The logged mission with ``kind`` and ``policy`` (None: the flight's own, from the mission metadata) and
     the planner factory the flight loop would have used. Raises :class:`ReplayError` (one line)."""
     from rpf_fly.log.metadata import file_sha256
     from rpf_fly.mission import MissionError, with_planner
     from rpf_fly.mission.model import POLICY_KINDS
+    from rpf_fly.planning.factory import UnsupportedPlanner, mission_planner
     from rpf_fly.planning.gains import FixedGains
     from rpf_fly.planning.onnx_policy import PolicyError
     from rpf_fly.planning.planner import Planner
-    from rpf_fly.planning.factory import UnsupportedPlanner, mission_planner
     from rpf_fly.sim.scenario import obstacle_set
 
     log = data.path

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import bisect
 from dataclasses import dataclass
-from typing import Any, Optional
+from typing import Any
 
 from rpf_fly.flight.phases import DronePhase
 from rpf_fly.flight.poses import stamp_from_us
@@ -38,10 +38,10 @@ class LoggedRow:
     mode: str
     direction: complex
     position: tuple[float, float, float]
-    reference: Optional[complex]
+    reference: complex | None
 
 
-def logged_row(message: Any) -> Optional[LoggedRow]:
+def logged_row(message: Any) -> LoggedRow | None:
     d = message.data
     try:
         direction = complex(float(d["direction"]["x"]), float(d["direction"]["y"]))
@@ -68,7 +68,7 @@ def phase_of_mode(mode: str) -> DronePhase:
         return DronePhase.HOLDING  # hold, stalled: airborne, in the others' way
 
 
-def batching_switched_off_ns(data: LogData) -> Optional[int]:
+def batching_switched_off_ns(data: LogData) -> int | None:
     """When the flight switched batching off for good (event ``planner_batch``: a batched call over budget)."""
     for message in data.topics.get("/events", ()):
         d = message.data
@@ -129,7 +129,7 @@ def logged_ticks(data: LogData, names: list[str], last_pose_log_ns: int) -> tupl
 class TrackerClock:
     """Log nanoseconds back to the loop's monotonic seconds as the flight's tracker held them."""
 
-    def __init__(self, offset_ns: Optional[int], first_ns: int):
+    def __init__(self, offset_ns: int | None, first_ns: int):
         self.exact = offset_ns is not None
         self.offset_ns = offset_ns if offset_ns is not None else first_ns
 

@@ -5,9 +5,9 @@ replay.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Optional
 
 from rpf_fly.flight.agent import PlannerLike
 from rpf_fly.flight.replay_inputs import ReplayError
@@ -26,7 +26,7 @@ class ReplaySetup:
     warnings: list[str] = field(default_factory=list)
 
 
-def _with_policy(text: str, policy: Optional[Path]) -> str:
+def _with_policy(text: str, policy: Path | None) -> str:
     """The mission text with ``planner.policy`` set to ``policy`` (absolute), or without a policy at all (kind
     ``apf``, for a replay that names its own planner). Only used when the logged policy path does not resolve:
     it was relative to the mission's folder, which the log does not record."""
@@ -44,7 +44,7 @@ def _with_policy(text: str, policy: Optional[Path]) -> str:
     return yaml.safe_dump(doc, sort_keys=False)
 
 
-def find_flown_policy(text: str, kind: str, log: Path, sha256: str) -> Optional[Path]:
+def find_flown_policy(text: str, kind: str, log: Path, sha256: str) -> Path | None:
     """The flown policy file, found by its SHA-256 (``mission.policy_sha256``): the mission's ``planner.policy``
     (or ``policies/<kind>.onnx``) next to the log or here, then a file of that name in ``policies/`` here, next to
     the log, above it, or in this checkout. None if no file there has that hash."""
@@ -73,7 +73,7 @@ def find_flown_policy(text: str, kind: str, log: Path, sha256: str) -> Optional[
     return None
 
 
-def shipped_policy(kind: str, log: Path) -> Optional[Path]:
+def shipped_policy(kind: str, log: Path) -> Path | None:
     """``policies/<kind>.onnx`` for a policy kind named with ``--planner`` alone: here, next to the log, or in
     this checkout (None: let the mission loader say where it looked)."""
     checkout = Path(__file__).resolve().parents[2]
@@ -84,7 +84,7 @@ def shipped_policy(kind: str, log: Path) -> Optional[Path]:
     return None
 
 
-def logged_mission(meta: dict[str, str], log: Path, kind: Optional[str], policy: Optional[Path]) -> Mission:
+def logged_mission(meta: dict[str, str], log: Path, kind: str | None, policy: Path | None) -> Mission:
     """The mission of the log's metadata, its policy resolved (see :func:`find_flown_policy`)."""
     from rpf_fly.mission import MissionError, parse_mission
 

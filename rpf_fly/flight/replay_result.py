@@ -7,7 +7,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Optional
+from typing import Any
 
 
 @dataclass
@@ -28,7 +28,7 @@ class TickComparison:
         return abs(self.replayed_direction - self.logged_direction)
 
     @property
-    def angle_diff_rad(self) -> Optional[float]:
+    def angle_diff_rad(self) -> float | None:
         """The angle between the two directions (radians), None when either is zero (a stalled or faulted step)."""
         if abs(self.replayed_direction) == 0 or abs(self.logged_direction) == 0:
             return None
@@ -55,7 +55,7 @@ class DroneReplay:
         return c.replayed_mode != c.logged_mode or not c.direction_diff <= self.tolerance
 
     @property
-    def first_divergence_tick(self) -> Optional[int]:
+    def first_divergence_tick(self) -> int | None:
         return next((c.tick for c in self.ticks if self.diverges(c)), None)
 
     @property
@@ -97,7 +97,7 @@ class ReplayResult:
     """A whole replay: the planner replayed, per drone the comparison, the cost, and the warnings to print."""
 
     planner: str
-    policy: Optional[Path]
+    policy: Path | None
     flown_planner: str
     same_as_flown: bool
     tolerance: float

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Optional
 
 import numpy as np
 
@@ -27,8 +26,8 @@ class LoopStats:
     gc: GcStats = field(default_factory=GcStats)
     """The garbage collections the loop ran in its gaps (flight/gc_pacing.py)."""
 
-    def summary(self) -> dict[str, Optional[float]]:
-        def pct(values: list[float], q: float) -> Optional[float]:
+    def summary(self) -> dict[str, float | None]:
+        def pct(values: list[float], q: float) -> float | None:
             return float(np.percentile(values, q)) if values else None
 
         intervals = self.tick_intervals
@@ -60,12 +59,12 @@ class FlightReport:
     events: list[FlightEvent]
     stats: LoopStats
     interrupted: bool = False
-    error: Optional[str] = None
+    error: str | None = None
     log_dropped: int = 0
     """Messages the flight log dropped (queue full, or logged after close)."""
     log_failed: int = 0
     """Messages the flight log could not encode (a schema or value error)."""
-    host_behind_s: Optional[float] = None
+    host_behind_s: float | None = None
     """A dry run's or lab's: seconds during this flight that the host let the simulated world run behind its own
     time (`rpf_fly.emulator.host_lag`); None for a real flight. Over 0, the flight's verdict is not evidence."""
 

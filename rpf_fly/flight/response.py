@@ -23,9 +23,9 @@ drone's parameter TOC (`ResponseGains.from_params`) or the firmware's defaults.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 from functools import lru_cache
-from typing import Mapping, Optional
 
 import numpy as np
 
@@ -64,7 +64,7 @@ class ResponseGains:
     """The firmware parameters this model reads, and the field each sets."""
 
     @classmethod
-    def from_params(cls, params: Mapping[str, float]) -> "ResponseGains":
+    def from_params(cls, params: Mapping[str, float]) -> ResponseGains:
         """From a drone's parameter values (names as in its TOC); a parameter it lacks keeps the default."""
         given = {field: float(params[name]) for name, field in cls.PARAMS.items() if name in params}
         return cls(**given)
@@ -87,7 +87,7 @@ DEFAULT_GAINS = ResponseGains()
 
 
 def respond(gains: ResponseGains, position: np.ndarray, velocity: np.ndarray, setpoints: np.ndarray,
-            duration_s: float, tilt_deg: Optional[np.ndarray] = None) -> np.ndarray:
+            duration_s: float, tilt_deg: np.ndarray | None = None) -> np.ndarray:
     """Positions (steps x ... x 2) of drones that start at ``position`` with ``velocity`` (... x 2, m and m/s) and
     are held at ``setpoints`` (... x 2; or steps x ... x 2, one per 10 ms step) for ``duration_s``, one row per
     10 ms step. ``tilt_deg``: the tilt each starts with (default: what holds its velocity against drag, as in
@@ -182,7 +182,7 @@ class Braking:
         self._stop = np.take_along_axis(farthest, chosen[:, :, None], axis=2)[:, :, 0]
         self._offset = np.take_along_axis(offsets, chosen[:, :, None], axis=2)[:, :, 0]
 
-    def _read(self, table: np.ndarray, speed_m_s: float, tilt_deg: Optional[float]) -> float:
+    def _read(self, table: np.ndarray, speed_m_s: float, tilt_deg: float | None) -> float:
         if tilt_deg is None:
             tilt_deg = math.degrees(math.atan(DRAG_PER_S * speed_m_s / GRAVITY))
         top = SPEEDS_M_S[-1]
@@ -197,17 +197,17 @@ class Braking:
         high = table[i + 1, j] * (1 - ft) + table[i + 1, j + 1] * ft
         return float((low * (1 - fv) + high * fv) * scale)
 
-    def stop_m(self, speed_m_s: float, tilt_deg: Optional[float] = STEADY) -> float:
+    def stop_m(self, speed_m_s: float, tilt_deg: float | None = STEADY) -> float:
         """How far a drone at ``speed_m_s`` tilted ``tilt_deg`` along its way (default: steady flight) travels
         after its hold before it is at rest (at most: it may come back a little)."""
         return self._read(self._stop, speed_m_s, tilt_deg)
 
-    def hold_offset_m(self, speed_m_s: float, tilt_deg: Optional[float] = STEADY) -> float:
+    def hold_offset_m(self, speed_m_s: float, tilt_deg: float | None = STEADY) -> float:
         """Where to hold it, ahead of where it is along its way (negative: behind)."""
         return self._read(self._offset, speed_m_s, tilt_deg)
 
-    def _way(self, position: complex, velocity: complex, setpoint: Optional[complex]) -> tuple[complex, float,
-                                                                                                 Optional[float]]:
+    def _way(self, position: complex, velocity: complex, setpoint: complex | None) -> tuple[complex, float,
+                                                                                                 float | None]:
         """The drone's way (unit, 0 when it goes nowhere), its speed along it and its tilt along it (None: steady,
         when no setpoint is known)."""
         speed = abs(velocity)
@@ -220,8 +220,8 @@ class Braking:
             return 0j, 0.0, None
         return way, speed, None if tilt is None else (tilt * way.conjugate()).real
 
-    def stop_point(self, position: complex, velocity: complex, setpoint: Optional[complex] = None,
-                   tilt_deg: Optional[complex] = None) -> complex:
+    def stop_point(self, position: complex, velocity: complex, setpoint: complex | None = None,
+                   tilt_deg: complex | None = None) -> complex:
         """Where a drone at ``position`` (x + iy), moving at ``velocity`` and streamed ``setpoint`` (None: in
         steady flight), comes to rest at the farthest if it is held now; ``tilt_deg`` (x + iy, towards where it
         accelerates): its tilt when known (a `Follower`'s), else the one its setpoint asks for."""
@@ -233,7 +233,7 @@ class Braking:
             tilt = (tilt_deg * way.conjugate()).real if way else None
         return position + way * self.stop_m(speed, tilt) if way else position
 
-    def hold_point(self, position: complex, velocity: complex, setpoint: Optional[complex] = None) -> complex:
+    def hold_point(self, position: complex, velocity: complex, setpoint: complex | None = None) -> complex:
         """The hold setpoint of a drone at ``position`` moving at ``velocity`` (x + iy, m and m/s) that was
         streamed ``setpoint`` (None: in steady flight)."""
         way, speed, tilt = self._way(position, velocity, setpoint)
@@ -245,7 +245,7 @@ def _braking(gains: ResponseGains) -> Braking:
     return Braking(gains)
 
 
-def braking_for(params: Optional[Mapping[str, float]]) -> Braking:
+def braking_for(params: Mapping[str, float] | None) -> Braking:
     """The `Braking` of a drone whose controller parameters are ``params`` (None: the firmware's defaults), shared
     by every drone with the same gains."""
     return _braking(ResponseGains.from_params(params) if params else DEFAULT_GAINS)

@@ -29,9 +29,10 @@ from __future__ import annotations
 import bisect
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Optional
+from typing import Any
 
 from rpf_fly.emulator.cf_scenario import Scenario, figures
 from rpf_fly.mission.load import parse_mission
@@ -114,7 +115,7 @@ class ScenarioFlight:
     (the trace then holds the mocap position). ``on_event(message)``: each step of the flight, for the console."""
 
     def __init__(self, mission: Mission, name: str, scenario: Scenario, backend: Any, mocap: Any, uri: str,
-                 truth: Optional[Callable[[str], tuple[float, float, float]]] = None,
+                 truth: Callable[[str], tuple[float, float, float]] | None = None,
                  on_event: Callable[[str], None] = lambda message: None, log: Any = None) -> None:
         self.mission = mission
         self.name = name
@@ -127,10 +128,10 @@ class ScenarioFlight:
         self.log = log
         drone = next(d for d in mission.drones if d.name == name)
         self.body = drone.rigid_body
-        self.pose: Optional[tuple[float, float, float]] = None
+        self.pose: tuple[float, float, float] | None = None
         self._last_extpos = -math.inf
         self._armed = False
-        self.t0: Optional[float] = None
+        self.t0: float | None = None
         """`time.monotonic()` at the scenario's t = 0 (None before)."""
 
     # ------------------------------------------------------------------------------------------- helpers
@@ -238,7 +239,7 @@ class ScenarioFlight:
         trace, sample = self._sampler()
         t0 = self.t0 = time.monotonic()
         sp = start
-        held: Optional[tuple[float, float, float]] = None
+        held: tuple[float, float, float] | None = None
         index = -1
         tick = 0
         next_sample = 0.0
@@ -312,7 +313,7 @@ class ScenarioFlight:
         return trace
 
 
-def write_json_trace(trace: dict[str, Any], path: Optional[Path] = None) -> str:
+def write_json_trace(trace: dict[str, Any], path: Path | None = None) -> str:
     """The trace as one strict JSON document (no NaN or Infinity: an unsettled figure is null)."""
     import json
 
@@ -388,7 +389,7 @@ def _host_verdict(trace: dict[str, Any], rig: Any, flight: ScenarioFlight) -> No
 
 
 def run_scenario(scenario: Scenario, mission: Mission, name: str, *, dry_run: bool, lab: Any = None,
-                 log_path: Optional[Path] = None, on_event: Callable[[str], None] = lambda m: None
+                 log_path: Path | None = None, on_event: Callable[[str], None] = lambda m: None
                  ) -> dict[str, Any]:
     """Fly ``scenario`` with drone ``name`` of ``mission``: on a private simulated drone (``dry_run``), on a running
     lab's (``lab``: its `rpf_fly.flight.lab.LabInfo`), else on the real one with the mission's mocap. Logs as a

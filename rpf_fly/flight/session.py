@@ -6,8 +6,9 @@ The CLI adds the console and the signal handlers around :func:`run_flight`; test
 from __future__ import annotations
 
 import socket
+from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING, Callable, Optional
+from typing import TYPE_CHECKING
 
 from rpf_fly.flight.events import EventSink
 from rpf_fly.flight.loop import FlightLoop, FlightReport, PlannerFactory
@@ -53,7 +54,7 @@ def resolve_mocap_server(mission: Mission) -> str:
     return str(infos[0][4][0])
 
 
-def real_flight_problem(mission: Mission) -> Optional[str]:
+def real_flight_problem(mission: Mission) -> str | None:
     """Why the mission's mocap cannot fly real drones (``FIELD: problem``), or None. ``sim`` and the library's
     ``mock`` serve poses that are not the drones': real drones would take off on them and fly blind."""
     m = mission.mocap
@@ -65,7 +66,7 @@ def real_flight_problem(mission: Mission) -> Optional[str]:
     return None
 
 
-def motioncapture_missing(mission: Mission, dry_run: bool, dry_run_mocap: Optional[str] = None) -> Optional[str]:
+def motioncapture_missing(mission: Mission, dry_run: bool, dry_run_mocap: str | None = None) -> str | None:
     """The one line naming the extra when this flight needs the ``motioncapture`` package and it is missing (a real
     flight of kind ``motioncapture``, or a dry run whose mocap is ``motioncapture``: ``dry_run_mocap`` or, if None,
     the mission's kind); None otherwise. Checked before anything starts, without importing the C++ library."""
@@ -135,14 +136,14 @@ def live_topics(mission: Mission, truth: bool) -> list[str]:
 def run_flight(
     mission: Mission,
     planner_factory: PlannerFactory,
-    log_path: Optional[Path],
+    log_path: Path | None,
     *,
-    rig: Optional["DryRun"] = None,
-    status_hook: Optional[Callable[[FlightLoop], None]] = None,
+    rig: DryRun | None = None,
+    status_hook: Callable[[FlightLoop], None] | None = None,
     event_sinks: tuple[EventSink, ...] = (),
-    on_loop: Optional[Callable[[FlightLoop], None]] = None,
+    on_loop: Callable[[FlightLoop], None] | None = None,
     seed: int = 0,
-    live: Optional["LiveView"] = None,
+    live: LiveView | None = None,
 ) -> FlightReport:
     """Fly ``mission`` (on ``rig``'s simulated drones when given; the rig must be entered). ``on_loop`` receives the
     loop before it runs (signal handlers, fault injection). ``live``: a started live view, fed by the log's writer

@@ -29,8 +29,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from typing import Iterable, Optional
-
+from collections.abc import Iterable
 
 from rpf_fly.flight.agent import DroneAgent
 from rpf_fly.flight.commander import ON_FLOOR_Z_M
@@ -93,7 +92,7 @@ random fault campaign's 33 ms of mocap delay (plus the emulated camera's 4 ms), 
 healthy one, would go unsaid."""
 
 def _pose_at(history: deque[tuple[float, tuple[float, float, float]]],
-             stamp_s: Optional[float]) -> Optional[tuple[float, float, float]]:
+             stamp_s: float | None) -> tuple[float, float, float] | None:
     """The mocap position at ``stamp_s`` (linear between the two poses around it); None without a stamp or when
     the history does not reach back that far (or forward: a stamp ahead of the newest pose by over 20 ms)."""
     if stamp_s is None or not history or stamp_s < history[0][0] or stamp_s > history[-1][0] + 0.02:
@@ -303,7 +302,7 @@ class Supervisor:
                         "(stalled; occluded?): said after the fact", name, "warn") for name, gap in named.items()]
 
     def _blind(self, now_s: float, agents: list[DroneAgent], uncommanded: list[DroneAgent], foreign: list[str],
-               tracker: PoseTracker, states: Optional[dict[str, DroneState]] = None) -> list[Finding]:
+               tracker: PoseTracker, states: dict[str, DroneState] | None = None) -> list[Finding]:
         """A drone without a fresh pose flies on its estimate, which drifts (`blind_drift_m`). Its room: the
         clearance of its last pose to obstacle surfaces and the arena's edge (plus r, the geofence's allowance), and
         half its distance to another blind drone (both drift) or all of it to one mocap sees, less the bodies'
@@ -353,7 +352,7 @@ class Supervisor:
                                    "take it there", a.name, "land", duration))
         return out
 
-    def _blind_height(self, now_s: float, pose_z: float, age: float, state: Optional[DroneState]) -> float:
+    def _blind_height(self, now_s: float, pose_z: float, age: float, state: DroneState | None) -> float:
         """How high a blind drone may be: its estimate's height (telemetry under `ESTIMATE_FRESH_S` old) plus its
         possible drift, at most its last pose's height; the last pose's height without a fresh estimate."""
         height = pose_z
@@ -518,7 +517,7 @@ class Supervisor:
                 continue
             off = math.dist(state.position_m, pose.position)
             then = _pose_at(history, state.estimate_stamp_s)
-            nearest: Optional[float]
+            nearest: float | None
             if then is not None:  # the estimate against where mocap saw the drone when it was made
                 nearest = math.dist(state.position_m, then)
                 wrong_m, what = ESTIMATE_WRONG_M, "the mocap pose of its own time"

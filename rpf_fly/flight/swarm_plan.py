@@ -26,10 +26,11 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from dataclasses import dataclass, field
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from concurrent.futures import Future, as_completed
 from concurrent.futures import TimeoutError as FutureTimeout
-from typing import Callable, Iterator, Mapping, Sequence, Union
+from dataclasses import dataclass, field
+from typing import Union
 
 import numpy as np
 
@@ -98,7 +99,7 @@ class Neighbourhood:
     velocity: np.ndarray
 
     @classmethod
-    def of(cls, poses: Mapping[str, TrackedPose]) -> "Neighbourhood":
+    def of(cls, poses: Mapping[str, TrackedPose]) -> Neighbourhood:
         """The neighbourhood of these tracked poses (the drones in the others' way), in their order: the order
         is the order of every drone's neighbours in its view, so the flight and a replay build it the same."""
         names = list(poses)
@@ -142,7 +143,7 @@ class TickPlan:
     streams its reference unchanged, and it is faulted once its call is older than the deadline."""
 
     ready: dict[str, Outcome]
-    _planner: "SwarmPlanner"
+    _planner: SwarmPlanner
     _calls: list[_Call]
 
     def collect(self, wait_s: float) -> Iterator[tuple[str, Outcome]]:

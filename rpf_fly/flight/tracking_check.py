@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from typing import Optional
 
 from rpf_fly.flight.agent import DroneAgent
 from rpf_fly.flight.commander import ON_FLOOR_Z_M
@@ -67,8 +66,8 @@ class _Follower:
     ``key``: the take-off's or landing's start (a new one starts a new follower); None while the drone plans,
     holds or hovers (both constants then the position loop's: one point)."""
 
-    def __init__(self, key: Optional[float], at: complex, now_s: float, momentum: complex, fast_s: float,
-                 slow_s: float, model: Optional[Follower] = None) -> None:
+    def __init__(self, key: float | None, at: complex, now_s: float, momentum: complex, fast_s: float,
+                 slow_s: float, model: Follower | None = None) -> None:
         self.key = key
         self.fast = self.slow = at
         self.then = self.since = now_s
@@ -76,7 +75,7 @@ class _Follower:
         self.fast_s, self.slow_s = fast_s, slow_s
         self.model = model
         """While the drone streams: its own controller's response (`response.Follower`), the slow edge."""
-        self.touched: Optional[tuple[complex, complex]] = None
+        self.touched: tuple[complex, complex] | None = None
 
     def step(self, setpoint: complex, now_s: float) -> None:
         """Advance to ``now_s`` towards ``setpoint``."""
@@ -134,7 +133,7 @@ class TrackingCheck:
         """drone -> (the take-off's or landing's start, its firmware target x + iy, confirmed by a second sample,
         when the last sample was made)."""
 
-    def model_of(self, name: str) -> Optional[Follower]:
+    def model_of(self, name: str) -> Follower | None:
         """The response model following ``name``'s streamed setpoints now (None while it does not stream, or
         before its first check): its velocity and tilt, which a filtered mocap velocity gives late."""
         follower = self._predicted.get(name)
@@ -213,7 +212,7 @@ class TrackingCheck:
         return out
 
 
-    def _plan_target(self, a: DroneAgent, state: Optional[DroneState]) -> Optional[complex]:
+    def _plan_target(self, a: DroneAgent, state: DroneState | None) -> complex | None:
         """The x, y the high-level commander's take-off or landing holds, from the firmware's logged target
         (`DroneState.target_m`): two telemetry samples in a row, both made at least ``PLAN_TARGET_AFTER_S`` after
         the command was sent, that agree within ``PLAN_TARGET_AGREE_M`` (a sample made before the command reached

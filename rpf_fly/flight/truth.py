@@ -20,7 +20,8 @@ flight loop.
 from __future__ import annotations
 
 import logging
-from typing import Any, Callable, Optional
+from collections.abc import Callable
+from typing import Any
 
 from rpf_fly.flight.periodic import PeriodicFeed
 
@@ -45,7 +46,7 @@ class TruthFeed(PeriodicFeed):
         self._sink = sink
         self.fetches = 0
         self.samples = 0
-        self.error: Optional[BaseException] = None
+        self.error: BaseException | None = None
 
     def _once(self) -> bool:
         """One fetch and hand-over; False once fetching failed (the feed then stays silent)."""

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import threading
 import time
-from typing import Callable, Optional
+from collections.abc import Callable
 
 from rpf_fly.mission.model import MIN_STALL_TIMEOUT_S, STALL_TICKS
 
@@ -36,7 +36,7 @@ class LoopWatchdog:
     the loop ticked again), and ``on_emergency()`` when :meth:`emergency` is called."""
 
     def __init__(self, on_stall: Callable[[], None], timeout_s: float = 0.35, *,
-                 on_emergency: Optional[Callable[[], None]] = None, clock: Callable[[], float] = time.monotonic):
+                 on_emergency: Callable[[], None] | None = None, clock: Callable[[], float] = time.monotonic):
         self._on_stall = on_stall
         self._on_emergency = on_emergency
         self._timeout_s = timeout_s
@@ -49,7 +49,7 @@ class LoopWatchdog:
         self._emergency = False
         self._wake = threading.Event()
         self._stop = threading.Event()
-        self._thread: Optional[threading.Thread] = None
+        self._thread: threading.Thread | None = None
 
     @property
     def timeout_s(self) -> float:

@@ -48,12 +48,12 @@ import numpy as np
 from rpf_fly.planning.arrival import capture
 from rpf_fly.planning.config import PlannerConfig
 from rpf_fly.planning.guidance import Guidance
-from rpf_fly.planning.visibility import CIRCLE_SIDES, Inflated
-from rpf_fly.planning.waypoints import next_waypoint
-from rpf_fly.planning.obstacles import FAR, ObstacleSet, nearest_obstacle
 from rpf_fly.planning.observation import Observation, build_observation
+from rpf_fly.planning.obstacles import FAR, ObstacleSet, nearest_obstacle
 from rpf_fly.planning.planner import apf_step, sense_obstacles
 from rpf_fly.planning.vectors import dot, unit
+from rpf_fly.planning.visibility import CIRCLE_SIDES, Inflated
+from rpf_fly.planning.waypoints import next_waypoint
 from rpf_fly.sim.collisions import nearest_neighbour_distance
 from rpf_fly.sim.scenario import Scenario, arena_a, arena_b
 from rpf_fly.sim.world import World

@@ -16,9 +16,10 @@ import dataclasses
 import json
 import logging
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Literal, Optional
+from typing import Literal
 
 import numpy as np
 import torch
@@ -165,7 +166,7 @@ class Trainer:
         self.env_steps = 0
         self.wall_s = 0.0
         self.history: list[UpdateLog] = []
-        self.best: Optional[dict] = None
+        self.best: dict | None = None
         self.skipped_minibatches = 0
         self.best_score: tuple[float, float] = (-1.0, -float("inf"))
         self._warm_up_normalisers()
@@ -217,7 +218,7 @@ class Trainer:
 
     # ------------------------------------------------------------------------------------- training
 
-    def run(self, progress: Optional[Callable[[UpdateLog], None]] = None) -> list[UpdateLog]:
+    def run(self, progress: Callable[[UpdateLog], None] | None = None) -> list[UpdateLog]:
         """Train until ``episodes`` arena episodes finished (or ``max_updates``); checkpoints and curves as it goes."""
         c = self.config
         while len(self.episodes) < c.episodes and self.update < c.max_updates:
@@ -379,7 +380,7 @@ class Trainer:
     def _log(self, batch: dict, losses: dict[str, float], seconds: float) -> UpdateLog:
         recent = self.episodes[-200:]
 
-        def rate(kind: Optional[str]) -> float:
+        def rate(kind: str | None) -> float:
             sel = [e for e in recent if kind is None or e.arena_kind == kind]
             return float(np.mean([e.success for e in sel])) if sel else float("nan")
 

@@ -8,12 +8,19 @@ cost, and fall back to the builder for anything unusual.
 from __future__ import annotations
 
 import math
-from typing import Any, Mapping, Optional, Sequence
+from collections.abc import Mapping, Sequence
+from typing import Any
 
 import orjson
 
 from rpf_fly.log.messages import (
-    IDENTITY, PLANNER_FIELDS, WORLD_FRAME, frame_transforms, planner_step, pose_in_frame, truth_state,
+    IDENTITY,
+    PLANNER_FIELDS,
+    WORLD_FRAME,
+    frame_transforms,
+    planner_step,
+    pose_in_frame,
+    truth_state,
 )
 from rpf_fly.log.rpf_schemas import PLANNER_MODES
 
@@ -35,7 +42,7 @@ def encode(message: Mapping[str, Any]) -> bytes:
 # the builder raises.
 
 
-def pose_json(t_ns: int, position: Any, quaternion: Optional[Sequence[float]] = None) -> bytes:
+def pose_json(t_ns: int, position: Any, quaternion: Sequence[float] | None = None) -> bytes:
     """``encode(pose_in_frame(t_ns, position, quaternion))`` (frame ``world``), fast."""
     try:
         x, y, z = position
@@ -48,7 +55,7 @@ def pose_json(t_ns: int, position: Any, quaternion: Optional[Sequence[float]] = 
         return encode(pose_in_frame(t_ns, position, quaternion))
 
 
-def tf_json(t_ns: int, poses: Mapping[str, tuple[Any, Optional[Sequence[float]]]]) -> bytes:
+def tf_json(t_ns: int, poses: Mapping[str, tuple[Any, Sequence[float] | None]]) -> bytes:
     """``encode(frame_transforms(t_ns, poses))``, fast."""
     try:
         sec, nsec = divmod(int(t_ns), 1_000_000_000)
@@ -83,7 +90,7 @@ _PLANNER_KEYS = frozenset(PLANNER_FIELDS) | {"lam"}
 _MODE_SET = frozenset(PLANNER_MODES)
 
 
-def _opt_float(value: Any) -> Optional[float]:
+def _opt_float(value: Any) -> float | None:
     return None if value is None else float(value)
 
 

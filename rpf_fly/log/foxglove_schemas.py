@@ -11,8 +11,37 @@ from __future__ import annotations
 from typing import Any
 
 from rpf_fly.log.schema_parts import (
-    obj as _obj, num as _num, time as _time, duration as _duration, vector3 as _vector3, point3 as _point3,
-    quaternion as _quaternion, pose as _pose, color as _color, array as _array, enum as _enum,
+    array as _array,
+)
+from rpf_fly.log.schema_parts import (
+    color as _color,
+)
+from rpf_fly.log.schema_parts import (
+    duration as _duration,
+)
+from rpf_fly.log.schema_parts import (
+    enum as _enum,
+)
+from rpf_fly.log.schema_parts import (
+    num as _num,
+)
+from rpf_fly.log.schema_parts import (
+    obj as _obj,
+)
+from rpf_fly.log.schema_parts import (
+    point3 as _point3,
+)
+from rpf_fly.log.schema_parts import (
+    pose as _pose,
+)
+from rpf_fly.log.schema_parts import (
+    quaternion as _quaternion,
+)
+from rpf_fly.log.schema_parts import (
+    time as _time,
+)
+from rpf_fly.log.schema_parts import (
+    vector3 as _vector3,
 )
 
 LOG_LEVELS = {1: "debug", 2: "info", 3: "warning", 4: "error", 5: "fatal"}

@@ -81,7 +81,7 @@ def load_sdk() -> Any:
 class _DropCounter(logging.Handler):
     """Counts the SDK's "outbox for client ... full" reports (the SDK exposes no drop count of its own)."""
 
-    def __init__(self, view: "LiveView"):
+    def __init__(self, view: LiveView):
         super().__init__(logging.INFO)
         self.view = view
 
@@ -212,7 +212,7 @@ class LiveView:
         finally:
             self._drop_logger.removeHandler(self._drop_counter)
 
-    def __enter__(self) -> "LiveView":
+    def __enter__(self) -> LiveView:
         return self
 
     def __exit__(self, *exc: object) -> None:

@@ -10,7 +10,8 @@ rpf_fly/log/foxglove_schemas.py and rpf_fly/log/rpf_schemas.py; docs/log-format.
 from __future__ import annotations
 
 import math
-from typing import Any, Iterable, Mapping, Optional, Sequence
+from collections.abc import Iterable, Mapping, Sequence
+from typing import Any
 
 from rpf_fly.log.foxglove_schemas import LOG_LEVELS
 from rpf_fly.log.rpf_schemas import MODE_NAMES, PLANNER_MODES
@@ -26,7 +27,7 @@ def stamp(t_ns: int) -> dict[str, int]:
     return {"sec": sec, "nsec": nsec}
 
 
-def _opt(value: Any) -> Optional[float]:
+def _opt(value: Any) -> float | None:
     """A float, or None for None and NaN."""
     if value is None:
         return None
@@ -53,7 +54,7 @@ def xy(value: Any) -> dict[str, float]:
     return {"x": float(value[0]), "y": float(value[1])}
 
 
-def quat(value: Optional[Sequence[float]]) -> dict[str, float]:
+def quat(value: Sequence[float] | None) -> dict[str, float]:
     """``{"x", "y", "z", "w"}`` of ``(qx, qy, qz, qw)`` (None: identity)."""
     q = IDENTITY if value is None else value
     return {"x": float(q[0]), "y": float(q[1]), "z": float(q[2]), "w": float(q[3])}
@@ -65,14 +66,14 @@ def yaw_quaternion(yaw_rad: float) -> tuple[float, float, float, float]:
     return (0.0, 0.0, math.sin(half), math.cos(half))
 
 
-def pose_in_frame(t_ns: int, position: Any, quaternion: Optional[Sequence[float]] = None,
+def pose_in_frame(t_ns: int, position: Any, quaternion: Sequence[float] | None = None,
                   frame_id: str = WORLD_FRAME) -> dict[str, Any]:
     """A ``foxglove.PoseInFrame``."""
     return {"timestamp": stamp(t_ns), "frame_id": frame_id,
             "pose": {"position": xyz(position), "orientation": quat(quaternion)}}
 
 
-def frame_transforms(t_ns: int, poses: Mapping[str, tuple[Any, Optional[Sequence[float]]]],
+def frame_transforms(t_ns: int, poses: Mapping[str, tuple[Any, Sequence[float] | None]],
                      parent: str = WORLD_FRAME) -> dict[str, Any]:
     """A ``foxglove.FrameTransforms`` from ``parent`` to each named child: ``{name: (position, quaternion)}``."""
     ts = stamp(t_ns)
@@ -140,7 +141,7 @@ def planner_step(t_ns: int, tick: int, position: Any, goal: Any, mode: Any, eta:
 
 
 def drone_status(t_ns: int, state: str, battery_v: Any = None, link_quality: Any = None, latency_ms: Any = None,
-                 outcome: Optional[str] = None, estimate: Any = None, target: Any = None) -> dict[str, Any]:
+                 outcome: str | None = None, estimate: Any = None, target: Any = None) -> dict[str, Any]:
     """A ``rpf_fly.DroneStatus`` (unknown values None; ``estimate`` and ``target`` as ``(x, y, z)``)."""
     return {
         "timestamp": stamp(t_ns),

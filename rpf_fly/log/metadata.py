@@ -7,7 +7,7 @@ from __future__ import annotations
 import hashlib
 import json
 from pathlib import Path
-from typing import Any, Optional
+from typing import Any
 
 
 def obstacle_dict(shape: Any) -> dict[str, Any]:
@@ -18,7 +18,7 @@ def obstacle_dict(shape: Any) -> dict[str, Any]:
     return {"shape": "box", "min": [float(v) for v in shape.min], "max": [float(v) for v in shape.max]}
 
 
-def file_sha256(path: Optional[str | Path]) -> str:
+def file_sha256(path: str | Path | None) -> str:
     """Hex SHA-256 of a file ("" for None)."""
     if path is None:
         return ""

@@ -12,8 +12,8 @@ tell it from a moment without frames.
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass, field
-from typing import Iterable, Optional
 
 from rpf_fly.log.reader import LogData
 
@@ -45,7 +45,7 @@ def mocap_drones(data: LogData) -> list[str]:
     return known + sorted(n for n in names if n not in known)
 
 
-def _pose(message: dict) -> Optional[tuple[Position, Quaternion]]:
+def _pose(message: dict) -> tuple[Position, Quaternion] | None:
     try:
         p = message["pose"]["position"]
         q = message["pose"]["orientation"]
@@ -56,7 +56,7 @@ def _pose(message: dict) -> Optional[tuple[Position, Quaternion]]:
     return position, quaternion
 
 
-def mocap_frames(data: LogData, drones: Optional[Iterable[str]] = None) -> list[LoggedFrame]:
+def mocap_frames(data: LogData, drones: Iterable[str] | None = None) -> list[LoggedFrame]:
     """Every logged frame of ``drones`` (default: every ``/mocap`` topic), in publish-time order; poses with a
     null coordinate are left out (the drone counts as untracked in that frame)."""
     names = list(drones) if drones is not None else mocap_drones(data)

@@ -12,9 +12,10 @@ from __future__ import annotations
 
 import json
 import os
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterator, NamedTuple, Optional
+from typing import Any, NamedTuple
 
 from mcap.exceptions import InvalidMagic
 from mcap.records import Attachment, Channel, DataEnd, Footer, Header, Message, Metadata, Schema
@@ -59,12 +60,12 @@ class LogData:
         return {topic: len(msgs) for topic, msgs in self.topics.items()}
 
     @property
-    def start_ns(self) -> Optional[int]:
+    def start_ns(self) -> int | None:
         times = [m[0].log_time for m in self.topics.values() if m]
         return min(times) if times else None
 
     @property
-    def end_ns(self) -> Optional[int]:
+    def end_ns(self) -> int | None:
         times = [m[-1].log_time for m in self.topics.values() if m]
         return max(times) if times else None
 
@@ -196,7 +197,7 @@ def salvage(src: str | Path, dst: str | Path) -> SalvageResult:
     source = _open(src)
     try:
         with source as f, open(part, "wb") as out:
-            writer: Optional[Writer] = None
+            writer: Writer | None = None
             try:
                 for record in _records(f):
                     if isinstance(record, Header):

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, NamedTuple, Optional
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -27,7 +27,11 @@ from rpf_fly.log.review_radio import RadioSummary, radio_of
 from rpf_fly.log.review_scenario import ReviewError, drones_of, scenario_of
 from rpf_fly.log.review_series import battery_series, rms_max, tracking_error
 from rpf_fly.log.review_tracking import (
-    CRAZYFLIE_LAG_S, TrackingExpectation, dry_run_dynamics, tracking_expectation, tracking_lag,
+    CRAZYFLIE_LAG_S,
+    TrackingExpectation,
+    dry_run_dynamics,
+    tracking_expectation,
+    tracking_lag,
 )
 from rpf_fly.sim.metrics import Metrics
 
@@ -45,13 +49,13 @@ class TopicStats:
     topic: str
     schema: str
     count: int
-    rate_hz: Optional[float]
-    median_period_s: Optional[float]
+    rate_hz: float | None
+    median_period_s: float | None
     gaps: tuple[tuple[float, float], ...]
     missing: int
 
     @property
-    def longest_gap_s(self) -> Optional[float]:
+    def longest_gap_s(self) -> float | None:
         return max((g[1] for g in self.gaps), default=None)
 
 
@@ -74,7 +78,7 @@ class Interruption:
     log ends before its footer, or a salvaged copy without the flight's clean end)."""
 
     how: str
-    t_s: Optional[float]
+    t_s: float | None
     message: str
 
     def to_json_dict(self) -> dict[str, Any]:
@@ -92,21 +96,21 @@ class Review:
     drones: list[str]
     mission: str
     planner: str
-    seed: Optional[int]
+    seed: int | None
     topics: list[TopicStats]
     events_by_level: dict[str, int]
     events: list[ReviewEvent]
-    metrics: Optional[Metrics]
+    metrics: Metrics | None
     metrics_error: str
-    scenario: Optional[dict[str, Any]]
-    outcomes: dict[str, Optional[str]] = field(default_factory=dict)
+    scenario: dict[str, Any] | None
+    outcomes: dict[str, str | None] = field(default_factory=dict)
     source: str = ""
     """``mission.source`` of the metadata: ``flight``, ``dry-run`` or ``sim`` ("" when the log has none)."""
-    clean_end: Optional[bool] = None
+    clean_end: bool | None = None
     """The recording ended as a finished run ends (a flight: every drone's final status with its outcome; a
     simulation: its end event); None when the log says nothing of its source."""
     interruptions: list[Interruption] = field(default_factory=list)
-    tracking: dict[str, tuple[Optional[float], Optional[float]]] = field(default_factory=dict)
+    tracking: dict[str, tuple[float | None, float | None]] = field(default_factory=dict)
     """Per drone, and ``all``: RMS and max setpoint tracking error (m); only drones with setpoints and poses."""
     tracking_expected: dict[str, TrackingExpectation] = field(default_factory=dict)
     """Per drone with setpoints and poses (not for a simulation): its tracking error while cruising against what
@@ -198,7 +202,7 @@ def review(data: LogData) -> Review:
     end = data.end_ns or start
     mission = data.metadata.get("mission", {})
     try:
-        scenario: Optional[dict[str, Any]] = scenario_of(data)
+        scenario: dict[str, Any] | None = scenario_of(data)
     except ReviewError:
         scenario = None
     metrics = None
@@ -217,17 +221,17 @@ def review(data: LogData) -> Review:
         key = LOG_LEVELS.get(event.level, "unknown")
         by_level[key] = by_level.get(key, 0) + 1
     drones = drones_of(data)
-    outcomes: dict[str, Optional[str]] = {}
+    outcomes: dict[str, str | None] = {}
     for name in drones:
         found = [m.data.get("outcome") for m in data.messages(f"/{name}/status") if m.data.get("outcome")]
         outcomes[name] = found[-1] if found else None
     try:
-        seed: Optional[int] = int(mission["seed"])
+        seed: int | None = int(mission["seed"])
     except (KeyError, ValueError):
         seed = None
     source = str(mission.get("source", ""))
     clean = clean_end(data, drones, source, events)
-    tracking: dict[str, tuple[Optional[float], Optional[float]]] = {}
+    tracking: dict[str, tuple[float | None, float | None]] = {}
     errors = []
     for name in drones:
         e = tracking_error(data, name, start)
@@ -276,7 +280,7 @@ def review(data: LogData) -> Review:
 FLIGHT_SOURCES = ("flight", "dry-run")
 
 
-def clean_end(data: LogData, drones: list[str], source: str, events: list[ReviewEvent]) -> Optional[bool]:
+def clean_end(data: LogData, drones: list[str], source: str, events: list[ReviewEvent]) -> bool | None:
     """Whether the log ends as a finished run ends: a flight's last status of every drone carries its outcome
     (written after every drone is down, right before the log is closed); a simulation has its ``sim end`` event.
     None for a log that does not say what wrote it."""
@@ -293,7 +297,7 @@ def clean_end(data: LogData, drones: list[str], source: str, events: list[Review
     return None
 
 
-def interruptions_of(data: LogData, events: list[ReviewEvent], clean: Optional[bool],
+def interruptions_of(data: LogData, events: list[ReviewEvent], clean: bool | None,
                      duration_s: float) -> list[Interruption]:
     """What interrupted the flight, in time order: the flight's ``interrupt`` events (a signal or a
     KeyboardInterrupt), its ``flight loop failed`` errors, and a log without a clean end (a kill)."""

@@ -9,7 +9,7 @@ Times are seconds from the start of the log (the log time minus the file's first
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Optional
+from typing import Any
 
 import numpy as np
 
@@ -57,7 +57,7 @@ def tracking_error(data: LogData, drone: str, start_ns: int) -> Series:
     return Series(setpoints.t[keep], err[keep])
 
 
-def rms_max(values: np.ndarray) -> tuple[Optional[float], Optional[float]]:
+def rms_max(values: np.ndarray) -> tuple[float | None, float | None]:
     if values.size == 0:
         return None, None
     return float(np.sqrt(np.mean(values**2))), float(values.max())
@@ -82,7 +82,7 @@ def min_separation(data: LogData, drones: list[str], start_ns: int) -> Series:
     return Series(base[keep], low[keep])
 
 
-def obstacle_clearance(data: LogData, drone: str, start_ns: int, scenario: Optional[dict[str, Any]]) -> Series:
+def obstacle_clearance(data: LogData, drone: str, start_ns: int, scenario: dict[str, Any] | None) -> Series:
     """Planar distance from the drone's centre (``/mocap``) to the nearest obstacle surface over time (metres,
     negative inside; what the metrics' ``min_obstacle_clearance_m`` and a collision, ``< r``, are measured on).
     Empty without obstacles."""

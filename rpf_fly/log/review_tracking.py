@@ -5,13 +5,12 @@ drone gives at the flown speed (its lag behind a moving setpoint x the setpoint'
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Optional
+from typing import Any
 
 import numpy as np
 
 from rpf_fly.log.reader import LogData
 from rpf_fly.log.review_series import interp, pose_series
-
 
 CRAZYFLIE_LAG_S = 0.55
 """How far a Crazyflie with the firmware's default gains trails a moving position setpoint, in seconds of the
@@ -46,12 +45,12 @@ class TrackingExpectation:
     drone: str
     lag_s: float
     samples: int
-    speed_m_s: Optional[float] = None
-    expected_m: Optional[float] = None
-    measured_m: Optional[float] = None
+    speed_m_s: float | None = None
+    expected_m: float | None = None
+    measured_m: float | None = None
 
     @property
-    def band_m(self) -> Optional[tuple[float, float]]:
+    def band_m(self) -> tuple[float, float] | None:
         """The range of measured errors that is as expected."""
         if self.expected_m is None:
             return None

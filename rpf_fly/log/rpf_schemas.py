@@ -12,7 +12,19 @@ from __future__ import annotations
 from typing import Any
 
 from rpf_fly.log.schema_parts import (
-    obj as _obj, num as _num, nullable_num as _nullable_num, time as _time, vector2 as _vector2,
+    nullable_num as _nullable_num,
+)
+from rpf_fly.log.schema_parts import (
+    num as _num,
+)
+from rpf_fly.log.schema_parts import (
+    obj as _obj,
+)
+from rpf_fly.log.schema_parts import (
+    time as _time,
+)
+from rpf_fly.log.schema_parts import (
+    vector2 as _vector2,
 )
 
 PLANNER_MODES = ("apf", "wall", "soft", "arrived", "stalled", "hold", "takeoff", "landing", "landed", "link_lost",

@@ -7,10 +7,11 @@ own (rpf_fly/log/rpf_schemas.py) are written alike: every field their ``required
 
 from __future__ import annotations
 
-from typing import Any, Iterable, Optional
+from collections.abc import Iterable
+from typing import Any
 
 
-def obj(properties: dict[str, Any], required: Optional[Iterable[str]] = None, title: str = "",
+def obj(properties: dict[str, Any], required: Iterable[str] | None = None, title: str = "",
          description: str = "") -> dict[str, Any]:
     out: dict[str, Any] = {}
     if title:

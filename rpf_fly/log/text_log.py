@@ -13,7 +13,6 @@ from __future__ import annotations
 import logging
 import sys
 from pathlib import Path
-from typing import Optional
 
 FORMAT = "%(asctime)s %(levelname)s %(threadName)s %(name)s: %(message)s"
 
@@ -21,7 +20,7 @@ FORMAT = "%(asctime)s %(levelname)s %(threadName)s %(name)s: %(message)s"
 class LogRouting:
     """The handlers :func:`route_logging` installed on the root logger; :meth:`close` removes them."""
 
-    def __init__(self, path: Optional[Path], handlers: list[logging.Handler], previous_level: int):
+    def __init__(self, path: Path | None, handlers: list[logging.Handler], previous_level: int):
         self.path = path
         self._handlers = handlers
         self._previous_level = previous_level
@@ -42,7 +41,7 @@ class LogRouting:
             handler.close()
         root.setLevel(self._previous_level)
 
-    def __enter__(self) -> "LogRouting":
+    def __enter__(self) -> LogRouting:
         return self
 
     def __exit__(self, *exc: object) -> None:
@@ -63,13 +62,13 @@ def text_log_path(log_path: Path) -> Path:
     return log_path.with_suffix(".log") if log_path.suffix != ".log" else log_path.with_name(log_path.name + ".txt")
 
 
-def route_logging(path: Optional[Path], verbose: bool = False) -> LogRouting:
+def route_logging(path: Path | None, verbose: bool = False) -> LogRouting:
     """Send log records (INFO and up) to ``path`` (a text file, overwritten) and, with ``verbose``, to stderr;
     nothing reaches the console otherwise. A file that cannot be opened is skipped (the records are dropped)."""
     root = logging.getLogger()
     previous = root.level
     handlers: list[logging.Handler] = []
-    written: Optional[Path] = None
+    written: Path | None = None
     if path is not None:
         try:
             path.parent.mkdir(parents=True, exist_ok=True)

@@ -37,8 +37,9 @@ import json
 import logging
 import threading
 import time
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
-from typing import Any, Callable, Iterable, Mapping, Optional, Sequence
+from typing import Any
 
 from mcap.writer import CompressionType, Writer
 
@@ -133,15 +134,15 @@ class FlightLog:
         mission_meta: Mapping[str, Any],
         scenario_meta: Mapping[str, Any],
         *,
-        clock: Optional[Callable[[], int]] = time.time_ns,
+        clock: Callable[[], int] | None = time.time_ns,
         max_queue: int = DEFAULT_MAX_QUEUE,
         flush_interval_s: float = FLUSH_INTERVAL_S,
         chunk_size: int = CHUNK_SIZE,
         name: str = "rpf_fly",
         block_when_full: bool = False,
         poll_interval_s: float = POLL_INTERVAL_S,
-        sink: Optional[Sink] = None,
-        out: Optional[Out] = None,
+        sink: Sink | None = None,
+        out: Out | None = None,
     ):
         from rpf_fly import __version__
 
@@ -151,7 +152,7 @@ class FlightLog:
         self.block_when_full = bool(block_when_full)
         self.flush_interval_s = float(flush_interval_s)
         self.poll_interval_s = float(poll_interval_s)
-        self.error: Optional[BaseException] = None
+        self.error: BaseException | None = None
         self.written = 0
         self.failed = 0
         self.sink_failed = 0
@@ -196,7 +197,7 @@ class FlightLog:
 
     # ------------------------------------------------------------------ context manager
 
-    def __enter__(self) -> "FlightLog":
+    def __enter__(self) -> FlightLog:
         return self
 
     def __exit__(self, *exc: object) -> None:
@@ -214,13 +215,13 @@ class FlightLog:
         return self._closed
 
     def pose(self, drone: str, t_ns: int, position_xyz: Sequence[float],
-             quaternion_xyzw: Optional[Sequence[float]] = None) -> None:
+             quaternion_xyzw: Sequence[float] | None = None) -> None:
         """``/mocap/<drone>``: the pose as received (frame ``world``; quaternion ``(qx, qy, qz, qw)``, None:
         identity). ``t_ns``: the mocap frame time."""
         self._put(self._poses.get(drone) or self._topic(self._poses, "/mocap/{}", drone), t_ns, pose_json,
                   (position_xyz, quaternion_xyzw))
 
-    def poses(self, t_ns: int, poses: Mapping[str, tuple[Sequence[float], Optional[Sequence[float]]]]) -> None:
+    def poses(self, t_ns: int, poses: Mapping[str, tuple[Sequence[float], Sequence[float] | None]]) -> None:
         """``/mocap/<drone>`` of several drones at one frame time ``{drone: (position, quaternion)}``: the same
         messages as :meth:`pose` per drone, queued as one entry (a flight logs every frame of every drone)."""
         self._put_batch(self._poses, "/mocap/{}", [(d, t_ns, v) for d, v in poses.items()], pose_json)
@@ -275,14 +276,14 @@ class FlightLog:
             "drones", "window_s", "packets", "transactions", "planned_per_s", "budget_per_s")),
             float(fields.get("setpoints_superseded", 0.0))), priority=True)
 
-    def scene(self, t_ns: int, obstacles: Sequence[Mapping[str, Any]] = (), goals: Optional[Mapping[str, Any]] = None,
-              arena: Optional[Mapping[str, Sequence[float]]] = None, height: float = 0.0) -> None:
+    def scene(self, t_ns: int, obstacles: Sequence[Mapping[str, Any]] = (), goals: Mapping[str, Any] | None = None,
+              arena: Mapping[str, Sequence[float]] | None = None, height: float = 0.0) -> None:
         """``/scene``: obstacles (``{shape, center, radius}`` / ``{shape, min, max}``), goals ``{name: (x, y)}``,
         arena ``{x, y, z}`` ranges, goal markers at ``height``."""
         fields = {"obstacles": list(obstacles), "goals": dict(goals or {}), "arena": arena, "height": height}
         self._put(self._fixed["/scene"], t_ns, _scene_message, (fields,), priority=True)
 
-    def tf(self, t_ns: int, poses: Mapping[str, tuple[Sequence[float], Optional[Sequence[float]]]]) -> None:
+    def tf(self, t_ns: int, poses: Mapping[str, tuple[Sequence[float], Sequence[float] | None]]) -> None:
         """``/tf``: transforms world -> each drone, ``{drone: (position, quaternion)}``."""
         self._put(self._fixed["/tf"], t_ns, tf_json, (dict(poses),))
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Literal, Optional
+from typing import TYPE_CHECKING, Literal
 
 if TYPE_CHECKING:
     from rpf_fly.calibrate.profile import VehicleProfile
@@ -112,7 +112,7 @@ class PlannerSettings:
     kind: str = DEFAULT_KIND
     """The shipped default is RPF-3 (:data:`DEFAULT_KIND`), whose policy a mission loader finds at
     ``policies/rpf3.onnx``; ``apf`` was the default until RPF-3 led the families bench (docs/mission-format.md)."""
-    policy: Optional[Path] = None
+    policy: Path | None = None
     sensing_range: float = 6.0
     safety_radius: float = 0.1
     influence_range: float = 10.0
@@ -122,11 +122,11 @@ class PlannerSettings:
     neighbour_aggregate: Literal["sum", "mean"] = "sum"
     eta: float = 0.05
     lam: float = 2.0
-    guidance: Optional[Literal["none", "path"]] = None
+    guidance: Literal["none", "path"] | None = None
     """``planner.guidance``; None: the kind's default (:func:`default_guidance`), see :attr:`guidance_mode`."""
-    margin: Optional[float] = None
+    margin: float | None = None
     """``planner.margin`` (m); None: the kind's default (:func:`default_margin`), see :attr:`margin_m`."""
-    capture_radius: Optional[float] = None
+    capture_radius: float | None = None
     """``planner.capture_radius`` (m): within it a drone nearer its goal than any surface heads straight at the
     goal (docs/algorithm.md, *Arrival*); None: the kind's default (:func:`default_capture_radius`: 0.3, 0 for the
     paper's planners), see :attr:`capture_radius_m`; 0 turns the rule off."""
@@ -168,9 +168,9 @@ class MocapSettings:
     rate_hz: float = 100.0
     dropout: float = 0.0
     timeout_s: float = 0.5
-    system: Optional[str] = None
+    system: str | None = None
     """``motioncapture``: the library's type (YAML key ``type``), e.g. ``vicon``; None for the other kinds."""
-    hostname: Optional[str] = None
+    hostname: str | None = None
     """``motioncapture``: the system's host (None: the library's default, ``localhost``; ``mock`` has none)."""
     options: tuple[tuple[str, str], ...] = ()
     """``motioncapture``: the library's other options, checked and as the text its ``connect()`` gets."""
@@ -192,7 +192,7 @@ class RadioSettings:
     dongle_type: Literal["crazyradio_pa", "crazyradio_2"] = "crazyradio_pa"
     """The Crazyradio model, for its budget: its figures (rpf_fly/emulator/crazyradio_timing.py,
     rpf_fly/radio/budget.py)."""
-    budget_packets_s: Optional[float] = None
+    budget_packets_s: float | None = None
     """Transactions a second one dongle carries with its links taking turns (None: from the dongle type's figures);
     a lab's own measurement (``rpf-fly radio probe``)."""
     allow_over_budget: bool = False
@@ -211,7 +211,7 @@ class ZenohSettings:
     """Endpoints to connect to (``tcp/HOST:7447``): where a worker finds its coordinator."""
     listen: tuple[str, ...] = ()
     """Endpoints the coordinator listens on (empty: loopback only)."""
-    config: Optional[Path] = None
+    config: Path | None = None
     """A Zenoh configuration file (JSON5) every session of the flight starts from: TLS certificates, access
     control, anything Zenoh reads; rpf_fly then sets the mode, the endpoints, the lease and scouting off on top
     (docs/distributed.md, "Across hosts"). Resolved to an existing file at load."""
@@ -323,17 +323,17 @@ class DryRunSettings:
     """
 
     seed: int = 0
-    mocap_noise_m: Optional[float] = None
-    mocap_noise_deg: Optional[float] = None
-    mocap_dropout: Optional[float] = None
+    mocap_noise_m: float | None = None
+    mocap_noise_deg: float | None = None
+    mocap_dropout: float | None = None
     dynamics: str = "first-order"
     radio: Literal["fake", "crazyradio"] = "fake"
     """How the flight's cflib reaches the simulated drones: ``fake`` (the ``fake://`` link driver in front of them)
     or ``crazyradio`` (cflib's own ``radio://`` driver through emulated dongles, rpf_fly/emulator/crazyradio.py;
     docs/radio.md, "Dry runs through cflib's radio driver")."""
-    crazyradio: Optional[Literal["crazyradio_pa", "crazyradio_2"]] = None
+    crazyradio: Literal["crazyradio_pa", "crazyradio_2"] | None = None
     """The emulated dongles' type with ``radio: crazyradio`` (None: ``radio.dongle_type``, the lab's own)."""
-    vehicle: Optional["VehicleProfile"] = None
+    vehicle: VehicleProfile | None = None
 
 
 @dataclass(frozen=True)
@@ -362,10 +362,10 @@ class Mission:
     sim: SimSettings
     obstacles: tuple[Obstacle, ...]
     drones: tuple[Drone, ...]
-    formation: Optional[Formation] = None
+    formation: Formation | None = None
     safety: SafetySettings = field(default_factory=SafetySettings)
     runtime: RuntimeSettings = field(default_factory=RuntimeSettings)
     dry_run: DryRunSettings = field(default_factory=DryRunSettings)
-    source: Optional[Path] = None
+    source: Path | None = None
     text: str = field(default="", repr=False)
     """The file's text as loaded (logged into flight records as metadata)."""

@@ -13,9 +13,10 @@ backend cannot know are optional (``latency_s``) or are synthesised (``frame_num
 
 from __future__ import annotations
 
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from types import MappingProxyType, TracebackType
-from typing import Callable, Mapping, Protocol, Sequence, runtime_checkable
+from typing import Protocol, runtime_checkable
 
 __all__ = ["RigidBodyPose", "MocapFrame", "MocapStats", "MocapSource", "PoseSample", "PoseCallable", "NO_UNSEEN"]
 

@@ -18,8 +18,8 @@ import difflib
 import ipaddress
 import math
 import re
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Mapping, Optional
 
 from rpf_fly import install_hint
 
@@ -62,7 +62,7 @@ class SystemType:
     name: str
     meaning: str
     in_wheel: bool
-    hostname: Optional[str]
+    hostname: str | None
     """How the library reads ``hostname``: ``ip`` (an IPv4 address: rpf_fly resolves a host name first, since
     the library's ``make_address`` takes only literals), ``host`` (a name or address), ``endpoint`` (``host`` or
     ``host:port``), or None (the type has no host)."""

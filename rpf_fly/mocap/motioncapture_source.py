@@ -47,8 +47,8 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Mapping, Sequence
 from types import TracebackType
-from typing import Mapping, Optional, Sequence
 
 try:
     import fcntl
@@ -94,7 +94,7 @@ def library_installed() -> bool:
         return False
 
 
-def _describe_exit(code: Optional[int]) -> str:
+def _describe_exit(code: int | None) -> str:
     if code is None:
         return "its pipe closed"
     if code < 0:
@@ -129,8 +129,8 @@ class MotioncaptureSource:
     def __init__(
         self,
         system: str,
-        hostname: Optional[str] = None,
-        options: Optional[Mapping[str, object]] = None,
+        hostname: str | None = None,
+        options: Mapping[str, object] | None = None,
         *,
         up_axis: str = "z",
         bodies: Sequence[str] = (),
@@ -161,17 +161,17 @@ class MotioncaptureSource:
         self._known: dict[str, tuple[tuple[float, float, float], tuple[float, float, float, float]]] = {
             name: _ORIGIN for name in bodies
         }
-        self._pending: Optional[tuple[int, float, list]] = None
+        self._pending: tuple[int, float, list] | None = None
         self._reader = RecordReader()
         self._closed = False
         self._dead = False
-        self._failure: Optional[str] = None
-        self._error_record: Optional[str] = None
+        self._failure: str | None = None
+        self._error_record: str | None = None
         self._warned_unnamed = False
         self._unnamed = 0
         self._seen: set[int] = set()  # kinds of the non-frame records received
-        self.library_version: Optional[str] = None
-        self._process: Optional[subprocess.Popen[bytes]] = None
+        self.library_version: str | None = None
+        self._process: subprocess.Popen[bytes] | None = None
         self._stderr = tempfile.TemporaryFile(prefix="rpf-fly-motioncapture-")
         if not library_installed():
             self._stderr.close()
@@ -230,7 +230,7 @@ class MotioncaptureSource:
             select.select([self._fd], [], [], remaining)
         return True
 
-    def _why_not(self, what: str) -> Optional[str]:
+    def _why_not(self, what: str) -> str | None:
         """The one line for a child that ended during start-up, or None if it is still running."""
         if not self._dead:
             return None
@@ -271,7 +271,7 @@ class MotioncaptureSource:
             if kind == ERROR:
                 self._error_record = payload.decode("utf-8", "replace")
         process = self._process
-        code: Optional[int] = None
+        code: int | None = None
         if process is not None:
             try:  # the pipe ends when the child exits: reaping it is immediate, never a stall of the flight loop
                 code = process.wait(timeout=0.2)
@@ -303,7 +303,7 @@ class MotioncaptureSource:
         return not (self._dead or self._closed)
 
     @property
-    def failure(self) -> Optional[str]:
+    def failure(self) -> str | None:
         """Why the child ended (``killed by SIGSEGV``, ``exit status 1: ...``), None while it runs."""
         return self._failure
 
@@ -320,7 +320,7 @@ class MotioncaptureSource:
 
     # ------------------------------------------------------------------------------------- MocapSource
 
-    def receive(self, timeout_s: float) -> Optional[MocapFrame]:
+    def receive(self, timeout_s: float) -> MocapFrame | None:
         """The newest frame since the last call, waiting up to ``timeout_s``; None on timeout, and (after waiting
         the timeout, so a caller's loop keeps its pace) once the child has ended or the source is closed."""
         deadline = time.monotonic() + max(0.0, timeout_s)

@@ -28,7 +28,8 @@ import struct
 import sys
 import threading
 import time
-from typing import Any, Iterator
+from collections.abc import Iterator
+from typing import Any
 
 __all__ = ["STARTED", "READY", "FRAME", "ERROR", "RecordReader", "RawBody", "decode_frame", "encode_frame", "main"]
 

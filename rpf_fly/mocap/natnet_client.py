@@ -36,8 +36,8 @@ import logging
 import select
 import socket
 import time
+from collections.abc import Mapping
 from types import TracebackType
-from typing import Mapping
 
 from rpf_fly.mocap.frame import NO_UNSEEN, MocapFrame, MocapStats
 from rpf_fly.mocap.natnet_delivery import NewestFrame, camera_latency_s, rigid_body_poses

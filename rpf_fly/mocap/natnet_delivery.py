@@ -10,7 +10,7 @@ poses of a frame in the Z-up world frame, and the camera latency.
 from __future__ import annotations
 
 import math
-from typing import Mapping
+from collections.abc import Mapping
 
 from rpf_fly.mocap.frame import NO_UNSEEN, RigidBodyPose
 from rpf_fly.mocap.natnet_protocol import FrameOfData

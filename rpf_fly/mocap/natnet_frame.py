@@ -13,7 +13,8 @@ Part of the NatNet codec; import it through :mod:`rpf_fly.mocap.natnet_protocol`
 from __future__ import annotations
 
 import struct
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 from rpf_fly.mocap import natnet_wire as _wire
 from rpf_fly.mocap.natnet_types import (

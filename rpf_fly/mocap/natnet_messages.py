@@ -7,7 +7,7 @@ Part of the NatNet codec; import it through :mod:`rpf_fly.mocap.natnet_protocol`
 from __future__ import annotations
 
 import struct
-from typing import Sequence
+from collections.abc import Sequence
 
 from rpf_fly.mocap import natnet_wire as _wire
 from rpf_fly.mocap.natnet_frame import decode_frame

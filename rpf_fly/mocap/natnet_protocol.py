@@ -96,10 +96,23 @@ from rpf_fly.mocap.natnet_types import (
 from rpf_fly.mocap.natnet_wire import decode_header, encode_packet
 
 __all__ = [
+    "Message",
     "MessageId",
     "NatNetDecodeError",
     "Version",
     "SUPPORTED_VERSIONS",
+    "DATASET_ASSET",
+    "DATASET_CAMERA",
+    "DATASET_DEVICE",
+    "DATASET_FORCE_PLATE",
+    "DATASET_MARKER_SET",
+    "DATASET_RIGID_BODY",
+    "DATASET_SKELETON",
+    "FRAME_MODELS_CHANGED",
+    "FRAME_RECORDING",
+    "MAX_PAYLOAD",
+    "RIGID_BODY_TRACKING_VALID",
+    "UNRECOGNIZED_REQUEST_ALT",
     "parse_version",
     "RigidBodyData",
     "LabeledMarker",

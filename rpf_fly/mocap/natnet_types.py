@@ -9,9 +9,10 @@ Part of the NatNet codec; import it through :mod:`rpf_fly.mocap.natnet_protocol`
 from __future__ import annotations
 
 import struct
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from enum import IntEnum
-from typing import NamedTuple, Sequence, Union
+from typing import NamedTuple, Union
 
 __all__ = [
     "MessageId",

@@ -6,8 +6,8 @@ all call the same :class:`Planner`.
 
 from rpf_fly.planning.config import PlannerConfig
 from rpf_fly.planning.gains import FixedGains, GainsPolicy
-from rpf_fly.planning.obstacles import FAR, NearestObstacle, ObstacleSet, nearest_obstacle
 from rpf_fly.planning.observation import Observation, build_observation
+from rpf_fly.planning.obstacles import FAR, NearestObstacle, ObstacleSet, nearest_obstacle
 from rpf_fly.planning.planner import Planner, PlanStep, apf_step, sense_obstacles
 from rpf_fly.planning.view import LocalView, view_of_drone, views_from_states, views_of_drones
 from rpf_fly.planning.wall_following import MODE_APF, MODE_NAMES, MODE_SOFT, MODE_WALL

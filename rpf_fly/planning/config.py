@@ -10,7 +10,6 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 from typing import Literal
 
-
 RPF3_TUNING: dict[str, float | bool] = {
     "guided_influence_range": 0.2,
     "repulsion_sum": True,
@@ -118,12 +117,12 @@ class PlannerConfig:
     ``r + margin`` that the drone can see, instead of straight at the goal (:mod:`rpf_fly.planning.guidance`)."""
 
     @staticmethod
-    def robust(**overrides: object) -> "PlannerConfig":
+    def robust(**overrides: object) -> PlannerConfig:
         """The default preset (docs/algorithm.md, *Presets*): the paper's method with its gaps closed."""
         return replace(PlannerConfig(), **overrides)  # type: ignore[arg-type]
 
     @staticmethod
-    def paper(**overrides: object) -> "PlannerConfig":
+    def paper(**overrides: object) -> PlannerConfig:
         """The formulas as printed in the paper (docs/algorithm.md, *Forces*, *Heading*), kept for reproduction."""
         base = PlannerConfig(
             soft_keeps_inter_robot=False,
@@ -137,7 +136,7 @@ class PlannerConfig:
         return replace(base, **overrides)  # type: ignore[arg-type]
 
     @staticmethod
-    def preset(name: str, **overrides: object) -> "PlannerConfig":
+    def preset(name: str, **overrides: object) -> PlannerConfig:
         """``robust`` or ``paper``."""
         if name == "robust":
             return PlannerConfig.robust(**overrides)

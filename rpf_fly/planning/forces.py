@@ -22,7 +22,8 @@ import numpy as np
 
 from rpf_fly.planning.config import PlannerConfig
 from rpf_fly.planning.obstacles import FAR, NearestObstacle, Surfaces
-from rpf_fly.planning.vectors import TINY, maximum, offsets as offsets_of, per_item, plain
+from rpf_fly.planning.vectors import TINY, maximum, per_item, plain
+from rpf_fly.planning.vectors import offsets as offsets_of
 
 
 def attractive(position: np.ndarray, goal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

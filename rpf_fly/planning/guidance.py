@@ -20,14 +20,22 @@ from __future__ import annotations
 
 import math
 from collections import OrderedDict
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Sequence
 
 import numpy as np
 
 from rpf_fly.planning.obstacles import ObstacleSet
 from rpf_fly.planning.visibility import (
-    UNREACHABLE, Bounds, Inflated, adjacency, adjacency_between, all_pairs, blocked, cost_to_go, graph_nodes,
+    UNREACHABLE,
+    Bounds,
+    Inflated,
+    adjacency,
+    adjacency_between,
+    all_pairs,
+    blocked,
+    cost_to_go,
+    graph_nodes,
     shortest_from,
 )
 from rpf_fly.planning.waypoints import free_one, inside_one, next_waypoint
@@ -134,7 +142,7 @@ class Guidance:
             return self._around(position, goal, w, remaining, parked)
         return w, remaining
 
-    def detour(self, parked: Sequence[complex], radius: float | None = None) -> "Guidance":
+    def detour(self, parked: Sequence[complex], radius: float | None = None) -> Guidance:
         """The guidance of the mission's obstacles plus these parked drones, each a circle of radius
         :attr:`parked_radius` (inflated by ``delta`` like every obstacle), placed on the :data:`PARKED_QUANTUM`
         grid; built on first use of a set and cached (:data:`DETOUR_CACHE`).
@@ -281,7 +289,7 @@ class _Detour(Guidance):
     (tested), at a fraction of the cost: 28 pillars and 5 parked drones took 42 ms from scratch."""
 
     @classmethod
-    def around(cls, base: Guidance, centers: np.ndarray, radius: float) -> "_Detour":
+    def around(cls, base: Guidance, centers: np.ndarray, radius: float) -> _Detour:
         o = base.obstacles
         parked = ObstacleSet(centers, np.full(centers.shape[0], radius), np.zeros(0, complex), np.zeros(0), np.zeros(0))
         self = cls.__new__(cls)

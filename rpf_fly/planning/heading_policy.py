@@ -14,10 +14,10 @@ from rpf_fly.planning.forces import attractive
 from rpf_fly.planning.observation import build_observation
 from rpf_fly.planning.obstacles import ObstacleSet
 from rpf_fly.planning.onnx_policy import OnnxPolicy, PolicyError
-from rpf_fly.planning.visibility import Bounds
 from rpf_fly.planning.planner import PlanStep, guided_view, make_guidance, sense_obstacles
 from rpf_fly.planning.vectors import unit
 from rpf_fly.planning.view import LocalView
+from rpf_fly.planning.visibility import Bounds
 
 
 class HeadingPolicyPlanner:

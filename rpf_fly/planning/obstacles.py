@@ -11,8 +11,8 @@ negative inside an obstacle, so a collision stays visible instead of being hidde
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
-from typing import Iterable, Sequence
 
 import numpy as np
 
@@ -46,7 +46,7 @@ class ObstacleSet:
         return self.n_circles == 0 and self.n_boxes == 0
 
     @staticmethod
-    def empty() -> "ObstacleSet":
+    def empty() -> ObstacleSet:
         """No obstacles."""
         return ObstacleSet.from_shapes()
 
@@ -54,7 +54,7 @@ class ObstacleSet:
     def from_shapes(
         circles: Iterable[tuple[Sequence[float], float]] = (),
         boxes: Iterable[tuple[Sequence[float], Sequence[float]]] = (),
-    ) -> "ObstacleSet":
+    ) -> ObstacleSet:
         """Circles as ``(center_xy, radius)`` and boxes as ``(min_xy, max_xy)``, metres."""
         circles = list(circles)
         boxes = list(boxes)

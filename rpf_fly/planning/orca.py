@@ -37,16 +37,16 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Sequence
 from dataclasses import replace
-from typing import Sequence
 
 import numpy as np
 
 from rpf_fly.planning.config import PlannerConfig
 from rpf_fly.planning.obstacles import ObstacleSet
-from rpf_fly.planning.visibility import Bounds
 from rpf_fly.planning.planner import PlanStep, guided_view, make_guidance, sense_obstacles
 from rpf_fly.planning.view import LocalView
+from rpf_fly.planning.visibility import Bounds
 
 HalfPlane = tuple[complex, complex]
 """``(point, unit normal)``: the velocities ``v`` with ``(v - point) . normal >= 0``."""

@@ -17,8 +17,8 @@ from rpf_fly.planning.config import PlannerConfig
 from rpf_fly.planning.forces import attractive, inter_robot, perceived, repulsion_one, repulsive, repulsive_sum
 from rpf_fly.planning.gains import FixedGains, GainsPolicy
 from rpf_fly.planning.guidance import Guidance
-from rpf_fly.planning.obstacles import FAR, NearestObstacle, ObstacleSet, every_surface, nearest_obstacle
 from rpf_fly.planning.observation import Observation, build_observation
+from rpf_fly.planning.obstacles import FAR, NearestObstacle, ObstacleSet, every_surface, nearest_obstacle
 from rpf_fly.planning.speed import brake, yield_speed
 from rpf_fly.planning.view import LocalView
 from rpf_fly.planning.visibility import Bounds

@@ -24,7 +24,8 @@ import numpy as np
 
 from rpf_fly.planning.config import PlannerConfig
 from rpf_fly.planning.obstacles import NearestObstacle
-from rpf_fly.planning.vectors import dot, maximum, minimum, offsets as offsets_of, per_item
+from rpf_fly.planning.vectors import dot, maximum, minimum, per_item
+from rpf_fly.planning.vectors import offsets as offsets_of
 
 
 def yield_speed(direction: np.ndarray, f_in: np.ndarray, config: PlannerConfig) -> np.ndarray:

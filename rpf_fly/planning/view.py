@@ -44,7 +44,7 @@ class LocalView:
             object.__setattr__(self, "_offsets", cached)
         return cached
 
-    def with_goal(self, goal: np.ndarray) -> "LocalView":
+    def with_goal(self, goal: np.ndarray) -> LocalView:
         """The same view with another goal (guidance's waypoint), its neighbour offsets shared."""
         view = LocalView(self.position, goal, self.heading, self.neighbour_position, self.neighbour_velocity,
                          self.neighbour_mask)

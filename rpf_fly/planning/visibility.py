@@ -49,7 +49,7 @@ class Inflated:
     y1: np.ndarray
 
     @staticmethod
-    def of(obstacles: ObstacleSet, delta: float) -> "Inflated":
+    def of(obstacles: ObstacleSet, delta: float) -> Inflated:
         c = np.asarray(obstacles.centers)
         b = np.asarray(obstacles.box_center)
         hx, hy = np.asarray(obstacles.box_half_x) + delta, np.asarray(obstacles.box_half_y) + delta
@@ -71,7 +71,7 @@ class Inflated:
         in_b = (x > self.x0) & (x < self.x1) & (y > self.y0) & (y < self.y1)
         return in_c, in_b
 
-    def axis(self) -> "Inflated":
+    def axis(self) -> Inflated:
         """The same obstacles with an axis inserted before the obstacle axis (for ``S + (T, M)`` tests)."""
         return Inflated(*(getattr(self, f.name)[..., None, :] for f in dataclasses.fields(Inflated)))
 

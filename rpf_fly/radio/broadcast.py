@@ -28,8 +28,15 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Protocol
 
-from rpf_fly.radio.packed_extpos import (BROADCAST_ADDRESS, BROADCAST_COPIES, HEADER, PackedGroup, Vec3, encode,
-                                         packed_groups)
+from rpf_fly.radio.packed_extpos import (
+    BROADCAST_ADDRESS,
+    BROADCAST_COPIES,
+    HEADER,
+    PackedGroup,
+    Vec3,
+    encode,
+    packed_groups,
+)
 
 logger = logging.getLogger(__name__)
 

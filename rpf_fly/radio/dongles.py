@@ -10,7 +10,7 @@ cflib 0.1.34) answers the question once, before anything connects. A URI's dongl
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Sequence
-from typing import Any, Optional
+from typing import Any
 from urllib.parse import urlparse
 
 NO_RADIO = "no Crazyradio found on USB: plug one in, or fly with --dry-run"
@@ -30,7 +30,7 @@ def _serial(device: Any) -> str:
     return str(device if isinstance(device, str) else device.serial_number).upper()
 
 
-def radio_problem(uris: Iterable[str], find: Callable[[], Sequence[Any]] = find_radios) -> Optional[str]:
+def radio_problem(uris: Iterable[str], find: Callable[[], Sequence[Any]] = find_radios) -> str | None:
     """None when every ``radio://`` URI of ``uris`` has its Crazyradio on USB (or there is no radio URI); otherwise
     one line saying what is missing."""
     radio = [u for u in uris if u.startswith("radio://")]
@@ -43,7 +43,7 @@ def radio_problem(uris: Iterable[str], find: Callable[[], Sequence[Any]] = find_
                "or fly with --dry-run"
     if not devices:
         return NO_RADIO
-    serials: Optional[list[str]] = None
+    serials: list[str] | None = None
     for uri in radio:
         dongle = urlparse(uri).netloc
         if len(dongle) < 10 and dongle.isdigit():

@@ -24,9 +24,9 @@ import statistics
 import struct
 import threading
 import time
-from dataclasses import asdict, dataclass, field
 from collections.abc import Callable
-from typing import Any, Optional
+from dataclasses import asdict, dataclass, field
+from typing import Any
 
 PING_MARK = 0x50
 """The first byte of the probe's echo requests (cflib's own latency ping starts with 0)."""
@@ -91,7 +91,7 @@ class _Link:
         self.measuring = False
         self.rtts_s: list[float] = []
         self.lost = 0
-        self.error: Optional[str] = None
+        self.error: str | None = None
         self._stop = threading.Event()
         self.driver = cflib.crtp.get_link_driver(uri, self._on_stats, self._on_error)
         if self.driver is None:
@@ -151,7 +151,7 @@ class _Link:
             next_s = max(next_s + self._period_s, time.monotonic())
             self._stop.wait(next_s - time.monotonic())
 
-    def _await_echo(self, seq: int, sent: float) -> Optional[float]:
+    def _await_echo(self, seq: int, sent: float) -> float | None:
         deadline = sent + ECHO_TIMEOUT_S
         while True:
             left = deadline - time.monotonic()
@@ -165,7 +165,7 @@ class _Link:
                     and struct.unpack_from("<H", data, 1)[0] == seq:
                 return time.monotonic() - sent
 
-    def radio_version(self) -> Optional[float]:
+    def radio_version(self) -> float | None:
         radio = getattr(self.driver, "_radio", None)
         return getattr(radio, "version", None)
 
@@ -179,7 +179,7 @@ class _Link:
             pass
 
 
-def radio_type(version: Optional[float]) -> str:
+def radio_type(version: float | None) -> str:
     """The dongle type from the firmware version cflib reads (a PA's 0.53, a 2.0's 5.x)."""
     if version is None:
         return "unknown"
@@ -207,7 +207,7 @@ def _measure(links: list[_Link], seconds: float) -> tuple[float, list[float], li
     return sum(per_link), per_link, rtts, retries / (1.0 + retries), sum(end[3] for end in ends)
 
 
-def probe(uris: list[str], *, seconds: float = 2.0, ping_hz: float = 20.0, radio: Optional[str] = None,
+def probe(uris: list[str], *, seconds: float = 2.0, ping_hz: float = 20.0, radio: str | None = None,
           warmup_s: float = 0.3, on_progress: Callable[[str], None] = lambda line: None) -> list[ProbeRun]:
     """Measure the dongle of ``uris`` (all on one dongle number): a run with the first link alone, then (with more
     than one URI) a run with all of them. ``radio``: the dongle type to report (None: from the version cflib reads).
@@ -229,7 +229,7 @@ def probe(uris: list[str], *, seconds: float = 2.0, ping_hz: float = 20.0, radio
     runs: list[ProbeRun] = []
     opened: list[_Link] = []
     try:
-        single: Optional[float] = None
+        single: float | None = None
         for count in ([1, len(uris)] if len(uris) > 1 else [1]):
             while len(opened) < count:
                 link = _Link(uris[len(opened)], ping_hz)
@@ -294,8 +294,8 @@ DEFAULT_DRY_RUN_LINKS = 4
 """Simulated drones on a dry-run probe's dongle when ``--links`` is not given."""
 
 
-def probe_dongle(*, drones: Optional[list[str]] = None, dry_run: bool = False, dongle: Optional[int] = None,
-                 links: Optional[int] = None, radio: Optional[str] = None, seconds: float = 2.0,
+def probe_dongle(*, drones: list[str] | None = None, dry_run: bool = False, dongle: int | None = None,
+                 links: int | None = None, radio: str | None = None, seconds: float = 2.0,
                  on_progress: Callable[[str], None] = lambda line: None) -> list[ProbeRun]:
     """``rpf-fly radio probe``: a real dongle with ``drones`` (``radio://`` URIs on one dongle; ``links``: the first
     that many), or with ``dry_run`` an emulated one of type ``radio`` carrying ``links`` simulated drones. Raises

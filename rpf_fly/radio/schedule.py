@@ -74,7 +74,7 @@ class ExtposSchedule:
     _last: dict[str, int] = field(default_factory=dict)
 
     @classmethod
-    def for_uris(cls, rate_hz: float, uris: Mapping[str, str], packed: bool = False) -> "ExtposSchedule":
+    def for_uris(cls, rate_hz: float, uris: Mapping[str, str], packed: bool = False) -> ExtposSchedule:
         return cls(float(rate_hz), extpos_phases(uris, packed))
 
     def due(self, name: str, t_s: float) -> bool:

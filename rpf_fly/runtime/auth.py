@@ -18,7 +18,6 @@ import json
 import secrets
 import time
 from dataclasses import dataclass
-from typing import Optional
 
 SECRET_ENV = "RPF_FLY_SECRET"
 COMMANDS = ("go", "takeoff", "abort", "finish", "land", "emergency_stop")
@@ -49,7 +48,7 @@ def mac(key: bytes, payload: bytes) -> bytes:
     return hmac.new(key, payload, hashlib.sha256).hexdigest().encode()
 
 
-def signed_by(key: bytes, payload: bytes, attachment: Optional[bytes]) -> bool:
+def signed_by(key: bytes, payload: bytes, attachment: bytes | None) -> bool:
     """Whether ``attachment`` is ``payload``'s signature under ``key`` (compared in constant time)."""
     return bool(attachment) and hmac.compare_digest(mac(key, payload), bytes(attachment))  # type: ignore[arg-type]
 
@@ -73,7 +72,7 @@ class CommandVerifier:
         self._flight = flight
         self._last_seq = 0
 
-    def verify(self, payload: bytes, attachment: Optional[bytes]) -> tuple[Optional[Command], str]:
+    def verify(self, payload: bytes, attachment: bytes | None) -> tuple[Command | None, str]:
         """(the command, "") if it is the coordinator's, else (None, why it is refused)."""
         if not attachment:
             return None, "unsigned command (no signature)"

@@ -11,7 +11,8 @@ from __future__ import annotations
 
 import logging
 import threading
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 from rpf_fly.runtime.auth import Command, CommandVerifier, sign
 from rpf_fly.runtime.keys import STAMPS, FlightKeys, topic_suffix

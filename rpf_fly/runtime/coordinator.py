@@ -33,8 +33,9 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import Any, Callable, Mapping, Optional
+from typing import Any
 
 from rpf_fly.flight.events import ERROR, EventBus
 from rpf_fly.mission.model import Mission
@@ -68,8 +69,8 @@ class Coordinator(SwarmViews, MocapRelayProcess, SwarmPhases):
                  remote_dongles: tuple[int, ...] = (), listen: tuple[str, ...] = (),
                  say: Callable[[str], None] = print, radio_loss: bool = True,
                  remote_wait_s: float = REMOTE_WAIT_S, worker_args: tuple[str, ...] = (),
-                 status_hook: Optional[Callable[["Coordinator"], None]] = None,
-                 start_faults: Optional[Mapping[str, Any]] = None):
+                 status_hook: Callable[[Coordinator], None] | None = None,
+                 start_faults: Mapping[str, Any] | None = None):
         """``start_faults``: a dry run's power-on faults (``DryRun(start_faults=...)``: a drone standing off its
         start, rotated, tumbled, with a failing motor), applied by the simulated drones themselves."""
         self.mission = mission
@@ -115,16 +116,16 @@ class Coordinator(SwarmViews, MocapRelayProcess, SwarmPhases):
         self._estop = False
         self._interrupts = 0
         self._wake = threading.Event()
-        self.bus: Optional[FlightBus] = None
-        self.logger_process: Optional[subprocess.Popen] = None
+        self.bus: FlightBus | None = None
+        self.logger_process: subprocess.Popen | None = None
         self.logger_alive = False
         self.logger_info: dict[str, Any] = {}
-        self.started_s: Optional[float] = None
-        self.ended_s: Optional[float] = None
+        self.started_s: float | None = None
+        self.ended_s: float | None = None
         self.rig: Any = None
         self.recorder: Any = None
         self.relayed = uses_relay(mission)
-        self.relay_process: Optional[subprocess.Popen] = None
+        self.relay_process: subprocess.Popen | None = None
         self.relay_alive = False
         self.relay_info: dict[str, Any] = {}
         self._relay_said: list[str] = []

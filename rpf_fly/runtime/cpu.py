@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import os
 import re
-from typing import Optional
 
 ZENOH_THREAD = re.compile(r"^(tx|rx|net|app|acc)-\d+$")
 """The names Zenoh's runtime gives its threads (zenoh 1.x)."""
@@ -20,7 +19,7 @@ ZENOH_SENDING = re.compile(r"^(tx|net|app)-\d+$")
 relayed mocap frames are its input, not its logging)."""
 
 
-def zenoh_threads_cpu_s(names: re.Pattern = ZENOH_THREAD) -> Optional[float]:
+def zenoh_threads_cpu_s(names: re.Pattern = ZENOH_THREAD) -> float | None:
     """CPU seconds (user + system) of this process's Zenoh runtime threads so far (those whose name ``names``
     matches); None where /proc has no tasks."""
     tasks = "/proc/self/task"

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import math
 import time
-from typing import Any, NamedTuple, Optional
+from typing import Any, NamedTuple
 
 import orjson
 
@@ -76,7 +76,7 @@ class FrameSigner:
 class Verdict(NamedTuple):
     """One message's verdict: the frame (None: refused, ``why``), and when the relay received it (Unix ns)."""
 
-    frame: Optional[MocapFrame]
+    frame: MocapFrame | None
     why: str = ""
     malformed: bool = False
     relay_receive_ns: int = 0
@@ -90,7 +90,7 @@ class FrameVerifier:
         self._flight = flight
         self.last_seq = 0
 
-    def verify(self, payload: bytes, attachment: Optional[bytes], receive_time_s: float) -> Verdict:
+    def verify(self, payload: bytes, attachment: bytes | None, receive_time_s: float) -> Verdict:
         """The frame (its ``receive_time_s`` the caller's receipt time) or why it is refused."""
         if not attachment:
             return Verdict(None, "unsigned mocap frame (no signature)")

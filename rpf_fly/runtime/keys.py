@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import re
 import struct
-from typing import Optional
 
 ROOT = "rpf_fly"
 STAMPS = struct.Struct("<qq")
@@ -72,7 +71,7 @@ class FlightKeys:
     def workers_all(self) -> str:
         return self.key("workers/*")
 
-    def suffix_of(self, key: str) -> Optional[str]:
+    def suffix_of(self, key: str) -> str | None:
         """``rpf_fly/<flight>/setpoint/cf1`` -> ``setpoint/cf1``; None for another flight's key."""
         head = self.prefix + "/"
         return key[len(head):] if key.startswith(head) else None
@@ -89,7 +88,7 @@ def worker_name(dongle: int) -> str:
     return f"dongle-{int(dongle)}"
 
 
-def topic_suffix(topic: str, publisher: str) -> Optional[str]:
+def topic_suffix(topic: str, publisher: str) -> str | None:
     """The key suffix of a log topic (None: not published): ``/mocap/cf1`` -> ``mocap/cf1``, ``/cf1/setpoint`` ->
     ``setpoint/cf1``, ``/events`` -> ``events``, ``/tf`` -> ``tf/<publisher>``, ``/truth/cf1`` -> ``truth/cf1``,
     ``/radio/0`` -> ``radio/0`` (a dongle's measured load, from its worker).
@@ -109,7 +108,7 @@ def topic_suffix(topic: str, publisher: str) -> Optional[str]:
     return None
 
 
-def suffix_topic(suffix: str) -> Optional[str]:
+def suffix_topic(suffix: str) -> str | None:
     """The log topic of a key suffix (the inverse of :func:`topic_suffix`); None for keys that are not messages
     (command, alive, workers, rig) or are malformed."""
     parts = suffix.split("/")

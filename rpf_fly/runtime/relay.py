@@ -37,9 +37,10 @@ import socket
 import sys
 import threading
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import asdict
 from pathlib import Path
-from typing import Any, Callable, Optional, Sequence
+from typing import Any
 
 from rpf_fly.mission.model import Mission
 from rpf_fly.runtime.keys import COORDINATOR, RELAY
@@ -84,7 +85,7 @@ class FrameRelay:
     name -> drone name; ``offset_ns``: this process's Unix-epoch ns minus its monotonic ns)."""
 
     def __init__(self, bus: Any, source: Any, secret: str, event: Callable[[int, str], None], *,
-                 signed: bool = True, drones: Optional[dict[str, str]] = None, offset_ns: int = 0):
+                 signed: bool = True, drones: dict[str, str] | None = None, offset_ns: int = 0):
         import zenoh
 
         from rpf_fly.runtime.frames import FrameSigner
@@ -103,7 +104,7 @@ class FrameRelay:
             express=True)
         self.published = 0
         self.failed = 0
-        self.first_at: Optional[tuple[float, float]] = None
+        self.first_at: tuple[float, float] | None = None
         """(monotonic s, process CPU s) at the first frame: the relay's CPU share is measured from there."""
 
     def run(self, stop: threading.Event, gone: Callable[[], bool]) -> None:
@@ -148,7 +149,7 @@ class FrameRelay:
             if topic is not None and body.valid:
                 out(topic, t_ns, t_ns, pose_json(t_ns, body.position, body.quaternion))
 
-    def cpu_pct(self) -> Optional[float]:
+    def cpu_pct(self) -> float | None:
         if self.first_at is None or time.monotonic() <= self.first_at[0]:
             return None
         return round(100 * (time.process_time() - self.first_at[1]) / (time.monotonic() - self.first_at[0]), 1)
@@ -174,7 +175,7 @@ def open_source(mission: Mission, bus: Any, dry_run: bool, connect: Sequence[str
     return mocap_source(mission)
 
 
-def main(argv: Optional[list[str]] = None) -> int:
+def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m rpf_fly.runtime.relay")
     parser.add_argument("mission")
     parser.add_argument("--flight", required=True)
@@ -182,9 +183,9 @@ def main(argv: Optional[list[str]] = None) -> int:
     parser.add_argument("--connect", action="append", default=[])
     parser.add_argument("--dry-run", action="store_true")
     args = parser.parse_args(argv)
-    from rpf_fly.log.text_log import route_logging
     from rpf_fly.log.encoding import encode
     from rpf_fly.log.messages import log_message
+    from rpf_fly.log.text_log import route_logging
     from rpf_fly.mission import load_mission
     from rpf_fly.runtime.auth import SECRET_ENV
     from rpf_fly.runtime.bus import FlightBus

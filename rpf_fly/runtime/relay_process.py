@@ -15,8 +15,9 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable, Optional
+from typing import Any
 
 from rpf_fly.flight.events import FATAL, WARNING, EventBus
 from rpf_fly.runtime.auth import SECRET_ENV
@@ -38,11 +39,11 @@ class MocapRelayProcess:
     local_endpoint: str
     dry_run: bool
     secret: str
-    bus: Optional[FlightBus]
+    bus: FlightBus | None
     events: EventBus
     workers: dict[str, WorkerView]
     relayed: bool
-    relay_process: Optional[subprocess.Popen]
+    relay_process: subprocess.Popen | None
     relay_alive: bool
     relay_info: dict[str, Any]
     _relay_said: list[str]

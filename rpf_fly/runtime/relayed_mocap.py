@@ -19,8 +19,9 @@ import logging
 import threading
 import time
 from collections import deque
+from collections.abc import Callable
 from types import TracebackType
-from typing import Any, Callable, Optional
+from typing import Any
 
 from rpf_fly.mocap.frame import MocapFrame, MocapStats
 from rpf_fly.runtime.frames import FrameVerifier
@@ -38,14 +39,14 @@ class RelayedMocap:
     (the worker sets it to its loop's events once the loop exists; Python's logging always gets them too)."""
 
     def __init__(self, session: Any, key: str, secret: str, flight: str,
-                 warn: Optional[Callable[[str], None]] = None):
+                 warn: Callable[[str], None] | None = None):
         self.key = key
         self.warn = warn
         self._verifier = FrameVerifier(secret, flight)
         self._stats = MocapStats()
         self._cond = threading.Condition()
         self._verify_lock = threading.Lock()
-        self._pending: Optional[MocapFrame] = None
+        self._pending: MocapFrame | None = None
         self._closed = False
         self._last_warning_s = -1e9
         self._unreported = 0
@@ -103,7 +104,7 @@ class RelayedMocap:
 
     # ------------------------------------------------------------------------------------------ MocapSource
 
-    def receive(self, timeout_s: float) -> Optional[MocapFrame]:
+    def receive(self, timeout_s: float) -> MocapFrame | None:
         """The newest frame since the last call, waiting up to ``timeout_s`` seconds; None on timeout or closed."""
         with self._cond:
             if self._pending is None and not self._closed:
@@ -135,7 +136,7 @@ class RelayedMocap:
         except Exception:  # noqa: BLE001 - a session closed first
             pass
 
-    def __enter__(self) -> "RelayedMocap":
+    def __enter__(self) -> RelayedMocap:
         return self
 
     def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,

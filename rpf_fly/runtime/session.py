@@ -12,7 +12,8 @@ from __future__ import annotations
 
 import json
 import socket
-from typing import Any, Optional, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 from rpf_fly.mission.model import ZenohSettings
 
@@ -37,7 +38,7 @@ def free_loopback_endpoint() -> str:
         return f"tcp/127.0.0.1:{s.getsockname()[1]}"
 
 
-def endpoint_host(endpoint: str) -> Optional[str]:
+def endpoint_host(endpoint: str) -> str | None:
     """The host of a Zenoh endpoint such as ``tcp/10.0.0.5:7447`` or ``tls/[::1]:7447`` (metadata and settings
     after ``?`` or ``#`` ignored); None for one without a host and port (a Unix socket)."""
     proto, sep, rest = endpoint.partition("/")
@@ -79,7 +80,7 @@ def rig_address(advertised: str, connect: Sequence[str]) -> str:
 
 
 def zenoh_config(settings: ZenohSettings, *, connect: Sequence[str] = (), listen: Sequence[str] = (),
-                 mode: Optional[str] = None) -> Any:
+                 mode: str | None = None) -> Any:
     """A ``zenoh.Config``: the mission's config file when it names one (TLS, access control: untouched), then the
     mission's settings on top, with the command line's endpoints replacing its own."""
     import zenoh
@@ -100,7 +101,7 @@ def zenoh_config(settings: ZenohSettings, *, connect: Sequence[str] = (), listen
 
 
 def open_session(settings: ZenohSettings, *, connect: Sequence[str] = (), listen: Sequence[str] = (),
-                 mode: Optional[str] = None) -> Any:
+                 mode: str | None = None) -> Any:
     """Open the session; :class:`ZenohUnavailable` with one line if it cannot (nothing has been armed)."""
     import zenoh
 

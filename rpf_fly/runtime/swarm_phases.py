@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import threading
 import time
-from typing import Callable, Optional
+from collections.abc import Callable
 
 from rpf_fly.flight.events import INFO, WARNING, EventBus
 from rpf_fly.mission.model import Mission
@@ -29,7 +29,7 @@ class SwarmPhases:
 
     mission: Mission
     secret: str
-    bus: Optional[FlightBus]
+    bus: FlightBus | None
     events: EventBus
     phase: str
     workers: dict[str, WorkerView]
@@ -54,7 +54,7 @@ class SwarmPhases:
     def _fly(self) -> None:
         self.phase = "preflight"
         self.events.emit(INFO, "phase", "swarm: preflight")
-        arrived_since: Optional[float] = None
+        arrived_since: float | None = None
         arming_since = 0.0
         sent_stop = sent_estop = False
         timeout = self.mission.flight.timeout_s + 120.0

@@ -12,9 +12,10 @@ import json
 import logging
 import subprocess
 import threading
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Optional
+from typing import Any
 
 from rpf_fly.flight.events import ERROR, FATAL, WARNING, EventBus, FlightEvent
 from rpf_fly.runtime.keys import LOGGER, RELAY
@@ -27,10 +28,10 @@ class DroneView:
     """What the coordinator knows of one drone: its status messages (state, outcome, battery, link), where its
     worker's ``tf`` last put it, and the reason its worker gave at the end."""
     state: str = "connecting"
-    outcome: Optional[str] = None
-    battery_v: Optional[float] = None
-    link_pct: Optional[float] = None
-    position: Optional[tuple[float, float, float]] = None
+    outcome: str | None = None
+    battery_v: float | None = None
+    link_pct: float | None = None
+    position: tuple[float, float, float] | None = None
     reason: str = ""
 
 
@@ -45,14 +46,14 @@ class WorkerView:
     done: bool = False
     lost: bool = False
     info: dict[str, Any] = field(default_factory=dict)
-    process: Optional[subprocess.Popen] = None
+    process: subprocess.Popen | None = None
 
 
 class SwarmViews:
     """The coordinator's callbacks on the workers', logger's and relay's messages, and its console."""
 
     say: Callable[[str], None]
-    status_hook: Optional[Callable[[Any], None]]
+    status_hook: Callable[[Any], None] | None
     workers: dict[str, WorkerView]
     drones: dict[str, DroneView]
     _goals: dict[str, complex]

@@ -20,16 +20,17 @@ import os
 import socket
 import threading
 import time
+from collections.abc import Callable, Collection
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Collection, Optional
+from typing import Any
 
 from rpf_fly.flight.events import ERROR, WARNING, FlightEvent
 from rpf_fly.flight.loop import FlightLoop, FlightReport, PlannerFactory
+from rpf_fly.flight.recorder import MeteredRecorder
 from rpf_fly.mission.model import Mission
 from rpf_fly.radio.budget import dongle_of
 from rpf_fly.runtime.auth import Command
-from rpf_fly.flight.recorder import MeteredRecorder
 from rpf_fly.runtime.bus import FlightBus
 from rpf_fly.runtime.cpu import ZENOH_SENDING, zenoh_threads_cpu_s
 from rpf_fly.runtime.keys import COORDINATOR, worker_name
@@ -64,7 +65,7 @@ def tick_offset(mission: Mission, dongle: int) -> float:
     return dongles.index(dongle) / len(dongles)
 
 
-def logging_cpu(since: tuple[float, Optional[float]], metered: MeteredRecorder, recorder: Any) -> dict[str, Any]:
+def logging_cpu(since: tuple[float, float | None], metered: MeteredRecorder, recorder: Any) -> dict[str, Any]:
     """What logging cost this worker from its recorder's start to now, in percent of a core: the flight loop's
     hand-over (``loop_pct``), the log writer thread's encoding and publishing (``writer_pct``), Zenoh's sending
     threads (``zenoh_pct``: ``tx``, ``net``, ``app``; the receiving ``rx`` threads run the subscribers, the relayed
@@ -93,22 +94,22 @@ class CoordinatorLink:
     def __init__(self, bus: FlightBus, info: Callable[..., None]):
         self._bus = bus
         self._info = info
-        self._verdict: Optional[str] = None
+        self._verdict: str | None = None
         self._grounded: tuple[str, ...] = ()
-        self._takeoff: Optional[tuple[str, ...]] = None
-        self.loop: Optional[FlightLoop] = None
+        self._takeoff: tuple[str, ...] | None = None
+        self.loop: FlightLoop | None = None
         self._pending: list[Command] = []
         self._lock = threading.Lock()
         self.coordinator_seen = threading.Event()
         self.coordinator_lost = False
-        self.go_at: Optional[tuple[float, float]] = None
+        self.go_at: tuple[float, float] | None = None
         """(monotonic s, process CPU s) at the coordinator's go: the CPU share of the flight is measured from it."""
 
     # SwarmLink
     def preflight_done(self, loop: FlightLoop) -> None:
         self._info("ready")
 
-    def verdict(self) -> Optional[str]:
+    def verdict(self) -> str | None:
         return self._verdict
 
     def grounded(self) -> tuple[str, ...]:
@@ -118,7 +119,7 @@ class CoordinatorLink:
         # The refusals go with the report itself: the drones' "failed" status messages may come after it.
         self._info("armed", refused=sorted(refused))
 
-    def takeoff(self) -> Optional[tuple[str, ...]]:
+    def takeoff(self) -> tuple[str, ...] | None:
         return self._takeoff
 
     # the bus
@@ -252,14 +253,14 @@ class WorkerRun:
 
     mission: Mission
     dongle: int
-    flight: Optional[str]
+    flight: str | None
     """None: the one flight whose coordinator the session reaches (:func:`discover_flight`)."""
     secret: str
     planner_factory: PlannerFactory
     dry_run: bool = False
     connect: tuple[str, ...] = ()
     event_sinks: tuple[Callable[[FlightEvent], None], ...] = ()
-    on_loop: Optional[Callable[[FlightLoop], None]] = None
+    on_loop: Callable[[FlightLoop], None] | None = None
     session: Any = None
     """An open Zenoh session to use (tests); None: open one from the mission and ``connect``."""
     _closers: list[Callable[[], None]] = field(default_factory=list)
@@ -348,7 +349,7 @@ class WorkerRun:
                               f"{bus.keys.mocap_frames}; is alive/relay up, is RPF_FLY_SECRET this flight's?)")
         return source
 
-    def _rig(self, bus: FlightBus) -> tuple[Any, Any, Optional[dict[str, str]]]:
+    def _rig(self, bus: FlightBus) -> tuple[Any, Any, dict[str, str] | None]:
         """The backend, the mocap source and the URIs: the coordinator's simulated drones (a dry run: their radio
         server and NatNet emulator, found on the ``rig`` key) or the real radios and mocap; the mocap is the relay's
         frames when the flight has a relay (:func:`~rpf_fly.runtime.relay.uses_relay`, dry runs alike)."""

@@ -41,8 +41,9 @@ flies all seeds of a (scene, planner) at once.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING, Literal, Optional, Sequence
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
@@ -74,7 +75,7 @@ class FirmwareParams:
     (module doc)."""
 
     height_m: float = FlightSettings().height
-    arena_z: Optional[tuple[float, float]] = None
+    arena_z: tuple[float, float] | None = None
     settle_s: float = 10.0
     hold_tail_s: float = 2.0
     plan_from: PlanFrom = "flight"
@@ -131,7 +132,7 @@ class _Scene:
                                                      ("mode", "eta", "lam", "f_a", "f_r", "f_in", "direction",
                                                       "neighbours")}
         self.clamps = np.zeros(n, dtype=int)
-        self.tail_until: Optional[int] = None
+        self.tail_until: int | None = None
         """Truth sample index after which this scene's record ends (set when its run ends)."""
 
     def sample_tick(self, xy: np.ndarray, velocity: np.ndarray) -> None:
@@ -302,14 +303,14 @@ def run_firmware(
     labels: Sequence[str],
     firmware: FirmwareParams = FirmwareParams(),
     keep: bool = False,
-    planners: Optional[Sequence[object]] = None,
-) -> list["Run"]:
+    planners: Sequence[object] | None = None,
+) -> list[Run]:
     """:func:`rpf_fly.sim.evaluate.run_scenario` on the firmware model, for many scenarios flown together: each
     with its planner settings (one for all, or one per scenario) and its own planner (``planners``, else made from
     the settings as the kinematic run makes it), each run scored by :func:`firmware_metrics`. Raises what
     :func:`~rpf_fly.planning.factory.make_planner` raises (an unusable policy) before anything flies."""
-    from rpf_fly.sim.evaluate import Run
     from rpf_fly.planning.factory import make_planner
+    from rpf_fly.sim.evaluate import Run
 
     chosen = [settings] * len(scenarios) if isinstance(settings, PlannerSettings) else list(settings)
     if planners is None:

@@ -6,16 +6,16 @@ simulation: no torch, so it runs with only the runtime dependencies.
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Callable, Iterable, Optional
 
 import numpy as np
 
 from rpf_fly.mission.load import with_planner
 from rpf_fly.mission.model import Mission, PlannerSettings
-from rpf_fly.sim.metrics import Metrics, compute_metrics
 from rpf_fly.planning.factory import make_planner
+from rpf_fly.sim.metrics import Metrics, compute_metrics
 from rpf_fly.sim.rollout import Rollout, SimParams, rollout
 from rpf_fly.sim.scenario import Scenario, arena_a, scenario_from_mission
 
@@ -28,7 +28,7 @@ class Run:
     planner: str
     seed: int
     metrics: Metrics
-    rollout: Optional[Rollout] = None
+    rollout: Rollout | None = None
 
 
 def sim_params(mission: Mission) -> SimParams:
@@ -52,9 +52,9 @@ def run_scenario(
 def evaluate_mission(
     mission: Mission,
     kind: str,
-    policy: Optional[str | Path],
+    policy: str | Path | None,
     seeds: Iterable[int],
-    on_run: Optional[Callable[[Run], None]] = None,
+    on_run: Callable[[Run], None] | None = None,
 ) -> list[Run]:
     """Rollouts of ``mission`` with planner ``kind`` for each seed of its start jitter."""
     chosen = with_planner(mission, kind, policy)
@@ -70,9 +70,9 @@ def evaluate_mission(
 def evaluate_arena_a(
     settings: PlannerSettings,
     seeds: Iterable[int],
-    goal_clearance: Optional[float] = None,
+    goal_clearance: float | None = None,
     params: SimParams = SimParams(),
-    on_run: Optional[Callable[[Run], None]] = None,
+    on_run: Callable[[Run], None] | None = None,
 ) -> list[Run]:
     """Rollouts on freshly generated training-arena-A scenes (``arena_a`` with each seed)."""
     runs = []
@@ -86,7 +86,7 @@ def evaluate_arena_a(
     return runs
 
 
-def planner_settings(kind: str, policy: Optional[str | Path] = None, **overrides: object) -> PlannerSettings:
+def planner_settings(kind: str, policy: str | Path | None = None, **overrides: object) -> PlannerSettings:
     """Planner settings with the paper's defaults for ``kind`` (``policy`` for the learned kinds)."""
     return replace(PlannerSettings(), kind=kind, policy=Path(policy) if policy else None, **overrides)  # type: ignore[arg-type]
 
@@ -94,7 +94,7 @@ def planner_settings(kind: str, policy: Optional[str | Path] = None, **overrides
 def summarise(runs: list[Run]) -> dict[str, object]:
     """Success rate, collision count and mean +- std of the path metrics over runs."""
 
-    def stat(values: list[float]) -> Optional[dict[str, float]]:
+    def stat(values: list[float]) -> dict[str, float] | None:
         values = [v for v in values if v is not None]
         if not values:
             return None

@@ -25,8 +25,8 @@ degrees and mirrored at random, so no family has a preferred direction. Pure num
 from __future__ import annotations
 
 import zlib
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable, Optional
 
 import numpy as np
 
@@ -59,7 +59,7 @@ class Family:
     max_circles: int
     max_boxes: int
     about: str
-    default_drones_range: Optional[tuple[int, int]] = None
+    default_drones_range: tuple[int, int] | None = None
     """When set, the drone count is drawn from this inclusive range unless one is asked for (circle swaps)."""
 
 
@@ -92,8 +92,8 @@ def _room(h: float) -> list[Obstacle]:
 
 def _scatter(
     rng: np.random.Generator, n: int, x: tuple[float, float], y: tuple[float, float], spacing: float = SPACING,
-    keep: Optional[Callable[[complex], bool]] = None,
-) -> Optional[np.ndarray]:
+    keep: Callable[[complex], bool] | None = None,
+) -> np.ndarray | None:
     """``n`` points uniform in the rectangle, pairwise at least ``spacing`` apart (None if they do not fit)."""
     points: list[complex] = []
     for _ in range(200 * n):
@@ -335,7 +335,7 @@ def generate(
     seed: int,
     *,
     split: str,
-    n_drones: Optional[int] = None,
+    n_drones: int | None = None,
     safety_radius: float = 0.1,
     margin: float = DEFAULT_MARGIN,
 ) -> Scenario:

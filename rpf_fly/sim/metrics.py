@@ -17,8 +17,9 @@ so ``review --json`` reproduces ``sim --json``. Definitions (docs/metrics.md):
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass
-from typing import Any, Optional, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -37,7 +38,7 @@ class DroneMetrics:
     reached: bool
     collided: bool
     travel_distance_m: float
-    time_to_goal_s: Optional[float]
+    time_to_goal_s: float | None
     smoothness: float
 
 
@@ -53,11 +54,11 @@ class Metrics:
     success: bool
     collisions_drone_drone: int
     collisions_drone_obstacle: int
-    min_separation_m: Optional[float]
-    min_obstacle_clearance_m: Optional[float]
-    travel_distance_m: Optional[float]
-    smoothness: Optional[float]
-    makespan_s: Optional[float]
+    min_separation_m: float | None
+    min_obstacle_clearance_m: float | None
+    travel_distance_m: float | None
+    smoothness: float | None
+    makespan_s: float | None
     per_drone: tuple[DroneMetrics, ...]
     margin_m: float = 0.0
     margin_breaches_drone_drone: int = 0

@@ -13,7 +13,6 @@ Agg backend (no display needed).
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Optional
 
 import numpy as np
 
@@ -39,7 +38,7 @@ def mode_runs(modes: np.ndarray) -> list[tuple[int, int, int]]:
     return runs
 
 
-def plot_rollout(result: Rollout, path: str | Path, metrics: Optional[Metrics] = None, title: str = "") -> Path:
+def plot_rollout(result: Rollout, path: str | Path, metrics: Metrics | None = None, title: str = "") -> Path:
     """Draw the rollout's trajectories into a PNG at ``path``; returns the path."""
     import matplotlib.pyplot as plt
 
@@ -50,7 +49,7 @@ def plot_rollout(result: Rollout, path: str | Path, metrics: Optional[Metrics] =
     return path
 
 
-def rollout_figure(result: Rollout, metrics: Optional[Metrics] = None, title: str = ""):  # type: ignore[no-untyped-def]
+def rollout_figure(result: Rollout, metrics: Metrics | None = None, title: str = ""):  # type: ignore[no-untyped-def]
     """The figure of :func:`plot_rollout` (Agg backend). Artists carry a ``gid``: ``track:<drone>:<mode>`` per
     run of one mode, ``goal:<drone>``, ``start:<drone>``, ``start-goal:<drone>``."""
     import matplotlib

@@ -17,7 +17,6 @@ from rpf_fly.planning.planner import Planner
 from rpf_fly.sim.scenario import Scenario
 from rpf_fly.sim.world import World
 
-
 STALL_WINDOW_S = 10.0
 
 

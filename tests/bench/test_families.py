@@ -4,15 +4,23 @@ guidance axis read from the settings dataclass, the margin counts, the claims ju
 import json
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal, Optional
+from typing import Literal
 
 import pytest
 from typer.testing import CliRunner
 
 from rpf_fly.bench.claims import FAMILY_CLAIMS, HELD, NOT_EVALUATED, NOT_HELD, evaluate_claims
 from rpf_fly.bench.families import (
-    FAMILY_PLANNERS, FamiliesConfig, guidance_modes, prepare_families, results_json, run_families,
-    planner_margin, summarise_family, to_markdown, with_guidance,
+    FAMILY_PLANNERS,
+    FamiliesConfig,
+    guidance_modes,
+    planner_margin,
+    prepare_families,
+    results_json,
+    run_families,
+    summarise_family,
+    to_markdown,
+    with_guidance,
 )
 from rpf_fly.bench.runner import BenchError, RunRecord, summarise_runs
 from rpf_fly.cli import get_app
@@ -94,8 +102,8 @@ class WithGuidance:
 @dataclass(frozen=True)
 class OptionalGuidance:
     kind: str = "apf"
-    guidance: Optional[Literal["none", "path"]] = None
-    margin: Optional[float] = None
+    guidance: Literal["none", "path"] | None = None
+    margin: float | None = None
 
     @property
     def margin_m(self) -> float:

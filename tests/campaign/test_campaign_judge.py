@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import copy
 import signal
+from collections.abc import Callable
 from pathlib import Path
 from types import SimpleNamespace
-from typing import Callable
 
 import pytest
 

@@ -6,9 +6,17 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from rpf_fly.campaign.owed import (TRACKING_NOISE_M, corrected_by_extpose, grounded_at_injection, gust_push_bound,
-                                   inside_loop_stall, planner_unused_at_injection, stall_within_jitter, uninjectable,
-                                   warnings_for)
+from rpf_fly.campaign.owed import (
+    TRACKING_NOISE_M,
+    corrected_by_extpose,
+    grounded_at_injection,
+    gust_push_bound,
+    inside_loop_stall,
+    planner_unused_at_injection,
+    stall_within_jitter,
+    uninjectable,
+    warnings_for,
+)
 from rpf_fly.campaign.schedules import fault_fields, schedule_of
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -11,8 +11,18 @@ import pytest
 
 from rpf_fly.campaign.missions import with_extpose, with_planner_kind, with_world_seed
 from rpf_fly.campaign.runner import lab_runs
-from rpf_fly.campaign.schedules import (ALL_KINDS, DEFAULTS, LAB_KINDS, ScheduleError, check_kinds, draw_faults,
-                                        middle_drone_fault, random_fault, schedule, schedule_of)
+from rpf_fly.campaign.schedules import (
+    ALL_KINDS,
+    DEFAULTS,
+    LAB_KINDS,
+    ScheduleError,
+    check_kinds,
+    draw_faults,
+    middle_drone_fault,
+    random_fault,
+    schedule,
+    schedule_of,
+)
 from rpf_fly.flight.faults import FAULT_KINDS, parse_faults
 from rpf_fly.mission import load_mission
 

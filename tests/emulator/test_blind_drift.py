@@ -14,7 +14,13 @@ import pytest
 
 from rpf_fly.emulator.fake_firmware import FakeFirmware
 from rpf_fly.emulator.fake_vehicle import (
-    ACCEL_BIAS_M_S2, ACCEL_NOISE_M_S2, BLIND_DRIFT_MAX_M_S2, GRAVITY_M_S2, SUBSTEP_S, TILT_ERROR_M_S2, TILT_ERROR_RAD,
+    ACCEL_BIAS_M_S2,
+    ACCEL_NOISE_M_S2,
+    BLIND_DRIFT_MAX_M_S2,
+    GRAVITY_M_S2,
+    SUBSTEP_S,
+    TILT_ERROR_M_S2,
+    TILT_ERROR_RAD,
     VehicleConfig,
 )
 from rpf_fly.flight.poses import PoseTracker

@@ -8,9 +8,21 @@ import math
 import pytest
 
 from rpf_fly.emulator.cf_body import P250, CfBody
-from rpf_fly.emulator.cf_controller import (MODE_ABS, MODE_DISABLE, MODE_VELOCITY, NULL_SETPOINT, PARAM_NAMES,
-                                            CfGains, ControlSetpoint, Lpf2p, Pid, PidController,
-                                            legacy_power_distribution, motor_thrust_n, saturate_int16)
+from rpf_fly.emulator.cf_controller import (
+    MODE_ABS,
+    MODE_DISABLE,
+    MODE_VELOCITY,
+    NULL_SETPOINT,
+    PARAM_NAMES,
+    CfGains,
+    ControlSetpoint,
+    Lpf2p,
+    Pid,
+    PidController,
+    legacy_power_distribution,
+    motor_thrust_n,
+    saturate_int16,
+)
 from rpf_fly.emulator.cf_drone import CfDrone
 from rpf_fly.emulator.cf_swarm import CfSwarm
 from rpf_fly.emulator.fake_setpoint import AxisMode, Setpoint

@@ -11,8 +11,19 @@ from pathlib import Path
 
 import pytest
 
-from rpf_fly.emulator.cf_scenario import (NOT_SETTLED, Scenario, carrot_scenario, circle_scenario, figures, fly,
-                                          hl_scenario, hold_scenario, json_figures, step_scenario, write_trace)
+from rpf_fly.emulator.cf_scenario import (
+    NOT_SETTLED,
+    Scenario,
+    carrot_scenario,
+    circle_scenario,
+    figures,
+    fly,
+    hl_scenario,
+    hold_scenario,
+    json_figures,
+    step_scenario,
+    write_trace,
+)
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "crazyflie_dynamics"
 NAMES = sorted(p.stem for p in (DATA / "scenarios").glob("*.yaml"))

@@ -14,12 +14,12 @@ import pytest
 from cflib.crazyflie import Crazyflie
 from cflib.crazyflie.syncCrazyflie import SyncCrazyflie
 
-from rpf_fly.mission.model import BoxObstacle, CircleObstacle
-from rpf_fly.radio.backend import SupervisorBits
 from rpf_fly.emulator.fake_contact import DRONE_CONTACT_M, OBSTACLE_CONTACT_M, ContactModel
 from rpf_fly.emulator.fake_firmware import LOG_TOC, Body, FakeFirmware
 from rpf_fly.emulator.fake_vehicle import VehicleConfig
 from rpf_fly.emulator.fake_world import FakeDroneConfig, FakeWorld
+from rpf_fly.mission.model import BoxObstacle, CircleObstacle
+from rpf_fly.radio.backend import SupervisorBits
 
 MakeWorld = Callable[..., FakeWorld]
 A, B = 0xE7E7E7E701, 0xE7E7E7E702

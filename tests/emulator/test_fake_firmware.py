@@ -13,7 +13,12 @@ from cflib.crazyflie.param import ParamTocElement
 from cflib.utils.encoding import compress_quaternion
 
 from rpf_fly.emulator.fake_firmware import (
-    LOG_TOC, PARAM_TOC, PROTOCOL_VERSION, REBOOT_BOOT_S, FakeFirmware, FirmwareSnapshot,
+    LOG_TOC,
+    PARAM_TOC,
+    PROTOCOL_VERSION,
+    REBOOT_BOOT_S,
+    FakeFirmware,
+    FirmwareSnapshot,
 )
 from rpf_fly.emulator.fake_planner import Trajectory
 from rpf_fly.emulator.fake_vehicle import ACCEL_BIAS_M_S2, TRACK_TAU_S, VehicleConfig

@@ -19,8 +19,8 @@ from cflib.crazyflie.syncLogger import SyncLogger
 from cflib.crtp.exceptions import WrongUriType
 
 from rpf_fly.emulator import fake_radio
-from rpf_fly.emulator.fake_radio import FakeLink, FakeUri, parse_fake_uri
 from rpf_fly.emulator.dongle_air import RadioTiming
+from rpf_fly.emulator.fake_radio import FakeLink, FakeUri, parse_fake_uri
 from rpf_fly.emulator.fake_world import FakeDroneConfig, FakeWorld, LinkFaults
 
 MakeWorld = Callable[..., FakeWorld]

@@ -11,7 +11,12 @@ import pytest
 
 from rpf_fly.emulator.fake_firmware import FakeFirmware
 from rpf_fly.emulator.fake_supervisor import (
-    ARMING_SPINUP_TIMEOUT_S, UPDATE_PERIOD_S, Supervisor, SupervisorStateName as S,
+    ARMING_SPINUP_TIMEOUT_S,
+    UPDATE_PERIOD_S,
+    Supervisor,
+)
+from rpf_fly.emulator.fake_supervisor import (
+    SupervisorStateName as S,
 )
 from rpf_fly.emulator.fake_vehicle import VehicleConfig
 

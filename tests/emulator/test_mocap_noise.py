@@ -9,9 +9,9 @@ import random
 import numpy as np
 import pytest
 
+from rpf_fly.emulator.fake_world import FakeDroneConfig, FakeWorld
 from rpf_fly.emulator.mocap_noise import MocapNoise
 from rpf_fly.emulator.simulated_bodies import SimulatedBodies
-from rpf_fly.emulator.fake_world import FakeDroneConfig, FakeWorld
 
 
 def test_the_jitter_and_the_dropouts_have_the_documented_figures():

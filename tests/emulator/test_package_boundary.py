@@ -26,9 +26,10 @@ def test_a_real_flight_imports_no_emulator() -> None:
 
 
 def test_radio_and_mocap_hold_no_emulator_module() -> None:
+    from pathlib import Path
+
     import rpf_fly.mocap
     import rpf_fly.radio
-    from pathlib import Path
 
     for package in (rpf_fly.radio, rpf_fly.mocap):
         names = {p.stem for p in Path(package.__file__).parent.glob("*.py")}

@@ -8,8 +8,8 @@ import time
 import numpy as np
 import pytest
 
-from rpf_fly.mocap.frame import MocapSource
 from rpf_fly.emulator.simulated_mocap import SimulatedMocap
+from rpf_fly.mocap.frame import MocapSource
 
 
 class FakeClock:

@@ -17,11 +17,11 @@ import pytest
 from cflib.crazyflie import Crazyflie
 from cflib.crazyflie.syncCrazyflie import SyncCrazyflie
 
-from rpf_fly.mission.model import CircleObstacle
 from rpf_fly.emulator import fake_radio
 from rpf_fly.emulator.fake_world import FakeDroneConfig
 from rpf_fly.emulator.remote_world import RemoteWorld
 from rpf_fly.emulator.world_process import WorldProcess
+from rpf_fly.mission.model import CircleObstacle
 
 A1, A2 = 0xE7E7E7E701, 0xE7E7E7E702
 

@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import threading
 import time
-from dataclasses import dataclass, replace
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Optional
 
 from rpf_fly.flight.dry_run import DryRun
 from rpf_fly.flight.fault_injection import FaultInjection
@@ -15,7 +15,6 @@ from rpf_fly.flight.loop import FlightLoop, FlightReport
 from rpf_fly.flight.phases import SwarmPhase
 from rpf_fly.flight.session import run_flight
 from rpf_fly.log.reader import LogData, read_log
-from rpf_fly.mission import parse_mission
 from rpf_fly.planning.factory import make_planner
 from rpf_fly.sim.scenario import obstacle_set
 
@@ -48,7 +47,7 @@ class Flight:
     log: LogData
     log_path: Path
 
-    def events(self, kind: str, drone: Optional[str] = None) -> list:
+    def events(self, kind: str, drone: str | None = None) -> list:
         return [e for e in self.report.events if e.kind == kind and (drone is None or e.drone == drone)]
 
     def logged_events(self) -> list[str]:
@@ -67,7 +66,7 @@ def fly(
     configs=None,
     start_faults=None,
     factory=None,
-    when_flying: Optional[Callable[[FlightLoop, DryRun], None]] = None,
+    when_flying: Callable[[FlightLoop, DryRun], None] | None = None,
     mocap: str = "natnet",
     process: bool = True,
 ) -> Flight:

@@ -9,18 +9,16 @@ from __future__ import annotations
 import gc
 import time
 from dataclasses import replace
+from pathlib import Path
 
-import pytest
+from flight_harness import default_factory, fly
 
+from rpf_fly.emulator.fake_world import FakeDroneConfig
+from rpf_fly.flight.dry_run import StartFault
 from rpf_fly.flight.loop import FlightLoop
 from rpf_fly.flight.phases import FlightOutcome, SwarmPhase
 from rpf_fly.log.review_metrics import metrics_of
 from rpf_fly.mission import load_mission
-from rpf_fly.emulator.fake_world import FakeDroneConfig
-from rpf_fly.flight.dry_run import StartFault
-from flight_harness import default_factory, fly
-
-from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
 

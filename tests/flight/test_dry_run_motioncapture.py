@@ -18,7 +18,7 @@ from flight_harness import fly
 from rpf_fly.flight.phases import FlightOutcome, SwarmPhase
 from rpf_fly.mission import parse_mission
 from rpf_fly.mocap.motioncapture_source import MotioncaptureSource
-from rpf_fly.mocap.natnet_protocol import decode_header, decode_server_info, encode_connect, ConnectRequest
+from rpf_fly.mocap.natnet_protocol import ConnectRequest, decode_header, decode_server_info, encode_connect
 
 MOCK_MISSION = """\
 name: mock-3

@@ -11,6 +11,8 @@ import numpy as np
 import pytest
 from cflib.crazyflie import Crazyflie
 from cflib.crazyflie.syncCrazyflie import SyncCrazyflie
+from flight_harness import SHORT_MISSION, fly
+from test_dry_run_flight import validate_every_message
 from typer.testing import CliRunner
 
 from rpf_fly.cli import get_app
@@ -19,8 +21,6 @@ from rpf_fly.flight.dry_run import DryRun
 from rpf_fly.flight.phases import FlightOutcome
 from rpf_fly.log.review import review
 from rpf_fly.mission import parse_mission
-from flight_harness import SHORT_MISSION, fly
-from test_dry_run_flight import validate_every_message
 
 NAMES = ("cf1", "cf2", "cf3")
 MOCAP_LATENCY_MAX_S = 0.3

@@ -4,18 +4,17 @@ drone flying or cut its motors in the air."""
 
 from __future__ import annotations
 
-from dataclasses import replace
-
 import _thread
 import re
 import threading
 import time
+from dataclasses import replace
 
 import pytest
+from flight_harness import default_factory, fly
 
 from rpf_fly.flight.phases import FlightOutcome
 from rpf_fly.flight.watchdog import LoopWatchdog, stall_timeout_s
-from flight_harness import default_factory, fly
 
 
 def landed(snapshot) -> bool:  # type: ignore[no-untyped-def]
@@ -273,9 +272,9 @@ def test_an_orientation_flip_under_extpose_is_not_fed_to_the_estimator(tmp_path,
 def test_a_drone_whose_mocap_orientation_flipped_on_the_ground_does_not_take_off(tmp_path, short_mission):
     """A flip seen before take-off: one of the two fits is wrong and nothing says which, and the estimator would
     start from that yaw. The drone stays on the ground with the reason; the others fly."""
+    from rpf_fly.flight.dry_run import DryRun
     from rpf_fly.flight.phases import SwarmPhase
     from rpf_fly.flight.session import run_flight
-    from rpf_fly.flight.dry_run import DryRun
     from rpf_fly.log.reader import read_log
 
     log_path = tmp_path / "flight.mcap"

@@ -12,7 +12,6 @@ import subprocess
 import sys
 import time
 from pathlib import Path
-from typing import Optional
 
 from flight_harness import SHORT_MISSION
 from mcap.reader import make_reader
@@ -25,7 +24,7 @@ WORLD_MODULE = "rpf_fly.emulator.world_process"
 
 
 def start_flight(tmp_path: Path, *, goal_x: float = 1.5, timeout_s: int = 60,
-                 stderr: Optional[Path] = None) -> tuple[subprocess.Popen, Path]:
+                 stderr: Path | None = None) -> tuple[subprocess.Popen, Path]:
     """``rpf-fly fly`` of the short mission (its goals at ``goal_x``) as a subprocess; stderr piped, or to a file."""
     mission = tmp_path / "short.yaml"
     mission.write_text(SHORT_MISSION.replace("timeout_s: 30", f"timeout_s: {timeout_s}")
@@ -70,7 +69,7 @@ def alive(pid: int) -> bool:
     return stat.rpartition(")")[2].split()[0] != "Z"
 
 
-def wait_gone(pid: int, timeout_s: float) -> Optional[float]:
+def wait_gone(pid: int, timeout_s: float) -> float | None:
     """Seconds until ``pid`` is gone, None if it still runs after ``timeout_s``."""
     start = time.monotonic()
     while time.monotonic() - start < timeout_s:

@@ -14,9 +14,9 @@ import time
 
 import jsonschema
 import pytest
+from lab_harness import LabProcess
 from mcap.reader import make_reader
 
-from lab_harness import LabProcess
 from rpf_fly.flight.lab import after_ground_station
 from rpf_fly.log.reader import read_log
 

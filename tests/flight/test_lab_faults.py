@@ -11,8 +11,8 @@ import time
 from pathlib import Path
 
 import pytest
-
 from lab_harness import LabProcess
+
 from rpf_fly.flight.lab import after_ground_station
 from rpf_fly.log.reader import read_log
 

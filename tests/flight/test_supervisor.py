@@ -6,6 +6,8 @@ from __future__ import annotations
 import math
 from dataclasses import replace
 
+from flight_harness import SHORT_MISSION
+
 from rpf_fly.flight.agent import DroneAgent
 from rpf_fly.flight.phases import DronePhase
 from rpf_fly.flight.poses import PoseTracker
@@ -15,7 +17,6 @@ from rpf_fly.mission import parse_mission
 from rpf_fly.mocap.frame import MocapFrame, RigidBodyPose
 from rpf_fly.radio.backend import BatteryState, DroneState, LinkState, PmState, SupervisorState
 from rpf_fly.sim.scenario import obstacle_set
-from flight_harness import SHORT_MISSION
 
 
 def setup(mission_text: str = SHORT_MISSION):  # type: ignore[no-untyped-def]

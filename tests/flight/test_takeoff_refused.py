@@ -5,15 +5,14 @@ commander's CRTP priority, so every high-level take-off is refused by the firmwa
 
 from __future__ import annotations
 
+import struct
 import threading
 import time
 
-import struct
-
 import cflib.crtp
 from cflib.crtp.crtpstack import CRTPPacket
-
 from flight_harness import default_factory
+
 from rpf_fly.flight.dry_run import DryRun
 from rpf_fly.flight.phases import DronePhase, FlightOutcome, SwarmPhase
 from rpf_fly.flight.session import run_flight

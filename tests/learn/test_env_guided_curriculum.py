@@ -5,8 +5,8 @@ import pytest
 
 from rpf_fly.learn.env import EnvConfig, SwarmEnv
 from rpf_fly.planning import FixedGains, Planner, views_from_states
-from rpf_fly.planning.visibility import CIRCLE_SIDES
 from rpf_fly.planning.obstacles import ObstacleSet
+from rpf_fly.planning.visibility import CIRCLE_SIDES
 from rpf_fly.sim.generators import FAMILIES, generate
 
 

@@ -6,10 +6,9 @@ import torch
 
 from rpf_fly.learn.export import check_parity, export_onnx, random_observations
 from rpf_fly.learn.model import ActorCritic, ModelConfig
-from rpf_fly.mission.model import PlannerSettings
-from rpf_fly.planning.onnx_policy import OnnxGains, OnnxPolicy, PolicyError
 from rpf_fly.planning.observation import Observation
-from rpf_fly.sim import circle_swap, compute_metrics
+from rpf_fly.planning.onnx_policy import OnnxGains, OnnxPolicy, PolicyError
+from rpf_fly.sim import circle_swap
 from rpf_fly.sim.evaluate import planner_settings, run_scenario
 from rpf_fly.sim.rollout import SimParams
 

@@ -4,7 +4,6 @@ a generated bench scene with guidance and the margin (onnxruntime, no torch need
 import hashlib
 from pathlib import Path
 
-import numpy as np
 import yaml
 
 from rpf_fly.learn.env import EnvConfig, SwarmEnv

@@ -10,11 +10,10 @@ from pathlib import Path
 
 import pytest
 from mcap.writer import Writer
+from sim_logs import MISSIONS, run_cli, sim_log
 
 from rpf_fly.log.reader import read_log
 from rpf_fly.log.review import review
-
-from sim_logs import MISSIONS, run_cli, sim_log
 
 
 def assert_close(a, b, path="$"):  # type: ignore[no-untyped-def]

@@ -9,14 +9,13 @@ import jsonschema
 import numpy as np
 import pytest
 from mcap.reader import make_reader
+from test_log_writer import write_flight
 
 from rpf_fly.log import encoding as E
 from rpf_fly.log import messages as M
 from rpf_fly.log import rpf_schemas as R
 from rpf_fly.log import schemas as S
 from rpf_fly.log.schemas import SCHEMAS
-
-from test_log_writer import write_flight
 
 # Required fields as listed in Foxglove's schema reference (docs.foxglove.dev, foxglove-sdk schemas/jsonschema).
 FOXGLOVE_REQUIRED = {

@@ -13,8 +13,8 @@ from matplotlib.colors import to_rgba  # noqa: E402
 
 from rpf_fly.log.reader import read_log  # noqa: E402
 from rpf_fly.log.review import review  # noqa: E402
-from rpf_fly.log.review_series import obstacle_clearance, pose_series  # noqa: E402
 from rpf_fly.log.review_plot import labelled_events, plot_review, review_figure  # noqa: E402
+from rpf_fly.log.review_series import obstacle_clearance, pose_series  # noqa: E402
 
 # Its module and session fixtures fly once: the tests sharing them run on one xdist worker (pyproject: --dist
 # loadgroup).

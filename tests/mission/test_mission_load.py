@@ -8,7 +8,6 @@ from pathlib import Path
 
 import pytest
 
-from rpf_fly.mission.load import PROJECT_POLICIES
 from rpf_fly.mission import (
     Arena,
     BoxObstacle,
@@ -28,6 +27,7 @@ from rpf_fly.mission import (
     parse_uri,
     with_planner,
 )
+from rpf_fly.mission.load import PROJECT_POLICIES
 
 BASE = """\
 arena: {x: [-2, 2], y: [-2, 2], z: [0, 1.5]}

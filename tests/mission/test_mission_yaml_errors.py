@@ -6,8 +6,7 @@ import pickle
 
 import pytest
 
-from rpf_fly.mission import MissionError, load_mission, parse_mission
-from rpf_fly.mission import yaml_nodes
+from rpf_fly.mission import MissionError, load_mission, parse_mission, yaml_nodes
 
 # Two drones crossing a 4 m arena; the tests rely on its line numbers (drones[0] on line 3, drones[1] on line 4).
 BASE = """\

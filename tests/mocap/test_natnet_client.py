@@ -52,7 +52,7 @@ def received_ids(sock: socket.socket, seconds: float) -> list[int]:
         sock.settimeout(remaining)
         try:
             ids.append(decode_header(sock.recv(65536))[0])
-        except socket.timeout:
+        except TimeoutError:
             break
     return ids
 

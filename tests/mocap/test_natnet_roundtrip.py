@@ -8,10 +8,10 @@ import time
 import pytest
 from natnet_samples import VERSIONS
 
+from rpf_fly.emulator.natnet_server import NatNetServer
 from rpf_fly.mocap.frame import MocapSource
 from rpf_fly.mocap.natnet_client import NatNetClient
 from rpf_fly.mocap.natnet_protocol import MessageId
-from rpf_fly.emulator.natnet_server import NatNetServer
 
 TRANSPORTS = {"unicast": False, "multicast": True}
 _C = math.cos(0.3)

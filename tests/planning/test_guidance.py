@@ -8,8 +8,8 @@ import pytest
 from rpf_fly.planning import FixedGains, ObstacleSet, Planner, PlannerConfig, build_observation, views_from_states
 from rpf_fly.planning.forces import inter_robot, perceived, repulsive
 from rpf_fly.planning.guidance import Guidance, path_length
-from rpf_fly.planning.visibility import Inflated, blocked
 from rpf_fly.planning.obstacles import nearest_obstacle
+from rpf_fly.planning.visibility import Inflated, blocked
 
 U_TRAP = ObstacleSet.from_shapes(boxes=[((0.0, -1.0), (0.2, 1.0)), ((-1.4, 0.8), (0.2, 1.0)), ((-1.4, -1.0), (0.2, -0.8))])
 MIXED = ObstacleSet.from_shapes(

@@ -214,8 +214,8 @@ def test_one_drone_step_is_fast():
 
 def test_planner_kind_orca_flies_the_paper_missions():
     from rpf_fly.mission import load_mission
-    from rpf_fly.sim.evaluate import evaluate_mission, planner_settings
     from rpf_fly.planning.factory import make_planner
+    from rpf_fly.sim.evaluate import evaluate_mission, planner_settings
 
     assert isinstance(make_planner(planner_settings("orca"), OBSTACLES), OrcaPlanner)
     for name in ("lab-3", "circle-8-r3"):

@@ -12,13 +12,28 @@ from cflib.crtp.radiodriver import RadioDriver
 from typer.testing import CliRunner
 
 from rpf_fly.cli import get_app
-from rpf_fly.emulator.crazyradio_timing import (CRAZYRADIO_2, CRAZYRADIO_PA, DR_2M, RadioType, ard_s, ceiling_per_s,
-                                                radio_s, transaction_s)
+from rpf_fly.emulator.crazyradio_timing import (
+    CRAZYRADIO_2,
+    CRAZYRADIO_PA,
+    DR_2M,
+    RadioType,
+    ard_s,
+    ceiling_per_s,
+    radio_s,
+    transaction_s,
+)
 from rpf_fly.emulator.fake_world import BurstLoss
 from rpf_fly.mission import MissionError, parse_mission
 from rpf_fly.radio import budget
-from rpf_fly.radio.budget import (EXPECTED_ATTEMPT_LOSS, KEEPALIVE_HZ, LINK_PING_HZ, link_rate_limits, link_uri,
-                                  radio_loads, uri_rate_limit)
+from rpf_fly.radio.budget import (
+    EXPECTED_ATTEMPT_LOSS,
+    KEEPALIVE_HZ,
+    LINK_PING_HZ,
+    link_rate_limits,
+    link_uri,
+    radio_loads,
+    uri_rate_limit,
+)
 from rpf_fly.radio.dongle_model import LinkTraffic, Run, Traffic, simulate, timing_of
 
 

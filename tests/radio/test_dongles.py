@@ -10,13 +10,13 @@ from pathlib import Path
 
 import pytest
 
-from rpf_fly.log.text_log import route_logging
 from rpf_fly.emulator.simulated_mocap import SimulatedMocap
 from rpf_fly.flight.loop import FlightLoop
+from rpf_fly.log.text_log import route_logging
 from rpf_fly.mission import load_mission
+from rpf_fly.planning.factory import make_planner
 from rpf_fly.radio.cflib_backend import CflibBackend
 from rpf_fly.radio.dongles import NO_RADIO, find_radios, radio_problem
-from rpf_fly.planning.factory import make_planner
 from rpf_fly.sim.scenario import obstacle_set
 
 ROOT = Path(__file__).resolve().parents[2]

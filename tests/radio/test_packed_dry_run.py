@@ -10,8 +10,8 @@ from rpf_fly.flight.dry_run import DryRun
 from rpf_fly.flight.phases import FlightOutcome
 from rpf_fly.flight.session import run_flight
 from rpf_fly.mission import parse_mission
-from rpf_fly.radio.budget import radio_loads
 from rpf_fly.planning.factory import make_planner
+from rpf_fly.radio.budget import radio_loads
 from rpf_fly.sim.scenario import obstacle_set
 
 # six drones on one dongle: two packed groups (four and two), lanes 0.5 m apart, 2 m each; margin 0 as the flight

@@ -10,8 +10,7 @@ import pytest
 
 from rpf_fly.emulator.fake_firmware import FakeFirmware
 from rpf_fly.emulator.fake_vehicle import VehicleConfig
-from rpf_fly.radio.packed_extpos import (HEADER, decode, drone_id, encode, packed_groups, parse_link, shared_ids,
-                                         to_mm)
+from rpf_fly.radio.packed_extpos import HEADER, decode, drone_id, encode, packed_groups, parse_link, shared_ids, to_mm
 
 
 def test_the_layout_is_the_firmwares_item_four_a_packet() -> None:

@@ -10,11 +10,11 @@ import threading
 from collections.abc import Callable
 from pathlib import Path
 
+from rpf_fly.emulator.fake_world import FakeWorld
 from rpf_fly.mission import parse_mission
 from rpf_fly.radio.budget import LINK_PING_HZ, dongle_of, radio_loads
 from rpf_fly.radio.cflib_backend import CflibBackend
 from rpf_fly.radio.schedule import ExtposSchedule, extpos_phases, frame_share
-from rpf_fly.emulator.fake_world import FakeWorld
 
 MakeWorld = Callable[..., FakeWorld]
 

@@ -76,9 +76,9 @@ def test_line_of_goals_settles_with_the_margin():
 def test_the_mission_key_sets_the_capture_radius_and_zero_turns_the_rule_off():
     """``planner.capture_radius``: the mission's value reaches the planner (0 reproduces the orbit of the pole)."""
     from rpf_fly.mission import parse_mission
+    from rpf_fly.planning.factory import planner_config
     from rpf_fly.sim.evaluate import run_scenario, sim_params
     from rpf_fly.sim.scenario import scenario_from_mission
-    from rpf_fly.planning.factory import planner_config
 
     text = ("name: pole\narena: {x: [-1, 5], y: [-2, 2]}\nflight: {speed: 0.5}\nobstacles:\n"
             "  - {shape: circle, center: [3.0, 0.0], radius: 0.25}\n"

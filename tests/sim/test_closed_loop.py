@@ -7,9 +7,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from rpf_fly.planning.factory import make_planner
 from rpf_fly.sim.closed_loop import STEP_S, FirmwareParams, firmware_metrics, firmware_rollouts, run_firmware
 from rpf_fly.sim.evaluate import planner_settings, run_scenario
-from rpf_fly.planning.factory import make_planner
 from rpf_fly.sim.rollout import DroneOutcome, SimParams
 from rpf_fly.sim.scenario import make_scenario
 

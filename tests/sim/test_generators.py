@@ -6,7 +6,15 @@ import pytest
 
 from rpf_fly.mission.model import BoxObstacle, CircleObstacle
 from rpf_fly.sim.generators import (
-    DEFAULT_MARGIN, FAMILIES, SPLITS, GeneratorError, check_scene, generate, grid_distance, reachable, scene_rng,
+    DEFAULT_MARGIN,
+    FAMILIES,
+    SPLITS,
+    GeneratorError,
+    check_scene,
+    generate,
+    grid_distance,
+    reachable,
+    scene_rng,
 )
 from rpf_fly.sim.scenario import make_scenario
 

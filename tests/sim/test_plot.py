@@ -13,8 +13,8 @@ import numpy as np  # noqa: E402
 from matplotlib.colors import to_rgba  # noqa: E402
 
 from rpf_fly.mission import load_mission, with_planner  # noqa: E402
-from rpf_fly.sim import SimParams, rollout, scenario_from_mission  # noqa: E402
 from rpf_fly.planning.factory import make_planner  # noqa: E402
+from rpf_fly.sim import SimParams, rollout, scenario_from_mission  # noqa: E402
 from rpf_fly.sim.plot import MODE_STYLES, mode_runs, rollout_figure  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]

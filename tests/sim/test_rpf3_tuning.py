@@ -9,8 +9,8 @@ import pytest
 from rpf_fly.mission.model import BoxObstacle, PlannerSettings
 from rpf_fly.planning import FixedGains, Planner, PlannerConfig
 from rpf_fly.planning.config import RPF3_TUNING
-from rpf_fly.sim import SimParams, compute_metrics, make_scenario, rollout
 from rpf_fly.planning.factory import planner_config
+from rpf_fly.sim import SimParams, compute_metrics, make_scenario, rollout
 
 R, MARGIN = 0.1, 0.05
 
@@ -97,8 +97,8 @@ def test_a_drone_is_routed_round_a_drone_parked_in_the_gap_of_its_path():
     parked on its goal. Without the detour it stalls there to the time limit; with it, it goes round by the next
     gap and every drone arrives, with the margin held (docs/algorithm.md, *Guidance round parked drones*)."""
     from rpf_fly.mission.load import PROJECT_POLICIES
-    from rpf_fly.sim.generators import generate
     from rpf_fly.planning.factory import make_planner
+    from rpf_fly.sim.generators import generate
 
     scenario = generate("arena-a", 192, split="bench")
     settings = PlannerSettings(kind="rpf3", policy=PROJECT_POLICIES / "rpf3.onnx")

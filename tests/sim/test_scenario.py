@@ -4,8 +4,16 @@ import numpy as np
 import pytest
 
 from rpf_fly.mission.model import (
-    Arena, CircleObstacle, Drone, FlightSettings, Formation, MocapSettings, Mission, PlannerSettings,
-    RadioSettings, SimSettings,
+    Arena,
+    CircleObstacle,
+    Drone,
+    FlightSettings,
+    Formation,
+    Mission,
+    MocapSettings,
+    PlannerSettings,
+    RadioSettings,
+    SimSettings,
 )
 from rpf_fly.sim import arena_a, arena_b, scenario_from_mission
 

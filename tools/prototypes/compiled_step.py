@@ -23,9 +23,11 @@ import numpy as np
 from numba import njit
 
 sys.path.insert(0, str(__import__("pathlib").Path(__file__).resolve().parents[1]))
-from bench_planner import ROOT, load_mission, midflight_views, scenario_from_mission, make_planner  # noqa: E402
-from bench_planner import timed as bench_timed  # noqa: E402
 from dataclasses import replace  # noqa: E402
+
+from bench_planner import ROOT, load_mission, make_planner, midflight_views, scenario_from_mission  # noqa: E402
+from bench_planner import timed as bench_timed  # noqa: E402
+
 from rpf_fly.planning.observation import build_observation  # noqa: E402
 from rpf_fly.planning.planner import guided_view, sense_obstacles  # noqa: E402
 
