@@ -373,7 +373,7 @@ def test_unknown_planner_kind_case(fail):
      "motioncapture package: kind: motioncapture, type: vicon)"),
     ("mocap", "kind", "vrpm", "expected one of 'natnet', 'sim', 'motioncapture', got 'vrpm'"),
     ("radio", "kind", "crazyradio", "expected one of 'cflib', got 'crazyradio'"),
-    ("radio", "extpos", "pose", "expected one of 'extpos', 'extpose', got 'pose'"),
+    ("radio", "extpos", "pose", "expected one of 'extpos', 'extpose', 'packed', got 'pose'"),
 ])
 def test_unknown_enum_value(fail, section, key, value, choices):
     fail(BASE + f"{section}: {{{key}: {value}}}\n", f"m.yaml:5: {section}.{key}: {choices}")
