@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Callable, Collection
-from typing import TYPE_CHECKING, Protocol
+from typing import TYPE_CHECKING, Protocol, cast
 
 from rpf_fly.flight.agent import DroneAgent
 from rpf_fly.flight.commander import Commander
@@ -71,7 +71,7 @@ class LoopSwarm:
         (mocap and telemetry keep flowing); its abort, a stop or the timeout: nothing takes off."""
         if self.swarm is None:
             return True
-        self.swarm.preflight_done(self)
+        self.swarm.preflight_done(cast("FlightLoop", self))  # this part of a FlightLoop is the loop
         deadline = self.clock() + GO_TIMEOUT_S
         while not self._stop.is_set():
             verdict = self.swarm.verdict()
@@ -110,7 +110,7 @@ class LoopSwarm:
         them down beside its own refusals (:meth:`_arm`). Its abort, a stop or the timeout: every armed drone is
         disarmed and stays down. Returns the drones that take off."""
         refused = sorted(n for n, a in self.agents.items() if a.phase == DronePhase.FAILED)
-        self.swarm.armed(self, refused)  # type: ignore[union-attr]
+        self.swarm.armed(cast("FlightLoop", self), refused)  # type: ignore[union-attr]
         deadline = self.clock() + GO_TIMEOUT_S
         why = "the swarm does not take off"
         while not self._stop.is_set():

@@ -112,7 +112,8 @@ class CflibConnection:
             logger.warning("drone %s: %s", name, message)
         return errors
 
-    def _parallel(self, func: Callable[[CflibDrone], None], drones: list[CflibDrone], timeout_s: float) -> dict[str, str]:
+    def _parallel(self, func: Callable[[CflibDrone], None], drones: list[CflibDrone],
+                  timeout_s: float) -> dict[str, str]:
         """Run `func(drone)` on one thread per drone; name -> error for those that raised or overran."""
         errors: dict[str, str] = {}
 
