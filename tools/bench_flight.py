@@ -205,12 +205,12 @@ def main() -> int:
     print(f"{args.drones} drones, planning at {args.rate:g} Hz, planner {args.planner}, {args.runs} runs (medians):")
     print(f"  mocap frame -> setpoint handed to the radio: p50 {result['latency_p50_ms']:.3f} ms "
           f"(goal <= 0.5), p99 {result['latency_p99_ms']:.3f} ms (goal <= 2)")
-    print(f"  tick interval p50 {result['tick_interval_p50_ms']:.2f} ms, jitter p99 {result['tick_jitter_p99_ms']:.2f} ms, "
+    print(f"  tick interval p50 {result['tick_interval_p50_ms']:.2f} ms, " f"jitter p99 {result['tick_jitter_p99_ms']:.2f} ms, "
           f"overruns {result['overruns_median']:.0f} per run")
     print(f"  worst of all runs: tick interval {result['tick_interval_max_ms']:.1f} ms, latency "
           f"{result['latency_max_ms']:.2f} ms; garbage collections in the loop's gaps: "
           f"{result['gc_collections_median']:.0f} per run (rpf_fly/flight/gc_pacing.py)")
-    print(f"  ticks without a fresh frame: {result['frameless_ticks_median']:.0f} of {result['ticks_median']:.0f} per run "
+    print(f"  ticks without a fresh frame: {result['frameless_ticks_median']:.0f} " f"of {result['ticks_median']:.0f} per run "
           f"(ticks are locked to the frames: rpf_fly/flight/ticks.py)")
     if not args.no_log:
         print(f"  flight log: {result['log_cpu_pct']:.2f} % of a core over the whole flight (loop thread in the "

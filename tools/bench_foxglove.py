@@ -8,8 +8,8 @@ its own process (as the Foxglove app would be) connects before the drones do, su
 advertises and reads every message until the flight ends. Measured by the flight loop itself (``LoopStats``, as
 bench_flight measures it): latency from a mocap frame's receipt to each setpoint handed to the radio driver, p50 and
 p99; tick jitter p99; overruns. Also: the writer thread's CPU time (it now hands every message to the server, so the
-live view's own cost on our side shows there), the flight process's CPU time (with the server's own threads), the client's, and the
-messages the client received against those served.
+live view's own cost on our side shows there), the flight process's CPU time (with the server's own threads), the
+client's, and the messages the client received against those served.
 
 The dry run's radio air time is off by default (``--air-time-ms 0``): at a Crazyradio's 1 ms a transaction, 10 drones
 at 100 Hz ask one dongle for more than it carries, extpos reaches some drones late and their supervisors cut their

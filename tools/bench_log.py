@@ -2,8 +2,8 @@
 
 Simulates the logging of a flight in real time: every tick (``--rate`` Hz) each of ``--drones`` drones logs its
 mocap pose, its setpoint and its planner step (by default through the batch calls the flight's recorder makes, one
-per topic kind and tick; ``--per-message``: one call per message), ``/tf`` gets one message at 20 Hz (as the flight writes it), and every ``--status-every`` ticks each
-drone logs its status. Measured:
+per topic kind and tick; ``--per-message``: one call per message), ``/tf`` gets one message at 20 Hz (as the flight
+writes it), and every ``--status-every`` ticks each drone logs its status. Measured:
 
 - enqueue: CPU time (``time.thread_time``) of the calling thread inside the ``FlightLog`` calls;
 - writer: CPU time of the writer thread (building, ``json.dumps``, chunking, zstd, flushing, finishing);

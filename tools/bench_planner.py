@@ -313,7 +313,7 @@ def main(argv: list[str] | None = None) -> int:
         print("RPF-3 (kind rpf3: guidance, margin 0.05, RPF-3's tuning), median; line: step <= 1.5x onnxruntime")
         for name, f in figures.items():
             if "step" in f:
-                print(f"  {name:14s} step {f['step'] * 1e6:7.1f} us, onnxruntime alone {f['onnxruntime_alone'] * 1e6:6.1f} us:"
+                print(f"  {name:14s} step {f['step'] * 1e6:7.1f} us, " f"onnxruntime alone {f['onnxruntime_alone'] * 1e6:6.1f} us:"
                       f" {f['step'] / f['onnxruntime_alone']:.2f}x")
             else:
                 n = int(name.rsplit("_", 1)[1])
@@ -348,8 +348,8 @@ def main(argv: list[str] | None = None) -> int:
     print("per-drone plan step of RPF with guidance path + margin 0.05, beside the onnxruntime call alone (median)")
     for name, g in guidance.items():
         print(
-            f"  {name:14s} with guidance {g['with_guidance'] * 1e6:7.1f} us, without {g['without_guidance'] * 1e6:7.1f} us,"
-            f" onnxruntime alone {g['onnxruntime_alone'] * 1e6:6.1f} us: {g['with_guidance'] / g['onnxruntime_alone']:.2f}x"
+            f"  {name:14s} with guidance {g['with_guidance'] * 1e6:7.1f} us, " f"without {g['without_guidance'] * 1e6:7.1f} us,"
+            f" onnxruntime alone {g['onnxruntime_alone'] * 1e6:6.1f} us" f": {g['with_guidance'] / g['onnxruntime_alone']:.2f}x"
             f" ({g['guided_views']:.0f} of {g['views']:.0f} drones with a hidden goal)"
         )
     print("one tick, every drone from its own view (goal: 100 drones <= 5 ms)")

@@ -119,7 +119,7 @@ def main() -> None:
     ap.add_argument("--cell", type=float, default=0.05)
     ap.add_argument("--repeats", type=int, default=5)
     args = ap.parse_args()
-    print("| scene | nodes / cells | VG build [ms] | VG goal row [ms] | VG tick [us] | grid build [ms] | grid field per goal [ms] "
+    print("| scene | nodes / cells | VG build [ms] | VG goal row [ms] | VG tick [us] | " "grid build [ms] | grid field per goal [ms] "
           "| grid tick [us] | VG path [m] | grid path [m] | grid shortcut [m] |")
     print("|---|---|---|---|---|---|---|---|---|---|---|")
     for name in ("lab-3", "arena-a-6", "u-trap"):
@@ -144,8 +144,8 @@ def main() -> None:
         paths = [grid.path(f, s, q) for f, s, q in zip(fields, starts, goals)]
         grid_len = statistics.mean(path_length(p) for p in paths)
         short_len = statistics.mean(path_length(grid.shortcut(p)) for p in paths)
-        print(f"| {name} | {g.nodes.shape[0]} / {grid.nx * grid.ny} | {vg_build * 1e3:.2f} | {vg_rows * 1e3:.3f} | {tick * 1e6:.1f} | "
-              f"{grid_build * 1e3:.1f} | {field_s * 1e3:.0f} | {grid_tick * 1e6:.1f} | {vg_len:.3f} | {grid_len:.3f} | {short_len:.3f} |")
+        print(f"| {name} | {g.nodes.shape[0]} / {grid.nx * grid.ny} | {vg_build * 1e3:.2f} | " f"{vg_rows * 1e3:.3f} | {tick * 1e6:.1f} | "
+              f"{grid_build * 1e3:.1f} | {field_s * 1e3:.0f} | {grid_tick * 1e6:.1f} | " f"{vg_len:.3f} | {grid_len:.3f} | {short_len:.3f} |")
 
 
 if __name__ == "__main__":

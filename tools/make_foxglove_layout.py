@@ -50,7 +50,7 @@ type Output = {
 };
 
 export const inputs = ["/tf"];
-export const output = "%s";
+export const output = "@OUTPUT@";
 
 export default function script(event: TfEvent): Output | undefined {
   const frames = event.message.transforms;
@@ -75,7 +75,7 @@ export default function script(event: TfEvent): Output | undefined {
   });
   return { min_planar_m: planar, min_3d_m: spatial, closest_pair: pair, drones: frames.length };
 }
-""" % SEPARATION_TOPIC
+""".replace("@OUTPUT@", SEPARATION_TOPIC)
 
 
 def drones(n: int) -> list[str]:

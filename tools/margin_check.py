@@ -21,6 +21,11 @@ from rpf_fly.sim.evaluate import run_scenario, sim_params  # noqa: E402
 from rpf_fly.sim.scenario import scenario_from_mission  # noqa: E402
 
 
+def _held(value: float | None, need: float, held: bool) -> str:
+    """A table cell: the measured value and whether it held its bound ("-": not measured)."""
+    return "-" if value is None else f"{value:.3f} ({'ok' if held else 'BELOW ' + format(need, '.3f')})"
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("missions", nargs="*", type=Path)
@@ -32,7 +37,7 @@ def main() -> int:
     paths = args.missions or sorted((ROOT / "missions").glob("*.yaml"))
     overrides = {k: v for k, v in (("guidance", args.guidance), ("margin", args.margin)) if v is not None}
     broken = False
-    print("| mission | planner | guidance | margin | success | collisions | min sep [m] (>= 2r+m) | min clear [m] (>= r+m) | makespan [s] |")
+    print("| mission | planner | guidance | margin | success | collisions | " "min sep [m] (>= 2r+m) | min clear [m] (>= r+m) | makespan [s] |")
     print("|---|---|---|---|---|---|---|---|---|")
     for path in paths:
         mission = with_planner(load_mission(path), args.planner, **overrides)
@@ -50,10 +55,9 @@ def main() -> int:
         held_sep = sep is None or sep >= 2 * r + m
         held_clear = clear is None or clear >= r + m
         broken |= not (held_sep and held_clear)
-        fmt = lambda v, need, held: "-" if v is None else f"{v:.3f} ({'ok' if held else 'BELOW ' + format(need, '.3f')})"  # noqa: E731
         span = f"{sum(spans) / len(spans):.1f}" if spans else "-"
         print(f"| {mission.name} | {s.kind} | {s.guidance_mode} | {m:g} | {ok}/{len(runs)} | {coll} | "
-              f"{fmt(sep, 2 * r + m, held_sep)} | {fmt(clear, r + m, held_clear)} | {span} |")
+              f"{_held(sep, 2 * r + m, held_sep)} | {_held(clear, r + m, held_clear)} | {span} |")
     return 1 if broken else 0
 
 

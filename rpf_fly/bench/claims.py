@@ -126,7 +126,7 @@ def evaluate_claims(results: Mapping[str, Any], scenes: ClaimScenes = PAPER_CLAI
     return out
 
 
-def _per_scene(t: _Rows, claim: str, wanted: tuple[str, ...], scenes: ClaimScenes, judge) -> Claim:  # type: ignore[no-untyped-def]
+def _per_scene(t: _Rows, claim: str, wanted: tuple[str, ...], scenes: ClaimScenes, judge) -> Claim:
     """A scene claim judged on every wanted scene: held when held on each that was evaluated."""
     parts = {scene: judge(t, scene) for scene in wanted}
     if scenes.only_run:

@@ -81,7 +81,7 @@ def _literal_values(hint: Any) -> list[Any]:
 def with_guidance(settings: PlannerSettings, mode: str) -> PlannerSettings:
     """The settings flown with guidance ``mode`` (unchanged for ``none`` while the field does not exist)."""
     if any(f.name == "guidance" for f in dataclasses.fields(settings)):
-        return replace(settings, guidance=mode)  # type: ignore[call-arg]
+        return replace(settings, guidance=mode)
     if mode != "none":
         raise BenchError(f"guidance {mode!r}: the planner settings have no guidance field")
     return settings

@@ -61,7 +61,7 @@ def plot_comparison(
     return path
 
 
-def _bars(ax, rows, planners, scenes, metric, label) -> None:  # type: ignore[no-untyped-def]
+def _bars(ax, rows, planners, scenes, metric, label) -> None:
     width = 0.8 / max(len(planners), 1)
     x = np.arange(len(scenes))
     rate_ax = ax.twinx()
@@ -92,7 +92,7 @@ def _bars(ax, rows, planners, scenes, metric, label) -> None:  # type: ignore[no
         ax.set_yscale("log")
 
 
-def _trajectory_panel(ax, traj: Trajectory | None, scene: str, planner: str, row) -> None:  # type: ignore[no-untyped-def]
+def _trajectory_panel(ax, traj: Trajectory | None, scene: str, planner: str, row) -> None:
     from matplotlib.patches import Circle, Rectangle
 
     name = PLANNER_LABELS.get(planner, planner)
@@ -127,7 +127,7 @@ def _trajectory_panel(ax, traj: Trajectory | None, scene: str, planner: str, row
     ax.set_title(f"{scene}: {name} ({verdict})", fontsize=7, color="k" if traj.success else "#d62728")
 
 
-def _drone_colours(n: int) -> list:  # type: ignore[type-arg]
+def _drone_colours(n: int) -> list:
     import matplotlib
 
     cmap = matplotlib.colormaps["tab10"]

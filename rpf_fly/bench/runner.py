@@ -307,7 +307,7 @@ def _setup(
         scenario = arena_a(np.random.default_rng(seed))
         return scenario, planner_settings(kind, policy), SimParams(), FirmwareParams()
     chosen = with_planner(plan.missions[scene], kind, policy)
-    firmware = FirmwareParams(chosen.flight.height, tuple(chosen.arena.z))  # type: ignore[arg-type]
+    firmware = FirmwareParams(chosen.flight.height, tuple(chosen.arena.z))
     return scenario_from_mission(chosen, seed), chosen.planner, sim_params(chosen), firmware
 
 

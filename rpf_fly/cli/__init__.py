@@ -56,7 +56,7 @@ def _flags_show_no_type() -> None:
     if getattr(original, "_rpf_fly_flags", False):
         return
 
-    def display_type_rich(self, ctx):  # type: ignore[no-untyped-def]
+    def display_type_rich(self, ctx):
         if getattr(self, "is_flag", False) and getattr(self, "is_bool_flag", False):
             return None
         return original(self, ctx)

@@ -98,7 +98,7 @@ def bench(
     try:
         plan = prepare(config)
     except BenchError as err:
-        raise fail(f"rpf-fly bench: {err}")
+        raise fail(f"rpf-fly bench: {err}") from err
     from rpf_fly.bench.report import REPORT_WIDTH
     from rpf_fly.cli.output import console as make_console
 
@@ -133,7 +133,7 @@ def bench(
         console.print(f"wrote {path}")
 
 
-def _families(episodes, planners, families, guidance, policies, paths, json_output, json_file, markdown, figure,  # type: ignore[no-untyped-def]
+def _families(episodes, planners, families, guidance, policies, paths, json_output, json_file, markdown, figure,
               out, jobs, first_seed=0, dynamics="kinematic") -> None:
     """``--suite families``: run, print the Markdown report (at most 110 columns), write what was asked for."""
     from rpf_fly.bench.families import (
@@ -164,7 +164,7 @@ def _families(episodes, planners, families, guidance, policies, paths, json_outp
     try:
         plan = prepare_families(config)
     except BenchError as err:
-        raise fail(f"rpf-fly bench: {err}")
+        raise fail(f"rpf-fly bench: {err}") from err
     console = make_console(pipe_width=110)
     errors = make_console(stderr=True)
     for reason in dict.fromkeys(plan.missing.values()):
@@ -215,13 +215,13 @@ def _split(text: str) -> tuple[str, ...]:
     return tuple(part.strip() for part in text.split(",") if part.strip())
 
 
-def _figure(results, result, path: Path) -> Path:  # type: ignore[no-untyped-def]
+def _figure(results, result, path: Path) -> Path:
     from rpf_fly.bench.figure import plot_comparison
 
     return plot_comparison(results, path, result.trajectories)
 
 
-def _run_with_progress(plan, run_bench, console):  # type: ignore[no-untyped-def]
+def _run_with_progress(plan, run_bench, console):
     from rich.progress import (
         BarColumn,
         MofNCompleteColumn,
@@ -237,7 +237,7 @@ def _run_with_progress(plan, run_bench, console):  # type: ignore[no-untyped-def
         lines = ProgressLines("bench", plan.total_runs, "runs", stream=console.file)
         done = [0]
 
-        def line(record) -> None:  # type: ignore[no-untyped-def]
+        def line(record) -> None:
             done[0] += 1
             verdict = "ok" if record.success else (record.failure or "failed")
             lines.update(done[0], f"{record.planner} {record.scene} seed {record.seed}: {verdict}")
@@ -256,7 +256,7 @@ def _run_with_progress(plan, run_bench, console):  # type: ignore[no-untyped-def
     ) as progress:
         task = progress.add_task("bench", total=plan.total_runs, now="")
 
-        def advance(record) -> None:  # type: ignore[no-untyped-def]
+        def advance(record) -> None:
             verdict = "ok" if record.success else (record.failure or "failed")
             progress.update(task, advance=1, now=f"{record.planner} {record.scene} seed {record.seed}: {verdict}")
 

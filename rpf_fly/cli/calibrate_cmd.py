@@ -71,11 +71,11 @@ def calibrate(
         try:
             begin = dict(load_profile(start).params)
         except ProfileError as err:
-            raise fail(f"--start {err}")
+            raise fail(f"--start {err}") from err
     try:
         records = read_records(log, drone)
     except RecordError as err:
-        raise fail(str(err))
+        raise fail(str(err)) from err
     if out is not None and len(records) > 1 and "{drone}" not in str(out):
         raise fail(f"--out {out}: {log} has {len(records)} drones with setpoints ({', '.join(r.drone for r in records)}"
                    "): give --drone NAME, or put {drone} in the path for one profile each")

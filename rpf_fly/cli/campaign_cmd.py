@@ -44,7 +44,7 @@ def campaign(
         result = mission_campaign(mission, kinds.split(",") if kinds is not None else None, random_runs, seed,
                                   faults_per_run, out, keep, on_verdict=said, dynamics=dynamics)
     except CampaignError as err:
-        raise fail(str(err))
+        raise fail(str(err)) from err
     if json_out:
         typer.echo(json.dumps(result.json(), indent=1))
     else:

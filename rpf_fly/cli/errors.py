@@ -28,9 +28,9 @@ def read_log_or_fail(log: Path) -> LogData:
     try:
         return read_log(log)
     except LogError as err:
-        raise fail(f"{log}: {err}")
+        raise fail(f"{log}: {err}") from err
     except OSError as err:
-        raise fail(f"{log}: {err.strerror or err}")
+        raise fail(f"{log}: {err.strerror or err}") from err
 
 
 @contextmanager

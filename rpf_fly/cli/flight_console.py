@@ -72,7 +72,7 @@ class FlightConsole:
 
             self.console.print(Text(text), soft_wrap=True)
 
-    def event(self, event) -> None:  # type: ignore[no-untyped-def]
+    def event(self, event) -> None:
         from rich.markup import escape
 
         if event.level >= 3 or (event.drone is None and event.kind == "phase"):
@@ -106,7 +106,7 @@ class FlightConsole:
             self.console.print(made)
 
 
-def table(title: str, rows: list[dict[str, Any]], final: bool = False):  # type: ignore[no-untyped-def]
+def table(title: str, rows: list[dict[str, Any]], final: bool = False):
     """The status table (rich): drone, [worker,] state, [outcome,] position, distance to goal, battery, link[, why]."""
     from rich.markup import escape
     from rich.table import Table

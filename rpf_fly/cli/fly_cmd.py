@@ -129,7 +129,7 @@ def _print_event(event: FlightEvent) -> None:
         typer.echo(f"[{event.kind}] {who}{event.message}", err=True)
 
 
-def _summary(report, log_path: Path, final_table: bool = False) -> None:  # type: ignore[no-untyped-def]
+def _summary(report, log_path: Path, final_table: bool = False) -> None:
     """What a flight prints last on stdout: each drone's outcome, the loop's summary line, the log. The outcome
     lines only where no final table (``final_table``: the status console's, on stderr) already showed them on the
     same screen: with ``--no-console``, or when stdout or stderr is not a terminal (a script reading stdout gets

@@ -61,7 +61,7 @@ def start_live(enabled: bool, port: int | None, host: str | None) -> LiveView | 
     try:
         live = LiveView(port, host or DEFAULT_HOST)
     except LiveUnavailable as err:
-        raise fail(f"--foxglove: {err}")
+        raise fail(f"--foxglove: {err}") from err
     typer.echo(f"live: serving the flight on {live.url} (Foxglove: Open connection > Foxglove WebSocket; "
                f"layout {LAYOUT})", err=True)
     if live.host not in ("127.0.0.1", "localhost", "::1"):

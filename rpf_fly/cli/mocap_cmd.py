@@ -341,9 +341,9 @@ def _emulate_replay(log: Path, speed: float, version: tuple[int, int], multicast
     try:
         data = read_log(log)
     except LogError as err:
-        raise fail(f"{log}: {err}")
+        raise fail(f"{log}: {err}") from err
     except OSError as err:
-        raise fail(f"{log}: {err.strerror or err}")
+        raise fail(f"{log}: {err.strerror or err}") from err
     frames = mocap_frames(data)
     if not frames:
         raise fail(f"{log}: no mocap poses (/mocap/<drone>) to serve")

@@ -21,7 +21,7 @@ PIPE_PROGRESS_S = 10.0
 """Seconds between two progress lines when the output is not a terminal."""
 
 
-def console(stderr: bool = False, pipe_width: int = PIPE_WIDTH, **kwargs: Any):  # type: ignore[no-untyped-def]
+def console(stderr: bool = False, pipe_width: int = PIPE_WIDTH, **kwargs: Any):
     """A rich Console on stdout (or stderr): the terminal's own, or a plain one ``pipe_width`` columns wide when not
     a terminal."""
     from rich.console import Console

@@ -48,6 +48,6 @@ def probe(
         runs = probe_dongle(drones=uris, dry_run=dry_run, dongle=dongle, links=links,
                             radio=radio.value if radio is not None else None, seconds=seconds, on_progress=progress)
     except ProbeError as err:
-        raise fail(f"radio probe: {err}")
+        raise fail(f"radio probe: {err}") from err
     for line in ([json.dumps(run.as_dict()) for run in runs] if as_json else describe(runs)):
         typer.echo(line)

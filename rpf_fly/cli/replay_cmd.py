@@ -41,14 +41,14 @@ def replay(
                             planner=setup.mission.planner.kind, policy=setup.mission.planner.policy,
                             same_as_flown=setup.same_as_flown)
     except ReplayError as err:
-        raise fail(str(err))
+        raise fail(str(err)) from err
     result.warnings[:0] = setup.warnings
     if data.truncated:
         result.warnings.insert(0, f"the log ends before its footer ({data.stop_reason or 'writer killed?'}); "
                                   f"replaying the {result.ticks} planning ticks of its complete chunks")
     for warning in result.warnings:
         typer.echo(f"{log}: warning: {warning}", err=True)
-    for name, drone in result.drones.items():
+    for drone in result.drones.values():
         if drone.note:
             typer.echo(f"{log}: {drone.note}", err=True)
     if plot is not None:
@@ -59,14 +59,14 @@ def replay(
             plot_replay(result, plot, title=f"{log.name}: {result.flown_planner or '?'} flown, {result.planner}"
                                             f"{policy} replayed")
         except OSError as err:
-            raise fail(f"{plot}: cannot write the plot: {err.strerror or err}")
+            raise fail(f"{plot}: cannot write the plot: {err.strerror or err}") from err
     if json_output:
         typer.echo(json.dumps(result.to_json()))
         return
     _print(result, log, plot)
 
 
-def _print(result, log: Path, plot: Path | None) -> None:  # type: ignore[no-untyped-def]
+def _print(result, log: Path, plot: Path | None) -> None:
     from rich.markup import escape
     from rich.table import Table
 

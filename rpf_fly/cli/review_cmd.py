@@ -33,9 +33,9 @@ def review(
         try:
             saved = salvage(log, salvage_to)
         except (LogError, ValueError) as err:
-            raise fail(f"{salvage_to}: cannot salvage {log}: {err}")
+            raise fail(f"{salvage_to}: cannot salvage {log}: {err}") from err
         except OSError as err:
-            raise fail(f"{salvage_to}: cannot write: {err.strerror or err}")
+            raise fail(f"{salvage_to}: cannot write: {err.strerror or err}") from err
         typer.echo(f"{salvage_to}: {saved.messages} messages on {saved.channels} channels, finished", err=True)
     result = compute_review(data)
     if json_output and result.metrics is None:
@@ -54,12 +54,12 @@ def review(
         try:
             plot_review(data, result, plot)
         except OSError as err:
-            raise fail(f"{plot}: cannot write the plot: {err.strerror or err}")
+            raise fail(f"{plot}: cannot write the plot: {err.strerror or err}") from err
     if csv_dir is not None:
         try:
             export_csv(data, csv_dir)
         except OSError as err:
-            raise fail(f"{csv_dir}: cannot write CSV: {err.strerror or err}")
+            raise fail(f"{csv_dir}: cannot write CSV: {err.strerror or err}") from err
     if json_output:
         assert result.metrics is not None
         typer.echo(json.dumps(result.to_json_dict()))
@@ -67,11 +67,11 @@ def review(
     _print_summary(result, plot, csv_dir)
 
 
-def _fmt(value, unit: str = "", digits: int = 2) -> str:  # type: ignore[no-untyped-def]
+def _fmt(value, unit: str = "", digits: int = 2) -> str:
     return "-" if value is None else f"{value:.{digits}f}{unit}"
 
 
-def _print_tracking_expected(console, result) -> None:  # type: ignore[no-untyped-def]
+def _print_tracking_expected(console, result) -> None:
     """What tracking error to expect while cruising, each drone's against it, and a line for each drone outside."""
     from rich.markup import escape
 
@@ -105,7 +105,7 @@ def _print_tracking_expected(console, result) -> None:  # type: ignore[no-untype
                                    "waits for its drone)") + "[/yellow]")
 
 
-def _print_summary(result, plot: Path | None, csv_dir: Path | None) -> None:  # type: ignore[no-untyped-def]
+def _print_summary(result, plot: Path | None, csv_dir: Path | None) -> None:
     from rich.markup import escape
     from rich.table import Table
 

@@ -11,6 +11,8 @@ from rpf_fly.cli import app
 from rpf_fly.cli.errors import fail
 from rpf_fly.mission.model import PLANNER_KINDS, POLICY_KINDS
 
+POLICY_HELP = f"ONNX policy for {', '.join(POLICY_KINDS)}."
+
 
 @app.command()
 def sim(
@@ -18,7 +20,7 @@ def sim(
     planner: str | None = typer.Option(
         None, "--planner", help=f"Override the mission's planner: {', '.join(PLANNER_KINDS)}."
     ),
-    policy: Path | None = typer.Option(None, "--policy", help=f"ONNX policy for {', '.join(POLICY_KINDS)}."),
+    policy: Path | None = typer.Option(None, "--policy", help=POLICY_HELP),
     no_wall_following: bool = typer.Option(
         False, "--no-wall-following", help="Vanilla APF direction: no wall-following, no soft rule."
     ),
@@ -51,12 +53,12 @@ def sim(
         if planner is not None or policy is not None or overrides:
             loaded = with_planner(loaded, planner or loaded.planner.kind, policy, **overrides)
     except MissionError as err:
-        raise fail(str(err))
+        raise fail(str(err)) from err
     scenario = scenario_from_mission(loaded, seed)
     try:
         chosen = make_planner(loaded.planner, scenario.obstacles, (scenario.arena_x, scenario.arena_y), scenario.goals)
     except (UnsupportedPlanner, PolicyError) as err:
-        raise fail(f"{mission}:0: planner.policy: {err}")
+        raise fail(f"{mission}:0: planner.policy: {err}") from err
     params = SimParams(loaded.flight.speed, loaded.flight.dt, loaded.flight.goal_tolerance, loaded.sim.time_limit_s)
     result = rollout(scenario, chosen, params)
     metrics = compute_metrics(
@@ -78,7 +80,7 @@ def sim(
         try:
             write_sim_log(log, loaded, scenario, result, seed)
         except OSError as err:
-            raise fail(f"{log}: cannot write the log: {err.strerror or err}")
+            raise fail(f"{log}: cannot write the log: {err.strerror or err}") from err
     if plot is not None:
         from rpf_fly.sim.plot import plot_rollout
 
@@ -91,7 +93,7 @@ def sim(
         raise typer.Exit(1)  # no drone reached: not a run to build on (docs: README, *Commands*)
 
 
-def _print_table(metrics, result, plot: Path | None, guidance: str = "none") -> None:  # type: ignore[no-untyped-def]
+def _print_table(metrics, result, plot: Path | None, guidance: str = "none") -> None:
     from rich.markup import escape
     from rich.table import Table
 
@@ -112,7 +114,7 @@ def _print_table(metrics, result, plot: Path | None, guidance: str = "none") -> 
         )
     console.print(table)
 
-    def fmt(value, unit="", digits=2):  # type: ignore[no-untyped-def]
+    def fmt(value, unit="", digits=2):
         return "-" if value is None else f"{value:.{digits}f}{unit}"
 
     verdict = "[green]success[/green]" if metrics.success else "[red]failure[/red]"
@@ -142,5 +144,5 @@ def _print_table(metrics, result, plot: Path | None, guidance: str = "none") -> 
         console.print(f"plot: {plot}")
 
 
-def metrics_names(metrics) -> list[str]:  # type: ignore[no-untyped-def]
+def metrics_names(metrics) -> list[str]:
     return [row.name for row in metrics.per_drone]

@@ -80,17 +80,17 @@ def train(
                    "add --force")
     try:
         import torch  # noqa: F401
-    except ImportError:
+    except ImportError as err:
         from rpf_fly import install_hint
 
-        raise fail(f"rpf-fly train needs torch: {install_hint('train')} (torch==2.13.0, CPU build)")
+        raise fail(f"rpf-fly train needs torch: {install_hint('train')} (torch==2.13.0, CPU build)") from err
     from rpf_fly.learn.ppo import PPOConfig, Trainer
 
     radius = obstacle_radius if obstacle_radius is not None else (0.1 if kind == "ppo" else 0.5)
     config = PPOConfig(seed=seed, kind=kind, arena=arena, curriculum=families, episodes=episodes, max_updates=max_updates, n_arenas=arenas,  # type: ignore[arg-type]
                        obstacle_radius=radius, guidance=guidance, margin=margin, threads=threads,
                        collision_penalty=collision_penalty, margin_penalty=margin_penalty,
-                       capture_radius=capture_radius)  # type: ignore[arg-type]
+                       capture_radius=capture_radius)
     run_dir = out.with_suffix(".run")
     command = "rpf-fly train " + " ".join(shlex.quote(a) for a in sys.argv[2:]) if len(sys.argv) > 2 else "rpf-fly train"
     from rpf_fly.learn.card import git_commit
@@ -113,12 +113,12 @@ def written_files(out: Path) -> tuple[Path, ...]:
     return (out, out.with_suffix(".yaml"), out.with_suffix(".curve.csv"), out.with_suffix(".curve.png"))
 
 
-def _stats(log) -> str:  # type: ignore[no-untyped-def]
+def _stats(log) -> str:
     return (f"return {log.mean_return:7.1f}  success {log.success_rate:4.0%}  kl {log.approx_kl:.4f}  "
             f"{log.steps_per_s:6.0f} steps/s")
 
 
-def _train_with_progress(trainer) -> None:  # type: ignore[no-untyped-def]
+def _train_with_progress(trainer) -> None:
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
     from rpf_fly.cli.output import ProgressLines, console
@@ -129,7 +129,7 @@ def _train_with_progress(trainer) -> None:  # type: ignore[no-untyped-def]
         lines = ProgressLines("train", target, "episodes")
         last: list = []
 
-        def line(log) -> None:  # type: ignore[no-untyped-def]
+        def line(log) -> None:
             last[:] = [log]
             lines.update(min(log.episodes, target), " ".join(_stats(log).split()))
 
@@ -149,13 +149,13 @@ def _train_with_progress(trainer) -> None:  # type: ignore[no-untyped-def]
     ) as progress:
         task = progress.add_task("train", total=target, completed=len(trainer.episodes), stats="")
 
-        def update(log) -> None:  # type: ignore[no-untyped-def]
+        def update(log) -> None:
             progress.update(task, completed=min(log.episodes, target), stats=_stats(log))
 
         trainer.run(update)
 
 
-def _finish(trainer, out: Path, command: str, eval_seeds: int, missions_dir: Path, wall_s: float, commit: str,  # type: ignore[no-untyped-def]
+def _finish(trainer, out: Path, command: str, eval_seeds: int, missions_dir: Path, wall_s: float, commit: str,
             cpu_s: float | None = None) -> None:
     import dataclasses
 

@@ -156,7 +156,7 @@ def circle_scenario(radius_m: float, speed_m_s: float, *, name: str | None = Non
     points = [(round(k / stream_hz, 9), round(radius_m * math.cos(omega * k / stream_hz), 6),
                round(radius_m * math.sin(omega * k / stream_hz), 6), height_m) for k in range(n + 1)]
     return Scenario(name or f"circle_{radius_m:g}_{speed_m_s:g}", (radius_m, 0.0, height_m), duration, stream_hz,
-                    points)  # type: ignore[arg-type]
+                    points)
 
 
 def hl_scenario(height_m: float, takeoff_s: float, goto_x_m: float, goto_at_s: float, goto_s: float, land_at_s: float,
@@ -237,7 +237,7 @@ def fly(scenario: Scenario, *, integrator: str = "midpoint", sample_offset_s: fl
                     while index + 1 < len(listed) and listed[index + 1][0] <= t_send + 1e-9:
                         index += 1
                     if index >= 0:
-                        sp = listed[index][1:4]  # type: ignore[assignment]
+                        sp = listed[index][1:4]
                 drone.send_position(sp[0], sp[1], sp[2], 0.0)
         if tick < end_tick:
             drone.step(0.001)

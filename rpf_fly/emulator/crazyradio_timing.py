@@ -5,10 +5,11 @@ driver meets a dongle as slow as a real one; the tests and docs/radio.md ("The e
 bounds from the same figures. Each figure says where it comes from or that it is an estimate.
 
 Sources (facts only, read for this module):
-- crazyradio-firmware (Crazyradio PA, nRF24LU1+) at 92dd1d8: its USB protocol page ``functional-areas/usb_radio_protocol.md`` (the
-  USB protocol, "the USB setup transaction ... takes about 1ms"), ``firmware/src/main.c`` (``handleUsbVendorSetup``,
-  ``legacyRun``: the status byte), ``firmware/src/radio.c`` (``radioUpdateRetr``: the ARD table by ACK payload
-  length, ``radioSetChannel``), ``firmware/src/usbDescriptor.c`` at tag 0.53 (bcdDevice 0x0053);
+- crazyradio-firmware (Crazyradio PA, nRF24LU1+) at 92dd1d8: its USB protocol page
+  ``functional-areas/usb_radio_protocol.md`` (the USB protocol, "the USB setup transaction ... takes about 1ms"),
+  ``firmware/src/main.c`` (``handleUsbVendorSetup``, ``legacyRun``: the status byte), ``firmware/src/radio.c``
+  (``radioUpdateRetr``: the ARD table by ACK payload length, ``radioSetChannel``), ``firmware/src/usbDescriptor.c`` at
+  tag 0.53 (bcdDevice 0x0053);
 - the nRF24LU1+ Product Specification v1.0 (in that repository, ``docs/images/nrf24lu1p_1_0.pdf``): section 6.4
   (ARD "from the end of a transmitted packet to when a retransmit starts", table 17, ARD 500 us for any ACK
   payload at 1 and 2 Mbps), table 18 (T_OA = (8 * (1 preamble + 5 address + payload + 2 CRC) + 9) / rate,

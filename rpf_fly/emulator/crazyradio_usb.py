@@ -133,7 +133,7 @@ def _usb_error(failure: UsbFailure) -> usb.core.USBError:
     return cls(failure.message, failure.libusb_code, failure.errno)
 
 
-class EmulatedBackend(usb.backend.IBackend):  # type: ignore[misc]
+class EmulatedBackend(usb.backend.IBackend):
     """pyusb's backend interface over emulated Crazyradios (`crazyradio.EmulatedCrazyradio`). Device
     identifications are the dongles themselves; handles are `Handle`. A failed transfer raises pyusb's
     ``USBError`` with libusb's code and errno, as the libusb-1.0 backend does."""

@@ -174,7 +174,7 @@ def decode_generic(data: bytes, now_s: float, yaw_rad: float) -> Setpoint | None
         qx, qy, qz, qw = (float(q) for q in decompress_quaternion(values[9]))
         yaw_deg = math.degrees(yaw_from_quaternion(qx, qy, qz, qw))
         return Setpoint(
-            _ABS3, pos, vel, yaw_mode=AxisMode.ABS, yaw_deg=yaw_deg, timestamp_s=now_s, source=src,  # type: ignore[arg-type]
+            _ABS3, pos, vel, yaw_mode=AxisMode.ABS, yaw_deg=yaw_deg, timestamp_s=now_s, source=src,
         )
     if kind == TYPE_MANUAL:
         roll, pitch, yaw_rate, thrust, rate = struct.unpack("<fffHB", body[:15])

@@ -211,26 +211,26 @@ class DryRun:
         crazyradio: str | None = None,
     ):
         """``lab``: fly the drones of a running lab (`rpf_fly.flight.lab`, ``rpf-fly lab``) instead of starting
-        private ones; they keep their firmware state, and closing the dry run leaves them to the lab. ``truth``: the flight log of a flight on this rig gets the world's truth (``/truth/<drone>``); False only
-        to measure what that costs (tools/bench_flight.py ``--no-truth``). ``air_time_s``: how long each radio
-        transaction holds its dongle, shared by every link on it (default ``AIR_TIME_S``, a Crazyradio's; 0: an
-        infinitely fast radio, only to measure what the radio costs). ``radio_loss``: the bursty loss of every
-        drone's link (default `RADIO_LOSS`; None: a lossless radio, for tests that count exact retries); a drone of
-        ``drone_configs`` whose `LinkFaults.burst` is set keeps its own. ``world_exit_report``: where the simulated
-        drones' process writes what became of the drones if this process dies without closing the dry run
-        (SIGKILL: they fall by the firmware's watchdog; `rpf_fly.emulator.world_process`); default
-        `default_world_exit_report()`; a stale report there is removed at the start. ``host``: the IPv4 address
-        the simulated drones' radio server and NatNet emulator bind (default loopback: nothing opened to the
-        network; a distributed flight's coordinator gives its listen address: docs/distributed.md).
-        ``mocap_noise``: the jitter and single-frame dropouts of every pose the mocap serves (default
-        `MocapNoise.default()`, a real room's: rpf_fly/emulator/mocap_noise.py; ``MocapNoise(0, 0, 0)``: the exact
-        truth, for tests that compare poses to the millimetre). ``dynamics``: how the simulated drones fly,
+        private ones; they keep their firmware state, and closing the dry run leaves them to the lab. ``truth``: the
+        flight log of a flight on this rig gets the world's truth (``/truth/<drone>``); False only to measure what that
+        costs (tools/bench_flight.py ``--no-truth``). ``air_time_s``: how long each radio transaction holds its dongle,
+        shared by every link on it (default ``AIR_TIME_S``, a Crazyradio's; 0: an infinitely fast radio, only to measure
+        what the radio costs). ``radio_loss``: the bursty loss of every drone's link (default `RADIO_LOSS`; None: a
+        lossless radio, for tests that count exact retries); a drone of ``drone_configs`` whose `LinkFaults.burst` is
+        set keeps its own. ``world_exit_report``: where the simulated drones' process writes what became of the drones
+        if this process dies without closing the dry run (SIGKILL: they fall by the firmware's watchdog;
+        `rpf_fly.emulator.world_process`); default `default_world_exit_report()`; a stale report there is removed at the
+        start. ``host``: the IPv4 address the simulated drones' radio server and NatNet emulator bind (default loopback:
+        nothing opened to the network; a distributed flight's coordinator gives its listen address:
+        docs/distributed.md). ``mocap_noise``: the jitter and single-frame dropouts of every pose the mocap serves
+        (default `MocapNoise.default()`, a real room's: rpf_fly/emulator/mocap_noise.py; ``MocapNoise(0, 0, 0)``: the
+        exact truth, for tests that compare poses to the millimetre). ``dynamics``: how the simulated drones fly,
         ``"firmware"`` (the firmware's PID cascade on the identified body, docs/dynamics.md) or ``"first-order"``
         (`VehicleConfig.dynamics`). ``seed``, ``mocap_noise`` and ``dynamics`` default to the mission's ``dry_run``
-        section (docs/mission-format.md); a lab's drones fly the lab mission's. ``radio``: ``"fake"`` (the
-        ``fake://`` link driver) or ``"crazyradio"`` (the mission's ``radio://`` URIs through cflib's own radio
-        driver and emulated dongles of type ``crazyradio``, plugged into this process until `close`); default the
-        mission's ``dry_run.radio`` and ``dry_run.crazyradio`` (else ``radio.dongle_type``)."""
+        section (docs/mission-format.md); a lab's drones fly the lab mission's. ``radio``: ``"fake"`` (the ``fake://``
+        link driver) or ``"crazyradio"`` (the mission's ``radio://`` URIs through cflib's own radio driver and emulated
+        dongles of type ``crazyradio``, plugged into this process until `close`); default the mission's
+        ``dry_run.radio`` and ``dry_run.crazyradio`` (else ``radio.dongle_type``)."""
         if mocap is None:  # the mission's kind decides: its own client against the emulator
             mocap = "motioncapture" if mission.mocap.kind == "motioncapture" else "natnet"
         if mocap not in ("natnet", "sim", "motioncapture"):
@@ -456,7 +456,7 @@ class DryRun:
             return host_lag(self.world.lag, self.server.lag if self.server is not None else None)
         return self.world.host_lag()
 
-    def snapshot(self, name: str):  # type: ignore[no-untyped-def]
+    def snapshot(self, name: str):
         """The fake firmware's state of drone ``name`` (position, motors, flags, ...)."""
         return self.world.snapshot(self.addresses[name])
 

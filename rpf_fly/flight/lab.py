@@ -277,7 +277,7 @@ class Lab:
         self._listener = Listener(("127.0.0.1", 0), authkey=self._authkey)
         ports = self.server.ports()
         self.info = LabInfo(os.getpid(), self.mission_path, tuple(self._listener.address), self._authkey.hex(),
-                            tuple(ports["radio"]), ports["natnet_command_port"],  # type: ignore[arg-type]
+                            tuple(ports["radio"]), ports["natnet_command_port"],
                             {name: address for address, name in self.names.items()},
                             os.fspath(self.log_path) if self.log_path is not None else None)
         partial = self.path.with_name(self.path.name + ".partial")

@@ -52,8 +52,8 @@ it is one swarm-wide ``mocap_late`` warning instead of one per drone."""
 @dataclass
 class TrackedPose:
     """Newest valid pose of one drone: position (x, y, z) metres, quaternion (qx, qy, qz, qw), planar velocity
-    (complex, m/s), ``stamp_s`` (monotonic receive time of that sample, on the 1 us grid), ``frame_number``, and whether the newest
-    frame tracked it (``valid``)."""
+    (complex, m/s), ``stamp_s`` (monotonic receive time of that sample, on the 1 us grid), ``frame_number``, and whether
+    the newest frame tracked it (``valid``)."""
 
     position: tuple[float, float, float]
     quaternion: tuple[float, float, float, float]

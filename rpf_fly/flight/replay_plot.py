@@ -46,7 +46,7 @@ def plot_replay(result: ReplayResult, path: str | Path, title: str = "") -> Path
     return out
 
 
-def replay_figure(result: ReplayResult, title: str = ""):  # type: ignore[no-untyped-def]
+def replay_figure(result: ReplayResult, title: str = ""):
     """The figure of :func:`plot_replay`, not yet saved. Every panel is on one time axis (the drones' rows can be
     compared tick for tick, as the review figure's panels)."""
     import matplotlib

@@ -148,7 +148,7 @@ class ScenarioFlight:
             body = frame.bodies.get(self.body)
             if body is None or not body.valid:
                 continue
-            self.pose = tuple(body.position)  # type: ignore[assignment]
+            self.pose = tuple(body.position)
             if self.log is not None:
                 self.log.pose(self.name, time.time_ns(), body.position, body.quaternion)
             if frame.receive_time_s - self._last_extpos >= EXTPOS_PERIOD_S:
@@ -425,7 +425,7 @@ def run_scenario(scenario: Scenario, mission: Mission, name: str, *, dry_run: bo
             world = rig.world
 
             def truth(_: str) -> tuple[float, float, float]:
-                return tuple(world.true_poses()[address][0])  # type: ignore[return-value]
+                return tuple(world.true_poses()[address][0])
         else:
             backend, mocap, uri = CflibBackend.for_mission(one, DEFAULT_TOC_CACHE), mocap_source(one), drone.uri
             truth = None  # type: ignore[assignment]
@@ -442,7 +442,7 @@ def run_scenario(scenario: Scenario, mission: Mission, name: str, *, dry_run: bo
                     log.truth(offset_ns + int(stamp * 1e9), states)
                 state = states.get(name)
                 if state is not None:
-                    truth_track.append((stamp, tuple(state[0])))  # type: ignore[arg-type]
+                    truth_track.append((stamp, tuple(state[0])))
 
             feed = TruthFeed(rig.truth_samples, sink).start()
         flight = ScenarioFlight(one, name, scenario, backend, mocap, uri, truth=truth, on_event=on_event, log=log)

@@ -30,7 +30,7 @@ from collections.abc import Callable, Iterator, Mapping, Sequence
 from concurrent.futures import Future, as_completed
 from concurrent.futures import TimeoutError as FutureTimeout
 from dataclasses import dataclass, field
-from typing import Union
+from typing import TypeAlias
 
 import numpy as np
 
@@ -44,7 +44,7 @@ from rpf_fly.planning.onnx_policy import OnnxGains
 from rpf_fly.planning.planner import Planner
 from rpf_fly.planning.view import view_of_drone, views_of_drones
 
-Outcome = Union[PlanResult, PlannerFault]
+Outcome: TypeAlias = PlanResult | PlannerFault
 
 
 def _same_obstacles(a: ObstacleSet, b: ObstacleSet) -> bool:
@@ -64,9 +64,9 @@ def same_function(a: object, b: object) -> bool:
     return (
         type(a) is Planner
         and type(b) is Planner
-        and a.config == b.config  # type: ignore[attr-defined]
-        and _same_obstacles(a.obstacles, b.obstacles)  # type: ignore[attr-defined]
-        and _same_gains(a.gains, b.gains)  # type: ignore[attr-defined]
+        and a.config == b.config
+        and _same_obstacles(a.obstacles, b.obstacles)
+        and _same_gains(a.gains, b.gains)
     )
 
 
@@ -262,7 +262,7 @@ class SwarmPlanner:
             known = self._known[id(planner)] = (planner, group)
         return known[1]
 
-    def _view_of(self, agent: DroneAgent, measured: complex, world: Neighbourhood):  # type: ignore[no-untyped-def]
+    def _view_of(self, agent: DroneAgent, measured: complex, world: Neighbourhood):
         lag_s = agent.tracking_lag_s(measured)
         xy, velocity = world.others_of(agent)
         return view_of_drone(agent.reference, agent.goal, agent.heading, xy + lag_s * velocity, velocity, self.sensing_range)

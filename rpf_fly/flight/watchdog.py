@@ -6,9 +6,9 @@ after 2 s (the drone falls). If the loop has not completed a planning tick for `
 needs no further setpoints, and the landing stands when the loop recovers). It re-arms once the loop ticks again,
 so a second stall is caught too.
 
-The timeout follows the mission's planning period (:func:`stall_timeout_s`): three missed ticks, at least 0.35 s, at most 0.4 s;
-a mission whose timeout would not act before the firmware's 0.5 s setpoint watchdog is rejected when it is loaded
-(``flight.rate_hz``, docs/mission-format.md).
+The timeout follows the mission's planning period (:func:`stall_timeout_s`): three missed ticks, at least 0.35 s, at
+most 0.4 s; a mission whose timeout would not act before the firmware's 0.5 s setpoint watchdog is rejected when it is
+loaded (``flight.rate_hz``, docs/mission-format.md).
 
 The same thread sends an emergency stop requested from a signal handler (:meth:`LoopWatchdog.emergency`): a
 handler may only set flags, since radio I/O inside it could deadlock on cflib's send lock held by the very thread

@@ -6,10 +6,10 @@ neighbour) with a fixed maximum ``K`` and a dynamic batch, and returns ``action`
 tolerance; float32 summation order differs between the two by up to a few 1e-6 on 256-wide layers with large
 weights, so if that parity check fails the export is redone with a float64 copy of the weights inside the graph
 (float32 in and out), where both compute the same function to ~1e-15. float64 costs about twice the per-drone
-inference time, hence float32 first. The metadata says which (``rpf_fly.precision``). Zero neighbours (an all-zero mask) is a valid input. Metadata properties record what
-the runtime needs (``rpf_fly.kind``, ``rpf_fly.action``, ``rpf_fly.max_neighbours``, the gain ranges, the planner
-preset). Every export runs :func:`check_parity`: onnxruntime against torch, ``assert_allclose(rtol=1e-5,
-atol=1e-6)``, on random observations including empty neighbour sets.
+inference time, hence float32 first. The metadata says which (``rpf_fly.precision``). Zero neighbours (an all-zero mask)
+is a valid input. Metadata properties record what the runtime needs (``rpf_fly.kind``, ``rpf_fly.action``,
+``rpf_fly.max_neighbours``, the gain ranges, the planner preset). Every export runs :func:`check_parity`: onnxruntime
+against torch, ``assert_allclose(rtol=1e-5, atol=1e-6)``, on random observations including empty neighbour sets.
 """
 
 from __future__ import annotations

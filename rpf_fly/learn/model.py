@@ -1,9 +1,9 @@
 """The actor-critic: attention (or mean) embedding of the neighbours, 256-256 MLP heads, squashed gains.
 
-Embedding (paper Section IV-A; docs/learning.md, *Network*), per neighbour ``j`` of a drone with local observation ``o_loc``:
-``e_j = relu(W_e [o_loc, w_j])``, ``h_j = relu(W_h e_j)``, score ``b_j = MLP_b([e_j, e_m])`` with ``e_m`` the masked
-mean of ``e`` (a ReLU layer, then a linear score), ``c = sum_j softmax(b)_j h_j`` over the visible neighbours (zero
-when there are none). RPF-2 replaces the attention by the plain masked mean of ``h``. ``[o_loc, c]`` feeds a
+Embedding (paper Section IV-A; docs/learning.md, *Network*), per neighbour ``j`` of a drone with local observation
+``o_loc``: ``e_j = relu(W_e [o_loc, w_j])``, ``h_j = relu(W_h e_j)``, score ``b_j = MLP_b([e_j, e_m])`` with ``e_m`` the
+masked mean of ``e`` (a ReLU layer, then a linear score), ``c = sum_j softmax(b)_j h_j`` over the visible neighbours
+(zero when there are none). RPF-2 replaces the attention by the plain masked mean of ``h``. ``[o_loc, c]`` feeds a
 256-256 tanh MLP actor and a 256-256 tanh MLP critic.
 
 Actions: a Gaussian over an unbounded ``u`` with a state-independent log-std. ``gains`` policies map ``u`` to
@@ -149,14 +149,14 @@ class ActorCritic(nn.Module):
         mean = self.actor(features)
         return torch.distributions.Normal(mean, self.log_std.exp().expand_as(mean))
 
-    def act(self, local, neighbours, mask):  # type: ignore[no-untyped-def]
+    def act(self, local, neighbours, mask):
         """Sample ``u``; returns ``u``, its log-probability and the value."""
         f = self.features(local, neighbours, mask)
         dist = self.distribution(f)
         u = dist.sample()
         return u, dist.log_prob(u).sum(-1), self.critic(f).squeeze(-1)
 
-    def evaluate(self, local, neighbours, mask, u):  # type: ignore[no-untyped-def]
+    def evaluate(self, local, neighbours, mask, u):
         """Log-probability of ``u``, entropy and value under the current parameters."""
         f = self.features(local, neighbours, mask)
         dist = self.distribution(f)

@@ -141,7 +141,7 @@ class UpdateLog:
     eval_collisions: float = float("nan")
 
 
-def _tensors(obs) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:  # type: ignore[no-untyped-def]
+def _tensors(obs) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """Flatten an env observation (arenas, robots, ...) into batch tensors."""
     local = torch.from_numpy(obs.local.reshape(-1, obs.local.shape[-1]))
     neighbours = torch.from_numpy(obs.neighbours.reshape(-1, *obs.neighbours.shape[-2:]))
@@ -207,7 +207,7 @@ class Trainer:
         self.history = [UpdateLog(**h) for h in state["history"]]
         torch.set_rng_state(state["torch_rng"])
         self.best = state.get("best")
-        self.best_score = tuple(state.get("best_score", (-1.0, -float("inf"))))  # type: ignore[assignment]
+        self.best_score = tuple(state.get("best_score", (-1.0, -float("inf"))))
         # Fresh scenes after a resume: reseed the environment from the update counter, deterministically.
         self.env = SwarmEnv(self.config.env_config(), seed=self.config.seed + 7919 * self.update)
 

@@ -84,7 +84,7 @@ class LogData:
         return self.topics.get(topic, [])
 
 
-def _open(path: str | Path):  # type: ignore[no-untyped-def]
+def _open(path: str | Path):
     path = Path(path)
     if not path.exists():
         raise LogError("no such file")
@@ -96,7 +96,7 @@ def _open(path: str | Path):  # type: ignore[no-untyped-def]
         raise LogError(f"cannot open: {err.strerror or err}") from None
 
 
-def _records(f) -> Iterator[Any]:  # type: ignore[no-untyped-def]
+def _records(f) -> Iterator[Any]:
     """The file's records in file order (chunks opened, CRCs checked); raises on a torn end."""
     reader = StreamReader(f, validate_crcs=True)
     records = reader.records

@@ -85,7 +85,7 @@ MAX_LISTED = 28
 """Named events listed under the XY panel (the rest are counted)."""
 
 
-def _event_list(fig, ax_xy, legend, named: list[tuple[R.ReviewEvent, str]],  # type: ignore[no-untyped-def]
+def _event_list(fig, ax_xy, legend, named: list[tuple[R.ReviewEvent, str]],
                 cuts: list[R.Interruption]) -> None:
     """The named events, numbered as on the events panel, listed under the XY panel's legend in their level's
     colour; then each interruption."""
@@ -114,7 +114,7 @@ LABEL_SPOTS = ((0, 6, "center", "bottom"), (0, -7, "center", "top"), (0, 17, "ce
 right, left; the first spot that covers no marker and no label already placed is taken."""
 
 
-def _event_labels(fig, ax, clusters: list[tuple[float, int, list[int]]]) -> None:  # type: ignore[no-untyped-def]
+def _event_labels(fig, ax, clusters: list[tuple[float, int, list[int]]]) -> None:
     """Number the events on the timeline, each cluster once, where its number covers no other marker and no
     other number (an interruption and the events of its instant share one time), on a white ground so the
     interruption's line does not strike through it."""
@@ -129,7 +129,7 @@ def _event_labels(fig, ax, clusters: list[tuple[float, int, list[int]]]) -> None
             markers.append(Bbox.from_extents(x - half, y - half, x + half, y + half))
     placed: list = []
 
-    def put(text: str, t: float, level: int, spot: tuple[int, int, str, str]):  # type: ignore[no-untyped-def]
+    def put(text: str, t: float, level: int, spot: tuple[int, int, str, str]):
         dx, dy, ha, va = spot
         return ax.annotate(text, (t, level), xytext=(dx, dy), textcoords="offset points", fontsize=7,
                            fontweight="bold", color=LEVEL_COLOURS.get(level, "0.3"), ha=ha, va=va,
@@ -149,7 +149,7 @@ def _event_labels(fig, ax, clusters: list[tuple[float, int, list[int]]]) -> None
         placed.append(box)
 
 
-def _legend_clear_of_data(fig, ax) -> None:  # type: ignore[no-untyped-def]
+def _legend_clear_of_data(fig, ax) -> None:
     """Raise the top of a time panel so that its legend (upper right) sits above the curves instead of on them:
     the panel's range so far keeps its share below the legend."""
     renderer = fig.canvas.get_renderer()
@@ -172,7 +172,7 @@ def plot_review(data: LogData, result: R.Review, path: str | Path) -> Path:
     return path
 
 
-def review_figure(data: LogData, result: R.Review):  # type: ignore[no-untyped-def]
+def review_figure(data: LogData, result: R.Review):
     """The review's figure (a matplotlib Figure on the Agg backend). Its axes are labelled ``xy`` and by panel
     (``altitude``, ``tracking``, ``separation``, ``clearance``, ``battery``, ``events``); the artists a reader looks
     for carry a ``gid`` (``track:<drone>``, ``goal:<drone>``, ``start-goal:<drone>``, ``r``, ``2r``,

@@ -58,7 +58,7 @@ def drones_of(data: LogData) -> list[str]:
     return names
 
 
-def obstacle_set_of(scenario: dict[str, Any]):  # type: ignore[no-untyped-def]
+def obstacle_set_of(scenario: dict[str, Any]):
     """The planner's obstacle arrays of the scenario record's obstacles."""
     from rpf_fly.mission.model import BoxObstacle, CircleObstacle
     from rpf_fly.sim.scenario import obstacle_set

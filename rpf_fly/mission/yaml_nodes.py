@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass
-from typing import Any, Union
+from typing import Any, TypeAlias
 
 import yaml
 from yaml.constructor import SafeConstructor
@@ -36,7 +36,7 @@ _MAP_TAG = _STD + "map"
 _MERGE_TAG = _STD + "merge"
 TAG_MESSAGE = "YAML tags that construct objects are not allowed (safe loading only)"
 
-YValue = Union[None, bool, int, float, str, list["YNode"], dict[str, "YNode"]]
+YValue: TypeAlias = None | bool | int | float | str | list["YNode"] | dict[str, "YNode"]
 
 
 @dataclass(frozen=True)
@@ -217,7 +217,7 @@ class _Converter:
             if key in out:
                 raise self.fail(key_node, sub, f"duplicate key {key!r} (first at line {out[key].key_line})")
             out[key] = self.convert(value_node, sub, key_node.start_mark.line + 1)
-        for key_node, value_node in merges:  # explicit keys win; earlier merge sources win over later ones
+        for _key_node, value_node in merges:  # explicit keys win; earlier merge sources win over later ones
             sources = value_node.value if isinstance(value_node, SequenceNode) else [value_node]
             for source in sources:
                 if not isinstance(source, MappingNode):

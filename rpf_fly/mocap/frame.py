@@ -1,8 +1,8 @@
 """What every motion-capture source delivers: rigid-body poses in the Z-up world frame, and the source protocol.
 
-Conventions (docs/architecture.md, *Conventions*): right-handed world, Z up, metres, seconds; quaternions are (qx, qy, qz, qw),
-rotating body coordinates into world coordinates. Sources convert from their native axes (NatNet streams Y-up by
-default) before filling these objects, so nothing downstream ever sees another frame.
+Conventions (docs/architecture.md, *Conventions*): right-handed world, Z up, metres, seconds; quaternions are (qx, qy,
+qz, qw), rotating body coordinates into world coordinates. Sources convert from their native axes (NatNet streams Y-up
+by default) before filling these objects, so nothing downstream ever sees another frame.
 
 The :class:`MocapSource` protocol is deliberately small (newest frame or None, close, stats) so that the NatNet
 client, the simulated source and the source over the ``motioncapture`` package (Vicon, Qualisys, VRPN; blocking

@@ -118,7 +118,7 @@ def decode_connect(payload: bytes) -> ConnectRequest:
     natnet_version = (v[4], v[5], v[6], v[7])
     subscribed = bool(payload[264]) if len(payload) >= 265 else None
     bitstream = tuple(_VERSION4.unpack_from(payload, 265)) if len(payload) >= 269 else None
-    return ConnectRequest(name, app_version, natnet_version, subscribed, bitstream)  # type: ignore[arg-type]
+    return ConnectRequest(name, app_version, natnet_version, subscribed, bitstream)
 
 
 def _connect_payload(request: ConnectRequest) -> bytes:

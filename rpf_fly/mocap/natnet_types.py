@@ -12,7 +12,7 @@ import struct
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from enum import IntEnum
-from typing import NamedTuple, Union
+from typing import NamedTuple, TypeAlias
 
 __all__ = [
     "MessageId",
@@ -392,6 +392,6 @@ class ModelDefinitions:
     others: tuple[OtherDescription, ...] = ()
 
 
-Message = Union[
-    FrameOfData, ModelDefinitions, ServerInfo, ConnectRequest, Response, EchoResponse, str, int, bytes, None
-]
+Message: TypeAlias = (
+    FrameOfData | ModelDefinitions | ServerInfo | ConnectRequest | Response | EchoResponse | str | int | bytes | None
+)

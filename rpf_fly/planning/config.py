@@ -1,8 +1,8 @@
 """Planner parameters and the two presets: ``paper`` (the formulas as printed) and ``robust`` (the default).
 
 docs/algorithm.md lists what the literal formulas do in practice (*What the literal formulas do*: side flips,
-mode-B collisions, livelock on symmetric swaps); *Presets* closes each gap with one option. Every option is a field here so the bench can compare them one by one.
-Units: metres, metres per second, radians unless a name says degrees.
+mode-B collisions, livelock on symmetric swaps); *Presets* closes each gap with one option. Every option is a field here
+so the bench can compare them one by one. Units: metres, metres per second, radians unless a name says degrees.
 """
 
 from __future__ import annotations

@@ -75,7 +75,7 @@ def make_planner(
     return planner
 
 
-def mission_planner(mission: Mission, settings: PlannerSettings | None = None, obstacles: ObstacleSet | None = None):  # type: ignore[no-untyped-def]
+def mission_planner(mission: Mission, settings: PlannerSettings | None = None, obstacles: ObstacleSet | None = None):
     """The planner of a mission as the flight, its dry run and its replay build it: the mission's obstacles, its arena
     as the guidance bounds and every drone's goal prepared at load time (the flight's tick then only looks up the
     next visible waypoint)."""
@@ -87,7 +87,7 @@ def mission_planner(mission: Mission, settings: PlannerSettings | None = None, o
     )
 
 
-def _make(settings: PlannerSettings, obstacles: ObstacleSet, config: PlannerConfig, bounds: Bounds | None):  # type: ignore[no-untyped-def]
+def _make(settings: PlannerSettings, obstacles: ObstacleSet, config: PlannerConfig, bounds: Bounds | None):
     if settings.kind in ("apf", "apf-paper"):
         return Planner(obstacles, config, FixedGains(settings.eta, settings.lam), bounds)
     if settings.kind == "orca":

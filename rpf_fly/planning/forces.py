@@ -136,9 +136,10 @@ def inter_robot(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Force from the lambda-neighbours ``S + (K,)`` selected by ``neighbour_mask``, and how many contributed.
 
-    ``sum`` aggregates as the paper's equation; ``mean`` divides by the count (the predecessor's code; docs/algorithm.md,
-    *What the literal formulas do*, shows it lets crowds collide). The robust preset keeps only the repulsive part of each term and rotates the
-    total counter-clockwise by ``keep_right_deg`` (rotating every term by one angle is rotating their sum).
+    ``sum`` aggregates as the paper's equation; ``mean`` divides by the count (the predecessor's code;
+    docs/algorithm.md, *What the literal formulas do*, shows it lets crowds collide). The robust preset keeps only the
+    repulsive part of each term and rotates the total counter-clockwise by ``keep_right_deg`` (rotating every term by
+    one angle is rotating their sum).
     """
     if neighbour_position.shape[-1] == 0:
         if isinstance(position, np.ndarray):

@@ -1,4 +1,5 @@
-"""The policy's observation of one drone, in its own heading frame (paper Section IV-A; docs/learning.md, *Observation*).
+"""The policy's observation of one drone, in its own heading frame (paper Section IV-A; docs/learning.md,
+*Observation*).
 
 ``o_loc = [d_o, phi_o, d_g, phi_g]``: distance and bearing of the nearest visible obstacle surface point and of the
 goal; ``w_j = [d_ji, phi_ji, psi_ji]`` per visible neighbour: distance, bearing, and the neighbour's motion heading

@@ -114,7 +114,7 @@ def _boxes(points: np.ndarray, obstacles: ObstacleSet) -> tuple[np.ndarray, np.n
     return outside + inside, normal
 
 
-def _reduce(dist: np.ndarray, normal: np.ndarray):  # type: ignore[no-untyped-def]
+def _reduce(dist: np.ndarray, normal: np.ndarray):
     """The minimum over the obstacle axis: Python numbers for one robot, arrays for many."""
     k = dist.argmin(axis=-1)
     if dist.ndim == 1:

@@ -90,7 +90,7 @@ class OnnxGains:
         self.policy = policy
         self.max_neighbours = policy.max_neighbours
 
-    def gains(self, observation: Observation | None):  # type: ignore[no-untyped-def]
+    def gains(self, observation: Observation | None):
         assert observation is not None
         action = self.policy.act(observation)
         if action.ndim == 1:  # one drone: Python numbers keep the planner on its fast scalar path

@@ -71,32 +71,32 @@ def from_angle(angle: np.ndarray | float) -> np.ndarray:
 # need different calls.
 
 
-def maximum(a, b):  # type: ignore[no-untyped-def]
+def maximum(a, b):
     """Elementwise max for arrays, ``max`` for Python numbers."""
     return np.maximum(a, b) if isinstance(a, np.ndarray) else (a if a > b else b)
 
 
-def minimum(a, b):  # type: ignore[no-untyped-def]
+def minimum(a, b):
     """Elementwise min for arrays, ``min`` for Python numbers."""
     return np.minimum(a, b) if isinstance(a, np.ndarray) else (a if a < b else b)
 
 
-def any_true(mask) -> bool:  # type: ignore[no-untyped-def]
+def any_true(mask) -> bool:
     """Whether any element is true (a Python bool passes through)."""
     return bool(mask.any()) if isinstance(mask, np.ndarray) else bool(mask)
 
 
-def plain(x):  # type: ignore[no-untyped-def]
+def plain(x):
     """A numpy scalar as a Python number; arrays and Python numbers pass through."""
     return x.item() if isinstance(x, np.generic) else x
 
 
-def per_item(x):  # type: ignore[no-untyped-def]
+def per_item(x):
     """Add a trailing axis to an array so it broadcasts against ``S + (K,)``; Python numbers pass through."""
     return x[..., None] if isinstance(x, np.ndarray) and x.ndim else x
 
 
-def offsets(position, neighbour_position: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # type: ignore[no-untyped-def]
+def offsets(position, neighbour_position: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Each neighbour's offset ``p_j - p`` (complex ``S + (K,)``) and its length: what the observation, the
     inter-robot force, the brake and the static-neighbour circles all start from (a view computes them once:
     :meth:`~rpf_fly.planning.view.LocalView.neighbour_offsets`)."""
@@ -104,7 +104,7 @@ def offsets(position, neighbour_position: np.ndarray) -> tuple[np.ndarray, np.nd
     return delta, abs(delta)
 
 
-def phase(z):  # type: ignore[no-untyped-def]
+def phase(z):
     """Angle of ``z`` in (-pi, pi], for a Python number or an array.
 
     The angle of a vector ``v`` seen from a unit heading ``h`` is ``phase(v * conj(h))``.

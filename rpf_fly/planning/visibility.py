@@ -65,7 +65,8 @@ class Inflated:
         return int(self.x0.shape[-1])
 
     def inside(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Points ``(x, y)`` (float arrays ``S``) strictly inside each inflated circle ``S + (Mc,)`` / box ``S + (Mb,)``."""
+        """Points ``(x, y)`` (float arrays ``S``) strictly inside each inflated circle ``S + (Mc,)`` / box
+        ``S + (Mb,)``."""
         x, y = x[..., None], y[..., None]
         in_c = (x - self.cx) ** 2 + (y - self.cy) ** 2 < self.cr**2
         in_b = (x > self.x0) & (x < self.x1) & (y > self.y0) & (y < self.y1)

@@ -79,7 +79,7 @@ def select_heading(
     return direction, _modes(push, in_a * MODE_WALL + in_b * MODE_SOFT)
 
 
-def _modes(like, value):  # type: ignore[no-untyped-def]
+def _modes(like, value):
     """Mode codes as int8 arrays for batches, a Python int for one drone."""
     if isinstance(like, np.ndarray):
         return np.broadcast_to(np.asarray(value, dtype=np.int8), like.shape)

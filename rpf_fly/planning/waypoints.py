@@ -73,7 +73,7 @@ def next_waypoint(
     return waypoint, remaining
 
 
-def _choose(position, goal, direct, nodes, bound, pick, inf, wide):  # type: ignore[no-untyped-def]
+def _choose(position, goal, direct, nodes, bound, pick, inf, wide):
     """Waypoint and remaining length among the goal and the ``pick``ed nodes; ``unresolved``: the goal is hidden
     and no picked node with a finite bound is in sight."""
     chosen = np.take_along_axis(nodes, pick, -1)

@@ -172,8 +172,8 @@ class DroneBackend(Protocol):
     Commands return True when the command was accepted for a live link and False when the drone is unknown to the
     link (never connected, lost or closed); they do not wait for the drone, nor for the radio: a backend may queue
     them (`CflibBackend` sends each drone's commands from a thread of that drone's own, in order, newest setpoint
-    only, so that one dying link holds back no other drone). The emergency stop is never queued. Swarm-wide operations return a mapping
-    name -> error message holding only the drones that failed (empty when all succeeded).
+    only, so that one dying link holds back no other drone). The emergency stop is never queued. Swarm-wide operations
+    return a mapping name -> error message holding only the drones that failed (empty when all succeeded).
     """
 
     def connect(self, drones: Mapping[str, str]) -> dict[str, str]:

@@ -242,7 +242,7 @@ def _with_model(load: DongleLoad, uris: Mapping[str, str], groups: list, timing:
     for factor in RATE_LIMIT_FACTORS:
         limits = {n: own[n] or max(1, math.ceil(packets_hz * factor)) for n in names}
         links = []
-        for k, name in enumerate(names):
+        for name in names:
             link = parse_link(uris[name])
             links.append(LinkTraffic((link.channel, link.rate, link.address), limits[name],
                                      setpoint_bytes=SETPOINT_BYTES,

@@ -35,8 +35,8 @@ that would queue more is stalled). A new thread is started only when no idle one
 senders than drones slow at once plus one.
 
 `Outbox.clear` drops everything pending and, for an emergency stop (which the backend sends at once from threads
-of its own, not through the pool), refuses anything after it; `Outbox.close` lets what is pending go out (a disarm queued after touchdown must reach the drone) for at most
-its ``flush_s``; `SenderPool.close` ends the threads.
+of its own, not through the pool), refuses anything after it; `Outbox.close` lets what is pending go out (a disarm
+queued after touchdown must reach the drone) for at most its ``flush_s``; `SenderPool.close` ends the threads.
 """
 
 from __future__ import annotations

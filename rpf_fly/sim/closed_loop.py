@@ -35,8 +35,8 @@ start). Not modelled: mocap and radio latency, estimator noise, take-off and lan
 pass through each other; a collision is counted, never acted on, as in the kinematic world).
 
 Several scenes fly in one swarm (:func:`firmware_rollouts`): the drones of different scenes never interact (each
-scene's planner sees only its own drones), and a swarm's tick costs about the same for 6 drones or 120, so a bench
-flies all seeds of a (scene, planner) at once.
+scene's planner sees only its own drones), and a swarm's tick costs about the same for 6 drones or 120, so the
+bench flies all seeds of a (planner, scene) at once, or a whole family (rpf_fly/bench/families.py).
 """
 
 from __future__ import annotations

@@ -49,7 +49,7 @@ def plot_rollout(result: Rollout, path: str | Path, metrics: Metrics | None = No
     return path
 
 
-def rollout_figure(result: Rollout, metrics: Metrics | None = None, title: str = ""):  # type: ignore[no-untyped-def]
+def rollout_figure(result: Rollout, metrics: Metrics | None = None, title: str = ""):
     """The figure of :func:`plot_rollout` (Agg backend). Artists carry a ``gid``: ``track:<drone>:<mode>`` per
     run of one mode, ``goal:<drone>``, ``start:<drone>``, ``start-goal:<drone>``."""
     import matplotlib

@@ -3,8 +3,9 @@
 Each step every drone that has not arrived moves ``speed * |direction| * dt`` along its planned direction (a unit
 vector for the APF planners; shorter for a planner that slows down, like ORCA); a stalled drone (zero direction)
 stays put; an arrived drone (goal distance below the tolerance) stays where it arrived and remains visible to the
-others as a static neighbour; a halted drone (the training environment halts a drone that collided) likewise. Positions are clamped to the arena (the geofence) and every clamp is
-counted. Arrays have shape ``(..., N)`` complex: one leading entry per arena.
+others as a static neighbour; a halted drone (the training environment halts a drone that collided) likewise. Positions
+are clamped to the arena (the geofence) and every clamp is counted. Arrays have shape ``(..., N)`` complex: one leading
+entry per arena.
 """
 
 from __future__ import annotations

@@ -75,9 +75,9 @@ def test_help_shows_no_type_after_a_flag(path):
 
 def test_options_that_take_a_value_still_show_its_type():
     result = runner.invoke(get_app(), ["fly", "--help"], env=WIDE)
-    line = next(l for l in result.output.splitlines() if "--log" in l)
+    line = next(row for row in result.output.splitlines() if "--log" in row)
     assert "<path>" in line
-    dry = next(l for l in result.output.splitlines() if "--dry-run" in l)
+    dry = next(row for row in result.output.splitlines() if "--dry-run" in row)
     assert "<" not in dry
 
 

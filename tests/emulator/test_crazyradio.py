@@ -152,7 +152,7 @@ def test_a_plain_cflib_program_flies_several_drones_through_cflibs_own_radio_dri
         shared = RadioManager._radios[0]
         assert type(shared._radio) is cflib_crazyradio.Crazyradio
         assert shared._radio.dev._ctx.backend is plug.backend
-        for address, scf in links.items():
+        for scf in links.values():
             assert type(scf.cf.link) is RadioDriver and RadioDriver.__module__ == "cflib.crtp.radiodriver"
             assert scf.cf.link.needs_resending is False  # safelink answered by the simulated nRF
             assert scf.cf.param.get_value("stabilizer.estimator") == "0"
@@ -162,7 +162,7 @@ def test_a_plain_cflib_program_flies_several_drones_through_cflibs_own_radio_dri
             with SyncLogger(scf, log) as logger:
                 samples = [entry for _, entry in zip(range(5), logger)]
             assert len(samples) == 5 and all("stateEstimate.z" in entry[1] for entry in samples)
-            for i in range(20):
+            for _ in range(20):
                 scf.cf.commander.send_position_setpoint(0.0, 0.0, 0.0, 0.0)
                 time.sleep(0.01)
         for address in uris:

@@ -71,7 +71,7 @@ def validate_every_message(path):
 
     validators, seen = {}, set()
     with open(path, "rb") as f:
-        for schema, channel, message in make_reader(f).iter_messages():
+        for schema, _channel, message in make_reader(f).iter_messages():
             if schema.id not in validators:
                 document = json.loads(schema.data)
                 validators[schema.id] = jsonschema.validators.validator_for(document)(document)

@@ -105,7 +105,7 @@ def test_check_then_fly_against_one_lab_flies_every_drone_also_one_latched_by_a_
     assert any("closed its connection" in e for e in events), events
     with open(lab.log, "rb") as f:  # every message validates against the schema in the file
         validators: dict = {}
-        for schema, channel, message in make_reader(f).iter_messages():
+        for schema, _channel, message in make_reader(f).iter_messages():
             if schema.id not in validators:
                 validators[schema.id] = jsonschema.Draft7Validator(json.loads(schema.data))
             validators[schema.id].validate(json.loads(message.data))

@@ -558,8 +558,8 @@ def test_a_landing_drone_that_loses_its_pose_is_said_and_a_blackout_while_all_la
 def landing_with(target_of, pose_of, seconds: float = 2.0, phase: DronePhase = DronePhase.LANDING,  # type: ignore[no-untyped-def]
                  telemetry_at_s: float = 0.0):
     """Every drone in ``phase`` (a high-level take-off or landing) from t = 0 (touchdown at 2 s), seen at 100 Hz at
-    ``pose_of(name, t)`` (None: untracked), with 10 Hz telemetry (from ``telemetry_at_s``) whose logged firmware target is
-    ``target_of(name, t)``; returns the tracking findings as (time, drone, level, message)."""
+    ``pose_of(name, t)`` (None: untracked), with 10 Hz telemetry (from ``telemetry_at_s``) whose logged firmware target
+    is ``target_of(name, t)``; returns the tracking findings as (time, drone, level, message)."""
     _, agents, tracker, supervisor = setup()
     for agent in agents.values():
         agent.set_phase(phase, 0.0)

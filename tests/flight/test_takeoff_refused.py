@@ -79,7 +79,8 @@ def test_a_drone_that_does_not_lift_off_stays_an_obstacle_and_nobody_lands_on_it
 
 def test_a_stop_while_the_drones_arm_sends_no_take_off(tmp_path):
     """Ctrl-C (request_stop) while the loop waits for the supervisors to arm: nothing takes off, every armed
-    drone is disarmed on the floor (a Crazyflie 2.x re-arms by itself, motors idle). A motor failing its spin-up check keeps the arming wait open for 3 s."""
+    drone is disarmed on the floor (a Crazyflie 2.x re-arms by itself, motors idle). A motor failing its spin-up check
+    keeps the arming wait open for 3 s."""
     from rpf_fly.flight.dry_run import StartFault
 
     mission = parse_mission(SWAP, tmp_path / "refused.yaml")

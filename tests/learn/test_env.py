@@ -110,7 +110,7 @@ def test_obstacle_band_and_turn_penalties():
     w.heading[b, i] = 1j
     w.goal[b, i] = c + (rad + 0.15) + 3j
     env._observe()
-    direction = env.directions(gains(env))
+    env.directions(gains(env))
     result = env.step(gains(env))
     assert result.reward[b, i] < -15
     # A heading reversal is a turn of more than 45 degrees: -5 on top.

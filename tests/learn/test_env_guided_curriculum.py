@@ -1,4 +1,5 @@
-"""Guidance on a curriculum of walled families: the per-arena corner arrays hold circles' polygons and boxes' corners."""
+"""Guidance on a curriculum of walled families: the per-arena corner arrays hold circles' polygons and boxes'
+corners."""
 
 import numpy as np
 import pytest

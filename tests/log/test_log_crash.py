@@ -62,7 +62,9 @@ def killed(tmp_path_factory):  # type: ignore[no-untyped-def]
 
 def test_seeking_reader_rejects_the_killed_file(killed):
     path, _ = killed
-    with open(path, "rb") as f, pytest.raises(Exception):
+    # Any exception: the bytes after the last complete chunk are whatever the kill left, read as a footer they fail
+    # in mcap's record decoding in more than one way (McapError, struct.error, ...).
+    with open(path, "rb") as f, pytest.raises(Exception):  # noqa: B017
         reader = make_reader(f)
         reader.get_summary()
         list(reader.iter_messages())

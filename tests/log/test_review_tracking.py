@@ -99,7 +99,8 @@ def test_the_simulated_drones_logs_are_judged_on_their_lag():
 
 
 def test_a_dry_run_whose_drones_fly_the_firmwares_cascade_is_judged_as_crazyflies(tmp_path):
-    """``dry_run: {dynamics: firmware}`` in the logged mission: the simulated drones trail as a default-gain Crazyflie."""
+    """``dry_run: {dynamics: firmware}`` in the logged mission: the simulated drones trail as a default-gain
+    Crazyflie."""
     from rpf_fly.log.review_tracking import dry_run_dynamics, tracking_lag
 
     assert dry_run_dynamics("name: m\ndry_run: {dynamics: firmware}\n") == "firmware"

@@ -226,8 +226,8 @@ def test_nan_obstacle_radius(fail):
 @pytest.mark.parametrize("section, key, value, bound", [
     ("flight", "height", "0", "positive"),
     ("flight", "speed", "0", "positive"),
-    ("flight", "rate_hz", "-10", "at least 7.5 Hz, so the loop watchdog acts before the Crazyflie's 0.5 s setpoint watchdog levels the drones out"),
-    ("flight", "rate_hz", "5", "at least 7.5 Hz, so the loop watchdog acts before the Crazyflie's 0.5 s setpoint watchdog levels the drones out"),
+    ("flight", "rate_hz", "-10", "at least 7.5 Hz, so the loop watchdog acts before the Crazyflie's " "0.5 s setpoint watchdog levels the drones out"),
+    ("flight", "rate_hz", "5", "at least 7.5 Hz, so the loop watchdog acts before the Crazyflie's " "0.5 s setpoint watchdog levels the drones out"),
     ("flight", "goal_tolerance", "0", "positive"),
     ("flight", "takeoff_s", "0", "positive"),
     ("flight", "land_s", "-1", "positive"),

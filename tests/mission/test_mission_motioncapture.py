@@ -36,7 +36,7 @@ def test_vicon_and_optitrack_options_become_the_strings_connect_reads(load):
     ("{kind: motioncapture}",
      "m.yaml:4: mocap.type: missing required key: kind 'motioncapture' needs the system's type, one of mock,"),
     ("{kind: motioncapture, type: optitrack_closed}",
-     "m.yaml:4: mocap.type: unknown motioncapture type 'optitrack_closed' (did you mean 'optitrack_closed_source'?)"),
+     "m.yaml:4: mocap.type: unknown motioncapture type 'optitrack_closed' " "(did you mean 'optitrack_closed_source'?)"),
     ("{kind: motioncapture, type: mock, hostname: lab}",
      "m.yaml:4: mocap.hostname: type 'mock' has no host (it needs no hardware); remove hostname"),
     ("{kind: motioncapture, type: vicon, hostname: 'vicon:99999'}",
@@ -44,7 +44,7 @@ def test_vicon_and_optitrack_options_become_the_strings_connect_reads(load):
     ("{kind: motioncapture, type: optitrack, hostname: 192.168.1.1000}",
      "m.yaml:4: mocap.hostname: expected a host name or IP address, got '192.168.1.1000'"),
     ("{kind: motioncapture, type: vicon, options: {enable_pointcloud: true}}",
-     "m.yaml:4: mocap.options.enable_pointcloud: unknown option 'enable_pointcloud' of type 'vicon' (did you mean "
+     "m.yaml:4: mocap.options.enable_pointcloud: unknown option 'enable_pointcloud' " "of type 'vicon' (did you mean "
      "'enable_pointclout'?); vicon takes enable_objects, enable_pointclout"),
     ("{kind: motioncapture, type: vicon, options: {enable_objects: 'on'}}",
      "m.yaml:4: mocap.options.enable_objects: expected true or false, got 'on'"),

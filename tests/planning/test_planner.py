@@ -146,8 +146,9 @@ def test_phase_is_in_the_half_open_interval_for_signed_zeros():
 
 
 def test_a_corner_within_reach_counts_as_reached_and_the_pull_moves_on():
-    """``waypoint_reach``: 3 cm short of the first corner of a wall (beside it) the drone is pulled to the second corner, not
-    back to the first (one-drone and batched alike); farther off, or with the reach 0, the first corner stays."""
+    """``waypoint_reach``: 3 cm short of the first corner of a wall (beside it) the drone is pulled to the second
+    corner, not back to the first (one-drone and batched alike); farther off, or with the reach 0, the first corner
+    stays."""
     from rpf_fly.planning.planner import guided_view, make_guidance
 
     wall = ObstacleSet.from_shapes(boxes=[((-0.1, -1.0), (0.1, 3.0))])

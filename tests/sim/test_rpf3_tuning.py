@@ -96,7 +96,7 @@ def test_a_drone_is_routed_round_a_drone_parked_in_the_gap_of_its_path():
     """Fresh arena-a seed 192 with the shipped RPF-3: drone 3's map path runs between two pillars where drone 0 has
     parked on its goal. Without the detour it stalls there to the time limit; with it, it goes round by the next
     gap and every drone arrives, with the margin held (docs/algorithm.md, *Guidance round parked drones*)."""
-    from rpf_fly.mission.load import PROJECT_POLICIES
+    from rpf_fly.mission.policy_paths import PROJECT_POLICIES
     from rpf_fly.planning.factory import make_planner
     from rpf_fly.sim.generators import generate
 

@@ -74,14 +74,13 @@ def step_kernel(p, g, h, npos, nvel, nmask, circles, boxes, nodes, cost, eta, la
     # --- summed repulsion and the nearest wall
     fx = fy = 0.0
     wall = 1e9
-    wnx = wny = 0.0
     for k in range(circles.shape[0]):
         dx, dy = px - circles[k, 0], py - circles[k, 1]
         ln = math.hypot(dx, dy)
         d_raw = ln - circles[k, 2]
         nx, ny = dx / (ln + 1e-12), dy / (ln + 1e-12)
         if d_raw < wall:
-            wall, wnx, wny = d_raw, nx, ny
+            wall = d_raw
         d_raw -= margin
         if d_raw <= rho and d_raw <= sensing:
             d = max(d_raw, 1e-3)
@@ -103,7 +102,7 @@ def step_kernel(p, g, h, npos, nvel, nmask, circles, boxes, nodes, cost, eta, la
     # --- neighbours: statics as obstacles, the others the inter-robot force; the observation's sort
     kn = npos.shape[0]
     dist = np.empty(kn)
-    ix = fy_in = 0.0
+    ix = 0.0
     iy = 0.0
     count = 0
     for j in range(kn):
