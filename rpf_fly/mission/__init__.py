@@ -4,6 +4,7 @@
     mission = load_mission("missions/circle-8-r3.yaml")   # or MissionError: "FILE:LINE: FIELD: problem"
 """
 
+import importlib
 from typing import Any
 
 from .errors import MissionError
@@ -53,14 +54,14 @@ __all__ = [
 ]
 
 
-_LOADER = ("expand_formation", "field_line", "load_mission", "parse_mission", "parse_uri", "with_planner")
+_LOADER = {"expand_formation": "parser", "field_line": "load", "load_mission": "load", "parse_mission": "load",
+           "parse_uri": "radio_uri", "with_planner": "load"}
+"""The loader's names, by the module of this package that holds each."""
 
 
 def __getattr__(name: str) -> Any:
     """The loader (numpy, yaml) is imported on first use: the CLI's help reads the planner kinds of ``model``
     without paying for it."""
     if name in _LOADER:
-        from . import load
-
-        return getattr(load, name)
+        return getattr(importlib.import_module(f"{__name__}.{_LOADER[name]}"), name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

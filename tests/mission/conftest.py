@@ -21,9 +21,9 @@ def workdir(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
 @pytest.fixture
 def no_shipped_policies(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """As if rpf_fly were installed without the project's ``policies/`` folder (a wheel): no fallback."""
-    import rpf_fly.mission.load
+    import rpf_fly.mission.policy_paths
 
-    monkeypatch.setattr(rpf_fly.mission.load, "PROJECT_POLICIES", tmp_path / "no-shipped-policies")
+    monkeypatch.setattr(rpf_fly.mission.policy_paths, "PROJECT_POLICIES", tmp_path / "no-shipped-policies")
 
 
 @pytest.fixture

@@ -15,8 +15,8 @@ try:
 except ModuleNotFoundError:  # Python 3.10: pip's own TOML reader (pip is in every venv this project installs into)
     from pip._vendor import tomli as tomllib  # type: ignore[no-redef]
 
-from rpf_fly.mission.load import INSTALLED_POLICIES, PROJECT_POLICIES
 from rpf_fly.mission.model import POLICY_KINDS
+from rpf_fly.mission.policy_paths import INSTALLED_POLICIES, PROJECT_POLICIES
 
 ROOT = Path(__file__).resolve().parents[2]
 

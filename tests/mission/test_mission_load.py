@@ -27,7 +27,7 @@ from rpf_fly.mission import (
     parse_uri,
     with_planner,
 )
-from rpf_fly.mission.load import PROJECT_POLICIES
+from rpf_fly.mission.policy_paths import PROJECT_POLICIES
 
 BASE = """\
 arena: {x: [-2, 2], y: [-2, 2], z: [0, 1.5]}
@@ -115,9 +115,9 @@ def test_minimal_mission_takes_the_dataclass_defaults(load):
 def test_the_default_planners_missing_policy_is_one_line_naming_the_default(tmp_path, monkeypatch):
     """Without the shipped policies (a wheel install, a copy of rpf_fly alone), a mission that names no planner,
     or names kind rpf3 without a policy, fails at load with the file, the field and where it looked."""
-    import rpf_fly.mission.load as load_module
+    import rpf_fly.mission.policy_paths as policy_paths
 
-    monkeypatch.setattr(load_module, "PROJECT_POLICIES", tmp_path / "nowhere")
+    monkeypatch.setattr(policy_paths, "PROJECT_POLICIES", tmp_path / "nowhere")
     monkeypatch.chdir(tmp_path)
     path = tmp_path / "m.yaml"
     path.write_text(BASE)

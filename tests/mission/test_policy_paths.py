@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from rpf_fly.mission import MissionError, load_mission, with_planner
-from rpf_fly.mission.load import PROJECT_POLICIES
+from rpf_fly.mission.policy_paths import PROJECT_POLICIES
 
 ROOT = Path(__file__).resolve().parents[2]
 
