@@ -40,7 +40,9 @@ from .fake_setpoint import AxisMode, decode_generic, decode_rpyt, wrap_angle
 from .fake_supervisor import Transition
 from .fake_toc import EXTENDED_TYPE_PERSISTENT, LOG_TYPE_NAMES, Toc, make_toc, pack_value, unpack_value, value_size
 from .cf_controller import CfGains
-from .fake_vehicle import CONTROLLER_PARAMS, HOVER_THRUST, Vehicle, VehicleConfig
+from .fake_vehicle import Vehicle, VehicleConfig
+from .vehicle_figures import HOVER_THRUST
+from .vehicle_firmware import CONTROLLER_PARAMS
 
 logger = logging.getLogger(__name__)
 

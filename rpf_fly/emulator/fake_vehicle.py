@@ -152,6 +152,10 @@ Battery: open-circuit voltage drains 0.0002 V/s with motors off and 0.0017 V/s w
 Crazyflie hovers about 7 minutes); `pm.vbat` sags 0.25 V under load. `pm.state` becomes low-power after 5 s below
 `pm.lowVoltage` (3.2 V) and the firmware shuts down after 5 s low-power below `pm.criticalLowVoltage` (3.0 V):
 motors off, radio silent.
+
+Parts: the figures above, with their sources, are in vehicle_figures.py; `Vehicle` is made of the estimator
+(vehicle_estimator.py), the first-order body (vehicle_motion.py) and the "firmware" dynamics (vehicle_firmware.py);
+this module keeps the configuration, the battery, the commander's priorities, contact and the stabilizer loop.
 """
 
 from __future__ import annotations
@@ -161,91 +165,32 @@ import math
 import random
 from dataclasses import dataclass, replace
 
-from .cf_body import CfBody, quaternion_to_rpy_deg
-from .cf_controller import ATTITUDE_EVERY, NULL_SETPOINT, PARAM_NAMES, POSITION_EVERY, CfGains, ControlSetpoint, \
-    Lpf2p, PidController, motor_thrust_n
+from .cf_body import CfBody
+from .cf_controller import CfGains, PidController
 from .fake_planner import HighLevelCommander
-from .fake_setpoint import AxisMode, Setpoint, Vec3, null_setpoint, wrap_angle, yaw_from_quaternion
+from .fake_setpoint import AxisMode, Setpoint, Vec3, null_setpoint
 from .fake_supervisor import UPDATE_PERIOD_S, Supervisor, SupervisorStateName
+from .vehicle_estimator import VehicleEstimator
+from .vehicle_figures import (
+    BATTERY_DRAIN_FLYING_V_PER_S,
+    BATTERY_DRAIN_IDLE_V_PER_S,
+    BATTERY_LOW_DURATION_S,
+    BATTERY_SAG_V,
+    PRIORITY_CRTP,
+    PRIORITY_DISABLE,
+    PRIORITY_HIGH_LEVEL,
+    SUBSTEP_S,
+    TURBULENCE_M_S2,
+    TURBULENCE_MIN_HEIGHT_M,
+    VARIANCE_DECAY_TAU_S,
+)
+from .vehicle_firmware import VehicleFirmware
+from .vehicle_motion import VehicleMotion
 
 logger = logging.getLogger(__name__)
-
-GRAVITY_M_S2 = 9.81
-TRACK_TAU_S = 0.25
-DRAG_TAU_S = 1.0
-SUBSTEP_S = 0.01
-VEL_MAX_OVERHEAD = 1.1
-
-PRIORITY_DISABLE = 0
-PRIORITY_HIGH_LEVEL = 1
-PRIORITY_CRTP = 2
-
-BATTERY_DRAIN_IDLE_V_PER_S = 0.0002
-BATTERY_DRAIN_FLYING_V_PER_S = 0.0017
-BATTERY_SAG_V = 0.25
-BATTERY_LOW_DURATION_S = 5.0
-
-ACCEL_BIAS_M_S2 = 0.196
-"""Norm of each drone's constant accelerometer bias (seeded direction, world frame): the Crazyflie 2.1's IMU, the
-Bosch BMI088, has a typical zero-g offset of 20 mg (BMI088 data sheet, BST-BMI088-DS001, section 1.1, the
-accelerometer's specification table, row "Zero-g offset" Off_acc: typ. +-20 mg), 20e-3 x 9.81 = 0.196 m/s^2. The
-firmware scales the accelerometer at rest but takes no offset off it (`sensors_bmi088_bmp3xx.c` lines 322, 337-339),
-and its Kalman estimator has no bias state (`kalman_core.h` line 64), so the offset is integrated while it is
-blind."""
-TILT_ERROR_RAD = 0.01
-"""Each drone's constant error of the estimated roll/pitch (seeded horizontal direction): the Kalman estimator's own
-roll/pitch standard deviation after a reset, `stdDevInitialAttitude_rollpitch` = 0.01 rad, 0.57 degrees
-(`kalman_core_params_defaults.h` line 68, "roughly flat"). Flying, the estimator takes only the body-z acceleration
-and subtracts gravity through its attitude (`kalman_core.c` lines 506-541), so a tilt error of the estimate is a
-horizontal acceleration the drone does not have: g sin(1 degree) = 0.17 m/s^2 per degree."""
-TILT_ERROR_M_S2 = GRAVITY_M_S2 * math.sin(TILT_ERROR_RAD)
-"""The horizontal acceleration error of `TILT_ERROR_RAD`: 0.098 m/s^2."""
-BLIND_DRIFT_MAX_M_S2 = ACCEL_BIAS_M_S2 + TILT_ERROR_M_S2
-"""The largest constant acceleration error of a blind estimate (bias and tilt error in line): 0.294 m/s^2, 0.147 m
-after 1 s and 0.59 m after 2 s (0.5 a t^2), before the noise (`ACCEL_NOISE_M_S2`) and the velocity error the
-estimate had when it went blind."""
-ACCEL_NOISE_M_S2 = 0.1
-"""Standard deviation of the accelerometer noise over one 10 ms sub-step."""
-_NOISE_PER_SUBSTEP = ACCEL_NOISE_M_S2 * SUBSTEP_S
-ACCEL_PROCESS_NOISE = 1.0
-"""The filter's process noise: its velocity variance grows by this many (m/s)^2 a second."""
-VARIANCE_AFTER_RESET_M2 = 1.0
-"""Position variance after a reset (and at power-on), m^2: the first external position is taken almost whole."""
-VELOCITY_VARIANCE_AFTER_RESET = 0.01
-"""Velocity variance after a reset, (m/s)^2: the drone is assumed at rest."""
-MAX_VARIANCE_M2 = 100.0
-"""Bound of the filter's variances (m^2 and (m/s)^2)."""
-VARIANCE_DECAY_TAU_S = 0.05
-"""Onboard positioning: time constant of the variance settling after a reset."""
-GUST_RESPONSE_TAU_S = 0.47
-"""Time constant with which the controller's velocity loop cancels a velocity an external push builds up (module
-doc): with `TRACK_TAU_S` it sets the steady offset of a gust, 0.1175 m per m/s^2. From the firmware's default
-position and velocity gains (2 /s and 25 degrees of tilt per m/s: 1 / (2 * 25 * g * pi / 180) = 0.117 m per
-m/s^2)."""
-TURBULENCE_M_S2 = 0.15
-"""Standard deviation of the random push on a flying body, each horizontal axis (m/s^2; module doc, "Turbulence")."""
-TURBULENCE_TAU_S = 0.5
-"""Correlation time of that push (s)."""
-TURBULENCE_Z_SHARE = 0.4
-"""The vertical push's share of the horizontal one."""
-TURBULENCE_MIN_HEIGHT_M = 0.02
-"""Above the floor by this much a body with its motors on is flying (below it, it stands: it cannot slide)."""
-HOVER_THRUST = 36000
-"""The integer thrust that holds a Crazyflie 2.1 in the air (`PID_VEL_THRUST_BASE`, platform_defaults_cf2.h). The
-firmware's battery compensation makes the thrust linear in newtons (thrust / 65535 x 0.12 N a motor), so the
-thrust's specific force is g x thrust / `HOVER_THRUST`: 1.67 g at the RPYT maximum (60000), 1.82 g at 65535."""
-ATTITUDE_TAU_S = 1.0 / 6.0
-"""Time constant with which roll and pitch follow an attitude command: the attitude loop's gain (`PID_ROLL_KP`,
-`PID_PITCH_KP` = 6 /s) over a rate loop fast enough to be ideal."""
-MAX_TILT_DEG = 80.0
-"""The model's bound on roll and pitch (rate modes integrate; a real drone past this flips)."""
 DYNAMICS = ("first_order", "firmware")
 """`VehicleConfig.dynamics`: the documented first-order model above, or the firmware's PID cascade on the identified
 body (module doc, "Firmware dynamics")."""
-TICK_S = 0.001
-"""The firmware's stabilizer tick (1 kHz): the step of the "firmware" dynamics."""
-CONTROLLER_PARAMS = frozenset(PARAM_NAMES)
-"""The controller's parameters by firmware name (`posCtlPid.xKp`, ...: cf_controller.CfGains)."""
 
 
 @dataclass(frozen=True)
@@ -320,8 +265,7 @@ class Battery:
             self.shutdown = True
             self.pm_state = 4
 
-
-class Vehicle:
+class Vehicle(VehicleEstimator, VehicleMotion, VehicleFirmware):
     """One simulated Crazyflie's flight stack and body. Not thread-safe: `FakeFirmware` serialises calls.
 
     Estimator state (see the module docstring): `offset` and `vel_error` are the estimate's errors (estimate minus
@@ -408,72 +352,6 @@ class Vehicle:
         self._turbulence_rng = random.Random(f"fake-turbulence-{seed}")
         self._last_s = now_s
 
-    def _init_firmware_dynamics(self, now_s: float) -> None:
-        """The "firmware" dynamics' state (module doc, "Firmware dynamics"): body, controller, gyro filter, the
-        1 kHz tick counter on the caller's clock."""
-        self.body = CfBody(self.pos, self.yaw, floor_z=self.floor_z)
-        self.pos, self.vel = self.body.pos, self.body.vel
-        self.controller = PidController(self.gains)
-        self._gyro_filter = Lpf2p()
-        self._tick_ms = math.ceil(now_s / TICK_S - 1e-6)
-        """The next tick's number: it runs at `_tick_ms` ms of the caller's clock and flies the body to the next."""
-        self._slot_s = (self._tick_ms - POSITION_EVERY) * TICK_S
-        """The time of the last 100 Hz tick (the estimator's, high-level commander's and position loop's)."""
-        self._slot_vel = (0.0, 0.0)
-        """The true horizontal velocity at the last 100 Hz tick (the IMU's velocity change since: `_predict`)."""
-        self._control: ControlSetpoint = NULL_SETPOINT
-        """The controller's setpoint (the commander's selection, overridden by the supervisor)."""
-        self._control_idle = True
-        """`_control` is the null setpoint's (all modes off, no thrust): motors off."""
-        self._control_of: Setpoint | None = None
-        """The `Setpoint` `_control` was made from."""
-        self._selected_from: Setpoint | None = None
-        """The commander's setpoint when the control was last selected."""
-        self._motors_allowed = False
-        """The supervisor's verdict at the last selection (`stabilizer.c`: motors run only when allowed)."""
-        self._state: tuple[float, ...] = (0.0,) * 9
-        """What the controller sees: the estimate (x, y, z, vx, vy, vz), true roll, pitch (legacy sign) and the
-        estimated yaw, degrees; refreshed every 10 ms."""
-        self._last_thrust = math.nan
-        self.motor_commands = (0, 0, 0, 0)
-
-    # Estimator ------------------------------------------------------------------------------------------------
-
-    def _draw_bias(self) -> Vec3:
-        """A bias of norm `ACCEL_BIAS_M_S2` in a direction drawn from this drone's seed."""
-        while True:
-            x, y, z = (self._rng.gauss(0.0, 1.0) for _ in range(3))
-            norm = math.sqrt(x * x + y * y + z * z)
-            if norm > 1e-6:
-                scale = ACCEL_BIAS_M_S2 / norm
-                return (x * scale, y * scale, z * scale)
-
-    def _draw_tilt(self) -> Vec3:
-        """The horizontal acceleration of a roll/pitch error `TILT_ERROR_RAD` in a direction drawn from this drone's
-        seed (its own stream: the IMU's noise is not disturbed)."""
-        angle = random.Random(f"fake-tilt-{self._seed}").uniform(0.0, 2.0 * math.pi)
-        return (TILT_ERROR_M_S2 * math.cos(angle), TILT_ERROR_M_S2 * math.sin(angle), 0.0)
-
-    @property
-    def estimate(self) -> Vec3:
-        """Estimated position in metres."""
-        return (self.pos[0] + self.offset[0], self.pos[1] + self.offset[1], self.pos[2] + self.offset[2])
-
-    @property
-    def estimate_velocity(self) -> Vec3:
-        """Estimated velocity in m/s (world frame)."""
-        return (self.vel[0] + self.vel_error[0], self.vel[1] + self.vel_error[1], self.vel[2] + self.vel_error[2])
-
-    @property
-    def estimate_yaw(self) -> float:
-        """Estimated yaw in radians, wrapped."""
-        return wrap_angle(self.yaw + self.yaw_offset)
-
-    @property
-    def variance_m2(self) -> float:
-        """Position variance of one axis (`kalman.varPX/PY/PZ`), m^2."""
-        return self.p_pp if self.kalman else self._onboard_variance_m2
-
     @property
     def powered(self) -> bool:
         return not self.battery.shutdown and not self.power_cut
@@ -491,89 +369,6 @@ class Vehicle:
         replaces a gust still blowing."""
         self.gust_accel = (float(accel_m_s2[0]), float(accel_m_s2[1]), float(accel_m_s2[2]))
         self.gust_until_s = until_s
-
-    def diverge(self, rate_m_s: float) -> None:
-        """From now on the estimator ignores external positions and its position estimate runs away at
-        ``rate_m_s`` in a horizontal direction drawn from the drone's seed (module doc, "Estimator divergence").
-        Until a new vehicle (reboot)."""
-        angle = random.Random(f"fake-divergence-{self._seed}").uniform(0.0, 2.0 * math.pi)
-        self.divergence_velocity = (rate_m_s * math.cos(angle), rate_m_s * math.sin(angle), 0.0)
-        self.vel_error = list(self.divergence_velocity)
-
-    def _run_away(self, dt: float) -> None:
-        """A diverged estimator's step: the estimate moves with the truth (the IMU) plus the runaway; the
-        estimated velocity carries the runaway, so the estimate looks still while the true drone drifts."""
-        runaway = self.divergence_velocity or (0.0, 0.0, 0.0)
-        offset = self.offset
-        for axis in range(3):
-            offset[axis] += runaway[axis] * dt
-        self.vel_error = list(runaway)
-
-    def external_position(self, position: Vec3, now_s: float) -> None:
-        """An external position measurement (metres): a Kalman update of position and velocity (module doc).
-        Ignored by a diverged estimator."""
-        self.last_extpos_s = now_s
-        if self.divergence_velocity is not None:
-            return
-        if not self.kalman:
-            self.offset = [m - p for m, p in zip(position, self.pos)]
-            return
-        innovation_var = self.p_pp + self.ext_pos_std_dev**2
-        k_pos, k_vel = self.p_pp / innovation_var, self.p_pv / innovation_var
-        pos, offset, vel_error = self.pos, self.offset, self.vel_error
-        for axis in range(3):
-            innovation = position[axis] - pos[axis] - offset[axis]
-            offset[axis] += k_pos * innovation
-            vel_error[axis] += k_vel * innovation
-        self.p_vv -= k_vel * self.p_pv
-        self.p_pp *= 1.0 - k_pos
-        self.p_pv *= 1.0 - k_pos
-
-    def external_pose(self, position: Vec3, quaternion: tuple[float, float, float, float], now_s: float) -> None:
-        """An external pose measurement (metres, quaternion qx, qy, qz, qw): position as `external_position`; the
-        yaw estimate is set to the measured yaw."""
-        self.external_position(position, now_s)
-        if self.divergence_velocity is None:
-            self.yaw_offset = wrap_angle(yaw_from_quaternion(*quaternion) - self.yaw)
-
-    def reset_estimator(self) -> None:
-        """`kalman.resetEstimation` (and power-on): the estimate restarts at `kalman.initialX/Y/Z` and
-        `kalman.initialYaw`, at rest, with a large variance. An onboard system restarts at the truth."""
-        if self.kalman:
-            self.offset = [e - p for e, p in zip(self.initial_estimate, self.pos)]
-            self.vel_error = [-v for v in self.vel]
-            self.yaw_offset = wrap_angle(self.initial_yaw - self.yaw)
-            self.p_pp, self.p_pv, self.p_vv = VARIANCE_AFTER_RESET_M2, 0.0, VELOCITY_VARIANCE_AFTER_RESET
-        else:
-            self.offset = [0.0, 0.0, 0.0]
-            self.yaw_offset = 0.0
-            self._onboard_variance_m2 = VARIANCE_AFTER_RESET_M2
-        if self.divergence_velocity is not None:  # a reset restarts the estimate, not the broken filter
-            self.vel_error = list(self.divergence_velocity)
-
-    def _predict(self, dt: float, dv_x: float, dv_y: float) -> None:
-        """Integrate the IMU over one sub-step: bias and noise enter the velocity error, which enters the position
-        error; with a yaw error the true horizontal velocity change (dv) is integrated rotated (the IMU's body-frame
-        acceleration turned into the world by the wrong yaw). The covariance grows with the filter's process
-        noise."""
-        vel_error, offset, bias = self.vel_error, self.offset, self.drift_accel
-        if self.yaw_offset != 0.0:
-            c, s = math.cos(self.yaw_offset), math.sin(self.yaw_offset)
-            vel_error[0] += (c - 1.0) * dv_x - s * dv_y
-            vel_error[1] += s * dv_x + (c - 1.0) * dv_y
-        noise = _NOISE_PER_SUBSTEP if dt == SUBSTEP_S else ACCEL_NOISE_M_S2 * math.sqrt(SUBSTEP_S * dt)
-        gauss = self._rng.gauss
-        for axis in range(3):
-            vel_error[axis] += bias[axis] * dt + noise * gauss(0.0, 1.0)
-            offset[axis] += vel_error[axis] * dt
-        p_vv = self.p_vv
-        p_pp = self.p_pp + dt * (2.0 * self.p_pv + dt * p_vv)
-        p_pv = self.p_pv + dt * p_vv
-        p_vv += ACCEL_PROCESS_NOISE * dt
-        if p_pp > MAX_VARIANCE_M2 or p_vv > MAX_VARIANCE_M2:  # bounded, as a long blind spell would not be
-            p_pp, p_vv = min(p_pp, MAX_VARIANCE_M2), min(p_vv, MAX_VARIANCE_M2)
-            p_pv = min(p_pv, math.sqrt(p_pp * p_vv))
-        self.p_pp, self.p_pv, self.p_vv = p_pp, p_pv, p_vv
 
     # Commander ------------------------------------------------------------------------------------------------
 
@@ -696,20 +491,6 @@ class Vehicle:
         `UPDATE_PERIOD_S` (40 ms) of the caller's clock (module doc, "Supervisor rate")."""
         return math.floor(now_s / UPDATE_PERIOD_S + 1e-6)
 
-    def _turbulent(self, dt: float, push: Vec3 | None) -> Vec3:
-        """Advance the random push one step (an Ornstein-Uhlenbeck process per axis, exact over ``dt``) and add it
-        to ``push``."""
-        keep = math.exp(-dt / TURBULENCE_TAU_S)
-        spread = math.sqrt(1.0 - keep * keep)
-        sigma = self.config.turbulence_m_s2 or 0.0  # resolved to a float by VehicleConfig
-        gauss, turbulence = self._turbulence_rng.gauss, self._turbulence
-        for axis in range(3):
-            scale = sigma if axis < 2 else sigma * TURBULENCE_Z_SHARE
-            turbulence[axis] = turbulence[axis] * keep + scale * spread * gauss(0.0, 1.0)
-        if push is None:
-            return (turbulence[0], turbulence[1], turbulence[2])
-        return (push[0] + turbulence[0], push[1] + turbulence[1], push[2] + turbulence[2])
-
     def _override(self, setpoint: Setpoint) -> Setpoint:
         state = self.supervisor.state
         if state is SupervisorStateName.WARNING_LEVEL_OUT:
@@ -728,265 +509,3 @@ class Vehicle:
         if state in (SupervisorStateName.READY_TO_FLY, SupervisorStateName.LANDED, SupervisorStateName.FLYING):
             return setpoint
         return null_setpoint(setpoint.timestamp_s, "supervisor")
-
-    def _move(self, dt: float, sp: Setpoint, *, motors_on: bool, push: Vec3 | None = None) -> None:
-        """Advance the true body by `dt`. The controller works on the estimate: positions and velocities are the
-        estimated ones, and the horizontal velocity it commands in its (estimated) frame is realised through the
-        true attitude, i.e. rotated by the yaw error (true minus estimated yaw). `push`: a gust's acceleration
-        (module doc), fought by the controlled axes, taken whole by the others."""
-        pos, vel, gust = self.pos, self.vel, self._gust_vel
-        if not motors_on:
-            gust[0] = gust[1] = gust[2] = 0.0
-            self.attitude_deg[0] = self.attitude_deg[1] = 0.0
-            if pos[2] <= self.floor_z and vel[2] <= 0.0:
-                pos[2], vel[:] = self.floor_z, [0.0, 0.0, 0.0]
-                return
-            vel[2] -= GRAVITY_M_S2 * dt
-            if push is not None:
-                for axis in range(3):
-                    vel[axis] += push[axis] * dt
-        else:
-            est, vel_error = self.estimate, self.vel_error
-            gain = 1.0 - math.exp(-dt / TRACK_TAU_S)
-            modes = sp.modes
-            # per controlled axis the velocity the controller commands (position axes) or aims at (velocity axes),
-            # in the world as it believes it to be
-            wanted = [0.0, 0.0, 0.0]
-            for axis in range(3):
-                limit = (self.xy_vel_max if axis < 2 else max(self.z_vel_max, 0.5)) * VEL_MAX_OVERHEAD
-                mode = modes[axis]
-                if mode is AxisMode.ABS:
-                    command = sp.velocity[axis] + (sp.position[axis] - est[axis]) / TRACK_TAU_S
-                    wanted[axis] = min(max(command, -limit), limit)
-                elif mode is AxisMode.VELOCITY:
-                    wanted[axis] = min(max(sp.velocity[axis], -limit), limit) - vel_error[axis]
-            if self.yaw_offset != 0.0:
-                c, s = math.cos(self.yaw_offset), math.sin(self.yaw_offset)  # rotation by true - estimated yaw
-                wanted[0], wanted[1] = c * wanted[0] + s * wanted[1], c * wanted[1] - s * wanted[0]
-            thrust_accel = self._attitude_step(dt, sp)
-            if push is None and not (gust[0] or gust[1] or gust[2]):
-                drag = math.exp(-dt / DRAG_TAU_S)
-                for axis in range(3):
-                    mode = modes[axis]
-                    if mode is AxisMode.ABS:
-                        vel[axis] = wanted[axis]
-                    elif mode is AxisMode.VELOCITY:
-                        vel[axis] += (wanted[axis] - vel[axis]) * gain
-                    else:
-                        vel[axis] = vel[axis] * drag + thrust_accel[axis] * dt
-            else:
-                self._move_in_gust(dt, modes, wanted, gain, push, thrust_accel)
-            if sp.yaw_mode is AxisMode.ABS:
-                self.yaw += wrap_angle(math.radians(sp.yaw_deg) - self.estimate_yaw) * gain
-            elif sp.yaw_mode is AxisMode.VELOCITY:
-                self.yaw += math.radians(sp.yaw_rate_deg_s) * dt
-            self.yaw = wrap_angle(self.yaw)
-            if pos[2] <= self.floor_z and vel[2] <= 0.0:
-                vel[:] = [0.0, 0.0, 0.0]  # no lift off the floor: it stands on its feet, it cannot slide
-                return
-        for axis in range(3):
-            pos[axis] += vel[axis] * dt
-        if pos[2] <= self.floor_z:
-            pos[2] = self.floor_z
-            if vel[2] <= 0.0:
-                vel[:] = [0.0, 0.0, 0.0]
-
-    def _move_in_gust(self, dt: float, modes: tuple[AxisMode, AxisMode, AxisMode], wanted: list[float],
-                      gain: float, push: Vec3 | None, thrust_accel: Vec3) -> None:
-        """The controlled velocities of `_move` with a gust (or what is left of one): on controlled axes the true
-        velocity is the controller's plus the disturbance velocity d, d' = push - d / `GUST_RESPONSE_TAU_S`
-        (integrated exactly over the step); uncontrolled axes take the push whole, with the thrust's acceleration
-        (`_attitude_step`)."""
-        vel, gust = self.vel, self._gust_vel
-        decay = math.exp(-dt / GUST_RESPONSE_TAU_S)
-        drag = math.exp(-dt / DRAG_TAU_S)
-        for axis in range(3):
-            a = push[axis] if push is not None else 0.0
-            mode = modes[axis]
-            if mode is AxisMode.ABS or mode is AxisMode.VELOCITY:
-                controlled = wanted[axis] if mode is AxisMode.ABS else vel[axis] - gust[axis]
-                if mode is AxisMode.VELOCITY:
-                    controlled += (wanted[axis] - controlled) * gain
-                d = gust[axis] * decay + a * GUST_RESPONSE_TAU_S * (1.0 - decay)
-                gust[axis] = d if abs(d) > 1e-9 or a else 0.0
-                vel[axis] = controlled + gust[axis]
-            else:
-                gust[axis] = 0.0
-                vel[axis] = vel[axis] * drag + (a + thrust_accel[axis]) * dt
-
-    def _attitude_step(self, dt: float, sp: Setpoint) -> Vec3:
-        """Roll and pitch follow the setpoint's attitude (module doc, "Attitude modes"); returns the world-frame
-        acceleration the thrust gives the axes the controller does not hold: horizontally its tilt (the specific
-        force that holds the height, or the raw thrust's), vertically the raw thrust's lift less gravity (0 where
-        the height is controlled)."""
-        att = self.attitude_deg
-        if sp.attitude_mode is AxisMode.DISABLE:
-            att[0] = att[1] = 0.0
-            return (0.0, 0.0, 0.0)
-        keep = math.exp(-dt / ATTITUDE_TAU_S)
-        for i in range(2):
-            if sp.attitude_mode is AxisMode.ABS:
-                target = min(max(sp.attitude_deg[i], -MAX_TILT_DEG), MAX_TILT_DEG)
-                att[i] = target + (att[i] - target) * keep
-            else:
-                att[i] = min(max(att[i] + sp.attitude_deg[i] * dt, -MAX_TILT_DEG), MAX_TILT_DEG)
-        roll, pitch = math.radians(att[0]), math.radians(-att[1])  # right-handed pitch: nose down is positive
-        up = math.cos(roll) * math.cos(pitch)
-        if sp.modes[2] is AxisMode.DISABLE:
-            force = GRAVITY_M_S2 * sp.thrust / HOVER_THRUST if sp.commands_thrust else 0.0
-            vertical = force * up - GRAVITY_M_S2
-            if vertical <= 0.0 and self.pos[2] <= self.floor_z and self.vel[2] <= 0.0:
-                return (0.0, 0.0, 0.0)  # too little lift to leave the floor: it stands (and cannot slide)
-        else:  # the height controller asks for what holds the height, up to full thrust
-            force = min(GRAVITY_M_S2 / max(up, 1e-6), GRAVITY_M_S2 * 65535 / HOVER_THRUST)
-            vertical = 0.0
-        c, s = math.cos(self.yaw), math.sin(self.yaw)  # the attitude loop holds the TRUE body (its IMU)
-        forward, left = math.sin(pitch) * math.cos(roll), -math.sin(roll)
-        return (force * (c * forward - s * left), force * (s * forward + c * left), vertical)
-
-    # Firmware dynamics ------------------------------------------------------------------------------------------
-
-    def set_controller_param(self, name: str, value: float) -> None:
-        """A controller parameter written (`posCtlPid.xKp`, ...; KeyError for another name): it acts at once, as
-        the firmware's PID objects read their gains each update."""
-        gains = self.gains
-        if self.controller is not None:
-            self.controller.set_param(name, value)
-        else:
-            gains.set_param(name, value)
-        self.xy_vel_max = min(gains.x_vel_max, gains.y_vel_max)
-        self.z_vel_max = gains.z_vel_max
-
-    def _stop_motors(self) -> None:
-        """Motors off now (power cut, crash): no command reaches them until the next selection allows it."""
-        self._motors_allowed = False
-        self._control = NULL_SETPOINT
-        self._control_of = None
-        self._control_idle = True
-        self.motor_commands = (0, 0, 0, 0)
-        assert self.body is not None
-        self.body.command_thrusts((0.0, 0.0, 0.0, 0.0))
-
-    def _select(self, setpoint: Setpoint) -> None:
-        """The controller's setpoint from the commander's (`setpoint`, already null where flying is not allowed):
-        the supervisor's override on its current state, and whether the motors may run."""
-        setpoint = self._override(setpoint)
-        self.control_setpoint = setpoint
-        if setpoint is not self._control_of:
-            control = self._control = ControlSetpoint.from_setpoint(setpoint)
-            self._control_of = setpoint
-            self._control_idle = control.thrust == 0.0 and control.modes == NULL_SETPOINT.modes
-        self._motors_allowed = self.powered and self.supervisor.motors_allowed
-
-    def _update_motors_on(self) -> None:
-        self.motors_on = self.thrusting = self._motors_allowed and any(
-            motor_thrust_n(m) > 0.0 for m in self.motor_commands)
-
-    def _step_firmware(self, now_s: float) -> None:
-        """Fly the 1 ms ticks up to `now_s` (module doc, "Firmware dynamics")."""
-        end = math.floor(now_s / TICK_S + 1e-6)
-        body, controller, gyro_filter = self.body, self.controller, self._gyro_filter
-        assert body is not None and controller is not None
-        if self._tick_ms < end and self.setpoint is not self._selected_from and self.powered:
-            # a streamed setpoint that came since the last tick acts from this one (commanderGetSetpoint each tick)
-            self._selected_from = self.setpoint
-            self._select(self.setpoint if self.supervisor.motors_allowed else null_setpoint(0.0))
-        degrees = math.degrees
-        while self._tick_ms < end:
-            k = self._tick_ms + 1  # the firmware's tick counter starts at 1 on the loop's first tick (CfDrone)
-            o = body.omega
-            gyro = gyro_filter.apply(degrees(o[0]), degrees(o[1]), degrees(o[2]))
-            if k % POSITION_EVERY == 0:
-                self._firmware_slot(self._tick_ms * TICK_S)
-            control = self._control
-            if self._motors_allowed and not self._control_idle:
-                controller.tick(k, control, self._state, gyro)
-                if k % ATTITUDE_EVERY == 0 or controller.thrust != self._last_thrust:
-                    motors = controller.motors()
-                    if motors != self.motor_commands:
-                        self.motor_commands = motors
-                        body.command_thrusts([motor_thrust_n(m) for m in motors])
-                self._last_thrust = controller.thrust
-            else:
-                # the null setpoint (or motors not allowed, which the override makes null): the controller's output
-                # is 0 and it resets on the state every tick, which changes every 10 ms: ticked then, and until
-                # its mode set and thrust are the null's
-                if k % POSITION_EVERY == 0 or controller.thrust != 0.0 or controller.previous_modes != control.modes:
-                    controller.tick(k, control, self._state, gyro)
-                    self._last_thrust = controller.thrust
-                if self.motor_commands != (0, 0, 0, 0):
-                    self.motor_commands = (0, 0, 0, 0)
-                    body.command_thrusts((0.0, 0.0, 0.0, 0.0))
-            if not (body.on_floor and body.rotor_rpm == _STILL_ROTORS and body.rotor_cmd_rpm == _STILL_ROTORS
-                    and body.external_force == _NO_FORCE):  # at rest on the floor with rotors still, nothing moves
-                x, y, was_on_floor = body.pos[0], body.pos[1], body.on_floor
-                body.step(TICK_S)
-                if body.on_floor:  # it stands on its feet: level, and it can neither slide nor tip
-                    body.pos[0], body.pos[1] = x, y
-                    qz, qw = body.quat[2], body.quat[3]
-                    if not was_on_floor or body.quat[0] or body.quat[1]:
-                        norm = math.hypot(qz, qw)
-                        body.quat = [0.0, 0.0, qz / norm, qw / norm]
-            self._tick_ms += 1
-        self.pos, self.vel = body.pos, body.vel
-        self._update_motors_on()
-        self._last_s = max(self._last_s, now_s)
-
-    def _firmware_slot(self, t: float) -> None:
-        """The 100 Hz part of the tick at `t`: the interval since the last one closed (battery, estimator), the
-        truth's attitude read, the push of gusts and turbulence set, then the high-level commander, the
-        commander's selection, the supervisor (at its 25 Hz) and its override, and the estimate the controller
-        sees for the next 10 ms."""
-        body = self.body
-        assert body is not None
-        self.pos, self.vel = body.pos, body.vel  # the body's lists of now (each step makes new ones)
-        dt = t - self._slot_s
-        self._slot_s = t
-        self._update_motors_on()
-        vel = body.vel
-        if dt > 0.0:
-            self.battery.step(t, dt, self.motors_on, self.low_voltage_v, self.critical_voltage_v)
-            if self.divergence_velocity is not None:
-                self._run_away(dt)
-            elif self.kalman:
-                self._predict(dt, vel[0] - self._slot_vel[0], vel[1] - self._slot_vel[1])
-            else:
-                floor = self.ext_pos_std_dev**2
-                self._onboard_variance_m2 = floor + (self._onboard_variance_m2 - floor) * math.exp(
-                    -dt / VARIANCE_DECAY_TAU_S)
-        self._slot_vel = (vel[0], vel[1])
-        roll, pitch, yaw = quaternion_to_rpy_deg(*body.quat)
-        self.yaw = math.radians(yaw)
-        self.attitude_deg[0], self.attitude_deg[1] = roll, -pitch
-        push = self.gust_accel if t <= self.gust_until_s else None
-        if self.config.turbulence_m_s2 and self.motors_on and body.pos[2] > self.floor_z + TURBULENCE_MIN_HEIGHT_M:
-            push = self._turbulent(POSITION_EVERY * TICK_S, push)
-        elif self._turbulence[0] or self._turbulence[1] or self._turbulence[2]:
-            self._turbulence = [0.0, 0.0, 0.0]
-        mass = body.params.mass
-        body.external_force = _NO_FORCE if push is None else (mass * push[0], mass * push[1], mass * push[2])
-        if not self.powered:
-            self.control_setpoint = null_setpoint(t, "power-off")
-            self._stop_motors()
-            return
-        can_fly = self.supervisor.motors_allowed
-        self.hl.block(not can_fly)
-        if can_fly:
-            hl_setpoint = self.hl.get_setpoint(t, self.estimate, self.estimate_velocity, self.estimate_yaw)
-            if hl_setpoint is not None:
-                self._commander_set(hl_setpoint, PRIORITY_HIGH_LEVEL, t)
-        setpoint = self.setpoint if can_fly else null_setpoint(0.0)
-        slot = self._supervisor_lattice(t)
-        if slot > self._supervisor_slot:
-            self._supervisor_slot = slot
-            self.supervisor.update(t, thrust_over_idle=self.thrusting, setpoint_age_s=t - setpoint.timestamp_s,
-                                   param_emergency_stop=self.param_emergency_stop)
-        self._selected_from = self.setpoint
-        self._select(setpoint)
-        est, est_vel = self.estimate, self.estimate_velocity
-        self._state = (est[0], est[1], est[2], est_vel[0], est_vel[1], est_vel[2], roll, -pitch,
-                       math.degrees(self.estimate_yaw))
-
-
-_STILL_ROTORS = [0.0, 0.0, 0.0, 0.0]
-_NO_FORCE = (0.0, 0.0, 0.0)

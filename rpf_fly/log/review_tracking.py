@@ -22,7 +22,7 @@ flight's speed, so its tracking error while cruising is mostly this lag, not a f
 
 DRY_RUN_LAG_S = 0.25
 """The dry run's simulated drone: a first-order follower of its position setpoint with a time constant of 0.25 s
-(rpf_fly/emulator/fake_vehicle.py ``TRACK_TAU_S``), which trails a moving setpoint by 0.25 s x speed, less than a
+(rpf_fly/emulator/vehicle_figures.py ``TRACK_TAU_S``), which trails a moving setpoint by 0.25 s x speed, less than a
 Crazyflie (docs/flight.md, *Known gap*)."""
 
 TRACKING_SLACK_M = 0.05

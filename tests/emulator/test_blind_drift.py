@@ -13,7 +13,8 @@ from dataclasses import dataclass
 import pytest
 
 from rpf_fly.emulator.fake_firmware import FakeFirmware
-from rpf_fly.emulator.fake_vehicle import (
+from rpf_fly.emulator.fake_vehicle import VehicleConfig
+from rpf_fly.emulator.vehicle_figures import (
     ACCEL_BIAS_M_S2,
     ACCEL_NOISE_M_S2,
     BLIND_DRIFT_MAX_M_S2,
@@ -21,7 +22,6 @@ from rpf_fly.emulator.fake_vehicle import (
     SUBSTEP_S,
     TILT_ERROR_M_S2,
     TILT_ERROR_RAD,
-    VehicleConfig,
 )
 from rpf_fly.flight.poses import PoseTracker
 from rpf_fly.flight.supervisor import BLIND_DRIFT_M_S2, blind_drift_m

@@ -17,8 +17,8 @@ from cflib.crazyflie import Crazyflie
 from cflib.crazyflie.syncCrazyflie import SyncCrazyflie
 
 from rpf_fly.emulator.fake_setpoint import TYPE_CPPM_EMU, AxisMode, decode_generic, decode_rpyt
-from rpf_fly.emulator.fake_vehicle import GRAVITY_M_S2, HOVER_THRUST
 from rpf_fly.emulator.fake_world import FakeWorld
+from rpf_fly.emulator.vehicle_figures import GRAVITY_M_S2, HOVER_THRUST
 
 
 def address(index: int) -> int:

@@ -21,7 +21,8 @@ from rpf_fly.emulator.fake_firmware import (
     FirmwareSnapshot,
 )
 from rpf_fly.emulator.fake_planner import Trajectory
-from rpf_fly.emulator.fake_vehicle import ACCEL_BIAS_M_S2, TRACK_TAU_S, VehicleConfig
+from rpf_fly.emulator.fake_vehicle import VehicleConfig
+from rpf_fly.emulator.vehicle_figures import ACCEL_BIAS_M_S2, TRACK_TAU_S
 
 DT = 0.01
 READY_S = 0.15

@@ -17,7 +17,7 @@ from cflib.crazyflie.log import LogConfig
 from cflib.crazyflie.syncCrazyflie import SyncCrazyflie
 
 from rpf_fly.emulator.fake_firmware import REBOOT_BOOT_S
-from rpf_fly.emulator.fake_vehicle import BLIND_DRIFT_MAX_M_S2
+from rpf_fly.emulator.vehicle_figures import BLIND_DRIFT_MAX_M_S2
 from rpf_fly.flight.dry_run import DryRun, StartFault
 from rpf_fly.mission import parse_mission
 from rpf_fly.mocap.frame import MocapFrame

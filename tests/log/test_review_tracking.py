@@ -86,7 +86,7 @@ def test_a_dry_run_is_judged_against_its_simulated_drones_lag(tmp_path):
 
 
 def test_the_dry_run_lag_is_the_simulated_drones():
-    from rpf_fly.emulator.fake_vehicle import TRACK_TAU_S
+    from rpf_fly.emulator.vehicle_figures import TRACK_TAU_S
 
     assert DRY_RUN_LAG_S == TRACK_TAU_S  # a first-order follower trails a moving setpoint by tau x speed
 
