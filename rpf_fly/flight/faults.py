@@ -138,10 +138,10 @@ def _number(file: str, node: YNode, check: Callable[[float], bool], expected: st
 
 
 def _vector(file: str, node: YNode, n: int) -> tuple[float, ...]:
-    items = node.value if node.is_seq else None
-    if items is None or len(items) != n:  # type: ignore[arg-type]
+    items = node.seq if node.is_seq else None
+    if items is None or len(items) != n:
         raise _fail(file, node, node.path, f"expected a list of {n} numbers (metres), got {node.raw or node.plain()!r}")
-    return tuple(_number(file, item, lambda x: x == x and abs(x) < 1e6, "a finite number") for item in items)  # type: ignore[union-attr]
+    return tuple(_number(file, item, lambda x: x == x and abs(x) < 1e6, "a finite number") for item in items)
 
 
 _SAME_AS = {"flying": "planning"}
@@ -194,7 +194,7 @@ _READERS: dict[str, Callable[[str, YNode, _Context], Any]] = {
 def _fault(file: str, node: YNode, drones: set[str], dongles: tuple[int, ...]) -> Fault:
     if not node.is_map:
         raise _fail(file, node, node.path, f"expected a mapping {{kind: ..., ...}}, got {node.raw or node.plain()!r}")
-    entries: dict[str, YNode] = node.value  # type: ignore[assignment]
+    entries = node.mapping
     if "kind" not in entries:
         raise _fail(file, node, child_path(node.path, "kind"), f"missing; one of {', '.join(FAULT_KINDS)}")
     kind_node = entries["kind"]
@@ -235,24 +235,24 @@ def parse_faults(text: str, source: Path | str, mission: Mission) -> list[Fault]
     """Validate a fault schedule (``faults:`` a list of faults) against ``mission``. Raises MissionError."""
     file = str(source)
     root = compose(text, file)
-    if root is None or not root.is_map or "faults" not in root.value:  # type: ignore[operator]
+    if root is None or not root.is_map or "faults" not in root.mapping:
         raise _fail(file, root.line if root is not None else 1, ROOT, "expected a mapping with a 'faults' list")
-    for key, value in root.value.items():  # type: ignore[union-attr]
+    for key, value in root.mapping.items():
         if key != "faults":
             raise _fail(file, value.key_line, value.path, "unknown key; a fault file holds only 'faults'")
-    items = root.value["faults"]  # type: ignore[index]
+    items = root.mapping["faults"]
     if not items.is_seq:
         raise _fail(file, items, items.path, "expected a list of faults")
     drones = {d.name for d in mission.drones}
     dongles = tuple(sorted({dongle_of(d.uri) for d in mission.drones}))
-    faults = [_fault(file, item, drones, dongles) for item in items.value]  # type: ignore[union-attr]
+    faults = [_fault(file, item, drones, dongles) for item in items.seq]
     seen: dict[tuple[str, str], int] = {}
     for f in faults:
         if not FAULT_KINDS[f.kind].timed and f.drone is not None:
-            key = (f.kind, f.drone)
-            if key in seen:
-                raise _fail(file, f.line, f"faults ({f.kind})", f"{f.drone} already has a {f.kind} (line {seen[key]})")
-            seen[key] = f.line
+            pair = (f.kind, f.drone)
+            if pair in seen:
+                raise _fail(file, f.line, f"faults ({f.kind})", f"{f.drone} already has a {f.kind} (line {seen[pair]})")
+            seen[pair] = f.line
     return faults
 
 

@@ -163,7 +163,7 @@ class LoopIteration:
                     continue
             if agent.phase in (DronePhase.HOLDING, DronePhase.ARRIVED):
                 mode = "arrived" if agent.phase == DronePhase.ARRIVED else "hold"
-                if fresh:
+                if fresh and pose is not None:  # fresh: a pose, valid and recent
                     agent.refine_hold(pose.xy, pose.velocity)
                 self._send(agent, agent.hold_point, frame, sent)
             if agent.phase not in (DronePhase.WAITING, DronePhase.READY, DronePhase.FAILED):

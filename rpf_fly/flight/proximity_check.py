@@ -11,7 +11,7 @@ stops")."""
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
@@ -73,13 +73,12 @@ class ProximityCheck:
         since = self._moving_since.get(name)
         return since is None or self._now_s - since >= REST_S
 
-    def separation(self, agents: list[DroneAgent], tracker: PoseTracker, foreign: list[str] = ()) -> list[Finding]:
+    def separation(self, agents: list[DroneAgent], tracker: PoseTracker, foreign: Sequence[str] = ()) -> list[Finding]:
         out = []
         close_now: set[tuple[str, str]] = set()
-        own = len(agents)
-        tracked = [(a.name, tracker.get(a.name)) for a in agents] + [(n, tracker.get(n)) for n in foreign]
-        tracked = [(n, p) for n, p in tracked[:own] if p is not None] + \
-            [(n, p) for n, p in tracked[own:] if p is not None]
+        own_poses = [(a.name, tracker.get(a.name)) for a in agents]
+        foreign_poses = [(n, tracker.get(n)) for n in foreign]
+        tracked = [(n, p) for n, p in own_poses if p is not None] + [(n, p) for n, p in foreign_poses if p is not None]
         mine = {n for n, _ in tracked} - set(foreign)
         commanded = {a.name: a for a in agents if a.phase.airborne}
         for i, (ni, pi) in enumerate(tracked):
@@ -117,9 +116,9 @@ class ProximityCheck:
         mocap's filtered velocity trails a drone that speeds up; the faster of the two is taken), else the tilt its
         setpoint asks for; a drone this process does not command: the firmware's defaults in steady flight."""
         braking = agent.braking if agent is not None else braking_for(None)
-        streaming = agent is not None and agent.phase in STREAMING_PHASES
-        setpoint = agent.last_setpoint if streaming else None
-        model = self.model_of(agent.name) if streaming and agent is not None else None
+        streaming = agent if agent is not None and agent.phase in STREAMING_PHASES else None
+        setpoint = streaming.last_setpoint if streaming is not None else None
+        model = self.model_of(streaming.name) if streaming is not None else None
         velocity, tilt = pose.velocity, None
         if model is not None:
             tilt = model.tilt_deg

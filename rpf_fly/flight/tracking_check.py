@@ -172,9 +172,7 @@ class TrackingCheck:
                     setpoint = None
             else:
                 setpoint = a.last_setpoint
-            if pose is None or now_s - pose.stamp_s > POSE_LATE_S:
-                setpoint = None
-            if setpoint is None:
+            if setpoint is None or pose is None or now_s - pose.stamp_s > POSE_LATE_S:
                 self._off_track.pop(a.name, None)
                 self._predicted.pop(a.name, None)
                 continue

@@ -51,7 +51,7 @@ from rpf_fly.planning.guidance import Guidance
 from rpf_fly.planning.observation import Observation, build_observation
 from rpf_fly.planning.obstacles import FAR, ObstacleSet, nearest_obstacle
 from rpf_fly.planning.planner import apf_step, sense_obstacles
-from rpf_fly.planning.vectors import dot, unit
+from rpf_fly.planning.vectors import Planar, Scalar, dot, unit
 from rpf_fly.planning.visibility import CIRCLE_SIDES, Inflated
 from rpf_fly.planning.waypoints import next_waypoint
 from rpf_fly.sim.collisions import nearest_neighbour_distance
@@ -179,6 +179,11 @@ class SwarmEnv:
             self.node = np.full((b, 1, v), FAR * (1 + 1j))
             self.cost = np.full((b, n, v), np.inf)
             self.start_path = np.zeros((b, n))
+        self.inflated: Inflated | None = None
+        """Guided: the obstacles inflated by ``r + margin`` (None after a reset: rebuilt at the next observation);
+        ``wide``: its :meth:`~rpf_fly.planning.visibility.Inflated.axis` form."""
+        self.wide: Inflated | None = None
+        self._scene_seed: tuple[str, int] | None = None
         for arena in range(b):
             self._reset_arena(arena)
         self._observe()
@@ -264,14 +269,14 @@ class SwarmEnv:
 
     # ------------------------------------------------------------------------------------------ stepping
 
-    def _waypoints(self, position: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _waypoints(self, position: np.ndarray) -> tuple[Planar, Scalar]:
         """Each drone's next visible waypoint and remaining path length (guidance on)."""
         if self.inflated is None:
             self.inflated = Inflated.of(self.obstacles, self.planner.safety_radius + self.planner.margin)
             self.wide = self.inflated.axis()
         return next_waypoint(position, self.world.goal, self.node, self.cost, self.inflated, self.wide)
 
-    def _observe(self, guided: tuple[np.ndarray, np.ndarray] | None = None) -> None:
+    def _observe(self, guided: tuple[Planar, Scalar] | None = None) -> None:
         """The views and observations of the current state (``guided``: its waypoints, already computed)."""
         self.view = self.world.views(self.config.sensing_range)
         self.nearest, self.lambda_mask = sense_obstacles(self.view, self.obstacles, self.planner)
@@ -284,11 +289,11 @@ class SwarmEnv:
             self.view, self.nearest, self.planner, self.config.max_neighbours, remaining
         )
 
-    def _potential(self, position: np.ndarray, d_g: np.ndarray | None = None) -> np.ndarray:
+    def _potential(self, position: np.ndarray, d_g: Scalar | None = None) -> np.ndarray:
         d_g = abs(self.world.goal - position) if d_g is None else d_g
         return np.maximum(1.0 - d_g / self.config.d_m, 0.0)
 
-    def directions(self, action: np.ndarray) -> np.ndarray:
+    def directions(self, action: np.ndarray) -> Planar:
         """Planned directions for actions ``(arenas, robots, size)``: gains (eta, lambda) or a heading change ``a``
         (the vanilla-PPO baseline: ``F = (v + a v_perp)/|...|``, paper Section V)."""
         if self.config.action == "gains":
@@ -347,7 +352,7 @@ class SwarmEnv:
 
         episodes = []
         finished = np.flatnonzero(self.done.all(axis=1))
-        for b in finished:
+        for b in finished.tolist():
             arrived = int(w.arrived[b].sum())
             collided = int(self.collided[b].sum())
             episodes.append(

@@ -42,7 +42,7 @@ def evaluate_policy(model: ActorCritic, config: EnvConfig, seed: int, episodes: 
         returns += result.reward
         ended = np.flatnonzero((done_before | result.done).all(axis=1))
         stats = iter(result.episodes)
-        for b in ended:
+        for b in ended.tolist():
             episode = next(stats)
             if b not in finished:
                 finished[b] = (float(returns[b].mean()), episode.success, episode.collided)

@@ -58,6 +58,10 @@ def _layer(inputs: int, outputs: int, std: float = float(np.sqrt(2))) -> nn.Line
 class RunningNorm(nn.Module):
     """Running mean and variance of a feature vector (parallel Welford update); clip to +-10 after scaling."""
 
+    mean: torch.Tensor
+    var: torch.Tensor
+    count: torch.Tensor
+
     def __init__(self, size: int):
         super().__init__()
         self.register_buffer("mean", torch.zeros(size))

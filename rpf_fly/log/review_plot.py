@@ -18,12 +18,16 @@ shared time axis (seconds from the start of the log), a panel only where the log
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from rpf_fly.log import review as R
 from rpf_fly.log import review_series as series
 from rpf_fly.log.reader import LogData
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
 
 STATE_COLOURS = {
     # a flight's drone phases (rpf_fly.flight.phases.DronePhase), each its own colour
@@ -210,8 +214,8 @@ def review_figure(data: LogData, result: R.Review):
                             wspace=0.14, left=0.05, right=0.98, top=0.94,
                             bottom=0.95 / max(10.0, 2.0 * sum(heights) + 1.2))
     ax_xy = fig.add_subplot(grid[:, 0], label="xy")
-    axes: dict[str, object] = {}
-    first = None
+    axes: dict[str, Axes] = {}
+    first: Axes | None = None
     for row, name in enumerate(panels):
         ax = fig.add_subplot(grid[row, 1], sharex=first, label=name)
         first = first or ax
@@ -291,7 +295,8 @@ def review_figure(data: LogData, result: R.Review):
             ax.plot(e.t, e.values, lw=1.0, color=colour[d], label=f"{d}: RMS {rms:.3f}, max {peak:.3f} m")
         judged = [x for x in result.tracking_expected.values() if x.expected_m is not None]
         if judged:  # what a drone of the log's kind trails by while cruising at the flown speed
-            low, high = (float(np.median([x.band_m[k] for x in judged])) for k in (0, 1))
+            bands = [band for x in judged if (band := x.band_m) is not None]  # each judged drone has its band
+            low, high = (float(np.median([b[k] for b in bands])) for k in (0, 1))
             lag_s = judged[0].lag_s
             speed = float(np.median([x.speed_m_s for x in judged]))
             ax.axhspan(low, high, color="0.85", zorder=0,
@@ -350,16 +355,17 @@ def review_figure(data: LogData, result: R.Review):
             ax.broken_barh([(t0, max(t1 - t0, 1e-3))], (-row - 1.4, 0.8),
                            facecolors=STATE_COLOURS.get(state, UNKNOWN_STATE_COLOUR))
             seen_states[state] = None
-    for e in result.events:
-        ax.plot(e.t_s, e.level, "v", ms=7, color=LEVEL_COLOURS.get(e.level, "0.3"), zorder=3, gid="event-marker")
+    for event in result.events:
+        ax.plot(event.t_s, event.level, "v", ms=7, color=LEVEL_COLOURS.get(event.level, "0.3"), zorder=3,
+                gid="event-marker")
     named = labelled_events(result.events)
     clusters: list[tuple[float, int, list[int]]] = []  # events close in time on one level share one label
-    for k, (e, _text) in enumerate(named):
-        near = [c for c in clusters if c[1] == e.level and abs(c[0] - e.t_s) < 0.02 * end_s]
+    for k, (event, _text) in enumerate(named):
+        near = [c for c in clusters if c[1] == event.level and abs(c[0] - event.t_s) < 0.02 * end_s]
         if near:
             near[0][2].append(k + 1)
         else:
-            clusters.append((e.t_s, e.level, [k + 1]))
+            clusters.append((event.t_s, event.level, [k + 1]))
     for cut in result.interruptions:
         if cut.how == "killed" and cut.t_s is not None:  # no event says so: the log just ends
             ax.annotate("killed: the log ends here", (cut.t_s, 5.0), xytext=(-4, 6), textcoords="offset points",
@@ -383,6 +389,7 @@ def review_figure(data: LogData, result: R.Review):
                 panel.axvline(cut.t_s, color="#d62728", lw=1.2, ls="-", alpha=0.7, gid="interruption")
         if name != "events":
             panel.tick_params(labelbottom=False)
+    assert first is not None  # panels always holds the altitude and the events
     first.set_xlim(-0.01 * end_s, 1.01 * end_s)
     axes["events"].set_xlabel("t [s] (from the start of the log)")
 

@@ -11,11 +11,13 @@ import ipaddress
 import math
 import re
 from collections.abc import Callable, Iterable, Sequence
-from typing import NamedTuple
+from typing import NamedTuple, TypeVar
 
 from . import model as m
 from .errors import MissionError
 from .yaml_nodes import YNode, child_path, describe
+
+_Choice = TypeVar("_Choice", bound=str)
 
 _HOST_NAME = re.compile(r"(?!-)[A-Za-z0-9-]{1,63}(?<!-)(\.(?!-)[A-Za-z0-9-]{1,63}(?<!-))*\.?")
 """A host name: dot-separated labels of letters, digits and hyphens, no label starting or ending with a hyphen."""
@@ -68,7 +70,7 @@ class Checker:
         """The entries of a mapping with only ``keys`` and all of ``required``."""
         if not node.is_map:
             raise self.bad(node, what)
-        entries: dict[str, YNode] = node.value  # type: ignore[assignment]
+        entries = node.mapping
         for key, value in entries.items():
             if key not in keys:
                 hint = did_you_mean(key, keys) or f"; expected one of {options_text(keys)}"
@@ -116,7 +118,8 @@ class Checker:
             raise self.bad(node, "true or false")
         return node.value
 
-    def choice(self, node: YNode, choices: Sequence[str], what: str = "") -> str:
+    def choice(self, node: YNode, choices: Sequence[_Choice], what: str = "") -> _Choice:
+        """The one of ``choices`` the node names (typed as they are: a tuple of literals gives a literal)."""
         if not isinstance(node.value, str):
             raise self.bad(node, f"one of {options_text(choices)}")
         if node.value not in choices:
@@ -125,12 +128,12 @@ class Checker:
             hint = did_you_mean(node.value, choices)
             known = f"; known: {', '.join(choices)}" if what else ""
             raise self.error(node, node.path, f"{label}{hint}{known}")
-        return node.value
+        return next(c for c in choices if c == node.value)
 
     def vec2(self, node: YNode, labels: str = "x, y") -> m.Vec2:
-        if not node.is_seq or len(node.value) != 2:  # type: ignore[arg-type]
+        if not node.is_seq or len(node.seq) != 2:
             raise self.bad(node, f"a list of 2 numbers [{labels}]")
-        a, b = node.value  # type: ignore[misc]
+        a, b = node.seq
         return self.number(a), self.number(b)
 
     def span(self, node: YNode) -> m.Vec2:

@@ -23,7 +23,6 @@ from pathlib import Path
 from typing import Any
 
 from . import model as m
-from .checker import Checker
 from .errors import MissionError
 from .layout import check_layout
 from .parser import MissionParser
@@ -74,9 +73,9 @@ def field_line(path: str | Path, field: str) -> int:
         return 0
     line = 0
     for key in field.split("."):
-        if node is None or not node.is_map or key not in node.value:  # type: ignore[operator]
+        if node is None or not node.is_map or key not in node.mapping:
             break
-        node = node.value[key]  # type: ignore[index]
+        node = node.mapping[key]
         line = node.key_line
     return line
 
@@ -88,11 +87,12 @@ def with_planner(mission: m.Mission, kind: str, policy: str | Path | None = None
 
     ``policy`` is looked up as an absolute path, else relative to the current directory, else to the mission's
     directory. Without it, the mission's policy is kept when ``kind`` is the mission's kind; a policy kind
-    otherwise looks for ``policies/<kind>.onnx`` (mission directory, current directory, the shipped ``policies/``); other kinds drop it.
+    otherwise looks for ``policies/<kind>.onnx`` (mission directory, current directory, the shipped ``policies/``);
+    other kinds drop it.
     """
     file = str(mission.source) if mission.source is not None else STRING_SOURCE
-    check = Checker(file)
     base_dir = mission.source.parent if mission.source is not None else None
+    check = MissionParser(file, base_dir)  # the planner section's readers, as the mission file's were read
 
     def cli_error(option: str, message: str) -> MissionError:
         return MissionError(file, 0, option, message)

@@ -10,7 +10,7 @@ import math
 import re
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 from . import model as m
 from .checker import POSITIVE, Checker, fmt, fmt_point
@@ -41,6 +41,8 @@ FORMATION_KEYS = ("kind", "count", "radius", "center", "uri_base", "name_prefix"
 FORMATION_KINDS = ("circle_swap",)
 MAX_FORMATION_COUNT = 255
 OBSTACLE_KEYS = {"circle": ("shape", "center", "radius"), "box": ("shape", "min", "max")}
+ZENOH_MODES: tuple[Literal["client", "peer"], ...] = ("client", "peer")
+MOCAP_RELAYS: tuple[Literal["auto", "on", "off"], ...] = ("auto", "on", "off")
 
 
 class MissionParser(Checker):
@@ -61,7 +63,7 @@ class MissionParser(Checker):
 
     def planner(self, node: YNode) -> m.PlannerSettings:
         settings: m.PlannerSettings = self.settings(node, m.PlannerSettings, PLANNER_SPEC)
-        entries: dict[str, YNode] = node.value  # type: ignore[assignment]
+        entries = node.mapping
         dirs = search_dirs(self.base_dir)
         if "policy" in entries:
             raw = str(settings.policy)
@@ -90,7 +92,7 @@ class MissionParser(Checker):
 
     def mocap(self, node: YNode) -> m.MocapSettings:
         settings: m.MocapSettings = self.settings(node, m.MocapSettings, MOCAP_SPEC)
-        entries: dict[str, YNode] = node.value  # type: ignore[assignment]
+        entries = node.mapping
         if settings.command_port == settings.data_port:
             at = entries.get("data_port") or entries["command_port"]
             raise self.error(at, at.path, f"command_port and data_port must differ, both are {settings.data_port}")
@@ -125,7 +127,7 @@ class MissionParser(Checker):
             at = entries["options"]
             if not at.is_map:
                 raise self.bad(at, f"a mapping of {system} options")
-            for key, value in at.value.items():  # type: ignore[union-attr]
+            for key, value in at.mapping.items():
                 if value.is_map or value.is_seq:
                     raise self.bad(value, "a scalar (text, number, true or false)")
                 try:
@@ -139,27 +141,28 @@ class MissionParser(Checker):
         entries = self.mapping(node, ("zenoh", "mocap_relay"))
         relay = self.mocap_relay(entries["mocap_relay"]) if "mocap_relay" in entries else "auto"
         if "zenoh" not in entries:
-            return m.RuntimeSettings(mocap_relay=relay)  # type: ignore[arg-type]
+            return m.RuntimeSettings(mocap_relay=relay)
         z = self.mapping(entries["zenoh"], ("mode", "connect", "listen", "config"))
-        mode = self.choice(z["mode"], ("client", "peer")) if "mode" in z else "client"
+        mode = self.choice(z["mode"], ZENOH_MODES) if "mode" in z else "client"
         config = self.zenoh_config(z["config"]) if "config" in z else None
         lists: dict[str, tuple[str, ...]] = {}
         for key in ("connect", "listen"):
             if key not in z:
                 continue
             value = z[key]
-            items = value.value if value.is_seq else [value]
+            items = value.seq if value.is_seq else [value]
             endpoints = tuple(self.endpoint(item) for item in items)
             lists[key] = endpoints
-        return m.RuntimeSettings(zenoh=m.ZenohSettings(mode=mode, config=config, **lists),  # type: ignore[arg-type]
-                                 mocap_relay=relay)  # type: ignore[arg-type]
+        zenoh = m.ZenohSettings(mode=mode, config=config, connect=lists.get("connect", ()),
+                                listen=lists.get("listen", ()))
+        return m.RuntimeSettings(zenoh=zenoh, mocap_relay=relay)
 
-    def mocap_relay(self, node: YNode) -> str:
+    def mocap_relay(self, node: YNode) -> Literal["auto", "on", "off"]:
         """``runtime.mocap_relay``: ``auto``, ``on`` or ``off`` (YAML 1.1 reads a bare on/off as true/false: taken
         as written)."""
         if isinstance(node.value, bool):
             return "on" if node.value else "off"
-        return self.choice(node, ("auto", "on", "off"))
+        return self.choice(node, MOCAP_RELAYS)
 
     def zenoh_config(self, node: YNode) -> Path:
         """``runtime.zenoh.config``: an existing file that Zenoh reads as its configuration (relative to the
@@ -180,7 +183,7 @@ class MissionParser(Checker):
     def dry_run(self, node: YNode) -> m.DryRunSettings:
         settings: m.DryRunSettings = self.settings(node, m.DryRunSettings, DRY_RUN_SPEC)
         if settings.vehicle is not None and settings.dynamics != "firmware":
-            at = node.value["vehicle"]  # type: ignore[index]
+            at = node.mapping["vehicle"]
             raise self.error(at, "dry_run.vehicle", "a vehicle profile sets the firmware model's gains: give "
                              f"dry_run.dynamics: firmware with it (it is {settings.dynamics})")
         return settings
@@ -210,7 +213,7 @@ class MissionParser(Checker):
         if not node.is_seq:
             raise self.bad(node, "a list of obstacles (write [] for none)")
         out: list[m.Obstacle] = []
-        for item in node.value:  # type: ignore[union-attr]
+        for item in node.seq:
             e = self.mapping(item, ("shape", "center", "radius", "min", "max"), required=("shape",),
                              what="an obstacle mapping {shape: circle|box, ...}")
             shape = self.choice(e["shape"], tuple(OBSTACLE_KEYS), what="obstacle shape")
@@ -245,13 +248,13 @@ class MissionParser(Checker):
     def drones(self, node: YNode) -> tuple[m.Drone, ...]:
         if not node.is_seq:
             raise self.bad(node, "a list of drones")
-        if not node.value:
+        if not node.seq:
             raise self.error(node, "drones", "empty list: a mission needs at least one drone")
         drones: list[m.Drone] = []
         names: dict[str, YNode] = {}
         links: dict[tuple[int, str], YNode] = {}
         bodies: dict[str, YNode] = {}
-        for i, item in enumerate(node.value):  # type: ignore[arg-type]
+        for item in node.seq:
             e = self.mapping(item, DRONE_KEYS, required=("name", "uri", "start", "goal"),
                              what="a drone mapping {name, uri, start, goal}")
             name = self.drone_name(e["name"])
@@ -367,10 +370,10 @@ class MissionParser(Checker):
     def index(self, node: YNode) -> None:
         self.nodes[node.path] = node
         if node.is_map:
-            for child in node.value.values():  # type: ignore[union-attr]
+            for child in node.mapping.values():
                 self.index(child)
         elif node.is_seq:
-            for child in node.value:  # type: ignore[union-attr]
+            for child in node.seq:
                 self.index(child)
 
     def layout_error(self, mission: m.Mission, entries: dict[str, YNode]) -> LayoutError:

@@ -6,13 +6,17 @@ Why apart: the keys of docs/mission-format.md and their bounds in one table, apa
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from . import model as m
 from .checker import FRACTION, NON_NEGATIVE, POSITIVE, Bound, Checker, fmt, options_text
 from .yaml_nodes import YNode
 
-Reader = Callable[[Checker, YNode], Any]
+if TYPE_CHECKING:
+    from .parser import MissionParser
+
+Reader = Callable[["MissionParser", YNode], Any]
+"""Reads one key's value: called by :meth:`MissionParser.settings` with the parser itself."""
 
 
 def _num(bound: Bound | None = None) -> Reader:

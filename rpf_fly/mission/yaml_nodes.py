@@ -63,6 +63,20 @@ class YNode:
     def is_seq(self) -> bool:
         return isinstance(self.value, list)
 
+    @property
+    def mapping(self) -> dict[str, YNode]:
+        """A mapping's entries, for a node known to be one (:attr:`is_map`); a TypeError otherwise (a bug)."""
+        if not isinstance(self.value, dict):
+            raise TypeError(f"{self.path}: not a mapping")
+        return self.value
+
+    @property
+    def seq(self) -> list[YNode]:
+        """A sequence's items, for a node known to be one (:attr:`is_seq`); a TypeError otherwise (a bug)."""
+        if not isinstance(self.value, list):
+            raise TypeError(f"{self.path}: not a sequence")
+        return self.value
+
     def plain(self) -> Any:
         """The value as plain Python (nested lists and dicts), lines dropped."""
         if isinstance(self.value, dict):

@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 
 from rpf_fly.planning.config import PlannerConfig
-from rpf_fly.planning.vectors import TINY, any_true, minimum, unit
+from rpf_fly.planning.vectors import TINY, Planar, Scalar, any_true, minimum, norm, unit
 from rpf_fly.planning.wall_following import MODE_APF
 
 MAX_INTER_ROBOT = 0.5
@@ -30,23 +30,23 @@ MAX_INTER_ROBOT = 0.5
 
 
 def captured(
-    position: np.ndarray, goal: np.ndarray, obstacle_distance: np.ndarray, config: PlannerConfig
-) -> np.ndarray:
+    position: Planar, goal: Planar, obstacle_distance: Scalar, config: PlannerConfig
+) -> np.ndarray | bool:
     """Where the capture rule applies: the goal nearer than ``capture_radius`` and than the nearest surface
     (``obstacle_distance``: the true signed distance, FAR when none). All false when the radius is 0."""
-    d_g = abs(goal - position)
+    d_g = norm(goal - position)
     return (d_g < config.capture_radius) & (d_g < obstacle_distance)
 
 
 def capture(
-    direction: np.ndarray,
-    mode: np.ndarray,
-    position: np.ndarray,
-    goal: np.ndarray,
-    f_in: np.ndarray,
-    obstacle_distance: np.ndarray,
+    direction: Planar,
+    mode: Scalar,
+    position: Planar,
+    goal: Planar,
+    f_in: Planar,
+    obstacle_distance: Scalar,
     config: PlannerConfig,
-) -> tuple[np.ndarray, np.ndarray]:
+) -> tuple[Planar, Scalar]:
     """``(direction, mode)`` with the captured drones heading at ``unit(unit(goal - position) + f_in)`` (``f_in``
     capped at :data:`MAX_INTER_ROBOT`) in mode ``apf``; the others unchanged (the same objects when no drone is
     captured or the radius is 0)."""
@@ -55,7 +55,7 @@ def capture(
     near = captured(position, goal, obstacle_distance, config)
     if not any_true(near):
         return direction, mode
-    f_in = f_in * minimum(MAX_INTER_ROBOT / (abs(f_in) + TINY), 1.0)
+    f_in = f_in * minimum(MAX_INTER_ROBOT / (norm(f_in) + TINY), 1.0)
     straight = unit(unit(goal - position) + f_in)
     if isinstance(near, np.ndarray):
         direction = np.where(near, straight, direction)

@@ -15,6 +15,7 @@ heading with no APF; ``orca`` the ORCA baseline.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import TYPE_CHECKING, TypeAlias
 
 import numpy as np
 
@@ -26,6 +27,12 @@ from rpf_fly.planning.heading_policy import HeadingPolicyPlanner
 from rpf_fly.planning.obstacles import ObstacleSet
 from rpf_fly.planning.onnx_policy import OnnxGains, OnnxPolicy
 from rpf_fly.planning.planner import Planner
+
+if TYPE_CHECKING:
+    from rpf_fly.planning.orca import OrcaPlanner
+
+AnyPlanner: TypeAlias = "Planner | HeadingPolicyPlanner | OrcaPlanner"
+"""What :func:`make_planner` builds for a mission's planner kind."""
 
 
 class UnsupportedPlanner(ValueError):
@@ -64,7 +71,7 @@ def make_planner(
     obstacles: ObstacleSet,
     bounds: Bounds | None = None,
     goals: np.ndarray | None = None,
-) -> Planner | HeadingPolicyPlanner:
+) -> AnyPlanner:
     """The planner a mission asks for. Raises :class:`PolicyError` for an unusable policy file.
 
     With guidance, ``bounds`` (the arena's ((x_lo, x_hi), (y_lo, y_hi))) keeps the path's corners inside the
@@ -87,7 +94,7 @@ def mission_planner(mission: Mission, settings: PlannerSettings | None = None, o
     )
 
 
-def _make(settings: PlannerSettings, obstacles: ObstacleSet, config: PlannerConfig, bounds: Bounds | None):
+def _make(settings: PlannerSettings, obstacles: ObstacleSet, config: PlannerConfig, bounds: Bounds | None) -> AnyPlanner:
     if settings.kind in ("apf", "apf-paper"):
         return Planner(obstacles, config, FixedGains(settings.eta, settings.lam), bounds)
     if settings.kind == "orca":

@@ -22,14 +22,14 @@ import numpy as np
 
 from rpf_fly.planning.config import PlannerConfig
 from rpf_fly.planning.obstacles import FAR, NearestObstacle, Surfaces
-from rpf_fly.planning.vectors import TINY, maximum, per_item, plain
+from rpf_fly.planning.vectors import TINY, Planar, Scalar, maximum, norm, per_item, plain
 from rpf_fly.planning.vectors import offsets as offsets_of
 
 
-def attractive(position: np.ndarray, goal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def attractive(position: Planar, goal: Planar) -> tuple[Planar, Scalar]:
     """Unit vector toward the goal (zero at the goal) and the goal distance ``d_g`` (metres)."""
     delta = goal - position
-    d_g = abs(delta)
+    d_g = norm(delta)
     return delta / (d_g + TINY), d_g
 
 
@@ -40,7 +40,7 @@ def perceived(nearest: NearestObstacle, config: PlannerConfig) -> NearestObstacl
     return NearestObstacle(nearest.distance - config.margin, nearest.normal)
 
 
-def repulsive(nearest: NearestObstacle, eta: np.ndarray | float, config: PlannerConfig) -> np.ndarray:
+def repulsive(nearest: NearestObstacle, eta: Scalar, config: PlannerConfig) -> Planar:
     """Repulsion from the nearest visible obstacle surface; zero beyond rho or the sensing range.
 
     Inside an obstacle or closer than ``min_distance`` the distance is clamped, giving a large finite outward push.
@@ -55,7 +55,7 @@ def repulsive(nearest: NearestObstacle, eta: np.ndarray | float, config: Planner
     return (visible * magnitude) * nearest.normal
 
 
-def repulsive_sum(surfaces: Surfaces, eta: np.ndarray | float, config: PlannerConfig) -> np.ndarray:
+def repulsive_sum(surfaces: Surfaces, eta: Scalar, config: PlannerConfig) -> Planar:
     """The repulsion of :func:`repulsive` summed over every surface within range (each seen ``margin`` closer),
     where :func:`repulsive` takes the nearest only: between two obstacles nearer than the range the two pushes
     cancel along the gap instead of flipping side from one step to the next. With guidance the mission's obstacles
@@ -127,13 +127,13 @@ def repulsion_one(
 
 
 def inter_robot(
-    position: np.ndarray,
+    position: Planar,
     neighbour_position: np.ndarray,
     neighbour_mask: np.ndarray,
-    lam: np.ndarray | float,
+    lam: Scalar,
     config: PlannerConfig,
     offsets: tuple[np.ndarray, np.ndarray] | None = None,
-) -> tuple[np.ndarray, np.ndarray]:
+) -> tuple[Planar, Scalar]:
     """Force from the lambda-neighbours ``S + (K,)`` selected by ``neighbour_mask``, and how many contributed.
 
     ``sum`` aggregates as the paper's equation; ``mean`` divides by the count (the predecessor's code;
@@ -157,7 +157,7 @@ def inter_robot(
             coefficient = coefficient + np.maximum(per_item(lam) / config.neighbour_range - 0.5, 0.0)
         coefficient = np.minimum(coefficient, 0.0)
     force = plain(((mask * coefficient / d) * delta).sum(axis=-1))
-    count = np.count_nonzero(mask) if mask.ndim == 1 else mask.sum(axis=-1)
+    count = int(np.count_nonzero(mask)) if mask.ndim == 1 else mask.sum(axis=-1)
     if config.neighbour_aggregate == "mean":
         force = force / maximum(count, 1)
     if config.keep_right_deg:

@@ -20,8 +20,11 @@ class GainsPolicy(Protocol):
     """Maps observations to gains; ``gains`` returns arrays ``eta`` and ``lambda`` of the observation's leading shape
     (or scalars, which broadcast)."""
 
-    needs_observation: bool
-    max_neighbours: int
+    @property
+    def needs_observation(self) -> bool: ...
+
+    @property
+    def max_neighbours(self) -> int: ...
 
     def gains(self, observation: Observation | None) -> tuple[np.ndarray | float, np.ndarray | float]: ...
 

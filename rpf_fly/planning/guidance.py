@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from rpf_fly.planning.obstacles import ObstacleSet
+from rpf_fly.planning.vectors import Planar, Scalar
 from rpf_fly.planning.visibility import (
     UNREACHABLE,
     Bounds,
@@ -103,13 +104,15 @@ class Guidance:
         new = list(dict.fromkeys(new))
         if not new:
             return
+        # pairs is None only in a detour graph, whose own prepare() runs shortest paths instead
+        assert self.pairs is not None
         rows = cost_to_go(np.array(new), self.nodes, self.pairs, self.inflated)
         for g in new:
             self._index[g] = len(self._goals)
             self._goals.append(g)
         self._rows = np.concatenate([self._rows, rows.reshape(len(new), -1)])
 
-    def rows(self, goal: np.ndarray | complex) -> np.ndarray:
+    def rows(self, goal: Planar) -> np.ndarray:
         """Cost-to-go rows ``S + (V,)`` for goals ``S`` (computed on first use of a goal)."""
         goal = np.asarray(goal, dtype=complex)
         flat = goal.reshape(-1)
@@ -119,9 +122,8 @@ class Guidance:
         return self._rows[index].reshape(goal.shape + (self.nodes.shape[0],))
 
     def waypoint(
-        self, position: np.ndarray | complex, goal: np.ndarray | complex,
-        parked: tuple[np.ndarray, np.ndarray] | None = None,
-    ) -> tuple[np.ndarray, np.ndarray]:
+        self, position: Planar, goal: Planar, parked: tuple[np.ndarray, np.ndarray] | None = None,
+    ) -> tuple[Planar, Scalar]:
         """Next visible waypoint and remaining path length for every drone (shapes of ``position``).
 
         ``parked``: what each drone sees parked (static neighbours), as positions (complex ``S + (K,)``) and a mask
@@ -137,10 +139,12 @@ class Guidance:
             if parked is not None and self.parked_radius:
                 return self._around_one(p, g, w, remaining, parked)
             return w, remaining
-        w, remaining = next_waypoint(position, goal, self.nodes, self.rows(goal), self.inflated, self._wide)
+        waypoints, lengths = next_waypoint(position, goal, self.nodes, self.rows(goal), self.inflated, self._wide)
         if parked is not None and self.parked_radius:
-            return self._around(position, goal, w, remaining, parked)
-        return w, remaining
+            # position or goal has a drone axis here, so next_waypoint gave arrays of that shape
+            assert isinstance(waypoints, np.ndarray) and isinstance(lengths, np.ndarray)
+            return self._around(position, goal, waypoints, lengths, parked)
+        return waypoints, lengths
 
     def detour(self, parked: Sequence[complex], radius: float | None = None) -> Guidance:
         """The guidance of the mission's obstacles plus these parked drones, each a circle of radius
@@ -213,7 +217,7 @@ class Guidance:
                 return w2, r2
         return None
 
-    def _around(self, position: np.ndarray, goal: np.ndarray, w: np.ndarray, remaining: np.ndarray,
+    def _around(self, position: Planar, goal: Planar, w: np.ndarray, remaining: np.ndarray,
                 parked: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`_around_one` over leading shapes ``S`` (the drones with a parked one in the way: a loop)."""
         positions, mask = parked
@@ -287,6 +291,9 @@ class _Detour(Guidance):
     corners are joined to every node, and each goal's cost-to-go comes from :func:`shortest_from` (no all-pairs
     table). The same graph, nodes and paths as a :class:`Guidance` built on the grown obstacle set from scratch
     (tested), at a fraction of the cost: 28 pillars and 5 parked drones took 42 ms from scratch."""
+
+    _usable: np.ndarray
+    """Per node, whether it is kept (a mission corner under a parked drone is not)."""
 
     @classmethod
     def around(cls, base: Guidance, centers: np.ndarray, radius: float) -> _Detour:

@@ -15,7 +15,7 @@ from rpf_fly.planning.observation import build_observation
 from rpf_fly.planning.obstacles import ObstacleSet
 from rpf_fly.planning.onnx_policy import OnnxPolicy, PolicyError
 from rpf_fly.planning.planner import PlanStep, guided_view, make_guidance, sense_obstacles
-from rpf_fly.planning.vectors import unit
+from rpf_fly.planning.vectors import Planar, Scalar, norm, unit
 from rpf_fly.planning.view import LocalView
 from rpf_fly.planning.visibility import Bounds
 
@@ -42,13 +42,12 @@ class HeadingPolicyPlanner:
         goal = view.goal
         view, waypoint, remaining = guided_view(view, self.guidance)
         observation = build_observation(view, nearest, self.config, self.policy.max_neighbours, remaining)
-        a = self.policy.act(observation)[..., 0].astype(float)
-        if a.ndim == 0:
-            a = float(a)
-        direction = unit(view.heading + a * (1j * view.heading))
+        action = self.policy.act(observation)[..., 0].astype(float)
+        a: Scalar = float(action) if action.ndim == 0 else action
+        direction: Planar = unit(view.heading + a * (1j * view.heading))
         f_a, d_g = attractive(view.position, view.goal)
         zero = f_a * 0
-        mode = zero.real.astype(np.int8) if isinstance(zero, np.ndarray) else 0
+        mode: Scalar = zero.real.astype(np.int8) if isinstance(zero, np.ndarray) else 0
         direction, mode = capture(direction, mode, view.position, goal, zero, nearest.distance, self.config)
         count = lambda_mask.sum(axis=-1) if isinstance(lambda_mask, np.ndarray) else 0
         return PlanStep(
@@ -61,7 +60,7 @@ class HeadingPolicyPlanner:
             lam=np.nan,
             neighbours=count,
             obstacle_distance=nearest.distance,
-            goal_distance=d_g if waypoint is None else abs(goal - view.position),
+            goal_distance=d_g if waypoint is None else norm(goal - view.position),
             observation=observation,
             waypoint=waypoint,
         )

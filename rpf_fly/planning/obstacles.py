@@ -13,10 +13,11 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
+from typing import overload
 
 import numpy as np
 
-from rpf_fly.planning.vectors import TINY, per_item
+from rpf_fly.planning.vectors import TINY, Planar, Scalar, per_item
 
 FAR = 1.0e6
 """Distance reported when a robot has no obstacle at all (metres); obstacles padded at FAR are never sensed."""
@@ -68,7 +69,11 @@ class ObstacleSet:
             raise ValueError("box min must not exceed box max")
         return ObstacleSet(centers, radii, (lo + hi) / 2, (hi - lo).real / 2, (hi - lo).imag / 2)
 
-    def signed_distance(self, points: np.ndarray) -> np.ndarray:
+    @overload
+    def signed_distance(self, points: complex) -> float: ...
+    @overload
+    def signed_distance(self, points: np.ndarray) -> np.ndarray: ...
+    def signed_distance(self, points: Planar) -> Scalar:
         """Signed distance from each point to the nearest obstacle surface (FAR without obstacles)."""
         return nearest_obstacle(points, self).distance
 
@@ -78,11 +83,11 @@ class NearestObstacle:
     """Per robot: signed ``distance`` to the nearest surface (metres, negative inside, FAR if none) and the outward
     unit ``normal`` there (complex; the surface point is ``position - distance * normal``; zero if none)."""
 
-    distance: np.ndarray
-    normal: np.ndarray
+    distance: Scalar
+    normal: Planar
 
 
-def _circles(points: np.ndarray, centers: np.ndarray, radii: np.ndarray | float,
+def _circles(points: Planar, centers: np.ndarray, radii: np.ndarray | float,
              offsets: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Signed distance and outward normal for every circle ``S + (M,)``. ``offsets``: the centres' ``(c - p,
     |c - p|)`` when the caller has them (a view's :meth:`~rpf_fly.planning.view.LocalView.neighbour_offsets`;
@@ -95,7 +100,7 @@ def _circles(points: np.ndarray, centers: np.ndarray, radii: np.ndarray | float,
     return dist - radii, diff / (dist + TINY)
 
 
-def _boxes(points: np.ndarray, obstacles: ObstacleSet) -> tuple[np.ndarray, np.ndarray]:
+def _boxes(points: Planar, obstacles: ObstacleSet) -> tuple[np.ndarray, np.ndarray]:
     """Signed distance and outward normal for every axis-aligned box ``S + (M,)`` (the box signed-distance field)."""
     a = per_item(points) - obstacles.box_center
     sx = np.sign(a.real)
@@ -114,7 +119,7 @@ def _boxes(points: np.ndarray, obstacles: ObstacleSet) -> tuple[np.ndarray, np.n
     return outside + inside, normal
 
 
-def _reduce(dist: np.ndarray, normal: np.ndarray):
+def _reduce(dist: np.ndarray, normal: np.ndarray) -> tuple[Scalar, Planar]:
     """The minimum over the obstacle axis: Python numbers for one robot, arrays for many."""
     k = dist.argmin(axis=-1)
     if dist.ndim == 1:
@@ -124,7 +129,7 @@ def _reduce(dist: np.ndarray, normal: np.ndarray):
 
 
 def nearest_obstacle(
-    points: np.ndarray | complex,
+    points: Planar,
     obstacles: ObstacleSet,
     extra_centers: np.ndarray | None = None,
     extra_radius: float = 0.0,
@@ -149,10 +154,10 @@ def nearest_obstacle(
             return NearestObstacle(np.full(points.shape, FAR), np.zeros(points.shape, dtype=complex))
         return NearestObstacle(FAR, 0j)
     dist, normal = found[0]
-    for d, n in found[1:]:
-        closer = d < dist
-        dist = dist + closer * (d - dist)
-        normal = normal + closer * (n - normal)
+    for d_k, n_k in found[1:]:
+        closer = d_k < dist
+        dist = dist + closer * (d_k - dist)
+        normal = normal + closer * (n_k - normal)
     return NearestObstacle(dist, normal)
 
 
@@ -168,7 +173,7 @@ class Surfaces:
 
 
 def every_surface(
-    points: np.ndarray | complex,
+    points: Planar,
     obstacles: ObstacleSet,
     extra_centers: np.ndarray | None = None,
     extra_radius: float = 0.0,
@@ -181,14 +186,17 @@ def every_surface(
     dists, normals = [], []
     if obstacles.n_circles:
         d, n = _circles(points, obstacles.centers, obstacles.radii)
-        dists.append(d), normals.append(n)
+        dists.append(d)
+        normals.append(n)
     if obstacles.n_boxes:
         d, n = _boxes(points, obstacles)
-        dists.append(d), normals.append(n)
+        dists.append(d)
+        normals.append(n)
     mapped = sum(d.shape[-1] for d in dists)
     if extra_mask is not None and extra_centers is not None and extra_mask.any():
         d, n = _circles(points, extra_centers, extra_radius, extra_offsets)
-        dists.append(d + (~extra_mask) * FAR), normals.append(n)
+        dists.append(d + (~extra_mask) * FAR)
+        normals.append(n)
     if not dists:
         shape = np.shape(points) + (0,)
         return Surfaces(np.zeros(shape), np.zeros(shape, dtype=complex), 0)

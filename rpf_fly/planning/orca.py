@@ -45,6 +45,7 @@ import numpy as np
 from rpf_fly.planning.config import PlannerConfig
 from rpf_fly.planning.obstacles import ObstacleSet
 from rpf_fly.planning.planner import PlanStep, guided_view, make_guidance, sense_obstacles
+from rpf_fly.planning.vectors import Scalar, norm
 from rpf_fly.planning.view import LocalView
 from rpf_fly.planning.visibility import Bounds
 
@@ -368,13 +369,14 @@ class OrcaPlanner:
         goal = view.goal
         guided, waypoint, _ = guided_view(view, self.guidance)
         step = self._step(guided)
-        return dataclasses.replace(step, goal_distance=abs(goal - view.position), waypoint=waypoint)
+        return dataclasses.replace(step, goal_distance=norm(goal - view.position), waypoint=waypoint)
 
     def _step(self, view: LocalView) -> PlanStep:
         nearest, _ = sense_obstacles(view, self.obstacles, self.config)
         if not isinstance(view.position, np.ndarray) or view.position.ndim == 0:
             return self._step_one(view, nearest.distance)
         shape = view.position.shape
+        goals = np.asarray(view.goal)
         current = self._current_velocity(view)
         result = np.zeros(shape, dtype=complex)
         counts = np.zeros(shape, dtype=int)
@@ -384,7 +386,7 @@ class OrcaPlanner:
             others = view.neighbour_position[idx][m]
             result[idx] = self.velocity(
                 view.position[idx].item(),
-                view.goal[idx].item(),
+                goals[idx].item(),
                 current[idx].item(),
                 others,
                 view.neighbour_velocity[idx][m],
@@ -392,7 +394,7 @@ class OrcaPlanner:
             )
             counts[idx] = others.shape[0]
         if self.remember_velocity:
-            self._memory[shape] = (view.goal.copy(), result.copy())
+            self._memory[shape] = (goals.copy(), result.copy())
         to_goal = view.goal - view.position
         d_g = np.abs(to_goal)
         zero = np.zeros(shape, dtype=complex)
@@ -409,7 +411,7 @@ class OrcaPlanner:
             goal_distance=d_g,
         )
 
-    def _step_one(self, view: LocalView, obstacle_distance: float) -> PlanStep:
+    def _step_one(self, view: LocalView, obstacle_distance: Scalar) -> PlanStep:
         position = complex(view.position)
         goal = complex(view.goal)
         current = self.speed * complex(view.heading)
@@ -441,7 +443,7 @@ class OrcaPlanner:
         """Each drone's own velocity: the remembered command where the view agrees with it, else cruise speed
         along the view's heading."""
         cruise = self.speed * np.asarray(view.heading, dtype=complex)
-        remembered = self._memory.get(view.position.shape) if self.remember_velocity else None
+        remembered = self._memory.get(np.shape(view.position)) if self.remember_velocity else None
         if remembered is None:
             return cruise
         last_goal, last_v = remembered

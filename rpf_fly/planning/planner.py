@@ -20,6 +20,7 @@ from rpf_fly.planning.guidance import Guidance
 from rpf_fly.planning.observation import Observation, build_observation
 from rpf_fly.planning.obstacles import FAR, NearestObstacle, ObstacleSet, every_surface, nearest_obstacle
 from rpf_fly.planning.speed import brake, yield_speed
+from rpf_fly.planning.vectors import Planar, Scalar, norm
 from rpf_fly.planning.view import LocalView
 from rpf_fly.planning.visibility import Bounds
 from rpf_fly.planning.wall_following import select_heading
@@ -35,18 +36,18 @@ class PlanStep:
     nearest visible obstacle surface (metres, FAR when none); ``goal_distance`` (metres).
     """
 
-    direction: np.ndarray
-    mode: np.ndarray
-    f_a: np.ndarray
-    f_r: np.ndarray
-    f_in: np.ndarray
-    eta: np.ndarray
-    lam: np.ndarray
-    neighbours: np.ndarray
-    obstacle_distance: np.ndarray
-    goal_distance: np.ndarray
+    direction: Planar
+    mode: Scalar
+    f_a: Planar
+    f_r: Planar
+    f_in: Planar
+    eta: Scalar
+    lam: Scalar
+    neighbours: Scalar
+    obstacle_distance: Scalar
+    goal_distance: Scalar
     observation: Observation | None = None
-    waypoint: np.ndarray | None = None
+    waypoint: Planar | None = None
     """With guidance: the point the attraction pulled toward (complex; the goal once it is in sight)."""
 
 
@@ -84,14 +85,14 @@ def apf_step(
     view: LocalView,
     nearest: NearestObstacle,
     lambda_mask: np.ndarray,
-    eta: np.ndarray | float,
-    lam: np.ndarray | float,
+    eta: Scalar,
+    lam: Scalar,
     config: PlannerConfig,
     observation: Observation | None = None,
-    waypoint: np.ndarray | None = None,
-    goal_distance: np.ndarray | None = None,
-    goal: np.ndarray | None = None,
-    repulsion: np.ndarray | complex | None = None,
+    waypoint: Planar | None = None,
+    goal_distance: Scalar | None = None,
+    goal: Planar | None = None,
+    repulsion: Planar | None = None,
     walls: NearestObstacle | None = None,
 ) -> PlanStep:
     """The APF with (soft) wall-following for given gains (``observation``, when the gains came from one, is kept
@@ -141,7 +142,7 @@ def make_guidance(obstacles: ObstacleSet, config: PlannerConfig, bounds: Bounds 
 
 def guided_view(
     view: LocalView, guidance: Guidance | None, reach: float = 0.0, parked_mask: np.ndarray | None = None,
-) -> tuple[LocalView, np.ndarray | None, np.ndarray | None]:
+) -> tuple[LocalView, Planar | None, Scalar | None]:
     """``view`` with its goal replaced by each drone's next visible waypoint, the waypoints and the remaining path
     lengths (the view itself and None without guidance). ``reach`` > 0: a drone nearer its waypoint corner than
     that has reached it and is pulled on to the corner's own next waypoint (:func:`past_reached`).
@@ -159,8 +160,8 @@ def guided_view(
     return guided, waypoint, remaining
 
 
-def past_reached(guidance: Guidance, position: np.ndarray, goal: np.ndarray, waypoint: np.ndarray,
-                 reach: float, parked: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
+def past_reached(guidance: Guidance, position: Planar, goal: Planar, waypoint: Planar,
+                 reach: float, parked: tuple[np.ndarray, np.ndarray] | None = None) -> Planar:
     """The waypoints with every corner nearer its drone than ``reach`` replaced by the corner's own next waypoint.
 
     Why (docs/algorithm.md, *RPF-3's tuning*): a drone rounding a corner within the repulsion's band is pushed off
@@ -168,7 +169,7 @@ def past_reached(guidance: Guidance, position: np.ndarray, goal: np.ndarray, way
     corner, and an inch past it the pull points on: the drone can shuttle between the two for ever (one arena-a
     drone in 40 fresh runs). Pulling on from the corner once the drone is within ``reach`` of it removes the
     backward pull; the repulsion still keeps the clearance."""
-    near = (abs(waypoint - position) < reach) & (waypoint != goal)
+    near = (norm(waypoint - position) < reach) & (waypoint != goal)
     if not isinstance(near, np.ndarray):
         return guidance.waypoint(complex(waypoint), complex(goal), parked)[0] if near else waypoint
     if not near.any():
@@ -177,8 +178,8 @@ def past_reached(guidance: Guidance, position: np.ndarray, goal: np.ndarray, way
     if parked is not None:
         parked = (np.broadcast_to(parked[0], near.shape + parked[0].shape[-1:])[rows],
                   np.broadcast_to(parked[1], near.shape + parked[1].shape[-1:])[rows])
+    waypoint = np.array(waypoint, dtype=complex)  # a copy: the caller's waypoints stay as they are
     onward, _ = guidance.waypoint(waypoint[rows], np.broadcast_to(goal, near.shape)[rows], parked)
-    waypoint = waypoint.copy()
     waypoint[rows] = onward
     return waypoint
 
@@ -230,9 +231,9 @@ class Planner:
             return apf_step(view, nearest, lambda_mask, eta, lam, self.config, observation, repulsion=repulsion,
                             walls=walls)
         return apf_step(guided, nearest, lambda_mask, eta, lam, self.config, observation, waypoint,
-                        abs(view.goal - view.position), view.goal, repulsion, walls)
+                        norm(view.goal - view.position), view.goal, repulsion, walls)
 
-    def unit_repulsion(self, view: LocalView, lambda_mask: np.ndarray) -> tuple[np.ndarray | complex, NearestObstacle]:
+    def unit_repulsion(self, view: LocalView, lambda_mask: np.ndarray) -> tuple[Planar, NearestObstacle]:
         """The static repulsion summed over every surface (``config.repulsion_sum``) at ``eta`` 1: the mission's
         obstacles and the static neighbours as :func:`sense_obstacles` counts them; and the nearest of the mission's
         obstacles alone (for the brake's wall slide), from the same distances. One drone: plain Python."""
@@ -250,9 +251,9 @@ class Planner:
                 )
             chosen = (mask & ~lambda_mask) if statics else ()
             others = [q for q, keep in zip(view.neighbour_position.tolist(), np.ravel(chosen).tolist()) if keep]
-            force, wall, normal = repulsion_one(complex(view.position), *self._shapes, others, config.safety_radius,
-                                                config)
-            return force, NearestObstacle(wall, normal)
+            one_force, one_wall, one_normal = repulsion_one(complex(view.position), *self._shapes, others,
+                                                            config.safety_radius, config)
+            return one_force, NearestObstacle(one_wall, one_normal)
         if statics:
             surfaces = every_surface(view.position, self.obstacles, view.neighbour_position, config.safety_radius,
                                      mask & ~lambda_mask, view.neighbour_offsets())

@@ -24,11 +24,11 @@ import numpy as np
 
 from rpf_fly.planning.config import PlannerConfig
 from rpf_fly.planning.obstacles import NearestObstacle
-from rpf_fly.planning.vectors import dot, maximum, minimum, per_item
+from rpf_fly.planning.vectors import Planar, dot, maximum, minimum, per_item
 from rpf_fly.planning.vectors import offsets as offsets_of
 
 
-def yield_speed(direction: np.ndarray, f_in: np.ndarray, config: PlannerConfig) -> np.ndarray:
+def yield_speed(direction: Planar, f_in: Planar, config: PlannerConfig) -> Planar:
     """``direction`` scaled by the yield factor (the same object when ``yield_gain`` is 0)."""
     if not config.yield_gain:
         return direction
@@ -37,9 +37,9 @@ def yield_speed(direction: np.ndarray, f_in: np.ndarray, config: PlannerConfig) 
 
 
 
-def brake(direction: np.ndarray, position: np.ndarray, neighbour_position: np.ndarray, neighbour_mask: np.ndarray,
+def brake(direction: Planar, position: Planar, neighbour_position: np.ndarray, neighbour_mask: np.ndarray,
           config: PlannerConfig, nearest: NearestObstacle | None = None,
-          offsets: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
+          offsets: tuple[np.ndarray, np.ndarray] | None = None) -> Planar:
     """``direction`` scaled by ``min clip(gap / brake_distance, 0, 1)`` over what it heads toward: each neighbour
     ``j`` with ``d . (p_j - p) > 0``, ``gap = |p_j - p| - (2r + margin + brake_buffer)``; then, toward the
     ``nearest`` obstacle surface (``d . normal < 0``), only the inward part of the step is scaled by the same
@@ -59,21 +59,21 @@ def brake(direction: np.ndarray, position: np.ndarray, neighbour_position: np.nd
     wall_bar = config.safety_radius + config.margin + config.brake_buffer
     k = neighbour_position.shape[-1]
     if not isinstance(position, np.ndarray):  # one drone: plain Python over its few neighbours
-        factor = 1.0
+        slowest = 1.0
         if k:
             for q, keep in zip(neighbour_position.tolist(), neighbour_mask.tolist()):
                 dx, dy = q.real - position.real, q.imag - position.imag
                 if keep and direction.real * dx + direction.imag * dy > 0.0:
-                    factor = min(factor, max((math.hypot(dx, dy) - pair_bar) / config.brake_distance, 0.0))
-        if factor < 1.0:
-            direction = direction * factor
+                    slowest = min(slowest, max((math.hypot(dx, dy) - pair_bar) / config.brake_distance, 0.0))
+        if slowest < 1.0:
+            direction = direction * slowest
         if nearest is not None:
             n = nearest.normal
             inward = direction.real * n.real + direction.imag * n.imag
             if inward < 0.0:
-                keep = min(max((nearest.distance - wall_bar) / config.brake_distance, 0.0), 1.0)
-                if keep < 1.0:
-                    direction = direction - (1.0 - keep) * inward * n
+                share = min(max((nearest.distance - wall_bar) / config.brake_distance, 0.0), 1.0)
+                if share < 1.0:
+                    direction = direction - (1.0 - share) * inward * n
         return direction
     factor = np.ones(np.shape(position))
     if k:

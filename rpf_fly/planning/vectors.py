@@ -12,8 +12,16 @@ Conventions (docs/architecture.md): metres, Z-up world, angles from +x counter-c
 from __future__ import annotations
 
 import math
+from typing import Any, TypeAlias, overload
 
 import numpy as np
+
+Planar: TypeAlias = "np.ndarray | complex"
+"""Planar vector(s) as the planner takes them: a complex array of leading shape ``S`` (drones planned together), or
+one drone's Python complex (see the helpers below: the one-drone path runs on Python numbers)."""
+
+Scalar: TypeAlias = "np.ndarray | float"
+"""Real value(s) per drone, as :data:`Planar`: an array of leading shape ``S``, or one drone's Python number."""
 
 TINY = 1e-300
 """Added to norms before dividing: a zero vector normalises to zero instead of NaN (callers read 0 as 'none')."""
@@ -31,17 +39,31 @@ def to_xy(z: np.ndarray) -> np.ndarray:
     return np.stack([z.real, z.imag], axis=-1)
 
 
-def unit(z: np.ndarray) -> np.ndarray:
+@overload
+def norm(z: complex) -> float: ...
+@overload
+def norm(z: np.ndarray) -> np.ndarray: ...
+def norm(z: Any) -> Any:
+    """``abs(z)``: the length of one drone's vector (a float) or of every drone's (an array). Typed per case, as
+    mypy cannot infer ``abs`` of a :data:`Planar` union."""
+    return abs(z)
+
+
+@overload
+def unit(z: complex) -> complex: ...
+@overload
+def unit(z: np.ndarray) -> np.ndarray: ...
+def unit(z: Any) -> Any:
     """Unit vector(s); zero stays zero."""
     return z / (abs(z) + TINY)
 
 
-def dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+def dot(a: Planar, b: Planar) -> Scalar:
     """Planar dot product ``a . b``."""
     return a.real * b.real + a.imag * b.imag
 
 
-def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+def cross(a: Planar, b: Planar) -> Scalar:
     """z-component of ``a x b``: positive when ``b`` is counter-clockwise from ``a``."""
     return a.real * b.imag - a.imag * b.real
 

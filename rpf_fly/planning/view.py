@@ -14,7 +14,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from rpf_fly.planning.vectors import offsets
+from rpf_fly.planning.vectors import Planar, offsets
 
 
 @dataclass(frozen=True)
@@ -26,9 +26,9 @@ class LocalView:
     real neighbour within sensing range (padding is false).
     """
 
-    position: np.ndarray
-    goal: np.ndarray
-    heading: np.ndarray
+    position: Planar
+    goal: Planar
+    heading: Planar
     neighbour_position: np.ndarray
     neighbour_velocity: np.ndarray
     neighbour_mask: np.ndarray
@@ -44,7 +44,7 @@ class LocalView:
             object.__setattr__(self, "_offsets", cached)
         return cached
 
-    def with_goal(self, goal: np.ndarray) -> LocalView:
+    def with_goal(self, goal: Planar) -> LocalView:
         """The same view with another goal (guidance's waypoint), its neighbour offsets shared."""
         view = LocalView(self.position, goal, self.heading, self.neighbour_position, self.neighbour_velocity,
                          self.neighbour_mask)

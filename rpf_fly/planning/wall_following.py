@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from rpf_fly.planning.config import PlannerConfig
-from rpf_fly.planning.vectors import TINY, any_true, dot, maximum, unit
+from rpf_fly.planning.vectors import TINY, Planar, Scalar, any_true, dot, maximum, norm, unit
 
 MODE_APF = 0
 """No wall-following active: vanilla APF direction."""
@@ -33,26 +33,26 @@ MODE_NAMES = {MODE_APF: "apf", MODE_WALL: "wall", MODE_SOFT: "soft"}
 TIE_TOLERANCE = 1e-9
 
 
-def choose_tangent(f_r: np.ndarray, f_in: np.ndarray, heading: np.ndarray, config: PlannerConfig) -> np.ndarray:
+def choose_tangent(f_r: Planar, f_in: Planar, heading: Planar, config: PlannerConfig) -> Planar:
     """The tangent chosen by the side rule (unit, complex); zero where ``F_r`` is zero."""
     n1 = unit(1j * f_r)
     if config.side_from_tangential_force:
-        strength = abs(dot(n1, f_in))
+        strength = norm(dot(n1, f_in))
     else:
-        strength = abs(f_in)
+        strength = norm(f_in)
     ref = (strength >= config.wall_threshold) * f_in + (strength < config.wall_threshold) * heading
-    flip = dot(n1, ref) < -TIE_TOLERANCE * abs(ref)
+    flip = dot(n1, ref) < -TIE_TOLERANCE * norm(ref)
     return n1 - 2.0 * flip * n1
 
 
 def select_heading(
-    f_a: np.ndarray,
-    f_r: np.ndarray,
-    f_in: np.ndarray,
-    heading: np.ndarray,
-    obstacle_distance: np.ndarray,
+    f_a: Planar,
+    f_r: Planar,
+    f_in: Planar,
+    heading: Planar,
+    obstacle_distance: Scalar,
     config: PlannerConfig,
-) -> tuple[np.ndarray, np.ndarray]:
+) -> tuple[Planar, Scalar]:
     """Commanded unit direction and mode (int8) for each robot.
 
     The direction is zero where the resultant vanishes: a stalled drone (the vanilla APF local minimum), which
@@ -67,7 +67,7 @@ def select_heading(
     in_b = (push < 0.0) & (push >= -1.0)
 
     n = choose_tangent(f_r, f_in, heading, config)
-    f_r_norm = abs(f_r)
+    f_r_norm = norm(f_r)
     wall = n
     if config.bend_near_surface:
         r = config.safety_radius

@@ -13,6 +13,7 @@ import dataclasses
 
 import numpy as np
 
+from rpf_fly.planning.vectors import Planar, Scalar
 from rpf_fly.planning.visibility import UNREACHABLE, Inflated, blocked
 
 CANDIDATES = 6
@@ -27,15 +28,15 @@ def _visible(position: np.ndarray, goal: np.ndarray, targets: np.ndarray, inf: I
     p_in = inf.inside(position.real, position.imag)
     g_in = inf.inside(goal.real, goal.imag)
     n = targets.shape[-1] - 1
-    t_in = tuple(np.concatenate([gi[..., None, :], np.zeros(gi.shape[:-1] + (n, gi.shape[-1]), bool)], axis=-2)
-                 for gi in g_in)
-    return ~blocked(position[..., None], targets, wide, tuple(pi[..., None, :] for pi in p_in), t_in)
+    c_in, b_in = (np.concatenate([gi[..., None, :], np.zeros(gi.shape[:-1] + (n, gi.shape[-1]), bool)], axis=-2)
+                  for gi in g_in)
+    return ~blocked(position[..., None], targets, wide, (p_in[0][..., None, :], p_in[1][..., None, :]), (c_in, b_in))
 
 
 def next_waypoint(
-    position: np.ndarray, goal: np.ndarray, nodes: np.ndarray, cost: np.ndarray, inf: Inflated,
+    position: Planar, goal: Planar, nodes: np.ndarray, cost: np.ndarray, inf: Inflated,
     wide: Inflated | None = None, candidates: int | None = CANDIDATES,
-) -> tuple[np.ndarray, np.ndarray]:
+) -> tuple[Planar, Scalar]:
     """The waypoint each drone should fly to (complex ``S``) and its remaining path length (metres, ``S``).
 
     ``nodes`` ``(V,)`` or ``S + (V,)`` (per arena, padded with FAR nodes whose cost is inf), ``cost`` ``S + (V,)``

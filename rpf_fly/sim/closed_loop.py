@@ -192,7 +192,7 @@ class _Scene:
                          else (DroneOutcome.STALLED if stalled[i] else DroneOutcome.TIMEOUT) for i in range(n))
         dtypes = {"mode": np.int8, "eta": float, "lam": float, "f_a": complex, "f_r": complex, "f_in": complex,
                   "direction": complex, "neighbours": int}
-        stacked = {k: (np.array(v, dtype=dtypes[k]) if v else np.zeros((0, n), dtype=dtypes[k]))
+        stacked: dict[str, np.ndarray] = {k: (np.array(v, dtype=dtypes[k]) if v else np.zeros((0, n), dtype=dtypes[k]))
                    for k, v in self.records.items()}
         return FirmwareRollout(
             scenario=self.scenario, params=params, positions=track, modes=stacked["mode"], eta=stacked["eta"],
@@ -250,7 +250,8 @@ def firmware_rollouts(
             elif tick >= params.max_steps:
                 scene.tail_until = sample  # the time limit: no tail (the flight lands them)
         planning = [s for s in planning if s.tail_until is None]
-        if not planning and sample >= max(s.tail_until for s in scenes):  # type: ignore[type-var]
+        # no scene left planning: every one has its tail's end
+        if not planning and sample >= max(s.tail_until for s in scenes if s.tail_until is not None):
             break
         for scene in planning:
             setpoints = scene.plan(firmware.plan_from)

@@ -94,11 +94,11 @@ def planner_settings(kind: str, policy: str | Path | None = None, **overrides: o
 def summarise(runs: list[Run]) -> dict[str, object]:
     """Success rate, collision count and mean +- std of the path metrics over runs."""
 
-    def stat(values: list[float]) -> dict[str, float] | None:
-        values = [v for v in values if v is not None]
-        if not values:
+    def stat(values: list[float | None]) -> dict[str, float] | None:
+        present = [v for v in values if v is not None]
+        if not present:
             return None
-        return {"mean": float(np.mean(values)), "std": float(np.std(values))}
+        return {"mean": float(np.mean(present)), "std": float(np.std(present))}
 
     ms = [r.metrics for r in runs]
     return {

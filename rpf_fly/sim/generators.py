@@ -147,7 +147,7 @@ def _corridor(rng: np.random.Generator, n: int, r: float) -> Scenario:
     length = rng.uniform(2.5, 5.0)
     y0 = rng.uniform(-2.0, 2.0)
     t = length / 2
-    shapes: list[Obstacle] = [_box(-t, t, y0 + width / 2, h), _box(-t, t, -h, y0 - width / 2)] + _room(h)
+    shapes: list[Obstacle] = [_box(-t, t, y0 + width / 2, h), _box(-t, t, -h, y0 - width / 2), *_room(h)]
     starts = _scatter(rng, n, (-h + 0.4, -t - 0.8), (-h + 0.4, h - 0.4))
     goals = _scatter(rng, n, (t + 0.8, h - 0.4), (-h + 0.4, h - 0.4))
     if starts is None or goals is None:
@@ -166,7 +166,8 @@ def _doorway(rng: np.random.Generator, n: int, r: float) -> Scenario:
     shapes: list[Obstacle] = [
         _box(x0 - thick / 2, x0 + thick / 2, g0 + gap / 2, h),
         _box(x0 - thick / 2, x0 + thick / 2, -h, g0 - gap / 2),
-    ] + _room(h)
+        *_room(h),
+    ]
     starts = _scatter(rng, n, (-h + 0.4, x0 - 1.0), (-h + 0.4, h - 0.4))
     goals = _scatter(rng, n, (x0 + 1.0, h - 0.4), (-h + 0.4, h - 0.4))
     if starts is None or goals is None:
@@ -267,7 +268,7 @@ def _passage(rng: np.random.Generator, n: int, r: float) -> Scenario:
     thick = rng.uniform(0.3, 1.5)
     g0 = rng.uniform(-2.0, 2.0)
     t = thick / 2
-    shapes: list[Obstacle] = [_box(-t, t, g0 + gap / 2, h), _box(-t, t, -h, g0 - gap / 2)] + _room(h)
+    shapes: list[Obstacle] = [_box(-t, t, g0 + gap / 2, h), _box(-t, t, -h, g0 - gap / 2), *_room(h)]
     left = n - n // 2
     right = n // 2
     band = (max(-h + 0.4, g0 - 2.0), min(h - 0.4, g0 + 2.0))

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rpf_fly.planning.planner import Planner
+from rpf_fly.planning.factory import AnyPlanner
 from rpf_fly.sim.scenario import Scenario
 from rpf_fly.sim.world import World
 
@@ -68,7 +68,7 @@ class Rollout:
         return int(self.modes.shape[0])
 
 
-def rollout(scenario: Scenario, planner: Planner, params: SimParams) -> Rollout:
+def rollout(scenario: Scenario, planner: AnyPlanner, params: SimParams) -> Rollout:
     """Run one scenario to completion (all arrived) or to the time limit."""
     world = World(
         scenario.starts,

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from rpf_fly.planning.vectors import unit
+from rpf_fly.planning.vectors import Planar, norm, unit
 from rpf_fly.planning.view import LocalView, views_from_states
 
 
@@ -52,9 +52,9 @@ class World:
         """Every drone's local view (neighbours of the same arena within range)."""
         return views_from_states(self.position, self.velocity, self.goal, self.heading, sensing_range)
 
-    def advance(self, direction: np.ndarray) -> None:
+    def advance(self, direction: Planar) -> None:
         """Move every active drone one step along ``direction`` (unit or zero)."""
-        moving = ~(self.arrived | self.halted) & (abs(direction) > 0.0)
+        moving = ~(self.arrived | self.halted) & (norm(direction) > 0.0)
         self.velocity = moving * (self.speed * direction)
         new = self.position + self.velocity * self.dt
         x = np.clip(new.real, self._lo_x, self._hi_x)
@@ -62,7 +62,7 @@ class World:
         clamped = (x != new.real) | (y != new.imag)
         self.geofence_clamps += clamped
         self.position = x + 1j * y
-        self.heading = np.where(moving, direction / np.where(moving, abs(direction), 1.0), self.heading)
+        self.heading = np.where(moving, direction / np.where(moving, norm(direction), 1.0), self.heading)
         self.arrived = self.arrived | (abs(self.goal - self.position) < self.goal_tolerance)
         self.steps += 1
 
