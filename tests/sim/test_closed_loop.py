@@ -16,7 +16,7 @@ from rpf_fly.sim.scenario import make_scenario
 MODEL_LAG_S = 0.55
 """docs/dynamics.md: the model trails a moving setpoint by 0.55 s x its speed."""
 
-FAST = FirmwareParams(settle_s=2.0, hold_tail_s=1.0)
+FAST = FirmwareParams(settle_s=1.0, hold_tail_s=1.0)
 """A shorter hover before t = 0 and tail after the arrivals than the bench's, to keep the tests short."""
 
 
@@ -63,8 +63,8 @@ def test_scenes_flown_together_fly_as_each_alone():
     b = make_scenario("b", np.array([1.5, 1.5 + 1.5j]), np.array([0.2j, 1.4j]), arena_x=(-1, 3), arena_y=(-1, 3))
     settings = planner_settings("orca")
     fast = replace(FAST, hold_tail_s=0.3)
-    alone = run_firmware([b], settings, SimParams(time_limit_s=4.0), [1], ["b"], fast, keep=True)[0]
-    both = run_firmware([a, b], settings, SimParams(time_limit_s=4.0), [0, 1], ["a", "b"], fast, keep=True)[1]
+    alone = run_firmware([b], settings, SimParams(time_limit_s=2.5), [1], ["b"], fast, keep=True)[0]
+    both = run_firmware([a, b], settings, SimParams(time_limit_s=2.5), [0, 1], ["a", "b"], fast, keep=True)[1]
     assert np.array_equal(alone.rollout.truth, both.rollout.truth)
     assert alone.metrics == both.metrics
 
