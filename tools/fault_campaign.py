@@ -6,7 +6,7 @@
     python tools/fault_campaign.py --extpose --kinds orientation_flip,pose_jump --out -   # poses sent as extpose
     python tools/fault_campaign.py --random 20 --seed 10 --faults-per-run 2   # two faults of different kinds a flight
     python tools/fault_campaign.py --random 16 --seed 16 --extpose --faults-per-run 2 --vary-world --only 14 \
-        --keep /tmp/run14 --out -                         # re-fly one run of that campaign, keeping its log
+        --keep run14 --out -                              # re-fly one run of that campaign, keeping its log
     python tools/fault_campaign.py --kinds ground_station_kill,dongle_unplug --out -   # the lab kinds' 10 runs
     python tools/fault_campaign.py --dynamics firmware   # every run's simulated drones on the firmware's PID cascade
 

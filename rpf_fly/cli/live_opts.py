@@ -6,7 +6,7 @@ Kept apart from ``fly_cmd.py`` so the command only gains its options and two cal
 The options: typer (0.29) gives an option either always a value or never one, and an option with an optional
 value would swallow whatever follows it (``--foxglove --dry-run`` takes ``--dry-run`` as the port, ``--foxglove
 missions/lab-3.yaml`` the mission). So ``--foxglove`` is a flag, and ``--foxglove-port PORT`` /
-``--foxglove-host HOST`` set where it listens (either of them turns it on too). The issue's form ``--foxglove
+``--foxglove-host HOST`` set where it listens (either of them turns it on too). The short form ``--foxglove
 [PORT]`` works as well, through :func:`foxglove_port_argv` before typer parses the command line: ``--foxglove=PORT``,
 and ``--foxglove PORT`` where the word after it is a port number (digits) that is not a file, are read as
 ``--foxglove-port PORT``; anything else after ``--foxglove`` stays what it was (the mission, another option).

@@ -35,8 +35,8 @@ from rpf_fly.planning.obstacles import nearest_obstacle
 from .fake_firmware import Body
 
 DRONE_SPAN_M = 0.13
-"""Rotor-tip span of a Crazyflie 2.1 (metres). Source: the project's brief for the contact model (2026-11), which
-gives 0.13 m. Cross-check: Bitcraze's Crazyflie 2.1 datasheet gives 92 x 92 x 29 mm "motor-to-motor and including
+"""Rotor-tip span of a Crazyflie 2.1 (metres). Source: the project's brief for the contact model, which gives
+0.13 m. Cross-check: Bitcraze's Crazyflie 2.1 datasheet gives 92 x 92 x 29 mm "motor-to-motor and including
 motor mount feet"; the stock propellers add about half their 45 mm diameter beyond each motor axis, so the tips
 span between about 0.11 m (across a side) and 0.14 m (along a diagonal). The figure is the model's only size."""
 

@@ -253,7 +253,7 @@ class FakeLink:
     def _waiting(self, now: float) -> int:
         """Uplink packets due and not yet acknowledged (the head may be in its transaction). Reads a copy of the
         queue taken in one C call (``deque.copy``): the transaction thread pops it without `_room`, and iterating
-        the deque itself raised "deque mutated during iteration" in cflib's send (a 10-drone dry run, 2026-12-01)."""
+        the deque itself can raise "deque mutated during iteration" in cflib's send (a 10-drone dry run does)."""
         n = 0
         for due, _, _ in self._up.copy():
             if due > now or n >= DRIVER_PACKETS:

@@ -37,8 +37,7 @@ Dynamics (documented model, not physics; the default `VehicleConfig.dynamics`, "
   raw thrust's, g x thrust / `HOVER_THRUST`, which also lifts the drone against gravity: 45000 climbs at 2.45 m/s^2,
   30000 sinks; nothing holds a height. Vertical drag as horizontal (`DRAG_TAU_S`). A thrust that cannot lift it
   leaves the drone standing (it cannot slide). Not modelled: the height lost at a tilt past what full thrust holds
-  (57 degrees), the thrust lost to a sagging battery beyond the firmware's compensation. Until 2026-12-02 any
-  thrust above zero was "level, hold the height" and roll and pitch were ignored: kinder than a real drone.
+  (57 degrees), the thrust lost to a sagging battery beyond the firmware's compensation.
 - The controller works in its estimated frame: the horizontal velocity it commands (position axes) or aims at
   (velocity axes) is realised through the true attitude, i.e. rotated by the yaw error (true minus estimated yaw)
   in the true world. A small error bends the path (5 degrees: 1.6 cm sideways on a 0.5 m move); beyond 90 degrees
@@ -49,7 +48,7 @@ Dynamics (documented model, not physics; the default `VehicleConfig.dynamics`, "
 - Motors off (null setpoint, supervisor forbids flying, power off): free fall at 9.81 m/s^2 onto the floor (the
   initial z), then rest. On the floor a drone cannot slide, with its motors on either: a body on the floor whose
   controller asks for no lift (a position setpoint at floor height, too little RPYT thrust) stands where it is
-  (until 2026-12-03 a setpoint on the floor 0.5 m away slid it there at flying speed; a real one scrapes or tips).
+  (a real one scrapes or tips; it does not slide to a setpoint on the floor at flying speed).
 - A crash (`Vehicle.crash`, called by the fake world on a contact): motors off at once and the horizontal velocity
   lost in the impact, so the drone drops where it hit (an inelastic impact: a Crazyflie that clips a pole or
   another drone does not sail on), then rests on the floor; its supervisor is crashed, tumbled and locked.
@@ -143,10 +142,10 @@ room's air, the other drones' downwash, controller and motor imperfections. It e
 controller fights it; the IMU feels it, so extpos keeps the estimate on the truth), which makes a hovering drone
 wander 1.2 cm (standard deviation) on each horizontal axis and 0.5 cm vertically, about 1.7 cm in the plane, and up
 to 4-5 cm at the worst moments of a minute. The figure is an assumption, set so that the dry run's tracking error
-is that of a real Crazyflie under mocap as this project states it (2-5 cm: issue #11, `flight/supervisor.py`),
-not kinder: until 2026-12-02 the simulated drone tracked its setpoints within 1.3 cm of the supervisor's model,
-and the supervisor's tracking warning (5 cm) had been set on that. Each drone draws its own (seeded) turbulence;
-`VehicleConfig.turbulence_m_s2` = 0 turns it off for the emulator's precision tests.
+is that of a real Crazyflie under mocap as this project states it (2-5 cm: `flight/supervisor.py`), not kinder:
+a tracking warning set on drones that hold their setpoints to the millimetre would sound on healthy real ones.
+Each drone draws its own (seeded) turbulence; `VehicleConfig.turbulence_m_s2` = 0 turns it off for the emulator's
+precision tests.
 
 Battery: open-circuit voltage drains 0.0002 V/s with motors off and 0.0017 V/s with motors on (a 250 mAh
 Crazyflie hovers about 7 minutes); `pm.vbat` sags 0.25 V under load. `pm.state` becomes low-power after 5 s below

@@ -60,7 +60,7 @@ PLANNER_STEP: dict[str, Any] = _obj(
         "obstacle_distance": _nullable_num("Distance to the nearest visible obstacle surface (m); null if none"),
         "goal_distance": _num("Distance to the goal (m)"),
         "reference": _vector2("Where the drone planned from: its reference (its own position in its view) before "
-                              "the step (m); only on ticks it planned (2026-12, for rpf-fly replay)"),
+                              "the step (m); only on ticks it planned (for rpf-fly replay)"),
     },
     required=("timestamp", "tick", "position", "goal", "eta", "lambda", "f_a", "f_r", "f_in", "direction", "mode",
               "heading", "neighbours", "obstacle_distance", "goal_distance"),
@@ -79,11 +79,10 @@ DRONE_STATUS: dict[str, Any] = _obj(
         "outcome": {"type": ["string", "null"], "description": "null while flying; reached, stalled, timeout, ..."},
         "estimate": {"type": ["object", "null"], "properties": {"x": _num(), "y": _num(), "z": _num()},
                      "description": "The on-board estimate of the drone's position (m), as its firmware logs it; "
-                                    "null if unknown (2026-12-04)"},
+                                    "null if unknown"},
         "target": {"type": ["object", "null"], "properties": {"x": _num(), "y": _num(), "z": _num()},
                    "description": "Where the drone's own controller is taking it (m): the streamed setpoint, or the "
-                                  "high-level take-off's or landing's point; null if the firmware does not log it "
-                                  "(2026-12-04)"},
+                                  "high-level take-off's or landing's point; null if the firmware does not log it"},
     },
     required=("timestamp", "state", "battery_v", "link_quality", "latency_ms", "outcome"),
     title="rpf_fly.DroneStatus",
@@ -120,8 +119,7 @@ RADIO_LOAD: dict[str, Any] = _obj(
         "budget_per_s": _num("What this dongle carries of that mix (the dongle type's figures, scaled to "
                              "radio.budget_packets_s when given)"),
         "setpoints_superseded": _num("Setpoints of this dongle's drones replaced by a newer one before the radio took "
-                                     "them (the radio lagged; rpf_fly/radio/outbox.py); absent in logs before "
-                                     "2026-12-02"),
+                                     "them (the radio lagged; rpf_fly/radio/outbox.py)"),
     },
     required=("timestamp", "dongle", "drones", "window_s", "packets", "transactions", "packets_per_s",
               "transactions_per_s", "planned_per_s", "budget_per_s"),

@@ -26,7 +26,7 @@ on the scene families (docs/learning.md): the product's learned planner, with gu
 POLICY_KINDS = ("rpf", "rpf-mean", "ppo", "rpf3")
 
 DEFAULT_KIND = "rpf3"
-"""``planner.kind`` of a mission that names none: RPF-3, the product's planner (issue #11; docs/bench/rpf3.md)."""
+"""``planner.kind`` of a mission that names none: RPF-3, the product's planner (docs/bench/rpf3.md)."""
 
 GUIDANCE_MODES = ("none", "path")
 """``planner.guidance``: ``none`` (the attraction pulls at the goal) or ``path`` (at the next visible waypoint of the

@@ -61,7 +61,7 @@ def test_smoke_runs_every_planner_on_both_families(smoke):
             assert row["min_obstacle_clearance_m"] is None
         else:
             assert row["below_margin"]["runs_clearance"] == int(run.min_obstacle_clearance_m < 0.15)
-    # the product's default is PlannerSettings().kind (RPF-3 since 2026-12-02): flown exactly as that kind by name
+    # the product's default is PlannerSettings().kind (RPF-3): flown exactly as that kind by name
     assert PlannerSettings().kind == "rpf3"
     default = {(m, r.scene): r for m, r in result.runs if r.planner == "default"}
     named = run_families(prepare_families(FamiliesConfig(planners=("rpf3",), families=("arena-a", "arena-b"), seeds=1,

@@ -1,4 +1,4 @@
-"""``rpf-fly fly --foxglove [PORT]``: the issue's form read as ``--foxglove-port PORT``, never at the cost of the
+"""``rpf-fly fly --foxglove [PORT]``: the short form read as ``--foxglove-port PORT``, never at the cost of the
 mission path or another option that follows the flag (rpf_fly/cli/live_opts.py)."""
 
 from __future__ import annotations

@@ -28,7 +28,7 @@ from rpf_fly.emulator.cf_scenario import (
 DATA = Path(__file__).resolve().parents[1] / "data" / "crazyflie_dynamics"
 NAMES = sorted(p.stem for p in (DATA / "scenarios").glob("*.yaml"))
 
-# The issue's tolerances: lags and overshoots within 4 cm or 20 %, settling times within 0.3 s, high-level lags
+# The acceptance tolerances: lags and overshoots within 4 cm or 20 %, settling times within 0.3 s, high-level lags
 # within 8 cm or 20 %. The other figures: speeds and tilts within 20 %, other distances 4 cm, times 0.3 s.
 TIME_S = 0.3
 DIST_CM = 4.0
@@ -75,7 +75,7 @@ def test_figure_code_reproduces_the_reference_trace_figures(name: str) -> None:
 @pytest.mark.parametrize("name", NAMES)
 def test_public_scenario_matches_the_reference(name: str, flown: dict[str, dict]) -> None:
     """Flown offline from the reference's start state, each figure (on the same 50 Hz sample instants as the
-    reference file's) is within the issue's tolerance of the reference's; in fact within 1 mm, 0.03 s and 0.1
+    reference file's) is within the acceptance tolerance of the reference's; in fact within 1 mm, 0.03 s and 0.1
     degree of it (docs/dynamics.md has the table)."""
     mine = json_figures(flown[name]["figures"])
     theirs = reference(name)["figures_from_trace"]

@@ -1,6 +1,6 @@
-"""Arrival in the kinematic world: goals the repulsion used to keep a drone circling are now reached (issue #11).
+"""Arrival in the kinematic world: goals the repulsion alone keeps a drone circling are reached with the capture rule.
 
-Before the capture rule (``capture_radius=0`` reproduces it) each of these drones orbits the pole or the arrived
+Without the capture rule (``capture_radius=0``) each of these drones orbits the pole or the arrived
 neighbour beside its goal, passing it at 0.11-0.24 m once a lap, until the time limit.
 """
 
@@ -30,7 +30,7 @@ def run(scenario, capture_radius=None):
 
 @pytest.mark.parametrize("goal", [2.5 + 0j, 3 + 0.5j, 2.6 + 0.2j], ids=["front", "side", "close"])
 def test_goal_beside_a_pole_is_reached(goal):
-    """Goals 0.20-0.25 m from a pole's surface (>= r + m): the fixed-gain APF used to orbit the pole."""
+    """Goals 0.20-0.25 m from a pole's surface (>= r + m): without the capture rule the fixed-gain APF orbits it."""
     scenario = make_scenario("pole", np.array([0j]), np.array([goal]), (CircleObstacle((3.0, 0.0), 0.25),))
     before, _ = run(scenario, capture_radius=0.0)
     assert before.outcomes == (DroneOutcome.TIMEOUT,)
@@ -44,7 +44,7 @@ def test_goal_beside_a_pole_is_reached(goal):
 @pytest.mark.parametrize("gap", [0.4, 0.45])
 def test_goal_beside_an_arrived_neighbour_is_reached(gap):
     """A neighbour hovering at its goal 0.40-0.45 m from this drone's goal (a static obstacle of radius r, seen
-    m nearer): the drone used to circle it; now it settles, and keeps 2r + m."""
+    m nearer): without the capture rule the drone circles it; with it, it settles and keeps 2r + m."""
     starts, goals = np.array([0j, -3 + 0.5j]), np.array([0j, gap + 0j])
     scenario = make_scenario("pair", starts, goals, ())
     before, _ = run(scenario, capture_radius=0.0)
