@@ -9,8 +9,8 @@ from __future__ import annotations
 import socket
 import threading
 
+from .crtp import Packet
 from .dongle_air import DongleAir, RadioTiming
-from .fake_firmware import Packet
 from .fake_world import LinkFaults
 from .radio_wire import BROADCAST, CLOSE, INFO, OPEN, REPLY, REPLY_TIMEOUT_S, REQUEST, TRANSACT
 

@@ -15,7 +15,8 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from .burst_loss import BurstChannel
-from .fake_firmware import FakeFirmware, Packet
+from .crtp import Packet
+from .fake_firmware import FakeFirmware
 
 if TYPE_CHECKING:
     from .fake_world import FakeDroneConfig, FakeWorld

@@ -15,9 +15,10 @@ from cflib.crazyflie import Crazyflie
 from cflib.crazyflie.syncCrazyflie import SyncCrazyflie
 
 from rpf_fly.emulator.fake_contact import DRONE_CONTACT_M, OBSTACLE_CONTACT_M, ContactModel
-from rpf_fly.emulator.fake_firmware import LOG_TOC, Body, FakeFirmware
+from rpf_fly.emulator.fake_firmware import Body, FakeFirmware
 from rpf_fly.emulator.fake_vehicle import VehicleConfig
 from rpf_fly.emulator.fake_world import FakeDroneConfig, FakeWorld
+from rpf_fly.emulator.firmware_tables import LOG_TOC
 from rpf_fly.mission.model import BoxObstacle, CircleObstacle
 from rpf_fly.radio.backend import SupervisorBits
 

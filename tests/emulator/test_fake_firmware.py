@@ -13,8 +13,6 @@ from cflib.crazyflie.param import ParamTocElement
 from cflib.utils.encoding import compress_quaternion
 
 from rpf_fly.emulator.fake_firmware import (
-    LOG_TOC,
-    PARAM_TOC,
     PROTOCOL_VERSION,
     REBOOT_BOOT_S,
     FakeFirmware,
@@ -22,6 +20,7 @@ from rpf_fly.emulator.fake_firmware import (
 )
 from rpf_fly.emulator.fake_planner import Trajectory
 from rpf_fly.emulator.fake_vehicle import VehicleConfig
+from rpf_fly.emulator.firmware_tables import LOG_TOC, PARAM_TOC
 from rpf_fly.emulator.vehicle_figures import ACCEL_BIAS_M_S2, TRACK_TAU_S
 
 DT = 0.01

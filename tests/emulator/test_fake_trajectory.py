@@ -14,10 +14,11 @@ import pytest
 from cflib.crazyflie.mem import CompressedSegment, CompressedStart
 from trajectory_shapes import Piece, figure_eight, reference, total_duration
 
-from rpf_fly.emulator.fake_firmware import LOG_TOC, PARAM_TOC, FakeFirmware
+from rpf_fly.emulator.fake_firmware import FakeFirmware
 from rpf_fly.emulator.fake_memory import EEPROM_SIZE, TRAJECTORY_MEMORY_SIZE, config_block
 from rpf_fly.emulator.fake_trajectory import normalize_radians, shortest_signed_angle_radians
 from rpf_fly.emulator.fake_vehicle import VehicleConfig
+from rpf_fly.emulator.firmware_tables import LOG_TOC, PARAM_TOC
 from rpf_fly.emulator.vehicle_figures import SUBSTEP_S
 
 DT = 0.01

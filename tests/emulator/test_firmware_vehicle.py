@@ -18,10 +18,11 @@ from test_fake_firmware import READY_S, Sim, go_to, land, position, takeoff
 from rpf_fly.emulator.cf_body import P250
 from rpf_fly.emulator.cf_controller import PARAM_NAMES, CfGains
 from rpf_fly.emulator.cf_drone import CfDrone
-from rpf_fly.emulator.fake_firmware import PARAM_TOC, REBOOT_BOOT_S
+from rpf_fly.emulator.fake_firmware import REBOOT_BOOT_S
 from rpf_fly.emulator.fake_toc import pack_value
 from rpf_fly.emulator.fake_vehicle import Vehicle, VehicleConfig
 from rpf_fly.emulator.fake_world import FakeDroneConfig, FakeWorld
+from rpf_fly.emulator.firmware_tables import PARAM_TOC
 
 MakeWorld = Callable[..., FakeWorld]
 ADDRESS = 0xE7E7E7E700

@@ -11,9 +11,9 @@ from pathlib import Path
 
 import pytest
 
-from rpf_fly.emulator.fake_firmware import LOG_MAX_PAYLOAD
 from rpf_fly.emulator.fake_toc import value_size
 from rpf_fly.emulator.fake_world import FakeDroneConfig, FakeWorld, RadioTiming
+from rpf_fly.emulator.firmware_log import LOG_MAX_PAYLOAD
 from rpf_fly.radio.backend import DroneBackend, PmState
 from rpf_fly.radio.cflib_backend import CflibBackend
 from rpf_fly.radio.cflib_telemetry import STATUS_VARIABLES, STATUS_VARIABLES_FLOAT, status_variables

@@ -201,7 +201,8 @@ def test_a_locked_or_flying_drone_is_not_rebooted(make_world: MakeWorld, toc_cac
 def test_the_nrf_reset_commands_reboot_the_simulated_drone() -> None:
     """cflib's `PowerSwitch.reboot_to_fw` on an open link: reset-init (answered with the nRF's address), then reset
     to firmware; a reset without reset-init, or into the bootloader, does nothing."""
-    from rpf_fly.emulator.fake_firmware import PORT_LINK, REBOOT_BOOT_S, FakeFirmware
+    from rpf_fly.emulator.crtp import PORT_LINK
+    from rpf_fly.emulator.fake_firmware import REBOOT_BOOT_S, FakeFirmware
 
     firmware = FakeFirmware(now_s=0.0, radio_address=0xE7E7E7E701)
     for t in range(1, 101):
