@@ -282,7 +282,8 @@ def test_a_drone_whose_mocap_orientation_flipped_on_the_ground_does_not_take_off
         def flip_when_tracked(loop) -> None:  # type: ignore[no-untyped-def]
             def act() -> None:
                 deadline = time.monotonic() + 20
-                while loop.phase != SwarmPhase.PREFLIGHT and time.monotonic() < deadline:
+                while (loop.phase != SwarmPhase.PREFLIGHT or loop.tracker.get("cf1") is None) \
+                        and time.monotonic() < deadline:  # tracked first: the flip is a jump, not its first pose
                     time.sleep(0.002)
                 rig.orientation_flip("cf1", 90.0, 60.0)
             threading.Thread(target=act, daemon=True).start()
