@@ -15,6 +15,7 @@ from contextlib import nullcontext
 from dataclasses import dataclass
 from datetime import datetime
 from pathlib import Path
+from types import TracebackType
 from typing import TYPE_CHECKING, Any, Protocol
 
 from rpf_fly.app import checks
@@ -47,7 +48,8 @@ class StatusView(Protocol):
 
     def __enter__(self) -> Any: ...
 
-    def __exit__(self, *exc: object) -> Any: ...
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> Any: ...
 
     def show(self, phase: str, rows_of: Callable[[], list[dict[str, Any]]]) -> None: ...
 
@@ -189,7 +191,7 @@ class FlightApp:
         rig = dry_runs.DryRun(mission, lab=lab) if dry_run else None
         with (rig if rig is not None else nullcontext()):
             try:
-                source = rig.mocap if rig is not None else mocap_source(mission)
+                source = rig.entered_mocap() if rig is not None else mocap_source(mission)
             except ConnectionError as err:
                 raise UserError(f"mocap: {err}", code=1) from None
             backend = CflibBackend.for_mission(mission, rig.cache_dir if rig is not None else DEFAULT_TOC_CACHE)

@@ -155,6 +155,13 @@ class _Rows:
         r = self.rows.get((planner, scene))
         return r if r is not None and r.get("status") == "ok" and r.get("runs", 0) > 0 else None
 
+    def ran(self, planner: str, scene: str) -> Mapping[str, Any]:
+        """The row of a planner the caller knows ran (checked with :meth:`row`, or one of :meth:`planners`)."""
+        r = self.row(planner, scene)
+        if r is None:
+            raise KeyError(f"{planner} on {scene}: no run")
+        return r
+
     def why_missing(self, planner: str, scene: str) -> str:
         r = self.rows.get((planner, scene))
         name = f"{PLANNER_LABELS.get(planner, planner)} on {scene}"
@@ -182,9 +189,9 @@ def _claim_a(t: _Rows, scene: str = "circle-8-r3") -> Claim:
         return _not_evaluated("a", absent)
     numbers = {
         PLANNER_LABELS[p]: {
-            "travel_distance_m": _mean(t.row(p, scene), "travel_distance_m"),  # type: ignore[arg-type]
-            "smoothness": _mean(t.row(p, scene), "smoothness"),  # type: ignore[arg-type]
-            "success_rate": t.row(p, scene)["success_rate"],  # type: ignore[index]
+            "travel_distance_m": _mean(t.ran(p, scene), "travel_distance_m"),
+            "smoothness": _mean(t.ran(p, scene), "smoothness"),
+            "success_rate": t.ran(p, scene)["success_rate"],
         }
         for p in needed
     }
@@ -221,8 +228,8 @@ def _claim_b(t: _Rows, scene: str = "circle-8-r8") -> Claim:
     numbers = {
         "seeds": len(seeds),
         "rpf1_succeeds_ppo_fails": len(paired),
-        "RPF-1 success_rate": t.row("rpf", scene)["success_rate"],  # type: ignore[index]
-        "PPO success_rate": t.row("ppo", scene)["success_rate"],  # type: ignore[index]
+        "RPF-1 success_rate": t.ran("rpf", scene)["success_rate"],
+        "PPO success_rate": t.ran("ppo", scene)["success_rate"],
         "PPO failures": causes,
     }
     held = len(paired) > 0 and len(paired) >= MAJORITY * len(seeds)
@@ -241,9 +248,9 @@ def _claim_c(t: _Rows, scene: str = "lab-3") -> Claim:
     planners = [p for p in everyone if p in PAPER_PLANNERS]  # the paper compares RPF-1, RPF-2, PPO and APF
     numbers = {
         PLANNER_LABELS.get(p, p): {
-            "success_rate": t.row(p, scene)["success_rate"],  # type: ignore[index]
-            "travel_distance_m": _mean(t.row(p, scene), "travel_distance_m"),  # type: ignore[arg-type]
-            "smoothness": _mean(t.row(p, scene), "smoothness"),  # type: ignore[arg-type]
+            "success_rate": t.ran(p, scene)["success_rate"],
+            "travel_distance_m": _mean(t.ran(p, scene), "travel_distance_m"),
+            "smoothness": _mean(t.ran(p, scene), "smoothness"),
         }
         for p in planners
     }
@@ -257,10 +264,10 @@ def _claim_c(t: _Rows, scene: str = "lab-3") -> Claim:
             held = False
             notes.append(f"{metric}: {best} {numbers[best][metric]:.4g} < RPF-1 {numbers['RPF-1'][metric]:.4g}")
     for extra in (p for p in everyone if p not in PAPER_PLANNERS):  # beyond the paper: reported, not judged
-        row = t.row(extra, scene)
+        row = t.ran(extra, scene)
         label = PLANNER_LABELS.get(extra, extra)
-        travel, smooth = _mean(row, "travel_distance_m"), _mean(row, "smoothness")  # type: ignore[arg-type]
-        notes.append(f"beyond the paper, {label}: success {row['success_rate']:.0%}, travel "  # type: ignore[index]
+        travel, smooth = _mean(row, "travel_distance_m"), _mean(row, "smoothness")
+        notes.append(f"beyond the paper, {label}: success {row['success_rate']:.0%}, travel "
                      f"{travel if travel is None else round(travel, 3)}, smoothness "
                      f"{smooth if smooth is None else round(smooth, 4)}")
     return Claim("c", STATEMENTS["c"], HELD if held else NOT_HELD, numbers, "; ".join(notes))

@@ -81,7 +81,9 @@ def _literal_values(hint: Any) -> list[Any]:
 def with_guidance(settings: PlannerSettings, mode: str) -> PlannerSettings:
     """The settings flown with guidance ``mode`` (unchanged for ``none`` while the field does not exist)."""
     if any(f.name == "guidance" for f in dataclasses.fields(settings)):
-        return replace(settings, guidance=mode)
+        if mode not in ("none", "path"):
+            raise BenchError(f"guidance {mode!r}: expected none or path")
+        return replace(settings, guidance="none" if mode == "none" else "path")
     if mode != "none":
         raise BenchError(f"guidance {mode!r}: the planner settings have no guidance field")
     return settings
@@ -236,8 +238,8 @@ def run_families(
                 jobs_of = {pool.submit(_run_family_firmware, family, seeds, [group for _, group in items],
                                        config.closed_loop): family
                            for family, items in by_family.items()}
-                for future in as_completed(jobs_of):
-                    flown(jobs_of[future], future.result())
+                for family_done in as_completed(jobs_of):
+                    flown(jobs_of[family_done], family_done.result())
     elif jobs <= 1:
         for k, (family, planner, mode) in todo:
             finished(k, _run_group(family, seeds, plan.settings[planner], planner, mode, on_run), False)
@@ -299,13 +301,13 @@ def _run_family_firmware(
     """Every (planner, guidance) group ``(settings, planner, mode)`` of one family over the seeds on the firmware
     model, all in one simulated swarm (a swarm's tick costs little more for all of them than for one group); per
     group its records, or the reason it cannot run (its planner could not be made: no run of it flies)."""
-    from rpf_fly.planning.factory import UnsupportedPlanner, make_planner
+    from rpf_fly.planning.factory import AnyPlanner, UnsupportedPlanner, make_planner
     from rpf_fly.planning.onnx_policy import PolicyError
     from rpf_fly.sim.closed_loop import run_firmware
 
     scenes = [generate(family, seed, split=SPLIT) for seed in seeds]
     errors: list[str | None] = []
-    flown: list[tuple[int, PlannerSettings, object, int]] = []  # (group, settings, planner, seed index)
+    flown: list[tuple[int, PlannerSettings, AnyPlanner, int]] = []  # (group, settings, planner, seed index)
     for g, (base, _, mode) in enumerate(groups):
         settings = with_guidance(base, mode)
         try:

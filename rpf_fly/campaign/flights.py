@@ -190,13 +190,15 @@ def _fly(mission_path: Path, schedule_file: Path, log: Path, env: dict[str, str]
                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=workdir)
     lines: list[tuple[int, str]] = []
     out: list[str] = []
+    stderr, stdout = flight.stderr, flight.stdout
+    assert stderr is not None and stdout is not None  # both PIPE above
 
     def read_stderr() -> None:
-        for line in flight.stderr:  # type: ignore[union-attr]
+        for line in stderr:
             lines.append((time.time_ns(), line))
 
     def read_stdout() -> None:
-        out.append(flight.stdout.read())  # type: ignore[union-attr]
+        out.append(stdout.read())
 
     readers = [threading.Thread(target=read_stderr, daemon=True), threading.Thread(target=read_stdout, daemon=True)]
     for reader in readers:

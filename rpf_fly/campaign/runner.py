@@ -16,7 +16,7 @@ import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 from rpf_fly.campaign.flights import FlightRecord, LabRecord, fly_against_lab, fly_dry_run
 from rpf_fly.campaign.judge import Verdict, judge_flight, judge_lab
@@ -107,7 +107,10 @@ def host_fell_behind(record: FlightRecord) -> bool:
     return said or NOT_EVIDENCE in record.stderr or NOT_EVIDENCE in record.stdout
 
 
-def _evidence(fly: Callable[[], FlightRecord], judge: Callable[[FlightRecord], Verdict]) -> Verdict:
+_Record = TypeVar("_Record", bound=FlightRecord)
+
+
+def _evidence(fly: Callable[[], _Record], judge: Callable[[_Record], Verdict]) -> Verdict:
     """``fly`` until its host kept up (at most `HOST_TRIES` times) and judge that flight. A verdict flown more than
     once says so in its events; one whose host fell behind every time fails as no evidence."""
     for tries in range(1, HOST_TRIES + 1):
@@ -134,7 +137,7 @@ def fly_and_judge(faults: list[dict[str, Any]], mission_file: Path, workdir: Pat
 def fly_and_judge_lab(fault: dict[str, Any], mission_file: Path, workdir: Path, tag: str = "") -> Verdict:
     """One run of a lab kind against a lab of its own, judged on the lab's log (flown again while its host fell
     behind, `HOST_TRIES`)."""
-    return _evidence(lambda: fly_against_lab(mission_file, fault, workdir, tag), judge_lab)  # type: ignore[arg-type]
+    return _evidence(lambda: fly_against_lab(mission_file, fault, workdir, tag), judge_lab)
 
 
 def fixed_runs(mission_file: Path, kinds: list[str], workdir: Path, on_verdict: OnVerdict = _ignore) -> list[Verdict]:

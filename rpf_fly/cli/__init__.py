@@ -61,6 +61,7 @@ def _flags_show_no_type() -> None:
             return None
         return original(self, ctx)
 
+    # patching typer's own class (typer 0.29 has no hook for it): its stubs rightly say neither assignment exists
     display_type_rich._rpf_fly_flags = True  # type: ignore[attr-defined]
     TyperOption.display_type_rich = display_type_rich  # type: ignore[method-assign]
 

@@ -82,7 +82,11 @@ def calibrate(
     defaults = CfGains().params()
     fits = []
     for record in records:
-        say = (lambda m, name=record.drone: typer.echo(f"{name}: {m}", err=True)) if verbose else (lambda m: None)
+
+        def say(message: str, name: str = record.drone) -> None:
+            if verbose:
+                typer.echo(f"{name}: {message}", err=True)
+
         fits.append((record, fit(record, start=begin or None, progress=say)))
     written = []
     if out is not None:

@@ -11,6 +11,7 @@ column; the final rows add ``outcome`` and ``reason``.
 from __future__ import annotations
 
 import time
+from types import TracebackType
 from typing import Any
 
 import typer
@@ -59,9 +60,10 @@ class FlightConsole:
             self.live.__enter__()
         return self
 
-    def __exit__(self, *exc: object) -> None:
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
         if self.live is not None:
-            self.live.__exit__(*exc)
+            self.live.__exit__(exc_type, exc, tb)
 
     def line(self, text: str) -> None:
         """One line as it is (no markup): above the live table on a terminal, a plain line otherwise."""

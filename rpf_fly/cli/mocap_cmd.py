@@ -75,6 +75,7 @@ def printing(rate: float) -> str:
 
 
 def _watch_table(frame, stats: WatchStats):  # noqa: ANN001, ANN202 - MocapFrame, rich Table
+    from rich.console import JustifyMethod
     from rich.table import Table
 
     rate = stats.rate_hz
@@ -82,9 +83,10 @@ def _watch_table(frame, stats: WatchStats):  # noqa: ANN001, ANN202 - MocapFrame
     table = Table(caption=f"frame {frame.frame_number}, {stats.frames} frames, "
                                        f"{'-' if rate is None else f'{rate:.1f}'} Hz, latency {latency}, "
                                        f"{stats.missed} missed  (Ctrl-C: stop)")
-    for column, justify in (("body", "left"), ("x", "right"), ("y", "right"), ("z", "right"), ("tracked", "left"),
-                            ("valid %", "right")):
-        table.add_column(column, justify=justify)  # type: ignore[arg-type]
+    columns: tuple[tuple[str, JustifyMethod], ...] = (("body", "left"), ("x", "right"), ("y", "right"), ("z", "right"),
+                                                     ("tracked", "left"), ("valid %", "right"))
+    for column, justify in columns:
+        table.add_column(column, justify=justify)
     for name, pose in sorted(frame.bodies.items()):
         x, y, z = pose.position
         table.add_row(name, f"{x:+.3f}", f"{y:+.3f}", f"{z:+.3f}", "[green]ok[/]" if pose.valid else "[red]LOST[/]",

@@ -55,9 +55,9 @@ def replay(
         from rpf_fly.flight.replay_plot import plot_replay
 
         try:
-            policy = f" ({result.policy.name})" if result.policy is not None else ""
+            replayed_policy = f" ({result.policy.name})" if result.policy is not None else ""
             plot_replay(result, plot, title=f"{log.name}: {result.flown_planner or '?'} flown, {result.planner}"
-                                            f"{policy} replayed")
+                                            f"{replayed_policy} replayed")
         except OSError as err:
             raise fail(f"{plot}: cannot write the plot: {err.strerror or err}") from err
     if json_output:

@@ -6,11 +6,22 @@ import shlex
 import sys
 import time
 from pathlib import Path
+from typing import Literal, TypeVar
 
 import typer
 
 from rpf_fly.cli import app
 from rpf_fly.cli.errors import fail
+
+_Choice = TypeVar("_Choice", bound=str)
+KINDS: tuple[Literal["rpf", "rpf-mean", "ppo"], ...] = ("rpf", "rpf-mean", "ppo")
+ARENAS: tuple[Literal["a", "b", "both"], ...] = ("a", "b", "both")
+GUIDANCE: tuple[Literal["none", "path"], ...] = ("none", "path")
+
+
+def _pick(value: str, choices: tuple[_Choice, ...]) -> _Choice | None:
+    """The one of ``choices`` that ``value`` names (typed as the choices are), None if none."""
+    return next((c for c in choices if c == value), None)
 
 PAPER_MISSIONS = ("arena-a-6", "arena-b-6", "circle-8-r3", "circle-8-r8", "lab-3")
 
@@ -55,9 +66,11 @@ def train(
     An existing policy (or its model card or curves) at --out is never overwritten without --force."""
     if no_attention:
         kind = "rpf-mean"
-    if kind not in ("rpf", "rpf-mean", "ppo"):
+    kind_chosen = _pick(kind, KINDS)
+    if kind_chosen is None:
         raise fail(f"--kind: expected rpf, rpf-mean or ppo, got {kind!r}")
-    if arena not in ("a", "b", "both"):
+    arena_chosen = _pick(arena, ARENAS)
+    if arena_chosen is None:
         raise fail(f"--arena: expected a, b or both, got {arena!r}")
     from rpf_fly.sim.generators import FAMILIES
 
@@ -66,7 +79,8 @@ def train(
     unknown = [f for f in families if f not in FAMILIES]
     if unknown:
         raise fail(f"--curriculum: unknown scene family {unknown[0]!r} (expected all or some of {', '.join(FAMILIES)})")
-    if guidance not in ("none", "path"):
+    guidance_chosen = _pick(guidance, GUIDANCE)
+    if guidance_chosen is None:
         raise fail(f"--guidance: expected none or path, got {guidance!r}")
     if not 0.0 <= margin < 1.0:
         raise fail(f"--margin: expected metres in [0, 1), got {margin}")
@@ -87,8 +101,9 @@ def train(
     from rpf_fly.learn.ppo import PPOConfig, Trainer
 
     radius = obstacle_radius if obstacle_radius is not None else (0.1 if kind == "ppo" else 0.5)
-    config = PPOConfig(seed=seed, kind=kind, arena=arena, curriculum=families, episodes=episodes, max_updates=max_updates, n_arenas=arenas,  # type: ignore[arg-type]
-                       obstacle_radius=radius, guidance=guidance, margin=margin, threads=threads,
+    config = PPOConfig(seed=seed, kind=kind_chosen, arena=arena_chosen, curriculum=families, episodes=episodes,
+                       max_updates=max_updates, n_arenas=arenas,
+                       obstacle_radius=radius, guidance=guidance_chosen, margin=margin, threads=threads,
                        collision_penalty=collision_penalty, margin_penalty=margin_penalty,
                        capture_radius=capture_radius)
     run_dir = out.with_suffix(".run")

@@ -32,6 +32,7 @@ four evaluations. At 1 kHz the two fly a 0.5 m step within 0.05 mm and 0.01 deg 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 RPM_TO_RAD_S = 2.0 * math.pi / 60.0
@@ -126,7 +127,7 @@ class CfBody:
     __slots__ = ("params", "pos", "vel", "quat", "omega", "rotor_rpm", "rotor_cmd_rpm", "external_force",
                  "floor_z", "integrator", "on_floor")
 
-    def __init__(self, position: tuple[float, float, float] = (0.0, 0.0, 0.0), yaw_rad: float = 0.0, *,
+    def __init__(self, position: Sequence[float] = (0.0, 0.0, 0.0), yaw_rad: float = 0.0, *,
                  params: CfBodyParams = P250, integrator: str = "midpoint", floor_z: float = 0.0) -> None:
         if integrator not in ("midpoint", "rk4"):
             raise ValueError(f"integrator must be 'midpoint' or 'rk4', not {integrator!r}")

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import math
 import struct
+from typing import Any
 
 from .cf_body import P250, CfBody, CfBodyParams, quaternion_to_rpy_deg
 from .cf_controller import (
@@ -78,16 +79,17 @@ class CfDrone:
         """What the controller sees: x, y, z, vx, vy, vz, roll, pitch (legacy sign), yaw (m, m/s, deg)."""
         self.setpoint: ControlSetpoint = NULL_SETPOINT
         self.priority = PRIORITY_NONE
-        self.hl = HighLevelCommander(tuple(self.body.pos), math.radians(yaw_deg))  # type: ignore[arg-type]
+        x, y, z = self.body.pos
+        self.hl = HighLevelCommander((x, y, z), math.radians(yaw_deg))
         self.motor_commands = (0, 0, 0, 0)
 
     @classmethod
     def hovering(cls, position: tuple[float, float, float], yaw_deg: float = 0.0, *, t_s: float = 0.0,
-                 settle_s: float = 10.0, **kwargs: object) -> CfDrone:
+                 settle_s: float = 10.0, **kwargs: Any) -> CfDrone:
         """A drone that has hovered at `position` under streamed position setpoints for `settle_s` before `t_s`:
         rotors at hover speed and the vertical-velocity integrator carrying the thrust thrustBase lacks, then
         flown `settle_s` so every loop settles (the state of a drone that has hovered a while)."""
-        drone = cls(position, yaw_deg, t_s=t_s - settle_s, **kwargs)  # type: ignore[arg-type]
+        drone = cls(position, yaw_deg, t_s=t_s - settle_s, **kwargs)
         drone.body.floor_z = min(0.0, drone.body.floor_z)
         drone.body.on_floor = False
         p = drone.body.params
@@ -152,10 +154,12 @@ class CfDrone:
         return self._hl(COMMAND_STOP, bytes([0]))
 
     def plan_position(self, t_s: float) -> tuple[float, float, float] | None:
-        """The high-level plan's position at `t_s` (its goal once it has ended); None before any plan."""
+        """The high-level plan's position at `t_s` (its goal once it has ended); None before any plan (or where it
+        does not evaluate)."""
         if self.hl.trajectory is None:
             return None
-        return self.hl.trajectory.evaluate(t_s)[0]
+        evaluated = self.hl.trajectory.evaluate(t_s)
+        return None if evaluated is None else evaluated[0]
 
     # Simulation -------------------------------------------------------------------------------------------------
 

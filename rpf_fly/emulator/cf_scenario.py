@@ -100,16 +100,16 @@ class Scenario:
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> Scenario:
-        start = tuple(float(v) for v in data["start"])
-        setpoints = [tuple(float(v) for v in row) for row in data.get("setpoints") or []]
+        x, y, z = (float(v) for v in data["start"])
+        setpoints = [_setpoint_row(row) for row in data.get("setpoints") or []]
         commands = [list(row) for row in data.get("commands") or []]
         if bool(setpoints) == bool(commands):
             raise ValueError(f"scenario {data.get('name')!r}: give either setpoints or commands")
         if setpoints and not data.get("stream_hz"):
             raise ValueError(f"scenario {data.get('name')!r}: setpoints need stream_hz")
         hold_at = data.get("hold_at")
-        return cls(str(data["name"]), start, float(data["duration_s"]),  # type: ignore[arg-type]
-                   float(data["stream_hz"]) if data.get("stream_hz") else None, setpoints,  # type: ignore[arg-type]
+        return cls(str(data["name"]), (x, y, z), float(data["duration_s"]),
+                   float(data["stream_hz"]) if data.get("stream_hz") else None, setpoints,
                    float(hold_at) if hold_at is not None else None, commands)
 
     @classmethod
@@ -127,7 +127,14 @@ def step_scenario(distance_m: float, *, name: str | None = None, height_m: float
                     [(0.0, distance_m, 0.0, height_m)])
 
 
-def _carrot_points(speed: float, move_s: float, stream_hz: float, height_m: float) -> list[tuple[float, ...]]:
+def _setpoint_row(row: Any) -> tuple[float, float, float, float]:
+    """A scenario file's setpoint ``[t, x, y, z]`` as numbers."""
+    t, x, y, z = (float(v) for v in row)
+    return t, x, y, z
+
+
+def _carrot_points(speed: float, move_s: float, stream_hz: float, height_m: float
+                   ) -> list[tuple[float, float, float, float]]:
     n = round(move_s * stream_hz)
     return [(round(k / stream_hz, 9), round(speed * k / stream_hz, 9), 0.0, height_m) for k in range(n + 1)]
 
@@ -136,7 +143,7 @@ def carrot_scenario(speed_m_s: float, *, name: str | None = None, move_s: float 
                     duration_s: float = 8.0, stream_hz: float = 10.0) -> Scenario:
     """A carrot from (0, 0, height) along x at `speed_m_s` for `move_s`, then still at speed x move_s."""
     return Scenario(name or f"carrot_{speed_m_s:g}", (0.0, 0.0, height_m), duration_s, stream_hz,
-                    _carrot_points(speed_m_s, move_s, stream_hz, height_m))  # type: ignore[arg-type]
+                    _carrot_points(speed_m_s, move_s, stream_hz, height_m))
 
 
 def hold_scenario(speed_m_s: float, *, name: str | None = None, hold_at: float = 3.0, height_m: float = 1.0,
@@ -144,7 +151,7 @@ def hold_scenario(speed_m_s: float, *, name: str | None = None, hold_at: float =
     """A carrot at `speed_m_s` whose stream becomes the drone's own position at `hold_at`."""
     points = _carrot_points(speed_m_s, hold_at, stream_hz, height_m)[:-1]
     return Scenario(name or f"hold_{speed_m_s:g}", (0.0, 0.0, height_m), duration_s, stream_hz,
-                    points, hold_at)  # type: ignore[arg-type]
+                    points, hold_at)
 
 
 def circle_scenario(radius_m: float, speed_m_s: float, *, name: str | None = None, laps: int = 2,

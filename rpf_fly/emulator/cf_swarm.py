@@ -16,6 +16,7 @@ from __future__ import annotations
 import math
 import struct
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -150,9 +151,9 @@ class CfSwarm:
 
     @classmethod
     def hovering(cls, positions: Sequence[Sequence[float]], *, t_s: float = 0.0, settle_s: float = 10.0,
-                 **kwargs: object) -> CfSwarm:
+                 **kwargs: Any) -> CfSwarm:
         """Drones that have hovered at `positions` for `settle_s` before `t_s` (`CfDrone.hovering`)."""
-        swarm = cls(positions, t_s=t_s - settle_s, **kwargs)  # type: ignore[arg-type]
+        swarm = cls(positions, t_s=t_s - settle_s, **kwargs)
         p = swarm.params
         swarm.floor_z = np.minimum(swarm.floor_z, 0.0)
         swarm.on_floor[:] = False
@@ -416,7 +417,7 @@ class CfSwarm:
     def _high_level(self) -> None:
         now = self.tick_count * TICK_S
         s = self.state
-        for i in np.flatnonzero(self.priority <= PRIORITY_HIGH_LEVEL):
+        for i in np.flatnonzero(self.priority <= PRIORITY_HIGH_LEVEL).tolist():
             hl = self.hl[i]
             sp = hl.get_setpoint(now, (float(s[0, i]), float(s[1, i]), float(s[2, i])),
                                  (float(s[3, i]), float(s[4, i]), float(s[5, i])), math.radians(float(s[8, i])))
@@ -481,7 +482,8 @@ class SwarmDrone:
 
     def plan_position(self, t_s: float) -> tuple[float, float, float] | None:
         trajectory = self.swarm.hl[self.i].trajectory
-        return None if trajectory is None else trajectory.evaluate(t_s)[0]
+        evaluated = trajectory.evaluate(t_s) if trajectory is not None else None
+        return None if evaluated is None else evaluated[0]
 
     @property
     def position(self) -> tuple[float, float, float]:

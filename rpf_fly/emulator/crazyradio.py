@@ -377,7 +377,8 @@ def plug(world: Any = None, dongles: int = 1, radio: str = "crazyradio_2") -> Pl
     plugged = Plugged(world, air, devices, backend, kind)
     with _lock:
         _real_getter = libusb_package.get_libusb1_backend
-        libusb_package.get_libusb1_backend = backend.getter
+        # replacing the package's cached getter by the emulated dongles' backend (restored by unplug())
+        libusb_package.get_libusb1_backend = backend.getter  # type: ignore[assignment]
         _plugged = plugged
     return plugged
 

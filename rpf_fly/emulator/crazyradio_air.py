@@ -43,8 +43,7 @@ from typing import TYPE_CHECKING, Any
 from .crazyradio_timing import DR_2M
 
 if TYPE_CHECKING:
-    from .fake_radio import RadioWorld
-    from .fake_world import DronePort
+    from .fake_radio import RadioPort, RadioWorld
 
 BROADCAST_ADDRESS = 0xFFE7E7E7E7
 """The address every Crazyflie's nRF51 also listens on and never acknowledges (crazyflie2-nrf-firmware ``esb.c``):
@@ -82,7 +81,7 @@ class CrazyflieRadio:
     """The nRF51 of one simulated Crazyflie: safelink state, its transmit queue and what it listens on.
     Thread-safe (two dongles may talk to one drone)."""
 
-    def __init__(self, address: int, port: DronePort, channel: int | None, waker: threading.Event) -> None:
+    def __init__(self, address: int, port: RadioPort, channel: int | None, waker: threading.Event) -> None:
         self.address = address
         self.port = port
         self._waker = waker

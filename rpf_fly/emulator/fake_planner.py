@@ -72,6 +72,11 @@ TRAJECTORY_TYPE_POLY4D = 0
 TRAJECTORY_TYPE_POLY4D_COMPRESSED = 1
 
 
+def _minus(a: Vec3, b: Vec3) -> Vec3:
+    """``a - b``, per axis."""
+    return a[0] - b[0], a[1] - b[1], a[2] - b[2]
+
+
 @dataclass(frozen=True)
 class TrajectoryDescription:
     """One defined trajectory (`struct trajectoryDescription`): where it lies in the trajectory memory."""
@@ -117,10 +122,11 @@ class Trajectory:
     def evaluate(self, now_s: float) -> tuple[Vec3, Vec3, float]:
         """Position (m), velocity (m/s) and yaw (rad) at `now_s`."""
         s, ds = self._shape(now_s)
-        pos = tuple(a + (b - a) * s for a, b in zip(self.start, self.end))
-        vel = tuple((b - a) * ds for a, b in zip(self.start, self.end))
+        (x0, y0, z0), (x1, y1, z1) = self.start, self.end
+        pos = (x0 + (x1 - x0) * s, y0 + (y1 - y0) * s, z0 + (z1 - z0) * s)
+        vel = ((x1 - x0) * ds, (y1 - y0) * ds, (z1 - z0) * ds)
         yaw = self.yaw_start + (self.yaw_end - self.yaw_start) * s
-        return pos, vel, yaw  # type: ignore[return-value]
+        return pos, vel, yaw
 
     def finished(self, now_s: float) -> bool:
         return now_s >= self.t0_s + self.duration_s
@@ -304,7 +310,7 @@ class HighLevelCommander:
             if relative:  # plan_start_trajectory: shift the start onto the last setpoint
                 start = trajectory.evaluate(now_s)
                 if start is not None:
-                    trajectory.shift = tuple(p - s for p, s in zip(self.pos, start[0]))  # type: ignore[assignment]
+                    trajectory.shift = _minus(self.pos, start[0])
                     if relative_yaw:
                         trajectory.shift_yaw = shortest_signed_angle_radians(normalize_radians(start[2]),
                                                                              normalize_radians(self.yaw))
@@ -317,8 +323,7 @@ class HighLevelCommander:
             compressed = CompressedTrajectory(self.trajectory_memory, description.offset, now_s)
             if relative:
                 start = compressed.evaluate(now_s)
-                shift = (math.nan,) * 3 if start is None else tuple(p - s for p, s in zip(self.pos, start[0]))
-                compressed.shift = shift  # type: ignore[assignment]
+                compressed.shift = (math.nan, math.nan, math.nan) if start is None else _minus(self.pos, start[0])
             self.trajectory = compressed
         else:
             return 0

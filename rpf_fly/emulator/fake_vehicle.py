@@ -233,10 +233,10 @@ class VehicleConfig:
             raise ValueError(f"dynamics must be 'first_order' or 'firmware', not {self.dynamics!r}")
         if self.positioning not in ("onboard", "extpos"):
             raise ValueError(f"positioning must be 'onboard' or 'extpos', not {self.positioning!r}")
-        if self.turbulence_m_s2 is None:
-            object.__setattr__(self, "turbulence_m_s2", TURBULENCE_M_S2)  # resolved here: a child process gets it
-        if not self.turbulence_m_s2 >= 0.0:
-            raise ValueError(f"turbulence_m_s2 must be >= 0, not {self.turbulence_m_s2}")
+        turbulence = TURBULENCE_M_S2 if self.turbulence_m_s2 is None else self.turbulence_m_s2
+        object.__setattr__(self, "turbulence_m_s2", turbulence)  # resolved here: a child process gets it
+        if not turbulence >= 0.0:
+            raise ValueError(f"turbulence_m_s2 must be >= 0, not {turbulence}")
 
 
 class Battery:

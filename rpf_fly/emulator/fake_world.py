@@ -20,6 +20,7 @@ import time
 from collections import deque
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 from rpf_fly.mission.model import Obstacle
 
@@ -87,11 +88,11 @@ class FakeDroneConfig:
     """Radio channel the drone listens on (None: any), so a URI with another channel gets no answer."""
 
     @classmethod
-    def at(cls, x: float, y: float, z: float = 0.0, **kwargs: object) -> FakeDroneConfig:
+    def at(cls, x: float, y: float, z: float = 0.0, **kwargs: Any) -> FakeDroneConfig:
         """Shorthand: a drone at (x, y, z) metres; keyword arguments go to `VehicleConfig` (yaw_deg, initial_vbat_v,
         auto_arm, positioning) or to this class (faults, rssi_dbm, channel)."""
         own = {k: kwargs.pop(k) for k in ("faults", "rssi_dbm", "channel") if k in kwargs}
-        return cls(vehicle=VehicleConfig(position=(x, y, z), **kwargs), **own)  # type: ignore[arg-type]
+        return cls(vehicle=VehicleConfig(position=(x, y, z), **kwargs), **own)
 
 
 def parse_address(address: int | str) -> int:
@@ -109,7 +110,7 @@ class FakeWorld:
 
     def __init__(
         self,
-        drones: Mapping[int | str, FakeDroneConfig],
+        drones: Mapping[int, FakeDroneConfig] | Mapping[str, FakeDroneConfig],
         *,
         step_s: float = 0.01,
         timing: RadioTiming | None = None,

@@ -137,7 +137,8 @@ class NatNetServer:
         self._rate_hz = float(rate_hz)
         self._y_up = axis == "y"
         self._app_name = app_name
-        self._app_version = tuple(app_version)
+        major, minor, build, revision = app_version
+        self._app_version = (major, minor, build, revision)
         self._clock_hz = int(clock_frequency_hz)
         self._camera_latency_s = float(camera_latency_s)
         self._extra_latency_s = extra_latency_s
@@ -316,6 +317,8 @@ class NatNetServer:
         for name in self._bodies or ():
             body_id = self._ids[name]
             sample = samples.get(name)
+            position: Sequence[float]
+            quaternion: Sequence[float]
             if sample is None:
                 position, quaternion, valid = (0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0), False
             else:
@@ -386,7 +389,7 @@ class NatNetServer:
     def _server_info_packet(self) -> bytes:
         info = ServerInfo(
             self._app_name,
-            self._app_version,  # type: ignore[arg-type]
+            self._app_version,
             (self._version[0], self._version[1], 0, 0),
             self._clock_hz,
             self.data_port,

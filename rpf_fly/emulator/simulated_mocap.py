@@ -42,7 +42,7 @@ def _quat_multiply(a: Sequence[float], b: Sequence[float]) -> tuple[float, float
     )
 
 
-def _rotation_quat(rotation_vector: Sequence[float]) -> tuple[float, float, float, float]:
+def _rotation_quat(rotation_vector: Sequence[float] | np.ndarray) -> tuple[float, float, float, float]:
     """Quaternion (x, y, z, w) of a rotation vector (axis * angle, radians)."""
     rx, ry, rz = rotation_vector
     angle = math.sqrt(rx * rx + ry * ry + rz * rz)
@@ -183,15 +183,16 @@ class SimulatedMocap:
 
     def _noisy(self, name: str, body_id: int, position: Sequence[float], quaternion: Sequence[float]) -> RigidBodyPose:
         x, y, z = (float(v) for v in position)
-        q = tuple(float(v) for v in quaternion)
+        qx, qy, qz, qw = (float(v) for v in quaternion)
+        q = (qx, qy, qz, qw)
         if self._noise_m > 0.0:
             dx, dy, dz = self._rng.normal(0.0, self._noise_m, 3)
             x, y, z = x + dx, y + dy, z + dz
         if self._noise_rad > 0.0:
             q = _quat_multiply(_rotation_quat(self._rng.normal(0.0, self._noise_rad, 3)), q)
             norm = math.sqrt(sum(c * c for c in q))
-            q = tuple(c / norm for c in q)
-        return RigidBodyPose(name, body_id, (x, y, z), q, True, 0.0)  # type: ignore[arg-type]
+            q = (q[0] / norm, q[1] / norm, q[2] / norm, q[3] / norm)
+        return RigidBodyPose(name, body_id, (x, y, z), q, True, 0.0)
 
     def _pop_ready(self, now: float) -> MocapFrame | None:
         """Deliver the newest queued frame whose latency has elapsed; older ready ones are superseded."""

@@ -60,6 +60,7 @@ from rpf_fly.mission.model import Mission
 from rpf_fly.mocap.frame import MocapSource
 
 if TYPE_CHECKING:
+    from rpf_fly.emulator.natnet_server import NatNetServer
     from rpf_fly.flight.lab import LabInfo
 
 
@@ -268,10 +269,20 @@ class DryRun:
         self.mocap_noise = mission_mocap_noise(mission) if mocap_noise is None else mocap_noise
         self.world: Any = None  # a FakeWorld, or the WorldProcess speaking to one (same hook names)
         self._bodies: Any = None
-        self._cache = tempfile.TemporaryDirectory(prefix="rpf-fly-toc-") if cache_dir is None else None
-        self.cache_dir = Path(self._cache.name) if self._cache is not None else Path(cache_dir)  # type: ignore[arg-type]
-        self.server = None
+        self._cache: tempfile.TemporaryDirectory[str] | None = None
+        if cache_dir is None:
+            self._cache = tempfile.TemporaryDirectory(prefix="rpf-fly-toc-")
+            self.cache_dir = Path(self._cache.name)
+        else:
+            self.cache_dir = Path(cache_dir)
+        self.server: NatNetServer | None = None
         self.mocap: MocapSource | None = None
+
+    def entered_mocap(self) -> MocapSource:
+        """The rig's mocap source, for a flight on it; the rig must be entered (``with DryRun(...)``)."""
+        if self.mocap is None:
+            raise RuntimeError("the dry run has no mocap: enter it first (with DryRun(...))")
+        return self.mocap
 
     # ------------------------------------------------------------------------------------------- life
 
@@ -335,6 +346,8 @@ class DryRun:
             from rpf_fly.mocap.natnet_client import NatNetClient
 
             server = "127.0.0.1" if self.host == "0.0.0.0" else self.host
+            if command_port is None:  # served (a natnet dry run) gives it, or stopped above
+                raise RuntimeError("dry run: no NatNet emulator serves the mocap")
             client = NatNetClient(
                 server, multicast=False, local_ip=client_ip(server), command_port=command_port,
                 data_port=None, up_axis=up,
@@ -343,6 +356,8 @@ class DryRun:
             if not client.wait_for_server(5.0):
                 raise RuntimeError("dry run: the NatNet emulator did not answer within 5 s")
         elif self.mocap_kind == "motioncapture":
+            if command_port is None:  # served (a motioncapture dry run) gives it, or stopped above
+                raise RuntimeError("dry run: no NatNet emulator serves the mocap")
             self.mocap = emulator_motioncapture_source("127.0.0.1" if self.host == "0.0.0.0" else self.host,
                                                        int(command_port), up, list(self.bodies.values()))
         else:

@@ -135,7 +135,8 @@ class LabClient(WorldCalls):
         deadline = time.monotonic() + timeout_s
         while True:
             try:
-                self._conn: Any = Client(tuple(info.control), authkey=bytes.fromhex(info.authkey))
+                host, port = info.control  # a JSON list in the lab's file
+                self._conn: Any = Client((host, port), authkey=bytes.fromhex(info.authkey))
                 break
             except OSError as err:
                 if time.monotonic() > deadline:

@@ -263,7 +263,11 @@ class FlightLoop(LoopPreflight, LoopSwarm, LoopTakeoff, LoopIteration, LoopLandi
                 self.emergency_stop("second Ctrl-C: emergency stop, motors off")
 
         signal.signal(signal.SIGINT, on_interrupt)
-        return lambda: signal.signal(signal.SIGINT, signal.default_int_handler)
+
+        def restore() -> None:
+            signal.signal(signal.SIGINT, signal.default_int_handler)
+
+        return restore
 
     def _set_phase(self, phase: SwarmPhase) -> None:
         self.phase = phase
@@ -348,7 +352,7 @@ class FlightLoop(LoopPreflight, LoopSwarm, LoopTakeoff, LoopIteration, LoopLandi
 
     def snapshot(self) -> list[dict[str, object]]:
         """Per-drone status for the console: phase, position, goal distance, battery, link quality."""
-        rows = []
+        rows: list[dict[str, object]] = []
         for name, agent in self.agents.items():
             pose = self.tracker.get(name)
             state = self._states.get(name)

@@ -109,12 +109,14 @@ class LoopSwarm:
         (another loop's arming refusal included: a drone landing on one would crash), as a single process keeps
         them down beside its own refusals (:meth:`_arm`). Its abort, a stop or the timeout: every armed drone is
         disarmed and stays down. Returns the drones that take off."""
+        swarm = self.swarm
+        assert swarm is not None  # the take-off calls this only with a SwarmLink
         refused = sorted(n for n, a in self.agents.items() if a.phase == DronePhase.FAILED)
-        self.swarm.armed(cast("FlightLoop", self), refused)  # type: ignore[union-attr]
+        swarm.armed(cast("FlightLoop", self), refused)
         deadline = self.clock() + GO_TIMEOUT_S
         why = "the swarm does not take off"
         while not self._stop.is_set():
-            grounded = self.swarm.takeoff()  # type: ignore[union-attr]
+            grounded = swarm.takeoff()
             if grounded is not None:
                 others = set(grounded) - set(self.agents)
                 if others:
@@ -124,7 +126,7 @@ class LoopSwarm:
                     self.events.emit(ERROR, "takeoff", f"{', '.join(kept)} stay on the ground beside the swarm's "
                                      f"grounded drones ({', '.join(sorted(others))}); the others fly")
                 return [a for a in armed if a.phase == DronePhase.READY]
-            if self.swarm.verdict() == "abort":  # type: ignore[union-attr]
+            if swarm.verdict() == "abort":
                 break
             if self.clock() > deadline:
                 why = f"no take-off from the coordinator within {GO_TIMEOUT_S:.0f} s"

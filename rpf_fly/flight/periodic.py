@@ -6,6 +6,9 @@ from __future__ import annotations
 
 import threading
 import time
+from typing import TypeVar
+
+_Feed = TypeVar("_Feed", bound="PeriodicFeed")
 
 
 class PeriodicFeed:
@@ -19,7 +22,7 @@ class PeriodicFeed:
         self.cpu_s = 0.0
         """CPU time of the feed's thread, set when it ends."""
 
-    def start(self) -> PeriodicFeed:
+    def start(self: _Feed) -> _Feed:
         self._thread.start()
         return self
 

@@ -295,14 +295,16 @@ class PoseTracker:
                 if previous is not None:
                     previous.valid = False
                 continue
-            position = tuple(body.position)
-            quaternion = tuple(body.quaternion)
-            trusted = self._trust_orientation(name, quaternion, t, frame.capture_time_s,  # type: ignore[arg-type]
+            px, py, pz = body.position
+            qx, qy, qz, qw = body.quaternion
+            position = (px, py, pz)
+            quaternion = (qx, qy, qz, qw)
+            trusted = self._trust_orientation(name, quaternion, t, frame.capture_time_s,
                                               previous.quaternion if previous is not None else None)
             if not trusted and previous is not None:
                 quaternion = previous.quaternion
             jumped = name in self.glitching or name in reacquired
-            if not self._accept(name, position, t, frame.capture_time_s, previous):  # type: ignore[arg-type]
+            if not self._accept(name, position, t, frame.capture_time_s, previous):
                 if previous is not None:
                     previous.orientation_trusted = trusted
                 continue
@@ -318,7 +320,7 @@ class PoseTracker:
                 else:
                     velocity = previous.velocity
             self.poses[name] = TrackedPose(
-                position, quaternion, velocity, t, frame.frame_number,  # type: ignore[arg-type]
+                position, quaternion, velocity, t, frame.frame_number,
                 orientation_trusted=trusted,
             )
 

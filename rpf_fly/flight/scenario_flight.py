@@ -262,7 +262,8 @@ class ScenarioFlight:
                 while index + 1 < len(s.setpoints) and s.setpoints[index + 1][0] <= t_send + 1e-9:
                     index += 1
                 if index >= 0:
-                    sp = tuple(s.setpoints[index][1:4])  # type: ignore[assignment]
+                    row = s.setpoints[index]  # (t, x, y, z)
+                    sp = (row[1], row[2], row[3])
             self.backend.send_position_setpoint(self.name, *sp, 0.0)
             if self.log is not None:
                 self.log.setpoint(self.name, time.time_ns(), sp)
@@ -407,6 +408,7 @@ def run_scenario(scenario: Scenario, mission: Mission, name: str, *, dry_run: bo
     rig: Any = None
     log = None
     feed = None
+    truth: Callable[[str], tuple[float, float, float]] | None = None  # a simulated drone's true position
     try:
         if dry_run or lab is not None:
             from rpf_fly.flight.dry_run import DryRun
@@ -424,11 +426,13 @@ def run_scenario(scenario: Scenario, mission: Mission, name: str, *, dry_run: bo
             address = rig.addresses[name]
             world = rig.world
 
-            def truth(_: str) -> tuple[float, float, float]:
-                return tuple(world.true_poses()[address][0])
+            def true_position(_: str) -> tuple[float, float, float]:
+                x, y, z = world.true_poses()[address][0]
+                return x, y, z
+
+            truth = true_position
         else:
             backend, mocap, uri = CflibBackend.for_mission(one, DEFAULT_TOC_CACHE), mocap_source(one), drone.uri
-            truth = None  # type: ignore[assignment]
         if log_path is not None:
             meta = mission_metadata(one, 0, source="scenario")
             meta["scenario"] = scenario.name

@@ -35,6 +35,7 @@ def resolve_mocap_server(mission: Mission) -> str:
     host the library takes as an IPv4 literal only (``optitrack``) are resolved the same way; the others' hosts
     are the library's to resolve (Vicon and VRPN take ``host:port``), and the host itself is returned."""
     m = mission.mocap
+    port: int | None
     host, port, family, field, what = m.server, m.command_port, 0, "mocap.server", "the PC running Motive"
     if m.kind == "motioncapture":
         from rpf_fly.mocap.motioncapture_options import TYPES
@@ -153,7 +154,7 @@ def run_flight(
     if live is not None and not log_path:
         raise ValueError("the live view serves what the flight log writes: give a log path")
     if rig is not None:
-        backend, source, uris = CflibBackend.for_mission(mission, rig.cache_dir), rig.mocap, rig.uris
+        backend, source, uris = CflibBackend.for_mission(mission, rig.cache_dir), rig.entered_mocap(), rig.uris
     else:
         backend, source, uris = CflibBackend.for_mission(mission, DEFAULT_TOC_CACHE), mocap_source(mission), None
     recorder = None

@@ -104,7 +104,8 @@ def _pose_at(history: deque[tuple[float, tuple[float, float, float]]],
             if span <= 0.0:
                 return after[1]
             w = (stamp_s - before[0]) / span
-            return tuple(b + w * (c - b) for b, c in zip(before[1], after[1]))  # type: ignore[return-value]
+            (bx, by, bz), (cx, cy, cz) = before[1], after[1]
+            return bx + w * (cx - bx), by + w * (cy - by), bz + w * (cz - bz)
         before = after
     return history[-1][1]
 

@@ -228,7 +228,9 @@ class TrackingCheck:
         if made is None or made < a.phase_since_s + PLAN_TARGET_AFTER_S or (held is not None and held[3] == made):
             return None
         target = complex(state.target_m[0], state.target_m[1])
-        agree = held is not None and abs(target - held[1]) <= PLAN_TARGET_AGREE_M
-        self._plan_targets[a.name] = (a.phase_since_s, held[1] if agree else target, agree, made)  # type: ignore[index]
-        return held[1] if agree else None  # type: ignore[index]
+        if held is not None and abs(target - held[1]) <= PLAN_TARGET_AGREE_M:
+            self._plan_targets[a.name] = (a.phase_since_s, held[1], True, made)
+            return held[1]
+        self._plan_targets[a.name] = (a.phase_since_s, target, False, made)
+        return None
 

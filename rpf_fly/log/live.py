@@ -222,9 +222,9 @@ class LiveView:
 def _listener(view: LiveView) -> Any:
     """The server's callbacks, on the SDK's threads: only subscriptions matter here (latched topics). A subclass of
     the SDK's ``ServerListener``, whose other callbacks do nothing (they need capabilities this server lacks)."""
-    base = load_sdk().websocket.ServerListener
+    base: Any = load_sdk().websocket.ServerListener  # the SDK's class, loaded when the live view starts
 
-    class Listener(base):  # type: ignore[misc, valid-type]
+    class Listener(base):
         def on_subscribe(self, client: Any, channel: Any) -> None:
             view._subscribed(channel.topic)  # noqa: SLF001
 

@@ -63,7 +63,7 @@ def obstacle_set_of(scenario: dict[str, Any]):
     from rpf_fly.mission.model import BoxObstacle, CircleObstacle
     from rpf_fly.sim.scenario import obstacle_set
 
-    shapes = []
+    shapes: list[CircleObstacle | BoxObstacle] = []
     for o in scenario["obstacles"]:
         if o["shape"] == "circle":
             shapes.append(CircleObstacle(tuple(o["center"]), o["radius"]))

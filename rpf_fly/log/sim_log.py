@@ -114,12 +114,12 @@ def write_sim_log(path: str | Path, mission: Any, scenario: Any, rollout: Rollou
                 log.status(name, t, state="arrived" if arrived else ("planning" if not final else "hover"),
                            outcome=rollout.outcomes[i].value if final else None)
             log.tf(t, {name: (xyz[i], ident) for i, name in enumerate(names)})
-            for i in np.flatnonzero(arrival == k):
+            for i in np.flatnonzero(arrival == k).tolist():
                 log.event(t, 2, f"{names[i]} reached its goal at {k * dt:.1f} s", name="sim")
             for i, j in zip(*np.nonzero(np.triu(pair_entries[k], 1))):
                 log.event(t, 4, f"collision {names[i]}-{names[j]}: centre distance {separation[k, i, j]:.3f} m "
                                 f"< 2r = {2 * r:g} m", name="sim")
-            for i in np.flatnonzero(obstacle_entries[k]):
+            for i in np.flatnonzero(obstacle_entries[k]).tolist():
                 log.event(t, 4, f"collision {names[i]} with an obstacle: clearance "
                                 f"{surface[k, i]:.3f} m < r = {r:g} m",
                           name="sim")

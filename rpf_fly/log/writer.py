@@ -39,7 +39,7 @@ import threading
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO
 
 from mcap.writer import CompressionType, Writer
 
@@ -181,9 +181,13 @@ class FlightLog:
         self._raw: dict[str, tuple[str, Any]] = {}
         self._channels: dict[str, int] = {}
         self._schema_ids: dict[str, int] = {}
-        self._file: Any = _NoFile() if out is not None else open(self.path, "wb")
+        self._file: BinaryIO | _NoFile = _NoFile()
         try:
-            self._writer: Any = _OutWriter(out) if out is not None else Writer(self._file, chunk_size=chunk_size, compression=CompressionType.ZSTD)
+            if out is not None:
+                self._writer: Any = _OutWriter(out)
+            else:
+                self._file = file = open(self.path, "wb")
+                self._writer = Writer(file, chunk_size=chunk_size, compression=CompressionType.ZSTD)
             self._writer.start(profile="", library=f"rpf_fly {__version__}")
             self._writer.add_metadata("mission", _strings(mission_meta))
             self._writer.add_metadata("scenario", _strings(scenario_meta))
@@ -365,7 +369,7 @@ class FlightLog:
             self._pushed += n
             self._queue.append(entry)
 
-    def _put(self, topic: tuple[str, Any], t_ns: int, build: Callable[..., dict], args: tuple,
+    def _put(self, topic: tuple[str, Any], t_ns: int, build: Callable[..., bytes | dict], args: tuple,
              priority: bool = False) -> None:
         sequence = next(topic[1])
         if self._closed:
@@ -378,7 +382,7 @@ class FlightLog:
         self._enqueue(1, (topic[0], sequence, t_ns, log_time, build, args))
 
     def _put_batch(self, table: dict[str, tuple[str, Any]], pattern: str, items: list[tuple[str, int, Any]],
-                   build: Callable[[int, Any], bytes | dict], log_at_publish: bool = False) -> None:
+                   build: Callable[..., bytes | dict], log_at_publish: bool = False) -> None:
         """Queue one message per ``(drone, t_ns, args)`` as one entry; ``build(t_ns, *args)`` runs on the writer.
         ``log_at_publish``: each message's log time is its ``t_ns`` instead of the clock at the call."""
         if not items:
@@ -418,12 +422,12 @@ class FlightLog:
             self._fail(err)
             return
         if self._sink is not None:
-            self._tee(topic, int(log_time), data)
+            self._tee(self._sink, topic, int(log_time), data)
 
-    def _tee(self, topic: str, log_time: int, data: bytes) -> None:
+    def _tee(self, sink: Sink, topic: str, log_time: int, data: bytes) -> None:
         """Hand one written message to the sink; its failure loses the message for the sink only."""
         try:
-            self._sink(topic, log_time, data)  # type: ignore[misc]
+            sink(topic, log_time, data)
         except Exception as err:  # noqa: BLE001 - the live view must never stop the log
             self.sink_failed += 1
             if self.sink_failed == 1:
@@ -479,7 +483,7 @@ class FlightLog:
                         self._fail(err)
                         break
                     if sink is not None:
-                        self._tee(topic, at, data)
+                        self._tee(sink, topic, at, data)
             with self._push_lock:  # logging stopped after an error: discard, never grow
                 self._popped = self._pushed
                 queue.clear()

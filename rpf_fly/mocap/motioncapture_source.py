@@ -50,10 +50,8 @@ import time
 from collections.abc import Mapping, Sequence
 from types import TracebackType
 
-try:
+if sys.platform != "win32":  # Windows has no fcntl
     import fcntl
-except ImportError:  # Windows
-    fcntl = None  # type: ignore[assignment]
 
 from rpf_fly.mocap.frame import MocapFrame, MocapStats, RigidBodyPose
 from rpf_fly.mocap.motioncapture_options import (
@@ -192,7 +190,7 @@ class MotioncaptureSource:
         )
         assert self._process.stdin is not None and self._process.stdout is not None
         self._fd = self._process.stdout.fileno()
-        if fcntl is not None and hasattr(fcntl, "F_SETPIPE_SZ"):  # Linux
+        if sys.platform != "win32" and hasattr(fcntl, "F_SETPIPE_SZ"):  # Linux
             try:
                 fcntl.fcntl(self._fd, fcntl.F_SETPIPE_SZ, _PIPE_SIZE)
             except OSError:

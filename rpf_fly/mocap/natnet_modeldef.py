@@ -60,7 +60,8 @@ def _decode_rb_description(buf: bytes, off: int, end: int, layout: _Layout) -> t
     off += _RB_DESC_HEAD.size
     rotation = (0.0, 0.0, 0.0, 1.0)
     if layout.rb_rotation_offset:
-        rotation = _read(_QUAT, buf, off, end, "rigid body rotation offset", _MODELDEF)
+        qx, qy, qz, qw = _read(_QUAT, buf, off, end, "rigid body rotation offset", _MODELDEF)
+        rotation = (qx, qy, qz, qw)
         off += 16
     n = _count(buf, off, end, 16, f"rigid body {name!r} markers", _MODELDEF)
     off += 4
@@ -73,7 +74,7 @@ def _decode_rb_description(buf: bytes, off: int, end: int, layout: _Layout) -> t
         for i in range(n):
             names[i], off = _cstr(buf, off, end, "rigid body marker name", _MODELDEF)
     markers = tuple(RigidBodyMarker(o, lab, nm) for o, lab, nm in zip(offsets, labels, names))
-    return RigidBodyDescription(name, body_id, parent_id, (ox, oy, oz), tuple(rotation), markers), off
+    return RigidBodyDescription(name, body_id, parent_id, (ox, oy, oz), rotation, markers), off
 
 
 def _decode_marker_set_description(buf: bytes, off: int, end: int) -> tuple[MarkerSetDescription, int]:

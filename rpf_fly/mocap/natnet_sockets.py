@@ -17,7 +17,7 @@ RECEIVE_BUFFER = 4 << 20
 
 def resolve_ipv4(host: str) -> str:
     """The IPv4 address of ``host`` (NatNet is IPv4 only)."""
-    return socket.getaddrinfo(host, None, socket.AF_INET, socket.SOCK_DGRAM)[0][4][0]
+    return str(socket.getaddrinfo(host, None, socket.AF_INET, socket.SOCK_DGRAM)[0][4][0])  # AF_INET: (host, port)
 
 
 def open_command_socket(local_ip: str) -> socket.socket:

@@ -8,7 +8,7 @@ so the bench can compare them one by one. Units: metres, metres per second, radi
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from typing import Literal
+from typing import Any, Literal
 
 RPF3_TUNING: dict[str, float | bool] = {
     "guided_influence_range": 0.2,
@@ -117,12 +117,12 @@ class PlannerConfig:
     ``r + margin`` that the drone can see, instead of straight at the goal (:mod:`rpf_fly.planning.guidance`)."""
 
     @staticmethod
-    def robust(**overrides: object) -> PlannerConfig:
+    def robust(**overrides: Any) -> PlannerConfig:
         """The default preset (docs/algorithm.md, *Presets*): the paper's method with its gaps closed."""
-        return replace(PlannerConfig(), **overrides)  # type: ignore[arg-type]
+        return replace(PlannerConfig(), **overrides)
 
     @staticmethod
-    def paper(**overrides: object) -> PlannerConfig:
+    def paper(**overrides: Any) -> PlannerConfig:
         """The formulas as printed in the paper (docs/algorithm.md, *Forces*, *Heading*), kept for reproduction."""
         base = PlannerConfig(
             soft_keeps_inter_robot=False,
@@ -133,7 +133,7 @@ class PlannerConfig:
             static_neighbours_as_obstacles=False,
             capture_radius=0.0,
         )
-        return replace(base, **overrides)  # type: ignore[arg-type]
+        return replace(base, **overrides)
 
     @staticmethod
     def preset(name: str, **overrides: object) -> PlannerConfig:

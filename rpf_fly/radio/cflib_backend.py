@@ -6,9 +6,9 @@ What it does per drone (cflib 0.1.34, firmware protocol 12):
   thread with a deadline (``cf.open_link`` and cflib's connected / fully-connected /
   connection-failed / connection-lost callbacks; not `SyncCrazyflie.open_link`, which waits forever when a link
   drops during the TOC download), so one drone's failure neither blocks nor fails the others;
-- configure: first notify-setpoint-stop (below, "Latched priority"), then `stabilizer.estimator` = 2 (Kalman), `commander.enHighLevel` = 1 (when the firmware still has it),
-  `locSrv.extQuatStdDev` when streaming poses, `locSrv.extPosStdDev` if given; each write is confirmed by the
-  firmware's echo;
+- configure: first notify-setpoint-stop (below, "Latched priority"), then `stabilizer.estimator` = 2 (Kalman),
+  `commander.enHighLevel` = 1 (when the firmware still has it), `locSrv.extQuatStdDev` when streaming poses,
+  `locSrv.extPosStdDev` if given; each write is confirmed by the firmware's echo;
 - telemetry: one `LogConfig` at 10 Hz with `pm.vbat`, `pm.state`, `supervisor.info`, `stateEstimateZ.x/y/z` (mm),
   `stateEstimate.yaw` (degrees) and the controller's target `ctrltargetZ.x/y/z` (mm); link quality and latency from
   `cf.link_statistics`;
@@ -88,7 +88,7 @@ import time
 from collections.abc import Callable, Iterable, Mapping
 from functools import partial
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 from cflib.crazyflie.swarm import Swarm
 from cflib.crtp.crtpstack import CRTPPacket
@@ -108,6 +108,12 @@ from .backend import (
 
 if TYPE_CHECKING:
     from rpf_fly.mission.model import Mission
+
+
+class _Command(Protocol):
+    """One drone's command as the backend queues it: run on a sender thread with the drone's cflib Crazyflie."""
+
+    def __call__(self, cf: Any, drone: CflibDrone) -> None: ...
 
 logger = logging.getLogger(__name__)
 
@@ -291,7 +297,7 @@ class CflibBackend(CflibConnection, CflibTelemetry):
                 return None
             return drone.scf.cf
 
-    def _queue(self, name: str, action: Callable[[Any, CflibDrone], None], kind: str) -> bool:
+    def _queue(self, name: str, action: _Command, kind: str) -> bool:
         """Queue one command in the drone's outbox (``kind``: ``setpoint``, ``extpos``, ``keepalive``, ``command``
         or ``ends_stream``); False when its link is not up (KeyError for an unknown name)."""
         drone = self._drones[name]
@@ -307,8 +313,9 @@ class CflibBackend(CflibConnection, CflibTelemetry):
             return outbox.keepalive(bound)
         return outbox.command(bound, ends_stream=kind == "ends_stream")
 
-    def _send(self, drone: CflibDrone, action: Action) -> None:
-        """A pool thread: hand one queued command to cflib (dropped when the link went down since)."""
+    def _send(self, drone: CflibDrone, action: Callable[..., None]) -> None:
+        """A pool thread: hand one queued command to cflib (dropped when the link went down since). ``action``: a
+        `_Command` bound to its drone, given the Crazyflie as ``cf``."""
         cf = self._live_cf(drone.name)
         if cf is None:
             return

@@ -176,7 +176,9 @@ class CflibConnection:
             raise RuntimeError(f"configuration failed: {exc}") from exc
 
     def _configure(self, drone: CflibDrone, deadline: float) -> None:
-        cf = drone.scf.cf  # type: ignore[union-attr]
+        scf = drone.scf
+        assert scf is not None  # configured once its link opened
+        cf = scf.cf
         # before anything else: release a setpoint priority an earlier connection left latched (module docstring)
         cf.commander.send_notify_setpoint_stop()
         toc = cf.param.toc

@@ -50,7 +50,7 @@ def mac(key: bytes, payload: bytes) -> bytes:
 
 def signed_by(key: bytes, payload: bytes, attachment: bytes | None) -> bool:
     """Whether ``attachment`` is ``payload``'s signature under ``key`` (compared in constant time)."""
-    return bool(attachment) and hmac.compare_digest(mac(key, payload), bytes(attachment))  # type: ignore[arg-type]
+    return attachment is not None and len(attachment) > 0 and hmac.compare_digest(mac(key, payload), bytes(attachment))
 
 
 def sign(secret: str, flight: str, command: str, seq: int, reason: str = "",

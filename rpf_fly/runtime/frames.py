@@ -36,6 +36,16 @@ def _floats(value: Any, n: int, what: str) -> tuple[float, ...]:
     return out
 
 
+def _vec3(value: Any, what: str) -> tuple[float, float, float]:
+    x, y, z = _floats(value, 3, what)
+    return x, y, z
+
+
+def _quat(value: Any, what: str) -> tuple[float, float, float, float]:
+    x, y, z, w = _floats(value, 4, what)
+    return x, y, z, w
+
+
 def _int(value: Any, what: str) -> int:
     if not isinstance(value, int) or isinstance(value, bool):
         raise ValueError(f"{what}: expected an integer")
@@ -108,8 +118,8 @@ class FrameVerifier:
                 if not isinstance(name, str) or not name:
                     raise ValueError("body name: expected text")
                 bodies[name] = RigidBodyPose(
-                    name, _int(item["id"], "id"), _floats(item["position"], 3, "position"),  # type: ignore[arg-type]
-                    _floats(item["quaternion"], 4, "quaternion"), bool(item["valid"]),  # type: ignore[arg-type]
+                    name, _int(item["id"], "id"), _vec3(item["position"], "position"),
+                    _quat(item["quaternion"], "quaternion"), bool(item["valid"]),
                     _number(item["marker_error"], "marker_error"))
             frame = MocapFrame(_int(body["frame_number"], "frame_number"),
                                _number(body["capture_time_s"], "capture_time_s"), receive_time_s,

@@ -65,12 +65,13 @@ class RelayedMocap:
     def _verify(self, sample: Any, received_s: float, received_ns: int) -> None:
         try:
             attachment = sample.attachment.to_bytes() if sample.attachment is not None else None
-            verdict = self._verifier.verify(sample.payload.to_bytes(), attachment, received_s)
+            checked = self._verifier.verify(sample.payload.to_bytes(), attachment, received_s)
         except Exception as err:  # noqa: BLE001 - whatever arrives, never into Zenoh's thread
             verdict = None
             why, malformed = f"malformed mocap frame ({err})", True
         else:
-            why, malformed = verdict.why, verdict.malformed
+            verdict = checked
+            why, malformed = checked.why, checked.malformed
         with self._cond:
             stats = self._stats
             stats.packets += 1

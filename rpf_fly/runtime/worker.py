@@ -313,7 +313,11 @@ class WorkerRun:
             for sink in self.event_sinks:
                 loop.events.subscribe(sink)
             if isinstance(source, RelayedMocap):  # refused frames are warnings in the flight log
-                source.warn = lambda message: loop.events.emit(WARNING, "mocap_relay", message)
+
+                def warn(message: str) -> None:
+                    loop.events.emit(WARNING, "mocap_relay", message)
+
+                source.warn = warn
             info("connecting")
             bus.token(name)
             link.attach(loop)

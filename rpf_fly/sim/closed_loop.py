@@ -43,7 +43,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
@@ -54,6 +54,7 @@ from rpf_fly.sim.rollout import STALL_WINDOW_S, DroneOutcome, Rollout, SimParams
 from rpf_fly.sim.scenario import Scenario
 
 if TYPE_CHECKING:
+    from rpf_fly.planning.factory import AnyPlanner
     from rpf_fly.sim.evaluate import Run
 
 STEP_S = 0.01
@@ -100,7 +101,7 @@ class FirmwareRollout(Rollout):
 class _Scene:
     """One scene's state in a shared swarm: its columns, agents, planner and records."""
 
-    def __init__(self, scenario: Scenario, planner: object, params: SimParams, firmware: FirmwareParams,
+    def __init__(self, scenario: Scenario, planner: AnyPlanner, params: SimParams, firmware: FirmwareParams,
                  settings: PlannerSettings, first_column: int):
         from rpf_fly.flight.agent import DroneAgent
 
@@ -110,13 +111,13 @@ class _Scene:
         self.sensing_range = settings.sensing_range
         n = scenario.n_drones
         self.columns = np.arange(first_column, first_column + n)
-        x, y = tuple(scenario.arena_x), tuple(scenario.arena_y)
+        (x0, x1), (y0, y1) = scenario.arena_x, scenario.arena_y
         z = firmware.arena_z
-        arena = Arena(x, y) if z is None else Arena(x, y, tuple(z))  # type: ignore[arg-type]
+        arena = Arena((x0, x1), (y0, y1)) if z is None else Arena((x0, x1), (y0, y1), z)
         # The flight's agents (its carrot, geofence and tracking lag); the planning budget is the flight's worry.
         self.agents = [
             DroneAgent(Drone(name, "sim://closed-loop", name, (s.real, s.imag), (g.real, g.imag)),
-                       planner,  # type: ignore[arg-type]
+                       planner,
                        height=firmware.height_m, speed=params.speed, dt=params.dt, arena=arena,
                        budget_s=float("inf"), body_radius_m=settings.safety_radius)
             for name, s, g in zip(scenario.names, scenario.starts, scenario.goals)
@@ -166,7 +167,7 @@ class _Scene:
             for agent, m in zip(self.agents, measured):
                 agent.begin_planning(complex(m), 0.0)
             self.planning = True
-        step = self.planner.step(self.view(plan_from))  # type: ignore[attr-defined]
+        step = self.planner.step(self.view(plan_from))
         direction = np.broadcast_to(np.asarray(step.direction, dtype=complex), (n,))
         setpoints = np.empty(n, dtype=complex)
         for i, agent in enumerate(self.agents):
@@ -206,7 +207,7 @@ class _Scene:
 
 def firmware_rollouts(
     scenarios: Sequence[Scenario],
-    planners: Sequence[object],
+    planners: Sequence[AnyPlanner],
     params: SimParams,
     settings: Sequence[PlannerSettings],
     firmware: FirmwareParams = FirmwareParams(),
@@ -277,10 +278,10 @@ def firmware_metrics(
     ticks (as the kinematic rollout is scored); collisions, separation, clearance and margin breaches from the
     100 Hz truth (a pass between two ticks counts); success needs both."""
     sc, p = rollout.scenario, rollout.params
-    common = dict(goal_tolerance=p.goal_tolerance, safety_radius=settings.safety_radius, obstacles=sc.obstacles,
+    common: dict[str, Any] = dict(goal_tolerance=p.goal_tolerance, safety_radius=settings.safety_radius, obstacles=sc.obstacles,
                   names=sc.names, mission=label, planner=settings.kind, seed=seed, margin=settings.margin_m)
-    ticks = compute_metrics(rollout.positions, sc.goals, p.dt, **common)  # type: ignore[arg-type]
-    fine = compute_metrics(rollout.truth, sc.goals, rollout.truth_dt, **common)  # type: ignore[arg-type]
+    ticks = compute_metrics(rollout.positions, sc.goals, p.dt, **common)
+    fine = compute_metrics(rollout.truth, sc.goals, rollout.truth_dt, **common)
     collisions = fine.collisions_drone_drone + fine.collisions_drone_obstacle
     per_drone = tuple(replace(row, collided=f.collided) for row, f in zip(ticks.per_drone, fine.per_drone))
     return replace(
@@ -304,7 +305,7 @@ def run_firmware(
     labels: Sequence[str],
     firmware: FirmwareParams = FirmwareParams(),
     keep: bool = False,
-    planners: Sequence[object] | None = None,
+    planners: Sequence[AnyPlanner] | None = None,
 ) -> list[Run]:
     """:func:`rpf_fly.sim.evaluate.run_scenario` on the firmware model, for many scenarios flown together: each
     with its planner settings (one for all, or one per scenario) and its own planner (``planners``, else made from

@@ -9,6 +9,7 @@ from __future__ import annotations
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -86,9 +87,9 @@ def evaluate_arena_a(
     return runs
 
 
-def planner_settings(kind: str, policy: str | Path | None = None, **overrides: object) -> PlannerSettings:
+def planner_settings(kind: str, policy: str | Path | None = None, **overrides: Any) -> PlannerSettings:
     """Planner settings with the paper's defaults for ``kind`` (``policy`` for the learned kinds)."""
-    return replace(PlannerSettings(), kind=kind, policy=Path(policy) if policy else None, **overrides)  # type: ignore[arg-type]
+    return replace(PlannerSettings(), kind=kind, policy=Path(policy) if policy else None, **overrides)
 
 
 def summarise(runs: list[Run]) -> dict[str, object]:
