@@ -46,10 +46,16 @@ def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo) -> Itera
     if call.when == "call" and report.failed:
         behind = sum(WATCHED)
         if behind >= HOST_BEHIND_REPORT_S:
-            report.sections.append(("host", f"the host could not keep up for {behind:.1f} s: this dry run is not "
-                                            "evidence (rerun on an idle machine)"))
-            report.longrepr = f"the host could not keep up for {behind:.1f} s: this dry run is not evidence\n" \
-                f"{report.longrepr}"
+            report.sections.append(
+                (
+                    "host",
+                    f"the host could not keep up for {behind:.1f} s: this dry run is not "
+                    "evidence (rerun on an idle machine)",
+                )
+            )
+            report.longrepr = (
+                f"the host could not keep up for {behind:.1f} s: this dry run is not evidence\n{report.longrepr}"
+            )
 
 
 @pytest.hookimpl(trylast=True)
@@ -62,12 +68,14 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     does not read), so pyproject pins pytest below 9.2."""
     if not getattr(config.option, "loadgroup", False):
         return  # not a loadgroup worker: a run without -n, or another --dist (the controller checks the version)
-    ungrouped = [item.nodeid for item in items
-                 if item.get_closest_marker("xdist_group") is not None and "@" not in item.nodeid]
+    ungrouped = [
+        item.nodeid for item in items if item.get_closest_marker("xdist_group") is not None and "@" not in item.nodeid
+    ]
     if ungrouped:
         raise pytest.UsageError(
             f"pytest-xdist's loadgroup did not group {len(ungrouped)} marked tests (first: {ungrouped[0]}) under "
-            f"pytest {pytest.__version__}: install the pytest that pyproject's dev extra pins")
+            f"pytest {pytest.__version__}: install the pytest that pyproject's dev extra pins"
+        )
 
 
 def pytest_configure(config: pytest.Config) -> None:
@@ -77,11 +85,16 @@ def pytest_configure(config: pytest.Config) -> None:
     so does every child it starts, so the Ctrl-C tests would fail there for a reason that is not theirs."""
     # A pytest that breaks xdist's grouping is named here, on the controller (pytest_collection_modifyitems below
     # catches any other cause, on the workers, less legibly).
-    if (config.getoption("dist", "no") == "loadgroup" and config.getoption("numprocesses", None)
-            and tuple(int(part) for part in pytest.__version__.split(".")[:2]) >= (9, 2)):
-        raise pytest.UsageError(f"pytest {pytest.__version__} ignores pytest-xdist's --dist loadgroup (the shared test "
-                                f"flights would fly on every worker): pip install 'pytest>=8,<9.2' (pyproject's dev "
-                                f"extra)")
+    if (
+        config.getoption("dist", "no") == "loadgroup"
+        and config.getoption("numprocesses", None)
+        and tuple(int(part) for part in pytest.__version__.split(".")[:2]) >= (9, 2)
+    ):
+        raise pytest.UsageError(
+            f"pytest {pytest.__version__} ignores pytest-xdist's --dist loadgroup (the shared test "
+            f"flights would fly on every worker): pip install 'pytest>=8,<9.2' (pyproject's dev "
+            f"extra)"
+        )
     if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
         signal.signal(signal.SIGINT, signal.default_int_handler)
     # `pytest --lf` reruns the failures alone after a run with or without -n (the grouped tests' ids: xdist_ids.py).
@@ -187,8 +200,14 @@ def fly_cli(folder: Path, *, interrupts: int = 0, kill: bool = False, args: tupl
     mission.write_text(CLI_MISSION)
     log = folder / "flight.mcap"
     env = dict(os.environ, PYTHONUNBUFFERED="1")
-    proc = subprocess.Popen([sys.executable, "-m", "rpf_fly", "fly", str(mission), "--dry-run", "--log", str(log),
-                             *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=folder)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "rpf_fly", "fly", str(mission), "--dry-run", "--log", str(log), *args],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+        cwd=folder,
+    )
     if interrupts or kill:
         lines = []
         deadline = time.monotonic() + 90

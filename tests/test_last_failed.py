@@ -35,8 +35,14 @@ def test_at_in_a_parameter(x): pass
 def pytest_in(folder: Path, *args: str) -> str:
     env = {k: v for k, v in os.environ.items() if not k.startswith(("PYTEST_", "PYTHONPATH"))}
     env["PYTHONPATH"] = str(TESTS)
-    done = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:randomly", *args], cwd=folder, env=env,
-                          capture_output=True, text=True, timeout=120)
+    done = subprocess.run(
+        [sys.executable, "-m", "pytest", "-q", "-p", "no:randomly", *args],
+        cwd=folder,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     return done.stdout + done.stderr
 
 
@@ -44,7 +50,9 @@ def pytest_in(folder: Path, *args: str) -> str:
 def test_last_failed_reruns_only_the_failures_after_a_run_on_two_workers(tmp_path, ungrouped_fails):
     """Recorded under the xdist ids, grouped failures alone make a serial `--lf` run the whole suite, and beside
     an ungrouped failure they are left out of it."""
-    (tmp_path / "pyproject.toml").write_text(f'[tool.pytest.ini_options]\ntestpaths = ["tests"]\naddopts = "{ADDOPTS}"\n')
+    (tmp_path / "pyproject.toml").write_text(
+        f'[tool.pytest.ini_options]\ntestpaths = ["tests"]\naddopts = "{ADDOPTS}"\n'
+    )
     (tmp_path / "tests").mkdir()
     shutil.copy(TESTS / "conftest.py", tmp_path / "tests" / "conftest.py")  # the suite's own conftest
     (tmp_path / "tests" / "test_sample.py").write_text(SAMPLE.format(fails=not ungrouped_fails))

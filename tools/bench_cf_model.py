@@ -103,8 +103,9 @@ def bench_closed_loop(family: str, planner: str, seeds: int, alone: bool) -> dic
     cpu = steps = 0.0
     for batch in batches:
         start = time.process_time()
-        runs = run_firmware([scenes[i] for i in batch], settings, SIM, [seed_list[i] for i in batch],
-                            [family] * len(batch), keep=True)
+        runs = run_firmware(
+            [scenes[i] for i in batch], settings, SIM, [seed_list[i] for i in batch], [family] * len(batch), keep=True
+        )
         cpu += time.process_time() - start
         drones = sum(scenes[i].n_drones for i in batch)
         longest = max(r.rollout.truth.shape[0] - 1 for r in runs) * LOOP_STEP_S  # the swarm flies the longest run
@@ -116,8 +117,10 @@ def main_closed_loop(args: argparse.Namespace) -> None:
     r = bench_closed_loop(args.family, args.planner, args.seeds, args.alone)
     how = "each alone" if args.alone else "together in one swarm"
     print(f"closed loop: {r['runs']} runs of {args.family} ({r['drones']:.0f} drones), {args.planner}, {how}")
-    print(f"CPU {r['cpu_s']:.1f} s: {r['runs'] / r['cpu_s']:.2f} runs per CPU second, "
-          f"{r['drone_steps'] / r['cpu_s']:.0f} drone-steps (10 ms) per CPU second")
+    print(
+        f"CPU {r['cpu_s']:.1f} s: {r['runs'] / r['cpu_s']:.2f} runs per CPU second, "
+        f"{r['drone_steps'] / r['cpu_s']:.0f} drone-steps (10 ms) per CPU second"
+    )
 
 
 def main() -> None:
@@ -136,14 +139,19 @@ def main() -> None:
         main_closed_loop(args)
         return
     print(f"mode {args.mode}: CPU time per 10 ms world step (best of {args.repeats} x {args.seconds:g} s)")
-    print("| drones | per-drone CfDrone: us/step | us per drone | swarm CfSwarm: us/step | us per drone "
-          "| drones one core keeps in real time (CfDrone / CfSwarm) |")
+    print(
+        "| drones | per-drone CfDrone: us/step | us per drone | swarm CfSwarm: us/step | us per drone "
+        "| drones one core keeps in real time (CfDrone / CfSwarm) |"
+    )
     print("|---|---|---|---|---|---|")
     for n in (int(v) for v in args.drones.split(",")):
         single = bench_single(n, args.seconds, args.repeats, args.mode) * 1e6
         swarm = bench_swarm(n, args.seconds, args.repeats, args.mode) * 1e6
-        print(f"| {n} | {single:.0f} | {single / n:.0f} | {swarm:.0f} | {swarm / n:.1f} "
-              f"| {BUDGET_US / (single / n):.0f} / {'yes' if swarm <= BUDGET_US else 'no'} at {n} |", flush=True)
+        print(
+            f"| {n} | {single:.0f} | {single / n:.0f} | {swarm:.0f} | {swarm / n:.1f} "
+            f"| {BUDGET_US / (single / n):.0f} / {'yes' if swarm <= BUDGET_US else 'no'} at {n} |",
+            flush=True,
+        )
 
 
 if __name__ == "__main__":

@@ -56,9 +56,13 @@ def mission_file(n: int, out_dir: Path, relay: str = "auto") -> Path:
     head, drones = text.split("drones:\n")
     lines = [line for line in drones.splitlines() if line.strip().startswith("- {name:")][:n]
     path = out_dir / (f"lanes-{n}.yaml" if relay == "auto" else f"lanes-{n}-relay-{relay}.yaml")
-    path.write_text(head.replace("name: lanes-40-4dongles", f"name: lanes-{n}").replace(
-        "../policies/", f"{ROOT}/policies/") + "drones:\n" + "\n".join(lines) + "\n"
-        + ("" if relay == "auto" else f"runtime: {{mocap_relay: '{relay}'}}\n"))
+    path.write_text(
+        head.replace("name: lanes-40-4dongles", f"name: lanes-{n}").replace("../policies/", f"{ROOT}/policies/")
+        + "drones:\n"
+        + "\n".join(lines)
+        + "\n"
+        + ("" if relay == "auto" else f"runtime: {{mocap_relay: '{relay}'}}\n")
+    )
     return path
 
 
@@ -88,10 +92,14 @@ def single(path: Path, out: Path) -> dict:
         report = run_flight(mission, factory_of(mission), out / f"single-{len(mission.drones)}.mcap", rig=rig)
     cpu, wall = time.process_time() - cpu0, time.monotonic() - t0
     lat = report.stats.latencies
-    return {"mode": "single", "drones": len(mission.drones),
-            "reached": sum(o.value == "reached" for o in report.outcomes.values()),
-            "latency_p50_ms": _ms(pct(lat, 0.5)), "latency_p99_ms": _ms(pct(lat, 0.99)),
-            "cpu_pct": {"flight process": round(100 * cpu / wall, 1)}}
+    return {
+        "mode": "single",
+        "drones": len(mission.drones),
+        "reached": sum(o.value == "reached" for o in report.outcomes.values()),
+        "latency_p50_ms": _ms(pct(lat, 0.5)),
+        "latency_p99_ms": _ms(pct(lat, 0.99)),
+        "cpu_pct": {"flight process": round(100 * cpu / wall, 1)},
+    }
 
 
 def _ms(v: float | None) -> float | None:
@@ -133,27 +141,32 @@ def distributed(path: Path, out: Path, kill: str = "") -> dict:
             cpu[f"{w.name}: logging"] = w.info["logging_cpu"]
     if "cpu_s" in coordinator.logger_info:
         cpu["logger"] = coordinator.logger_info.get("cpu_pct")
-    cpu["coordinator (+ truth feed)"] = round(
-        100 * (time.process_time() - cpu0) / flight_s, 1)
+    cpu["coordinator (+ truth feed)"] = round(100 * (time.process_time() - cpu0) / flight_s, 1)
     if coordinator.relay_info.get("cpu_pct") is not None:
         cpu["mocap relay"] = coordinator.relay_info["cpu_pct"]
     hops = [v * 1e-6 for w in coordinator.workers.values() for v in w.info.get("relay_transit_us", [])]
-    row = {"mode": "distributed, " + ("relay" if coordinator.relayed else "direct mocap"),
-           "drones": len(mission.drones),
-           "reached": sum(v.outcome == "reached" for v in coordinator.drones.values()),
-           "latency_p50_ms": _ms(pct(latencies, 0.5)), "latency_p99_ms": _ms(pct(latencies, 0.99)),
-           "cpu_pct": cpu, "exit": result.get("code")}
+    row = {
+        "mode": "distributed, " + ("relay" if coordinator.relayed else "direct mocap"),
+        "drones": len(mission.drones),
+        "reached": sum(v.outcome == "reached" for v in coordinator.drones.values()),
+        "latency_p50_ms": _ms(pct(latencies, 0.5)),
+        "latency_p99_ms": _ms(pct(latencies, 0.99)),
+        "cpu_pct": cpu,
+        "exit": result.get("code"),
+    }
     if hops:
-        row.update(relay_hop_p50_ms=_ms(pct(hops, 0.5)), relay_hop_p99_ms=_ms(pct(hops, 0.99)),
-                   relay_frames=coordinator.relay_info.get("frames"))
+        row.update(
+            relay_hop_p50_ms=_ms(pct(hops, 0.5)),
+            relay_hop_p99_ms=_ms(pct(hops, 0.99)),
+            relay_frames=coordinator.relay_info.get("frames"),
+        )
     if killed_at is not None:
         lost = [e for e in coordinator.events.history if e.kind == "worker_lost"]
         row["killed"] = kill
         if kill == "worker":
             row["noticed_after_s"] = round(lost[0].time_s - killed_at, 3) if lost else None
             dead = set(coordinator.workers["dongle-1"].drones)
-            row["others_reached"] = sum(v.outcome == "reached" for n, v in coordinator.drones.items()
-                                        if n not in dead)
+            row["others_reached"] = sum(v.outcome == "reached" for n, v in coordinator.drones.items() if n not in dead)
             row["others"] = len(coordinator.drones) - len(dead)
         if kill == "relay":
             lost = [e for e in coordinator.events.history if e.kind == "relay_lost"]
@@ -169,8 +182,12 @@ def kill_coordinator(path: Path, out: Path) -> dict:
     from rpf_fly.log.reader import read_log, salvage
 
     log = out / "kill-coordinator.mcap"
-    child = subprocess.Popen([sys.executable, "-m", "rpf_fly", "fly", str(path), "--dry-run", "--distributed",
-                              "--log", str(log)], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    child = subprocess.Popen(
+        [sys.executable, "-m", "rpf_fly", "fly", str(path), "--dry-run", "--distributed", "--log", str(log)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
     assert child.stdout is not None
     for line in child.stdout:
         if "swarm: flying" in line:
@@ -183,23 +200,37 @@ def kill_coordinator(path: Path, out: Path) -> dict:
     if data.truncated:
         salvage(log, out / "kill-coordinator-salvaged.mcap")
         data = read_log(out / "kill-coordinator-salvaged.mcap")
-    finals = {t.split("/")[1]: msgs[-1].data["state"] for t, msgs in data.topics.items()
-              if t.endswith("/status") and msgs}
-    return {"killed": "coordinator", "drones": len(finals), "final_states": sorted(set(finals.values())),
-            "landed": sum(s == "landed" for s in finals.values()), "log_truncated": data.truncated,
-            "log": str(log)}
+    finals = {
+        t.split("/")[1]: msgs[-1].data["state"] for t, msgs in data.topics.items() if t.endswith("/status") and msgs
+    }
+    return {
+        "killed": "coordinator",
+        "drones": len(finals),
+        "final_states": sorted(set(finals.values())),
+        "landed": sum(s == "landed" for s in finals.values()),
+        "log_truncated": data.truncated,
+        "log": str(log),
+    }
 
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--drones", default="10,20,40")
     parser.add_argument("--kill", choices=("worker", "coordinator", "logger", "relay"))
-    parser.add_argument("--mocap-relay", choices=("auto", "on", "off", "both"), default="auto",
-                        help="the distributed runs' runtime.mocap_relay (auto: the relay, the mission's NatNet being "
-                        "unicast); both: one run each way")
+    parser.add_argument(
+        "--mocap-relay",
+        choices=("auto", "on", "off", "both"),
+        default="auto",
+        help="the distributed runs' runtime.mocap_relay (auto: the relay, the mission's NatNet being "
+        "unicast); both: one run each way",
+    )
     parser.add_argument("--no-single", action="store_true", help="leave out the single-process runs")
-    parser.add_argument("--mission", type=Path, default=None,
-                        help="--kill: fly this mission (its dongle 1's worker is the one killed) instead")
+    parser.add_argument(
+        "--mission",
+        type=Path,
+        default=None,
+        help="--kill: fly this mission (its dongle 1's worker is the one killed) instead",
+    )
     parser.add_argument("--json", action="store_true")
     parser.add_argument("--out", type=Path, default=None, help="where the logs go (default: a temporary folder)")
     args = parser.parse_args()

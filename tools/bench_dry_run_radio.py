@@ -54,14 +54,20 @@ def fly_once(radio: str) -> dict[str, Any]:
     kind, dongle = ("fake", None) if radio == "fake" else ("crazyradio", radio)
     start = time.monotonic()
     with tempfile.TemporaryDirectory() as tmp, DryRun(mission, radio=kind, crazyradio=dongle) as rig:
-        report = run_flight(mission, lambda drone: make_planner(mission.planner, obstacles), Path(tmp) / "f.mcap",
-                            rig=rig)
+        report = run_flight(
+            mission, lambda drone: make_planner(mission.planner, obstacles), Path(tmp) / "f.mcap", rig=rig
+        )
     phases = {e.message: e.time_s for e in report.events if e.kind == "phase" and e.drone is None}
     reached = sum(o == FlightOutcome.REACHED for o in report.outcomes.values())
     connected = phases.get("swarm: preflight")
-    return {"radio": radio, "connect_s": None if connected is None else connected - phases["swarm: connecting"],
-            "flight_s": time.monotonic() - start, "reached": reached, "drones": len(report.outcomes),
-            "host_behind_s": report.host_behind_s or 0.0}
+    return {
+        "radio": radio,
+        "connect_s": None if connected is None else connected - phases["swarm: connecting"],
+        "flight_s": time.monotonic() - start,
+        "reached": reached,
+        "drones": len(report.outcomes),
+        "host_behind_s": report.host_behind_s or 0.0,
+    }
 
 
 def main() -> None:
@@ -74,8 +80,11 @@ def main() -> None:
         for _ in range(args.runs):
             r = fly_once(radio)
             connect = "did not connect" if r["connect_s"] is None else f"connect {r['connect_s']:.2f} s"
-            print(f"{r['radio']:14} {connect}  flight {r['flight_s']:.1f} s  reached {r['reached']}/{r['drones']}"
-                  f"  world behind {r['host_behind_s']:.1f} s", flush=True)
+            print(
+                f"{r['radio']:14} {connect}  flight {r['flight_s']:.1f} s  reached {r['reached']}/{r['drones']}"
+                f"  world behind {r['host_behind_s']:.1f} s",
+                flush=True,
+            )
 
 
 _FORCED = os.environ.get("RPF_FLY_DRY_RUN_RADIO")

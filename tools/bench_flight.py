@@ -63,9 +63,12 @@ def mission_text(drones: int, rate: float, planner: str) -> str:
     for i in range(drones):
         t = 2.0 * math.pi * i / drones
         dx, dy = 3.0 * math.cos(t), 3.0 * math.sin(t)
-        rows.append(f"  - {{name: cf{i + 1}, uri: radio://{i % dongles}/80/2M/E7E7E7E7{i + 1:02X}, "
-                    f"start: [{dx:.4f}, {dy:.4f}], goal: [{-dx:.4f}, {-dy:.4f}]}}")
-    return f"""
+        rows.append(
+            f"  - {{name: cf{i + 1}, uri: radio://{i % dongles}/80/2M/E7E7E7E7{i + 1:02X}, "
+            f"start: [{dx:.4f}, {dy:.4f}], goal: [{-dx:.4f}, {-dy:.4f}]}}"
+        )
+    return (
+        f"""
 name: bench-{drones}
 arena: {{x: [-4.5, 4.5], y: [-4.5, 4.5], z: [0.0, 2.0]}}
 flight: {{height: 1.0, speed: 0.5, rate_hz: {rate}, goal_tolerance: 0.1, takeoff_s: 1.0, land_s: 1.0, timeout_s: 60}}
@@ -73,7 +76,10 @@ planner: {{kind: {planner}{policy}}}
 mocap: {{kind: sim, rate_hz: 100}}
 radio: {{extpos_rate_hz: 30}}
 drones:
-""" + "\n".join(rows) + "\n"
+"""
+        + "\n".join(rows)
+        + "\n"
+    )
 
 
 def floor_once(drones: int, rate: float, air_time_s: float, seconds: float = 8.0) -> dict:
@@ -118,12 +124,21 @@ def floor_table(drones: int, rate: float, planner: str) -> None:
     for air, floor, stack in rows:
         f50, f99 = floor["latency_p50_s"] * 1e3, floor["latency_p99_s"] * 1e3
         s50, s99 = stack["latency_p50_s"] * 1e3, stack["latency_p99_s"] * 1e3
-        print(f"| {air * 1e3:g} ms | {f50:.3f} ms | {f99:.3f} ms | {s50:.3f} ms | {s99:.3f} ms | {s50 / f50:.2f}x | "
-              f"{s99 / f99:.2f}x |")
+        print(
+            f"| {air * 1e3:g} ms | {f50:.3f} ms | {f99:.3f} ms | {s50:.3f} ms | {s99:.3f} ms | {s50 / f50:.2f}x | "
+            f"{s99 / f99:.2f}x |"
+        )
 
 
-def run_once(drones: int, rate: float, planner: str, log: bool, in_process: bool = False, truth: bool = True,
-             air_time_s: float | None = None) -> dict:
+def run_once(
+    drones: int,
+    rate: float,
+    planner: str,
+    log: bool,
+    in_process: bool = False,
+    truth: bool = True,
+    air_time_s: float | None = None,
+) -> dict:
     mission = parse_mission(mission_text(drones, rate, planner))
     obstacles = obstacle_set(mission.obstacles)
     loops = []
@@ -142,11 +157,18 @@ def run_once(drones: int, rate: float, planner: str, log: bool, in_process: bool
 
             setattr(loop.recorder, name, timed)
 
-    with tempfile.TemporaryDirectory() as tmp, DryRun(mission, process=not in_process, truth=truth,
-                                                      air_time_s=air_time_s) as rig:
+    with (
+        tempfile.TemporaryDirectory() as tmp,
+        DryRun(mission, process=not in_process, truth=truth, air_time_s=air_time_s) as rig,
+    ):
         wall0 = time.perf_counter()
-        report = run_flight(mission, lambda d: make_planner(mission.planner, obstacles),
-                            Path(tmp) / "bench.mcap" if log else None, rig=rig, on_loop=time_the_recorder)
+        report = run_flight(
+            mission,
+            lambda d: make_planner(mission.planner, obstacles),
+            Path(tmp) / "bench.mcap" if log else None,
+            rig=rig,
+            on_loop=time_the_recorder,
+        )
         wall = time.perf_counter() - wall0
     summary = report.stats.summary()
     summary["success"] = report.success
@@ -168,8 +190,11 @@ def main() -> int:
     parser.add_argument("--planner", default="apf", choices=("apf", "rpf"))
     parser.add_argument("--runs", type=int, default=3)
     parser.add_argument("--no-log", action="store_true", help="fly without the MCAP log")
-    parser.add_argument("--in-process", action="store_true",
-                        help="simulated drones and NatNet emulator on threads of this process (default: their own)")
+    parser.add_argument(
+        "--in-process",
+        action="store_true",
+        help="simulated drones and NatNet emulator on threads of this process (default: their own)",
+    )
     parser.add_argument("--no-truth", action="store_true", help="fly without the dry run's /truth in the log")
     parser.add_argument("--json", action="store_true")
     parser.add_argument("--floor", action="store_true", help="the floor beside the stack, radio air time on and off")
@@ -177,50 +202,78 @@ def main() -> int:
     if args.floor:
         floor_table(args.drones, args.rate, args.planner)
         return 0
-    runs = [run_once(args.drones, args.rate, args.planner, not args.no_log, args.in_process,
-                     not args.no_truth) for _ in range(args.runs)]
+    runs = [
+        run_once(args.drones, args.rate, args.planner, not args.no_log, args.in_process, not args.no_truth)
+        for _ in range(args.runs)
+    ]
 
     def med(key: str) -> float:
         values = [r[key] for r in runs if r[key] is not None]
         return statistics.median(values) if values else float("nan")
 
     result = {
-        "drones": args.drones, "rate_hz": args.rate, "planner": args.planner, "runs": runs,
-        "latency_p50_ms": med("latency_p50_s") * 1e3, "latency_p99_ms": med("latency_p99_s") * 1e3,
-        "tick_interval_p50_ms": med("tick_interval_p50_s") * 1e3, "tick_jitter_p99_ms": med("tick_jitter_p99_s") * 1e3,
+        "drones": args.drones,
+        "rate_hz": args.rate,
+        "planner": args.planner,
+        "runs": runs,
+        "latency_p50_ms": med("latency_p50_s") * 1e3,
+        "latency_p99_ms": med("latency_p99_s") * 1e3,
+        "tick_interval_p50_ms": med("tick_interval_p50_s") * 1e3,
+        "tick_jitter_p99_ms": med("tick_jitter_p99_s") * 1e3,
         "tick_interval_max_ms": max(r["tick_interval_max_s"] or 0.0 for r in runs) * 1e3,
         "latency_max_ms": max(r["latency_max_s"] or 0.0 for r in runs) * 1e3,
         "gc_collections_median": med("gc_collections"),
-        "planner_p50_us": med("planner_p50_s") * 1e6, "overruns_median": med("overruns"),
-        "frameless_ticks_median": med("frameless_ticks"), "ticks_median": med("ticks"),
+        "planner_p50_us": med("planner_p50_s") * 1e6,
+        "overruns_median": med("overruns"),
+        "frameless_ticks_median": med("frameless_ticks"),
+        "ticks_median": med("ticks"),
     }
     if not args.no_log:
-        result.update(log_cpu_pct=med("log_cpu_pct"), log_recorder_pct=med("log_recorder_pct"),
-                      log_messages_per_s=med("log_messages_per_s"))
+        result.update(
+            log_cpu_pct=med("log_cpu_pct"),
+            log_recorder_pct=med("log_recorder_pct"),
+            log_messages_per_s=med("log_messages_per_s"),
+        )
         if not args.no_truth:
             result.update(truth_cpu_pct=med("truth_cpu_pct"), truth_messages_per_s=med("truth_messages_per_s"))
     if args.json:
         print(json.dumps(result))
         return 0
     print(f"{args.drones} drones, planning at {args.rate:g} Hz, planner {args.planner}, {args.runs} runs (medians):")
-    print(f"  mocap frame -> setpoint handed to the radio: p50 {result['latency_p50_ms']:.3f} ms "
-          f"(goal <= 0.5), p99 {result['latency_p99_ms']:.3f} ms (goal <= 2)")
-    print(f"  tick interval p50 {result['tick_interval_p50_ms']:.2f} ms, " f"jitter p99 {result['tick_jitter_p99_ms']:.2f} ms, "
-          f"overruns {result['overruns_median']:.0f} per run")
-    print(f"  worst of all runs: tick interval {result['tick_interval_max_ms']:.1f} ms, latency "
-          f"{result['latency_max_ms']:.2f} ms; garbage collections in the loop's gaps: "
-          f"{result['gc_collections_median']:.0f} per run (rpf_fly/flight/gc_pacing.py)")
-    print(f"  ticks without a fresh frame: {result['frameless_ticks_median']:.0f} " f"of {result['ticks_median']:.0f} per run "
-          f"(ticks are locked to the frames: rpf_fly/flight/ticks.py)")
+    print(
+        f"  mocap frame -> setpoint handed to the radio: p50 {result['latency_p50_ms']:.3f} ms "
+        f"(goal <= 0.5), p99 {result['latency_p99_ms']:.3f} ms (goal <= 2)"
+    )
+    print(
+        f"  tick interval p50 {result['tick_interval_p50_ms']:.2f} ms, "
+        f"jitter p99 {result['tick_jitter_p99_ms']:.2f} ms, "
+        f"overruns {result['overruns_median']:.0f} per run"
+    )
+    print(
+        f"  worst of all runs: tick interval {result['tick_interval_max_ms']:.1f} ms, latency "
+        f"{result['latency_max_ms']:.2f} ms; garbage collections in the loop's gaps: "
+        f"{result['gc_collections_median']:.0f} per run (rpf_fly/flight/gc_pacing.py)"
+    )
+    print(
+        f"  ticks without a fresh frame: {result['frameless_ticks_median']:.0f} "
+        f"of {result['ticks_median']:.0f} per run "
+        f"(ticks are locked to the frames: rpf_fly/flight/ticks.py)"
+    )
     if not args.no_log:
-        print(f"  flight log: {result['log_cpu_pct']:.2f} % of a core over the whole flight (loop thread in the "
-              f"recorder {result['log_recorder_pct']:.2f} %, the rest the writer thread), "
-              f"{result['log_messages_per_s']:.0f} messages/s")
+        print(
+            f"  flight log: {result['log_cpu_pct']:.2f} % of a core over the whole flight (loop thread in the "
+            f"recorder {result['log_recorder_pct']:.2f} %, the rest the writer thread), "
+            f"{result['log_messages_per_s']:.0f} messages/s"
+        )
         if not args.no_truth:
-            print(f"  truth feed thread: {result['truth_cpu_pct']:.2f} % of a core, "
-                  f"{result['truth_messages_per_s']:.0f} /truth messages/s (their writing is in the log's figure)")
-    print(f"  planner p50 {result['planner_p50_us']:.1f} us per drone; every run succeeded: "
-          f"{all(r['success'] for r in runs)}")
+            print(
+                f"  truth feed thread: {result['truth_cpu_pct']:.2f} % of a core, "
+                f"{result['truth_messages_per_s']:.0f} /truth messages/s (their writing is in the log's figure)"
+            )
+    print(
+        f"  planner p50 {result['planner_p50_us']:.1f} us per drone; every run succeeded: "
+        f"{all(r['success'] for r in runs)}"
+    )
     return 0
 
 

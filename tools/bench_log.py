@@ -52,10 +52,28 @@ def run(drones: int, rate: float, seconds: float, status_every: int, path: Path,
             frame = dict(zip(names, poses))
             log.poses(t, frame)
             log.setpoints([(name, t, (p[0] + 0.05, p[1], 0.6), 0.3) for name, (p, _) in frame.items()])
-            log.planner_steps(t, {name: dict(
-                tick=k, position=p, goal=(1.0, 1.0), mode="apf", eta=0.05, lam=2.0, f_a=0.7 + 0.7j, f_r=-0.1j,
-                f_in=0.05 + 0j, direction=0.6 + 0.8j, heading=0.93, neighbours=2, obstacle_distance=0.8,
-                goal_distance=1.2) for name, (p, _) in frame.items()})
+            log.planner_steps(
+                t,
+                {
+                    name: dict(
+                        tick=k,
+                        position=p,
+                        goal=(1.0, 1.0),
+                        mode="apf",
+                        eta=0.05,
+                        lam=2.0,
+                        f_a=0.7 + 0.7j,
+                        f_r=-0.1j,
+                        f_in=0.05 + 0j,
+                        direction=0.6 + 0.8j,
+                        heading=0.93,
+                        neighbours=2,
+                        obstacle_distance=0.8,
+                        goal_distance=1.2,
+                    )
+                    for name, (p, _) in frame.items()
+                },
+            )
             if k % tf_every == 0:  # the flight writes /tf at 20 Hz (rpf_fly/flight/recording.py)
                 log.tf(t, frame)
         else:  # one call per message
@@ -63,9 +81,24 @@ def run(drones: int, rate: float, seconds: float, status_every: int, path: Path,
                 position, quaternion = poses[i]
                 log.pose(name, t, position, quaternion)
                 log.setpoint(name, t, (position[0] + 0.05, position[1], 0.6), 0.3)
-                log.planner_step(name, t, tick=k, position=position, goal=(1.0, 1.0), mode="apf", eta=0.05, lam=2.0,
-                                 f_a=0.7 + 0.7j, f_r=-0.1j, f_in=0.05 + 0j, direction=0.6 + 0.8j, heading=0.93,
-                                 neighbours=2, obstacle_distance=0.8, goal_distance=1.2)
+                log.planner_step(
+                    name,
+                    t,
+                    tick=k,
+                    position=position,
+                    goal=(1.0, 1.0),
+                    mode="apf",
+                    eta=0.05,
+                    lam=2.0,
+                    f_a=0.7 + 0.7j,
+                    f_r=-0.1j,
+                    f_in=0.05 + 0j,
+                    direction=0.6 + 0.8j,
+                    heading=0.93,
+                    neighbours=2,
+                    obstacle_distance=0.8,
+                    goal_distance=1.2,
+                )
             if k % tf_every == 0:
                 log.tf(t, {name: poses[i] for i, name in enumerate(names)})
         if k % status_every == 0:
@@ -110,8 +143,11 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=10.0)
     parser.add_argument("--status-every", type=int, default=10, help="status every N ticks (10: 10 Hz at 100 Hz)")
     parser.add_argument("--out", type=Path, default=None, help="keep the log here (default: a temporary file)")
-    parser.add_argument("--per-message", action="store_true",
-                        help="one FlightLog call per message (default: the batch calls the flight's recorder makes)")
+    parser.add_argument(
+        "--per-message",
+        action="store_true",
+        help="one FlightLog call per message (default: the batch calls the flight's recorder makes)",
+    )
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
@@ -121,14 +157,18 @@ def main() -> None:
     if args.json:
         print(json.dumps(result))
         return
-    print(f"{result['drones']} drones x {result['rate_hz']:g} Hz for {result['seconds']:.1f} s, {result['calls']} calls: "
-          f"{result['messages']} messages ({result['messages_per_s']:.0f}/s), {result['dropped']} dropped, "
-          f"queue peak {result['queue_peak']}, file {result['file_bytes'] / 1e6:.2f} MB")
+    print(
+        f"{result['drones']} drones x {result['rate_hz']:g} Hz for {result['seconds']:.1f} s, {result['calls']} calls: "
+        f"{result['messages']} messages ({result['messages_per_s']:.0f}/s), {result['dropped']} dropped, "
+        f"queue peak {result['queue_peak']}, file {result['file_bytes'] / 1e6:.2f} MB"
+    )
     print(f"  enqueue  {result['enqueue_cpu_pct']:5.2f} % of a core  ({result['enqueue_us_per_msg']:.2f} us/message)")
     print(f"  writer   {result['writer_cpu_pct']:5.2f} % of a core  ({result['writer_us_per_msg']:.2f} us/message)")
     verdict = "ok" if result["logging_cpu_pct"] <= result["goal_pct"] else "OVER GOAL"
-    print(f"  logging  {result['logging_cpu_pct']:5.2f} % of a core (goal <= {result['goal_pct']:g} %: {verdict}); "
-          f"whole process {result['process_cpu_pct']:.2f} %")
+    print(
+        f"  logging  {result['logging_cpu_pct']:5.2f} % of a core (goal <= {result['goal_pct']:g} %: {verdict}); "
+        f"whole process {result['process_cpu_pct']:.2f} %"
+    )
 
 
 if __name__ == "__main__":

@@ -35,8 +35,9 @@ def _percentiles(samples: list[float]) -> dict[str, float]:
     return {"p50_us": statistics.median(ordered) * 1e6, "p90_us": pick(0.9) * 1e6, "p99_us": pick(0.99) * 1e6}
 
 
-def _run(server: NatNetServer, receive: Callable[[float], Any], frames: int,
-         rate: float) -> list[tuple[float, float, float]]:
+def _run(
+    server: NatNetServer, receive: Callable[[float], Any], frames: int, rate: float
+) -> list[tuple[float, float, float]]:
     """(sent, library-side receipt, returned) per frame, monotonic seconds."""
     out = []
     period = 1.0 / rate
@@ -65,8 +66,9 @@ def main() -> None:
     poses = {n: ((0.1 * i, 1.0, 0.5), (0.0, 0.0, 0.0, 1.0), True) for i, n in enumerate(names)}
     results: dict[str, dict[str, float]] = {}
     with NatNetServer(lambda: poses, version="4.1", multicast=True, rate_hz=0, up_axis="z", bodies=names) as server:
-        with NatNetClient("127.0.0.1", multicast=True, local_ip="127.0.0.1", command_port=server.command_port,
-                          data_port=None) as client:
+        with NatNetClient(
+            "127.0.0.1", multicast=True, local_ip="127.0.0.1", command_port=server.command_port, data_port=None
+        ) as client:
             if not client.wait_for_server(5.0):
                 raise SystemExit("the emulator did not answer")
             natnet = _run(server, client.receive, args.frames, args.rate)
@@ -78,8 +80,17 @@ def main() -> None:
         results["motioncapture pipe"] = _percentiles([r - c for _, c, r in library])
     added = results["motioncapture"]["p50_us"] - results["natnet"]["p50_us"]
     if args.json:
-        print(json.dumps({"frames": args.frames, "bodies": args.bodies, "rate_hz": args.rate, "results": results,
-                          "added_p50_us": added}))
+        print(
+            json.dumps(
+                {
+                    "frames": args.frames,
+                    "bodies": args.bodies,
+                    "rate_hz": args.rate,
+                    "results": results,
+                    "added_p50_us": added,
+                }
+            )
+        )
         return
     print(f"{args.frames} frames of {args.bodies} rigid bodies at {args.rate:g} Hz, send to receive() returning:")
     for name, r in results.items():

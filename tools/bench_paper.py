@@ -41,13 +41,18 @@ def commit() -> str | None:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--episodes", type=int, default=20, help="seeds per scene (default 20)")
-    parser.add_argument("--policies", type=Path, default=Path("policies"), help="folder of <kind>.onnx (default policies)")
+    parser.add_argument(
+        "--policies", type=Path, default=Path("policies"), help="folder of <kind>.onnx (default policies)"
+    )
     parser.add_argument("--out", type=Path, default=Path("docs") / "bench", help="output folder (default docs/bench)")
     args = parser.parse_args(argv)
     os.chdir(ROOT)  # relative paths (policies/, missions/, docs/bench/) are the repository's, and read so in the output
 
     config = BenchConfig(
-        planners=PLANNERS, scenes=SCENES, episodes=args.episodes, policies_dir=args.policies,
+        planners=PLANNERS,
+        scenes=SCENES,
+        episodes=args.episodes,
+        policies_dir=args.policies,
         missions_dir=Path("missions"),
     )
     plan = prepare(config)

@@ -108,13 +108,19 @@ def bench_guidance(repeats: int) -> dict[str, dict[str, float]]:
         guided = make_planner(replace(base, guidance="path", margin=0.05), scenario.obstacles, bounds, scenario.goals)
         plain = make_planner(replace(base, guidance="none", margin=0.05), scenario.obstacles, bounds, scenario.goals)
         policy = guided.gains.policy
-        observations = [build_observation(v, sense_obstacles(v, guided.obstacles, guided.config)[0], guided.config,
-                                          policy.max_neighbours) for v in views]
+        observations = [
+            build_observation(
+                v, sense_obstacles(v, guided.obstacles, guided.config)[0], guided.config, policy.max_neighbours
+            )
+            for v in views
+        ]
         hidden = sum(guided.step(v).waypoint != v.goal for v in views)
         out[name] = {
             "with_guidance": statistics.median(timed(lambda v=v: guided.step(v), 300, repeats) for v in views),
             "without_guidance": statistics.median(timed(lambda v=v: plain.step(v), 300, repeats) for v in views),
-            "onnxruntime_alone": statistics.median(timed(lambda o=o: policy.act(o), 300, repeats) for o in observations),
+            "onnxruntime_alone": statistics.median(
+                timed(lambda o=o: policy.act(o), 300, repeats) for o in observations
+            ),
             "guided_views": float(hidden),
             "views": float(len(views)),
         }
@@ -137,8 +143,14 @@ def bench_rpf3(repeats: int) -> dict[str, dict[str, float]]:
         _, views = midflight_views(name)
         mission = load_mission(ROOT / "missions" / f"{name}.yaml")
         scenario = scenario_from_mission(mission, 0)
-        settings = replace(mission.planner, kind="rpf3", policy=ROOT / "policies" / "rpf3.onnx", guidance=None,
-                           margin=None, capture_radius=None)
+        settings = replace(
+            mission.planner,
+            kind="rpf3",
+            policy=ROOT / "policies" / "rpf3.onnx",
+            guidance=None,
+            margin=None,
+            capture_radius=None,
+        )
         planner = make_planner(settings, scenario.obstacles, (scenario.arena_x, scenario.arena_y), scenario.goals)
         policy = planner.gains.policy
         observations = []
@@ -148,12 +160,15 @@ def bench_rpf3(repeats: int) -> dict[str, dict[str, float]]:
             observations.append(build_observation(guided, nearest, planner.config, policy.max_neighbours, remaining))
         out[name] = {
             "step": statistics.median(timed(lambda v=v: planner.step(v), 300, repeats) for v in views),
-            "onnxruntime_alone": statistics.median(timed(lambda o=o: policy.act(o), 300, repeats) for o in observations),
+            "onnxruntime_alone": statistics.median(
+                timed(lambda o=o: policy.act(o), 300, repeats) for o in observations
+            ),
         }
     for n in (10, 100):
         pos, goals, vel, obstacles = swarm_state(n, np.random.default_rng(n))
-        planner = make_planner(PlannerSettings(kind="rpf3", policy=ROOT / "policies" / "rpf3.onnx"), obstacles,
-                               None, goals)
+        planner = make_planner(
+            PlannerSettings(kind="rpf3", policy=ROOT / "policies" / "rpf3.onnx"), obstacles, None, goals
+        )
         view = views_from_states(pos, vel, goals, vel / abs(vel), planner.config.sensing_range)
         out[f"batched_tick_{n}"] = {"tick": timed(lambda: planner.step(view), max(2, 200 // n) * 5, repeats)}
     return out
@@ -185,7 +200,10 @@ def bench_tick(n: int, repeats: int) -> dict[str, float]:
         planner.step(views_from_states(pos, vel, goals, heading, 6.0))
 
     inner = max(2, 200 // n)
-    return {"per_drone_calls": timed(per_drone_tick, inner, repeats), "batched": timed(batched_tick, inner * 5, repeats)}
+    return {
+        "per_drone_calls": timed(per_drone_tick, inner, repeats),
+        "batched": timed(batched_tick, inner * 5, repeats),
+    }
 
 
 def flight_tick(kind: str, drones: int = 10, batching: bool = True) -> Callable[[], None]:
@@ -206,8 +224,15 @@ def flight_tick(kind: str, drones: int = 10, batching: bool = True) -> Callable[
     xy = run.positions[k]
     world = Neighbourhood([d.name for d in mission.drones], xy, (xy - run.positions[k - 1]) / params.dt)
     agents = [
-        DroneAgent(d, make_planner(mission.planner, scenario.obstacles), height=1.0, speed=0.5, dt=params.dt,
-                   arena=mission.arena, budget_s=1.0)
+        DroneAgent(
+            d,
+            make_planner(mission.planner, scenario.obstacles),
+            height=1.0,
+            speed=0.5,
+            dt=params.dt,
+            arena=mission.arena,
+            budget_s=1.0,
+        )
         for d in mission.drones
     ]
     requests = [(a, complex(p)) for a, p in zip(agents, xy)]
@@ -227,8 +252,10 @@ def bench_flight_tick(repeats: int, drones: int = 10) -> dict[str, dict[str, flo
     """The flight's planning tick: one batched call against one call per drone, with the fixed-gains APF and the
     shipped RPF-1. Hot caches: in flight the tick starts cold (see :func:`bench_flight_tick_cadence`)."""
     return {
-        kind: {label: timed(flight_tick(kind, drones, batching), 50, repeats)
-               for label, batching in (("batched", True), ("one_call_per_drone", False))}
+        kind: {
+            label: timed(flight_tick(kind, drones, batching), 50, repeats)
+            for label, batching in (("batched", True), ("one_call_per_drone", False))
+        }
         for kind in ("apf", "rpf")
     }
 
@@ -303,22 +330,33 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--repeats", type=int, default=15)
     parser.add_argument("--json", type=Path, default=None, help="also write the figures as JSON")
-    parser.add_argument("--cadence", action="store_true",
-                        help="only the flight tick at the flight's cadence (cold start after a sleep vs back to back)")
-    parser.add_argument("--rpf3", action="store_true",
-                        help="only RPF-3 as shipped: per-drone step against the onnxruntime call, batched ticks")
+    parser.add_argument(
+        "--cadence",
+        action="store_true",
+        help="only the flight tick at the flight's cadence (cold start after a sleep vs back to back)",
+    )
+    parser.add_argument(
+        "--rpf3",
+        action="store_true",
+        help="only RPF-3 as shipped: per-drone step against the onnxruntime call, batched ticks",
+    )
     args = parser.parse_args(argv)
     if args.rpf3:
         figures = bench_rpf3(args.repeats)
         print("RPF-3 (kind rpf3: guidance, margin 0.05, RPF-3's tuning), median; line: step <= 1.5x onnxruntime")
         for name, f in figures.items():
             if "step" in f:
-                print(f"  {name:14s} step {f['step'] * 1e6:7.1f} us, " f"onnxruntime alone {f['onnxruntime_alone'] * 1e6:6.1f} us:"
-                      f" {f['step'] / f['onnxruntime_alone']:.2f}x")
+                print(
+                    f"  {name:14s} step {f['step'] * 1e6:7.1f} us, "
+                    f"onnxruntime alone {f['onnxruntime_alone'] * 1e6:6.1f} us:"
+                    f" {f['step'] / f['onnxruntime_alone']:.2f}x"
+                )
             else:
                 n = int(name.rsplit("_", 1)[1])
-                print(f"  {name:14s} {f['tick'] * 1e3:7.2f} ms, {f['tick'] / n * 1e6:5.1f} us a drone"
-                      f" (line: 100 drones < 2 ms; the flight plans a worker's drones in one such call)")
+                print(
+                    f"  {name:14s} {f['tick'] * 1e3:7.2f} ms, {f['tick'] / n * 1e6:5.1f} us a drone"
+                    f" (line: 100 drones < 2 ms; the flight plans a worker's drones in one such call)"
+                )
         if args.json:
             args.json.write_text(json.dumps({"rpf3_s": figures}, indent=2))
         return 0
@@ -348,8 +386,10 @@ def main(argv: list[str] | None = None) -> int:
     print("per-drone plan step of RPF with guidance path + margin 0.05, beside the onnxruntime call alone (median)")
     for name, g in guidance.items():
         print(
-            f"  {name:14s} with guidance {g['with_guidance'] * 1e6:7.1f} us, " f"without {g['without_guidance'] * 1e6:7.1f} us,"
-            f" onnxruntime alone {g['onnxruntime_alone'] * 1e6:6.1f} us" f": {g['with_guidance'] / g['onnxruntime_alone']:.2f}x"
+            f"  {name:14s} with guidance {g['with_guidance'] * 1e6:7.1f} us, "
+            f"without {g['without_guidance'] * 1e6:7.1f} us,"
+            f" onnxruntime alone {g['onnxruntime_alone'] * 1e6:6.1f} us"
+            f": {g['with_guidance'] / g['onnxruntime_alone']:.2f}x"
             f" ({g['guided_views']:.0f} of {g['views']:.0f} drones with a hidden goal)"
         )
     print("one tick, every drone from its own view (goal: 100 drones <= 5 ms)")

@@ -151,10 +151,14 @@ def main() -> None:
     print(f"  connected (Swarm.open_links)       {results['connect_median_s'] * 1000:8.1f} ms")
     print(f"  fully connected (all param values) {results['fully_connected_median_s'] * 1000:8.1f} ms")
     print(f"position setpoint round trip, {args.samples} samples (p50 / p99):")
-    print(f"  send -> firmware decoded           {results['setpoint_to_decode_p50_ms']:6.2f} / "
-          f"{results['setpoint_to_decode_p99_ms']:6.2f} ms")
-    print(f"  send -> ctrltarget log at cflib    {results['setpoint_to_log_p50_ms']:6.2f} / "
-          f"{results['setpoint_to_log_p99_ms']:6.2f} ms  (10 ms log period)")
+    print(
+        f"  send -> firmware decoded           {results['setpoint_to_decode_p50_ms']:6.2f} / "
+        f"{results['setpoint_to_decode_p99_ms']:6.2f} ms"
+    )
+    print(
+        f"  send -> ctrltarget log at cflib    {results['setpoint_to_log_p50_ms']:6.2f} / "
+        f"{results['setpoint_to_log_p99_ms']:6.2f} ms  (10 ms log period)"
+    )
 
 
 if __name__ == "__main__":

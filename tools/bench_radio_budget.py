@@ -35,13 +35,20 @@ BASE_ADDRESS = 0xE7E7E7E700
 
 
 def mission_of(drones: int, radio: str, mode: str, rate_hz: float, mocap_hz: float, extpos_hz: float) -> Mission:
-    lines = [f"name: budget-{drones}", "arena: {x: [-10, 10], y: [-10, 10]}", f"flight: {{rate_hz: {rate_hz}}}",
-             f"mocap: {{kind: sim, rate_hz: {mocap_hz}}}",
-             f"radio: {{dongle_type: {radio}, extpos: {mode}, extpos_rate_hz: {extpos_hz}}}", "drones:"]
+    lines = [
+        f"name: budget-{drones}",
+        "arena: {x: [-10, 10], y: [-10, 10]}",
+        f"flight: {{rate_hz: {rate_hz}}}",
+        f"mocap: {{kind: sim, rate_hz: {mocap_hz}}}",
+        f"radio: {{dongle_type: {radio}, extpos: {mode}, extpos_rate_hz: {extpos_hz}}}",
+        "drones:",
+    ]
     for k in range(drones):
         x = -9.0 + 0.5 * k
-        lines.append(f"  - {{name: cf{k + 1}, uri: radio://0/80/2M/{BASE_ADDRESS + k + 1:010X}, start: [{x}, 0], "
-                     f"goal: [{x}, 1]}}")
+        lines.append(
+            f"  - {{name: cf{k + 1}, uri: radio://0/80/2M/{BASE_ADDRESS + k + 1:010X}, start: [{x}, 0], "
+            f"goal: [{x}, 1]}}"
+        )
     return parse_mission("\n".join(lines) + "\n")
 
 
@@ -63,22 +70,33 @@ def measure(mission: Mission, seconds: float, cache_dir: str) -> dict[str, float
 
     packed = mission.radio.extpos == "packed"
     addresses = {d.name: int(d.uri.rsplit("/", 1)[1], 16) for d in mission.drones}
-    world = FakeWorld({addresses[d.name]: FakeDroneConfig.at(d.start[0], d.start[1], 0.0, positioning="extpos")
-                       for d in mission.drones}).start()
+    world = FakeWorld(
+        {
+            addresses[d.name]: FakeDroneConfig.at(d.start[0], d.start[1], 0.0, positioning="extpos")
+            for d in mission.drones
+        }
+    ).start()
     plug = crazyradio.plug(world, dongles=1, radio=mission.radio.dongle_type)
     received: dict[tuple[str, int, int], list[float]] = defaultdict(list)
     lock = threading.Lock()
     for name, address in addresses.items():
-        def observer(port: int, channel: int, payload: bytes, stamp: float, name: str = name,
-                     ident: int = address & 0xFF) -> None:
+
+        def observer(
+            port: int, channel: int, payload: bytes, stamp: float, name: str = name, ident: int = address & 0xFF
+        ) -> None:
             if (port, channel) == (6, 2) and all(i != ident for i, _ in decode(payload)):
                 return  # another group's packet: not this drone's position
             with lock:
                 received[(name, port, channel)].append(stamp)
+
         world.add_packet_observer(address, observer)
-    backend = CflibBackend(cache_dir=cache_dir, packed_extpos=packed,
-                           ext_pos_std_dev=PACKED_EXT_POS_STD_DEV_M if packed else None,
-                           rate_limits=link_rate_limits(mission), connect_timeout_s=60.0)  # many links, one dongle
+    backend = CflibBackend(
+        cache_dir=cache_dir,
+        packed_extpos=packed,
+        ext_pos_std_dev=PACKED_EXT_POS_STD_DEV_M if packed else None,
+        rate_limits=link_rate_limits(mission),
+        connect_timeout_s=60.0,
+    )  # many links, one dongle
     uris = {d.name: d.uri for d in mission.drones}
     try:
         errors = backend.connect(uris)
@@ -134,11 +152,14 @@ def measure(mission: Mission, seconds: float, cache_dir: str) -> dict[str, float
                     extpos_latency.append(later - t)
     made = sum(len(s) for _, s in frames) * (BROADCAST_COPIES if packed else 1)  # each copy heard when packed
     delivered = sum(len([s for s in received[(n, *extpos)] if start <= s <= start + elapsed]) for n in uris)
-    return {"setpoint_p50_s": quantile(setpoint_latency, 0.5), "setpoint_p99_s": quantile(setpoint_latency, 0.99),
-            "setpoints_missing": len(ticks) * len(uris) - len(setpoint_latency),
-            "extpos_p99_s": quantile(extpos_latency, 0.99),
-            "extpos_delivered": delivered / made if made else math.nan,
-            "busy": (busy1 - busy0) / elapsed}
+    return {
+        "setpoint_p50_s": quantile(setpoint_latency, 0.5),
+        "setpoint_p99_s": quantile(setpoint_latency, 0.99),
+        "setpoints_missing": len(ticks) * len(uris) - len(setpoint_latency),
+        "extpos_p99_s": quantile(extpos_latency, 0.99),
+        "extpos_delivered": delivered / made if made else math.nan,
+        "busy": (busy1 - busy0) / elapsed,
+    }
 
 
 def _latencies(ticks: list[float], stamps: dict[str, list[float]], names: list[str]) -> list[float]:
@@ -155,14 +176,26 @@ def _latencies(ticks: list[float], stamps: dict[str, list[float]], names: list[s
 
 
 def row(load: DongleLoad, measured: dict[str, float] | None) -> list[str]:
-    cells = [f"{len(load.drones)}", "packed" if load.broadcasts else "per drone", f"{load.needed:.0f}",
-             f"{load.budget:.0f}", f"{load.use:.0%}", str(sorted(set(load.rate_limits.values()))[0]),
-             f"{load.setpoint_p50_s * 1e3:.0f} / {load.setpoint_p99_s * 1e3:.0f}",
-             f"{load.extpos_p99_s * 1e3:.0f}", f"{load.extpos_delivered:.0%}", "no" if load.over else "yes"]
+    cells = [
+        f"{len(load.drones)}",
+        "packed" if load.broadcasts else "per drone",
+        f"{load.needed:.0f}",
+        f"{load.budget:.0f}",
+        f"{load.use:.0%}",
+        str(sorted(set(load.rate_limits.values()))[0]),
+        f"{load.setpoint_p50_s * 1e3:.0f} / {load.setpoint_p99_s * 1e3:.0f}",
+        f"{load.extpos_p99_s * 1e3:.0f}",
+        f"{load.extpos_delivered:.0%}",
+        "no" if load.over else "yes",
+    ]
     if measured is not None:
-        cells += [f"{measured['busy']:.0%}", f"{measured['setpoint_p50_s'] * 1e3:.0f} / "
-                  f"{measured['setpoint_p99_s'] * 1e3:.0f}", f"{measured['setpoints_missing']:.0f}",
-                  f"{measured['extpos_p99_s'] * 1e3:.0f}", f"{measured['extpos_delivered']:.0%}"]
+        cells += [
+            f"{measured['busy']:.0%}",
+            f"{measured['setpoint_p50_s'] * 1e3:.0f} / {measured['setpoint_p99_s'] * 1e3:.0f}",
+            f"{measured['setpoints_missing']:.0f}",
+            f"{measured['extpos_p99_s'] * 1e3:.0f}",
+            f"{measured['extpos_delivered']:.0%}",
+        ]
     return cells
 
 
@@ -177,11 +210,26 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=5.0)
     parser.add_argument("--markdown", action="store_true")
     args = parser.parse_args()
-    header = ["drones", "extpos", "needed/s", "carries/s", "use", "rate_limit", "setpoint ms p50 / p99 (model)",
-              "extpos ms p99", "extpos out", "within budget"]
+    header = [
+        "drones",
+        "extpos",
+        "needed/s",
+        "carries/s",
+        "use",
+        "rate_limit",
+        "setpoint ms p50 / p99 (model)",
+        "extpos ms p99",
+        "extpos out",
+        "within budget",
+    ]
     if args.measure:
-        header += ["dongle busy (measured)", "setpoint ms p50 / p99 (measured)", "setpoints missing",
-                   "extpos ms p99 (measured)", "extpos out (measured)"]
+        header += [
+            "dongle busy (measured)",
+            "setpoint ms p50 / p99 (measured)",
+            "setpoints missing",
+            "extpos ms p99 (measured)",
+            "extpos out (measured)",
+        ]
     rows = []
     with tempfile.TemporaryDirectory(prefix="rpf-fly-toc-") as cache:
         for mode in ("extpos", "packed"):

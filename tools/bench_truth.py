@@ -60,9 +60,13 @@ def poll(n: int, seconds: float, period_s: float) -> dict:
         finally:
             process.close()
             log.close()
-    return {"cpu_pct": 100 * feed.cpu_s / seconds, "wakeups_per_s": feed.fetches / seconds,
-            "samples_per_s": feed.samples / seconds, "writer_cpu_pct": 100 * log.writer_cpu_s / seconds,
-            "messages": log.written}
+    return {
+        "cpu_pct": 100 * feed.cpu_s / seconds,
+        "wakeups_per_s": feed.fetches / seconds,
+        "samples_per_s": feed.samples / seconds,
+        "writer_cpu_pct": 100 * log.writer_cpu_s / seconds,
+        "messages": log.written,
+    }
 
 
 PUSHER = textwrap.dedent("""
@@ -110,8 +114,11 @@ def push(n: int, seconds: float) -> dict:
         thread.join(5)
         log.close()
     sock.close()
-    return {"cpu_pct": 100 * result["cpu_s"] / seconds, "wakeups_per_s": result["wakeups"] / seconds,
-            "samples_per_s": result["samples"] / seconds}
+    return {
+        "cpu_pct": 100 * result["cpu_s"] / seconds,
+        "wakeups_per_s": result["wakeups"] / seconds,
+        "samples_per_s": result["samples"] / seconds,
+    }
 
 
 def world_step_cost(n: int, steps: int = 2000) -> dict:
@@ -143,14 +150,20 @@ def main() -> int:
     print(f"{n} drones, {s:g} s each; CPU of the receiving thread in the flight's process, % of one core:")
     chosen = poll(n, s, 0.1)
     for name, r in (("poll 10 Hz (chosen)", chosen), ("poll 50 Hz", poll(n, s, 0.02)), ("push 100 Hz", push(n, s))):
-        print(f"  {name:20s} {r['cpu_pct']:5.2f} %  {r['wakeups_per_s']:6.1f} wake-ups/s  "
-              f"{r['samples_per_s']:6.1f} samples/s")
+        print(
+            f"  {name:20s} {r['cpu_pct']:5.2f} %  {r['wakeups_per_s']:6.1f} wake-ups/s  "
+            f"{r['samples_per_s']:6.1f} samples/s"
+        )
     per_message = 1e6 * chosen["writer_cpu_pct"] / 100 * s / max(chosen["messages"], 1)
-    print(f"  log writer, /truth only: {chosen['writer_cpu_pct']:.2f} % ({per_message:.1f} us a message, "
-          f"{chosen['messages'] / s:.0f} messages/s)")
+    print(
+        f"  log writer, /truth only: {chosen['writer_cpu_pct']:.2f} % ({per_message:.1f} us a message, "
+        f"{chosen['messages'] / s:.0f} messages/s)"
+    )
     cost = world_step_cost(n)
-    print(f"world process, one step: firmwares {cost['firmware_step_us']:.0f} us, contact check + truth sample "
-          f"{cost['contact_and_truth_us']:.0f} us")
+    print(
+        f"world process, one step: firmwares {cost['firmware_step_us']:.0f} us, contact check + truth sample "
+        f"{cost['contact_and_truth_us']:.0f} us"
+    )
     return 0
 
 

@@ -26,8 +26,9 @@ DT_S = 0.01
 
 def run(drones: int, steps: int, positioning: str) -> list[float]:
     """Seconds each world step took, for `steps` steps after a 2 s take-off."""
-    firmwares = [FakeFirmware(VehicleConfig(position=(0.5 * i, 0.0, 0.0), positioning=positioning))
-                 for i in range(drones)]
+    firmwares = [
+        FakeFirmware(VehicleConfig(position=(0.5 * i, 0.0, 0.0), positioning=positioning)) for i in range(drones)
+    ]
     t = 0.0
     for fw in firmwares:
         fw.handle(6, 0, struct.pack("<fff", *fw.vehicle.pos), t)
@@ -67,10 +68,13 @@ def main() -> None:
         median = statistics.median(durations)
         medians.append(median)
         p99 = durations[int(0.99 * (len(durations) - 1))]
-        print(f"{args.drones} drones ({args.positioning}): world step median {median * 1e6:.0f} us, "
-              f"p99 {p99 * 1e6:.0f} us")
-    print(f"best median {min(medians) * 1e6:.0f} us per world step ({min(medians) * 1e6 / args.drones:.1f} us "
-          "per drone)")
+        print(
+            f"{args.drones} drones ({args.positioning}): world step median {median * 1e6:.0f} us, "
+            f"p99 {p99 * 1e6:.0f} us"
+        )
+    print(
+        f"best median {min(medians) * 1e6:.0f} us per world step ({min(medians) * 1e6 / args.drones:.1f} us per drone)"
+    )
 
 
 if __name__ == "__main__":

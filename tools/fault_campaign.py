@@ -46,29 +46,64 @@ def _list(text: str | None) -> list[str] | None:
 def parser() -> argparse.ArgumentParser:
     """The tool's options (each the same as before the campaign moved into rpf_fly/campaign)."""
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("--missions", default=None, help="comma-separated shipped mission names or mission file paths "
-                   "(default: lab-3,circle-8-r3; random: lab-3,circle-8-r3,arena-a-6,arena-b-6,u-trap)")
-    p.add_argument("--kinds", default=None, help="comma-separated fault kinds (default: every kind; "
-                   "ground_station_kill and dongle_unplug fly their own missions against a lab unless --missions)")
-    p.add_argument("--out", default=None, help="the report (markdown), - for stdout (default: "
-                   "docs/fault-campaign/<name>.md)")
+    p.add_argument(
+        "--missions",
+        default=None,
+        help="comma-separated shipped mission names or mission file paths "
+        "(default: lab-3,circle-8-r3; random: lab-3,circle-8-r3,arena-a-6,arena-b-6,u-trap)",
+    )
+    p.add_argument(
+        "--kinds",
+        default=None,
+        help="comma-separated fault kinds (default: every kind; "
+        "ground_station_kill and dongle_unplug fly their own missions against a lab unless --missions)",
+    )
+    p.add_argument(
+        "--out", default=None, help="the report (markdown), - for stdout (default: docs/fault-campaign/<name>.md)"
+    )
     p.add_argument("--json", default=None, help="verdicts as JSON to this file")
     p.add_argument("--planner", default=None, help="fly each mission with this planner kind and its default policy")
-    p.add_argument("--random", type=int, default=0, metavar="N",
-                   help="N flights with a random mission, planner, fault kind, drone, time and parameters")
+    p.add_argument(
+        "--random",
+        type=int,
+        default=0,
+        metavar="N",
+        help="N flights with a random mission, planner, fault kind, drone, time and parameters",
+    )
     p.add_argument("--seed", type=int, default=0, help="the random campaign's seed")
     p.add_argument("--planners", default="mission,rpf3", help="the random campaign's planners (mission: its own)")
-    p.add_argument("--faults-per-run", type=int, default=1, metavar="K",
-                   help="the random campaign's faults a flight: K of different kinds at once (compound)")
-    p.add_argument("--vary-world", action="store_true", help="the random campaign's simulated world drawn from a "
-                   "seed of each run's own (dry_run.seed = seed * 1000 + run) instead of 0")
+    p.add_argument(
+        "--faults-per-run",
+        type=int,
+        default=1,
+        metavar="K",
+        help="the random campaign's faults a flight: K of different kinds at once (compound)",
+    )
+    p.add_argument(
+        "--vary-world",
+        action="store_true",
+        help="the random campaign's simulated world drawn from a "
+        "seed of each run's own (dry_run.seed = seed * 1000 + run) instead of 0",
+    )
     p.add_argument("--extpose", action="store_true", help="fly each mission with radio.extpos: extpose")
-    p.add_argument("--dynamics", default=None, choices=("first-order", "firmware"),
-                   help="how every run's simulated drones fly (dry_run.dynamics; default: each mission's own)")
-    p.add_argument("--only", default=None, metavar="RUNS", help="the random campaign's runs to fly, comma-separated "
-                   "(the draws are the whole campaign's)")
-    p.add_argument("--keep", default=None, metavar="DIR", help="fly in DIR and keep each run's mission copy, fault "
-                   "schedule and flight log")
+    p.add_argument(
+        "--dynamics",
+        default=None,
+        choices=("first-order", "firmware"),
+        help="how every run's simulated drones fly (dry_run.dynamics; default: each mission's own)",
+    )
+    p.add_argument(
+        "--only",
+        default=None,
+        metavar="RUNS",
+        help="the random campaign's runs to fly, comma-separated (the draws are the whole campaign's)",
+    )
+    p.add_argument(
+        "--keep",
+        default=None,
+        metavar="DIR",
+        help="fly in DIR and keep each run's mission copy, fault schedule and flight log",
+    )
     return p
 
 
@@ -83,18 +118,31 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError:
         p.error(f"--only: expected run numbers separated by commas, got {args.only!r}")
     try:
-        result = maintainers_campaign(_list(args.missions), _list(args.kinds), args.planner, args.random, args.seed,
-                                      _list(args.planners), args.faults_per_run, args.vary_world, args.extpose, only,
-                                      Path(args.keep) if args.keep else None,
-                                      on_verdict=lambda v: print(progress_line(v), flush=True),
-                                      dynamics=args.dynamics)
+        result = maintainers_campaign(
+            _list(args.missions),
+            _list(args.kinds),
+            args.planner,
+            args.random,
+            args.seed,
+            _list(args.planners),
+            args.faults_per_run,
+            args.vary_world,
+            args.extpose,
+            only,
+            Path(args.keep) if args.keep else None,
+            on_verdict=lambda v: print(progress_line(v), flush=True),
+            dynamics=args.dynamics,
+        )
     except CampaignError as err:
         p.error(str(err))
     if args.out == "-":
         print(result.markdown())
     else:
-        out = Path(args.out) if args.out else default_report(args.planner, args.random, args.seed,
-                                                             args.faults_per_run, args.extpose, args.dynamics)
+        out = (
+            Path(args.out)
+            if args.out
+            else default_report(args.planner, args.random, args.seed, args.faults_per_run, args.extpose, args.dynamics)
+        )
         out.write_text(result.markdown())
         print(f"report: {out}")
     if args.json:

@@ -47,8 +47,10 @@ class Grid:
         self.blocked = obstacles.signed_distance(pts.reshape(-1)).reshape(pts.shape) < DELTA
 
     def index(self, p: complex) -> tuple[int, int]:
-        return (min(max(int(round((p.real - self.x0) / self.cell)), 0), self.nx - 1),
-                min(max(int(round((p.imag - self.y0) / self.cell)), 0), self.ny - 1))
+        return (
+            min(max(int(round((p.real - self.x0) / self.cell)), 0), self.nx - 1),
+            min(max(int(round((p.imag - self.y0) / self.cell)), 0), self.ny - 1),
+        )
 
     def point(self, i: int, j: int) -> complex:
         return complex(self.x0 + i * self.cell, self.y0 + j * self.cell)
@@ -119,8 +121,11 @@ def main() -> None:
     ap.add_argument("--cell", type=float, default=0.05)
     ap.add_argument("--repeats", type=int, default=5)
     args = ap.parse_args()
-    print("| scene | nodes / cells | VG build [ms] | VG goal row [ms] | VG tick [us] | " "grid build [ms] | grid field per goal [ms] "
-          "| grid tick [us] | VG path [m] | grid path [m] | grid shortcut [m] |")
+    print(
+        "| scene | nodes / cells | VG build [ms] | VG goal row [ms] | VG tick [us] | "
+        "grid build [ms] | grid field per goal [ms] "
+        "| grid tick [us] | VG path [m] | grid path [m] | grid shortcut [m] |"
+    )
     print("|---|---|---|---|---|---|---|---|---|---|---|")
     for name in ("lab-3", "arena-a-6", "u-trap"):
         mission = load_mission(ROOT / "missions" / f"{name}.yaml")
@@ -133,19 +138,26 @@ def main() -> None:
 
         vg_rows = timed(lambda: cost_to_go(np.array(goals), g.nodes, g.pairs, g.inflated), args.repeats) / len(goals)
         g.prepare(np.array(goals))
-        tick = timed(lambda: [g.waypoint(s, q) for s, q in zip(starts, goals) for _ in range(50)], args.repeats) / (50 * len(goals))
+        tick = timed(lambda: [g.waypoint(s, q) for s, q in zip(starts, goals) for _ in range(50)], args.repeats) / (
+            50 * len(goals)
+        )
         vg_len = statistics.mean(path_length(g.path(s, q)) for s, q in zip(starts, goals))
         grid_build = timed(lambda: Grid(obstacles, bounds, args.cell), args.repeats)
         grid = Grid(obstacles, bounds, args.cell)
         field_s = timed(lambda: grid.field(goals[0]), max(1, args.repeats // 2))
         fields = [grid.field(q) for q in goals]
-        grid_tick = timed(lambda: [grid.descend(f, *grid.index(s)) for f, s in zip(fields, starts) for _ in range(50)],
-                          args.repeats) / (50 * len(goals))
+        grid_tick = timed(
+            lambda: [grid.descend(f, *grid.index(s)) for f, s in zip(fields, starts) for _ in range(50)], args.repeats
+        ) / (50 * len(goals))
         paths = [grid.path(f, s, q) for f, s, q in zip(fields, starts, goals)]
         grid_len = statistics.mean(path_length(p) for p in paths)
         short_len = statistics.mean(path_length(grid.shortcut(p)) for p in paths)
-        print(f"| {name} | {g.nodes.shape[0]} / {grid.nx * grid.ny} | {vg_build * 1e3:.2f} | " f"{vg_rows * 1e3:.3f} | {tick * 1e6:.1f} | "
-              f"{grid_build * 1e3:.1f} | {field_s * 1e3:.0f} | {grid_tick * 1e6:.1f} | " f"{vg_len:.3f} | {grid_len:.3f} | {short_len:.3f} |")
+        print(
+            f"| {name} | {g.nodes.shape[0]} / {grid.nx * grid.ny} | {vg_build * 1e3:.2f} | "
+            f"{vg_rows * 1e3:.3f} | {tick * 1e6:.1f} | "
+            f"{grid_build * 1e3:.1f} | {field_s * 1e3:.0f} | {grid_tick * 1e6:.1f} | "
+            f"{vg_len:.3f} | {grid_len:.3f} | {short_len:.3f} |"
+        )
 
 
 if __name__ == "__main__":

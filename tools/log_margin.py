@@ -63,11 +63,20 @@ def main() -> int:
                 clearance = min(clearance, d)
     crashed = [n for n in names if any(s["crashed"] for s in truth[n])]
     held = separation >= 2 * r + args.margin and clearance >= r + args.margin and not crashed
-    print(json.dumps({"log": args.log, "drones": len(names),
-                      "min_separation_m": None if separation == math.inf else round(separation, 3),
-                      "separation_bar_m": round(2 * r + args.margin, 3),
-                      "min_clearance_m": None if clearance == math.inf else round(clearance, 3),
-                      "clearance_bar_m": round(r + args.margin, 3), "crashed": crashed, "held": held}))
+    print(
+        json.dumps(
+            {
+                "log": args.log,
+                "drones": len(names),
+                "min_separation_m": None if separation == math.inf else round(separation, 3),
+                "separation_bar_m": round(2 * r + args.margin, 3),
+                "min_clearance_m": None if clearance == math.inf else round(clearance, 3),
+                "clearance_bar_m": round(r + args.margin, 3),
+                "crashed": crashed,
+                "held": held,
+            }
+        )
+    )
     return 0 if held else 1
 
 

@@ -32,8 +32,7 @@ ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_OUT = ROOT / "docs" / "foxglove-layout.json"
 SEPARATION_TOPIC = "/studio_script/separation"
 
-COLOURS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f", "#bcbd22",
-           "#17becf")
+COLOURS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f", "#bcbd22", "#17becf")
 
 SEPARATION_SCRIPT = """\
 // rpf_fly: the smallest distance between any two drones, from /tf (world -> each drone), as rpf-fly review and the
@@ -86,48 +85,114 @@ def three_d(n: int) -> dict:
     """The 3D panel: world frame, a view from above and aside, the grid on the floor, the topics to draw."""
     topics: dict = {"/scene": {"visible": True}}
     for i, name in enumerate(drones(n)):
-        topics[f"/{name}/setpoint"] = {"visible": True, "type": "arrow", "arrowScale": [0.15, 0.03, 0.03],
-                                       "color": COLOURS[i % len(COLOURS)]}
+        topics[f"/{name}/setpoint"] = {
+            "visible": True,
+            "type": "arrow",
+            "arrowScale": [0.15, 0.03, 0.03],
+            "color": COLOURS[i % len(COLOURS)],
+        }
     return {
-        "cameraState": {"distance": 11.0, "perspective": True, "phi": 50.0, "thetaOffset": 30.0,
-                        "target": [0, 0, 0], "targetOffset": [0, 0, 0], "targetOrientation": [0, 0, 0, 1],
-                        "fovy": 45, "near": 0.05, "far": 500},
+        "cameraState": {
+            "distance": 11.0,
+            "perspective": True,
+            "phi": 50.0,
+            "thetaOffset": 30.0,
+            "target": [0, 0, 0],
+            "targetOffset": [0, 0, 0],
+            "targetOrientation": [0, 0, 0, 1],
+            "fovy": 45,
+            "near": 0.05,
+            "far": 500,
+        },
         "followMode": "follow-none",
         "followTf": "world",
-        "scene": {"transforms": {"showLabel": True, "labelSize": 0.15, "axisScale": 0.25, "lineWidth": 1},
-                  "labelScaleFactor": 1},
+        "scene": {
+            "transforms": {"showLabel": True, "labelSize": 0.15, "axisScale": 0.25, "lineWidth": 1},
+            "labelScaleFactor": 1,
+        },
         "transforms": {"frame:world": {"visible": True}},
         "topics": topics,
-        "layers": {"grid": {"visible": True, "frameLocked": True, "label": "Grid (1 m)", "instanceId": "grid",
-                            "layerId": "foxglove.Grid", "frameId": "world", "size": 10, "divisions": 10,
-                            "lineWidth": 1, "color": "#248eff80", "position": [0, 0, 0], "rotation": [0, 0, 0],
-                            "order": 1}},
-        "publish": {"type": "point", "poseTopic": "/move_base_simple/goal", "pointTopic": "/clicked_point",
-                    "poseEstimateTopic": "/initialpose", "poseEstimateXDeviation": 0.5,
-                    "poseEstimateYDeviation": 0.5, "poseEstimateThetaDeviation": 0.26179939},
+        "layers": {
+            "grid": {
+                "visible": True,
+                "frameLocked": True,
+                "label": "Grid (1 m)",
+                "instanceId": "grid",
+                "layerId": "foxglove.Grid",
+                "frameId": "world",
+                "size": 10,
+                "divisions": 10,
+                "lineWidth": 1,
+                "color": "#248eff80",
+                "position": [0, 0, 0],
+                "rotation": [0, 0, 0],
+                "order": 1,
+            }
+        },
+        "publish": {
+            "type": "point",
+            "poseTopic": "/move_base_simple/goal",
+            "pointTopic": "/clicked_point",
+            "poseEstimateTopic": "/initialpose",
+            "poseEstimateXDeviation": 0.5,
+            "poseEstimateYDeviation": 0.5,
+            "poseEstimateThetaDeviation": 0.26179939,
+        },
         "imageMode": {},
     }
 
 
 def plot(title: str, paths: list[dict]) -> dict:
-    return {"title": title, "paths": paths, "showLegend": True, "legendDisplay": "floating", "showXAxisLabels": True,
-            "showYAxisLabels": True, "isSynced": True, "xAxisVal": "timestamp", "sidebarDimension": 240}
+    return {
+        "title": title,
+        "paths": paths,
+        "showLegend": True,
+        "legendDisplay": "floating",
+        "showXAxisLabels": True,
+        "showYAxisLabels": True,
+        "isSynced": True,
+        "xAxisVal": "timestamp",
+        "sidebarDimension": 240,
+    }
 
 
 def separation_plot() -> dict:
     two_r = 2 * PlannerSettings().safety_radius
-    return plot("separation [m] (smallest planar distance between two drones)", [
-        {"value": f"{SEPARATION_TOPIC}.min_planar_m", "enabled": True, "timestampMethod": "receiveTime",
-         "label": "min distance", "color": "#1f77b4"},
-        {"value": f"{two_r:g}", "enabled": True, "timestampMethod": "receiveTime",
-         "label": f"2r = {two_r:g} m (the default planner.safety_radius)", "color": "#d62728"},
-    ])
+    return plot(
+        "separation [m] (smallest planar distance between two drones)",
+        [
+            {
+                "value": f"{SEPARATION_TOPIC}.min_planar_m",
+                "enabled": True,
+                "timestampMethod": "receiveTime",
+                "label": "min distance",
+                "color": "#1f77b4",
+            },
+            {
+                "value": f"{two_r:g}",
+                "enabled": True,
+                "timestampMethod": "receiveTime",
+                "label": f"2r = {two_r:g} m (the default planner.safety_radius)",
+                "color": "#d62728",
+            },
+        ],
+    )
 
 
 def altitude_plot(n: int) -> dict:
-    return plot("altitude [m] (mocap z)", [
-        {"value": f"/mocap/{name}.pose.position.z", "enabled": True, "timestampMethod": "receiveTime", "label": name,
-         "color": COLOURS[i % len(COLOURS)]} for i, name in enumerate(drones(n))])
+    return plot(
+        "altitude [m] (mocap z)",
+        [
+            {
+                "value": f"/mocap/{name}.pose.position.z",
+                "enabled": True,
+                "timestampMethod": "receiveTime",
+                "label": name,
+                "color": COLOURS[i % len(COLOURS)],
+            }
+            for i, name in enumerate(drones(n))
+        ],
+    )
 
 
 def layout(n: int = 10) -> dict:
@@ -146,8 +211,12 @@ def layout(n: int = 10) -> dict:
             "first": "3D!rpf-scene",
             "second": {
                 "first": "Plot!rpf-separation",
-                "second": {"first": "Plot!rpf-altitude", "second": "RosOut!rpf-events", "direction": "column",
-                           "splitPercentage": 50},
+                "second": {
+                    "first": "Plot!rpf-altitude",
+                    "second": "RosOut!rpf-events",
+                    "direction": "column",
+                    "splitPercentage": 50,
+                },
                 "direction": "column",
                 "splitPercentage": 33,
             },

@@ -32,15 +32,19 @@ def arena_a_mission_text(seed: int = GENERATOR_SEED) -> str:
         "# by hand. `sim.start_jitter_m` gives the paper's random initial positions (drawn from --seed).",
         "name: arena-a-6",
         "arena: {x: [-5.0, 5.0], y: [-5.0, 5.0], z: [0.0, 2.0]}",
-        "flight: {height: 1.0, speed: 0.5, rate_hz: 10, goal_tolerance: 0.1, " "takeoff_s: 2.0, land_s: 2.0, timeout_s: 120}",
-        "planner: {kind: rpf, policy: ../policies/rpf.onnx, sensing_range: 6.0, " "safety_radius: 0.1, influence_range: 10.0}",
+        "flight: {height: 1.0, speed: 0.5, rate_hz: 10, goal_tolerance: 0.1, "
+        "takeoff_s: 2.0, land_s: 2.0, timeout_s: 120}",
+        "planner: {kind: rpf, policy: ../policies/rpf.onnx, sensing_range: 6.0, "
+        "safety_radius: 0.1, influence_range: 10.0}",
         "mocap: {kind: sim}",
         "radio: {kind: cflib}",
         "sim: {time_limit_s: 100, start_jitter_m: 0.1}",
         "obstacles:",
     ]
     for shape in scenario.shapes:
-        lines.append(f"  - {{shape: circle, center: [{_num(shape.center[0])}, {_num(shape.center[1])}], radius: {shape.radius}}}")
+        lines.append(
+            f"  - {{shape: circle, center: [{_num(shape.center[0])}, {_num(shape.center[1])}], radius: {shape.radius}}}"
+        )
     lines.append("drones:")
     for i, (s, g) in enumerate(zip(scenario.starts, scenario.goals)):
         lines.append(

@@ -37,14 +37,19 @@ def main() -> int:
     paths = args.missions or sorted((ROOT / "missions").glob("*.yaml"))
     overrides = {k: v for k, v in (("guidance", args.guidance), ("margin", args.margin)) if v is not None}
     broken = False
-    print("| mission | planner | guidance | margin | success | collisions | " "min sep [m] (>= 2r+m) | min clear [m] (>= r+m) | makespan [s] |")
+    print(
+        "| mission | planner | guidance | margin | success | collisions | "
+        "min sep [m] (>= 2r+m) | min clear [m] (>= r+m) | makespan [s] |"
+    )
     print("|---|---|---|---|---|---|---|---|---|")
     for path in paths:
         mission = with_planner(load_mission(path), args.planner, **overrides)
         s = mission.planner
         r, m = s.safety_radius, s.margin_m
-        runs = [run_scenario(scenario_from_mission(mission, seed), s, sim_params(mission), seed, mission.name).metrics
-                for seed in range(args.seeds)]
+        runs = [
+            run_scenario(scenario_from_mission(mission, seed), s, sim_params(mission), seed, mission.name).metrics
+            for seed in range(args.seeds)
+        ]
         ok = sum(x.success for x in runs)
         coll = sum(x.collisions_drone_drone + x.collisions_drone_obstacle for x in runs)
         seps = [x.min_separation_m for x in runs if x.min_separation_m is not None]
@@ -56,8 +61,10 @@ def main() -> int:
         held_clear = clear is None or clear >= r + m
         broken |= not (held_sep and held_clear)
         span = f"{sum(spans) / len(spans):.1f}" if spans else "-"
-        print(f"| {mission.name} | {s.kind} | {s.guidance_mode} | {m:g} | {ok}/{len(runs)} | {coll} | "
-              f"{_held(sep, 2 * r + m, held_sep)} | {_held(clear, r + m, held_clear)} | {span} |")
+        print(
+            f"| {mission.name} | {s.kind} | {s.guidance_mode} | {m:g} | {ok}/{len(runs)} | {coll} | "
+            f"{_held(sep, 2 * r + m, held_sep)} | {_held(clear, r + m, held_clear)} | {span} |"
+        )
     return 1 if broken else 0
 
 

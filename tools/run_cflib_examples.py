@@ -117,37 +117,61 @@ class ExampleSpec:
         return self.label or " ".join((self.path, *self.args))
 
 
-SBS_SWARM_LAYOUT = {"E7E7E7E701": (-0.5, 0.5), "E7E7E7E702": (0.5, 0.5), "E7E7E7E703": (0.5, -0.5),
-                    "E7E7E7E704": (-0.5, -0.5)}
+SBS_SWARM_LAYOUT = {
+    "E7E7E7E701": (-0.5, 0.5),
+    "E7E7E7E702": (0.5, 0.5),
+    "E7E7E7E703": (0.5, -0.5),
+    "E7E7E7E704": (-0.5, -0.5),
+}
 """sbs_swarm.py's drones, "1 m apart" as its comment draws them (0 top left, 1 top right, 2 bottom right, 3 bottom
 left): its relative go-tos swap them around that square; on the fake's default 0.5 m row they would collide."""
 
 KNOWN: tuple[ExampleSpec, ...] = (
-    ExampleSpec("autonomy/autonomous_sequence.py",
-                note="written for Loco/Lighthouse positioning: the fake drone's onboard positioning stands in"),
+    ExampleSpec(
+        "autonomy/autonomous_sequence.py",
+        note="written for Loco/Lighthouse positioning: the fake drone's onboard positioning stands in",
+    ),
     ExampleSpec("autonomy/autonomous_sequence_high_level.py", note="uploads and flies a figure-8 trajectory"),
-    ExampleSpec("autonomy/autonomous_sequence_high_level.py", args=("--relative-yaw",),
-                note="the same, rotated to the take-off yaw"),
-    ExampleSpec("autonomy/motion_commander_demo.py",
-                note="written for the Flow deck (uses none of its API): the onboard positioning stands in"),
+    ExampleSpec(
+        "autonomy/autonomous_sequence_high_level.py",
+        args=("--relative-yaw",),
+        note="the same, rotated to the take-off yaw",
+    ),
+    ExampleSpec(
+        "autonomy/motion_commander_demo.py",
+        note="written for the Flow deck (uses none of its API): the onboard positioning stands in",
+    ),
     ExampleSpec("logging/basiclog.py"),
     ExampleSpec("logging/basiclog_sync.py"),
     ExampleSpec("parameters/basicparam.py"),
-    ExampleSpec("parameters/persistent_params.py",
-                note="stores ring.effect, a parameter of the LED-ring driver the firmware always has"),
-    ExampleSpec("parameters/persistent_params_from_file.py",
-                note="stores activeMarker.back, a parameter of the active-marker driver the firmware always has"),
+    ExampleSpec(
+        "parameters/persistent_params.py",
+        note="stores ring.effect, a parameter of the LED-ring driver the firmware always has",
+    ),
+    ExampleSpec(
+        "parameters/persistent_params_from_file.py",
+        note="stores activeMarker.back, a parameter of the active-marker driver the firmware always has",
+    ),
     ExampleSpec("step-by-step/sbs_connect_log_param.py"),
-    ExampleSpec("step-by-step/sbs_swarm.py", drones=SBS_SWARM_LAYOUT,
-                note="4 drones placed as its comment draws them (1 m square)"),
-    ExampleSpec("step-by-step/sbs_motion_commander.py",
-                excluded="needs a Flow deck v2: it waits for deck.bcFlow2 = 1 and exits without one"),
-    ExampleSpec("lighthouse/multi_bs_geometry_estimation.py",
-                excluded="needs a Lighthouse deck (its sensor sweeps, the Lighthouse memory) and a person: it "
-                         "waits for input() at every step"),
-    ExampleSpec("lighthouse/upload_geos.py",
-                excluded="needs a Lighthouse deck (writes the Lighthouse memory, which only its driver registers) "
-                         "and the user's geometry file (/path/to/your/geo.yaml)"),
+    ExampleSpec(
+        "step-by-step/sbs_swarm.py",
+        drones=SBS_SWARM_LAYOUT,
+        note="4 drones placed as its comment draws them (1 m square)",
+    ),
+    ExampleSpec(
+        "step-by-step/sbs_motion_commander.py",
+        excluded="needs a Flow deck v2: it waits for deck.bcFlow2 = 1 and exits without one",
+    ),
+    ExampleSpec(
+        "lighthouse/multi_bs_geometry_estimation.py",
+        excluded="needs a Lighthouse deck (its sensor sweeps, the Lighthouse memory) and a person: it "
+        "waits for input() at every step",
+    ),
+    ExampleSpec(
+        "lighthouse/upload_geos.py",
+        excluded="needs a Lighthouse deck (writes the Lighthouse memory, which only its driver registers) "
+        "and the user's geometry file (/path/to/your/geo.yaml)",
+    ),
 )
 
 
@@ -178,16 +202,34 @@ def fetch_examples(cache: Path, version: str) -> Path:
     cache.mkdir(parents=True, exist_ok=True)
     archive = cache / f"cflib-{version}.tar.gz"
     if not archive.exists():
-        command = [sys.executable, "-m", "pip", "download", f"cflib=={version}", "--no-binary", ":all:",
-                   "--no-deps", "--quiet", "-d", str(cache)]
+        command = [
+            sys.executable,
+            "-m",
+            "pip",
+            "download",
+            f"cflib=={version}",
+            "--no-binary",
+            ":all:",
+            "--no-deps",
+            "--quiet",
+            "-d",
+            str(cache),
+        ]
         done = subprocess.run(command, capture_output=True, text=True)
         if done.returncode != 0 or not archive.exists():
             last = ((done.stderr or done.stdout).strip().splitlines() or ["no output"])[-1]
-            raise SystemExit(f"error: could not download the cflib {version} sdist with pip ({last}); "
-                             f"give a local copy with --examples DIR")
+            raise SystemExit(
+                f"error: could not download the cflib {version} sdist with pip ({last}); "
+                f"give a local copy with --examples DIR"
+            )
     with tarfile.open(archive) as tar:
-        members = [m for m in tar.getmembers() if m.name.startswith(f"cflib-{version}/examples/")
-                   and ".." not in Path(m.name).parts and (m.isfile() or m.isdir())]
+        members = [
+            m
+            for m in tar.getmembers()
+            if m.name.startswith(f"cflib-{version}/examples/")
+            and ".." not in Path(m.name).parts
+            and (m.isfile() or m.isdir())
+        ]
         try:
             tar.extractall(cache, members=members, filter="data")
         except TypeError:  # Python before 3.10.12 / 3.11.4: no extraction filters (the names were checked above)
@@ -208,8 +250,9 @@ def plan(found: Iterable[str]) -> list[ExampleSpec]:
     found = list(found)
     specs = [spec for spec in KNOWN if spec.path in found]
     known_paths = {spec.path for spec in KNOWN}
-    specs += [ExampleSpec(path, note="not in the list: run with the defaults") for path in found
-              if path not in known_paths]
+    specs += [
+        ExampleSpec(path, note="not in the list: run with the defaults") for path in found if path not in known_paths
+    ]
     return specs
 
 
@@ -223,7 +266,7 @@ def first_error_line(output: str) -> str:
     lines = output.splitlines()
     for index, line in enumerate(lines):
         if line.startswith("Traceback (most recent call last):"):
-            for candidate in lines[index + 1:]:
+            for candidate in lines[index + 1 :]:
                 if candidate and not candidate.startswith((" ", "\t")):
                     return candidate.strip()
     rest = [line.strip() for line in lines if line.strip()]
@@ -249,8 +292,9 @@ def describe_flights(flights: dict[str, dict]) -> tuple[str, str]:
     return summary, "; ".join(problems)
 
 
-def run_one(spec: ExampleSpec, examples: Path, timeout_s: float | None = None, keep_output: Path | None = None
-            ) -> Result:
+def run_one(
+    spec: ExampleSpec, examples: Path, timeout_s: float | None = None, keep_output: Path | None = None
+) -> Result:
     """Run one example (see the module docstring); never raises for the example's own failures."""
     if spec.excluded:
         return Result(spec.name, "excluded", 0.0, spec.excluded)
@@ -275,8 +319,14 @@ def run_one(spec: ExampleSpec, examples: Path, timeout_s: float | None = None, k
         log = Path(tmp) / "output.txt"
         start = time.monotonic()
         with open(log, "w", encoding="utf-8") as out:
-            child = subprocess.Popen([sys.executable, "-c", CHILD, str(script), *spec.args], cwd=copy, env=env,
-                                     stdin=subprocess.DEVNULL, stdout=out, stderr=subprocess.STDOUT)
+            child = subprocess.Popen(
+                [sys.executable, "-c", CHILD, str(script), *spec.args],
+                cwd=copy,
+                env=env,
+                stdin=subprocess.DEVNULL,
+                stdout=out,
+                stderr=subprocess.STDOUT,
+            )
             try:
                 code: int | None = child.wait(timeout)
             except subprocess.TimeoutExpired:
@@ -294,8 +344,9 @@ def run_one(spec: ExampleSpec, examples: Path, timeout_s: float | None = None, k
     if code is None:
         if spec.runs_until_stopped and not traceback:
             return Result(spec.name, "ran until timeout", seconds, f"stopped after {timeout:g} s, no error", flight)
-        return Result(spec.name, "timeout", seconds, f"killed after {timeout:g} s; last line: "
-                                                     f"{first_error_line(output)}", flight)
+        return Result(
+            spec.name, "timeout", seconds, f"killed after {timeout:g} s; last line: {first_error_line(output)}", flight
+        )
     if code != 0 or traceback:
         return Result(spec.name, "failed", seconds, f"exit {code}: {first_error_line(output)}", flight)
     if problem:
@@ -306,22 +357,27 @@ def run_one(spec: ExampleSpec, examples: Path, timeout_s: float | None = None, k
 def summary(results: Sequence[Result]) -> str:
     run = [r for r in results if r.result != "excluded"]
     counts = {kind: sum(r.result == kind for r in run) for kind in ("ok", "ran until timeout", "failed", "timeout")}
-    return (f"{counts['ok']} of {len(run)} runs ok, {counts['ran until timeout']} ran until their timeout without "
-            f"error, {counts['failed']} failed, {counts['timeout']} timed out; "
-            f"{len(results) - len(run)} excluded")
+    return (
+        f"{counts['ok']} of {len(run)} runs ok, {counts['ran until timeout']} ran until their timeout without "
+        f"error, {counts['failed']} failed, {counts['timeout']} timed out; "
+        f"{len(results) - len(run)} excluded"
+    )
 
 
 def table(results: Sequence[Result], markdown: bool) -> str:
-    rows = [(r.name, r.result, f"{r.seconds:.1f}" if r.result != "excluded" else "-", r.flight, r.detail)
-            for r in results]
+    rows = [
+        (r.name, r.result, f"{r.seconds:.1f}" if r.result != "excluded" else "-", r.flight, r.detail) for r in results
+    ]
     header = ("example", "result", "seconds", "drones (the fake world's truth)", "notes")
     if markdown:
         lines = ["| " + " | ".join(header) + " |", "|---|---|---|---|---|"]
         lines += ["| " + " | ".join(cell.replace("|", "\\|") for cell in row) + " |" for row in rows]
         return "\n".join(lines)
     widths = [max(len(row[i]) for row in (header, *rows)) for i in range(4)]
-    return "\n".join(f"{row[0]:<{widths[0]}}  {row[1]:<{widths[1]}}  {row[2]:>{widths[2]}}  {row[3]:<{widths[3]}}  "
-                     f"{row[4]}" for row in (header, *rows))
+    return "\n".join(
+        f"{row[0]:<{widths[0]}}  {row[1]:<{widths[1]}}  {row[2]:>{widths[2]}}  {row[3]:<{widths[3]}}  {row[4]}"
+        for row in (header, *rows)
+    )
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -347,8 +403,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     results = []
     for spec in specs:
         result = run_one(spec, examples, args.timeout, args.output_dir)
-        print(f"{result.name}: {result.result} ({result.seconds:.1f} s) {result.flight} {result.detail}",
-              file=sys.stderr, flush=True)
+        print(
+            f"{result.name}: {result.result} ({result.seconds:.1f} s) {result.flight} {result.detail}",
+            file=sys.stderr,
+            flush=True,
+        )
         results.append(result)
     print(f"cflib {installed_cflib_version()}, examples from {examples}")
     print(table(results, args.markdown))

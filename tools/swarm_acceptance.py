@@ -89,8 +89,9 @@ def _worker_pid(flight_log: Path, dongle: int, timeout_s: float = 60.0) -> int:
     raise RuntimeError(f"no worker process for dongle {dongle} within {timeout_s:.0f} s")
 
 
-def fly(mission_path: Path, workdir: Path, kill_dongle: int | None = None,
-        kill_after_s: float = KILL_AFTER_PLANNING_S) -> Verdict:
+def fly(
+    mission_path: Path, workdir: Path, kill_dongle: int | None = None, kill_after_s: float = KILL_AFTER_PLANNING_S
+) -> Verdict:
     mission = load_mission(mission_path)
     names = [d.name for d in mission.drones]
     run = "flight" if kill_dongle is None else f"kill dongle-{kill_dongle}"
@@ -99,9 +100,24 @@ def fly(mission_path: Path, workdir: Path, kill_dongle: int | None = None,
     verdict.log = str(log)
     limit = mission.flight.timeout_s + 180.0
     started = time.monotonic()
-    child = subprocess.Popen([sys.executable, "-m", "rpf_fly", "fly", str(mission_path), "--dry-run", "--distributed",
-                              "--no-console", "--log", str(log)], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                             text=True, cwd=workdir)
+    child = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "rpf_fly",
+            "fly",
+            str(mission_path),
+            "--dry-run",
+            "--distributed",
+            "--no-console",
+            "--log",
+            str(log),
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        cwd=workdir,
+    )
     assert child.stdout is not None
     output: list[str] = []
     flying = threading.Event()
@@ -148,8 +164,11 @@ def fly(mission_path: Path, workdir: Path, kill_dongle: int | None = None,
     _judge_review(verdict, log, workdir, len(names))
     if killed_ns is not None:
         worker = f"dongle-{kill_dongle}"
-        events = [(t, m) for t, m in topics.get("/events", [])
-                  if m.get("level", 0) >= 3 and worker in m.get("message", "") and t >= killed_ns]
+        events = [
+            (t, m)
+            for t, m in topics.get("/events", [])
+            if m.get("level", 0) >= 3 and worker in m.get("message", "") and t >= killed_ns
+        ]
         if not events:
             fail(f"no warning naming {worker} after the kill")
         else:
@@ -187,8 +206,9 @@ def _judge_truth(verdict: Verdict, mission: Any, topics: dict, outcomes: dict[st
         if math.dist((p["x"], p["y"]), goals[n]) < GOAL_M and outcomes.get(n) == "reached":
             verdict.reached += 1
         else:
-            fail(f"{n} did not reach its goal ({outcomes.get(n)}, {math.dist((p['x'], p['y']), goals[n]):.2f} m "
-                 "from it)")
+            fail(
+                f"{n} did not reach its goal ({outcomes.get(n)}, {math.dist((p['x'], p['y']), goals[n]):.2f} m from it)"
+            )
     verdict.min_separation_m = _min_separation(truth, dead)
     if verdict.min_separation_m is not None and verdict.min_separation_m < CONTACT_M:
         fail(f"two drones {verdict.min_separation_m:.3f} m apart (< {CONTACT_M} m)")
@@ -201,10 +221,10 @@ def _min_separation(truth: dict[str, list[tuple[int, dict]]], dead: set[str]) ->
 
     names = list(truth)
     length = min(len(s) for s in truth.values())
-    pos = np.array([[[m["position"]["x"], m["position"]["y"], m["position"]["z"]] for _, m in truth[n][:length]]
-                    for n in names])  # (drones, steps, 3)
-    airborne = np.array([[m["motors"] or m["position"]["z"] > ON_FLOOR_M for _, m in truth[n][:length]]
-                         for n in names])
+    pos = np.array(
+        [[[m["position"]["x"], m["position"]["y"], m["position"]["z"]] for _, m in truth[n][:length]] for n in names]
+    )  # (drones, steps, 3)
+    airborne = np.array([[m["motors"] or m["position"]["z"] > ON_FLOOR_M for _, m in truth[n][:length]] for n in names])
     alive = np.array([n not in dead for n in names])
     best: float | None = None
     for i in range(len(names)):
@@ -235,8 +255,13 @@ def _judge_radio(verdict: Verdict, topics: dict) -> None:
 
 
 def _judge_review(verdict: Verdict, log: Path, workdir: Path, drones: int) -> None:
-    review = subprocess.run([sys.executable, "-m", "rpf_fly", "review", str(log), "--json"], capture_output=True,
-                            text=True, timeout=300, cwd=workdir)
+    review = subprocess.run(
+        [sys.executable, "-m", "rpf_fly", "review", str(log), "--json"],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        cwd=workdir,
+    )
     if review.returncode != 0:
         verdict.failures.append(f"review failed: {review.stderr.strip()[-200:]}")
         return
@@ -246,8 +271,11 @@ def _judge_review(verdict: Verdict, log: Path, workdir: Path, drones: int) -> No
     from mcap.reader import make_reader
 
     with open(log, "rb") as f:
-        flights = {r.metadata["flight_id"] for r in make_reader(f).iter_metadata()
-                   if r.name == "runtime" and "flight_id" in r.metadata}
+        flights = {
+            r.metadata["flight_id"]
+            for r in make_reader(f).iter_metadata()
+            if r.name == "runtime" and "flight_id" in r.metadata
+        }
     if len(flights) != 1:
         verdict.failures.append(f"runtime.flight_id: {sorted(flights) or 'none'}, expected one")
 
@@ -257,8 +285,12 @@ def main() -> int:
     parser.add_argument("--mission", type=Path, default=MISSION)
     parser.add_argument("--runs", default="flight,kill", help="flight, kill or both (default)")
     parser.add_argument("--kill-dongle", type=int, default=1)
-    parser.add_argument("--kill-after", type=float, default=KILL_AFTER_PLANNING_S,
-                        help="seconds after the drones start planning (default %(default)s)")
+    parser.add_argument(
+        "--kill-after",
+        type=float,
+        default=KILL_AFTER_PLANNING_S,
+        help="seconds after the drones start planning (default %(default)s)",
+    )
     parser.add_argument("--json", type=Path, default=None, help="write the verdicts here")
     parser.add_argument("--out", type=Path, default=None, help="where the logs go (default: a temporary folder)")
     args = parser.parse_args()

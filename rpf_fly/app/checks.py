@@ -98,8 +98,11 @@ def check_radios(mission: Mission, skip_dongles: tuple[int, ...] = (), only_dong
     from rpf_fly.radio.budget import dongle_of
     from rpf_fly.radio.dongles import radio_problem
 
-    drones = [d for d in mission.drones if dongle_of(d.uri) not in skip_dongles
-              and (only_dongle is None or dongle_of(d.uri) == only_dongle)]
+    drones = [
+        d
+        for d in mission.drones
+        if dongle_of(d.uri) not in skip_dongles and (only_dongle is None or dongle_of(d.uri) == only_dongle)
+    ]
     problem = radio_problem(d.uri for d in drones)
     if problem:
         raise UserError(problem)
@@ -131,8 +134,10 @@ def lab_info(mission: Mission) -> LabInfo:
         raise UserError(f"--lab: {err}") from None
     missing = [d.name for d in mission.drones if uri_address(d.uri) not in info.addresses.values()]
     if missing:
-        raise UserError(f"--lab: the running lab ({info.mission}) has no drone at the address of "
-                        f"{', '.join(missing)}: start the lab with this mission")
+        raise UserError(
+            f"--lab: the running lab ({info.mission}) has no drone at the address of "
+            f"{', '.join(missing)}: start the lab with this mission"
+        )
     return info
 
 

@@ -48,8 +48,9 @@ class StatusView(Protocol):
 
     def __enter__(self) -> Any: ...
 
-    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
-                 tb: TracebackType | None) -> Any: ...
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> Any: ...
 
     def show(self, phase: str, rows_of: Callable[[], list[dict[str, Any]]]) -> None: ...
 
@@ -135,8 +136,9 @@ class FlightApp:
         dry_run = request.dry_run
         if request.lab:
             if dry_run:
-                raise UserError("--lab and --dry-run: choose one (--lab flies a running lab's drones, --dry-run "
-                                "private ones)")
+                raise UserError(
+                    "--lab and --dry-run: choose one (--lab flies a running lab's drones, --dry-run private ones)"
+                )
             if request.distributed:
                 raise UserError("--lab flies in one process (without --distributed)")
             lab = self.lab_info()
@@ -150,8 +152,10 @@ class FlightApp:
         if lab is not None and schedule:
             powered = next((f for f in schedule if f.at_s is None and f.drone is not None), None)
             if powered is not None:
-                raise UserError(f"{faults}:{powered.line}: {powered.kind}: the lab's drones are already powered on: "
-                                "give power-on faults to `rpf-fly lab --faults`")
+                raise UserError(
+                    f"{faults}:{powered.line}: {powered.kind}: the lab's drones are already powered on: "
+                    "give power-on faults to `rpf-fly lab --faults`"
+                )
         self.check_radio_budget()
         factory = self.planner_factory()
         problem = self.real_flight_problem()
@@ -173,8 +177,10 @@ class FlightApp:
                 raise UserError("--distributed flies without --foxglove or --mocap sim (docs/distributed.md)")
             timed = next((f for f in schedule or () if f.at_s is not None or f.drone is None), None)
             if timed is not None:  # the power-on ones live in the simulated drones; the others need the worker's loop
-                raise UserError(f"{faults}:{timed.line}: {timed.kind}: --distributed takes the power-on faults only "
-                                "(yaw_offset, start_offset, upside_down, motor_fault; docs/distributed.md)")
+                raise UserError(
+                    f"{faults}:{timed.line}: {timed.kind}: --distributed takes the power-on faults only "
+                    "(yaw_offset, start_offset, upside_down, motor_fault; docs/distributed.md)"
+                )
             remote = checks.dongles(request.remote_dongles)
             listen = checks.endpoints(request.listen, "--listen")
         return Flight(self, request, factory, dry_run, mocap, log_path, schedule, lab, remote, listen)
@@ -189,7 +195,7 @@ class FlightApp:
 
         mission = self.mission
         rig = dry_runs.DryRun(mission, lab=lab) if dry_run else None
-        with (rig if rig is not None else nullcontext()):
+        with rig if rig is not None else nullcontext():
             try:
                 source = rig.entered_mocap() if rig is not None else mocap_source(mission)
             except ConnectionError as err:
@@ -208,8 +214,9 @@ class FlightApp:
         lab_info = None
         if lab:
             if dry_run:
-                raise UserError("--lab and --dry-run: choose one (--lab checks a running lab's drones, --dry-run "
-                                "private ones)")
+                raise UserError(
+                    "--lab and --dry-run: choose one (--lab checks a running lab's drones, --dry-run private ones)"
+                )
             lab_info = self.lab_info() if preflight else None
             dry_run = True
         if preflight and not dry_run and not self.real_flight_problem():
@@ -280,8 +287,9 @@ class Flight:
 
         return route_logging(text_log_path(self.log_path), verbose)
 
-    def fly(self, view: StatusView | None, on_event: Callable[[FlightEvent], None],
-            live: LiveView | None = None) -> FlightResult:
+    def fly(
+        self, view: StatusView | None, on_event: Callable[[FlightEvent], None], live: LiveView | None = None
+    ) -> FlightResult:
         """Fly in this process: the mission's drones, or a dry run's (its rig, faults injected) or the running lab's.
         ``view``: the status console (entered for the flight; its final table from the loop and the report),
         ``on_event``: every flight event, ``live``: the started live view. The first Ctrl-C (or SIGTERM) lands every
@@ -306,14 +314,22 @@ class Flight:
         factory = injection.planner_factory(self.factory) if injection is not None else self.factory
         kwargs: dict[str, Any] = dict(
             status_hook=(lambda loop: view.show(loop.phase.value, loop.snapshot)) if view is not None else None,
-            event_sinks=(on_event,), on_loop=on_loop, live=live)
+            event_sinks=(on_event,),
+            on_loop=on_loop,
+            live=live,
+        )
         try:
-            with (view if view is not None else nullcontext()):
+            with view if view is not None else nullcontext():
                 if self.dry_run:
                     start_faults = injection.start_faults() if injection is not None else None
-                    with DryRun(mission, mocap=self.mocap, start_faults=start_faults,
-                                radio_loss=RADIO_LOSS if self.request.radio_loss else None,
-                                world_exit_report=world_exit_report_for(self.log_path), lab=self.lab) as rig:
+                    with DryRun(
+                        mission,
+                        mocap=self.mocap,
+                        start_faults=start_faults,
+                        radio_loss=RADIO_LOSS if self.request.radio_loss else None,
+                        world_exit_report=world_exit_report_for(self.log_path),
+                        lab=self.lab,
+                    ) as rig:
                         rig_holder["rig"] = rig
                         if injection is not None:
                             FaultInjection.wrap(rig)
@@ -332,8 +348,7 @@ class Flight:
             signals.restore()
         return FlightResult(report, final_table=view is not None and "loop" in rig_holder)
 
-    def fly_distributed(self, view: StatusView | None, say: Callable[[str], None],
-                        verbose: bool) -> DistributedResult:
+    def fly_distributed(self, view: StatusView | None, say: Callable[[str], None], verbose: bool) -> DistributedResult:
         """The coordinator of ``rpf-fly fly --distributed`` (docs/distributed.md): its workers, logger and relay,
         the swarm's phases; ``view``: the status console from the coordinator's snapshot, each drone with its worker;
         ``say``: the coordinator's lines. A signal interrupts the coordinator (it lands the swarm)."""
@@ -346,17 +361,23 @@ class Flight:
         mission = self.mission
         start_faults = FaultInjection(mission, self.schedule).start_faults() if self.schedule else None
         try:
-            coordinator = Coordinator(mission, self.app.path, self.log_path, dry_run=self.dry_run,
-                                      remote_dongles=self.remote, listen=self.listen,
-                                      radio_loss=self.request.radio_loss, say=say,
-                                      status_hook=(lambda c: view.show(c.phase, c.snapshot)) if view is not None
-                                      else None, start_faults=start_faults)
+            coordinator = Coordinator(
+                mission,
+                self.app.path,
+                self.log_path,
+                dry_run=self.dry_run,
+                remote_dongles=self.remote,
+                listen=self.listen,
+                radio_loss=self.request.radio_loss,
+                say=say,
+                status_hook=(lambda c: view.show(c.phase, c.snapshot)) if view is not None else None,
+                start_faults=start_faults,
+            )
         except ValueError as err:
             raise UserError(str(err)) from None
         previous = on_signals(lambda signum, frame: coordinator.interrupt())
         try:
-            with route_logging(text_log_path(self.log_path), verbose), \
-                    (view if view is not None else nullcontext()):
+            with route_logging(text_log_path(self.log_path), verbose), view if view is not None else nullcontext():
                 try:
                     code = coordinator.run()
                 except (ZenohUnavailable, StartError) as err:

@@ -78,8 +78,10 @@ def prepare_lab(app: FlightApp, faults: Path | None, log: Path | None) -> LabRun
         schedule = app.faults(faults)
         timed = next((f for f in schedule if f.at_s is not None or f.drone is None), None)
         if timed is not None:
-            raise UserError(f"{faults}:{timed.line}: {timed.kind}: a lab takes the power-on faults only; give timed "
-                            "faults to `rpf-fly fly MISSION --lab --faults FILE`")
+            raise UserError(
+                f"{faults}:{timed.line}: {timed.kind}: a lab takes the power-on faults only; give timed "
+                "faults to `rpf-fly fly MISSION --lab --faults FILE`"
+            )
         start_faults = FaultInjection(app.mission, schedule).start_faults()
     log_path = log or Path("flights") / f"lab-{app.mission.name}-{datetime.now():%Y%m%d-%H%M%S}.mcap"
     try:

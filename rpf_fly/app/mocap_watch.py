@@ -32,8 +32,7 @@ class WatchStats:
             self.missed += frame.frame_number - self.last_number - 1
         if self.first_number is None:
             self.first_number = frame.frame_number
-        self.last_number = frame.frame_number if self.last_number is None else max(self.last_number,
-                                                                                   frame.frame_number)
+        self.last_number = frame.frame_number if self.last_number is None else max(self.last_number, frame.frame_number)
         for name, pose in frame.bodies.items():
             self.seen[name] = self.seen.get(name, 0) + 1
             self.valid[name] = self.valid.get(name, 0) + bool(pose.valid)
@@ -126,17 +125,24 @@ class UpAxisCheck:
         if not means:
             return None
         default = " (Motive's default)" if other == "y" else ""
-        fix = (f"the stream looks {other.upper()}-up{default}, not the "
-               f"{self.assumed.upper()}-up assumed (--up-axis {self.assumed}): watch with --up-axis {other}, and fly "
-               f"with mocap.up_axis: {other}")
+        fix = (
+            f"the stream looks {other.upper()}-up{default}, not the "
+            f"{self.assumed.upper()}-up assumed (--up-axis {self.assumed}): watch with --up-axis {other}, and fly "
+            f"with mocap.up_axis: {other}"
+        )
         name, lowest = min(((n, p[2]) for n, p in means.items()), key=lambda item: item[1])
         if lowest < -FLOOR_BELOW_M:
             return f"hint: {name} is at z {lowest:+.3f} m, below the floor: {fix}"
-        resting = {n: means[n] for n, ps in self.positions.items()
-                   if max(max(p[k] for p in ps) - min(p[k] for p in ps) for k in range(3)) <= REST_M}
+        resting = {
+            n: means[n]
+            for n, ps in self.positions.items()
+            if max(max(p[k] for p in ps) - min(p[k] for p in ps) for k in range(3)) <= REST_M
+        }
         if resting and all(abs(p[1]) <= FLAT_Y_M for p in resting.values()):
             name, top = max(((n, p[2]) for n, p in resting.items()), key=lambda item: abs(item[1]))
             if abs(top) >= TALL_Z_M:
-                return (f"hint: every body at rest has y within {FLAT_Y_M:g} m of 0 while {name} is at z {top:+.3f} m: "
-                        f"if they stand on the floor, {fix}")
+                return (
+                    f"hint: every body at rest has y within {FLAT_Y_M:g} m of 0 while {name} is at z {top:+.3f} m: "
+                    f"if they stand on the floor, {fix}"
+                )
         return None

@@ -50,8 +50,15 @@ class ScenarioFlight:
         from rpf_fly.flight.scenario_flight import ScenarioError, run_scenario
 
         try:
-            return run_scenario(self.scenario, self.mission, self.drone, dry_run=self.dry_run, lab=self.lab,
-                                log_path=self.log_path, on_event=on_event)
+            return run_scenario(
+                self.scenario,
+                self.mission,
+                self.drone,
+                dry_run=self.dry_run,
+                lab=self.lab,
+                log_path=self.log_path,
+                on_event=on_event,
+            )
         except ScenarioError as err:
             raise UserError(str(err), code=1) from None
 
@@ -70,8 +77,10 @@ def prepare_scenario(request: ScenarioRequest) -> ScenarioFlight:
     except FileNotFoundError:
         raise UserError(f"{file}: no such file") from None
     except (OSError, ValueError, KeyError, TypeError) as err:
-        raise UserError(f"{file}: not a scenario file ({err}); expected name, start, duration_s and setpoints with "
-                        "stream_hz, or commands (docs/dynamics.md)") from None
+        raise UserError(
+            f"{file}: not a scenario file ({err}); expected name, start, duration_s and setpoints with "
+            "stream_hz, or commands (docs/dynamics.md)"
+        ) from None
     if request.mission is not None:
         mission = checks.load_mission(request.mission)
     elif request.dry_run or request.lab:

@@ -66,9 +66,17 @@ class Worker:
         signals = LoopSignals("this worker's drones")
         signals.install()
         try:
-            run = WorkerRun(self.app.mission, request.dongle, request.flight, self.secret, self.factory,
-                            dry_run=request.dry_run, connect=self.connect, event_sinks=(on_event,),
-                            on_loop=signals.attach)
+            run = WorkerRun(
+                self.app.mission,
+                request.dongle,
+                request.flight,
+                self.secret,
+                self.factory,
+                dry_run=request.dry_run,
+                connect=self.connect,
+                event_sinks=(on_event,),
+                on_loop=signals.attach,
+            )
             with route_logging(self.text_log, verbose):
                 try:
                     return run.run()
@@ -98,8 +106,9 @@ def prepare_worker(app: FlightApp, request: WorkerRequest) -> Worker:
         app.check_radios(only_dongle=request.dongle)
     secret = request.environ.get(SECRET_ENV, "")
     if len(secret) < 32:
-        raise UserError(f"{SECRET_ENV}: the flight's secret is missing (the coordinator prints the worker's command "
-                        "line with it)")
+        raise UserError(
+            f"{SECRET_ENV}: the flight's secret is missing (the coordinator prints the worker's command line with it)"
+        )
     try:
         if request.flight is not None:
             check_flight_id(request.flight)

@@ -49,8 +49,14 @@ class Claim:
         return None if self.status == NOT_EVALUATED else self.status == HELD
 
     def to_json_dict(self) -> dict[str, Any]:
-        return {"id": self.id, "statement": self.statement, "status": self.status, "held": self.held,
-                "numbers": self.numbers, "note": self.note}
+        return {
+            "id": self.id,
+            "statement": self.statement,
+            "status": self.status,
+            "held": self.held,
+            "numbers": self.numbers,
+            "note": self.note,
+        }
 
 
 STATEMENTS = {
@@ -94,7 +100,7 @@ FAMILY_CLAIMS = ClaimScenes(
         "a": "circle swaps (circle, arena-b): RPF-1 beats RPF-2 and APF on travel distance and smoothness",
         "b": "circle swaps of 8-24 drones: PPO fails (collision or timeout) where RPF-1 succeeds",
         "c": "obstacle families (corridor, doorway, u-trap, pillars, passage, arena-a): RPF-1 has the best travel "
-             "distance and smoothness among the successful planners",
+        "distance and smoothness among the successful planners",
         "d": f"RPF-1 succeeds on >= {SUCCESS_TARGET:.0%} of the runs of all families pooled, zero collisions",
         "e": f"RPF-1 succeeds on >= {SUCCESS_TARGET:.0%} of the fresh arena-A family scenes, zero collisions",
     },
@@ -117,8 +123,9 @@ def evaluate_claims(results: Mapping[str, Any], scenes: ClaimScenes = PAPER_CLAI
         wanted = getattr(scenes, claim)
         ran = [s for s in wanted if table.row("rpf", s) is not None] if scenes.only_run else list(wanted)
         if not ran:
-            out.append(Claim(claim, scenes.statements[claim], NOT_EVALUATED, note="RPF-1 ran on none of "
-                             + ", ".join(wanted)))
+            out.append(
+                Claim(claim, scenes.statements[claim], NOT_EVALUATED, note="RPF-1 ran on none of " + ", ".join(wanted))
+            )
             continue
         judged = _success_claim(table, claim, tuple(ran))
         note = judged.note + ("" if len(ran) == len(wanted) else f"; judged on {', '.join(ran)} only")
@@ -134,8 +141,12 @@ def _per_scene(t: _Rows, claim: str, wanted: tuple[str, ...], scenes: ClaimScene
     statement = scenes.statements[claim]
     statuses = {c.status for c in parts.values()}
     if NOT_EVALUATED in statuses:
-        return Claim(claim, statement, NOT_EVALUATED, note="; ".join(f"{s}: {c.note}" for s, c in parts.items()
-                                                                    if c.status == NOT_EVALUATED))
+        return Claim(
+            claim,
+            statement,
+            NOT_EVALUATED,
+            note="; ".join(f"{s}: {c.note}" for s, c in parts.items() if c.status == NOT_EVALUATED),
+        )
     status = HELD if statuses == {HELD} else NOT_HELD
     numbers = {s: c.numbers for s, c in parts.items()}
     note = "; ".join(f"{s}: {c.status}" + (f" ({c.note})" if c.note else "") for s, c in parts.items())
@@ -256,7 +267,9 @@ def _claim_c(t: _Rows, scene: str = "lab-3") -> Claim:
     }
     successful = [name for name, n in numbers.items() if n["success_rate"] >= MAJORITY]
     if "RPF-1" not in successful:
-        return Claim("c", STATEMENTS["c"], NOT_HELD, numbers, f"RPF-1 succeeds on fewer than {MAJORITY:.0%} of {scene} runs")
+        return Claim(
+            "c", STATEMENTS["c"], NOT_HELD, numbers, f"RPF-1 succeeds on fewer than {MAJORITY:.0%} of {scene} runs"
+        )
     notes, held = [f"successful planners: {', '.join(successful)}"], True
     for metric in ("travel_distance_m", "smoothness"):
         best = min(successful, key=lambda name: numbers[name][metric])
@@ -267,9 +280,11 @@ def _claim_c(t: _Rows, scene: str = "lab-3") -> Claim:
         row = t.ran(extra, scene)
         label = PLANNER_LABELS.get(extra, extra)
         travel, smooth = _mean(row, "travel_distance_m"), _mean(row, "smoothness")
-        notes.append(f"beyond the paper, {label}: success {row['success_rate']:.0%}, travel "
-                     f"{travel if travel is None else round(travel, 3)}, smoothness "
-                     f"{smooth if smooth is None else round(smooth, 4)}")
+        notes.append(
+            f"beyond the paper, {label}: success {row['success_rate']:.0%}, travel "
+            f"{travel if travel is None else round(travel, 3)}, smoothness "
+            f"{smooth if smooth is None else round(smooth, 4)}"
+        )
     return Claim("c", STATEMENTS["c"], HELD if held else NOT_HELD, numbers, "; ".join(notes))
 
 
@@ -282,12 +297,22 @@ def _success_claim(t: _Rows, claim: str, scenes: tuple[str, ...]) -> Claim:
     for scene in scenes:
         row = t.row("rpf", scene)
         assert row is not None
-        per_scene[scene] = {"success_rate": row["success_rate"], "runs": row["runs"], "collisions": row["collisions"]["total"]}
+        per_scene[scene] = {
+            "success_rate": row["success_rate"],
+            "runs": row["runs"],
+            "collisions": row["collisions"]["total"],
+        }
         runs += row["runs"]
         successes += row["successes"]
         collisions += row["collisions"]["total"]
     rate = successes / runs
-    numbers = {"runs": runs, "successes": successes, "success_rate": rate, "collisions": collisions, "per_scene": per_scene}
+    numbers = {
+        "runs": runs,
+        "successes": successes,
+        "success_rate": rate,
+        "collisions": collisions,
+        "per_scene": per_scene,
+    }
     held = rate >= SUCCESS_TARGET and collisions == 0
     note = f"{successes}/{runs} = {rate:.1%} (needs >= {SUCCESS_TARGET:.0%}), {collisions} collisions (needs 0)"
     return Claim(claim, STATEMENTS[claim], HELD if held else NOT_HELD, numbers, note)

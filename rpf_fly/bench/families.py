@@ -207,8 +207,9 @@ def run_families(
     config = plan.config
     started = time.perf_counter()
     seeds = config.seed_list()
-    tasks: list[tuple[str, str, str]] = [(f, p, m) for f in config.families for p in config.planners
-                                         for m in config.modes()]
+    tasks: list[tuple[str, str, str]] = [
+        (f, p, m) for f in config.families for p in config.planners for m in config.modes()
+    ]
     done: dict[int, tuple[list[RunRecord], str | None]] = {}
     todo = [(k, t) for k, t in enumerate(tasks) if t[1] not in plan.missing]
 
@@ -235,9 +236,12 @@ def run_families(
             from concurrent.futures import ProcessPoolExecutor, as_completed
 
             with ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
-                jobs_of = {pool.submit(_run_family_firmware, family, seeds, [group for _, group in items],
-                                       config.closed_loop): family
-                           for family, items in by_family.items()}
+                jobs_of = {
+                    pool.submit(
+                        _run_family_firmware, family, seeds, [group for _, group in items], config.closed_loop
+                    ): family
+                    for family, items in by_family.items()
+                }
                 for family_done in as_completed(jobs_of):
                     flown(jobs_of[family_done], family_done.result())
     elif jobs <= 1:
@@ -248,8 +252,10 @@ def run_families(
         from concurrent.futures import ProcessPoolExecutor, as_completed
 
         with ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
-            futures = {pool.submit(_run_group, family, seeds, plan.settings[planner], planner, mode): k
-                       for k, (family, planner, mode) in todo}
+            futures = {
+                pool.submit(_run_group, family, seeds, plan.settings[planner], planner, mode): k
+                for k, (family, planner, mode) in todo
+            }
             for future in as_completed(futures):
                 finished(futures[future], future.result(), True)
     runs: list[tuple[str, RunRecord]] = []
@@ -272,7 +278,11 @@ def run_families(
 
 
 def _run_group(
-    family: str, seeds: Sequence[int], base: PlannerSettings, planner: str, mode: str,
+    family: str,
+    seeds: Sequence[int],
+    base: PlannerSettings,
+    planner: str,
+    mode: str,
     on_run: Callable[[RunRecord], None] | None = None,
 ) -> tuple[list[RunRecord], str | None]:
     """The runs of one (family, planner, guidance) over the seeds, or the reason it cannot run."""
@@ -295,7 +305,9 @@ def _run_group(
 
 
 def _run_family_firmware(
-    family: str, seeds: Sequence[int], groups: Sequence[tuple[PlannerSettings, str, str]],
+    family: str,
+    seeds: Sequence[int],
+    groups: Sequence[tuple[PlannerSettings, str, str]],
     closed_loop: FirmwareParams = FirmwareParams(),
 ) -> list[tuple[list[RunRecord], str | None]]:
     """Every (planner, guidance) group ``(settings, planner, mode)`` of one family over the seeds on the firmware
@@ -317,9 +329,16 @@ def _run_family_firmware(
             continue
         errors.append(None)
         flown += [(g, settings, planner, i) for i, planner in enumerate(made)]
-    runs = run_firmware([scenes[i] for *_, i in flown], [st for _, st, _, _ in flown], SIM,
-                        [seeds[i] for *_, i in flown], [family] * len(flown), closed_loop, keep=True,
-                        planners=[pl for _, _, pl, _ in flown])
+    runs = run_firmware(
+        [scenes[i] for *_, i in flown],
+        [st for _, st, _, _ in flown],
+        SIM,
+        [seeds[i] for *_, i in flown],
+        [family] * len(flown),
+        closed_loop,
+        keep=True,
+        planners=[pl for _, _, pl, _ in flown],
+    )
     records: list[list[RunRecord]] = [[] for _ in groups]
     for (g, _, _, _), run in zip(flown, runs):
         records[g].append(_record(run, groups[g][1], family))
@@ -352,6 +371,7 @@ def summarise_family(
 
 
 # -- results document --------------------------------------------------------------------------------------------
+
 
 def results_json(result: FamiliesResult, command: str = "") -> dict[str, Any]:
     """The families results: settings, policies, rows, every run (with its guidance), claims per guidance mode."""
@@ -392,6 +412,7 @@ def claims_for(results: Mapping[str, Any], mode: str) -> list:
 
 # -- Markdown ----------------------------------------------------------------------------------------------------
 
+
 def _n(value: float | None, digits: int) -> str:
     return "-" if value is None else f"{value:.{digits}f}"
 
@@ -428,8 +449,11 @@ def to_markdown(results: Mapping[str, Any]) -> str:
         lines += ["", "```", results["command"], "```"]
     lines += ["", "## Policies", ""]
     for kind, info in results.get("policies", {}).items():
-        lines.append(f"- `{kind}`: **missing**: {info['missing']}" if "missing" in info
-                     else f"- `{kind}`: `{Path(info['path']).name}` sha256 `{info['sha256'][:16]}…`")
+        lines.append(
+            f"- `{kind}`: **missing**: {info['missing']}"
+            if "missing" in info
+            else f"- `{kind}`: `{Path(info['path']).name}` sha256 `{info['sha256'][:16]}…`"
+        )
     if not results.get("policies"):
         lines.append("No learned planner in this run.")
     lines += ["", "## Success (successful runs / runs)", ""]
@@ -444,14 +468,28 @@ def to_markdown(results: Mapping[str, Any]) -> str:
                 r = by_key.get((planner, f, mode))
                 cells.append("miss." if r is None or r["status"] != "ok" else f"{r['successes']}/{r['runs']}")
             lines.append("| " + " | ".join(cells) + " |")
-    lines += ["", "Per family: **safety** (coll.: collision events drone-drone/drone-obstacle; failed: runs by cause",
-              "collision/stalled/timeout; sep: smallest drone-drone distance of any run, `<2r+m`: runs below",
-              "2r + margin; clr: smallest obstacle clearance, `<r+m`: runs below r + margin) and **paths** (means",
-              "± std over successful runs; travel, all: over every run where a drone arrived).", ""]
+    lines += [
+        "",
+        "Per family: **safety** (coll.: collision events drone-drone/drone-obstacle; failed: runs by cause",
+        "collision/stalled/timeout; sep: smallest drone-drone distance of any run, `<2r+m`: runs below",
+        "2r + margin; clr: smallest obstacle clearance, `<r+m`: runs below r + margin) and **paths** (means",
+        "± std over successful runs; travel, all: over every run where a drone arrived).",
+        "",
+    ]
     for f in fams:
         lines += [f"### {f}", "", f"{results.get('family_about', {}).get(f, '')}", ""]
-        head = ["planner", "guid.", "success", "reached", "coll. dd/do", "failed c/s/t", "sep [m]", "<2r+m",
-                "clr [m]", "<r+m"]
+        head = [
+            "planner",
+            "guid.",
+            "success",
+            "reached",
+            "coll. dd/do",
+            "failed c/s/t",
+            "sep [m]",
+            "<2r+m",
+            "clr [m]",
+            "<r+m",
+        ]
         lines += ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
         fam_rows = [r for r in rows if r["scene"] == f]
         for r in fam_rows:
@@ -460,12 +498,24 @@ def to_markdown(results: Mapping[str, Any]) -> str:
                 continue
             c, fr, b = r["collisions"], r["failed_runs"], r["below_margin"]
             sep, clr = r["min_separation_m"], r["min_obstacle_clearance_m"]
-            lines.append("| " + " | ".join([
-                _who(r), r["guidance"], f"{r['successes']}/{r['runs']}", f"{r['reached_rate']:.0%}",
-                f"{c['drone_drone']}/{c['drone_obstacle']}", f"{fr['collision']}/{fr['stalled']}/{fr['timeout']}",
-                _n(sep["min"] if sep else None, 3), str(b["runs_separation"]) if sep else "-",
-                _n(clr["min"] if clr else None, 3), str(b["runs_clearance"]) if clr else "-",
-            ]) + " |")
+            lines.append(
+                "| "
+                + " | ".join(
+                    [
+                        _who(r),
+                        r["guidance"],
+                        f"{r['successes']}/{r['runs']}",
+                        f"{r['reached_rate']:.0%}",
+                        f"{c['drone_drone']}/{c['drone_obstacle']}",
+                        f"{fr['collision']}/{fr['stalled']}/{fr['timeout']}",
+                        _n(sep["min"] if sep else None, 3),
+                        str(b["runs_separation"]) if sep else "-",
+                        _n(clr["min"] if clr else None, 3),
+                        str(b["runs_clearance"]) if clr else "-",
+                    ]
+                )
+                + " |"
+            )
         lines.append("")
         head = ["planner", "guid.", "travel [m]", "makespan [s]", "smoothness", "travel, all"]
         lines += ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
@@ -473,17 +523,30 @@ def to_markdown(results: Mapping[str, Any]) -> str:
             if r["status"] != "ok":
                 continue
             every = r["travel_distance_m"]["all"]
-            lines.append("| " + " | ".join([
-                _who(r), r["guidance"], _ms(r["travel_distance_m"]["successful"], 2),
-                _ms(r["makespan_s"]["successful"], 1), _ms(r["smoothness"]["successful"], 4),
-                "-" if every is None else f"{_ms(every, 2)} ({every['n']})",
-            ]) + " |")
+            lines.append(
+                "| "
+                + " | ".join(
+                    [
+                        _who(r),
+                        r["guidance"],
+                        _ms(r["travel_distance_m"]["successful"], 2),
+                        _ms(r["makespan_s"]["successful"], 1),
+                        _ms(r["smoothness"]["successful"], 4),
+                        "-" if every is None else f"{_ms(every, 2)} ({every['n']})",
+                    ]
+                )
+                + " |"
+            )
         lines.append("")
     import textwrap
 
     for mode in modes:
-        lines += [f"## The paper's claims, guidance {mode}", "",
-                  "Judged as docs/bench.md, *The claims on the families*, says; the numbers are in the JSON.", ""]
+        lines += [
+            f"## The paper's claims, guidance {mode}",
+            "",
+            "Judged as docs/bench.md, *The claims on the families*, says; the numbers are in the JSON.",
+            "",
+        ]
         for cl in results["claims"][mode]:
             text = f"- **({cl['id']}) {cl['status']}**: {cl['statement']}." + (f" {cl['note']}." if cl["note"] else "")
             lines += textwrap.wrap(text, width=110, subsequent_indent="  ", break_on_hyphens=False)

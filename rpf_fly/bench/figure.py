@@ -14,12 +14,17 @@ import numpy as np
 from rpf_fly.bench.runner import PLANNER_LABELS, Trajectory
 from rpf_fly.mission.model import BoxObstacle, CircleObstacle
 
-PLANNER_COLOURS = {"rpf": "#1f77b4", "rpf-mean": "#17becf", "apf": "#ff7f0e", "ppo": "#9467bd", "orca": "#2ca02c", "rpf3": "#d62728"}
+PLANNER_COLOURS = {
+    "rpf": "#1f77b4",
+    "rpf-mean": "#17becf",
+    "apf": "#ff7f0e",
+    "ppo": "#9467bd",
+    "orca": "#2ca02c",
+    "rpf3": "#d62728",
+}
 
 
-def plot_comparison(
-    results: Mapping[str, Any], path: str | Path, trajectories: Sequence[Trajectory] = ()
-) -> Path:
+def plot_comparison(results: Mapping[str, Any], path: str | Path, trajectories: Sequence[Trajectory] = ()) -> Path:
     """Write the comparison PNG to ``path``: bars from the results rows, panels from ``trajectories``."""
     import matplotlib
 
@@ -33,8 +38,9 @@ def plot_comparison(
     panel = 2.6
     width = max(13.0, panel * n_cols)
     fig = plt.figure(figsize=(width, 4.4 + panel * len(traj_scenes)), dpi=110)
-    outer = fig.add_gridspec(2 if traj_scenes else 1, 1, height_ratios=[4.4, panel * len(traj_scenes)] if traj_scenes else None,
-                             hspace=0.25)
+    outer = fig.add_gridspec(
+        2 if traj_scenes else 1, 1, height_ratios=[4.4, panel * len(traj_scenes)] if traj_scenes else None, hspace=0.25
+    )
     top = outer[0].subgridspec(1, 2, wspace=0.3)
     rows = {(r["planner"], r["scene"]): r for r in results["rows"]}
     for k, (metric, label) in enumerate((("travel_distance_m", "travel distance [m]"), ("smoothness", "smoothness"))):
@@ -77,8 +83,9 @@ def _bars(ax, rows, planners, scenes, metric, label) -> None:
         missing = all(row is None or row.get("status") != "ok" for row in (rows.get((planner, s)) for s in scenes))
         name = PLANNER_LABELS.get(planner, planner) + (" (missing)" if missing else "")
         colour = PLANNER_COLOURS.get(planner, None)
-        ax.bar(offset, np.nan_to_num(means), width, yerr=stds, color=colour, label=name, capsize=2,
-               error_kw={"lw": 0.8})
+        ax.bar(
+            offset, np.nan_to_num(means), width, yerr=stds, color=colour, label=name, capsize=2, error_kw={"lw": 0.8}
+        )
         rate_ax.plot(offset, np.array(rates) * 100, ls="", marker="D", ms=4, mfc="white", mec="k", mew=0.8)
     rate_ax.set_ylim(0, 110)
     rate_ax.set_ylabel("success rate [%] (◇)", fontsize=8)
@@ -112,8 +119,11 @@ def _trajectory_panel(ax, traj: Trajectory | None, scene: str, planner: str, row
         if isinstance(shape, CircleObstacle):
             ax.add_patch(Circle(shape.center, shape.radius, fc="0.65", ec="0.35", lw=0.5))
         elif isinstance(shape, BoxObstacle):
-            ax.add_patch(Rectangle(shape.min, shape.max[0] - shape.min[0], shape.max[1] - shape.min[1],
-                                   fc="0.65", ec="0.35", lw=0.5))
+            ax.add_patch(
+                Rectangle(
+                    shape.min, shape.max[0] - shape.min[0], shape.max[1] - shape.min[1], fc="0.65", ec="0.35", lw=0.5
+                )
+            )
     colours = _drone_colours(traj.positions.shape[1])
     for i in range(traj.positions.shape[1]):
         track = traj.positions[:, i]

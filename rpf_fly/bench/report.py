@@ -106,19 +106,29 @@ def print_report(results: Mapping[str, Any], console: Any = None) -> None:
     console = console or Console()
     one = results["episodes"] <= 1
     spread = "" if one else "mean±std "
-    note = (f"success: successful runs / runs. travel, smoothness, makespan: {spread}over successful runs"
-                + ("" if one else "; dim below: over all runs where defined (the count when not every run), where it "
-                                     "differs")
-                + ". coll.: drone-drone (dd), drone-obstacle (do). failed c/s/t: runs by cause collision/stalled/"
-                  "timeout")
+    note = (
+        f"success: successful runs / runs. travel, smoothness, makespan: {spread}over successful runs"
+        + ("" if one else "; dim below: over all runs where defined (the count when not every run), where it differs")
+        + ". coll.: drone-drone (dd), drone-obstacle (do). failed c/s/t: runs by cause collision/stalled/"
+        "timeout"
+    )
     table = Table(
         title=f"rpf-fly bench: {results['episodes']} seed{'' if one else 's'} per scene",
         box=box.SIMPLE_HEAD,
         pad_edge=False,
         collapse_padding=True,
     )
-    for column in ("scene", "planner", "success", "coll.", "reached", "travel\n[m]", "smoothness", "makespan\n[s]",
-                   "failed\nc/s/t"):
+    for column in (
+        "scene",
+        "planner",
+        "success",
+        "coll.",
+        "reached",
+        "travel\n[m]",
+        "smoothness",
+        "makespan\n[s]",
+        "failed\nc/s/t",
+    ):
         left = column in ("scene", "planner")
         table.add_column(escape(column), justify="left" if left else "right", no_wrap=left)
     reasons: dict[str, str] = {}
@@ -215,8 +225,20 @@ def to_markdown(results: Mapping[str, Any]) -> str:
         else:
             lines.append(f"- `{kind}`: `{Path(info['path']).name}` sha256 `{info['sha256'][:16]}…`")
     lines += ["", "## Results", ""]
-    header = ("planner", "success", "collisions", "reached", "travel [m]", "travel, all", "smoothness",
-              "smoothness, all", "makespan [s]", "makespan, all", "failed runs c/s/t", "drones not reached s/t")
+    header = (
+        "planner",
+        "success",
+        "collisions",
+        "reached",
+        "travel [m]",
+        "travel, all",
+        "smoothness",
+        "smoothness, all",
+        "makespan [s]",
+        "makespan, all",
+        "failed runs c/s/t",
+        "drones not reached s/t",
+    )
     for scene in results["scenes"]:
         lines += [f"### {scene}", "", "| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
         for row in results["rows"]:
@@ -227,13 +249,24 @@ def to_markdown(results: Mapping[str, Any]) -> str:
                 continue
             c = _cells(row)
             lines.append(
-                "| " + " | ".join([
-                    _label(row["planner"]), c["success"], c["collisions"], c["reached"],
-                    c["travel_distance_m.successful"], c["travel_distance_m.all"],
-                    c["smoothness.successful"], c["smoothness.all"],
-                    c["makespan_s.successful"], c["makespan_s.all"],
-                    c["failed"], c["drones_not_reached"],
-                ]) + " |"
+                "| "
+                + " | ".join(
+                    [
+                        _label(row["planner"]),
+                        c["success"],
+                        c["collisions"],
+                        c["reached"],
+                        c["travel_distance_m.successful"],
+                        c["travel_distance_m.all"],
+                        c["smoothness.successful"],
+                        c["smoothness.all"],
+                        c["makespan_s.successful"],
+                        c["makespan_s.all"],
+                        c["failed"],
+                        c["drones_not_reached"],
+                    ]
+                )
+                + " |"
             )
         lines.append("")
     lines += ["## Claims", "", "| | claim | verdict | numbers |", "|---|---|---|---|"]

@@ -103,7 +103,10 @@ class RunRecord:
             "drones": self.drones,
             "reached": self.reached,
             "success": self.success,
-            "collisions": {"drone_drone": self.collisions_drone_drone, "drone_obstacle": self.collisions_drone_obstacle},
+            "collisions": {
+                "drone_drone": self.collisions_drone_drone,
+                "drone_obstacle": self.collisions_drone_obstacle,
+            },
             "travel_distance_m": _round(self.travel_distance_m),
             "smoothness": _round(self.smoothness, 6),
             "makespan_s": _round(self.makespan_s, 2),
@@ -324,8 +327,10 @@ def dynamics_line(results: Mapping[str, Any]) -> str:
         return "Dynamics: kinematic (every drone moves along its planned heading at the mission speed)."
     loop = results.get("closed_loop", {})
     views = "; planners on the true state" if loop.get("plan_from") == "truth" else ""
-    return (f"Dynamics: firmware (the flight's closed loop on the Crazyflie firmware model; safety on "
-            f"{loop.get('truth_hz', 100)} Hz truth{views}).")
+    return (
+        f"Dynamics: firmware (the flight's closed loop on the Crazyflie firmware model; safety on "
+        f"{loop.get('truth_hz', 100)} Hz truth{views})."
+    )
 
 
 def closed_loop_json(dynamics: str, f: FirmwareParams = FirmwareParams()) -> dict[str, Any]:
@@ -335,8 +340,14 @@ def closed_loop_json(dynamics: str, f: FirmwareParams = FirmwareParams()) -> dic
         return {}
     from rpf_fly.sim.closed_loop import STEP_S
 
-    return {"closed_loop": {"truth_hz": round(1.0 / STEP_S), "settle_s": f.settle_s, "hold_tail_s": f.hold_tail_s,
-                            "plan_from": f.plan_from}}
+    return {
+        "closed_loop": {
+            "truth_hz": round(1.0 / STEP_S),
+            "settle_s": f.settle_s,
+            "hold_tail_s": f.hold_tail_s,
+            "plan_from": f.plan_from,
+        }
+    }
 
 
 def _record(run: Run, kind: str, scene: str) -> RunRecord:
@@ -428,7 +439,9 @@ def summarise_runs(planner: str, scene: str, runs: Sequence[RunRecord]) -> dict[
             "all": stat([getattr(r, metric) for r in runs]),
         }
     row["outcomes"] = {o.value: sum(r.outcomes.get(o.value, 0) for r in runs) for o in DroneOutcome}
-    row["failed_runs"] = {cause: sum(1 for r in runs if r.failure == cause) for cause in ("collision", "stalled", "timeout")}
+    row["failed_runs"] = {
+        cause: sum(1 for r in runs if r.failure == cause) for cause in ("collision", "stalled", "timeout")
+    }
     return row
 
 

@@ -48,13 +48,26 @@ from .record import FlightRecord
 from .replay import Track, replay
 
 AXES = ("x", "y", "z")
-GAINS = {"x": ("posCtlPid.xKp", "velCtlPid.vxKp"), "y": ("posCtlPid.yKp", "velCtlPid.vyKp"),
-         "z": ("posCtlPid.zKp", "velCtlPid.vzKp", "posCtlPid.zKi")}
+GAINS = {
+    "x": ("posCtlPid.xKp", "velCtlPid.vxKp"),
+    "y": ("posCtlPid.yKp", "velCtlPid.vyKp"),
+    "z": ("posCtlPid.zKp", "velCtlPid.vzKp", "posCtlPid.zKi"),
+}
 """The gains fitted per axis, in kinds (position P, velocity P, position I): the Jacobian's replays change every
 fitted axis's gain of one kind at once."""
-NOT_FITTED = ("posCtlPid.xKi", "posCtlPid.yKi", "posCtlPid.xKd", "posCtlPid.yKd", "posCtlPid.zKd",
-              "velCtlPid.vxKi", "velCtlPid.vyKi", "velCtlPid.vzKi", "velCtlPid.vxKd", "velCtlPid.vyKd",
-              "velCtlPid.vzKd")
+NOT_FITTED = (
+    "posCtlPid.xKi",
+    "posCtlPid.yKi",
+    "posCtlPid.xKd",
+    "posCtlPid.yKd",
+    "posCtlPid.zKd",
+    "velCtlPid.vxKi",
+    "velCtlPid.vyKi",
+    "velCtlPid.vzKi",
+    "velCtlPid.vxKd",
+    "velCtlPid.vyKd",
+    "velCtlPid.vzKd",
+)
 """Kept at the firmware's values, or the start's (module doc: why they are not fitted)."""
 MIN_TRAVEL_M = 0.1
 """An axis whose setpoint spans less than this in the window is not fitted."""
@@ -108,8 +121,9 @@ class FitResult:
     """Why the fit may not describe the drone: the record's own warnings, a residual the model does not explain."""
 
 
-def _best_delay(track: Track, t: np.ndarray, measured: np.ndarray, axes: list[int], fixed: float | None
-                ) -> tuple[float, np.ndarray]:
+def _best_delay(
+    track: Track, t: np.ndarray, measured: np.ndarray, axes: list[int], fixed: float | None
+) -> tuple[float, np.ndarray]:
     """The delay (from `MIN_DELAY_S` to `MAX_DELAY_S` by 5 ms, then by 1 ms about the best; or ``fixed``) that best
     lays the replay on ``measured`` along ``axes``, and the model's positions with it."""
     if fixed is not None:
@@ -161,14 +175,19 @@ def noise_from_frames(frames: np.ndarray) -> float:
     return 1.4826 * mad / math.sqrt(6.0)
 
 
-def fit(record: FlightRecord, *, start: dict[str, float] | None = None,
-        progress: Callable[[str], None] = lambda message: None) -> FitResult:
+def fit(
+    record: FlightRecord,
+    *,
+    start: dict[str, float] | None = None,
+    progress: Callable[[str], None] = lambda message: None,
+) -> FitResult:
     """Fit ``record`` (module doc). ``start``: firmware parameters to start from (an earlier profile's; default
     the firmware's): the fitted gains start at theirs, and the others are replayed as they say and kept."""
     sp = record.setpoints
     first = record.start_position  # the drone hovered there before: a step from it is travel too
-    travel = {a: float(max(np.max(sp[:, 1 + i]), first[i]) - min(np.min(sp[:, 1 + i]), first[i]))
-              for i, a in enumerate(AXES)}
+    travel = {
+        a: float(max(np.max(sp[:, 1 + i]), first[i]) - min(np.min(sp[:, 1 + i]), first[i])) for i, a in enumerate(AXES)
+    }
     fitted_axes = [a for a in AXES if travel[a] >= MIN_TRAVEL_M]
     not_identified = {}
     for a in AXES:
@@ -177,8 +196,9 @@ def fit(record: FlightRecord, *, start: dict[str, float] | None = None,
             not_identified.update({name: why for name in GAINS[a]})
     defaults = CfGains().params()
     base = dict(start or {})
-    chosen = [(a, k, name) for a in fitted_axes for k, name in enumerate(GAINS[a])
-              if base.get(name, defaults[name]) > 0.0]  # a gain of 0 is switched off: the fit leaves it off
+    chosen = [
+        (a, k, name) for a in fitted_axes for k, name in enumerate(GAINS[a]) if base.get(name, defaults[name]) > 0.0
+    ]  # a gain of 0 is switched off: the fit leaves it off
     for a in fitted_axes:
         for name in GAINS[a]:
             if base.get(name, defaults[name]) <= 0.0:
@@ -236,14 +256,15 @@ def fit(record: FlightRecord, *, start: dict[str, float] | None = None,
             speed = velocity(track, delay)
             jac = np.zeros((3 * len(t), len(names) + (fixed_delay is None)))
             for j, i in enumerate(axis_of):
-                jac[i * len(t):(i + 1) * len(t), j] = gains_jac[:, j]
+                jac[i * len(t) : (i + 1) * len(t), j] = gains_jac[:, j]
             if fixed_delay is None:
                 jac[:, -1] = -speed.T.ravel()  # the model seen later by d is the model at t - d
             residual = (measured - model).T.ravel()
             normal = jac.T @ jac
-            step = np.linalg.solve(normal + mu * np.diag(np.diag(normal)) + 1e-12 * np.eye(len(normal)),
-                                   jac.T @ residual)
-            gain_step = np.clip(step[:len(names)], -MAX_STEP, MAX_STEP)
+            step = np.linalg.solve(
+                normal + mu * np.diag(np.diag(normal)) + 1e-12 * np.eye(len(normal)), jac.T @ residual
+            )
+            gain_step = np.clip(step[: len(names)], -MAX_STEP, MAX_STEP)
             delay_step = float(np.clip(step[-1], -0.02, 0.02)) if fixed_delay is None else 0.0
             trial = theta + gain_step
             trial_delay = min(max(delay + delay_step, MIN_DELAY_S), MAX_DELAY_S)
@@ -269,12 +290,14 @@ def fit(record: FlightRecord, *, start: dict[str, float] | None = None,
                 done = mu > 1e4 or (float(np.max(np.abs(gain_step))) < TOLERANCE and abs(delay_step) < 5e-4)
             rms = float(np.sqrt(cost / len(t)))
             history.append({"iteration": iterations, "residual_rms_m": rms, "delay_s": delay, **params_of(theta)})
-            progress(f"iteration {iterations}: residual {rms * 1000:.2f} mm, delay {delay * 1000:.1f} ms, " +
-                     ", ".join(f"{k} {v:.3f}" for k, v in params_of(theta).items()))
+            progress(
+                f"iteration {iterations}: residual {rms * 1000:.2f} mm, delay {delay * 1000:.1f} ms, "
+                + ", ".join(f"{k} {v:.3f}" for k, v in params_of(theta).items())
+            )
             if done:
                 break
     residual = measured - model
-    distance = np.sqrt(np.sum(residual ** 2, axis=1))
+    distance = np.sqrt(np.sum(residual**2, axis=1))
     if record.kind == "trace":
         latency, latency_from, noise = 0.0, "none", 0.0
     elif against_truth is not None:
@@ -285,15 +308,27 @@ def fit(record: FlightRecord, *, start: dict[str, float] | None = None,
         frames = record.mocap_frames if record.mocap_frames is not None else record.positions
         noise = noise_from_frames(frames[(frames[:, 0] >= 0.0) & (frames[:, 0] <= record.end_s)])
     warnings = list(record.warnings)
-    rms = float(np.sqrt(np.mean(distance ** 2)))
+    rms = float(np.sqrt(np.mean(distance**2)))
     if rms > max(UNEXPLAINED_M, 5.0 * noise):
-        warnings.append(f"the fitted model leaves {rms * 1000:.1f} mm RMS unexplained ({noise * 1000:.2f} mm of mocap "
-                        "noise): the flight holds what the model does not (a stall, a gust, a crash, the floor, "
-                        "another drone's wash), or gains it does not fit")
+        warnings.append(
+            f"the fitted model leaves {rms * 1000:.1f} mm RMS unexplained ({noise * 1000:.2f} mm of mocap "
+            "noise): the flight holds what the model does not (a stall, a gust, a crash, the floor, "
+            "another drone's wash), or gains it does not fit"
+        )
     return FitResult(
         warnings=warnings,
-        params={**base, **(params_of(theta) if names else {})}, not_identified=not_identified, delay_s=delay,
-        residual_rms_m=float(np.sqrt(np.mean(distance ** 2))), residual_max_m=float(np.max(distance)),
+        params={**base, **(params_of(theta) if names else {})},
+        not_identified=not_identified,
+        delay_s=delay,
+        residual_rms_m=float(np.sqrt(np.mean(distance**2))),
+        residual_max_m=float(np.max(distance)),
         residual_axis_rms_m={a: float(np.sqrt(np.mean(residual[:, i] ** 2))) for i, a in enumerate(AXES)},
-        default_residual_rms_m=default_rms, latency_s=latency, latency_from=latency_from, noise_m=noise,
-        iterations=iterations, replays=replays, samples=len(t), history=history)
+        default_residual_rms_m=default_rms,
+        latency_s=latency,
+        latency_from=latency_from,
+        noise_m=noise,
+        iterations=iterations,
+        replays=replays,
+        samples=len(t),
+        history=history,
+    )

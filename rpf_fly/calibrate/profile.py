@@ -98,8 +98,10 @@ def parse_profile(doc: Any, path: Path | None = None) -> VehicleProfile:
     out = []
     for name, value in params.items():
         if name not in known:
-            raise ProfileError(f"params.{name}: not a parameter of the simulated firmware's controller "
-                               "(posCtlPid.*, velCtlPid.*, pid_attitude.*, pid_rate.*: docs/dynamics.md)")
+            raise ProfileError(
+                f"params.{name}: not a parameter of the simulated firmware's controller "
+                "(posCtlPid.*, velCtlPid.*, pid_attitude.*, pid_rate.*: docs/dynamics.md)"
+            )
         hi = 65535.0 if name in UINT16_PARAMS else math.inf
         out.append((str(name), _number(value, f"params.{name}", 0.0, hi)))
     latency = noise = None
@@ -115,8 +117,13 @@ def parse_profile(doc: Any, path: Path | None = None) -> VehicleProfile:
         if "noise_m" in mocap:
             noise = _number(mocap["noise_m"], "mocap.noise_m", 0.0, MAX_NOISE_M)
     drone = doc.get("drone", "")
-    return VehicleProfile(path=path, drone=str(drone) if drone is not None else "", params=tuple(out),
-                          mocap_latency_s=latency, mocap_noise_m=noise)
+    return VehicleProfile(
+        path=path,
+        drone=str(drone) if drone is not None else "",
+        params=tuple(out),
+        mocap_latency_s=latency,
+        mocap_noise_m=noise,
+    )
 
 
 def load_profile(path: Path) -> VehicleProfile:
@@ -151,14 +158,28 @@ def _plain(value: Any) -> Any:
     return value
 
 
-def profile_text(drone: str, params: Mapping[str, float], *, source: Mapping[str, Any],
-                 mocap: Mapping[str, Any], fit: Mapping[str, Any]) -> str:
+def profile_text(
+    drone: str,
+    params: Mapping[str, float],
+    *,
+    source: Mapping[str, Any],
+    mocap: Mapping[str, Any],
+    fit: Mapping[str, Any],
+) -> str:
     """The profile file's text (module doc), a comment line first saying what it is and how it was made."""
     import yaml
 
-    doc = {"format": FORMAT, "drone": drone, "source": _plain(source), "params": _plain(dict(params)),
-           "mocap": _plain(dict(mocap)), "fit": _plain(dict(fit))}
-    head = ("# rpf-fly vehicle profile: the firmware gains and mocap figures under which the simulated drone flies\n"
-            "# as this drone flew (rpf-fly calibrate; docs/dynamics.md, \"Calibrating a vehicle profile\"). A mission\n"
-            "# uses it with dry_run: {dynamics: firmware, vehicle: THIS_FILE}.\n")
+    doc = {
+        "format": FORMAT,
+        "drone": drone,
+        "source": _plain(source),
+        "params": _plain(dict(params)),
+        "mocap": _plain(dict(mocap)),
+        "fit": _plain(dict(fit)),
+    }
+    head = (
+        "# rpf-fly vehicle profile: the firmware gains and mocap figures under which the simulated drone flies\n"
+        '# as this drone flew (rpf-fly calibrate; docs/dynamics.md, "Calibrating a vehicle profile"). A mission\n'
+        "# uses it with dry_run: {dynamics: firmware, vehicle: THIS_FILE}.\n"
+    )
     return head + yaml.safe_dump(doc, sort_keys=False, default_flow_style=False, width=120)

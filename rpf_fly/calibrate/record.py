@@ -131,27 +131,39 @@ def _log_records(path: Path, drone: str | None) -> list[FlightRecord]:
         data = read_log(path)
     except LogError as err:
         raise RecordError(f"{path}: {err}") from None
-    names = sorted(topic.split("/")[1] for topic in data.topics
-                   if topic.endswith("/setpoint") and topic.count("/") == 2 and data.topics[topic])
+    names = sorted(
+        topic.split("/")[1]
+        for topic in data.topics
+        if topic.endswith("/setpoint") and topic.count("/") == 2 and data.topics[topic]
+    )
     if not names:
-        raise RecordError(f"{path}: no setpoints in the log (no /<drone>/setpoint topic): calibrate needs a streamed "
-                          "flight's log (rpf-fly fly or rpf-fly scenario with --log)")
+        raise RecordError(
+            f"{path}: no setpoints in the log (no /<drone>/setpoint topic): calibrate needs a streamed "
+            "flight's log (rpf-fly fly or rpf-fly scenario with --log)"
+        )
     if drone is not None:
         if drone not in names:
-            raise RecordError(f"{path}: --drone {drone}: no setpoints of {drone} in the log (drones with setpoints: "
-                              f"{', '.join(names)})")
+            raise RecordError(
+                f"{path}: --drone {drone}: no setpoints of {drone} in the log (drones with setpoints: "
+                f"{', '.join(names)})"
+            )
         names = [drone]
     mission = data.metadata.get("mission", {})
     origin = mission.get("source", "") or "flight"
-    warnings = tuple(str(m.data.get("message", "")) for m in data.topics.get("/events", [])
-                     if "could not keep up" in str(m.data.get("message", "")))  # rpf_fly/emulator/host_lag.py
+    warnings = tuple(
+        str(m.data.get("message", ""))
+        for m in data.topics.get("/events", [])
+        if "could not keep up" in str(m.data.get("message", ""))
+    )  # rpf_fly/emulator/host_lag.py
     if origin in ("dry-run", "lab"):
         from rpf_fly.log.review import dry_run_dynamics
 
         dynamics = dry_run_dynamics(str(mission.get("yaml", ""))) or "first-order"
         if dynamics != "firmware":
-            warnings += (f"its simulated drones flew the {dynamics} model (the logged mission's dry_run.dynamics), "
-                         "not the firmware's cascade: no gains describe them",)
+            warnings += (
+                f"its simulated drones flew the {dynamics} model (the logged mission's dry_run.dynamics), "
+                "not the firmware's cascade: no gains describe them",
+            )
     return [_log_record(path, data, name, origin, warnings) for name in names]
 
 
@@ -164,8 +176,10 @@ def _log_record(path: Path, data: Any, name: str, origin: str, warnings: tuple[s
     seconds = stamps * 1e-9
     a, b = _longest_stream(seconds)
     if b - a < 2 or seconds[b - 1] - seconds[a] < MIN_WINDOW_S:
-        raise RecordError(f"{path}: {name}: its longest setpoint stream lasts {seconds[b - 1] - seconds[a]:.2f} s "
-                          f"(at least {MIN_WINDOW_S:g} s without a gap over {MAX_GAP_S:g} s needed)")
+        raise RecordError(
+            f"{path}: {name}: its longest setpoint stream lasts {seconds[b - 1] - seconds[a]:.2f} s "
+            f"(at least {MIN_WINDOW_S:g} s without a gap over {MAX_GAP_S:g} s needed)"
+        )
     epoch_ns = int(stamps[a])
     t0 = epoch_ns * 1e-9
     rows = []
@@ -182,18 +196,35 @@ def _log_record(path: Path, data: Any, name: str, origin: str, warnings: tuple[s
     frames[:, 0] -= t0
     inside = (frames[:, 0] >= 0.0) & (frames[:, 0] <= end_s)
     if inside.sum() < 10:
-        raise RecordError(f"{path}: {name}: {int(inside.sum())} mocap poses during its setpoint stream (at least 10 "
-                          "needed)")
+        raise RecordError(
+            f"{path}: {name}: {int(inside.sum())} mocap poses during its setpoint stream (at least 10 needed)"
+        )
     truth = None
     truth_messages = data.topics.get(f"/truth/{name}", [])
     if truth_messages:
-        truth = np.array([(m.publish_time * 1e-9 - t0, m.data["position"]["x"], m.data["position"]["y"],
-                           m.data["position"]["z"]) for m in truth_messages], dtype=float)
+        truth = np.array(
+            [
+                (m.publish_time * 1e-9 - t0, m.data["position"]["x"], m.data["position"]["y"], m.data["position"]["z"])
+                for m in truth_messages
+            ],
+            dtype=float,
+        )
         truth = truth[np.argsort(truth[:, 0], kind="stable")]
     first = frames[inside][0]
-    return FlightRecord(path=path, drone=name, kind="log", origin=origin, setpoints=setpoints,
-                        positions=frames[inside], truth=truth, mocap_frames=frames, end_s=end_s,
-                        on_floor=bool(first[3] < FLOOR_Z_M), epoch_ns=epoch_ns, warnings=warnings)
+    return FlightRecord(
+        path=path,
+        drone=name,
+        kind="log",
+        origin=origin,
+        setpoints=setpoints,
+        positions=frames[inside],
+        truth=truth,
+        mocap_frames=frames,
+        end_s=end_s,
+        on_floor=bool(first[3] < FLOOR_Z_M),
+        epoch_ns=epoch_ns,
+        warnings=warnings,
+    )
 
 
 # ----------------------------------------------------------------------------------------------- traces
@@ -224,9 +255,19 @@ def _trace_record(path: Path, drone: str | None) -> FlightRecord:
     setpoints = _trace_stream(t, sp, stream_hz)
     dt = float(np.median(np.diff(t)))
     end_s = float(t[-1] + dt)
-    return FlightRecord(path=path, drone=name, kind="trace", origin=str(doc.get("source") or "trace"),
-                        setpoints=setpoints, positions=np.column_stack([t, pos]), truth=None, mocap_frames=None,
-                        end_s=end_s, on_floor=on_floor, epoch_ns=0)
+    return FlightRecord(
+        path=path,
+        drone=name,
+        kind="trace",
+        origin=str(doc.get("source") or "trace"),
+        setpoints=setpoints,
+        positions=np.column_stack([t, pos]),
+        truth=None,
+        mocap_frames=None,
+        end_s=end_s,
+        on_floor=on_floor,
+        epoch_ns=0,
+    )
 
 
 def _stream_rate(t: np.ndarray, sp: np.ndarray, on_floor: bool) -> float | None:

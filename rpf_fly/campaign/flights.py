@@ -89,8 +89,9 @@ def _rpf_fly(*args: str) -> list[str]:
 
 def _review(log: Path, workdir: Path) -> str | None:
     """None when ``rpf-fly review LOG --json`` reads the log, else the end of its stderr."""
-    done = subprocess.run(_rpf_fly("review", str(log), "--json"), capture_output=True, text=True, timeout=120,
-                          cwd=workdir)
+    done = subprocess.run(
+        _rpf_fly("review", str(log), "--json"), capture_output=True, text=True, timeout=120, cwd=workdir
+    )
     return None if done.returncode == 0 else (done.stderr.strip()[-200:] or f"exit {done.returncode}")
 
 
@@ -108,9 +109,15 @@ def fly_dry_run(mission_path: Path, faults: list[dict[str, Any]], workdir: Path,
     record = FlightRecord(mission, faults, limit_s=mission.flight.timeout_s + START_S + EXIT_EXTRA_S)
     started = time.monotonic()
     try:
-        done = subprocess.run(_rpf_fly("fly", str(mission_path), "--dry-run", "--faults", str(schedule_file),
-                                       "--no-console", "--log", str(log)),
-                              capture_output=True, text=True, timeout=record.limit_s, cwd=workdir)
+        done = subprocess.run(
+            _rpf_fly(
+                "fly", str(mission_path), "--dry-run", "--faults", str(schedule_file), "--no-console", "--log", str(log)
+            ),
+            capture_output=True,
+            text=True,
+            timeout=record.limit_s,
+            cwd=workdir,
+        )
     except subprocess.TimeoutExpired:
         record.seconds = time.monotonic() - started
         return record
@@ -141,8 +148,14 @@ def fly_against_lab(mission_path: Path, fault: dict[str, Any], workdir: Path, ta
     started = time.monotonic()
     flown = None
     with open(workdir / f"{stem}.lab.out", "w+") as lab_out:
-        lab = subprocess.Popen(_rpf_fly("lab", str(mission_path), "--log", str(lab_log)), stdout=lab_out,
-                               stderr=subprocess.STDOUT, text=True, env=env, cwd=workdir)
+        lab = subprocess.Popen(
+            _rpf_fly("lab", str(mission_path), "--log", str(lab_log)),
+            stdout=lab_out,
+            stderr=subprocess.STDOUT,
+            text=True,
+            env=env,
+            cwd=workdir,
+        )
         try:
             deadline = time.monotonic() + LAB_START_S
             while not lab_file.exists() and lab.poll() is None and time.monotonic() < deadline:
@@ -179,15 +192,21 @@ def fly_against_lab(mission_path: Path, fault: dict[str, Any], workdir: Path, ta
     return record
 
 
-def _fly(mission_path: Path, schedule_file: Path, log: Path, env: dict[str, str], workdir: Path, limit: float,
-         kind: str) -> tuple[int, str, str, int | None, int] | None:
+def _fly(
+    mission_path: Path, schedule_file: Path, log: Path, env: dict[str, str], workdir: Path, limit: float, kind: str
+) -> tuple[int, str, str, int | None, int] | None:
     """``rpf-fly fly --lab --faults`` in a process of its own: (exit code, stdout, stderr, when the fault's line came
     on stderr, when the process ended), or None when it outlived ``limit``. A kill's moment is the stderr line the
     injection writes just before it; an unplug's flight lives on and returns when it ends. Returns `LAB_AFTER_S`
     after the fault at the earliest, so the lab's log covers that much of the drones without their ground station."""
-    flight = subprocess.Popen(_rpf_fly("fly", str(mission_path), "--lab", "--faults", str(schedule_file),
-                                       "--no-console", "--log", str(log)),
-                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=workdir)
+    flight = subprocess.Popen(
+        _rpf_fly("fly", str(mission_path), "--lab", "--faults", str(schedule_file), "--no-console", "--log", str(log)),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+        cwd=workdir,
+    )
     lines: list[tuple[int, str]] = []
     out: list[str] = []
     stderr, stdout = flight.stderr, flight.stdout

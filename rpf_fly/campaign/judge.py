@@ -72,8 +72,9 @@ def _judge_process(record: FlightRecord, verdict: Verdict) -> None:
         verdict.failures.append(f"the flight's log does not review: {record.review_error}")
 
 
-def _truth_of(topics: dict[str, list[tuple[int, dict]]], names: list[str], verdict: Verdict,
-              source: str) -> Truth | None:
+def _truth_of(
+    topics: dict[str, list[tuple[int, dict]]], names: list[str], verdict: Verdict, source: str
+) -> Truth | None:
     """Every drone's ``/truth`` samples from ``topics``; None (and a failure) when a drone has none."""
     truth = {n: topics.get(f"/truth/{n}", []) for n in names}
     missing = [n for n, s in truth.items() if not s]
@@ -85,8 +86,7 @@ def _truth_of(topics: dict[str, list[tuple[int, dict]]], names: list[str], verdi
 
 def _reached(record: FlightRecord, truth: Truth, outcomes: dict[str, str]) -> dict[str, bool]:
     """Each drone reached its goal: it says so and its truth ended there."""
-    return {d.name: outcomes.get(d.name) == "reached" and at_goal(truth[d.name], d.goal)
-            for d in record.mission.drones}
+    return {d.name: outcomes.get(d.name) == "reached" and at_goal(truth[d.name], d.goal) for d in record.mission.drones}
 
 
 def _finish(verdict: Verdict) -> Verdict:
@@ -146,8 +146,9 @@ def judge_flight(record: FlightRecord) -> Verdict:
     if record.exit_code != expected:
         fail(f"exit code {record.exit_code}, expected {expected}")
     ticks = {n: [t for t, _ in record.topics.get(f"/{n}/planner", [])] for n in names}
-    owed, said, owed_notes = owed_warnings(faults, events, truth, mission, reached, ticks,
-                                           set(names) <= kept_down | unsafe)
+    owed, said, owed_notes = owed_warnings(
+        faults, events, truth, mission, reached, ticks, set(names) <= kept_down | unsafe
+    )
     verdict.failures += owed
     verdict.events += said + notes + owed_notes
     return _finish(verdict)
@@ -172,8 +173,9 @@ def judge_lab(record: LabRecord) -> Verdict:
     kind = fault["kind"]
     kill = kind == "ground_station_kill"
     orphans = names if kill else [d.name for d in mission.drones if dongle_of(d.uri) == fault["dongle"]]
-    verdict = Verdict(kind, mission.name, None if kill else ",".join(orphans),
-                      params={k: v for k, v in fault.items() if k != "kind"})
+    verdict = Verdict(
+        kind, mission.name, None if kill else ",".join(orphans), params={k: v for k, v in fault.items() if k != "kind"}
+    )
     fail = verdict.failures.append
     if not record.lab_started:
         fail("the lab did not start")
@@ -197,8 +199,10 @@ def judge_lab(record: LabRecord) -> Verdict:
             at_ns = record.exited_ns
             fail("no 'injected ground_station_kill' line on the flight's stderr")
     else:
-        at_ns = next((t for t, m in events if m.get("file") == "fault"
-                      and m.get("message", "").startswith(f"injected {kind}")), None)
+        at_ns = next(
+            (t for t, m in events if m.get("file") == "fault" and m.get("message", "").startswith(f"injected {kind}")),
+            None,
+        )
     if at_ns is None:
         fail(f"{kind} was never injected")
         return _finish(verdict)
@@ -221,15 +225,17 @@ def judge_lab(record: LabRecord) -> Verdict:
     return _finish(verdict)
 
 
-def _judge_orphans(record: LabRecord, verdict: Verdict, truth: Truth, orphans: list[str], at_ns: int,
-                   events: list[tuple[int, dict]]) -> None:
+def _judge_orphans(
+    record: LabRecord, verdict: Verdict, truth: Truth, orphans: list[str], at_ns: int, events: list[tuple[int, dict]]
+) -> None:
     """The drones the fault left without a ground station (`rpf_fly.flight.lab.after_ground_station`), and for an
     unplug the others at their goals and each orphan said lost."""
     kind = record.faults[0]["kind"]
     fail = verdict.failures.append
     try:
-        after = after_ground_station({n: [SimpleNamespace(log_time=t, data=m) for t, m in truth[n]] for n in orphans},
-                                     at_ns, (STILL_FLYING_S,))
+        after = after_ground_station(
+            {n: [SimpleNamespace(log_time=t, data=m) for t, m in truth[n]] for n in orphans}, at_ns, (STILL_FLYING_S,)
+        )
     except ValueError as err:
         fail(str(err))
         return
@@ -238,18 +244,25 @@ def _judge_orphans(record: LabRecord, verdict: Verdict, truth: Truth, orphans: l
         fail(f"no drone airborne at the {kind}: nothing was tested")
     for n, d in after.items():
         if d.down_after_s is None or d.down_after_s > DOWN_WITHIN_S:
-            fail(f"{n} not down within {DOWN_WITHIN_S:g} s of the {kind} "
-                 f"({'never' if d.down_after_s is None else f'{d.down_after_s:.2f} s'})")
+            fail(
+                f"{n} not down within {DOWN_WITHIN_S:g} s of the {kind} "
+                f"({'never' if d.down_after_s is None else f'{d.down_after_s:.2f} s'})"
+            )
         if d.moved_m > MOVED_M:
             fail(f"{n} moved {d.moved_m:.2f} m after the {kind} (> {MOVED_M:g} m)")
         if d.flying_at_s[STILL_FLYING_S]:
             fail(f"{n} still flying {STILL_FLYING_S:g} s after the {kind}")
     down = [d.down_after_s for n, d in after.items() if n in airborne and d.down_after_s is not None]
-    verdict.events.append(f"{len(airborne)} of {len(after)} airborne at the {kind.replace('_', ' ')}"
-                          + (f"; down {min(down):.2f}-{max(down):.2f} s after" if down else "")
-                          + f"; moved at most {max(d.moved_m for d in after.values()):.2f} m")
-    behind = [m.get("message", "") for _, m in record.lab_topics.get("/events", [])
-              if "could not keep up" in m.get("message", "")]
+    verdict.events.append(
+        f"{len(airborne)} of {len(after)} airborne at the {kind.replace('_', ' ')}"
+        + (f"; down {min(down):.2f}-{max(down):.2f} s after" if down else "")
+        + f"; moved at most {max(d.moved_m for d in after.values()):.2f} m"
+    )
+    behind = [
+        m.get("message", "")
+        for _, m in record.lab_topics.get("/events", [])
+        if "could not keep up" in m.get("message", "")
+    ]
     if behind:  # the lab's world fell behind its own time: what the drones did is the host's as much as the stack's
         verdict.events.append(f"lab: {behind[-1]}")
     if kind == "ground_station_kill":
@@ -259,8 +272,11 @@ def _judge_orphans(record: LabRecord, verdict: Verdict, truth: Truth, orphans: l
     if missed:
         fail("did not reach their goals: " + ", ".join(missed))
     for n in orphans:
-        said = [m for t, m in events if at_ns <= t <= at_ns + EVENT_WINDOW_S * 1e9 and m.get("level", 0) >= 3
-                and m.get("name") == n]
+        said = [
+            m
+            for t, m in events
+            if at_ns <= t <= at_ns + EVENT_WINDOW_S * 1e9 and m.get("level", 0) >= 3 and m.get("name") == n
+        ]
         if not said and not after[n].motors_at_death and after[n].z_at_death <= ON_FLOOR_M:
             verdict.events.append(f"{n} on the floor, motors off, at the unplug: no link of a flight to lose")
             continue

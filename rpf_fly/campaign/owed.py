@@ -53,9 +53,16 @@ def target(fault: dict[str, Any]) -> str:
 def injected_at(fault: dict[str, Any], events: Events) -> int | None:
     """When the fault's own injection event came (naming its drone, unless a swarm fault); None: never injected."""
     drone = fault.get("drone")
-    return next((t for t, m in events if m.get("file") == "fault"
-                 and m.get("message", "").startswith(f"injected {fault['kind']}")
-                 and (fault["kind"] in SWARM_KINDS or m.get("name") == drone)), None)
+    return next(
+        (
+            t
+            for t, m in events
+            if m.get("file") == "fault"
+            and m.get("message", "").startswith(f"injected {fault['kind']}")
+            and (fault["kind"] in SWARM_KINDS or m.get("name") == drone)
+        ),
+        None,
+    )
 
 
 def warnings_for(fault: dict[str, Any], events: Events, flying_at: int | None) -> list[dict] | None:
@@ -114,8 +121,11 @@ def planner_unused_at_injection(fault: dict[str, Any], events: Events) -> bool:
     injected = injected_at(fault, events)
     if injected is None:
         return False
-    phases = [m.get("message", "") for t, m in events
-              if t <= injected and m.get("file") == "phase" and m.get("name") == fault["drone"]]
+    phases = [
+        m.get("message", "")
+        for t, m in events
+        if t <= injected and m.get("file") == "phase" and m.get("name") == fault["drone"]
+    ]
     return bool(phases) and phases[-1].split(":")[0] in NOT_PLANNING_AGAIN
 
 
@@ -139,8 +149,9 @@ def inside_loop_stall(fault: dict[str, Any], events: Events) -> bool:
     return False
 
 
-def stall_within_jitter(fault: dict[str, Any], events: Events, ticks: dict[str, list[int]],
-                        period_s: float) -> float | None:
+def stall_within_jitter(
+    fault: dict[str, Any], events: Events, ticks: dict[str, list[int]], period_s: float
+) -> float | None:
     """For a loop stall: the longest gap between two planning ticks of any drone around it (from a period before its
     injection to a period after its end), when that is at most the period plus `LATE_TICK_S`, else None. A stall
     that began while the loop waited for its next frame delays that tick by less than its length; no stack can tell
@@ -166,8 +177,11 @@ def corrected_by_extpose(fault: dict[str, Any], mission: Any, reached: dict[str,
     pose, so its yaw is right before the preflight looks and the stack has nothing to say; owed nothing when the
     drone then reached its goal (it flew right). With position-only extpos the offset stays until the preflight
     resets the estimator, and that warning is owed."""
-    return (fault["kind"] == "yaw_offset" and mission.radio.extpos == "extpose"
-            and reached.get(fault.get("drone") or "", False))
+    return (
+        fault["kind"] == "yaw_offset"
+        and mission.radio.extpos == "extpose"
+        and reached.get(fault.get("drone") or "", False)
+    )
 
 
 def gust_push_bound(fault: dict[str, Any], events: Events, truth: Truth) -> float | None:
@@ -181,12 +195,18 @@ def gust_push_bound(fault: dict[str, Any], events: Events, truth: Truth) -> floa
     end = injected + fault["duration_s"] * 1e9
     samples = [(t, m) for t, m in truth.get(fault["drone"], []) if injected <= t <= end]
     airborne = sum((b[0] - a[0]) / 1e9 for a, b in zip(samples, samples[1:]) if a[1]["position"]["z"] > ON_FLOOR_M)
-    return 0.5 * math.hypot(*fault["accel"]) * airborne ** 2
+    return 0.5 * math.hypot(*fault["accel"]) * airborne**2
 
 
-def owed_warnings(faults: list[dict[str, Any]], events: Events, truth: Truth, mission: Mission,
-                  reached: dict[str, bool], ticks: dict[str, list[int]],
-                  all_kept_down: bool) -> tuple[list[str], list[str], list[str]]:
+def owed_warnings(
+    faults: list[dict[str, Any]],
+    events: Events,
+    truth: Truth,
+    mission: Mission,
+    reached: dict[str, bool],
+    ticks: dict[str, list[int]],
+    all_kept_down: bool,
+) -> tuple[list[str], list[str], list[str]]:
     """Each fault's own warning, so one fault's warning cannot stand in for another's: (failures, the warnings said
     (at most 3 a fault), notes on the faults that owed nothing and why)."""
     flying_at = next((t for t, m in events if m.get("message") == "swarm: flying"), None)
@@ -212,23 +232,37 @@ def owed_warnings(faults: list[dict[str, Any]], events: Events, truth: Truth, mi
     return failures, said, notes
 
 
-def _owes_nothing(fault: dict[str, Any], events: Events, truth: Truth, mission: Mission, reached: dict[str, bool],
-                  ticks: dict[str, list[int]]) -> str | None:
+def _owes_nothing(
+    fault: dict[str, Any],
+    events: Events,
+    truth: Truth,
+    mission: Mission,
+    reached: dict[str, bool],
+    ticks: dict[str, list[int]],
+) -> str | None:
     """Why a fault that left no warning owed none (the note the report shows), or None: it owed one."""
     if grounded_at_injection(fault, events, truth):
         return f"{fault['drone']} on the floor, motors off, at its {fault['kind']}: nothing for it to act on"
     if planner_unused_at_injection(fault, events):
-        return (f"{fault['drone']} no longer planning at its {fault['kind']} (landing or down): its planner is never "
-                "called again")
+        return (
+            f"{fault['drone']} no longer planning at its {fault['kind']} (landing or down): its planner is never "
+            "called again"
+        )
     if (gap := stall_within_jitter(fault, events, ticks, mission.flight.dt)) is not None:
-        return (f"its loop_stall delayed no planning tick past the period plus {LATE_TICK_S:g} s (longest gap "
-                f"{gap:.3f} s): within the loop's normal jitter, no drone felt it")
+        return (
+            f"its loop_stall delayed no planning tick past the period plus {LATE_TICK_S:g} s (longest gap "
+            f"{gap:.3f} s): within the loop's normal jitter, no drone felt it"
+        )
     if inside_loop_stall(fault, events):
         return f"{fault['kind']} began and ended inside a loop stall: the loop never read a frame of it"
     if corrected_by_extpose(fault, mission, reached):
-        return (f"{fault['drone']} stood rotated with extpose: its estimator took mocap's yaw and it reached its goal: "
-                "nothing to act on")
+        return (
+            f"{fault['drone']} stood rotated with extpose: its estimator took mocap's yaw and it reached its goal: "
+            "nothing to act on"
+        )
     if (push := gust_push_bound(fault, events, truth)) is not None and push < TRACKING_NOISE_M:
-        return (f"{fault['drone']} airborne too little of its gust to be pushed more than {push:.3f} m, under a real "
-                f"drone's {TRACKING_NOISE_M:g} m tracking noise")
+        return (
+            f"{fault['drone']} airborne too little of its gust to be pushed more than {push:.3f} m, under a real "
+            f"drone's {TRACKING_NOISE_M:g} m tracking noise"
+        )
     return None

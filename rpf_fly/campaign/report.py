@@ -27,8 +27,10 @@ def row(v: Verdict) -> str:
     outcomes = ", ".join(f"{n} {o}" for n, o in v.outcomes.items())
     sep = "-" if v.min_separation_m is None else f"{v.min_separation_m:.3f} m"
     kind = v.kind + (" " + json.dumps(v.params) if v.params else "")
-    return (f"| {_cell(kind)} | {v.mission} | {v.drone or '-'} | {'pass' if v.passed else 'FAIL'} | {v.exit_code} | "
-            f"{outcomes} | {sep} | {_cell('; '.join(v.events))} | {_cell('; '.join(v.failures))} |")
+    return (
+        f"| {_cell(kind)} | {v.mission} | {v.drone or '-'} | {'pass' if v.passed else 'FAIL'} | {v.exit_code} | "
+        f"{outcomes} | {sep} | {_cell('; '.join(v.events))} | {_cell('; '.join(v.failures))} |"
+    )
 
 
 def table(verdicts: list[Verdict]) -> str:
@@ -88,5 +90,10 @@ def markdown(command: str, revision: str, verdicts: list[Verdict]) -> str:
 def as_json(command: str, revision: str, verdicts: list[Verdict]) -> dict[str, Any]:
     """The verdicts as one JSON document (every field of each `Verdict`), with what was flown."""
     passed = sum(v.passed for v in verdicts)
-    return {"command": command, "revision": revision, "passed": passed, "failed": len(verdicts) - passed,
-            "verdicts": [asdict(v) for v in verdicts]}
+    return {
+        "command": command,
+        "revision": revision,
+        "passed": passed,
+        "failed": len(verdicts) - passed,
+        "verdicts": [asdict(v) for v in verdicts],
+    }

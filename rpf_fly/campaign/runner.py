@@ -153,10 +153,20 @@ def fixed_runs(mission_file: Path, kinds: list[str], workdir: Path, on_verdict: 
     return verdicts
 
 
-def random_campaign(runs: int, seed: int, missions: list[str], planners: list[str], workdir: Path,
-                    kinds: list[str] | None = None, extpose: bool = False, faults_per_run: int = 1,
-                    vary_world: bool = False, only: set[int] | None = None,
-                    on_verdict: OnVerdict = _ignore, dynamics: str | None = None) -> list[Verdict]:
+def random_campaign(
+    runs: int,
+    seed: int,
+    missions: list[str],
+    planners: list[str],
+    workdir: Path,
+    kinds: list[str] | None = None,
+    extpose: bool = False,
+    faults_per_run: int = 1,
+    vary_world: bool = False,
+    only: set[int] | None = None,
+    on_verdict: OnVerdict = _ignore,
+    dynamics: str | None = None,
+) -> list[Verdict]:
     """``runs`` flights, each a mission and planner (``mission``: its own) drawn from ``seed`` and ``faults_per_run``
     faults of different kinds (of ``kinds``, default every dry-run kind), each with its drone, time and parameters
     drawn (`rpf_fly.campaign.schedules.draw_faults`). ``vary_world``: run k of seed S flies the simulated world of
@@ -181,25 +191,42 @@ def random_campaign(runs: int, seed: int, missions: list[str], planners: list[st
         if only is not None and run not in only:
             continue
         v = fly_and_judge(faults, path, workdir, tag=f"-r{run}")
-        v.params = {"run": run, "planner": planner, **({"world_seed": seed * 1000 + run} if vary_world else {}),
-                    **({k: x for k, x in draws[0].items() if k not in ("kind", "drone")} if len(draws) == 1
-                       else {"faults": draws})}
+        v.params = {
+            "run": run,
+            "planner": planner,
+            **({"world_seed": seed * 1000 + run} if vary_world else {}),
+            **(
+                {k: x for k, x in draws[0].items() if k not in ("kind", "drone")}
+                if len(draws) == 1
+                else {"faults": draws}
+            ),
+        }
         verdicts.append(v)
         on_verdict(v)
     return verdicts
 
 
-def lab_runs(kinds: list[str], missions: list[str] | None, planner: str | None, extpose: bool,
-             workdir: Path, dynamics: str | None = None) -> list[tuple[str, Path, dict[str, Any]]]:
+def lab_runs(
+    kinds: list[str],
+    missions: list[str] | None,
+    planner: str | None,
+    extpose: bool,
+    workdir: Path,
+    dynamics: str | None = None,
+) -> list[tuple[str, Path, dict[str, Any]]]:
     """The lab kinds' runs among ``kinds`` (kind, mission file, fault): `LAB_RUNS` without ``missions``, else each
     lab kind on each of those missions (`rpf_fly.campaign.schedules.lab_faults`); the lab's drones fly
     ``dynamics`` when given."""
     if missions is None:
-        chosen = [(kind, ROOT / "missions" / f"{name}.yaml", {"kind": kind, **fields})
-                  for kind, name, fields in LAB_RUNS if kind in kinds]
+        chosen = [
+            (kind, ROOT / "missions" / f"{name}.yaml", {"kind": kind, **fields})
+            for kind, name, fields in LAB_RUNS
+            if kind in kinds
+        ]
     else:
-        chosen = [(f["kind"], path, f) for path in map(mission_path, missions)
-                  for f in lab_faults(load_mission(path), kinds)]
+        chosen = [
+            (f["kind"], path, f) for path in map(mission_path, missions) for f in lab_faults(load_mission(path), kinds)
+        ]
     runs = []
     for kind, path, fault in chosen:
         if planner:
@@ -221,8 +248,10 @@ def _kinds(kinds: list[str] | None, random_runs: int) -> list[str] | None:
     except ScheduleError as err:
         raise CampaignError(str(err)) from None
     if random_runs and LAB_KINDS & set(kinds):
-        raise CampaignError(f"--kinds: --random draws {', '.join(sorted(LAB_KINDS & set(kinds)))} nowhere: they fly "
-                            "against a lab, in the campaign without --random only")
+        raise CampaignError(
+            f"--kinds: --random draws {', '.join(sorted(LAB_KINDS & set(kinds)))} nowhere: they fly "
+            "against a lab, in the campaign without --random only"
+        )
     return kinds
 
 
@@ -247,8 +276,10 @@ def _check_dynamics(dynamics: str | None, missions: list[Path]) -> None:
             except MissionError as err:
                 raise CampaignError(str(err)) from None
             if vehicle is not None:
-                raise CampaignError(f"--dynamics first-order: {path} gives a vehicle profile (dry_run.vehicle), "
-                                    "which sets the firmware model's gains: it flies firmware only")
+                raise CampaignError(
+                    f"--dynamics first-order: {path} gives a vehicle profile (dry_run.vehicle), "
+                    "which sets the firmware model's gains: it flies firmware only"
+                )
 
 
 def _check_out(out: Path | None) -> None:
@@ -256,9 +287,17 @@ def _check_out(out: Path | None) -> None:
         raise CampaignError(f"--out: {out}: its folder {out.parent} does not exist")
 
 
-def mission_campaign(mission_file: Path, kinds: list[str] | None = None, random_runs: int = 0, seed: int = 0,
-                     faults_per_run: int = 2, out: Path | None = None, keep: Path | None = None,
-                     on_verdict: OnVerdict = _ignore, dynamics: str | None = None) -> CampaignResult:
+def mission_campaign(
+    mission_file: Path,
+    kinds: list[str] | None = None,
+    random_runs: int = 0,
+    seed: int = 0,
+    faults_per_run: int = 2,
+    out: Path | None = None,
+    keep: Path | None = None,
+    on_verdict: OnVerdict = _ignore,
+    dynamics: str | None = None,
+) -> CampaignResult:
     """A lab's campaign on its own mission before a first flight. Without ``random_runs``: each kind of ``kinds``
     (default every kind) on its own dry run, its default fault on the middle drone, the lab kinds against a lab of
     their own (the kill in each phase, the unplug of the highest dongle). With ``random_runs``: that many dry runs,
@@ -286,8 +325,17 @@ def mission_campaign(mission_file: Path, kinds: list[str] | None = None, random_
         if dynamics:
             mission_file = with_dynamics(mission_file, dynamics, workdir)
         if random_runs:
-            verdicts = random_campaign(random_runs, seed, [str(mission_file)], ["mission"], workdir, checked,
-                                       faults_per_run=faults_per_run, vary_world=True, on_verdict=on_verdict)
+            verdicts = random_campaign(
+                random_runs,
+                seed,
+                [str(mission_file)],
+                ["mission"],
+                workdir,
+                checked,
+                faults_per_run=faults_per_run,
+                vary_world=True,
+                on_verdict=on_verdict,
+            )
         else:
             every = checked or list(ALL_KINDS)
             verdicts = fixed_runs(mission_file, every, workdir, on_verdict)
@@ -300,8 +348,9 @@ def mission_campaign(mission_file: Path, kinds: list[str] | None = None, random_
     return result
 
 
-def default_report(planner: str | None, random_runs: int, seed: int, faults_per_run: int, extpose: bool,
-                   dynamics: str | None = None) -> Path:
+def default_report(
+    planner: str | None, random_runs: int, seed: int, faults_per_run: int, extpose: bool, dynamics: str | None = None
+) -> Path:
     """Where the maintainers' campaign writes its report: docs/fault-campaign/<name>.md, the name saying what flew
     (fixed, the planner's kind, random or compound with the seed; -extpose; -firmware on the firmware model)."""
     variant = ("-extpose" if extpose else "") + ("-firmware" if dynamics == "firmware" else "")
@@ -312,11 +361,21 @@ def default_report(planner: str | None, random_runs: int, seed: int, faults_per_
     return ROOT / "docs" / "fault-campaign" / f"{name}.md"
 
 
-def maintainers_campaign(missions: list[str] | None = None, kinds: list[str] | None = None,
-                         planner: str | None = None, random_runs: int = 0, seed: int = 0,
-                         planners: list[str] | None = None, faults_per_run: int = 1, vary_world: bool = False,
-                         extpose: bool = False, only: set[int] | None = None, keep: Path | None = None,
-                         on_verdict: OnVerdict = _ignore, dynamics: str | None = None) -> CampaignResult:
+def maintainers_campaign(
+    missions: list[str] | None = None,
+    kinds: list[str] | None = None,
+    planner: str | None = None,
+    random_runs: int = 0,
+    seed: int = 0,
+    planners: list[str] | None = None,
+    faults_per_run: int = 1,
+    vary_world: bool = False,
+    extpose: bool = False,
+    only: set[int] | None = None,
+    keep: Path | None = None,
+    on_verdict: OnVerdict = _ignore,
+    dynamics: str | None = None,
+) -> CampaignResult:
     """The maintainers' campaign over shipped missions (tools/fault_campaign.py; its options, the same names).
     Fixed: each kind on each of ``missions`` (default lab-3, circle-8-r3), ``planner`` instead of each mission's
     own; the lab kinds on `LAB_RUNS` (on ``missions`` when given). Random: `random_campaign` over ``missions``
@@ -341,8 +400,20 @@ def maintainers_campaign(missions: list[str] | None = None, kinds: list[str] | N
     command += f" --dynamics {dynamics}" if dynamics else ""
     with _workdir(keep) as workdir:
         if random_runs:
-            verdicts = random_campaign(random_runs, seed, missions or RANDOM_MISSIONS.split(","), planners, workdir,
-                                       checked, extpose, faults_per_run, vary_world, only, on_verdict, dynamics)
+            verdicts = random_campaign(
+                random_runs,
+                seed,
+                missions or RANDOM_MISSIONS.split(","),
+                planners,
+                workdir,
+                checked,
+                extpose,
+                faults_per_run,
+                vary_world,
+                only,
+                on_verdict,
+                dynamics,
+            )
         else:
             every = checked or list(ALL_KINDS)
             verdicts = []

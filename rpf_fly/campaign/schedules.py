@@ -51,8 +51,11 @@ LAB_KINDS = frozenset({"ground_station_kill", "dongle_unplug"})
 """The kinds that leave drones without a ground station: they fly against a lab (`rpf-fly lab`), whose log outlives
 the flight's process."""
 LAB_RUNS: list[tuple[str, str, dict[str, Any]]] = [
-    *[("ground_station_kill", mission, {"at_phase": phase, "at_s": KILL_AT_S[phase]})
-      for mission in ("lab-3", "circle-8-r3") for phase in GROUND_STATION_PHASES],
+    *[
+        ("ground_station_kill", mission, {"at_phase": phase, "at_s": KILL_AT_S[phase]})
+        for mission in ("lab-3", "circle-8-r3")
+        for phase in GROUND_STATION_PHASES
+    ],
     ("dongle_unplug", "campaign/pillars-6", {"dongle": 1, "at_s": UNPLUG_AT_S}),
     ("dongle_unplug", "radio/split-10", {"dongle": 1, "at_s": UNPLUG_AT_S}),
 ]
@@ -83,11 +86,16 @@ def check_kinds(kinds: list[str], allowed: tuple[str, ...] = ALL_KINDS, option: 
     return kinds
 
 
-def fault_fields(kind: str, drone: str | None, params: dict[str, Any] | None = None,
-                 at_s: float = AT_S) -> dict[str, Any]:
+def fault_fields(
+    kind: str, drone: str | None, params: dict[str, Any] | None = None, at_s: float = AT_S
+) -> dict[str, Any]:
     """One fault's schedule entry: the kind's `DEFAULTS` unless ``params`` are given (a random draw's)."""
-    return {"kind": kind, **({} if kind in SWARM_KINDS else {"drone": drone}),
-            **({} if kind in POWER_ON else {"at_s": at_s}), **(DEFAULTS[kind] if params is None else params)}
+    return {
+        "kind": kind,
+        **({} if kind in SWARM_KINDS else {"drone": drone}),
+        **({} if kind in POWER_ON else {"at_s": at_s}),
+        **(DEFAULTS[kind] if params is None else params),
+    }
 
 
 def schedule_of(faults: list[dict[str, Any]]) -> str:
@@ -111,11 +119,14 @@ def lab_faults(mission: Mission, kinds: list[str]) -> list[dict[str, Any]]:
     highest dongle (on a one-dongle mission that is every drone's)."""
     faults: list[dict[str, Any]] = []
     if "ground_station_kill" in kinds:
-        faults += [{"kind": "ground_station_kill", "at_phase": phase, "at_s": KILL_AT_S[phase]}
-                   for phase in GROUND_STATION_PHASES]
+        faults += [
+            {"kind": "ground_station_kill", "at_phase": phase, "at_s": KILL_AT_S[phase]}
+            for phase in GROUND_STATION_PHASES
+        ]
     if "dongle_unplug" in kinds:
-        faults.append({"kind": "dongle_unplug", "dongle": max(dongle_of(d.uri) for d in mission.drones),
-                       "at_s": UNPLUG_AT_S})
+        faults.append(
+            {"kind": "dongle_unplug", "dongle": max(dongle_of(d.uri) for d in mission.drones), "at_s": UNPLUG_AT_S}
+        )
     return faults
 
 
@@ -134,8 +145,10 @@ def random_fault(rng: random.Random, kind: str, start_tolerance_m: float) -> dic
         "blackout": lambda: {"duration_s": round(u(0.15, 3.0), 2)},
         "pose_jump": lambda: {"duration_s": round(u(0.05, 1.0), 2), "offset_m": _direction(rng, u(0.3, 1.5), 3)},
         # a turn of a nearly symmetric marker set's wrong fit: 90 or 180 degrees on a square or a line, tens on others
-        "orientation_flip": lambda: {"duration_s": round(u(0.1, 3.0), 2),
-                                     "deg": round(rng.choice((-1, 1)) * u(30.0, 180.0), 1)},
+        "orientation_flip": lambda: {
+            "duration_s": round(u(0.1, 3.0), 2),
+            "deg": round(rng.choice((-1, 1)) * u(30.0, 180.0), 1),
+        },
         "mocap_delay": lambda: {"duration_s": round(u(1.0, 4.0), 2), "delay_s": round(u(0.02, 0.15), 3)},
         "link_drop": lambda: {},
         # under 28 % of the attempts lost, cflib's link quality dips no lower than in a lab's normal bursts; near
@@ -157,8 +170,9 @@ def random_fault(rng: random.Random, kind: str, start_tolerance_m: float) -> dic
     return draws[kind]()
 
 
-def draw_faults(rng: random.Random, mission: Mission, kinds: list[str] | None,
-                faults_per_run: int) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
+def draw_faults(
+    rng: random.Random, mission: Mission, kinds: list[str] | None, faults_per_run: int
+) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
     """One random run's faults: ``faults_per_run`` of different kinds (of ``kinds``, default every dry-run kind),
     each with its drone, time (0.5-6 s into the planning phase) and parameters drawn from ``rng``; and the draws as
     the report shows them (a swarm kind without a drone, a power-on kind without a time). The draw order is fixed:
@@ -173,7 +187,12 @@ def draw_faults(rng: random.Random, mission: Mission, kinds: list[str] | None,
         drone = names[rng.randrange(len(names))]
         at_s = round(rng.uniform(0.5, 6.0), 2)
         faults.append(fault_fields(kind, None if kind in SWARM_KINDS else drone, params, at_s))
-        draws.append({"kind": kind, **({} if kind in SWARM_KINDS else {"drone": drone}),
-                      **({} if kind in POWER_ON else {"at_s": at_s}), **params})
+        draws.append(
+            {
+                "kind": kind,
+                **({} if kind in SWARM_KINDS else {"drone": drone}),
+                **({} if kind in POWER_ON else {"at_s": at_s}),
+                **params,
+            }
+        )
     return faults, draws
-

@@ -31,8 +31,9 @@ def outside_arena(truth: Truth, arena: Any, r: float) -> list[str]:
             p = m["position"]
             if not m["motors"] and p["z"] <= ON_FLOOR_M:
                 continue
-            excess = max(arena.x[0] - p["x"], p["x"] - arena.x[1], arena.y[0] - p["y"], p["y"] - arena.y[1],
-                         p["z"] - arena.z[1])
+            excess = max(
+                arena.x[0] - p["x"], p["x"] - arena.x[1], arena.y[0] - p["y"], p["y"] - arena.y[1], p["z"] - arena.z[1]
+            )
             if excess > r:
                 outside.append(f"{n} {excess:.2f} m")
                 break

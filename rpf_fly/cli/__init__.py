@@ -39,8 +39,9 @@ def _print_version(value: bool) -> None:
 
 @app.callback()
 def _root(
-    version: bool = typer.Option(False, "--version", callback=_print_version, is_eager=True,
-                                 help="Print the rpf_fly version and exit."),
+    version: bool = typer.Option(
+        False, "--version", callback=_print_version, is_eager=True, help="Print the rpf_fly version and exit."
+    ),
 ) -> None:
     """Fly a Crazyflie swarm with the Reinforced Potential Field planner."""
     # A callback keeps typer in group mode even when one command is registered, so `rpf-fly sim ...` always works.

@@ -19,13 +19,17 @@ def bench(
     suite: str = typer.Option(
         "paper", "--suite", help="paper: the paper missions and arena-a-fresh; families: the generated scene families."
     ),
-    episodes: int = typer.Option(20, "--episodes", help="Seeds per scene (start jitter 0..N-1; fresh arena-A seeds 1000000..)."),
+    episodes: int = typer.Option(
+        20, "--episodes", help="Seeds per scene (start jitter 0..N-1; fresh arena-A seeds 1000000..)."
+    ),
     seeds: int | None = typer.Option(
         None, "--seeds", help="Seeds per scene or family (overrides --episodes; families: bench-stream seeds 0..N-1)."
     ),
     dynamics: str = typer.Option(
-        "kinematic", "--dynamics", help="kinematic: drones move along their planned headings; firmware: the flight's "
-        "closed loop on the simulated Crazyflie firmware (docs/bench.md)."
+        "kinematic",
+        "--dynamics",
+        help="kinematic: drones move along their planned headings; firmware: the flight's "
+        "closed loop on the simulated Crazyflie firmware (docs/bench.md).",
     ),
     first_seed: int = typer.Option(
         0, "--first-seed", help="families suite: the first bench-stream seed (seeds FIRST..FIRST+N-1; default 0)."
@@ -51,8 +55,10 @@ def bench(
     markdown: Path | None = typer.Option(None, "--markdown", help="Write the results as Markdown."),
     figure: Path | None = typer.Option(None, "--figure", help="Write the comparison figure (PNG)."),
     out: Path | None = typer.Option(
-        None, "--out", help="Write results.json, results.md and comparison.png into this folder (families suite: "
-        "families.json and families.md)."
+        None,
+        "--out",
+        help="Write results.json, results.md and comparison.png into this folder (families suite: "
+        "families.json and families.md).",
     ),
 ) -> None:
     """Run every planner on every scene for each seed; print success, collisions, path metrics and the paper's claims.
@@ -81,8 +87,22 @@ def bench(
     if first_seed and suite != "families":
         raise fail("--first-seed: only the families suite takes it (the paper suite's seeds are fixed per scene)")
     if suite == "families":
-        _families(episodes, planners, families, guidance, policies, paths, json_output, json_file, markdown, figure, out,
-                  jobs, first_seed, dynamics)
+        _families(
+            episodes,
+            planners,
+            families,
+            guidance,
+            policies,
+            paths,
+            json_output,
+            json_file,
+            markdown,
+            figure,
+            out,
+            jobs,
+            first_seed,
+            dynamics,
+        )
         return
     if families is not None or guidance is not None or jobs != 1:
         raise fail("--families, --guidance and --jobs belong to --suite families")
@@ -133,8 +153,22 @@ def bench(
         console.print(f"wrote {path}")
 
 
-def _families(episodes, planners, families, guidance, policies, paths, json_output, json_file, markdown, figure,
-              out, jobs, first_seed=0, dynamics="kinematic") -> None:
+def _families(
+    episodes,
+    planners,
+    families,
+    guidance,
+    policies,
+    paths,
+    json_output,
+    json_file,
+    markdown,
+    figure,
+    out,
+    jobs,
+    first_seed=0,
+    dynamics="kinematic",
+) -> None:
     """``--suite families``: run, print the Markdown report (at most 110 columns), write what was asked for."""
     from rpf_fly.bench.families import (
         FAMILY_PLANNERS,

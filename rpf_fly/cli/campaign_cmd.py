@@ -15,22 +15,37 @@ from rpf_fly.cli.errors import fail
 @app.command()
 def campaign(
     mission: Path = typer.Argument(..., help="Mission YAML file to fly the faults on (dry runs: nothing real flies)."),
-    kinds: str | None = typer.Option(None, "--kinds", help="Comma-separated fault kinds (docs/faults.md; "
-                                        "default: every kind)."),
-    random_runs: int = typer.Option(0, "--random", metavar="N", help="N runs of random compound faults (drones, "
-                                    "times, parameters and the simulated world drawn from --seed) instead of each "
-                                    "kind once."),
+    kinds: str | None = typer.Option(
+        None, "--kinds", help="Comma-separated fault kinds (docs/faults.md; default: every kind)."
+    ),
+    random_runs: int = typer.Option(
+        0,
+        "--random",
+        metavar="N",
+        help="N runs of random compound faults (drones, "
+        "times, parameters and the simulated world drawn from --seed) instead of each "
+        "kind once.",
+    ),
     seed: int = typer.Option(0, "--seed", help="The random runs' seed (the same seed flies the same draws)."),
-    faults_per_run: int = typer.Option(2, "--faults-per-run", metavar="K", help="Faults of different kinds in each "
-                                       "random run."),
+    faults_per_run: int = typer.Option(
+        2, "--faults-per-run", metavar="K", help="Faults of different kinds in each random run."
+    ),
     out: Path | None = typer.Option(None, "--out", help="Write the report (markdown table) to this file."),
-    keep: Path | None = typer.Option(None, "--keep", help="Fly in this folder and keep each run's schedule, "
-                                        "mission copy and logs (to review a failed run)."),
+    keep: Path | None = typer.Option(
+        None,
+        "--keep",
+        help="Fly in this folder and keep each run's schedule, mission copy and logs (to review a failed run).",
+    ),
     json_out: bool = typer.Option(False, "--json", help="Print the verdicts as one JSON document."),
-    dynamics: str | None = typer.Option(None, "--dynamics", metavar="first-order|firmware", help="How the "
-                                           "simulated drones fly in every run: first-order (the emulator's lag) or "
-                                           "firmware (the firmware's PID cascade; docs/dynamics.md). Default: the "
-                                           "mission's dry_run.dynamics."),
+    dynamics: str | None = typer.Option(
+        None,
+        "--dynamics",
+        metavar="first-order|firmware",
+        help="How the "
+        "simulated drones fly in every run: first-order (the emulator's lag) or "
+        "firmware (the firmware's PID cascade; docs/dynamics.md). Default: the "
+        "mission's dry_run.dynamics.",
+    ),
 ) -> None:
     """Inject each fault kind into dry runs of MISSION and judge every run on the simulated truth."""
     from rpf_fly.campaign import CampaignError, mission_campaign
@@ -41,8 +56,17 @@ def campaign(
         typer.echo(progress_line(verdict), err=True)
 
     try:
-        result = mission_campaign(mission, kinds.split(",") if kinds is not None else None, random_runs, seed,
-                                  faults_per_run, out, keep, on_verdict=said, dynamics=dynamics)
+        result = mission_campaign(
+            mission,
+            kinds.split(",") if kinds is not None else None,
+            random_runs,
+            seed,
+            faults_per_run,
+            out,
+            keep,
+            on_verdict=said,
+            dynamics=dynamics,
+        )
     except CampaignError as err:
         raise fail(str(err)) from err
     if json_out:

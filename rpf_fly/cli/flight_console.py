@@ -51,8 +51,9 @@ class FlightConsole:
 
         self.name = name
         self.console = console(stderr=True)
-        self.live = Live(console=self.console, refresh_per_second=4, transient=False) if self.console.is_terminal \
-            else None
+        self.live = (
+            Live(console=self.console, refresh_per_second=4, transient=False) if self.console.is_terminal else None
+        )
         self._last = 0.0
 
     def __enter__(self) -> FlightConsole:
@@ -60,8 +61,9 @@ class FlightConsole:
             self.live.__enter__()
         return self
 
-    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
-                 tb: TracebackType | None) -> None:
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
         if self.live is not None:
             self.live.__exit__(exc_type, exc, tb)
 
@@ -115,8 +117,13 @@ def table(title: str, rows: list[dict[str, Any]], final: bool = False):
 
     made = Table(title=escape(title))
     workers = any("worker" in row for row in rows)
-    columns = ["drone"] + (["worker"] if workers else []) + ["state"] + (["outcome"] if final else []) + \
-        ["x", "y", "z", "to goal [m]", "battery [V]", "link [%]"]
+    columns = (
+        ["drone"]
+        + (["worker"] if workers else [])
+        + ["state"]
+        + (["outcome"] if final else [])
+        + ["x", "y", "z", "to goal [m]", "battery [V]", "link [%]"]
+    )
     why = final and any(row.get("why") for row in rows)
     if why:
         columns.append("why")

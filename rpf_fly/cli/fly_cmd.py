@@ -32,41 +32,81 @@ if TYPE_CHECKING:
 def fly(
     mission: Path = typer.Argument(..., help="Mission YAML file."),
     dry_run: bool = typer.Option(False, "--dry-run", help="Simulated drones through the same stack (fake radio)."),
-    lab: bool = typer.Option(False, "--lab", help="Fly the simulated drones of the running `rpf-fly lab` (they keep "
-                             "their firmware state between commands) instead of private ones."),
+    lab: bool = typer.Option(
+        False,
+        "--lab",
+        help="Fly the simulated drones of the running `rpf-fly lab` (they keep "
+        "their firmware state between commands) instead of private ones.",
+    ),
     log: Path | None = typer.Option(None, "--log", help="MCAP flight log (default flights/<mission>-<time>.mcap)."),
     mocap: str | None = typer.Option(
-        None, "--mocap", help="Dry run only: natnet (emulator over UDP), motioncapture (the emulator read by the "
+        None,
+        "--mocap",
+        help="Dry run only: natnet (emulator over UDP), motioncapture (the emulator read by the "
         "motioncapture package in a child process) or sim. Default: motioncapture for mocap.kind motioncapture, "
-        "else natnet."),
+        "else natnet.",
+    ),
     console: bool = typer.Option(True, "--console/--no-console", help="Live status table while flying."),
     faults: Path | None = typer.Option(None, "--faults", help="Dry run only: a fault schedule (docs/faults.md)."),
-    radio_loss: bool = typer.Option(True, "--radio-loss/--no-radio-loss",
-                                    help="Dry run only: bursty radio loss on every link (docs/radio.md)."),
-    foxglove: bool = typer.Option(False, "--foxglove", help="Serve the flight live to Foxglove over WebSocket "
-                                  "(ws://localhost:8765; the live extra; docs/foxglove.md)."),
-    foxglove_port: int | None = typer.Option(None, "--foxglove-port", help="Port of the live view (default 8765; "
-                                                "0: any free port). Implies --foxglove."),
-    foxglove_host: str | None = typer.Option(None, "--foxglove-host", help="Address the live view listens on "
-                                                "(default 127.0.0.1; 0.0.0.0: every network). Implies --foxglove."),
-    verbose: bool = typer.Option(False, "--verbose", help="Also print the libraries' log records (cflib, foxglove-sdk) "
-                                                          "on stderr; they always go to LOG.log beside the flight "
-                                                          "log."),
-    distributed: bool = typer.Option(False, "--distributed", help="One worker process per radio dongle, a "
-                                     "coordinator and a logger, on Zenoh (docs/distributed.md)."),
-    remote_dongles: str | None = typer.Option(None, "--remote-dongles", help="With --distributed: dongles "
-                                                 "(K[,K...]) whose workers run on other hosts (`rpf-fly worker`); "
-                                                 "waits for them before any drone arms."),
-    listen: list[str] | None = typer.Option(None, "--listen", help="With --distributed: the Zenoh endpoint the "
-                                               "coordinator listens on (default 127.0.0.1 only, e.g. "
-                                               "tcp/0.0.0.0:7447 for remote workers)."),
+    radio_loss: bool = typer.Option(
+        True, "--radio-loss/--no-radio-loss", help="Dry run only: bursty radio loss on every link (docs/radio.md)."
+    ),
+    foxglove: bool = typer.Option(
+        False,
+        "--foxglove",
+        help="Serve the flight live to Foxglove over WebSocket "
+        "(ws://localhost:8765; the live extra; docs/foxglove.md).",
+    ),
+    foxglove_port: int | None = typer.Option(
+        None, "--foxglove-port", help="Port of the live view (default 8765; 0: any free port). Implies --foxglove."
+    ),
+    foxglove_host: str | None = typer.Option(
+        None,
+        "--foxglove-host",
+        help="Address the live view listens on (default 127.0.0.1; 0.0.0.0: every network). Implies --foxglove.",
+    ),
+    verbose: bool = typer.Option(
+        False,
+        "--verbose",
+        help="Also print the libraries' log records (cflib, foxglove-sdk) "
+        "on stderr; they always go to LOG.log beside the flight "
+        "log.",
+    ),
+    distributed: bool = typer.Option(
+        False,
+        "--distributed",
+        help="One worker process per radio dongle, a coordinator and a logger, on Zenoh (docs/distributed.md).",
+    ),
+    remote_dongles: str | None = typer.Option(
+        None,
+        "--remote-dongles",
+        help="With --distributed: dongles "
+        "(K[,K...]) whose workers run on other hosts (`rpf-fly worker`); "
+        "waits for them before any drone arms.",
+    ),
+    listen: list[str] | None = typer.Option(
+        None,
+        "--listen",
+        help="With --distributed: the Zenoh endpoint the "
+        "coordinator listens on (default 127.0.0.1 only, e.g. "
+        "tcp/0.0.0.0:7447 for remote workers).",
+    ),
 ) -> None:
     """Fly MISSION: its mocap (NatNet or motioncapture) and cflib radios, or simulated drones with --dry-run."""
     from rpf_fly.app.flight import FlightApp, FlightRequest
 
-    request = FlightRequest(dry_run=dry_run, lab=lab, log=log, mocap=mocap, faults=faults, radio_loss=radio_loss,
-                            live=foxglove or foxglove_port is not None or foxglove_host is not None,
-                            distributed=distributed, remote_dongles=remote_dongles, listen=tuple(listen or ()))
+    request = FlightRequest(
+        dry_run=dry_run,
+        lab=lab,
+        log=log,
+        mocap=mocap,
+        faults=faults,
+        radio_loss=radio_loss,
+        live=foxglove or foxglove_port is not None or foxglove_host is not None,
+        distributed=distributed,
+        remote_dongles=remote_dongles,
+        listen=tuple(listen or ()),
+    )
     with refused():
         flight = FlightApp(mission).prepare_flight(request)
     if flight.distributed:
@@ -157,8 +197,11 @@ def check(
     dry_run: bool = typer.Option(False, "--dry-run", help="Preflight the simulated drones instead of hardware."),
     lab: bool = typer.Option(False, "--lab", help="Preflight the simulated drones of the running `rpf-fly lab`."),
     preflight: bool = typer.Option(True, "--preflight/--no-preflight", help="Connect and run the preflight checks."),
-    verbose: bool = typer.Option(False, "--verbose", help="Also print the libraries' log records (cflib) on stderr; "
-                                                          "they always go to ~/.cache/rpf_fly/check.log."),
+    verbose: bool = typer.Option(
+        False,
+        "--verbose",
+        help="Also print the libraries' log records (cflib) on stderr; they always go to ~/.cache/rpf_fly/check.log.",
+    ),
 ) -> None:
     """Validate MISSION; then connect to the drones and the mocap and run the preflight checks (nothing takes off)."""
     from rpf_fly.app.flight import FlightApp
@@ -175,8 +218,10 @@ def check(
     with refused():
         flight_app.check_radio_budget()
     policy = f" ({loaded.planner.policy})" if loaded.planner.policy is not None else ""
-    typer.echo(f"{mission}: valid mission '{loaded.name}' with {len(loaded.drones)} drones, planner "
-               f"{loaded.planner.kind}{policy}")
+    typer.echo(
+        f"{mission}: valid mission '{loaded.name}' with {len(loaded.drones)} drones, planner "
+        f"{loaded.planner.kind}{policy}"
+    )
     if not preflight:
         return
     if not prepared.dry_run and flight_app.real_flight_problem():

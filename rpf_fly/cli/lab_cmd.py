@@ -20,10 +20,14 @@ if TYPE_CHECKING:
 @app.command()
 def lab(
     mission: Path = typer.Argument(..., help="Mission YAML file: its drones, starts, obstacles and mocap."),
-    faults: Path | None = typer.Option(None, "--faults", help="Power-on faults of the drones (yaw_offset, "
-                                          "start_offset, upside_down, motor_fault; docs/faults.md)."),
-    log: Path | None = typer.Option(None, "--log", help="The lab's MCAP log (default "
-                                       "flights/lab-<mission>-<time>.mcap)."),
+    faults: Path | None = typer.Option(
+        None,
+        "--faults",
+        help="Power-on faults of the drones (yaw_offset, start_offset, upside_down, motor_fault; docs/faults.md).",
+    ),
+    log: Path | None = typer.Option(
+        None, "--log", help="The lab's MCAP log (default flights/lab-<mission>-<time>.mcap)."
+    ),
 ) -> None:
     """Run MISSION's simulated drones and mocap until stopped; `check --lab` and `fly --lab` fly them."""
     from rpf_fly.app.flight import FlightApp
@@ -36,13 +40,19 @@ def lab(
     log_path = prepared.log_path
 
     def started(info: LabInfo, lab_file: Path) -> None:
-        typer.echo(f"lab: {len(info.addresses)} simulated Crazyflies of '{loaded.name}' on the floor at their "
-                   f"mission starts, Motive emulated on 127.0.0.1:{info.natnet_command_port}")
+        typer.echo(
+            f"lab: {len(info.addresses)} simulated Crazyflies of '{loaded.name}' on the floor at their "
+            f"mission starts, Motive emulated on 127.0.0.1:{info.natnet_command_port}"
+        )
         typer.echo(f"  fly them:   rpf-fly check {mission} --lab   then   rpf-fly fly {mission} --lab")
-        typer.echo("  from cflib: from rpf_fly.emulator import fake_radio; from rpf_fly.flight.lab import lab_world; "
-                   "fake_radio.register(lab_world()); then fake:// URIs (the mission's radio paths)")
-        typer.echo("  or through cflib's radio driver: from rpf_fly.emulator import crazyradio; from rpf_fly.flight.lab "
-                   f"import lab_world; {crazyradio_plug_call(loaded)}; then the mission's radio:// URIs")
+        typer.echo(
+            "  from cflib: from rpf_fly.emulator import fake_radio; from rpf_fly.flight.lab import lab_world; "
+            "fake_radio.register(lab_world()); then fake:// URIs (the mission's radio paths)"
+        )
+        typer.echo(
+            "  or through cflib's radio driver: from rpf_fly.emulator import crazyradio; from rpf_fly.flight.lab "
+            f"import lab_world; {crazyradio_plug_call(loaded)}; then the mission's radio:// URIs"
+        )
         typer.echo(f"  lab file:   {lab_file}   log: {log_path}")
         typer.echo("  Ctrl-C stops the lab (its drones power off)")
 

@@ -62,10 +62,15 @@ def start_live(enabled: bool, port: int | None, host: str | None) -> LiveView | 
         live = LiveView(port, host or DEFAULT_HOST)
     except LiveUnavailable as err:
         raise fail(f"--foxglove: {err}") from err
-    typer.echo(f"live: serving the flight on {live.url} (Foxglove: Open connection > Foxglove WebSocket; "
-               f"layout {LAYOUT})", err=True)
+    typer.echo(
+        f"live: serving the flight on {live.url} (Foxglove: Open connection > Foxglove WebSocket; layout {LAYOUT})",
+        err=True,
+    )
     if live.host not in ("127.0.0.1", "localhost", "::1"):
-        typer.echo(f"live: warning: listening on {live.host}: anyone who can reach this machine on port {live.port} "
-                   f"sees the flight (read only, no password; docs/foxglove.md); from elsewhere connect to "
-                   f"ws://<this machine's address>:{live.port}", err=True)
+        typer.echo(
+            f"live: warning: listening on {live.host}: anyone who can reach this machine on port {live.port} "
+            f"sees the flight (read only, no password; docs/foxglove.md); from elsewhere connect to "
+            f"ws://<this machine's address>:{live.port}",
+            err=True,
+        )
     return live

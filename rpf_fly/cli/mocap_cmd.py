@@ -80,17 +80,31 @@ def _watch_table(frame, stats: WatchStats):  # noqa: ANN001, ANN202 - MocapFrame
 
     rate = stats.rate_hz
     latency = f"{frame.latency_s * 1000:.1f} ms" if frame.latency_s is not None else "n/a"
-    table = Table(caption=f"frame {frame.frame_number}, {stats.frames} frames, "
-                                       f"{'-' if rate is None else f'{rate:.1f}'} Hz, latency {latency}, "
-                                       f"{stats.missed} missed  (Ctrl-C: stop)")
-    columns: tuple[tuple[str, JustifyMethod], ...] = (("body", "left"), ("x", "right"), ("y", "right"), ("z", "right"),
-                                                     ("tracked", "left"), ("valid %", "right"))
+    table = Table(
+        caption=f"frame {frame.frame_number}, {stats.frames} frames, "
+        f"{'-' if rate is None else f'{rate:.1f}'} Hz, latency {latency}, "
+        f"{stats.missed} missed  (Ctrl-C: stop)"
+    )
+    columns: tuple[tuple[str, JustifyMethod], ...] = (
+        ("body", "left"),
+        ("x", "right"),
+        ("y", "right"),
+        ("z", "right"),
+        ("tracked", "left"),
+        ("valid %", "right"),
+    )
     for column, justify in columns:
         table.add_column(column, justify=justify)
     for name, pose in sorted(frame.bodies.items()):
         x, y, z = pose.position
-        table.add_row(name, f"{x:+.3f}", f"{y:+.3f}", f"{z:+.3f}", "[green]ok[/]" if pose.valid else "[red]LOST[/]",
-                      f"{stats.valid_pct(name):.1f}")
+        table.add_row(
+            name,
+            f"{x:+.3f}",
+            f"{y:+.3f}",
+            f"{z:+.3f}",
+            "[green]ok[/]" if pose.valid else "[red]LOST[/]",
+            f"{stats.valid_pct(name):.1f}",
+        )
     return table
 
 
@@ -109,18 +123,27 @@ def watch(
     frames: int = typer.Option(0, "--frames", min=0, help="Exit after this many frames (0: until Ctrl-C)."),
     duration: float = typer.Option(0.0, "--duration", min=0.0, help="Exit after this many seconds (0: until Ctrl-C)."),
     rate: float = typer.Option(
-        10.0, "--rate", min=0.0, help="Lines a second when piped, table redraws a second on a terminal (0: a line for "
-                                      "every frame). --json prints every frame."),
+        10.0,
+        "--rate",
+        min=0.0,
+        help="Lines a second when piped, table redraws a second on a terminal (0: a line for "
+        "every frame). --json prints every frame.",
+    ),
     json_output: bool = typer.Option(False, "--json", help="One JSON object per line per frame (summary on stderr)."),
     timeout: float = typer.Option(5.0, "--timeout", min=0.1, help="Seconds to wait for the server and for frames."),
     system: str = typer.Option(
-        "natnet", "--system", help="natnet (our NatNet client, the default for OptiTrack) or a type of the "
-        "motioncapture package: optitrack, vicon, qualisys, vrpn, mock, ... (docs/mocap.md)."),
-    host: str | None = typer.Option(
-        None, "--host", help="The system's host (--system natnet: the same as --natnet)."),
+        "natnet",
+        "--system",
+        help="natnet (our NatNet client, the default for OptiTrack) or a type of the "
+        "motioncapture package: optitrack, vicon, qualisys, vrpn, mock, ... (docs/mocap.md).",
+    ),
+    host: str | None = typer.Option(None, "--host", help="The system's host (--system natnet: the same as --natnet)."),
     option: list[str] = typer.Option(
-        [], "--option", help="KEY=VALUE: an option of the motioncapture type (repeat for several), e.g. "
-        "--option 'rigid_bodies=cf1(0,0,0,1,0,0,0)' for mock."),
+        [],
+        "--option",
+        help="KEY=VALUE: an option of the motioncapture type (repeat for several), e.g. "
+        "--option 'rigid_bodies=cf1(0,0,0,1,0,0,0)' for mock.",
+    ),
 ) -> None:
     """Show rigid bodies as they arrive from a NatNet server, or from a system of the motioncapture package
     (Z-up world frame, metres).
@@ -132,9 +155,19 @@ def watch(
     if system != "natnet":
         from rpf_fly.cli.mocap_library import watch_library
 
-        return watch_library(system, host, option, local_ip=local_ip, command_port=command_port,
-                             up_axis=up_axis.value, frames=frames, json_output=json_output, timeout=timeout,
-                             rate=rate, duration=duration)
+        return watch_library(
+            system,
+            host,
+            option,
+            local_ip=local_ip,
+            command_port=command_port,
+            up_axis=up_axis.value,
+            frames=frames,
+            json_output=json_output,
+            timeout=timeout,
+            rate=rate,
+            duration=duration,
+        )
     if host is not None:
         natnet = host
     if option:
@@ -234,13 +267,18 @@ def watch(
 
 def _watch_header(client, natnet: str, multicast: bool, up_axis: str) -> str:  # noqa: ANN001 - NatNetClient
     info = client.server_info
-    server = f"{info.app_name} {'.'.join(map(str, info.app_version[:3]))}, NatNet {info.version[0]}." \
-             f"{info.version[1]}" if info is not None else "NatNet"
+    server = (
+        f"{info.app_name} {'.'.join(map(str, info.app_version[:3]))}, NatNet {info.version[0]}.{info.version[1]}"
+        if info is not None
+        else "NatNet"
+    )
     names = sorted(client.rigid_body_names.values())
     bodies = f", {len(names)} rigid bodies ({', '.join(names)})" if names else ""
     transport = "multicast" if multicast else "unicast"
-    return (f"{server} at {natnet}, {transport}, assuming {up_axis.upper()}-up (--up-axis {up_axis}; NatNet does not "
-            f"say which Motive streams), shown Z-up{bodies}")
+    return (
+        f"{server} at {natnet}, {transport}, assuming {up_axis.upper()}-up (--up-axis {up_axis}; NatNet does not "
+        f"say which Motive streams), shown Z-up{bodies}"
+    )
 
 
 def _circle_poses(n_bodies: int, radius: float, speed: float, t0: float):  # noqa: ANN202
@@ -275,10 +313,14 @@ def emulate(
     speed: float = typer.Option(0.5, "--speed", min=0.0, help="Speed along the circles, m/s."),
     duration: float = typer.Option(0.0, "--duration", min=0.0, help="Stop after this many seconds (0: Ctrl-C)."),
     replay: Path | None = typer.Option(
-        None, "--replay", help="Serve a flight log's /mocap poses at their logged times instead of circles "
-                               "(--bodies, --rate, --radius and --speed do not apply)."),
-    replay_speed: float = typer.Option(1.0, "--replay-speed", min=0.01, help="With --replay: playback speed "
-                                                                              "(2: twice as fast)."),
+        None,
+        "--replay",
+        help="Serve a flight log's /mocap poses at their logged times instead of circles "
+        "(--bodies, --rate, --radius and --speed do not apply).",
+    ),
+    replay_speed: float = typer.Option(
+        1.0, "--replay-speed", min=0.01, help="With --replay: playback speed (2: twice as fast)."
+    ),
 ) -> None:
     """Run a NatNet server emulator streaming bodies on circles (or a flight log's mocap with --replay), so `mocap
     watch` and any NatNet client can be tried without Motive."""
@@ -328,8 +370,17 @@ def emulate(
             pass
 
 
-def _emulate_replay(log: Path, speed: float, version: tuple[int, int], multicast: bool, local_ip: str,  # noqa: PLR0913
-                    command_port: int, data_port: int, up_axis: UpAxis, duration: float) -> None:
+def _emulate_replay(
+    log: Path,
+    speed: float,
+    version: tuple[int, int],
+    multicast: bool,
+    local_ip: str,  # noqa: PLR0913
+    command_port: int,
+    data_port: int,
+    up_axis: UpAxis,
+    duration: float,
+) -> None:
     """``emulate --replay LOG``: the log's mocap frames over NatNet at their logged times (relative timing kept);
     exits when the last frame is sent (or after ``duration``, or on Ctrl-C)."""
     import threading
@@ -350,14 +401,24 @@ def _emulate_replay(log: Path, speed: float, version: tuple[int, int], multicast
     if not frames:
         raise fail(f"{log}: no mocap poses (/mocap/<drone>) to serve")
     if data.truncated:
-        typer.echo(f"{log}: warning: the log ends before its footer; serving the {len(frames)} frames of its "
-                   "complete chunks", err=True)
+        typer.echo(
+            f"{log}: warning: the log ends before its footer; serving the {len(frames)} frames of its complete chunks",
+            err=True,
+        )
     playback = PosePlayback([(f.t_ns / 1e9, f.poses) for f in frames], speed)
     bodies = playback.bodies
     try:
-        server = NatNetServer(playback.poses, version=version, multicast=multicast, local_ip=local_ip,
-                              command_port=command_port, data_port=data_port, rate_hz=0, up_axis=up_axis.value,
-                              bodies=bodies)
+        server = NatNetServer(
+            playback.poses,
+            version=version,
+            multicast=multicast,
+            local_ip=local_ip,
+            command_port=command_port,
+            data_port=data_port,
+            rate_hz=0,
+            up_axis=up_axis.value,
+            bodies=bodies,
+        )
     except OSError as exc:
         typer.echo(f"error: cannot start the emulator on {local_ip}: {exc}", err=True)
         raise typer.Exit(1) from None
@@ -372,7 +433,8 @@ def _emulate_replay(log: Path, speed: float, version: tuple[int, int], multicast
         flag = "" if multicast else " --unicast"
         typer.echo(
             f"try: rpf-fly mocap watch --natnet {local_ip} --command-port {server.command_port}{flag}"
-            f" --up-axis {up_axis.value}   (Ctrl-C to stop)", nl=True,
+            f" --up-axis {up_axis.value}   (Ctrl-C to stop)",
+            nl=True,
         )
         import sys
 
@@ -391,5 +453,7 @@ def _emulate_replay(log: Path, speed: float, version: tuple[int, int], multicast
             sent = playback.play(server, stop)
         except KeyboardInterrupt:
             sent = len(playback.sent)
-        typer.echo(f"replay done: {sent} of {len(frames)} frames sent (latest {playback.max_late_s * 1e3:.1f} ms "
-                   "behind its time)")
+        typer.echo(
+            f"replay done: {sent} of {len(frames)} frames sent (latest {playback.max_late_s * 1e3:.1f} ms "
+            "behind its time)"
+        )

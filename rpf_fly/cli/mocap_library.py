@@ -77,13 +77,18 @@ def watch_library(
         raise typer.Exit(1) from None
     console = Console(highlight=False, soft_wrap=True)
     if system == "mock" and "rigid_bodies" not in options:
-        typer.echo("note: the mock has no rigid bodies unless given, e.g. --option 'rigid_bodies=cf1(0,0,0.5,1,0,0,0)'"
-                   " (name(x,y,z,qw,qx,qy,qz))", err=True)
+        typer.echo(
+            "note: the mock has no rigid bodies unless given, e.g. --option 'rigid_bodies=cf1(0,0,0.5,1,0,0,0)'"
+            " (name(x,y,z,qw,qx,qy,qz))",
+            err=True,
+        )
     stats = WatchStats()
     up_check = UpAxisCheck(up_axis)
     if not json_output:
-        console.print(f"motioncapture {system} at {host or 'its default host'}, assuming {up_axis.upper()}-up "
-                      f"(--up-axis {up_axis}), shown Z-up; printing {printing(rate)}")
+        console.print(
+            f"motioncapture {system} at {host or 'its default host'}, assuming {up_axis.upper()}-up "
+            f"(--up-axis {up_axis}), shown Z-up; printing {printing(rate)}"
+        )
     started = time.monotonic()
     end = started + duration if duration > 0 else float("inf")
     next_line = 0.0
@@ -95,12 +100,15 @@ def watch_library(
                 frame = source.receive(0.2)
                 if frame is None:
                     if not source.alive:
-                        typer.echo(f"error: motioncapture {system}: the library's process ended ({source.failure})",
-                                   err=True)
+                        typer.echo(
+                            f"error: motioncapture {system}: the library's process ended ({source.failure})", err=True
+                        )
                         raise typer.Exit(1)
                     if time.monotonic() - last_frame > timeout:
-                        typer.echo(f"error: motioncapture {system}: connected but no frames arrived within "
-                                   f"{timeout:g} s", err=True)
+                        typer.echo(
+                            f"error: motioncapture {system}: connected but no frames arrived within {timeout:g} s",
+                            err=True,
+                        )
                         raise typer.Exit(1)
                     continue
                 last_frame = time.monotonic()

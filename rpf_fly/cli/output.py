@@ -29,16 +29,30 @@ def console(stderr: bool = False, pipe_width: int = PIPE_WIDTH, **kwargs: Any):
     made = Console(stderr=stderr, **kwargs)
     if made.is_terminal:
         return made
-    return Console(stderr=stderr, width=pipe_width, force_terminal=False, no_color=True, highlight=False,
-                   soft_wrap=False, **{k: v for k, v in kwargs.items() if k not in ("width", "highlight")})
+    return Console(
+        stderr=stderr,
+        width=pipe_width,
+        force_terminal=False,
+        no_color=True,
+        highlight=False,
+        soft_wrap=False,
+        **{k: v for k, v in kwargs.items() if k not in ("width", "highlight")},
+    )
 
 
 class ProgressLines:
     """Progress for a console that is not a terminal: ``update`` prints one line at most every ``period_s`` seconds
     (and always for the first and the last step), each ending in a newline."""
 
-    def __init__(self, label: str, total: int, unit: str, stream: Any = None, period_s: float = PIPE_PROGRESS_S,
-                 clock: Callable[[], float] = time.monotonic):
+    def __init__(
+        self,
+        label: str,
+        total: int,
+        unit: str,
+        stream: Any = None,
+        period_s: float = PIPE_PROGRESS_S,
+        clock: Callable[[], float] = time.monotonic,
+    ):
         self.label, self.total, self.unit = label, total, unit
         self.stream = stream
         self.period_s = period_s
@@ -58,7 +72,8 @@ class ProgressLines:
         elapsed = int(now - self.started)
         stream = self.stream or sys.stdout
         tail = f"  {text}" if text else ""
-        stream.write(f"{self.label}: {completed}/{self.total} {self.unit}  {elapsed // 60:d}:{elapsed % 60:02d}"
-                     f"{tail}\n")
+        stream.write(
+            f"{self.label}: {completed}/{self.total} {self.unit}  {elapsed // 60:d}:{elapsed % 60:02d}{tail}\n"
+        )
         stream.flush()
         self.lines += 1

@@ -25,16 +25,28 @@ class DongleType(str, Enum):
 
 @radio_app.command()
 def probe(
-    dongle: int | None = typer.Option(None, "--dongle", help="The dongle number (the URI's first number; a dry "
-                                         "run's emulated dongle: default 0)."),
-    drones: str | None = typer.Option(None, "--drones", help="Powered-on drones on that dongle, radio:// URIs "
-                                         "separated by commas (only link packets are sent: nothing flies)."),
+    dongle: int | None = typer.Option(
+        None, "--dongle", help="The dongle number (the URI's first number; a dry run's emulated dongle: default 0)."
+    ),
+    drones: str | None = typer.Option(
+        None,
+        "--drones",
+        help="Powered-on drones on that dongle, radio:// URIs "
+        "separated by commas (only link packets are sent: nothing flies).",
+    ),
     dry_run: bool = typer.Option(False, "--dry-run", help="Probe an emulated dongle carrying simulated drones."),
-    links: int | None = typer.Option(None, "--links", help="Links in the second run (a dry run: simulated "
-                                        "drones, default 4; real: the first N of --drones)."),
-    radio: DongleType | None = typer.Option(None, "--radio", help="A dry run's dongle type (default "
-                                               "crazyradio_pa); real: the type to report (default: from its "
-                                               "firmware version)."),
+    links: int | None = typer.Option(
+        None,
+        "--links",
+        help="Links in the second run (a dry run: simulated drones, default 4; real: the first N of --drones).",
+    ),
+    radio: DongleType | None = typer.Option(
+        None,
+        "--radio",
+        help="A dry run's dongle type (default "
+        "crazyradio_pa); real: the type to report (default: from its "
+        "firmware version).",
+    ),
     seconds: float = typer.Option(2.0, "--seconds", help="How long each run measures."),
     as_json: bool = typer.Option(False, "--json", help="One JSON object per run, one a line."),
 ) -> None:
@@ -45,9 +57,16 @@ def probe(
     uris = [u.strip() for u in drones.split(",") if u.strip()] if drones is not None else None
     progress = (lambda line: None) if as_json else (lambda line: typer.echo(line, err=True))
     try:
-        runs = probe_dongle(drones=uris, dry_run=dry_run, dongle=dongle, links=links,
-                            radio=radio.value if radio is not None else None, seconds=seconds, on_progress=progress)
+        runs = probe_dongle(
+            drones=uris,
+            dry_run=dry_run,
+            dongle=dongle,
+            links=links,
+            radio=radio.value if radio is not None else None,
+            seconds=seconds,
+            on_progress=progress,
+        )
     except ProbeError as err:
         raise fail(f"radio probe: {err}") from err
-    for line in ([json.dumps(run.as_dict()) for run in runs] if as_json else describe(runs)):
+    for line in [json.dumps(run.as_dict()) for run in runs] if as_json else describe(runs):
         typer.echo(line)

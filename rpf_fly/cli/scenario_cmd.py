@@ -17,8 +17,12 @@ def scenario(
     file: Path = typer.Argument(..., help="Scenario YAML file (docs/dynamics.md: setpoints or commands)."),
     dry_run: bool = typer.Option(False, "--dry-run", help="On a private simulated drone."),
     lab: bool = typer.Option(False, "--lab", help="On the running `rpf-fly lab`'s drone."),
-    mission: Path | None = typer.Option(None, "--mission", help="The mission whose drone flies it (default: a "
-                                           "one-drone mission made around the scenario's start; needs --dry-run)."),
+    mission: Path | None = typer.Option(
+        None,
+        "--mission",
+        help="The mission whose drone flies it (default: a "
+        "one-drone mission made around the scenario's start; needs --dry-run).",
+    ),
     drone: str | None = typer.Option(None, "--drone", help="Which drone of the mission (default: its first)."),
     log: Path | None = typer.Option(None, "--log", help="MCAP log (default flights/scenario-<name>-<time>.mcap)."),
     json_out: bool = typer.Option(False, "--json", help="Print the trace (t, sp, pos, figures) as one JSON document."),

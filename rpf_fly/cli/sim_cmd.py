@@ -30,8 +30,9 @@ def sim(
     margin: float | None = typer.Option(None, "--margin", help="Override planner.margin (m)."),
     seed: int = typer.Option(0, "--seed", help="Seed of the mission's start jitter (sim section)."),
     json_output: bool = typer.Option(False, "--json", help="Print the metrics JSON (docs/metrics.md) only."),
-    plot: Path | None = typer.Option(None, "--plot", help="Write the XY tracks to a PNG: a colour per drone, the "
-                                                             "planner mode as the line style."),
+    plot: Path | None = typer.Option(
+        None, "--plot", help="Write the XY tracks to a PNG: a colour per drone, the planner mode as the line style."
+    ),
     log: Path | None = typer.Option(None, "--log", help="Write the run as an MCAP flight log (rpf-fly review)."),
 ) -> None:
     """Simulate MISSION with its planner (no radio, no mocap) and report success, collisions and path quality.
@@ -131,13 +132,19 @@ def _print_table(metrics, result, plot: Path | None, guidance: str = "none") -> 
         breaches = metrics.margin_breaches_drone_drone + metrics.margin_breaches_drone_obstacle
         console.print(
             f"guidance {guidance}, margin {metrics.margin_m:g} m: "
-            + ("held" if metrics.margin_held else f"[yellow]broken {breaches} times[/yellow] "
-               f"(pairs within 2r + margin {metrics.margin_breaches_drone_drone}, "
-               f"obstacles within r + margin {metrics.margin_breaches_drone_obstacle})")
+            + (
+                "held"
+                if metrics.margin_held
+                else f"[yellow]broken {breaches} times[/yellow] "
+                f"(pairs within 2r + margin {metrics.margin_breaches_drone_drone}, "
+                f"obstacles within r + margin {metrics.margin_breaches_drone_obstacle})"
+            )
         )
     else:
         console.print(f"guidance {guidance}, margin 0")
-    clamped = [f"{name} ({count} steps)" for name, count in zip(metrics_names(metrics), result.geofence_clamps) if count]
+    clamped = [
+        f"{name} ({count} steps)" for name, count in zip(metrics_names(metrics), result.geofence_clamps) if count
+    ]
     if clamped:
         console.print(f"[yellow]geofence: held at the arena boundary: {', '.join(clamped)}[/yellow]")
     if plot is not None:

@@ -23,6 +23,7 @@ def _pick(value: str, choices: tuple[_Choice, ...]) -> _Choice | None:
     """The one of ``choices`` that ``value`` names (typed as the choices are), None if none."""
     return next((c for c in choices if c == value), None)
 
+
 PAPER_MISSIONS = ("arena-a-6", "arena-b-6", "circle-8-r3", "circle-8-r8", "lab-3")
 
 
@@ -33,28 +34,50 @@ def train(
     no_attention: bool = typer.Option(False, "--no-attention", help="Same as --kind rpf-mean."),
     arena: str = typer.Option("both", "--arena", help="Training arenas: a, b or both."),
     curriculum: str = typer.Option(
-        "", "--curriculum", help="Comma-separated scene families to train on instead of --arena (all: every family; "
-        "training seed stream, docs/bench.md)."
+        "",
+        "--curriculum",
+        help="Comma-separated scene families to train on instead of --arena (all: every family; "
+        "training seed stream, docs/bench.md).",
     ),
-    guidance: str = typer.Option("none", "--guidance", help="none (the paper's environment) or path (global "
-                                 "guidance, as the product flies: RPF-3)."),
-    margin: float = typer.Option(0.0, "--margin", help="Clearance beyond contact (m) kept by the planner and asked "
-                                 "by the reward (RPF-3: 0.05)."),
-    capture_radius: float = typer.Option(0.0, "--capture-radius", help="The planner's capture rule near the goal (m; "
-                                         "docs/algorithm.md Arrival): 0, the paper's, turns it off; the product "
-                                         "flies 0.3."),
+    guidance: str = typer.Option(
+        "none",
+        "--guidance",
+        help="none (the paper's environment) or path (global guidance, as the product flies: RPF-3).",
+    ),
+    margin: float = typer.Option(
+        0.0, "--margin", help="Clearance beyond contact (m) kept by the planner and asked by the reward (RPF-3: 0.05)."
+    ),
+    capture_radius: float = typer.Option(
+        0.0,
+        "--capture-radius",
+        help="The planner's capture rule near the goal (m; "
+        "docs/algorithm.md Arrival): 0, the paper's, turns it off; the product "
+        "flies 0.3.",
+    ),
     episodes: int = typer.Option(4000, "--episodes", help="Stop after this many finished arena episodes."),
     collision_penalty: float = typer.Option(500.0, "--collision-penalty", help="Reward of a collision (negated)."),
-    margin_penalty: float = typer.Option(20.0, "--margin-penalty", help="Per step inside r + margin of an obstacle "
-                                         "or 2r + margin of a drone (negated; with --margin)."),
-    max_updates: int = typer.Option(10_000, "--max-updates", help="Stop after this many PPO updates (whichever of "
-                                    "--episodes and --max-updates comes first)."),
+    margin_penalty: float = typer.Option(
+        20.0,
+        "--margin-penalty",
+        help="Per step inside r + margin of an obstacle or 2r + margin of a drone (negated; with --margin).",
+    ),
+    max_updates: int = typer.Option(
+        10_000,
+        "--max-updates",
+        help="Stop after this many PPO updates (whichever of --episodes and --max-updates comes first).",
+    ),
     seed: int = typer.Option(0, "--seed", help="Seed of the weights, the scenes and the sampling."),
     arenas: int = typer.Option(48, "--arenas", help="Parallel arenas (6 drones each)."),
-    threads: int = typer.Option(2, "--threads", help="torch threads (1 on a machine shared with other jobs: two "
-                                "threads on two busy cores spin against each other)."),
+    threads: int = typer.Option(
+        2,
+        "--threads",
+        help="torch threads (1 on a machine shared with other jobs: two "
+        "threads on two busy cores spin against each other).",
+    ),
     resume: bool = typer.Option(False, "--resume", help="Continue from the run folder's checkpoint."),
-    eval_seeds: int = typer.Option(20, "--eval-seeds", help="Seeds per scene in the model card's evaluation (0: none)."),
+    eval_seeds: int = typer.Option(
+        20, "--eval-seeds", help="Seeds per scene in the model card's evaluation (0: none)."
+    ),
     obstacle_radius: float | None = typer.Option(
         None, "--obstacle-radius", help="Arena A obstacle radius (default 0.5 m; 0.1 m for the ppo baseline)."
     ),
@@ -74,8 +97,9 @@ def train(
         raise fail(f"--arena: expected a, b or both, got {arena!r}")
     from rpf_fly.sim.generators import FAMILIES
 
-    families = tuple(FAMILIES) if curriculum.strip() == "all" else tuple(
-        f.strip() for f in curriculum.split(",") if f.strip())
+    families = (
+        tuple(FAMILIES) if curriculum.strip() == "all" else tuple(f.strip() for f in curriculum.split(",") if f.strip())
+    )
     unknown = [f for f in families if f not in FAMILIES]
     if unknown:
         raise fail(f"--curriculum: unknown scene family {unknown[0]!r} (expected all or some of {', '.join(FAMILIES)})")
@@ -90,8 +114,9 @@ def train(
         raise fail(f"--out: expected a path ending in .onnx, got {str(out)!r}")
     existing = [p for p in written_files(out) if p.exists()]
     if existing and not force:
-        raise fail(f"--out: refusing to overwrite {', '.join(str(p) for p in existing)}: choose another --out, or "
-                   "add --force")
+        raise fail(
+            f"--out: refusing to overwrite {', '.join(str(p) for p in existing)}: choose another --out, or add --force"
+        )
     try:
         import torch  # noqa: F401
     except ImportError as err:
@@ -101,13 +126,26 @@ def train(
     from rpf_fly.learn.ppo import PPOConfig, Trainer
 
     radius = obstacle_radius if obstacle_radius is not None else (0.1 if kind == "ppo" else 0.5)
-    config = PPOConfig(seed=seed, kind=kind_chosen, arena=arena_chosen, curriculum=families, episodes=episodes,
-                       max_updates=max_updates, n_arenas=arenas,
-                       obstacle_radius=radius, guidance=guidance_chosen, margin=margin, threads=threads,
-                       collision_penalty=collision_penalty, margin_penalty=margin_penalty,
-                       capture_radius=capture_radius)
+    config = PPOConfig(
+        seed=seed,
+        kind=kind_chosen,
+        arena=arena_chosen,
+        curriculum=families,
+        episodes=episodes,
+        max_updates=max_updates,
+        n_arenas=arenas,
+        obstacle_radius=radius,
+        guidance=guidance_chosen,
+        margin=margin,
+        threads=threads,
+        collision_penalty=collision_penalty,
+        margin_penalty=margin_penalty,
+        capture_radius=capture_radius,
+    )
     run_dir = out.with_suffix(".run")
-    command = "rpf-fly train " + " ".join(shlex.quote(a) for a in sys.argv[2:]) if len(sys.argv) > 2 else "rpf-fly train"
+    command = (
+        "rpf-fly train " + " ".join(shlex.quote(a) for a in sys.argv[2:]) if len(sys.argv) > 2 else "rpf-fly train"
+    )
     from rpf_fly.learn.card import git_commit
 
     commit = git_commit()  # the code that trains: taken now, not at export time
@@ -129,8 +167,10 @@ def written_files(out: Path) -> tuple[Path, ...]:
 
 
 def _stats(log) -> str:
-    return (f"return {log.mean_return:7.1f}  success {log.success_rate:4.0%}  kl {log.approx_kl:.4f}  "
-            f"{log.steps_per_s:6.0f} steps/s")
+    return (
+        f"return {log.mean_return:7.1f}  success {log.success_rate:4.0%}  kl {log.approx_kl:.4f}  "
+        f"{log.steps_per_s:6.0f} steps/s"
+    )
 
 
 def _train_with_progress(trainer) -> None:
@@ -170,8 +210,16 @@ def _train_with_progress(trainer) -> None:
         trainer.run(update)
 
 
-def _finish(trainer, out: Path, command: str, eval_seeds: int, missions_dir: Path, wall_s: float, commit: str,
-            cpu_s: float | None = None) -> None:
+def _finish(
+    trainer,
+    out: Path,
+    command: str,
+    eval_seeds: int,
+    missions_dir: Path,
+    wall_s: float,
+    commit: str,
+    cpu_s: float | None = None,
+) -> None:
     import dataclasses
 
     from rpf_fly.learn.card import machine, write_card
@@ -183,8 +231,14 @@ def _finish(trainer, out: Path, command: str, eval_seeds: int, missions_dir: Pat
     export_onnx(
         model,
         out,
-        {"rpf_fly.kind": config.kind, "rpf_fly.preset": "robust", "rpf_fly.seed": str(config.seed), "rpf_fly.commit": commit,
-         "rpf_fly.guidance": config.guidance, "rpf_fly.margin": str(config.margin)},
+        {
+            "rpf_fly.kind": config.kind,
+            "rpf_fly.preset": "robust",
+            "rpf_fly.seed": str(config.seed),
+            "rpf_fly.commit": commit,
+            "rpf_fly.guidance": config.guidance,
+            "rpf_fly.margin": str(config.margin),
+        },
     )
     parity = check_parity(model, out)
     curve_csv = out.with_suffix(".curve.csv")
@@ -209,9 +263,14 @@ def _finish(trainer, out: Path, command: str, eval_seeds: int, missions_dir: Pat
             "final_success_rate_last_200": trainer.history[-1].success_rate if trainer.history else None,
             "selected_update": trainer.best["update"] if trainer.best else trainer.update,
             "selected_validation": (
-                {"success_rate": trainer.best["success"], "mean_return": trainer.best["return"],
-                 "scenes": config.eval_episodes, "seed": config.eval_seed}
-                if trainer.best else None
+                {
+                    "success_rate": trainer.best["success"],
+                    "mean_return": trainer.best["return"],
+                    "scenes": config.eval_episodes,
+                    "seed": config.eval_seed,
+                }
+                if trainer.best
+                else None
             ),
             "hyperparameters": dataclasses.asdict(config),
             "machine": machine(),

@@ -18,13 +18,21 @@ if TYPE_CHECKING:
 @app.command()
 def worker(
     mission: Path = typer.Argument(..., help="Mission YAML file (the coordinator's)."),
-    dongle: int = typer.Option(..., "--dongle", help="The radio dongle whose drones this worker flies (the URIs' "
-                               "first number)."),
-    flight: str | None = typer.Option(None, "--flight", help="The flight id the coordinator printed (its log's "
-                                         "stem); default: the one flight whose coordinator --connect reaches."),
+    dongle: int = typer.Option(
+        ..., "--dongle", help="The radio dongle whose drones this worker flies (the URIs' first number)."
+    ),
+    flight: str | None = typer.Option(
+        None,
+        "--flight",
+        help="The flight id the coordinator printed (its log's "
+        "stem); default: the one flight whose coordinator --connect reaches.",
+    ),
     dry_run: bool = typer.Option(False, "--dry-run", help="The coordinator's simulated drones (its dry run)."),
-    connect: list[str] | None = typer.Option(None, "--connect", help="The coordinator's Zenoh endpoint, e.g. "
-                                                "tcp/HOST:7447 (default: the mission's runtime.zenoh.connect)."),
+    connect: list[str] | None = typer.Option(
+        None,
+        "--connect",
+        help="The coordinator's Zenoh endpoint, e.g. tcp/HOST:7447 (default: the mission's runtime.zenoh.connect).",
+    ),
     verbose: bool = typer.Option(False, "--verbose", help="Also print the libraries' log records on stderr."),
 ) -> None:
     """Fly the drones of one dongle in a distributed flight (docs/distributed.md). The flight's secret comes in

@@ -88,9 +88,17 @@ def rotation_matrix(qx: float, qy: float, qz: float, qw: float) -> tuple[float, 
     xx, yy, zz = qx * qx, qy * qy, qz * qz
     xy, xz, yz = qx * qy, qx * qz, qy * qz
     wx, wy, wz = qw * qx, qw * qy, qw * qz
-    return (1.0 - 2.0 * (yy + zz), 2.0 * (xy - wz), 2.0 * (xz + wy),
-            2.0 * (xy + wz), 1.0 - 2.0 * (xx + zz), 2.0 * (yz - wx),
-            2.0 * (xz - wy), 2.0 * (yz + wx), 1.0 - 2.0 * (xx + yy))
+    return (
+        1.0 - 2.0 * (yy + zz),
+        2.0 * (xy - wz),
+        2.0 * (xz + wy),
+        2.0 * (xy + wz),
+        1.0 - 2.0 * (xx + zz),
+        2.0 * (yz - wx),
+        2.0 * (xz - wy),
+        2.0 * (yz + wx),
+        1.0 - 2.0 * (xx + yy),
+    )
 
 
 def quaternion_to_rpy_deg(qx: float, qy: float, qz: float, qw: float) -> tuple[float, float, float]:
@@ -112,10 +120,12 @@ def _rotated(q: list[float], ax: float, ay: float, az: float) -> list[float]:
     s = math.sin(0.5 * angle) / angle
     dx, dy, dz, dw = ax * s, ay * s, az * s, math.cos(0.5 * angle)
     qx, qy, qz, qw = q
-    return [qw * dx + qx * dw + qy * dz - qz * dy,
-            qw * dy - qx * dz + qy * dw + qz * dx,
-            qw * dz + qx * dy - qy * dx + qz * dw,
-            qw * dw - qx * dx - qy * dy - qz * dz]
+    return [
+        qw * dx + qx * dw + qy * dz - qz * dy,
+        qw * dy - qx * dz + qy * dw + qz * dx,
+        qw * dz + qx * dy - qy * dx + qz * dw,
+        qw * dw - qx * dx - qy * dy - qz * dz,
+    ]
 
 
 class CfBody:
@@ -124,11 +134,29 @@ class CfBody:
     (set it with `command_thrusts`). `external_force` (world frame, N) acts on the centre of mass while it is set
     (a gust)."""
 
-    __slots__ = ("params", "pos", "vel", "quat", "omega", "rotor_rpm", "rotor_cmd_rpm", "external_force",
-                 "floor_z", "integrator", "on_floor")
+    __slots__ = (
+        "params",
+        "pos",
+        "vel",
+        "quat",
+        "omega",
+        "rotor_rpm",
+        "rotor_cmd_rpm",
+        "external_force",
+        "floor_z",
+        "integrator",
+        "on_floor",
+    )
 
-    def __init__(self, position: Sequence[float] = (0.0, 0.0, 0.0), yaw_rad: float = 0.0, *,
-                 params: CfBodyParams = P250, integrator: str = "midpoint", floor_z: float = 0.0) -> None:
+    def __init__(
+        self,
+        position: Sequence[float] = (0.0, 0.0, 0.0),
+        yaw_rad: float = 0.0,
+        *,
+        params: CfBodyParams = P250,
+        integrator: str = "midpoint",
+        floor_z: float = 0.0,
+    ) -> None:
         if integrator not in ("midpoint", "rk4"):
             raise ValueError(f"integrator must be 'midpoint' or 'rk4', not {integrator!r}")
         self.params = params
@@ -176,8 +204,9 @@ class CfBody:
                 out.append(p.rotor_down_k2 * (c - r) + p.rotor_down_k3 * (c * c - r * r))
         return out
 
-    def _accelerations(self, vel: list[float], quat: list[float], omega: list[float], w: list[float],
-                       w_dot: list[float]) -> tuple[float, float, float, float, float, float]:
+    def _accelerations(
+        self, vel: list[float], quat: list[float], omega: list[float], w: list[float], w_dot: list[float]
+    ) -> tuple[float, float, float, float, float, float]:
         """Linear acceleration (world) and angular acceleration (body) at one state."""
         p = self.params
         a1, a2, b1, b2 = p.thrust_a1, p.thrust_a2, p.torque_b1, p.torque_b2
@@ -209,19 +238,25 @@ class CfBody:
         ty = L * (-f1 + f2 + f3 - f4) - jp * ox * spin
         tz = (-q1 + q2 - q3 + q4) + jp * spin_dot
         jx, jy, jz = p.jxx, p.jyy, p.jzz
-        return (fx / m, fy / m, fz / m - p.gravity,
-                (tx - (jz - jy) * oy * oz) / jx,
-                (ty - (jx - jz) * oz * ox) / jy,
-                (tz - (jy - jx) * ox * oy) / jz)
+        return (
+            fx / m,
+            fy / m,
+            fz / m - p.gravity,
+            (tx - (jz - jy) * oy * oz) / jx,
+            (ty - (jx - jz) * oz * ox) / jy,
+            (tz - (jy - jx) * ox * oy) / jz,
+        )
 
     @staticmethod
     def _quat_dot(q: list[float], o: list[float]) -> list[float]:
         qx, qy, qz, qw = q
         ox, oy, oz = o
-        return [0.5 * (qw * ox + qy * oz - qz * oy),
-                0.5 * (qw * oy + qz * ox - qx * oz),
-                0.5 * (qw * oz + qx * oy - qy * ox),
-                -0.5 * (qx * ox + qy * oy + qz * oz)]
+        return [
+            0.5 * (qw * ox + qy * oz - qz * oy),
+            0.5 * (qw * oy + qz * ox - qx * oz),
+            0.5 * (qw * oz + qx * oy - qy * ox),
+            -0.5 * (qx * ox + qy * oy + qz * oz),
+        ]
 
     def step(self, dt: float) -> None:
         """Advance by `dt` seconds with the rotor commands held."""
@@ -259,15 +294,19 @@ class CfBody:
         o1 = [ox + dox * dt, oy + doy * dt, oz + doz * dt]
         vx, vy, vz = v
         v1 = [vx + ax * dt, vy + ay * dt, vz + az * dt]
-        self.pos = [pos[0] + 0.5 * (vx + v1[0]) * dt, pos[1] + 0.5 * (vy + v1[1]) * dt,
-                    pos[2] + 0.5 * (vz + v1[2]) * dt]
+        self.pos = [
+            pos[0] + 0.5 * (vx + v1[0]) * dt,
+            pos[1] + 0.5 * (vy + v1[1]) * dt,
+            pos[2] + 0.5 * (vz + v1[2]) * dt,
+        ]
         self.quat = _rotated(self.quat, 0.5 * (ox + o1[0]) * dt, 0.5 * (oy + o1[1]) * dt, 0.5 * (oz + o1[2]) * dt)
         self.vel = v1
         self.omega = o1
         self.rotor_rpm = w_new
 
-    def _derivative(self, vel: list[float], quat: list[float], omega: list[float],
-                    w: list[float]) -> tuple[list[float], list[float], list[float], list[float], list[float]]:
+    def _derivative(
+        self, vel: list[float], quat: list[float], omega: list[float], w: list[float]
+    ) -> tuple[list[float], list[float], list[float], list[float], list[float]]:
         w_dot = self._rotor_dot(w)
         ax, ay, az, dox, doy, doz = self._accelerations(vel, quat, omega, w, w_dot)
         return list(vel), [ax, ay, az], self._quat_dot(quat, omega), [dox, doy, doz], w_dot
@@ -279,10 +318,12 @@ class CfBody:
             return [x + h * y for x, y in zip(a, b)]
 
         k1 = self._derivative(vel, quat, omega, w)
-        k2 = self._derivative(add(vel, k1[1], dt / 2), add(quat, k1[2], dt / 2), add(omega, k1[3], dt / 2),
-                              add(w, k1[4], dt / 2))
-        k3 = self._derivative(add(vel, k2[1], dt / 2), add(quat, k2[2], dt / 2), add(omega, k2[3], dt / 2),
-                              add(w, k2[4], dt / 2))
+        k2 = self._derivative(
+            add(vel, k1[1], dt / 2), add(quat, k1[2], dt / 2), add(omega, k1[3], dt / 2), add(w, k1[4], dt / 2)
+        )
+        k3 = self._derivative(
+            add(vel, k2[1], dt / 2), add(quat, k2[2], dt / 2), add(omega, k2[3], dt / 2), add(w, k2[4], dt / 2)
+        )
         k4 = self._derivative(add(vel, k3[1], dt), add(quat, k3[2], dt), add(omega, k3[3], dt), add(w, k3[4], dt))
 
         def combine(x: list[float], i: int) -> list[float]:

@@ -172,11 +172,38 @@ class Pid:
     """The firmware's `PidObject` and `pidUpdate` / `pidReset` (`pid.c:58-157`), without the D filter (off or
     irrelevant in the PID controller's loops: module doc)."""
 
-    __slots__ = ("kp", "ki", "kd", "kff", "i_limit", "output_limit", "dt", "is_yaw", "desired", "error",
-                 "prev_measured", "integ", "deriv", "out_p", "out_i", "out_d", "out_ff")
+    __slots__ = (
+        "kp",
+        "ki",
+        "kd",
+        "kff",
+        "i_limit",
+        "output_limit",
+        "dt",
+        "is_yaw",
+        "desired",
+        "error",
+        "prev_measured",
+        "integ",
+        "deriv",
+        "out_p",
+        "out_i",
+        "out_d",
+        "out_ff",
+    )
 
-    def __init__(self, kp: float, ki: float, kd: float, kff: float, dt: float, *,
-                 i_limit: float = DEFAULT_INTEGRATION_LIMIT, output_limit: float = 0.0, is_yaw: bool = False) -> None:
+    def __init__(
+        self,
+        kp: float,
+        ki: float,
+        kd: float,
+        kff: float,
+        dt: float,
+        *,
+        i_limit: float = DEFAULT_INTEGRATION_LIMIT,
+        output_limit: float = 0.0,
+        is_yaw: bool = False,
+    ) -> None:
         self.kp, self.ki, self.kd, self.kff = kp, ki, kd, kff
         self.i_limit, self.output_limit, self.dt, self.is_yaw = i_limit, output_limit, dt, is_yaw
         self.desired = self.error = self.prev_measured = self.integ = self.deriv = 0.0
@@ -295,9 +322,21 @@ class ControlSetpoint:
     def from_setpoint(cls, sp: Setpoint) -> ControlSetpoint:
         """The emulator's `Setpoint` (fake_setpoint.py) as the firmware's `setpoint_t`."""
         mode = {AxisMode.DISABLE: MODE_DISABLE, AxisMode.ABS: MODE_ABS, AxisMode.VELOCITY: MODE_VELOCITY}
-        out = cls(mode[sp.modes[0]], mode[sp.modes[1]], mode[sp.modes[2]], mode[sp.attitude_mode],
-                  mode[sp.attitude_mode], mode[sp.yaw_mode], sp.position[0], sp.position[1], sp.position[2],
-                  sp.velocity[0], sp.velocity[1], sp.velocity[2], thrust=float(sp.thrust))
+        out = cls(
+            mode[sp.modes[0]],
+            mode[sp.modes[1]],
+            mode[sp.modes[2]],
+            mode[sp.attitude_mode],
+            mode[sp.attitude_mode],
+            mode[sp.yaw_mode],
+            sp.position[0],
+            sp.position[1],
+            sp.position[2],
+            sp.velocity[0],
+            sp.velocity[1],
+            sp.velocity[2],
+            thrust=float(sp.thrust),
+        )
         if sp.attitude_mode is AxisMode.ABS:
             out.roll, out.pitch = sp.attitude_deg
         elif sp.attitude_mode is AxisMode.VELOCITY:
@@ -386,11 +425,20 @@ class PidController:
     def apply_gains(self) -> None:
         """Copy `gains` into the PID objects (what writing a parameter does on the firmware)."""
         g = self.gains
-        for pid, prefix in ((self.pid_x, "pos_x"), (self.pid_y, "pos_y"), (self.pid_z, "pos_z"),
-                            (self.pid_vx, "vel_x"), (self.pid_vy, "vel_y"), (self.pid_vz, "vel_z"),
-                            (self.pid_roll, "att_roll"), (self.pid_pitch, "att_pitch"), (self.pid_yaw, "att_yaw"),
-                            (self.pid_roll_rate, "rate_roll"), (self.pid_pitch_rate, "rate_pitch"),
-                            (self.pid_yaw_rate, "rate_yaw")):
+        for pid, prefix in (
+            (self.pid_x, "pos_x"),
+            (self.pid_y, "pos_y"),
+            (self.pid_z, "pos_z"),
+            (self.pid_vx, "vel_x"),
+            (self.pid_vy, "vel_y"),
+            (self.pid_vz, "vel_z"),
+            (self.pid_roll, "att_roll"),
+            (self.pid_pitch, "att_pitch"),
+            (self.pid_yaw, "att_yaw"),
+            (self.pid_roll_rate, "rate_roll"),
+            (self.pid_pitch_rate, "rate_pitch"),
+            (self.pid_yaw_rate, "rate_yaw"),
+        ):
             pid.kp = getattr(g, prefix + "_kp")
             pid.ki = getattr(g, prefix + "_ki")
             pid.kd = getattr(g, prefix + "_kd")

@@ -62,11 +62,25 @@ class CfDrone:
     """One Crazyflie: controller, body, gyro filter, high-level commander (module doc). Deterministic: the same
     calls give the same flight."""
 
-    def __init__(self, position: tuple[float, float, float] = (0.0, 0.0, 0.0), yaw_deg: float = 0.0, *,
-                 t_s: float = 0.0, gains: CfGains | None = None, body_params: CfBodyParams = P250,
-                 integrator: str = "midpoint", estimate_every_ticks: int = POSITION_EVERY, step_offset: int = 1) -> None:
-        self.body = CfBody(position, math.radians(yaw_deg), params=body_params, integrator=integrator,
-                           floor_z=min(0.0, float(position[2])))
+    def __init__(
+        self,
+        position: tuple[float, float, float] = (0.0, 0.0, 0.0),
+        yaw_deg: float = 0.0,
+        *,
+        t_s: float = 0.0,
+        gains: CfGains | None = None,
+        body_params: CfBodyParams = P250,
+        integrator: str = "midpoint",
+        estimate_every_ticks: int = POSITION_EVERY,
+        step_offset: int = 1,
+    ) -> None:
+        self.body = CfBody(
+            position,
+            math.radians(yaw_deg),
+            params=body_params,
+            integrator=integrator,
+            floor_z=min(0.0, float(position[2])),
+        )
         self.controller = PidController(gains)
         self.gyro_filter = Lpf2p()
         self.tick_count = round(t_s / TICK_S)
@@ -84,8 +98,15 @@ class CfDrone:
         self.motor_commands = (0, 0, 0, 0)
 
     @classmethod
-    def hovering(cls, position: tuple[float, float, float], yaw_deg: float = 0.0, *, t_s: float = 0.0,
-                 settle_s: float = 10.0, **kwargs: Any) -> CfDrone:
+    def hovering(
+        cls,
+        position: tuple[float, float, float],
+        yaw_deg: float = 0.0,
+        *,
+        t_s: float = 0.0,
+        settle_s: float = 10.0,
+        **kwargs: Any,
+    ) -> CfDrone:
         """A drone that has hovered at `position` under streamed position setpoints for `settle_s` before `t_s`:
         rotors at hover speed and the vertical-velocity integrator carrying the thrust thrustBase lacks, then
         flown `settle_s` so every loop settles (the state of a drone that has hovered a while)."""
@@ -136,18 +157,27 @@ class CfDrone:
 
     def takeoff(self, height_m: float, duration_s: float, yaw_deg: float = 0.0) -> int:
         """cflib `HighLevelCommander.takeoff` (takeoff2, absolute height); returns the firmware's answer (0: ok)."""
-        return self._hl(COMMAND_TAKEOFF_2, struct.pack("<Bff?f", 0, height_m, math.radians(yaw_deg), False,
-                                                        duration_s))
+        return self._hl(COMMAND_TAKEOFF_2, struct.pack("<Bff?f", 0, height_m, math.radians(yaw_deg), False, duration_s))
 
     def land(self, height_m: float, duration_s: float, yaw_deg: float = 0.0) -> int:
         """cflib `HighLevelCommander.land` (land2)."""
         return self._hl(COMMAND_LAND_2, struct.pack("<Bff?f", 0, height_m, math.radians(yaw_deg), False, duration_s))
 
-    def go_to(self, x: float, y: float, z: float, duration_s: float, yaw_deg: float = 0.0, *,
-              relative: bool = False, linear: bool = False) -> int:
+    def go_to(
+        self,
+        x: float,
+        y: float,
+        z: float,
+        duration_s: float,
+        yaw_deg: float = 0.0,
+        *,
+        relative: bool = False,
+        linear: bool = False,
+    ) -> int:
         """cflib `HighLevelCommander.go_to` (go_to2)."""
-        return self._hl(COMMAND_GO_TO_2, struct.pack("<BBBfffff", 0, relative, linear, x, y, z,
-                                                      math.radians(yaw_deg), duration_s))
+        return self._hl(
+            COMMAND_GO_TO_2, struct.pack("<BBBfffff", 0, relative, linear, x, y, z, math.radians(yaw_deg), duration_s)
+        )
 
     def stop(self) -> int:
         """cflib `HighLevelCommander.stop`: the plan ends, the commander asks for motors off."""

@@ -108,9 +108,15 @@ class Scenario:
         if setpoints and not data.get("stream_hz"):
             raise ValueError(f"scenario {data.get('name')!r}: setpoints need stream_hz")
         hold_at = data.get("hold_at")
-        return cls(str(data["name"]), (x, y, z), float(data["duration_s"]),
-                   float(data["stream_hz"]) if data.get("stream_hz") else None, setpoints,
-                   float(hold_at) if hold_at is not None else None, commands)
+        return cls(
+            str(data["name"]),
+            (x, y, z),
+            float(data["duration_s"]),
+            float(data["stream_hz"]) if data.get("stream_hz") else None,
+            setpoints,
+            float(hold_at) if hold_at is not None else None,
+            commands,
+        )
 
     @classmethod
     def load(cls, path: str | Path) -> Scenario:
@@ -120,11 +126,18 @@ class Scenario:
 # Scenarios of the reference's kinds -----------------------------------------------------------------------------
 
 
-def step_scenario(distance_m: float, *, name: str | None = None, height_m: float = 1.0, duration_s: float = 6.0,
-                  stream_hz: float = 10.0) -> Scenario:
+def step_scenario(
+    distance_m: float,
+    *,
+    name: str | None = None,
+    height_m: float = 1.0,
+    duration_s: float = 6.0,
+    stream_hz: float = 10.0,
+) -> Scenario:
     """A step of `distance_m` along x from a hover at (0, 0, height) at t = 0."""
-    return Scenario(name or f"step_{distance_m:g}", (0.0, 0.0, height_m), duration_s, stream_hz,
-                    [(0.0, distance_m, 0.0, height_m)])
+    return Scenario(
+        name or f"step_{distance_m:g}", (0.0, 0.0, height_m), duration_s, stream_hz, [(0.0, distance_m, 0.0, height_m)]
+    )
 
 
 def _setpoint_row(row: Any) -> tuple[float, float, float, float]:
@@ -133,47 +146,95 @@ def _setpoint_row(row: Any) -> tuple[float, float, float, float]:
     return t, x, y, z
 
 
-def _carrot_points(speed: float, move_s: float, stream_hz: float, height_m: float
-                   ) -> list[tuple[float, float, float, float]]:
+def _carrot_points(
+    speed: float, move_s: float, stream_hz: float, height_m: float
+) -> list[tuple[float, float, float, float]]:
     n = round(move_s * stream_hz)
     return [(round(k / stream_hz, 9), round(speed * k / stream_hz, 9), 0.0, height_m) for k in range(n + 1)]
 
 
-def carrot_scenario(speed_m_s: float, *, name: str | None = None, move_s: float = 3.0, height_m: float = 1.0,
-                    duration_s: float = 8.0, stream_hz: float = 10.0) -> Scenario:
+def carrot_scenario(
+    speed_m_s: float,
+    *,
+    name: str | None = None,
+    move_s: float = 3.0,
+    height_m: float = 1.0,
+    duration_s: float = 8.0,
+    stream_hz: float = 10.0,
+) -> Scenario:
     """A carrot from (0, 0, height) along x at `speed_m_s` for `move_s`, then still at speed x move_s."""
-    return Scenario(name or f"carrot_{speed_m_s:g}", (0.0, 0.0, height_m), duration_s, stream_hz,
-                    _carrot_points(speed_m_s, move_s, stream_hz, height_m))
+    return Scenario(
+        name or f"carrot_{speed_m_s:g}",
+        (0.0, 0.0, height_m),
+        duration_s,
+        stream_hz,
+        _carrot_points(speed_m_s, move_s, stream_hz, height_m),
+    )
 
 
-def hold_scenario(speed_m_s: float, *, name: str | None = None, hold_at: float = 3.0, height_m: float = 1.0,
-                  duration_s: float = 8.0, stream_hz: float = 10.0) -> Scenario:
+def hold_scenario(
+    speed_m_s: float,
+    *,
+    name: str | None = None,
+    hold_at: float = 3.0,
+    height_m: float = 1.0,
+    duration_s: float = 8.0,
+    stream_hz: float = 10.0,
+) -> Scenario:
     """A carrot at `speed_m_s` whose stream becomes the drone's own position at `hold_at`."""
     points = _carrot_points(speed_m_s, hold_at, stream_hz, height_m)[:-1]
-    return Scenario(name or f"hold_{speed_m_s:g}", (0.0, 0.0, height_m), duration_s, stream_hz,
-                    points, hold_at)
+    return Scenario(name or f"hold_{speed_m_s:g}", (0.0, 0.0, height_m), duration_s, stream_hz, points, hold_at)
 
 
-def circle_scenario(radius_m: float, speed_m_s: float, *, name: str | None = None, laps: int = 2,
-                    height_m: float = 1.0, stream_hz: float = 10.0) -> Scenario:
+def circle_scenario(
+    radius_m: float,
+    speed_m_s: float,
+    *,
+    name: str | None = None,
+    laps: int = 2,
+    height_m: float = 1.0,
+    stream_hz: float = 10.0,
+) -> Scenario:
     """A circle of `radius_m` about the z axis at `height_m`, counter-clockwise at `speed_m_s` from (R, 0)."""
     omega = speed_m_s / radius_m
     duration = round(laps * 2.0 * math.pi / omega, 3)
     n = math.floor(duration * stream_hz + 1e-9)
-    points = [(round(k / stream_hz, 9), round(radius_m * math.cos(omega * k / stream_hz), 6),
-               round(radius_m * math.sin(omega * k / stream_hz), 6), height_m) for k in range(n + 1)]
-    return Scenario(name or f"circle_{radius_m:g}_{speed_m_s:g}", (radius_m, 0.0, height_m), duration, stream_hz,
-                    points)
+    points = [
+        (
+            round(k / stream_hz, 9),
+            round(radius_m * math.cos(omega * k / stream_hz), 6),
+            round(radius_m * math.sin(omega * k / stream_hz), 6),
+            height_m,
+        )
+        for k in range(n + 1)
+    ]
+    return Scenario(
+        name or f"circle_{radius_m:g}_{speed_m_s:g}", (radius_m, 0.0, height_m), duration, stream_hz, points
+    )
 
 
-def hl_scenario(height_m: float, takeoff_s: float, goto_x_m: float, goto_at_s: float, goto_s: float, land_at_s: float,
-                land_s: float, *, name: str = "hl", duration_s: float | None = None) -> Scenario:
+def hl_scenario(
+    height_m: float,
+    takeoff_s: float,
+    goto_x_m: float,
+    goto_at_s: float,
+    goto_s: float,
+    land_at_s: float,
+    land_s: float,
+    *,
+    name: str = "hl",
+    duration_s: float | None = None,
+) -> Scenario:
     """From the floor at the origin: take-off to `height_m` in `takeoff_s` at 0, go_to (goto_x_m, 0, height) at
     `goto_at_s` in `goto_s`, land at `land_at_s` in `land_s`."""
-    commands = [[0.0, "takeoff", height_m, takeoff_s], [goto_at_s, "go_to", goto_x_m, 0.0, height_m, goto_s],
-                [land_at_s, "land", 0.0, land_s]]
-    return Scenario(name, (0.0, 0.0, 0.0), duration_s if duration_s is not None else land_at_s + land_s + 2.0,
-                    commands=commands)
+    commands = [
+        [0.0, "takeoff", height_m, takeoff_s],
+        [goto_at_s, "go_to", goto_x_m, 0.0, height_m, goto_s],
+        [land_at_s, "land", 0.0, land_s],
+    ]
+    return Scenario(
+        name, (0.0, 0.0, 0.0), duration_s if duration_s is not None else land_at_s + land_s + 2.0, commands=commands
+    )
 
 
 # Flying --------------------------------------------------------------------------------------------------------
@@ -183,8 +244,13 @@ def _ticks(t_s: float) -> int:
     return round(t_s * 1000.0)
 
 
-def fly(scenario: Scenario, *, integrator: str = "midpoint", sample_offset_s: float = SAMPLE_OFFSET_S,
-        sample_period_s: float = SAMPLE_PERIOD_S) -> dict[str, Any]:
+def fly(
+    scenario: Scenario,
+    *,
+    integrator: str = "midpoint",
+    sample_offset_s: float = SAMPLE_OFFSET_S,
+    sample_period_s: float = SAMPLE_PERIOD_S,
+) -> dict[str, Any]:
     """Fly `scenario` from its start state; return its trace (module doc), figures included."""
     if scenario.is_command:
         drone = CfDrone((scenario.start[0], scenario.start[1], 0.0), t_s=-FLOOR_LEAD_S, integrator=integrator)
@@ -411,9 +477,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("scenarios", nargs="+", type=Path)
     parser.add_argument("--out", type=Path, default=None, help="folder for the <name>.json traces")
     parser.add_argument("--integrator", choices=("midpoint", "rk4"), default="midpoint")
-    parser.add_argument("--reference", type=Path, default=None,
-                        help="folder of reference traces <name>.json: print a Markdown table of their figures "
-                             "(`figures`, on a 200 Hz record) beside this model's (on its 200 Hz record too)")
+    parser.add_argument(
+        "--reference",
+        type=Path,
+        default=None,
+        help="folder of reference traces <name>.json: print a Markdown table of their figures "
+        "(`figures`, on a 200 Hz record) beside this model's (on its 200 Hz record too)",
+    )
     args = parser.parse_args(argv)
     if args.reference is not None:
         print("| scenario | figure | reference | this model | difference |")
@@ -427,8 +497,11 @@ def main(argv: Sequence[str] | None = None) -> int:
             ref = json.loads((args.reference / f"{scenario.name}.json").read_text(encoding="utf-8"))["figures"]
             for i, (key, theirs) in enumerate(ref.items()):
                 mine = figs.get(key)
-                diff = (f"{mine - theirs:+.3f}" if isinstance(mine, (int, float)) and isinstance(theirs, (int, float))
-                        else "")
+                diff = (
+                    f"{mine - theirs:+.3f}"
+                    if isinstance(mine, (int, float)) and isinstance(theirs, (int, float))
+                    else ""
+                )
                 print(f"| {scenario.name if i == 0 else ''} | {key} | {_fmt(theirs)} | {_fmt(mine)} | {diff} |")
         else:
             print(scenario.name, json.dumps({k: (round(v, 3) if isinstance(v, float) else v) for k, v in figs.items()}))

@@ -61,11 +61,18 @@ from .fake_setpoint import Setpoint
 _RPM_TO_RAD_S = 2.0 * math.pi / 60.0
 _DEG = 180.0 / math.pi
 _GROUPS = ("pos", "vel", "att", "rate")
-_PREFIXES = {"pos": ("pos_x", "pos_y", "pos_z"), "vel": ("vel_x", "vel_y", "vel_z"),
-             "att": ("att_roll", "att_pitch", "att_yaw"), "rate": ("rate_roll", "rate_pitch", "rate_yaw")}
-_I_LIMITS = {"pos": (DEFAULT_INTEGRATION_LIMIT,) * 3, "vel": (DEFAULT_INTEGRATION_LIMIT,) * 3,
-             "att": (ROLL_INTEGRATION_LIMIT, PITCH_INTEGRATION_LIMIT, YAW_INTEGRATION_LIMIT),
-             "rate": (ROLL_RATE_INTEGRATION_LIMIT, PITCH_RATE_INTEGRATION_LIMIT, YAW_RATE_INTEGRATION_LIMIT)}
+_PREFIXES = {
+    "pos": ("pos_x", "pos_y", "pos_z"),
+    "vel": ("vel_x", "vel_y", "vel_z"),
+    "att": ("att_roll", "att_pitch", "att_yaw"),
+    "rate": ("rate_roll", "rate_pitch", "rate_yaw"),
+}
+_I_LIMITS = {
+    "pos": (DEFAULT_INTEGRATION_LIMIT,) * 3,
+    "vel": (DEFAULT_INTEGRATION_LIMIT,) * 3,
+    "att": (ROLL_INTEGRATION_LIMIT, PITCH_INTEGRATION_LIMIT, YAW_INTEGRATION_LIMIT),
+    "rate": (ROLL_RATE_INTEGRATION_LIMIT, PITCH_RATE_INTEGRATION_LIMIT, YAW_RATE_INTEGRATION_LIMIT),
+}
 _DT = {"pos": POSITION_DT, "vel": POSITION_DT, "att": ATTITUDE_DT, "rate": ATTITUDE_DT}
 
 
@@ -83,10 +90,14 @@ def _rotated(q: np.ndarray, ax: np.ndarray, ay: np.ndarray, az: np.ndarray) -> n
     s = np.sin(0.5 * angle) / angle
     dx, dy, dz, dw = ax * s, ay * s, az * s, np.cos(0.5 * angle)
     qx, qy, qz, qw = q
-    out = np.array([qw * dx + qx * dw + qy * dz - qz * dy,
-                    qw * dy - qx * dz + qy * dw + qz * dx,
-                    qw * dz + qx * dy - qy * dx + qz * dw,
-                    qw * dw - qx * dx - qy * dy - qz * dz])
+    out = np.array(
+        [
+            qw * dx + qx * dw + qy * dz - qz * dy,
+            qw * dy - qx * dz + qy * dw + qz * dx,
+            qw * dz + qx * dy - qy * dx + qz * dw,
+            qw * dw - qx * dx - qy * dy - qz * dz,
+        ]
+    )
     return np.where(small, q, out)
 
 
@@ -94,9 +105,16 @@ class CfSwarm:
     """N Crazyflies (module doc). `positions` (N, 3) in metres; each drone starts at rest there, motors off,
     unless `hovering` (below)."""
 
-    def __init__(self, positions: Sequence[Sequence[float]], *, t_s: float = 0.0, gains: Sequence[CfGains] | None = None,
-                 body_params: CfBodyParams = P250, step_offset: int = 1,
-                 estimate_every_ticks: int = POSITION_EVERY) -> None:
+    def __init__(
+        self,
+        positions: Sequence[Sequence[float]],
+        *,
+        t_s: float = 0.0,
+        gains: Sequence[CfGains] | None = None,
+        body_params: CfBodyParams = P250,
+        step_offset: int = 1,
+        estimate_every_ticks: int = POSITION_EVERY,
+    ) -> None:
         start = np.asarray(positions, dtype=float).reshape(-1, 3).T.copy()
         n = start.shape[1]
         self.n = n
@@ -144,14 +162,16 @@ class CfSwarm:
         self.sp_rate = np.zeros((3, n))
         self.sp_thrust = np.zeros(n)
         self.priority = np.full(n, PRIORITY_NONE)
-        self.hl = [HighLevelCommander((float(start[0, i]), float(start[1, i]), float(start[2, i])), 0.0)
-                   for i in range(n)]
+        self.hl = [
+            HighLevelCommander((float(start[0, i]), float(start[1, i]), float(start[2, i])), 0.0) for i in range(n)
+        ]
         self.state = np.zeros((9, n))
         self._refresh_state()
 
     @classmethod
-    def hovering(cls, positions: Sequence[Sequence[float]], *, t_s: float = 0.0, settle_s: float = 10.0,
-                 **kwargs: Any) -> CfSwarm:
+    def hovering(
+        cls, positions: Sequence[Sequence[float]], *, t_s: float = 0.0, settle_s: float = 10.0, **kwargs: Any
+    ) -> CfSwarm:
         """Drones that have hovered at `positions` for `settle_s` before `t_s` (`CfDrone.hovering`)."""
         swarm = cls(positions, t_s=t_s - settle_s, **kwargs)
         p = swarm.params
@@ -179,16 +199,35 @@ class CfSwarm:
         k: dict[str, np.ndarray] = {}
         for group in _GROUPS:
             for term in ("kp", "ki", "kd", "kff"):
-                k[f"{group}_{term}"] = np.array([[getattr(g, f"{p}_{term}") for g in self.gains]
-                                                 for p in _PREFIXES[group]])
+                k[f"{group}_{term}"] = np.array(
+                    [[getattr(g, f"{p}_{term}") for g in self.gains] for p in _PREFIXES[group]]
+                )
             k[f"{group}_ilimit"] = np.array(_I_LIMITS[group]).reshape(3, 1)
-        for name in ("thrust_base", "thrust_min", "r_limit", "p_limit", "x_vel_max", "y_vel_max", "z_vel_max",
-                     "yaw_max_delta"):
+        for name in (
+            "thrust_base",
+            "thrust_min",
+            "r_limit",
+            "p_limit",
+            "x_vel_max",
+            "y_vel_max",
+            "z_vel_max",
+            "yaw_max_delta",
+        ):
             k[name] = np.array([getattr(g, name) for g in self.gains])
-        k["pos_olimit"] = np.array([k["x_vel_max"] * VEL_MAX_OVERHEAD, k["y_vel_max"] * VEL_MAX_OVERHEAD,
-                                    np.maximum(k["z_vel_max"], 0.5) * VEL_MAX_OVERHEAD])
-        k["vel_olimit"] = np.array([k["p_limit"] * RP_LIMIT_OVERHEAD, k["r_limit"] * RP_LIMIT_OVERHEAD,
-                                    np.full(self.n, UINT16_MAX / 2 / THRUST_SCALE)])
+        k["pos_olimit"] = np.array(
+            [
+                k["x_vel_max"] * VEL_MAX_OVERHEAD,
+                k["y_vel_max"] * VEL_MAX_OVERHEAD,
+                np.maximum(k["z_vel_max"], 0.5) * VEL_MAX_OVERHEAD,
+            ]
+        )
+        k["vel_olimit"] = np.array(
+            [
+                k["p_limit"] * RP_LIMIT_OVERHEAD,
+                k["r_limit"] * RP_LIMIT_OVERHEAD,
+                np.full(self.n, UINT16_MAX / 2 / THRUST_SCALE),
+            ]
+        )
         self._k = k
 
     def set_param(self, i: int, name: str, value: float) -> None:
@@ -198,8 +237,14 @@ class CfSwarm:
 
     # Controller -------------------------------------------------------------------------------------------------
 
-    def _pid(self, group: str, desired: np.ndarray, measured: np.ndarray, olimit: np.ndarray | None,
-             mask: np.ndarray | None = None) -> np.ndarray:
+    def _pid(
+        self,
+        group: str,
+        desired: np.ndarray,
+        measured: np.ndarray,
+        olimit: np.ndarray | None,
+        mask: np.ndarray | None = None,
+    ) -> np.ndarray:
         """`pidUpdate` on the three PIDs of `group` for every drone (where `mask`, rows by columns, is True)."""
         k = self._k
         dt = _DT[group]
@@ -311,8 +356,14 @@ class CfSwarm:
         r = np.trunc(self.cmd[0] / 2.0)
         p = np.trunc(self.cmd[1] / 2.0)
         yaw = self.cmd[2]
-        m = np.array([np.trunc(thrust - r + p + yaw), np.trunc(thrust - r - p - yaw),
-                      np.trunc(thrust + r - p + yaw), np.trunc(thrust + r + p - yaw)])
+        m = np.array(
+            [
+                np.trunc(thrust - r + p + yaw),
+                np.trunc(thrust - r - p - yaw),
+                np.trunc(thrust + r - p + yaw),
+                np.trunc(thrust + r + p - yaw),
+            ]
+        )
         excess = m.max(axis=0) - UINT16_MAX
         m = np.where(excess > 0, m - excess, m)
         m = np.maximum(m, 0.0)
@@ -366,9 +417,13 @@ class CfSwarm:
         ty = arm * (-f1 + f2 + f3 - f4) - jp * ox * spin
         tz = (-q[0] + q[1] - q[2] + q[3]) + jp * spin_dot
         jx, jy, jz = p.jxx, p.jyy, p.jzz
-        o1 = np.array([ox + (tx - (jz - jy) * oy * oz) / jx * dt,
-                       oy + (ty - (jx - jz) * oz * ox) / jy * dt,
-                       oz + (tz - (jy - jx) * ox * oy) / jz * dt])
+        o1 = np.array(
+            [
+                ox + (tx - (jz - jy) * oy * oz) / jx * dt,
+                oy + (ty - (jx - jz) * oz * ox) / jy * dt,
+                oz + (tz - (jy - jx) * ox * oy) / jz * dt,
+            ]
+        )
         v1 = np.array([vx + ax * dt, vy + ay * dt, vz + az * dt])
         self.pos = self.pos + 0.5 * (self.vel + v1) * dt
         self.quat = _rotated(self.quat, 0.5 * (ox + o1[0]) * dt, 0.5 * (oy + o1[1]) * dt, 0.5 * (oz + o1[2]) * dt)
@@ -419,8 +474,12 @@ class CfSwarm:
         s = self.state
         for i in np.flatnonzero(self.priority <= PRIORITY_HIGH_LEVEL).tolist():
             hl = self.hl[i]
-            sp = hl.get_setpoint(now, (float(s[0, i]), float(s[1, i]), float(s[2, i])),
-                                 (float(s[3, i]), float(s[4, i]), float(s[5, i])), math.radians(float(s[8, i])))
+            sp = hl.get_setpoint(
+                now,
+                (float(s[0, i]), float(s[1, i]), float(s[2, i])),
+                (float(s[3, i]), float(s[4, i]), float(s[5, i])),
+                math.radians(float(s[8, i])),
+            )
             if sp is not None:
                 self._write(i, ControlSetpoint.from_setpoint(sp))
                 self.priority[i] = PRIORITY_HIGH_LEVEL
@@ -457,8 +516,9 @@ class SwarmDrone:
 
     def notify_setpoint_stop(self) -> None:
         s = self.swarm.state[:, self.i]
-        self.swarm.hl[self.i].tell_state((float(s[0]), float(s[1]), float(s[2])),
-                                         (float(s[3]), float(s[4]), float(s[5])), math.radians(float(s[8])))
+        self.swarm.hl[self.i].tell_state(
+            (float(s[0]), float(s[1]), float(s[2])), (float(s[3]), float(s[4]), float(s[5])), math.radians(float(s[8]))
+        )
         self.swarm.priority[self.i] = PRIORITY_HIGH_LEVEL
 
     def _hl(self, command: int, body: bytes) -> int:
@@ -466,16 +526,25 @@ class SwarmDrone:
         return answer[3] if len(answer) > 3 else 0
 
     def takeoff(self, height_m: float, duration_s: float, yaw_deg: float = 0.0) -> int:
-        return self._hl(COMMAND_TAKEOFF_2, struct.pack("<Bff?f", 0, height_m, math.radians(yaw_deg), False,
-                                                        duration_s))
+        return self._hl(COMMAND_TAKEOFF_2, struct.pack("<Bff?f", 0, height_m, math.radians(yaw_deg), False, duration_s))
 
     def land(self, height_m: float, duration_s: float, yaw_deg: float = 0.0) -> int:
         return self._hl(COMMAND_LAND_2, struct.pack("<Bff?f", 0, height_m, math.radians(yaw_deg), False, duration_s))
 
-    def go_to(self, x: float, y: float, z: float, duration_s: float, yaw_deg: float = 0.0, *,
-              relative: bool = False, linear: bool = False) -> int:
-        return self._hl(COMMAND_GO_TO_2, struct.pack("<BBBfffff", 0, relative, linear, x, y, z,
-                                                      math.radians(yaw_deg), duration_s))
+    def go_to(
+        self,
+        x: float,
+        y: float,
+        z: float,
+        duration_s: float,
+        yaw_deg: float = 0.0,
+        *,
+        relative: bool = False,
+        linear: bool = False,
+    ) -> int:
+        return self._hl(
+            COMMAND_GO_TO_2, struct.pack("<BBBfffff", 0, relative, linear, x, y, z, math.radians(yaw_deg), duration_s)
+        )
 
     def stop(self) -> int:
         return self._hl(COMMAND_STOP, bytes([0]))

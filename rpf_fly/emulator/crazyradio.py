@@ -180,8 +180,9 @@ class EmulatedCrazyradio:
 
     # Control transfers ----------------------------------------------------------------------------------------
 
-    def vendor_request(self, request_type: int, request: int, value: int, index: int, data: bytes,
-                       length: int) -> bytes | int:
+    def vendor_request(
+        self, request_type: int, request: int, value: int, index: int, data: bytes, length: int
+    ) -> bytes | int:
         """One vendor control transfer: OUT returns the bytes taken, IN the bytes read. Stalls (`UsbFailure`)
         what the firmware does not handle."""
         with self._lock:
@@ -207,7 +208,7 @@ class EmulatedCrazyradio:
         elif request == SET_RADIO_ADDRESS:
             if pa and not 3 <= len(data) <= 5 or not pa and len(data) != 5:
                 raise stall()
-            self.address = bytes(data) + self.address[len(data):]
+            self.address = bytes(data) + self.address[len(data) :]
         elif request == SET_DATA_RATE:
             if value < 3:
                 self.rate = value
@@ -226,8 +227,9 @@ class EmulatedCrazyradio:
                 raise stall()
             self._firmware_scan(value, index, bytes(data[:32]), now)
         elif request == LAUNCH_BOOTLOADER:
-            logger.warning("emulated Crazyradio %d: LAUNCH_BOOTLOADER is not simulated (it stays in its firmware)",
-                           self.index)
+            logger.warning(
+                "emulated Crazyradio %d: LAUNCH_BOOTLOADER is not simulated (it stays in its firmware)", self.index
+            )
         else:
             raise stall()
 
@@ -299,8 +301,7 @@ class EmulatedCrazyradio:
             return 0, b"", radio_s(self.radio, rate, len(packet), 0, self.arc + 1, False, ard_s(self.ard, rate))
         heard = self.air.transmit(self.address_int, channel, rate, packet, self.arc)
         attempts = heard.retries + 1 if heard.acked else self.arc + 1
-        air_s = radio_s(self.radio, rate, len(packet), len(heard.payload), attempts, heard.acked,
-                        ard_s(self.ard, rate))
+        air_s = radio_s(self.radio, rate, len(packet), len(heard.payload), attempts, heard.acked, ard_s(self.ard, rate))
         if not heard.acked:
             self.counters.unacked += 1
             return 0, b"", air_s
@@ -343,7 +344,7 @@ _real_getter: Any = None
 
 def serial_number(radio: RadioType, index: int) -> str:
     """A made-up serial number of the type's length (upper-case hex, as the firmwares write the chip id)."""
-    return f"{0xC0FFEE0000 + index:0{radio.serial_digits}X}"[-radio.serial_digits:]
+    return f"{0xC0FFEE0000 + index:0{radio.serial_digits}X}"[-radio.serial_digits :]
 
 
 def plug(world: Any = None, dongles: int = 1, radio: str = "crazyradio_2") -> Plugged:
@@ -426,8 +427,11 @@ def wait_released(devids: Iterable[int], timeout_s: float = 2.0) -> bool:
     wanted = sorted(set(devids))
     while True:
         radios = RadioManager._radios
-        busy = [d for d in wanted if d < len(radios) and radios[d] is not None and radios[d]._radio is not None
-                and radios[d].is_alive()]
+        busy = [
+            d
+            for d in wanted
+            if d < len(radios) and radios[d] is not None and radios[d]._radio is not None and radios[d].is_alive()
+        ]
         if not busy:
             return True
         if time.monotonic() >= deadline:

@@ -148,33 +148,34 @@ SOURCES: dict[str, dict[str, str]] = {
     "crazyradio_pa": {
         "control_s": "about 1 ms: crazyradio-firmware usb_radio_protocol.md, 'Set radio channel'",
         "bulk_out_s": "estimate: chosen so that one link's smallest transaction (1-byte packet, 1-byte ack) "
-                      "takes about 1 ms, the ~1000 transactions/s of docs/radio.md 'Radio budget'",
+        "takes about 1 ms, the ~1000 transactions/s of docs/radio.md 'Radio budget'",
         "bulk_in_s": "estimate, as bulk_out_s",
         "reset_s": "lower bound: USB 2.0 spec 7.1.7.5, reset signalling >= 10 ms (re-enumeration not counted)",
         "ramp_s": "nRF24LU1+ PS v1.0, Tstby2a = 130 us",
         "upload_s_per_byte": "nRF24LU1+ PS table 18 T_UL at the radio SPI's 8 MHz (radio.c radioInit, RFCTL)",
         "irq_s": "nRF24LU1+ PS table 18: 8.2 us at 1 Mbps, 6.0 us at 2 Mbps; 250 kbps: estimate (8.2 us)",
         "ack_timeout_s": "the ARD: radio.c radioUpdateRetr / nRF24LU1+ PS table 17 (500 us at 1-2 Mbps, "
-                         "1500 us at 250 kbps for cflib's 32-byte ARD)",
+        "1500 us at 250 kbps for cflib's 32-byte ARD)",
     },
     "crazyradio_2": {
         "control_s": "about 2.5 ms: github.com/bitcraze/crazyradio2-firmware/issues/9 (libusb_control_transfer timed)",
         "bulk_out_s": "estimate: with bulk_in_s and the radio time of a short packet, the ~0.7 ms of a bulk "
-                      "write and read in github.com/bitcraze/crazyradio2-firmware/issues/9",
+        "write and read in github.com/bitcraze/crazyradio2-firmware/issues/9",
         "bulk_in_s": "estimate, as bulk_out_s",
         "reset_s": "lower bound: USB 2.0 spec 7.1.7.5, reset signalling >= 10 ms (re-enumeration not counted)",
         "ramp_s": "estimate: the nRF24LU1+'s 130 us; crazyradio2-firmware esb.c keeps the nRF52840's default "
-                  "(nRF51-compatible) ramp-up",
+        "(nRF51-compatible) ramp-up",
         "upload_s_per_byte": "0: the nRF52840 radio reads the packet by EasyDMA",
         "irq_s": "estimate: the nRF24LU1+ figures",
         "ack_timeout_s": "500 us after each transmission's end: crazyradio2-firmware esb.c (timer CC1 = END + "
-                         "500); ARD is ignored (legacy_usb.c)",
+        "500); ARD is ignored (legacy_usb.c)",
     },
 }
 
 
-def radio_s(radio: RadioType, rate: int, up_bytes: int, ack_bytes: int, attempts: int, acked: bool,
-            ard: float) -> float:
+def radio_s(
+    radio: RadioType, rate: int, up_bytes: int, ack_bytes: int, attempts: int, acked: bool, ard: float
+) -> float:
     """Radio time of one bulk packet: ``attempts`` transmissions, the last one acknowledged with ``ack_bytes`` of
     payload if ``acked``. A lost attempt costs ramp-up, time on air and the wait for its acknowledgement (the ARD
     ``ard`` on a PA, the 2.0's timeout); an acknowledged one ramp-up, time on air, the turnaround and the
@@ -188,12 +189,12 @@ def radio_s(radio: RadioType, rate: int, up_bytes: int, ack_bytes: int, attempts
     return total
 
 
-def transaction_s(radio: RadioType, rate: int = DR_2M, up_bytes: int = 1, ack_bytes: int = 1,
-                  retries: int = 0, ard: float = 500e-6) -> float:
+def transaction_s(
+    radio: RadioType, rate: int = DR_2M, up_bytes: int = 1, ack_bytes: int = 1, retries: int = 0, ard: float = 500e-6
+) -> float:
     """One acknowledged packet end to end as cflib's ``Crazyradio.send_packet`` sees it: bulk write, radio, bulk
     read. The defaults are the smallest transaction (a null packet acknowledged by a one-byte empty ack)."""
-    return (radio.bulk_out_s + radio_s(radio, rate, up_bytes, ack_bytes, retries + 1, True, ard)
-            + radio.bulk_in_s)
+    return radio.bulk_out_s + radio_s(radio, rate, up_bytes, ack_bytes, retries + 1, True, ard) + radio.bulk_in_s
 
 
 def ceiling_per_s(radio: RadioType, switching: bool, rate: int = DR_2M) -> float:

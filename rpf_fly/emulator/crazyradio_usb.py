@@ -54,51 +54,134 @@ def serial_index(dongle: EmulatedCrazyradio) -> int:
 
 
 def device_descriptor(dongle: EmulatedCrazyradio) -> Descriptor:
-    return Descriptor(dict(
-        bLength=18, bDescriptorType=DEVICE, bcdUSB=0x0200, bDeviceClass=0, bDeviceSubClass=0,
-        bDeviceProtocol=0, bMaxPacketSize0=64, idVendor=VENDOR_ID, idProduct=PRODUCT_ID,
-        bcdDevice=dongle.radio.bcd_device, iManufacturer=1, iProduct=2, iSerialNumber=serial_index(dongle),
-        bNumConfigurations=1, bus=BUS, address=FIRST_ADDRESS + dongle.index, port_number=dongle.index + 1,
-        port_numbers=(dongle.index + 1,), speed=SPEED_FULL,
-    ))
+    return Descriptor(
+        dict(
+            bLength=18,
+            bDescriptorType=DEVICE,
+            bcdUSB=0x0200,
+            bDeviceClass=0,
+            bDeviceSubClass=0,
+            bDeviceProtocol=0,
+            bMaxPacketSize0=64,
+            idVendor=VENDOR_ID,
+            idProduct=PRODUCT_ID,
+            bcdDevice=dongle.radio.bcd_device,
+            iManufacturer=1,
+            iProduct=2,
+            iSerialNumber=serial_index(dongle),
+            bNumConfigurations=1,
+            bus=BUS,
+            address=FIRST_ADDRESS + dongle.index,
+            port_number=dongle.index + 1,
+            port_numbers=(dongle.index + 1,),
+            speed=SPEED_FULL,
+        )
+    )
 
 
 def _endpoints(dongle: EmulatedCrazyradio) -> list[Descriptor]:
     interval = dongle.radio.endpoint_interval
-    ends = [Descriptor(dict(bLength=7, bDescriptorType=5, bEndpointAddress=address, bmAttributes=0x02,
-                            wMaxPacketSize=64, bInterval=interval, bRefresh=0, bSynchAddress=0,
-                            extra_descriptors=[]))
-            for address in (IN_ENDPOINT, OUT_ENDPOINT)]
+    ends = [
+        Descriptor(
+            dict(
+                bLength=7,
+                bDescriptorType=5,
+                bEndpointAddress=address,
+                bmAttributes=0x02,
+                wMaxPacketSize=64,
+                bInterval=interval,
+                bRefresh=0,
+                bSynchAddress=0,
+                extra_descriptors=[],
+            )
+        )
+        for address in (IN_ENDPOINT, OUT_ENDPOINT)
+    ]
     return ends if dongle.radio.endpoints_in_first else ends[::-1]
 
 
 def configuration_descriptor() -> Descriptor:
-    return Descriptor(dict(bLength=9, bDescriptorType=CONFIGURATION, wTotalLength=32, bNumInterfaces=1,
-                           bConfigurationValue=1, iConfiguration=0, bmAttributes=0x80, bMaxPower=50,
-                           extra_descriptors=[]))
+    return Descriptor(
+        dict(
+            bLength=9,
+            bDescriptorType=CONFIGURATION,
+            wTotalLength=32,
+            bNumInterfaces=1,
+            bConfigurationValue=1,
+            iConfiguration=0,
+            bmAttributes=0x80,
+            bMaxPower=50,
+            extra_descriptors=[],
+        )
+    )
 
 
 def interface_descriptor(dongle: EmulatedCrazyradio) -> Descriptor:
-    return Descriptor(dict(bLength=9, bDescriptorType=4, bInterfaceNumber=0, bAlternateSetting=0, bNumEndpoints=2,
-                           bInterfaceClass=0xFF, bInterfaceSubClass=dongle.radio.interface_subclass,
-                           bInterfaceProtocol=0, iInterface=0, extra_descriptors=[]))
+    return Descriptor(
+        dict(
+            bLength=9,
+            bDescriptorType=4,
+            bInterfaceNumber=0,
+            bAlternateSetting=0,
+            bNumEndpoints=2,
+            bInterfaceClass=0xFF,
+            bInterfaceSubClass=dongle.radio.interface_subclass,
+            bInterfaceProtocol=0,
+            iInterface=0,
+            extra_descriptors=[],
+        )
+    )
 
 
 def _raw(desc: Descriptor, layout: tuple[tuple[str, int], ...]) -> bytes:
     return b"".join(int(desc.fields[name]).to_bytes(size, "little") for name, size in layout)
 
 
-_DEVICE_LAYOUT = (("bLength", 1), ("bDescriptorType", 1), ("bcdUSB", 2), ("bDeviceClass", 1),
-                  ("bDeviceSubClass", 1), ("bDeviceProtocol", 1), ("bMaxPacketSize0", 1), ("idVendor", 2),
-                  ("idProduct", 2), ("bcdDevice", 2), ("iManufacturer", 1), ("iProduct", 1),
-                  ("iSerialNumber", 1), ("bNumConfigurations", 1))
-_CONFIG_LAYOUT = (("bLength", 1), ("bDescriptorType", 1), ("wTotalLength", 2), ("bNumInterfaces", 1),
-                  ("bConfigurationValue", 1), ("iConfiguration", 1), ("bmAttributes", 1), ("bMaxPower", 1))
-_INTERFACE_LAYOUT = (("bLength", 1), ("bDescriptorType", 1), ("bInterfaceNumber", 1), ("bAlternateSetting", 1),
-                     ("bNumEndpoints", 1), ("bInterfaceClass", 1), ("bInterfaceSubClass", 1),
-                     ("bInterfaceProtocol", 1), ("iInterface", 1))
-_ENDPOINT_LAYOUT = (("bLength", 1), ("bDescriptorType", 1), ("bEndpointAddress", 1), ("bmAttributes", 1),
-                    ("wMaxPacketSize", 2), ("bInterval", 1))
+_DEVICE_LAYOUT = (
+    ("bLength", 1),
+    ("bDescriptorType", 1),
+    ("bcdUSB", 2),
+    ("bDeviceClass", 1),
+    ("bDeviceSubClass", 1),
+    ("bDeviceProtocol", 1),
+    ("bMaxPacketSize0", 1),
+    ("idVendor", 2),
+    ("idProduct", 2),
+    ("bcdDevice", 2),
+    ("iManufacturer", 1),
+    ("iProduct", 1),
+    ("iSerialNumber", 1),
+    ("bNumConfigurations", 1),
+)
+_CONFIG_LAYOUT = (
+    ("bLength", 1),
+    ("bDescriptorType", 1),
+    ("wTotalLength", 2),
+    ("bNumInterfaces", 1),
+    ("bConfigurationValue", 1),
+    ("iConfiguration", 1),
+    ("bmAttributes", 1),
+    ("bMaxPower", 1),
+)
+_INTERFACE_LAYOUT = (
+    ("bLength", 1),
+    ("bDescriptorType", 1),
+    ("bInterfaceNumber", 1),
+    ("bAlternateSetting", 1),
+    ("bNumEndpoints", 1),
+    ("bInterfaceClass", 1),
+    ("bInterfaceSubClass", 1),
+    ("bInterfaceProtocol", 1),
+    ("iInterface", 1),
+)
+_ENDPOINT_LAYOUT = (
+    ("bLength", 1),
+    ("bDescriptorType", 1),
+    ("bEndpointAddress", 1),
+    ("bmAttributes", 1),
+    ("wMaxPacketSize", 2),
+    ("bInterval", 1),
+)
 
 
 def descriptor_bytes(dongle: EmulatedCrazyradio, kind: int, index: int) -> bytes | None:
@@ -106,8 +189,11 @@ def descriptor_bytes(dongle: EmulatedCrazyradio, kind: int, index: int) -> bytes
     if kind == DEVICE:
         return _raw(device_descriptor(dongle), _DEVICE_LAYOUT)
     if kind == CONFIGURATION and index == 0:
-        return (_raw(configuration_descriptor(), _CONFIG_LAYOUT) + _raw(interface_descriptor(dongle), _INTERFACE_LAYOUT)
-                + b"".join(_raw(e, _ENDPOINT_LAYOUT) for e in _endpoints(dongle)))
+        return (
+            _raw(configuration_descriptor(), _CONFIG_LAYOUT)
+            + _raw(interface_descriptor(dongle), _INTERFACE_LAYOUT)
+            + b"".join(_raw(e, _ENDPOINT_LAYOUT) for e in _endpoints(dongle))
+        )
     if kind == STRING:
         if index == 0:
             return bytes((4, STRING)) + LANGID_EN_US.to_bytes(2, "little")
@@ -178,8 +264,7 @@ class EmulatedBackend(usb.backend.IBackend):
             raise IndexError((intf, alt, config))
         return interface_descriptor(dev)
 
-    def get_endpoint_descriptor(self, dev: EmulatedCrazyradio, ep: int, intf: int, alt: int,
-                                config: int) -> Descriptor:
+    def get_endpoint_descriptor(self, dev: EmulatedCrazyradio, ep: int, intf: int, alt: int, config: int) -> Descriptor:
         if config != 0 or intf != 0 or alt != 0 or not 0 <= ep < 2:
             raise IndexError((ep, intf, alt, config))
         return _endpoints(dev)[ep]
@@ -252,11 +337,19 @@ class EmulatedBackend(usb.backend.IBackend):
         self._alive(dev_handle, intf)
         answer = self._call(dev_handle.dongle.bulk_in, ep, len(buff) * buff.itemsize, timeout)
         view = memoryview(buff).cast("B")
-        view[:len(answer)] = answer
+        view[: len(answer)] = answer
         return len(answer)
 
-    def ctrl_transfer(self, dev_handle: Handle, bmRequestType: int, bRequest: int, wValue: int, wIndex: int,
-                      data: array.array, timeout: int) -> int:
+    def ctrl_transfer(
+        self,
+        dev_handle: Handle,
+        bmRequestType: int,
+        bRequest: int,
+        wValue: int,
+        wIndex: int,
+        data: array.array,
+        timeout: int,
+    ) -> int:
         self._alive(dev_handle)
         dongle = dev_handle.dongle
         size = len(data) * data.itemsize
@@ -264,7 +357,7 @@ class EmulatedBackend(usb.backend.IBackend):
             out = bytes(data.tobytes()) if not bmRequestType & 0x80 else b""
             result = self._call(dongle.vendor_request, bmRequestType, bRequest, wValue, wIndex, out, size)
             if isinstance(result, bytes):
-                memoryview(data).cast("B")[:len(result)] = result
+                memoryview(data).cast("B")[: len(result)] = result
                 return len(result)
             return int(result)
         self._call(dongle.standard_request)
@@ -273,7 +366,7 @@ class EmulatedBackend(usb.backend.IBackend):
             if answer is None:
                 raise _usb_error(UsbFailure(-9, 32, "Pipe error"))
             answer = answer[:size]
-            memoryview(data).cast("B")[:len(answer)] = answer
+            memoryview(data).cast("B")[: len(answer)] = answer
             return len(answer)
         if bmRequestType == 0x80 and bRequest == GET_CONFIGURATION and size >= 1:
             memoryview(data).cast("B")[0] = dongle.configuration

@@ -101,8 +101,9 @@ class ContactModel:
         return contacts
 
     @staticmethod
-    def _pairs(addresses: list[int], before: np.ndarray, now: np.ndarray, airborne: np.ndarray,
-               crashed: np.ndarray) -> list[tuple[float, int, str]]:
+    def _pairs(
+        addresses: list[int], before: np.ndarray, now: np.ndarray, airborne: np.ndarray, crashed: np.ndarray
+    ) -> list[tuple[float, int, str]]:
         """Pairs whose relative motion, a straight segment from ``before`` to ``now``, enters the contact distance:
         the first fraction ``s`` with ``|d0 + s (d1 - d0)| = DRONE_CONTACT_M``."""
         d0 = before[:, None, :] - before[None, :, :]
@@ -140,7 +141,7 @@ class ContactModel:
         out: list[tuple[float, int, str]] = []
         hit = distance < OBSTACLE_CONTACT_M
         for k in range(indices.size):
-            where = np.flatnonzero(hit[starts[k]:starts[k] + steps[k]])
+            where = np.flatnonzero(hit[starts[k] : starts[k] + steps[k]])
             if where.size:
                 out.append((float(fractions[starts[k] + where[0]]), int(indices[k]), "obstacle"))
         return out

@@ -152,14 +152,23 @@ class FirmwareSnapshot:
         times = [t.time_s for t in self.transitions if t.new.value == state]
         return times[-1] if times else None
 
+
 class FakeFirmware(FirmwareLog, FirmwareParams, FirmwareFlight):
     """One simulated Crazyflie. See the module docstring for what it answers."""
 
     vehicle: Vehicle
     rssi: int
 
-    def __init__(self, config: VehicleConfig | None = None, *, now_s: float = 0.0, rssi: int = 35,
-                 seed: int = 0, radio_address: int = 0xE7E7E7E7E7, radio_channel: int = 80) -> None:
+    def __init__(
+        self,
+        config: VehicleConfig | None = None,
+        *,
+        now_s: float = 0.0,
+        rssi: int = 35,
+        seed: int = 0,
+        radio_address: int = 0xE7E7E7E7E7,
+        radio_channel: int = 80,
+    ) -> None:
         """`seed` draws the drone's IMU bias and noise (`fake_vehicle`): give each drone of a world its own.
         `radio_address` and `radio_channel` go into the EEPROM's config block, as a real drone's do."""
         self.config = config or VehicleConfig()
@@ -198,13 +207,15 @@ class FakeFirmware(FirmwareLog, FirmwareParams, FirmwareFlight):
     def _memory_subsystem(self) -> MemorySubsystem:
         """The memory table of a fresh flight stack, in the firmware's registration order (`fake_memory`)."""
         self.memory_tester = MemoryTester(on_reset=lambda: self._params.__setitem__("memTst.resetW", 0.0))
-        return MemorySubsystem([
-            BufferMemory(MEM_TYPE_EEPROM, lambda: self._eeprom),
-            BufferMemory(MEM_TYPE_TRAJ, lambda: self.vehicle.hl.trajectory_memory),
-            self.memory_tester,
-            DeckMemory(),
-            DeckCtrlDfuMemory(),
-        ])
+        return MemorySubsystem(
+            [
+                BufferMemory(MEM_TYPE_EEPROM, lambda: self._eeprom),
+                BufferMemory(MEM_TYPE_TRAJ, lambda: self.vehicle.hl.trajectory_memory),
+                self.memory_tester,
+                DeckMemory(),
+                DeckCtrlDfuMemory(),
+            ]
+        )
 
     # Public API -----------------------------------------------------------------------------------------------
 
@@ -238,8 +249,12 @@ class FakeFirmware(FirmwareLog, FirmwareParams, FirmwareFlight):
             return
         if old.pos[2] > old.floor_z or old.vel[2] != 0.0:
             return  # still falling: it boots where it lands
-        self.config = replace(self.config, position=(old.pos[0], old.pos[1], old.floor_z),
-                              yaw_deg=math.degrees(old.yaw), initial_vbat_v=old.battery.open_v)
+        self.config = replace(
+            self.config,
+            position=(old.pos[0], old.pos[1], old.floor_z),
+            yaw_deg=math.degrees(old.yaw),
+            initial_vbat_v=old.battery.open_v,
+        )
         self.vehicle = Vehicle(self.config, now_s, self.seed)
         self.vehicle.gust(old.gust_accel, old.gust_until_s)  # the wind does not care
         self._params = dict(PARAM_DEFAULTS)
@@ -319,8 +334,14 @@ class FakeFirmware(FirmwareLog, FirmwareParams, FirmwareFlight):
         snapshot."""
         with self._lock:
             v = self.vehicle
-            return Body((v.pos[0], v.pos[1], v.pos[2]), wrap_angle(v.yaw), v.motors_on, v.airborne,
-                        v.crash_s is not None, v.estimate)
+            return Body(
+                (v.pos[0], v.pos[1], v.pos[2]),
+                wrap_angle(v.yaw),
+                v.motors_on,
+                v.airborne,
+                v.crash_s is not None,
+                v.estimate,
+            )
 
     def crash(self, now_s: float, reason: str, at: tuple[float, float, float] | None = None) -> bool:
         """The drone hit something at true position `at` (see `Vehicle.crash`); True if this was its first crash."""
@@ -415,15 +436,17 @@ class FakeFirmware(FirmwareLog, FirmwareParams, FirmwareFlight):
     def _mem(self, channel: int, data: bytes, now_s: float) -> list[Packet]:
         return self._memories.handle(channel, data)
 
-    _HANDLERS: Mapping[int, Callable[[FakeFirmware, int, bytes, float], list[Packet]]] = MappingProxyType({
-        PORT_LINK: _link,
-        PORT_PLATFORM: _platform,
-        PORT_MEM: _mem,
-        PORT_LOG: FirmwareLog._log,
-        PORT_PARAM: FirmwareParams._param,
-        PORT_COMMANDER: FirmwareFlight._commander,
-        PORT_COMMANDER_GENERIC: FirmwareFlight._commander_generic,
-        PORT_SETPOINT_HL: FirmwareFlight._high_level,
-        PORT_LOCALIZATION: FirmwareFlight._localization,
-        PORT_SUPERVISOR: FirmwareFlight._supervisor,
-    })
+    _HANDLERS: Mapping[int, Callable[[FakeFirmware, int, bytes, float], list[Packet]]] = MappingProxyType(
+        {
+            PORT_LINK: _link,
+            PORT_PLATFORM: _platform,
+            PORT_MEM: _mem,
+            PORT_LOG: FirmwareLog._log,
+            PORT_PARAM: FirmwareParams._param,
+            PORT_COMMANDER: FirmwareFlight._commander,
+            PORT_COMMANDER_GENERIC: FirmwareFlight._commander_generic,
+            PORT_SETPOINT_HL: FirmwareFlight._high_level,
+            PORT_LOCALIZATION: FirmwareFlight._localization,
+            PORT_SUPERVISOR: FirmwareFlight._supervisor,
+        }
+    )

@@ -112,8 +112,17 @@ class BufferMemory:
 def config_block(channel: int, datarate: int, address: int) -> bytes:
     """The EEPROM config block v1 (`configblockeeprom.c`): magic, version, radio channel, radio speed (0 250K,
     1 1M, 2 2M), pitch and roll trim (0), radio address (upper byte, lower word), modulo-256 checksum."""
-    body = struct.pack("<IBBBffBI", CONFIG_BLOCK_MAGIC, CONFIG_BLOCK_VERSION, channel, datarate, 0.0, 0.0,
-                       (address >> 32) & 0xFF, address & 0xFFFFFFFF)
+    body = struct.pack(
+        "<IBBBffBI",
+        CONFIG_BLOCK_MAGIC,
+        CONFIG_BLOCK_VERSION,
+        channel,
+        datarate,
+        0.0,
+        0.0,
+        (address >> 32) & 0xFF,
+        address & 0xFFFFFFFF,
+    )
     return body + bytes([sum(body) & 0xFF])
 
 

@@ -305,15 +305,17 @@ class HighLevelCommander:
         if description is None or description.location != TRAJECTORY_LOCATION_MEM:
             return 0
         if description.kind == TRAJECTORY_TYPE_POLY4D:
-            trajectory = PiecewiseTrajectory(self.trajectory_memory, description.offset, description.n_pieces, now_s,
-                                             timescale, bool(reversed_))
+            trajectory = PiecewiseTrajectory(
+                self.trajectory_memory, description.offset, description.n_pieces, now_s, timescale, bool(reversed_)
+            )
             if relative:  # plan_start_trajectory: shift the start onto the last setpoint
                 start = trajectory.evaluate(now_s)
                 if start is not None:
                     trajectory.shift = _minus(self.pos, start[0])
                     if relative_yaw:
-                        trajectory.shift_yaw = shortest_signed_angle_radians(normalize_radians(start[2]),
-                                                                             normalize_radians(self.yaw))
+                        trajectory.shift_yaw = shortest_signed_angle_radians(
+                            normalize_radians(start[2]), normalize_radians(self.yaw)
+                        )
                 else:  # an invalid start: the firmware's shift is NaN, so is every evaluation
                     trajectory.shift = (math.nan, math.nan, math.nan)
             self.trajectory = trajectory

@@ -77,8 +77,10 @@ SEND_TIMEOUT_S = 2.0
 (``out_queue.put(pk, True, 2)``, then the link error "RadioDriver: Could not send packet to copter")."""
 
 
-UNPLUGGED = ("Error communicating with crazy radio ,it has probably been unplugged!\n"
-             "Exception:[Errno 19] No such device (it may have been disconnected)\n\n")
+UNPLUGGED = (
+    "Error communicating with crazy radio ,it has probably been unplugged!\n"
+    "Exception:[Errno 19] No such device (it may have been disconnected)\n\n"
+)
 """The link error of a link whose dongle was pulled out: cflib's ``RadioDriver`` thread says this (with the traceback
 of pyusb's ``USBError``) when a transaction raises."""
 
@@ -123,7 +125,9 @@ class RadioPort(Protocol):
     def faults(self) -> LinkFaults: ...
     @property
     def rssi_dbm(self) -> int: ...
-    def transact(self, channel: int, uplink: tuple[int, bytes] | None) -> tuple[bool, int, tuple[int, int, bytes] | None]: ...
+    def transact(
+        self, channel: int, uplink: tuple[int, bytes] | None
+    ) -> tuple[bool, int, tuple[int, int, bytes] | None]: ...
     def has_downlink(self) -> bool: ...
     def attach(self, waker: threading.Event) -> None: ...
     def detach(self, waker: threading.Event) -> None: ...
@@ -414,7 +418,7 @@ class FakeLink:
         self._taken()
         self._in.put(None)
         if callback is not None:  # first, as cflib's driver does: a world process slow to answer the detach's
-            callback(message)     # round trip must not delay the link error
+            callback(message)  # round trip must not delay the link error
         if self._drone is not None:
             self._drone.detach(self._wake)
 

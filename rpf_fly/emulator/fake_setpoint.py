@@ -141,7 +141,11 @@ def decode_generic(data: bytes, now_s: float, yaw_rad: float) -> Setpoint | None
         vx, vy, vz, yaw_rate = struct.unpack("<ffff", body[:16])
         yaw_rate = -yaw_rate if kind == TYPE_VELOCITY_WORLD_LEGACY else yaw_rate
         return Setpoint(
-            _VEL3, velocity=(vx, vy, vz), yaw_mode=AxisMode.VELOCITY, yaw_rate_deg_s=yaw_rate, timestamp_s=now_s,
+            _VEL3,
+            velocity=(vx, vy, vz),
+            yaw_mode=AxisMode.VELOCITY,
+            yaw_rate_deg_s=yaw_rate,
+            timestamp_s=now_s,
             source=src,
         )
     if kind in (TYPE_HOVER, TYPE_HOVER_LEGACY):
@@ -150,22 +154,38 @@ def decode_generic(data: bytes, now_s: float, yaw_rad: float) -> Setpoint | None
         c, s = math.cos(yaw_rad), math.sin(yaw_rad)
         world_velocity = (c * vx - s * vy, s * vx + c * vy, 0.0)
         return Setpoint(
-            (AxisMode.VELOCITY, AxisMode.VELOCITY, AxisMode.ABS), (0.0, 0.0, z), world_velocity,
-            yaw_mode=AxisMode.VELOCITY, yaw_rate_deg_s=yaw_rate, timestamp_s=now_s, source=src,
+            (AxisMode.VELOCITY, AxisMode.VELOCITY, AxisMode.ABS),
+            (0.0, 0.0, z),
+            world_velocity,
+            yaw_mode=AxisMode.VELOCITY,
+            yaw_rate_deg_s=yaw_rate,
+            timestamp_s=now_s,
+            source=src,
         )
     if kind in (TYPE_ZDISTANCE, TYPE_ZDISTANCE_LEGACY):
         roll, pitch, yaw_rate, z = struct.unpack("<ffff", body[:16])
         yaw_rate = -yaw_rate if kind == TYPE_ZDISTANCE_LEGACY else yaw_rate
         return Setpoint(
-            _HOLD_Z, (0.0, 0.0, z), yaw_mode=AxisMode.VELOCITY, yaw_rate_deg_s=yaw_rate,
-            attitude_mode=AxisMode.ABS, attitude_deg=(roll, pitch), timestamp_s=now_s, source=src,
+            _HOLD_Z,
+            (0.0, 0.0, z),
+            yaw_mode=AxisMode.VELOCITY,
+            yaw_rate_deg_s=yaw_rate,
+            attitude_mode=AxisMode.ABS,
+            attitude_deg=(roll, pitch),
+            timestamp_s=now_s,
+            source=src,
         )
     if kind == TYPE_ALTHOLD:
         roll, pitch, yaw_rate, vz = struct.unpack("<ffff", body[:16])
         return Setpoint(
-            (AxisMode.DISABLE, AxisMode.DISABLE, AxisMode.VELOCITY), velocity=(0.0, 0.0, vz),
-            yaw_mode=AxisMode.VELOCITY, yaw_rate_deg_s=yaw_rate, attitude_mode=AxisMode.ABS,
-            attitude_deg=(roll, pitch), timestamp_s=now_s, source=src,
+            (AxisMode.DISABLE, AxisMode.DISABLE, AxisMode.VELOCITY),
+            velocity=(0.0, 0.0, vz),
+            yaw_mode=AxisMode.VELOCITY,
+            yaw_rate_deg_s=yaw_rate,
+            attitude_mode=AxisMode.ABS,
+            attitude_deg=(roll, pitch),
+            timestamp_s=now_s,
+            source=src,
         )
     if kind == TYPE_FULL_STATE:
         values = struct.unpack("<hhhhhhhhhIhhh", body[:28])
@@ -174,7 +194,13 @@ def decode_generic(data: bytes, now_s: float, yaw_rad: float) -> Setpoint | None
         qx, qy, qz, qw = (float(q) for q in decompress_quaternion(values[9]))
         yaw_deg = math.degrees(yaw_from_quaternion(qx, qy, qz, qw))
         return Setpoint(
-            _ABS3, pos, vel, yaw_mode=AxisMode.ABS, yaw_deg=yaw_deg, timestamp_s=now_s, source=src,
+            _ABS3,
+            pos,
+            vel,
+            yaw_mode=AxisMode.ABS,
+            yaw_deg=yaw_deg,
+            timestamp_s=now_s,
+            source=src,
         )
     if kind == TYPE_MANUAL:
         roll, pitch, yaw_rate, thrust, rate = struct.unpack("<fffHB", body[:15])
@@ -220,9 +246,18 @@ def _decode_cppm(body: bytes, now_s: float, source: str) -> Setpoint | None:
     return _attitude_setpoint(roll, pitch, yaw_rate, thrust, mode, now_s, source)
 
 
-def _attitude_setpoint(roll: float, pitch: float, yaw_rate: float, thrust: int, mode: AxisMode, now_s: float,
-                       source: str) -> Setpoint:
+def _attitude_setpoint(
+    roll: float, pitch: float, yaw_rate: float, thrust: int, mode: AxisMode, now_s: float, source: str
+) -> Setpoint:
     """Roll and pitch (angles or rates), a yaw rate and a raw thrust; the height is not controlled."""
     modes = (AxisMode.DISABLE, AxisMode.DISABLE, AxisMode.DISABLE)
-    return Setpoint(modes, yaw_mode=AxisMode.VELOCITY, yaw_rate_deg_s=yaw_rate, thrust=min(int(thrust), 65535),
-                    attitude_mode=mode, attitude_deg=(roll, pitch), timestamp_s=now_s, source=source)
+    return Setpoint(
+        modes,
+        yaw_mode=AxisMode.VELOCITY,
+        yaw_rate_deg_s=yaw_rate,
+        thrust=min(int(thrust), 65535),
+        attitude_mode=mode,
+        attitude_deg=(roll, pitch),
+        timestamp_s=now_s,
+        source=source,
+    )

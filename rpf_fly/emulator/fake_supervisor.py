@@ -218,10 +218,10 @@ class Supervisor:
             emergency_stop=estop,
             crashed=self.crashed,
             preflight_timeout=self.state is S.READY_TO_FLY and now_s - self._latest_arming_s > PREFLIGHT_TIMEOUT_S,
-            landing_timeout=self._latest_landing_s is not None
-            and now_s - self._latest_landing_s > LANDING_TIMEOUT_S,
+            landing_timeout=self._latest_landing_s is not None and now_s - self._latest_landing_s > LANDING_TIMEOUT_S,
             tumbled=self.tumbled,
-            spinup_timeout=self.state is S.ARMING and self._arming_entered_s is not None
+            spinup_timeout=self.state is S.ARMING
+            and self._arming_entered_s is not None
             and now_s - self._arming_entered_s > ARMING_SPINUP_TIMEOUT_S,
             rpm_at_arming_valid=not self.spinup_fails,
         )

@@ -19,51 +19,57 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from types import MappingProxyType
 
-LOG_TYPES: Mapping[str, int] = MappingProxyType({
-    "uint8_t": 0x01,
-    "uint16_t": 0x02,
-    "uint32_t": 0x03,
-    "int8_t": 0x04,
-    "int16_t": 0x05,
-    "int32_t": 0x06,
-    "float": 0x07,
-    "FP16": 0x08,
-})
+LOG_TYPES: Mapping[str, int] = MappingProxyType(
+    {
+        "uint8_t": 0x01,
+        "uint16_t": 0x02,
+        "uint32_t": 0x03,
+        "int8_t": 0x04,
+        "int16_t": 0x05,
+        "int32_t": 0x06,
+        "float": 0x07,
+        "FP16": 0x08,
+    }
+)
 """Log variable C type -> firmware type code."""
 
 LOG_TYPE_NAMES: Mapping[int, str] = MappingProxyType({code: name for name, code in LOG_TYPES.items()})
 
-PARAM_TYPES: Mapping[str, int] = MappingProxyType({
-    "int8_t": 0x00,
-    "int16_t": 0x01,
-    "int32_t": 0x02,
-    "int64_t": 0x03,
-    "FP16": 0x05,
-    "float": 0x06,
-    "double": 0x07,
-    "uint8_t": 0x08,
-    "uint16_t": 0x09,
-    "uint32_t": 0x0A,
-    "uint64_t": 0x0B,
-})
+PARAM_TYPES: Mapping[str, int] = MappingProxyType(
+    {
+        "int8_t": 0x00,
+        "int16_t": 0x01,
+        "int32_t": 0x02,
+        "int64_t": 0x03,
+        "FP16": 0x05,
+        "float": 0x06,
+        "double": 0x07,
+        "uint8_t": 0x08,
+        "uint16_t": 0x09,
+        "uint32_t": 0x0A,
+        "uint64_t": 0x0B,
+    }
+)
 """Parameter C type -> firmware type code (low nibble of the type byte)."""
 
 PARAM_FLAG_EXTENDED = 0x10
 PARAM_FLAG_READ_ONLY = 0x40
 
-STRUCT_FORMATS: Mapping[str, str] = MappingProxyType({
-    "uint8_t": "<B",
-    "uint16_t": "<H",
-    "uint32_t": "<I",
-    "uint64_t": "<Q",
-    "int8_t": "<b",
-    "int16_t": "<h",
-    "int32_t": "<i",
-    "int64_t": "<q",
-    "float": "<f",
-    "double": "<d",
-    "FP16": "<e",
-})
+STRUCT_FORMATS: Mapping[str, str] = MappingProxyType(
+    {
+        "uint8_t": "<B",
+        "uint16_t": "<H",
+        "uint32_t": "<I",
+        "uint64_t": "<Q",
+        "int8_t": "<b",
+        "int16_t": "<h",
+        "int32_t": "<i",
+        "int64_t": "<q",
+        "float": "<f",
+        "double": "<d",
+        "FP16": "<e",
+    }
+)
 """C type -> little-endian struct format."""
 
 CMD_TOC_ITEM_V2 = 2

@@ -278,8 +278,11 @@ class CompressedTrajectory:
 
     def _rewind(self) -> None:
         start = self.offset
-        pos = (self._int16(start) / STORED_DISTANCE_SCALE, self._int16(start + 2) / STORED_DISTANCE_SCALE,
-               self._int16(start + 4) / STORED_DISTANCE_SCALE)
+        pos = (
+            self._int16(start) / STORED_DISTANCE_SCALE,
+            self._int16(start + 2) / STORED_DISTANCE_SCALE,
+            self._int16(start + 4) / STORED_DISTANCE_SCALE,
+        )
         yaw = self._int16(start + 6) / STORED_ANGLE_SCALE
         self._piece = self._make_piece(start + 8, 0.0, pos, yaw)
 
@@ -290,8 +293,9 @@ class CompressedTrajectory:
         duration = duration_ms / STORED_DURATION_SCALE
         ptr = body
         polys = []
-        for kind, initial, scale in zip(types, (*end_pos, end_yaw), (STORED_DISTANCE_SCALE,) * 3 +
-                                        (STORED_ANGLE_SCALE,)):
+        for kind, initial, scale in zip(
+            types, (*end_pos, end_yaw), (STORED_DISTANCE_SCALE,) * 3 + (STORED_ANGLE_SCALE,)
+        ):
             points = [initial]
             for _ in range(_CONTROL_POINTS_BY_TYPE[kind]):
                 assert ptr is not None

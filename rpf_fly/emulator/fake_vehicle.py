@@ -264,6 +264,7 @@ class Battery:
             self.shutdown = True
             self.pm_state = 4
 
+
 class Vehicle(VehicleEstimator, VehicleMotion, VehicleFirmware):
     """One simulated Crazyflie's flight stack and body. Not thread-safe: `FakeFirmware` serialises calls.
 
@@ -295,8 +296,11 @@ class Vehicle(VehicleEstimator, VehicleMotion, VehicleFirmware):
         self.tilt_accel: Vec3 = self._draw_tilt() if self.kalman else (0.0, 0.0, 0.0)
         """The horizontal acceleration (m/s^2, world frame; norm `TILT_ERROR_M_S2`) the attitude estimate's tilt
         error makes up, per drone."""
-        self.drift_accel: Vec3 = (self.accel_bias[0] + self.tilt_accel[0], self.accel_bias[1] + self.tilt_accel[1],
-                                  self.accel_bias[2] + self.tilt_accel[2])
+        self.drift_accel: Vec3 = (
+            self.accel_bias[0] + self.tilt_accel[0],
+            self.accel_bias[1] + self.tilt_accel[1],
+            self.accel_bias[2] + self.tilt_accel[2],
+        )
         """The estimate's constant acceleration error while blind: bias plus tilt error (norm at most
         `BLIND_DRIFT_MAX_M_S2`)."""
         self.initial_estimate: Vec3 = (0.0, 0.0, 0.0)
@@ -313,8 +317,9 @@ class Vehicle(VehicleEstimator, VehicleMotion, VehicleFirmware):
         self._onboard_variance_m2 = self.ext_pos_std_dev**2
         self.reset_estimator()
         self._onboard_variance_m2 = self.ext_pos_std_dev**2  # an onboard system is settled at power-on
-        self.supervisor = Supervisor(auto_arm=config.auto_arm, tumbled=config.upside_down,
-                                     spinup_fails=config.motor_fault)
+        self.supervisor = Supervisor(
+            auto_arm=config.auto_arm, tumbled=config.upside_down, spinup_fails=config.motor_fault
+        )
         self._supervisor_slot = self._supervisor_lattice(now_s)
         """The last lattice point (in `UPDATE_PERIOD_S`) at which the supervisor updated (`_tick`)."""
         self.hl = HighLevelCommander(self.estimate, self.estimate_yaw)
@@ -482,7 +487,8 @@ class Vehicle(VehicleEstimator, VehicleMotion, VehicleFirmware):
         else:
             floor = self.ext_pos_std_dev**2
             self._onboard_variance_m2 = floor + (self._onboard_variance_m2 - floor) * math.exp(
-                -dt / VARIANCE_DECAY_TAU_S)
+                -dt / VARIANCE_DECAY_TAU_S
+            )
 
     @staticmethod
     def _supervisor_lattice(now_s: float) -> int:

@@ -204,8 +204,9 @@ class FakeWorld:
                     n = len(self._drones)
                     x, y = place if place is not None else ((n % 10) * self.GRID_M, (n // 10) * self.GRID_M)
                     now = self.time_s()
-                    drone = SimDrone(addr, FakeDroneConfig.at(x, y, 0.0), now - BOOT_S,
-                                     self.seed * 1_000_003 + addr % 1_000_003)
+                    drone = SimDrone(
+                        addr, FakeDroneConfig.at(x, y, 0.0), now - BOOT_S, self.seed * 1_000_003 + addr % 1_000_003
+                    )
                     ticks = round(BOOT_S / self.step_s)
                     for tick in range(1, ticks + 1):
                         drone.firmware.step(now - BOOT_S + tick * self.step_s)
@@ -324,9 +325,7 @@ class FakeWorld:
     def remove_packet_observer(self, address: int | str, observer: PacketObserver) -> None:
         self._drones[parse_address(address)].remove_observer(observer)
 
-    def wait_until(
-        self, predicate: Callable[[FakeWorld], bool], timeout_s: float, poll_s: float = 0.01
-    ) -> bool:
+    def wait_until(self, predicate: Callable[[FakeWorld], bool], timeout_s: float, poll_s: float = 0.01) -> bool:
         """Poll `predicate(world)` until it is true (returns True) or `timeout_s` passes (returns False)."""
         deadline = time.monotonic() + timeout_s
         while True:
@@ -368,5 +367,6 @@ class FakeWorld:
             if firmware.crash(now, contact.reason, contact.position):
                 logger.warning("fake drone %010X crashed at %.3f s: %s", contact.address, now, contact.reason)
             bodies[contact.address] = firmware.body()
-        self._truth.append((self._t0 + now, {a: (b.position, b.yaw, b.motors_on, b.crashed, b.estimate)
-                                             for a, b in bodies.items()}))
+        self._truth.append(
+            (self._t0 + now, {a: (b.position, b.yaw, b.motors_on, b.crashed, b.estimate) for a, b in bodies.items()})
+        )

@@ -86,7 +86,9 @@ class FirmwareFlight:
             if cmd == 0x01:
                 success = sup.request_arming(bool(data[1]) if len(data) > 1 else True)
                 return [(PORT_SUPERVISOR, 1, bytes([0x81, int(success), int(sup.armed)]))]
-            if cmd == 0x02:  # crash recovery: refused while tumbled (the firmware's rule); a crash here tumbles for good
+            if (
+                cmd == 0x02
+            ):  # crash recovery: refused while tumbled (the firmware's rule); a crash here tumbles for good
                 recovered = not sup.tumbled
                 return [(PORT_SUPERVISOR, 1, bytes([0x82, int(recovered), int(recovered)]))]
             if cmd == 0x03:

@@ -56,7 +56,7 @@ class FirmwareParams:
         if cmd == 0:  # set by name: [0, group\0name\0, type, value]
             group_end = data.index(0, 1)
             name_end = data.index(0, group_end + 1)
-            full_name = f"{data[1:group_end].decode()}.{data[group_end + 1:name_end].decode()}"
+            full_name = f"{data[1:group_end].decode()}.{data[group_end + 1 : name_end].decode()}"
             entry = PARAM_TOC.by_name.get(full_name)
             result = errno.ENOENT if entry is None else (errno.EACCES if entry.read_only else 0)
             if entry is not None and not entry.read_only:
@@ -101,8 +101,11 @@ class FirmwareParams:
         elif full_name == "kalman.initialYaw":  # used at the next reset, as in the firmware
             v.initial_yaw = float(value)
         elif full_name.startswith("kalman.initial"):
-            v.initial_estimate = (self._params["kalman.initialX"], self._params["kalman.initialY"],
-                                  self._params["kalman.initialZ"])
+            v.initial_estimate = (
+                self._params["kalman.initialX"],
+                self._params["kalman.initialY"],
+                self._params["kalman.initialZ"],
+            )
         elif full_name in CONTROLLER_PARAMS:
             v.set_controller_param(full_name, float(value))
         elif full_name == "pm.lowVoltage":

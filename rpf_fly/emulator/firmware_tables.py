@@ -79,12 +79,14 @@ LOG_VARIABLES: tuple[tuple[str, str, Callable[[FakeFirmware], float]], ...] = (
     ("memTst.errCntW", "uint32_t", lambda f: f.memory_tester.write_errors),
 )
 
-_CONTROLLER_PARAM_TYPES: Mapping[str, str] = MappingProxyType({"posCtlPid.thrustBase": "uint16_t",
-                                                                "posCtlPid.thrustMin": "uint16_t"})
+_CONTROLLER_PARAM_TYPES: Mapping[str, str] = MappingProxyType(
+    {"posCtlPid.thrustBase": "uint16_t", "posCtlPid.thrustMin": "uint16_t"}
+)
 """The controller parameters that are not floats (`position_controller_pid.c:521-603`: PARAM_UINT16)."""
 _CONTROLLER_PARAMS: tuple[tuple[str, str, float, bool, bool], ...] = tuple(
     (name, _CONTROLLER_PARAM_TYPES.get(name, "float"), default, False, True)
-    for name, default in CfGains().params().items())
+    for name, default in CfGains().params().items()
+)
 """The PID controller's gains and limits under their firmware names, types and defaults (cf_controller.CfGains,
 checked against the PARAM_GROUP blocks of `position_controller_pid.c:462-603` (velCtlPid, posCtlPid) and
 `attitude_pid_controller.c:318-450` (pid_attitude, pid_rate) at crazyflie-firmware 2a18fc29: every one
@@ -125,9 +127,24 @@ _PARAMS: tuple[tuple[str, str, float, bool, bool], ...] = (
     ("activeMarker.right", "uint8_t", 2, False, True),
     ("activeMarker.mode", "uint8_t", 3, False, True),
     ("activeMarker.poll", "uint8_t", 0, False, False),
-    *((f"deck.{flag}", "uint8_t", 0, True, False) for flag in (
-        "bcActiveMarker", "bcAI", "bcBuzzer", "bcDWM1000", "bcFlow", "bcFlow2", "bcLedRing", "bcLighthouse4",
-        "bcLoco", "bcMultiranger", "bcUSD", "bcZRanger", "bcZRanger2")),
+    *(
+        (f"deck.{flag}", "uint8_t", 0, True, False)
+        for flag in (
+            "bcActiveMarker",
+            "bcAI",
+            "bcBuzzer",
+            "bcDWM1000",
+            "bcFlow",
+            "bcFlow2",
+            "bcLedRing",
+            "bcLighthouse4",
+            "bcLoco",
+            "bcMultiranger",
+            "bcUSD",
+            "bcZRanger",
+            "bcZRanger2",
+        )
+    ),
     # system.c: the MCU's flash size in kB (STM32F405: 1024) and unique id
     ("cpu.flash", "uint16_t", 1024, True, False),
     ("cpu.id0", "uint32_t", 0x0033_0047, True, False),

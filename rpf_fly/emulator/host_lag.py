@@ -59,16 +59,22 @@ class HostLag:
         return self.behind_s < HOST_BEHIND_REPORT_S
 
     def as_dict(self) -> dict[str, Any]:
-        return {"bound_s": self.bound_s, "behind_s": self.behind_s, "world": asdict(self.world),
-                "natnet": asdict(self.natnet) if self.natnet is not None else None}
+        return {
+            "bound_s": self.bound_s,
+            "behind_s": self.behind_s,
+            "world": asdict(self.world),
+            "natnet": asdict(self.natnet) if self.natnet is not None else None,
+        }
 
     def sentence(self, since: HostLag | None = None) -> str:
         """The line that says the host fell behind (since ``since``); '' when it kept up."""
         behind = self.behind_since(since)
         if behind < HOST_BEHIND_REPORT_S:
             return ""
-        return (f"the host could not keep up for {behind:.1f} s (simulated steps or mocap frames more than "
-                f"{self.bound_s * 1000:.0f} ms late): this dry run is not evidence")
+        return (
+            f"the host could not keep up for {behind:.1f} s (simulated steps or mocap frames more than "
+            f"{self.bound_s * 1000:.0f} ms late): this dry run is not evidence"
+        )
 
     def behind_since(self, since: HostLag | None = None) -> float:
         """Seconds behind since ``since`` (an earlier reading of the same world; None: since it started)."""

@@ -64,8 +64,13 @@ class PosePlayback:
             return {}
         return {name: (p, q, True) for name, (p, q) in self.frames[self._current][1].items()}
 
-    def play(self, server: FrameSender, stop: threading.Event | None = None,
-             clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep) -> int:
+    def play(
+        self,
+        server: FrameSender,
+        stop: threading.Event | None = None,
+        clock: Callable[[], float] = time.monotonic,
+        sleep: Callable[[float], None] = time.sleep,
+    ) -> int:
         """Send every frame at its time (blocking); returns how many were sent (fewer when ``stop`` is set)."""
         if not self.frames:
             return 0

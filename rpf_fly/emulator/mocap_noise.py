@@ -66,8 +66,12 @@ def turned(turn: Quaternion, q: Quaternion) -> Quaternion:
     """The orientation ``q`` (qx, qy, qz, qw, world from body) turned by ``turn`` in the world frame: turn * q."""
     ax, ay, az, aw = turn
     bx, by, bz, bw = q
-    return (aw * bx + ax * bw + ay * bz - az * by, aw * by - ax * bz + ay * bw + az * bx,
-            aw * bz + ax * by - ay * bx + az * bw, aw * bw - ax * bx - ay * by - az * bz)
+    return (
+        aw * bx + ax * bw + ay * bz - az * by,
+        aw * by - ax * bz + ay * bw + az * bx,
+        aw * bz + ax * by - ay * bx + az * bw,
+        aw * bw - ax * bx - ay * by - az * bz,
+    )
 
 
 def _turn(rotation: Vec3, q: Quaternion) -> Quaternion:

@@ -352,8 +352,10 @@ class NatNetServer:
             rigid_bodies=rigid_bodies,
             labeled_markers=labeled,
             timestamp=now - self._t0,
-            camera_mid_exposure=received - self._ticks(self._camera_latency_s + (
-                self._extra_latency_s() if self._extra_latency_s is not None else 0.0)),
+            camera_mid_exposure=received
+            - self._ticks(
+                self._camera_latency_s + (self._extra_latency_s() if self._extra_latency_s is not None else 0.0)
+            ),
             camera_data_received=received,
             transmit=received + self._ticks(0.0003),
             precision_seconds=int(wall),

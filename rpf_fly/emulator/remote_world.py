@@ -46,7 +46,7 @@ class RemotePort:
                 while True:
                     data = self._sock.recv(2048)
                     if len(data) >= REPLY.size and REPLY.unpack_from(data)[0] == seq:
-                        return (*REPLY.unpack_from(data), data[REPLY.size:])
+                        return (*REPLY.unpack_from(data), data[REPLY.size :])
             except OSError:  # timeout (a lost ack), or the drones' process is gone
                 return None
 

@@ -50,8 +50,14 @@ class SimDrone:
     def __init__(self, address: int, config: FakeDroneConfig, now_s: float, seed: int) -> None:
         self.address = address
         self.config = config
-        self.firmware = FakeFirmware(config.vehicle, now_s=now_s, rssi=config.rssi_dbm, seed=seed,
-                                     radio_address=address, radio_channel=config.channel or 80)
+        self.firmware = FakeFirmware(
+            config.vehicle,
+            now_s=now_s,
+            rssi=config.rssi_dbm,
+            seed=seed,
+            radio_address=address,
+            radio_channel=config.channel or 80,
+        )
         self.rng = random.Random(seed)
         self._lock = threading.Lock()
         self._tx: deque[Packet] = deque()

@@ -31,8 +31,9 @@ class SimulatedBodies:
     Every pose served carries the jitter and the single-frame dropouts of a real mocap (`noise`, default
     `MocapNoise.default()`: rpf_fly/emulator/mocap_noise.py), seeded by ``seed``."""
 
-    def __init__(self, world: FakeWorld, bodies: Mapping[int, str], noise: MocapNoise | None = None,
-                 seed: int = 0) -> None:
+    def __init__(
+        self, world: FakeWorld, bodies: Mapping[int, str], noise: MocapNoise | None = None, seed: int = 0
+    ) -> None:
         self._world = world
         self._noise = MocapNoise.default() if noise is None else noise
         self._rng = random.Random(f"mocap-noise-{seed}")

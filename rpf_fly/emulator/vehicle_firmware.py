@@ -83,6 +83,7 @@ class VehicleFirmware:
     _turbulent: Callable[[float, Vec3 | None], Vec3]
 
     if TYPE_CHECKING:  # the estimator's (VehicleEstimator) and the vehicle's, read here
+
         @property
         def estimate(self) -> Vec3: ...
 
@@ -158,7 +159,8 @@ class VehicleFirmware:
 
     def _update_motors_on(self) -> None:
         self.motors_on = self.thrusting = self._motors_allowed and any(
-            motor_thrust_n(m) > 0.0 for m in self.motor_commands)
+            motor_thrust_n(m) > 0.0 for m in self.motor_commands
+        )
 
     def _step_firmware(self, now_s: float) -> None:
         """Fly the 1 ms ticks up to `now_s` (fake_vehicle, "Firmware dynamics")."""
@@ -195,8 +197,12 @@ class VehicleFirmware:
                 if self.motor_commands != (0, 0, 0, 0):
                     self.motor_commands = (0, 0, 0, 0)
                     body.command_thrusts((0.0, 0.0, 0.0, 0.0))
-            if not (body.on_floor and body.rotor_rpm == _STILL_ROTORS and body.rotor_cmd_rpm == _STILL_ROTORS
-                    and body.external_force == _NO_FORCE):  # at rest on the floor with rotors still, nothing moves
+            if not (
+                body.on_floor
+                and body.rotor_rpm == _STILL_ROTORS
+                and body.rotor_cmd_rpm == _STILL_ROTORS
+                and body.external_force == _NO_FORCE
+            ):  # at rest on the floor with rotors still, nothing moves
                 x, y, was_on_floor = body.pos[0], body.pos[1], body.on_floor
                 body.step(TICK_S)
                 if body.on_floor:  # it stands on its feet: level, and it can neither slide nor tip
@@ -231,7 +237,8 @@ class VehicleFirmware:
             else:
                 floor = self.ext_pos_std_dev**2
                 self._onboard_variance_m2 = floor + (self._onboard_variance_m2 - floor) * math.exp(
-                    -dt / VARIANCE_DECAY_TAU_S)
+                    -dt / VARIANCE_DECAY_TAU_S
+                )
         self._slot_vel = (vel[0], vel[1])
         roll, pitch, yaw = quaternion_to_rpy_deg(*body.quat)
         self.yaw = math.radians(yaw)
@@ -257,10 +264,23 @@ class VehicleFirmware:
         slot = self._supervisor_lattice(t)
         if slot > self._supervisor_slot:
             self._supervisor_slot = slot
-            self.supervisor.update(t, thrust_over_idle=self.thrusting, setpoint_age_s=t - setpoint.timestamp_s,
-                                   param_emergency_stop=self.param_emergency_stop)
+            self.supervisor.update(
+                t,
+                thrust_over_idle=self.thrusting,
+                setpoint_age_s=t - setpoint.timestamp_s,
+                param_emergency_stop=self.param_emergency_stop,
+            )
         self._selected_from = self.setpoint
         self._select(setpoint)
         est, est_vel = self.estimate, self.estimate_velocity
-        self._state = (est[0], est[1], est[2], est_vel[0], est_vel[1], est_vel[2], roll, -pitch,
-                       math.degrees(self.estimate_yaw))
+        self._state = (
+            est[0],
+            est[1],
+            est[2],
+            est_vel[0],
+            est_vel[1],
+            est_vel[2],
+            roll,
+            -pitch,
+            math.degrees(self.estimate_yaw),
+        )

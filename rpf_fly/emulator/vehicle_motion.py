@@ -48,8 +48,8 @@ class VehicleMotion:
     _turbulence: list[float]
     _turbulence_rng: random.Random
 
-
     if TYPE_CHECKING:  # the estimator's (VehicleEstimator), read here
+
         @property
         def estimate(self) -> Vec3: ...
 
@@ -132,8 +132,15 @@ class VehicleMotion:
             if vel[2] <= 0.0:
                 vel[:] = [0.0, 0.0, 0.0]
 
-    def _move_in_gust(self, dt: float, modes: tuple[AxisMode, AxisMode, AxisMode], wanted: list[float],
-                      gain: float, push: Vec3 | None, thrust_accel: Vec3) -> None:
+    def _move_in_gust(
+        self,
+        dt: float,
+        modes: tuple[AxisMode, AxisMode, AxisMode],
+        wanted: list[float],
+        gain: float,
+        push: Vec3 | None,
+        thrust_accel: Vec3,
+    ) -> None:
         """The controlled velocities of `_move` with a gust (or what is left of one): on controlled axes the true
         velocity is the controller's plus the disturbance velocity d, d' = push - d / `GUST_RESPONSE_TAU_S`
         (integrated exactly over the step); uncontrolled axes take the push whole, with the thrust's acceleration

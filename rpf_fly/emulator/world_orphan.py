@@ -41,8 +41,9 @@ class Orphan:
     down or `ORPHAN_CAP_S` passed, then write the exit report. The first caller (the control connection's end, or
     the parent watch) runs it; a second one waits until it is done."""
 
-    def __init__(self, world: FakeWorld, parent_pid: int, names: Mapping[int, str], report: str | None,
-                 cap_s: float) -> None:
+    def __init__(
+        self, world: FakeWorld, parent_pid: int, names: Mapping[int, str], report: str | None, cap_s: float
+    ) -> None:
         self._world = world
         self._parent_pid = parent_pid
         self._names = dict(names)
@@ -171,8 +172,10 @@ class Orphan:
             except OSError as err:
                 where = f"report not written: {err}"
         down = sum(d["at_rest"] for d in report["drones"].values())
-        line = (f"rpf-fly dry run: the flight's process died; {down} of {len(report['drones'])} simulated drones "
-                f"down after {report['elapsed_s']:.1f} s ({where})\n")
+        line = (
+            f"rpf-fly dry run: the flight's process died; {down} of {len(report['drones'])} simulated drones "
+            f"down after {report['elapsed_s']:.1f} s ({where})\n"
+        )
         try:
             if select.select([], [2], [], 0.5)[1]:
                 os.write(2, line.encode()[:4096])  # a pipe that polls writable takes 4096 bytes without blocking

@@ -91,13 +91,23 @@ class WorldProcess(WorldCalls):
         self._lock = threading.Lock()
         self._conn: Any = None
         key = secrets.token_bytes(32)
-        settings = {"drones": dict(drones), "bodies": dict(bodies), "seed": seed, "obstacles": tuple(obstacles),
-                    "natnet": dict(natnet) if natnet else None, "authkey": key, "names": dict(names or {}),
-                    "exit_report": os.fspath(exit_report) if exit_report is not None else None,
-                    "orphan_cap_s": float(orphan_cap_s), "host": host,
-                    "mocap_noise": MocapNoise.default() if mocap_noise is None else mocap_noise}
+        settings = {
+            "drones": dict(drones),
+            "bodies": dict(bodies),
+            "seed": seed,
+            "obstacles": tuple(obstacles),
+            "natnet": dict(natnet) if natnet else None,
+            "authkey": key,
+            "names": dict(names or {}),
+            "exit_report": os.fspath(exit_report) if exit_report is not None else None,
+            "orphan_cap_s": float(orphan_cap_s),
+            "host": host,
+            "mocap_noise": MocapNoise.default() if mocap_noise is None else mocap_noise,
+        }
         self._process = subprocess.Popen(
-            [sys.executable, "-m", "rpf_fly.emulator.world_process"], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+            [sys.executable, "-m", "rpf_fly.emulator.world_process"],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
         )
         try:
             assert self._process.stdin is not None and self._process.stdout is not None
@@ -163,8 +173,13 @@ def serve(settings: dict[str, Any], out: Any) -> None:
     """The child process: world, radio server, NatNet server; reports its ports as one JSON line on ``out``, then
     answers the parent's calls until it closes them, or until it goes away (then `Orphan`)."""
     server = WorldServer(settings)
-    orphan = Orphan(server.world, os.getppid(), settings.get("names", {}), settings.get("exit_report"),
-                     settings.get("orphan_cap_s", ORPHAN_CAP_S))
+    orphan = Orphan(
+        server.world,
+        os.getppid(),
+        settings.get("names", {}),
+        settings.get("exit_report"),
+        settings.get("orphan_cap_s", ORPHAN_CAP_S),
+    )
     orphan.watch_parent()
     try:
         with Listener(("127.0.0.1", 0), authkey=settings["authkey"]) as listener:

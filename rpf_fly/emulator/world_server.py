@@ -63,7 +63,7 @@ class RadioServer:
     def _handle(self, data: bytes, peer: Any) -> bytes:
         op, seq, address, channel, flags = REQUEST.unpack_from(data)
         if op == BROADCAST:
-            body = data[REQUEST.size:]
+            body = data[REQUEST.size :]
             self._world.broadcast(channel, (body[0], bytes(body[1:])), flags)
             return REPLY.pack(seq, 1, 0, 0, 0)
         port = self._port(address)
@@ -79,7 +79,7 @@ class RadioServer:
             return REPLY.pack(seq, 1, 0, 0, 0)
         if port is None:
             return REPLY.pack(seq, 0, self._world.timing.arc_retries, 0, 0)
-        body = data[REQUEST.size:]
+        body = data[REQUEST.size :]
         uplink = (body[0], bytes(body[1:])) if flags & 1 else None
         ok, retry, down = port.transact(channel, uplink)
         more = port.has_downlink()
@@ -94,8 +94,12 @@ class WorldServer:
     ``settings``: as `WorldProcess` sends them. The caller serves the calls (`handle`) over its connections."""
 
     def __init__(self, settings: Mapping[str, Any]) -> None:
-        self.world = FakeWorld(settings["drones"], seed=settings["seed"], obstacles=settings.get("obstacles", ()),
-                               timing=settings.get("timing")).start()
+        self.world = FakeWorld(
+            settings["drones"],
+            seed=settings["seed"],
+            obstacles=settings.get("obstacles", ()),
+            timing=settings.get("timing"),
+        ).start()
         self.bodies: dict[int, str] = dict(settings["bodies"])
         self.tracked = SimulatedBodies(self.world, self.bodies, settings.get("mocap_noise"), seed=settings["seed"])
         self.host = settings.get("host", "127.0.0.1")
@@ -106,22 +110,39 @@ class WorldServer:
             from rpf_fly.emulator.natnet_server import NatNetServer
 
             self.natnet = NatNetServer(
-                self.tracked.poses, version=natnet["version"], multicast=natnet.get("multicast", False),
-                local_ip=self.host, rate_hz=natnet["rate_hz"], up_axis=natnet["up_axis"],
-                bodies=list(self.bodies.values()), extra_latency_s=self.tracked.extra_latency_s,
+                self.tracked.poses,
+                version=natnet["version"],
+                multicast=natnet.get("multicast", False),
+                local_ip=self.host,
+                rate_hz=natnet["rate_hz"],
+                up_axis=natnet["up_axis"],
+                bodies=list(self.bodies.values()),
+                extra_latency_s=self.tracked.extra_latency_s,
             ).start()
         world, tracked = self.world, self.tracked
         self.calls: dict[str, Any] = {
-            "drop_link": world.drop_link, "restore_link": world.restore_link, "disturb": world.disturb,
-            "set_battery": world.set_battery, "reboot": world.reboot, "snapshot": world.snapshot,
-            "true_poses": world.true_poses, "truth_samples": world.truth_samples, "poses": tracked.poses,
+            "drop_link": world.drop_link,
+            "restore_link": world.restore_link,
+            "disturb": world.disturb,
+            "set_battery": world.set_battery,
+            "reboot": world.reboot,
+            "snapshot": world.snapshot,
+            "true_poses": world.true_poses,
+            "truth_samples": world.truth_samples,
+            "poses": tracked.poses,
             "hide": tracked.hide,
             "blackout": tracked.blackout,
             # fault hooks of a campaign (same names and arguments as on FakeWorld and SimulatedBodies)
-            "packet_loss": world.packet_loss, "gust": world.gust, "estimator_divergence": world.estimator_divergence,
-            "radio_counters": world.radio_counters, "radio_bursts": world.radio_bursts, "time_s": world.time_s,
-            "pose_jump": tracked.pose_jump, "orientation_flip": tracked.orientation_flip,
-            "mocap_delay": tracked.mocap_delay, "host_lag": self.host_lag,
+            "packet_loss": world.packet_loss,
+            "gust": world.gust,
+            "estimator_divergence": world.estimator_divergence,
+            "radio_counters": world.radio_counters,
+            "radio_bursts": world.radio_bursts,
+            "time_s": world.time_s,
+            "pose_jump": tracked.pose_jump,
+            "orientation_flip": tracked.orientation_flip,
+            "mocap_delay": tracked.mocap_delay,
+            "host_lag": self.host_lag,
         }
 
     def host_lag(self) -> HostLag:
@@ -130,8 +151,10 @@ class WorldServer:
 
     def ports(self) -> dict[str, Any]:
         """Where the world is reached: the radio server's UDP address and the NatNet emulator's command port."""
-        return {"radio": list(self.radio.sock.getsockname()),
-                "natnet_command_port": self.natnet.command_port if self.natnet is not None else None}
+        return {
+            "radio": list(self.radio.sock.getsockname()),
+            "natnet_command_port": self.natnet.command_port if self.natnet is not None else None,
+        }
 
     def handle(self, method: str, args: Sequence[Any]) -> tuple[str, Any]:
         """One call: ``("ok", value)`` or ``("error", "Type: message")`` (the caller stays up)."""

@@ -45,6 +45,7 @@ LEAD_ALLOWANCE = 1.25
 MIN_LEAD_M = 0.3
 """The carrot's lead is never held under this (a slow mission's drone still gets a firm pull)."""
 
+
 class PlannerLike(Protocol):
     def step(self, view: LocalView) -> PlanStep: ...
 
@@ -148,8 +149,10 @@ class DroneAgent:
         self.arena = arena
         self.budget_s = budget_s
         self.body_radius_m = body_radius_m
-        inset = [(lo + body_radius_m, hi - body_radius_m) if hi - lo > 2 * body_radius_m else ((lo + hi) / 2,) * 2
-                 for lo, hi in (arena.x, arena.y, arena.z)]
+        inset = [
+            (lo + body_radius_m, hi - body_radius_m) if hi - lo > 2 * body_radius_m else ((lo + hi) / 2,) * 2
+            for lo, hi in (arena.x, arena.y, arena.z)
+        ]
         self._fence = tuple(inset)
         self._max_lead_given_m = max_lead_m
         """How far the carrot may lead the drone when the caller fixed it; None: from the drone's steady lag."""
@@ -184,8 +187,14 @@ class DroneAgent:
         """The agent the flight loop flies ``drone`` with (height, speed, step, arena, budget and body radius from
         the mission); ``overrides`` replace keyword arguments (``rpf-fly replay`` lifts the time budget)."""
         flight = mission.flight
-        kwargs: dict = dict(height=flight.height, speed=flight.speed, dt=flight.dt, arena=mission.arena,
-                            budget_s=mission.safety.planner_budget_s, body_radius_m=mission.planner.safety_radius)
+        kwargs: dict = dict(
+            height=flight.height,
+            speed=flight.speed,
+            dt=flight.dt,
+            arena=mission.arena,
+            budget_s=mission.safety.planner_budget_s,
+            body_radius_m=mission.planner.safety_radius,
+        )
         kwargs.update(overrides)
         return cls(drone, planner, **kwargs)
 

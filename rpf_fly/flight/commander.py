@@ -210,7 +210,9 @@ class Commander:
             if not agent.phase.airborne or agent.phase == DronePhase.LANDING:
                 return False
             if agent.outcome is None:
-                agent.outcome = FlightOutcome.REACHED if agent.phase == DronePhase.ARRIVED else FlightOutcome.LANDED_EARLY
+                agent.outcome = (
+                    FlightOutcome.REACHED if agent.phase == DronePhase.ARRIVED else FlightOutcome.LANDED_EARLY
+                )
             self._set(agent, DronePhase.LANDING, reason, level)
             agent.landing_until_s = self.clock() + land_s + self.land_settle_s
             agent.touchdown_s = self.clock() + land_s
@@ -224,8 +226,9 @@ class Commander:
         for agent in self.agents.values():
             self.land(agent, reason, level)
 
-    def confirm_touchdown(self, agent: DroneAgent, now_s: float, pose_z: float | None, pose_fresh: bool,
-                          state: DroneState | None) -> bool:
+    def confirm_touchdown(
+        self, agent: DroneAgent, now_s: float, pose_z: float | None, pose_fresh: bool, state: DroneState | None
+    ) -> bool:
         """A landing drone is down when its supervisor no longer says flying (its motors have idled for the
         firmware's hysteresis: the landing ended) and, where mocap sees it, its height is near the floor; only then
         is it disarmed (disarming in flight cuts the motors). With mocap lost the supervisor alone decides: the
@@ -243,8 +246,12 @@ class Commander:
             if now_s > agent.landing_until_s + TOUCHDOWN_TIMEOUT_S and agent.name not in self._touchdown_late:
                 self._touchdown_late.add(agent.name)
                 why = "its height is not near the floor" if not low else "its supervisor still says flying"
-                self.events.emit(ERROR, "touchdown", f"touchdown not confirmed {TOUCHDOWN_TIMEOUT_S:.0f} s after "
-                                 f"landing ({why}): not disarmed", agent.name)
+                self.events.emit(
+                    ERROR,
+                    "touchdown",
+                    f"touchdown not confirmed {TOUCHDOWN_TIMEOUT_S:.0f} s after landing ({why}): not disarmed",
+                    agent.name,
+                )
             return False
 
     def _emergency(self, agent: DroneAgent) -> None:
@@ -257,8 +264,7 @@ class Commander:
     """How long the flight loop waits for an emergency stop it orders (:meth:`emergency_stop` ``wait_s``): the
     packets of a drone whose link is blocked go on from their own thread, and the loop ticks on."""
 
-    def emergency_stop(self, reason: str, names: Iterable[str] | None = None,
-                       wait_s: float | None = None) -> None:
+    def emergency_stop(self, reason: str, names: Iterable[str] | None = None, wait_s: float | None = None) -> None:
         """Motors off now (latched until reboot), from any thread but a signal handler (it does radio I/O). It takes
         no drone lock first: a drone whose link is blocked must not delay the stop of the others (the backend sends
         each drone's from a thread of its own, waiting ``wait_s`` at most: its default when None); the phase is

@@ -99,8 +99,9 @@ def emulator_motioncapture_source(host: str, command_port: int, up_axis: str, bo
     one process or in a distributed flight's relay."""
     from rpf_fly.mocap.motioncapture_source import MotioncaptureSource
 
-    return MotioncaptureSource("optitrack", host, {"interface_ip": host, "port_command": str(command_port)},
-                               up_axis=up_axis, bodies=bodies)
+    return MotioncaptureSource(
+        "optitrack", host, {"interface_ip": host, "port_command": str(command_port)}, up_axis=up_axis, bodies=bodies
+    )
 
 
 def fake_uri(uri: str) -> str:
@@ -147,15 +148,20 @@ def mission_mocap_noise(mission: Mission) -> MocapNoise:
     default, d = MocapNoise.default(), mission.dry_run
     if d.mocap_noise_m is None and d.vehicle is not None and d.vehicle.mocap_noise_m is not None:
         default = replace(default, position_m=d.vehicle.mocap_noise_m)  # the vehicle profile's (dry_run.vehicle)
-    return MocapNoise(default.position_m if d.mocap_noise_m is None else d.mocap_noise_m,
-                      default.orientation_deg if d.mocap_noise_deg is None else d.mocap_noise_deg,
-                      default.dropout if d.mocap_dropout is None else d.mocap_dropout)
+    return MocapNoise(
+        default.position_m if d.mocap_noise_m is None else d.mocap_noise_m,
+        default.orientation_deg if d.mocap_noise_deg is None else d.mocap_noise_deg,
+        default.dropout if d.mocap_dropout is None else d.mocap_dropout,
+    )
 
 
-def simulated_drones(mission: Mission, drone_configs: Mapping[str, FakeDroneConfig] | None = None,
-                     start_faults: Mapping[str, StartFault] | None = None,
-                     radio_loss: BurstLoss | None = RADIO_LOSS,
-                     dynamics: str | None = None) -> dict[int, FakeDroneConfig]:
+def simulated_drones(
+    mission: Mission,
+    drone_configs: Mapping[str, FakeDroneConfig] | None = None,
+    start_faults: Mapping[str, StartFault] | None = None,
+    radio_loss: BurstLoss | None = RADIO_LOSS,
+    dynamics: str | None = None,
+) -> dict[int, FakeDroneConfig]:
     """The simulated Crazyflie of each drone of ``mission`` by radio address: at its mission start, mocap
     positioning, every link with ``radio_loss``; ``drone_configs`` replaces a drone's (by name), ``start_faults``
     then moves or turns it before power-on. ``dynamics`` (``"firmware"`` or ``"first-order"``; default the
@@ -252,8 +258,10 @@ class DryRun:
         self.addresses = {d.name: uri_address(d.uri) for d in mission.drones}
         self.bodies = {d.name: d.rigid_body for d in mission.drones}
         if lab is not None and (drone_configs or start_faults):
-            raise ValueError("a running lab's drones are already powered on: give drone configs and power-on "
-                             "faults to the lab (rpf-fly lab --faults), not to a flight against it")
+            raise ValueError(
+                "a running lab's drones are already powered on: give drone configs and power-on "
+                "faults to the lab (rpf-fly lab --faults), not to a flight against it"
+            )
         self.dynamics = mission.dry_run.dynamics if dynamics is None else dynamics
         self.drone_configs = simulated_drones(mission, drone_configs, start_faults, radio_loss, self.dynamics)
         self.lab = lab
@@ -261,8 +269,9 @@ class DryRun:
         self.seed = mission.dry_run.seed if seed is None else seed
         self.timing = RadioTiming(transaction_s=AIR_TIME_S if air_time_s is None else float(air_time_s))
         self.radio_loss = radio_loss
-        self.world_exit_report = Path(world_exit_report) if world_exit_report is not None else \
-            default_world_exit_report()
+        self.world_exit_report = (
+            Path(world_exit_report) if world_exit_report is not None else default_world_exit_report()
+        )
         self.in_process = not process
         self.host = host
         self.truth = truth
@@ -308,16 +317,19 @@ class DryRun:
             self.world = self._bodies = LabClient(self.lab)
             missing = sorted(set(self.drone_configs) - set(self.lab.addresses.values()))
             if missing:
-                raise RuntimeError(f"the lab ({self.lab.mission}) has no drone at address "
-                                   f"{', '.join(f'{a:010X}' for a in missing)}: start the lab with this mission")
+                raise RuntimeError(
+                    f"the lab ({self.lab.mission}) has no drone at address "
+                    f"{', '.join(f'{a:010X}' for a in missing)}: start the lab with this mission"
+                )
             lab_radio: Any = tuple(self.lab.radio)
             self._connect_radio(RemoteWorld(lab_radio, tuple(self.drone_configs), self.timing))
             command_port = self.lab.natnet_command_port
             if served and command_port is None:
                 raise RuntimeError("the lab serves no NatNet emulator")
         elif self.in_process:
-            self.world = FakeWorld(self.drone_configs, seed=self.seed, obstacles=self.mission.obstacles,
-                                   timing=self.timing).start()
+            self.world = FakeWorld(
+                self.drone_configs, seed=self.seed, obstacles=self.mission.obstacles, timing=self.timing
+            ).start()
             self._bodies = SimulatedBodies(self.world, body_of_address, self.mocap_noise, seed=self.seed)
             self._connect_radio(self.world)
             command_port = None
@@ -325,17 +337,28 @@ class DryRun:
                 from rpf_fly.emulator.natnet_server import NatNetServer
 
                 self.server = NatNetServer(
-                    self._bodies.poses, version=self.natnet_version, multicast=multicast, local_ip=self.host,
-                    rate_hz=self.rate_hz, up_axis=up, bodies=list(self.bodies.values()),
+                    self._bodies.poses,
+                    version=self.natnet_version,
+                    multicast=multicast,
+                    local_ip=self.host,
+                    rate_hz=self.rate_hz,
+                    up_axis=up,
+                    bodies=list(self.bodies.values()),
                     extra_latency_s=self._bodies.extra_latency_s,
                 ).start()
                 command_port = self.server.command_port
         else:
             self.world_exit_report.unlink(missing_ok=True)  # a report there is about an earlier run
             self.world = self._bodies = WorldProcess(
-                self.drone_configs, body_of_address, seed=self.seed,
-                natnet=natnet if served else None, obstacles=self.mission.obstacles,
-                names=self._names, exit_report=self.world_exit_report, host=self.host, mocap_noise=self.mocap_noise,
+                self.drone_configs,
+                body_of_address,
+                seed=self.seed,
+                natnet=natnet if served else None,
+                obstacles=self.mission.obstacles,
+                names=self._names,
+                exit_report=self.world_exit_report,
+                host=self.host,
+                mocap_noise=self.mocap_noise,
             )
             self._connect_radio(RemoteWorld(self.world.radio, tuple(self.drone_configs), self.timing))
             command_port = self.world.natnet_command_port
@@ -349,8 +372,12 @@ class DryRun:
             if command_port is None:  # served (a natnet dry run) gives it, or stopped above
                 raise RuntimeError("dry run: no NatNet emulator serves the mocap")
             client = NatNetClient(
-                server, multicast=False, local_ip=client_ip(server), command_port=command_port,
-                data_port=None, up_axis=up,
+                server,
+                multicast=False,
+                local_ip=client_ip(server),
+                command_port=command_port,
+                data_port=None,
+                up_axis=up,
             )
             self.mocap = client
             if not client.wait_for_server(5.0):
@@ -358,8 +385,9 @@ class DryRun:
         elif self.mocap_kind == "motioncapture":
             if command_port is None:  # served (a motioncapture dry run) gives it, or stopped above
                 raise RuntimeError("dry run: no NatNet emulator serves the mocap")
-            self.mocap = emulator_motioncapture_source("127.0.0.1" if self.host == "0.0.0.0" else self.host,
-                                                       int(command_port), up, list(self.bodies.values()))
+            self.mocap = emulator_motioncapture_source(
+                "127.0.0.1" if self.host == "0.0.0.0" else self.host, int(command_port), up, list(self.bodies.values())
+            )
         else:
             from rpf_fly.emulator.simulated_mocap import SimulatedMocap
 
@@ -377,8 +405,10 @@ class DryRun:
             from rpf_fly.emulator import crazyradio
 
             if crazyradio.plugged() is not None:
-                raise RuntimeError("emulated Crazyradios are already plugged into this process (another dry run "
-                                   "through dry_run.radio: crazyradio): one at a time")
+                raise RuntimeError(
+                    "emulated Crazyradios are already plugged into this process (another dry run "
+                    "through dry_run.radio: crazyradio): one at a time"
+                )
             dongles = 1 + max(uri_dongle(u) for u in self.uris.values())
             self.plugged = crazyradio.plug(world, dongles=dongles, radio=self.crazyradio)
         else:
@@ -427,8 +457,10 @@ class DryRun:
         (position, yaw, motors, crashed, estimate)})]`` (one sample per world step; one round trip to the world
         process, or a direct call with ``process=False``). One reader: the flight log's truth feed."""
         names = self._names
-        return [(stamp, {names[a]: state for a, state in states.items()})
-                for stamp, states in self.world.truth_samples()]
+        return [
+            (stamp, {names[a]: state for a, state in states.items()}) for stamp, states in self.world.truth_samples()
+        ]
+
     def pose_jump(self, name: str, offset_m: tuple[float, float, float], seconds: float) -> None:
         """Report drone ``name``'s rigid body ``offset_m`` metres from where it is, as tracked, for ``seconds`` (a
         marker swap, a wrong model fit); the drone does not move."""
@@ -481,8 +513,11 @@ def _with_start_fault(config: FakeDroneConfig, fault: StartFault | None) -> Fake
     if fault is None:
         return config
     x, y, z = config.vehicle.position
-    vehicle = replace(config.vehicle, position=(x + fault.offset_m[0], y + fault.offset_m[1], z),
-                      yaw_deg=config.vehicle.yaw_deg + fault.yaw_deg,
-                      upside_down=config.vehicle.upside_down or fault.upside_down,
-                      motor_fault=config.vehicle.motor_fault or fault.motor_fault)
+    vehicle = replace(
+        config.vehicle,
+        position=(x + fault.offset_m[0], y + fault.offset_m[1], z),
+        yaw_deg=config.vehicle.yaw_deg + fault.yaw_deg,
+        upside_down=config.vehicle.upside_down or fault.upside_down,
+        motor_fault=config.vehicle.motor_fault or fault.motor_fault,
+    )
     return replace(config, vehicle=vehicle)

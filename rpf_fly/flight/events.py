@@ -11,8 +11,13 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 DEBUG, INFO, WARNING, ERROR, FATAL = 1, 2, 3, 4, 5
-_LOGGING_LEVEL = {DEBUG: logging.DEBUG, INFO: logging.INFO, WARNING: logging.WARNING, ERROR: logging.ERROR,
-                  FATAL: logging.CRITICAL}
+_LOGGING_LEVEL = {
+    DEBUG: logging.DEBUG,
+    INFO: logging.INFO,
+    WARNING: logging.WARNING,
+    ERROR: logging.ERROR,
+    FATAL: logging.CRITICAL,
+}
 
 logger = logging.getLogger("rpf_fly.flight")
 

@@ -135,6 +135,7 @@ class FaultInjection:
 
     def planner_factory(self, base: Callable[[Drone], Any]) -> Callable[[Drone], Any]:
         """``base`` with the planner faults of each drone wrapped around its own planner."""
+
         def factory(drone: Drone) -> Any:
             mine = [f for f in self.faults if f.drone == drone.name and f.kind in ("planner_error", "planner_hang")]
             planner = base(drone)
@@ -225,8 +226,12 @@ class FaultInjection:
         not get to write it), then SIGKILL. Nothing after it runs: no landing, no disconnect, no log close; the
         drones are left to their firmware (its emergency-stop watchdog, fed from each take-off on)."""
         self.applied.append((time.monotonic(), fault))
-        loop.events.emit(INFO, "fault", f"injected ground_station_kill at {fault.phase} + {fault.at_s or 0.0:g} s: "
-                         "SIGKILL of this ground station (no landing, no log close)")
+        loop.events.emit(
+            INFO,
+            "fault",
+            f"injected ground_station_kill at {fault.phase} + {fault.at_s or 0.0:g} s: "
+            "SIGKILL of this ground station (no landing, no log close)",
+        )
         self._kill()
 
     def _apply(self, fault: Fault, loop: Any, rig: Any) -> None:

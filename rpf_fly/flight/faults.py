@@ -54,37 +54,67 @@ class FaultKind:
 FAULT_KINDS: dict[str, FaultKind] = {
     "occlusion": FaultKind("the drone's rigid body untracked in the NatNet frames", True, duration=True),
     "blackout": FaultKind("no NatNet frames carry any tracked body", False, duration=True),
-    "pose_jump": FaultKind("the drone's body reported offset_m away (a marker swap)", True, duration=True,
-                           params={"offset_m": ("vec3", True)}),
-    "orientation_flip": FaultKind("the drone's body reported turned by deg about the vertical (a wrong fit of its "
-                                  "markers)", True, duration=True, params={"deg": ("number", True)}),
-    "mocap_delay": FaultKind("every frame carries poses delay_s old", False, duration=True,
-                             params={"delay_s": ("positive", True)}),
+    "pose_jump": FaultKind(
+        "the drone's body reported offset_m away (a marker swap)",
+        True,
+        duration=True,
+        params={"offset_m": ("vec3", True)},
+    ),
+    "orientation_flip": FaultKind(
+        "the drone's body reported turned by deg about the vertical (a wrong fit of its markers)",
+        True,
+        duration=True,
+        params={"deg": ("number", True)},
+    ),
+    "mocap_delay": FaultKind(
+        "every frame carries poses delay_s old", False, duration=True, params={"delay_s": ("positive", True)}
+    ),
     "link_drop": FaultKind("the drone's radio link lost for good (its firmware levels, then cuts)", True),
-    "packet_loss": FaultKind("the drone's radio attempts lost with probability rate", True, duration=True,
-                             params={"rate": ("fraction", True)}),
+    "packet_loss": FaultKind(
+        "the drone's radio attempts lost with probability rate",
+        True,
+        duration=True,
+        params={"rate": ("fraction", True)},
+    ),
     "low_battery": FaultKind("the drone's battery sags to a low voltage", True),
     "planner_error": FaultKind("the drone's planner raises from at_s on", True),
     "planner_hang": FaultKind("the drone's planner blocks for duration_s", True, duration=True),
     "loop_stall": FaultKind("the flight loop's thread blocks for duration_s", False, duration=True),
-    "yaw_offset": FaultKind("the drone stands rotated by deg at power-on", True, timed=False,
-                            params={"deg": ("number", True)}),
-    "start_offset": FaultKind("the drone stands offset_m (x, y) from its mission start", True, timed=False,
-                              params={"offset_m": ("vec2", True)}),
-    "upside_down": FaultKind("the drone lies on its back at power-on (its supervisor reports tumbled)", True,
-                             timed=False),
+    "yaw_offset": FaultKind(
+        "the drone stands rotated by deg at power-on", True, timed=False, params={"deg": ("number", True)}
+    ),
+    "start_offset": FaultKind(
+        "the drone stands offset_m (x, y) from its mission start",
+        True,
+        timed=False,
+        params={"offset_m": ("vec2", True)},
+    ),
+    "upside_down": FaultKind(
+        "the drone lies on its back at power-on (its supervisor reports tumbled)", True, timed=False
+    ),
     "motor_fault": FaultKind("a motor of the drone fails the arming spin-up check", True, timed=False),
-    "gust": FaultKind("an external acceleration accel (m/s^2) on the drone", True, duration=True,
-                      params={"accel": ("vec3", True)}),
-    "estimator_divergence": FaultKind("the drone's estimator stops taking extpos and runs away at rate_m_s", True,
-                                      params={"rate_m_s": ("positive", True)}),
+    "gust": FaultKind(
+        "an external acceleration accel (m/s^2) on the drone", True, duration=True, params={"accel": ("vec3", True)}
+    ),
+    "estimator_divergence": FaultKind(
+        "the drone's estimator stops taking extpos and runs away at rate_m_s",
+        True,
+        params={"rate_m_s": ("positive", True)},
+    ),
     "reboot": FaultKind("the drone browns out: motors off, radio silent while it boots", True),
-    "ground_station_kill": FaultKind("the ground station (this flight's process) is SIGKILLed at_s after the start "
-                                     "of at_phase: nothing of it runs any more, no landing, no log close",
-                                     False, params={"at_phase": ("choice", True)},
-                                     choices={"at_phase": GROUND_STATION_PHASES}, at_s_default=0.0),
-    "dongle_unplug": FaultKind("the Crazyradio of that dongle number is pulled out: every link on it fails with "
-                               "cflib's link error, for good", False, params={"dongle": ("dongle", True)}),
+    "ground_station_kill": FaultKind(
+        "the ground station (this flight's process) is SIGKILLed at_s after the start "
+        "of at_phase: nothing of it runs any more, no landing, no log close",
+        False,
+        params={"at_phase": ("choice", True)},
+        choices={"at_phase": GROUND_STATION_PHASES},
+        at_s_default=0.0,
+    ),
+    "dongle_unplug": FaultKind(
+        "the Crazyradio of that dongle number is pulled out: every link on it fails with cflib's link error, for good",
+        False,
+        params={"dongle": ("dongle", True)},
+    ),
 }
 """Every fault kind a schedule may name."""
 
@@ -117,7 +147,8 @@ class Fault:
         if self.drone is not None:
             return self.drone
         return {"loop_stall": "loop", "dongle_unplug": "radio", "ground_station_kill": "ground station"}.get(
-            self.kind, "mocap")
+            self.kind, "mocap"
+        )
 
     @property
     def ends_at_s(self) -> float | None:
@@ -159,16 +190,25 @@ def _did_you_mean(word: Any, words: tuple[str, ...] | list[str]) -> str:
 def _choice(file: str, node: YNode, words: tuple[str, ...]) -> str:
     v = node.value
     if not isinstance(v, str) or v not in words:
-        raise _fail(file, node, node.path, f"expected one of {', '.join(words)}, got {node.raw or node.plain()!r}"
-                    f"{_did_you_mean(v, words)}")
+        raise _fail(
+            file,
+            node,
+            node.path,
+            f"expected one of {', '.join(words)}, got {node.raw or node.plain()!r}{_did_you_mean(v, words)}",
+        )
     return v
 
 
 def _dongle(file: str, node: YNode, dongles: tuple[int, ...]) -> int:
     v = node.value
     if isinstance(v, bool) or not isinstance(v, int) or v not in dongles:
-        raise _fail(file, node, node.path, f"expected a dongle of the mission (the first number of its radio URIs: "
-                    f"{', '.join(str(d) for d in dongles)}), got {node.raw or node.plain()!r}")
+        raise _fail(
+            file,
+            node,
+            node.path,
+            f"expected a dongle of the mission (the first number of its radio URIs: "
+            f"{', '.join(str(d) for d in dongles)}), got {node.raw or node.plain()!r}",
+        )
     return v
 
 
@@ -200,34 +240,62 @@ def _fault(file: str, node: YNode, drones: set[str], dongles: tuple[int, ...]) -
     kind_node = entries["kind"]
     kind = kind_node.value
     if kind not in FAULT_KINDS:
-        raise _fail(file, kind_node, kind_node.path, f"unknown fault kind {kind!r}"
-                    f"{_did_you_mean(kind, list(FAULT_KINDS))}; one of {', '.join(FAULT_KINDS)}")
+        raise _fail(
+            file,
+            kind_node,
+            kind_node.path,
+            f"unknown fault kind {kind!r}{_did_you_mean(kind, list(FAULT_KINDS))}; one of {', '.join(FAULT_KINDS)}",
+        )
     spec = FAULT_KINDS[str(kind)]
-    allowed = {"kind"} | set(spec.params) | ({"drone"} if spec.drone else set()) | (
-        {"at_s"} if spec.timed else set()) | ({"duration_s"} if spec.duration else set())
+    allowed = (
+        {"kind"}
+        | set(spec.params)
+        | ({"drone"} if spec.drone else set())
+        | ({"at_s"} if spec.timed else set())
+        | ({"duration_s"} if spec.duration else set())
+    )
     for key, value in entries.items():
         if key not in allowed:
-            raise _fail(file, value.key_line, value.path,
-                        f"not a field of a {kind} fault; its fields: {', '.join(sorted(allowed))}")
-    required = [k for k in sorted(allowed - {"kind"}) if (k not in spec.params or spec.params[k][1])
-                and not (k == "at_s" and spec.at_s_default is not None)]
+            raise _fail(
+                file,
+                value.key_line,
+                value.path,
+                f"not a field of a {kind} fault; its fields: {', '.join(sorted(allowed))}",
+            )
+    required = [
+        k
+        for k in sorted(allowed - {"kind"})
+        if (k not in spec.params or spec.params[k][1]) and not (k == "at_s" and spec.at_s_default is not None)
+    ]
     for key in required:
         if key not in entries:
-            raise _fail(file, node, child_path(node.path, key), f"missing (the {kind} fault needs {', '.join(required)})")
+            raise _fail(
+                file, node, child_path(node.path, key), f"missing (the {kind} fault needs {', '.join(required)})"
+            )
     drone = None
     if spec.drone:
         d = entries["drone"]
         if not isinstance(d.value, str) or d.value not in drones:
-            raise _fail(file, d, d.path, f"expected one of the mission's drones ({', '.join(sorted(drones))}), "
-                        f"got {d.raw or d.value!r}")
+            raise _fail(
+                file,
+                d,
+                d.path,
+                f"expected one of the mission's drones ({', '.join(sorted(drones))}), got {d.raw or d.value!r}",
+            )
         drone = d.value
     at_s = None
     if spec.timed:
-        at_s = _number(file, entries["at_s"], lambda x: 0 <= x < 1e6, "seconds >= 0") if "at_s" in entries \
+        at_s = (
+            _number(file, entries["at_s"], lambda x: 0 <= x < 1e6, "seconds >= 0")
+            if "at_s" in entries
             else spec.at_s_default
+        )
     duration = _number(file, entries["duration_s"], lambda x: 0 < x < 1e6, "seconds > 0") if spec.duration else None
-    params = {k: _READERS[t](file, entries[k], _Context(spec.choices.get(k, ()), dongles))
-              for k, (t, _) in spec.params.items() if k in entries}
+    params = {
+        k: _READERS[t](file, entries[k], _Context(spec.choices.get(k, ()), dongles))
+        for k, (t, _) in spec.params.items()
+        if k in entries
+    }
     return Fault(str(kind), drone, at_s, duration, params, node.line)
 
 

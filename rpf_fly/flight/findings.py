@@ -19,4 +19,3 @@ class Finding:
     response: Response
     land_s: float | None = None
     """For ``land``: how long the landing takes (None: the mission's ``land_s``)."""
-

@@ -61,7 +61,11 @@ class HostWatch(PeriodicFeed):
             self._baseline = lag
             return True
         self.behind_s = lag.behind_since(self._baseline)
-        if not self._quiet and self.behind_s >= HOST_BEHIND_REPORT_S and (self._said_s == 0.0 or self.behind_s >= self._said_s + 1.0):
+        if (
+            not self._quiet
+            and self.behind_s >= HOST_BEHIND_REPORT_S
+            and (self._said_s == 0.0 or self.behind_s >= self._said_s + 1.0)
+        ):
             self._said_s = self.behind_s
             self._events.emit(WARNING, "host", lag.sentence(self._baseline))
         return True

@@ -95,9 +95,16 @@ class LabInfo:
     @classmethod
     def from_json(cls, text: str) -> LabInfo:
         d = json.loads(text)
-        return cls(int(d["pid"]), str(d["mission"]), (d["control"][0], int(d["control"][1])), str(d["authkey"]),
-                   (d["radio"][0], int(d["radio"][1])), d.get("natnet_command_port"),
-                   {str(k): int(v) for k, v in d["addresses"].items()}, d.get("log"))
+        return cls(
+            int(d["pid"]),
+            str(d["mission"]),
+            (d["control"][0], int(d["control"][1])),
+            str(d["authkey"]),
+            (d["radio"][0], int(d["radio"][1])),
+            d.get("natnet_command_port"),
+            {str(k): int(v) for k, v in d["addresses"].items()},
+            d.get("log"),
+        )
 
 
 def _alive(pid: int) -> bool:
@@ -116,13 +123,14 @@ def read_lab(path: Path | None = None) -> LabInfo:
     try:
         info = LabInfo.from_json(path.read_text(encoding="utf-8"))
     except FileNotFoundError:
-        raise LabNotRunning(f"no lab is running ({path} does not exist): start one with `rpf-fly lab MISSION` "
-                            f"(another lab file: {LAB_ENV}=PATH)") from None
+        raise LabNotRunning(
+            f"no lab is running ({path} does not exist): start one with `rpf-fly lab MISSION` "
+            f"(another lab file: {LAB_ENV}=PATH)"
+        ) from None
     except (OSError, ValueError, KeyError, IndexError, TypeError) as err:
         raise LabNotRunning(f"{path}: not a lab file ({err})") from None
     if not _alive(info.pid):
-        raise LabNotRunning(f"the lab that wrote {path} (pid {info.pid}) is gone: start one with "
-                            "`rpf-fly lab MISSION`")
+        raise LabNotRunning(f"the lab that wrote {path} (pid {info.pid}) is gone: start one with `rpf-fly lab MISSION`")
     return info
 
 
@@ -140,8 +148,9 @@ class LabClient(WorldCalls):
                 break
             except OSError as err:
                 if time.monotonic() > deadline:
-                    raise LabNotRunning(f"the lab (pid {info.pid}) does not answer at {info.control[0]}:"
-                                        f"{info.control[1]}: {err}") from None
+                    raise LabNotRunning(
+                        f"the lab (pid {info.pid}) does not answer at {info.control[0]}:{info.control[1]}: {err}"
+                    ) from None
                 time.sleep(0.1)
         self.addresses = tuple(info.addresses.values())
 
@@ -225,9 +234,17 @@ class Lab:
     ``start_faults``: how drones stand at power-on (`rpf_fly.flight.dry_run.StartFault` by drone name);
     ``log_path``: the lab's MCAP log (None: no log); ``path``: the lab file (default `lab_file`)."""
 
-    def __init__(self, mission: Mission, mission_path: str | os.PathLike[str], log_path: Path | None, *,
-                 start_faults: Mapping[str, Any] | None = None, seed: int | None = None,
-                 host: str = "127.0.0.1", path: Path | None = None) -> None:
+    def __init__(
+        self,
+        mission: Mission,
+        mission_path: str | os.PathLike[str],
+        log_path: Path | None,
+        *,
+        start_faults: Mapping[str, Any] | None = None,
+        seed: int | None = None,
+        host: str = "127.0.0.1",
+        path: Path | None = None,
+    ) -> None:
         from rpf_fly.flight.dry_run import RADIO_LOSS, mission_mocap_noise, simulated_drones, uri_address
 
         self.mission = mission
@@ -240,9 +257,15 @@ class Lab:
         self._settings = {
             "drones": simulated_drones(mission, None, start_faults, RADIO_LOSS),
             "bodies": {uri_address(d.uri): d.rigid_body for d in mission.drones},
-            "seed": self.seed, "obstacles": tuple(mission.obstacles), "host": host,
-            "natnet": {"version": "4.1", "rate_hz": m.rate_hz, "up_axis": m.up_axis,
-                       "multicast": m.kind == "motioncapture"},
+            "seed": self.seed,
+            "obstacles": tuple(mission.obstacles),
+            "host": host,
+            "natnet": {
+                "version": "4.1",
+                "rate_hz": m.rate_hz,
+                "up_axis": m.up_axis,
+                "multicast": m.kind == "motioncapture",
+            },
             "mocap_noise": mission_mocap_noise(mission),
         }
         self._authkey = secrets.token_bytes(32)
@@ -267,8 +290,10 @@ class Lab:
         except LabNotRunning:
             running = None
         if running is not None:
-            raise RuntimeError(f"a lab is already running (pid {running.pid}, {running.mission}; lab file "
-                               f"{self.path}): stop it, or give this one another lab file ({LAB_ENV}=PATH)")
+            raise RuntimeError(
+                f"a lab is already running (pid {running.pid}, {running.mission}; lab file "
+                f"{self.path}): stop it, or give this one another lab file ({LAB_ENV}=PATH)"
+            )
         if self.log_path is not None:
             from rpf_fly.log.writer import FlightLog
 
@@ -277,10 +302,16 @@ class Lab:
         self.server = WorldServer(self._settings)
         self._listener = Listener(("127.0.0.1", 0), authkey=self._authkey)
         ports = self.server.ports()
-        self.info = LabInfo(os.getpid(), self.mission_path, tuple(self._listener.address), self._authkey.hex(),
-                            tuple(ports["radio"]), ports["natnet_command_port"],
-                            {name: address for address, name in self.names.items()},
-                            os.fspath(self.log_path) if self.log_path is not None else None)
+        self.info = LabInfo(
+            os.getpid(),
+            self.mission_path,
+            tuple(self._listener.address),
+            self._authkey.hex(),
+            tuple(ports["radio"]),
+            ports["natnet_command_port"],
+            {name: address for address, name in self.names.items()},
+            os.fspath(self.log_path) if self.log_path is not None else None,
+        )
         partial = self.path.with_name(self.path.name + ".partial")
         fd = os.open(partial, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
         with os.fdopen(fd, "w", encoding="utf-8") as f:
@@ -374,14 +405,14 @@ class Lab:
         finally:
             self._truth.unsubscribe(key)
             if not self._stop.is_set():
-                self._event(3 if "without" in how else 2, f"ground station {n} {how}; the drones fly on as their "
-                            "firmware does")
+                self._event(
+                    3 if "without" in how else 2, f"ground station {n} {how}; the drones fly on as their firmware does"
+                )
 
     # ------------------------------------------------------------------------------------------ recording
 
     def _event(self, level: int, message: str, drone: str = "") -> None:
-        logger.log(logging.WARNING if level >= 3 else logging.INFO, "lab: %s%s", f"{drone}: " if drone else "",
-                   message)
+        logger.log(logging.WARNING if level >= 3 else logging.INFO, "lab: %s%s", f"{drone}: " if drone else "", message)
         if self.log is not None:
             self.log.event(time.time_ns(), level, f"{drone}: {message}" if drone else message, name="rpf_fly.lab")
 
@@ -398,8 +429,9 @@ class Lab:
                 self._truth.publish(samples)
                 if self.log is not None:
                     for stamp, states in samples:
-                        self.log.truth(offset_ns + int(stamp * 1e9),
-                                       {self.names.get(a, f"{a:010X}"): s for a, s in states.items()})
+                        self.log.truth(
+                            offset_ns + int(stamp * 1e9), {self.names.get(a, f"{a:010X}"): s for a, s in states.items()}
+                        )
                     self._firmware(world, offset_ns, seen)
                 if time.monotonic() >= next_host or stopping:
                     next_host += HOST_PERIOD_S
@@ -415,15 +447,29 @@ class Lab:
             snap = world.snapshot(address)
             t_ns = offset_ns + int((now_mono - (now_world - snap.time_s)) * 1e9)
             setpoint = snap.last_crtp_setpoint_s
-            self.log.message(f"/firmware/{name}", t_ns, t_ns, S.encode({
-                "timestamp": S.stamp(t_ns), "powered": snap.powered and not snap.booting,
-                "supervisor": snap.supervisor_state, "armed": snap.armed, "motors": snap.motors_on,
-                "flying": snap.flying, "locked": snap.locked, "crashed": snap.crashed,
-                "emergency_stop": snap.emergency_stop_latched, "commander": snap.control_source,
-                "high_level": snap.hl_state,
-                "setpoint_age_s": None if setpoint is None else max(0.0, snap.time_s - setpoint),
-                "battery_v": snap.vbat_v, "boots": snap.boots,
-            }))
+            self.log.message(
+                f"/firmware/{name}",
+                t_ns,
+                t_ns,
+                S.encode(
+                    {
+                        "timestamp": S.stamp(t_ns),
+                        "powered": snap.powered and not snap.booting,
+                        "supervisor": snap.supervisor_state,
+                        "armed": snap.armed,
+                        "motors": snap.motors_on,
+                        "flying": snap.flying,
+                        "locked": snap.locked,
+                        "crashed": snap.crashed,
+                        "emergency_stop": snap.emergency_stop_latched,
+                        "commander": snap.control_source,
+                        "high_level": snap.hl_state,
+                        "setpoint_age_s": None if setpoint is None else max(0.0, snap.time_s - setpoint),
+                        "battery_v": snap.vbat_v,
+                        "boots": snap.boots,
+                    }
+                ),
+            )
             last = seen.get(address, -1.0)
             for transition in snap.transitions:
                 if transition.time_s > last:
@@ -459,8 +505,9 @@ FLOOR_Z_M = 0.05
 """A drone at or below this true height stands on the floor (its centre: 0 on the floor in the simulated world)."""
 
 
-def after_ground_station(truth: Mapping[str, list[Any]], death_ns: int,
-                         checks_s: tuple[float, ...] = (5.0,)) -> dict[str, AfterDeath]:
+def after_ground_station(
+    truth: Mapping[str, list[Any]], death_ns: int, checks_s: tuple[float, ...] = (5.0,)
+) -> dict[str, AfterDeath]:
     """Judge the drones after their ground station died at ``death_ns`` (ns since the Unix epoch), from a lab's
     ``/truth/<drone>`` messages (`rpf_fly.log.reader.LogData.messages`, by drone name)."""
     out = {}

@@ -114,12 +114,20 @@ class FlightLoop(LoopPreflight, LoopSwarm, LoopTakeoff, LoopIteration, LoopLandi
         self.events = EventBus(clock)
         self.events.subscribe(self._record_event)
         flight = mission.flight
-        self.agents: dict[str, DroneAgent] = {d.name: DroneAgent.for_mission(d, planner_factory(d), mission)
-                                              for d in mission.drones if d.name in own}
+        self.agents: dict[str, DroneAgent] = {
+            d.name: DroneAgent.for_mission(d, planner_factory(d), mission) for d in mission.drones if d.name in own
+        }
         self.others: tuple[str, ...] = tuple(d.name for d in mission.drones if d.name not in own)
         """The mission's drones this loop does not fly: in its drones' views from mocap only."""
-        self.commander = Commander(backend, self.agents, self.events, clock, land_s=flight.land_s,
-                                   land_settle_s=self.LAND_SETTLE_S, floor_z=0.0)
+        self.commander = Commander(
+            backend,
+            self.agents,
+            self.events,
+            clock,
+            land_s=flight.land_s,
+            land_settle_s=self.LAND_SETTLE_S,
+            floor_z=0.0,
+        )
         self.obstacles = obstacle_set(mission.obstacles)
         self.tracker = PoseTracker({d.name: d.rigid_body for d in mission.drones})
         self.tracker.estimate_of = self._estimate_of  # a jumped track is taken only where the drone thinks it is
@@ -150,12 +158,12 @@ class FlightLoop(LoopPreflight, LoopSwarm, LoopTakeoff, LoopIteration, LoopLandi
         self._estop_reason = ""
         self._estop_lock = threading.Lock()
         self._estop_done = False
-        self._extpos = ExtposSchedule.for_uris(mission.radio.extpos_rate_hz, self.uris,
-                                               packed=mission.radio.extpos == "packed")  # a group's drones together
+        self._extpos = ExtposSchedule.for_uris(
+            mission.radio.extpos_rate_hz, self.uris, packed=mission.radio.extpos == "packed"
+        )  # a group's drones together
         self._last_status_s = -math.inf
         self._states: dict[str, DroneState] = {}
-        self._watchdog = LoopWatchdog(self._on_loop_stall, stall_timeout_s(flight.dt),
-                                      on_emergency=self._emergency_now)
+        self._watchdog = LoopWatchdog(self._on_loop_stall, stall_timeout_s(flight.dt), on_emergency=self._emergency_now)
         self._gc = GcPacer()
         self._swarm_planner = SwarmPlanner(mission.planner.sensing_range, mission.safety.planner_budget_s)
 
@@ -286,7 +294,11 @@ class FlightLoop(LoopPreflight, LoopSwarm, LoopTakeoff, LoopIteration, LoopLandi
             while not self._stop.is_set():
                 self._spin_once(None)
                 now = self.clock()
-                flying = [a for a in self.agents.values() if a.phase in (DronePhase.PLANNING, DronePhase.HOLDING, DronePhase.ARRIVED)]
+                flying = [
+                    a
+                    for a in self.agents.values()
+                    if a.phase in (DronePhase.PLANNING, DronePhase.HOLDING, DronePhase.ARRIVED)
+                ]
                 if not flying:
                     self._end_reason = "no drone is flying its mission any more"
                     break
@@ -298,7 +310,9 @@ class FlightLoop(LoopPreflight, LoopSwarm, LoopTakeoff, LoopIteration, LoopLandi
                 else:
                     all_arrived_at = None
                 if now - started > self.mission.flight.timeout_s:
-                    self.events.emit(WARNING, "timeout", f"mission timeout ({self.mission.flight.timeout_s:.0f} s): landing")
+                    self.events.emit(
+                        WARNING, "timeout", f"mission timeout ({self.mission.flight.timeout_s:.0f} s): landing"
+                    )
                     for a in flying:
                         if a.phase != DronePhase.ARRIVED:
                             a.outcome = FlightOutcome.TIMEOUT
@@ -356,13 +370,15 @@ class FlightLoop(LoopPreflight, LoopSwarm, LoopTakeoff, LoopIteration, LoopLandi
         for name, agent in self.agents.items():
             pose = self.tracker.get(name)
             state = self._states.get(name)
-            rows.append({
-                "name": name,
-                "phase": agent.phase.value,
-                "position": pose.position if pose else None,
-                "goal_distance": abs(agent.goal - pose.xy) if pose else None,
-                "battery_v": state.battery.voltage_v if state and state.battery else None,
-                "link_pct": state.link.quality_pct if state else None,
-                "reason": agent.reason,
-            })
+            rows.append(
+                {
+                    "name": name,
+                    "phase": agent.phase.value,
+                    "position": pose.position if pose else None,
+                    "goal_distance": abs(agent.goal - pose.xy) if pose else None,
+                    "battery_v": state.battery.voltage_v if state and state.battery else None,
+                    "link_pct": state.link.quality_pct if state else None,
+                    "reason": agent.reason,
+                }
+            )
         return rows

@@ -51,8 +51,7 @@ class LoopLanding:
     _down_since: dict[str, float]
     _emergency_now: Callable[[], None]
     _spin_once: Callable[[float | None], None]
-    _send: Callable[[DroneAgent, complex, MocapFrame | None, list[tuple[str, tuple[float, float, float], float]]],
-                    None]
+    _send: Callable[[DroneAgent, complex, MocapFrame | None, list[tuple[str, tuple[float, float, float], float]]], None]
 
     def _land_all(self, reason: str, wait: bool = True, told: bool = False) -> None:
         """Land every drone for ``reason``; the phase event names it unless an ``interrupt`` event just ``told``
@@ -64,8 +63,9 @@ class LoopLanding:
         if not wait:
             return
         deadline = self.clock() + self.mission.flight.land_s + self.LAND_SETTLE_S + TOUCHDOWN_TIMEOUT_S + 1.0
-        while self.clock() < deadline and (any(a.phase == DronePhase.LANDING for a in self.agents.values())
-                                           or self._coming_down(self.clock())):
+        while self.clock() < deadline and (
+            any(a.phase == DronePhase.LANDING for a in self.agents.values()) or self._coming_down(self.clock())
+        ):
             if self._estop.is_set():
                 self._emergency_now()
                 break
@@ -98,8 +98,9 @@ class LoopLanding:
             if agent.phase == DronePhase.LANDING:
                 pose = self.tracker.get(agent.name)
                 fresh = pose is not None and pose.valid and now - pose.stamp_s <= stale_after
-                self.commander.confirm_touchdown(agent, now, pose.position[2] if pose is not None else None, fresh,
-                                                 self._states.get(agent.name))
+                self.commander.confirm_touchdown(
+                    agent, now, pose.position[2] if pose is not None else None, fresh, self._states.get(agent.name)
+                )
 
     def _apply(self, findings: list[Finding], now: float) -> None:
         sent: list[tuple[str, tuple[float, float, float], float]] = []

@@ -132,13 +132,19 @@ class LoopPreflight:
             new = set()
             for drone in self.mission.drones:
                 agent = self.agents.get(drone.name)
-                if drone.name in down or (agent is not None and agent.phase not in (DronePhase.WAITING,
-                                                                                    DronePhase.READY)):
+                if drone.name in down or (
+                    agent is not None and agent.phase not in (DronePhase.WAITING, DronePhase.READY)
+                ):
                     continue
-                why = next((f"its {what} is {abs(point - xy):.2f} m from {name}, which stays on the ground"
-                            for name, xy in spots.items()
-                            for what, point in (("start", complex(*drone.start)), ("goal", complex(*drone.goal)))
-                            if abs(point - xy) < r2), None)
+                why = next(
+                    (
+                        f"its {what} is {abs(point - xy):.2f} m from {name}, which stays on the ground"
+                        for name, xy in spots.items()
+                        for what, point in (("start", complex(*drone.start)), ("goal", complex(*drone.goal)))
+                        if abs(point - xy) < r2
+                    ),
+                    None,
+                )
                 if why is None:
                     continue
                 new.add(drone.name)
@@ -162,12 +168,14 @@ class LoopPreflight:
             pose = self.tracker.get(name)
             before = yaw_problem(self._states.get(name), pose) if pose is not None else ""
             if before:  # the position converges with extpos; a yaw estimate never does
-                self.events.emit(WARNING, "estimator", f"before take-off: {before}; restarting its estimator at the "
-                                 "mocap pose", name)
+                self.events.emit(
+                    WARNING, "estimator", f"before take-off: {before}; restarting its estimator at the mocap pose", name
+                )
             if pose is not None and not pose.orientation_trusted:
                 problems[name] = orientation_problem(self.tracker, name)
-            elif pose is None or not self.commander.reset_estimator(self.agents[name], pose.position,
-                                                                    yaw_of(pose.quaternion)):
+            elif pose is None or not self.commander.reset_estimator(
+                self.agents[name], pose.position, yaw_of(pose.quaternion)
+            ):
                 problems[name] = "its estimator could not be reset (kalman.initialX/Y/Z/Yaw, resetEstimation)"
         deadline = self.clock() + self.ESTIMATOR_SETTLE_S
         pending = {n: "" for n in names if n not in problems}
@@ -215,8 +223,9 @@ class LoopPreflight:
 
     def _preflight_problem(self, agent: DroneAgent) -> str:
         pose = self.tracker.get(agent.name)
-        problem = preflight_problem(self.mission, agent, self._states.get(agent.name), pose,
-                                    self.tracker.age(agent.name, self.clock()))
+        problem = preflight_problem(
+            self.mission, agent, self._states.get(agent.name), pose, self.tracker.age(agent.name, self.clock())
+        )
         if not problem and pose is not None and not pose.orientation_trusted:
             return orientation_problem(self.tracker, agent.name)
         return problem

@@ -96,8 +96,11 @@ class LoopSwarm:
         kept = sorted(n for n in ready if self.agents[n].phase == DronePhase.FAILED)
         if kept:
             others = ", ".join(sorted(grounded - set(self.agents)))
-            self.events.emit(ERROR, "preflight", f"{', '.join(kept)} stay on the ground beside the swarm's grounded "
-                             f"drones ({others}); the others fly")
+            self.events.emit(
+                ERROR,
+                "preflight",
+                f"{', '.join(kept)} stay on the ground beside the swarm's grounded drones ({others}); the others fly",
+            )
         if not any(a.phase == DronePhase.READY for a in self.agents.values()):
             self._abort("every drone of this loop stays on the ground; the swarm's others fly")
             return False
@@ -123,8 +126,12 @@ class LoopSwarm:
                     self._ground_neighbours(set(grounded))
                 kept = sorted(a.name for a in armed if a.phase == DronePhase.FAILED)
                 if kept:
-                    self.events.emit(ERROR, "takeoff", f"{', '.join(kept)} stay on the ground beside the swarm's "
-                                     f"grounded drones ({', '.join(sorted(others))}); the others fly")
+                    self.events.emit(
+                        ERROR,
+                        "takeoff",
+                        f"{', '.join(kept)} stay on the ground beside the swarm's "
+                        f"grounded drones ({', '.join(sorted(others))}); the others fly",
+                    )
                 return [a for a in armed if a.phase == DronePhase.READY]
             if swarm.verdict() == "abort":
                 break

@@ -67,8 +67,13 @@ class LoopTakeoff:
             self._spin_once(min(deadline, self.clock() + 0.05))
             for name in list(pending):
                 state = self._states.get(name)
-                if (state is not None and state.supervisor is not None and state.telemetry_stamp_s is not None
-                        and state.telemetry_stamp_s >= asked_at and state.supervisor.can_fly):
+                if (
+                    state is not None
+                    and state.supervisor is not None
+                    and state.telemetry_stamp_s is not None
+                    and state.telemetry_stamp_s >= asked_at
+                    and state.supervisor.can_fly
+                ):
                     pending.discard(name)
         ready = []
         for agent in asked:
@@ -86,8 +91,11 @@ class LoopTakeoff:
             else:
                 why = "not armed (its pre-flight checks did not pass)"
             if not self._stop.is_set():
-                self.commander.refuse_take_off(agent, f"its supervisor was not ready to fly "
-                                                      f"{ARM_CONFIRM_TIMEOUT_S:.0f} s after the arming request ({why})")
+                self.commander.refuse_take_off(
+                    agent,
+                    f"its supervisor was not ready to fly "
+                    f"{ARM_CONFIRM_TIMEOUT_S:.0f} s after the arming request ({why})",
+                )
         refused = {a.name for a in asked if a.phase == DronePhase.FAILED}
         if refused:
             self._ground_neighbours(refused)
@@ -102,8 +110,9 @@ class LoopTakeoff:
             armed = self._await_takeoff(armed)
         if self._stop.is_set():  # interrupted while arming: nothing takes off
             for agent in armed:
-                self.commander.refuse_take_off(agent, "interrupted before take-off" + (
-                    f" ({self._stop_reason})" if self._stop_reason else ""))
+                self.commander.refuse_take_off(
+                    agent, "interrupted before take-off" + (f" ({self._stop_reason})" if self._stop_reason else "")
+                )
             return
         floor = {a.name: p.position[2] for a in armed if (p := self.tracker.get(a.name)) is not None}
         commanded = 0
@@ -111,8 +120,11 @@ class LoopTakeoff:
             if self.commander.take_off(agent, flight.height, flight.takeoff_s):
                 self.backend_arm_watchdog(agent.name)
                 commanded += 1
-        self.events.emit(INFO, "takeoff", f"take-off commanded: {commanded} drone(s) to {flight.height:.2f} m in "
-                         f"{flight.takeoff_s:g} s")
+        self.events.emit(
+            INFO,
+            "takeoff",
+            f"take-off commanded: {commanded} drone(s) to {flight.height:.2f} m in {flight.takeoff_s:g} s",
+        )
         started = self.clock()
         until = started + flight.takeoff_s + self.TAKEOFF_SETTLE_S
         retried = False
@@ -122,20 +134,31 @@ class LoopTakeoff:
                 retried = True
                 for agent in self.agents.values():
                     pose = self.tracker.get(agent.name)
-                    if agent.phase == DronePhase.TAKEOFF and pose is not None and \
-                            pose.position[2] < floor.get(agent.name, 0.0) + self.LIFT_OFF_M:
-                        self.events.emit(WARNING, "takeoff", f"not rising {self.TAKEOFF_RETRY_S:.0f} s after its "
-                                         "take-off: sending it again", agent.name)
-                        self.commander.retry_take_off(agent, flight.height, max(1.0, flight.takeoff_s -
-                                                                                self.TAKEOFF_RETRY_S))
+                    if (
+                        agent.phase == DronePhase.TAKEOFF
+                        and pose is not None
+                        and pose.position[2] < floor.get(agent.name, 0.0) + self.LIFT_OFF_M
+                    ):
+                        self.events.emit(
+                            WARNING,
+                            "takeoff",
+                            f"not rising {self.TAKEOFF_RETRY_S:.0f} s after its take-off: sending it again",
+                            agent.name,
+                        )
+                        self.commander.retry_take_off(
+                            agent, flight.height, max(1.0, flight.takeoff_s - self.TAKEOFF_RETRY_S)
+                        )
         grounded: set[str] = set()
         for agent in self.agents.values():
             if agent.phase != DronePhase.TAKEOFF:
                 continue
             pose = self.tracker.get(agent.name)
             if pose is not None and pose.position[2] <= ON_FLOOR_Z_M:
-                if self.commander.ground(agent, f"take-off did not lift it off (z = {pose.position[2]:.2f} m): "
-                                                "it stays on the floor, an obstacle in every view"):
+                if self.commander.ground(
+                    agent,
+                    f"take-off did not lift it off (z = {pose.position[2]:.2f} m): "
+                    "it stays on the floor, an obstacle in every view",
+                ):
                     grounded.add(agent.name)
             elif pose is None or abs(pose.position[2] - flight.height) > max(0.15, 0.3 * flight.height):
                 z = "no pose" if pose is None else f"z = {pose.position[2]:.2f} m"
@@ -160,10 +183,20 @@ class LoopTakeoff:
         for agent in self.agents.values():
             if agent.phase not in (DronePhase.PLANNING, DronePhase.HOLDING, DronePhase.TAKEOFF):
                 continue
-            why = next((f"its goal is {abs(agent.goal - xy):.2f} m from {name}, which did not lift off"
-                        for name, xy in spots.items() if abs(agent.goal - xy) < r2), None)
+            why = next(
+                (
+                    f"its goal is {abs(agent.goal - xy):.2f} m from {name}, which did not lift off"
+                    for name, xy in spots.items()
+                    if abs(agent.goal - xy) < r2
+                ),
+                None,
+            )
             if why is not None:
                 self.commander.land(agent, f"{why}: it lands where it is", ERROR)
-        self.events.emit(ERROR, "takeoff", f"{', '.join(sorted(grounded))} did not lift off: on the floor where "
-                         f"{'it stands' if len(grounded) == 1 else 'they stand'}, in every view and the separation "
-                         "check; the others fly")
+        self.events.emit(
+            ERROR,
+            "takeoff",
+            f"{', '.join(sorted(grounded))} did not lift off: on the floor where "
+            f"{'it stands' if len(grounded) == 1 else 'they stand'}, in every view and the separation "
+            "check; the others fly",
+        )

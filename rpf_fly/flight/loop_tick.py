@@ -114,8 +114,11 @@ class LoopIteration:
         """Record the frame's poses of the drones this loop flies and forward them to their estimators, each drone
         in its own extpos slots (``radio.extpos_rate_hz``, phased across the drones of a dongle:
         rpf_fly/radio/schedule.py)."""
-        fresh = {n: p for n, p in self.tracker.poses.items()
-                 if p.frame_number == frame.frame_number and p.valid and n in self.agents}
+        fresh = {
+            n: p
+            for n, p in self.tracker.poses.items()
+            if p.frame_number == frame.frame_number and p.valid and n in self.agents
+        }
         self.recorder.poses(now, fresh)
         extpose = self.mission.radio.extpos == "extpose"
         for name, pose in fresh.items():
@@ -123,8 +126,9 @@ class LoopIteration:
             if agent.phase.terminal or not self._extpos.due(name, now):
                 continue
             # an orientation refused as a jump (a wrong fit of the markers) is not fed to the estimator
-            self.commander.extpos(agent, pose.position,
-                                  pose.quaternion if extpose and pose.orientation_trusted else None)
+            self.commander.extpos(
+                agent, pose.position, pose.quaternion if extpose and pose.orientation_trusted else None
+            )
 
     def _in_the_way(self, agent: DroneAgent, pose: TrackedPose) -> bool:
         """Whether a drone is in the other drones' views: airborne near the planning plane; a drone nobody
@@ -141,8 +145,11 @@ class LoopIteration:
         flight = self.mission.flight
         stale_after = self.mission.safety.pose_timeout_s
         agents = self.agents
-        airborne_poses = {n: p for n, p in self.tracker.poses.items()
-                          if (self._in_the_way(agents[n], p) if n in agents else foreign_in_the_way(p.position[2]))}
+        airborne_poses = {
+            n: p
+            for n, p in self.tracker.poses.items()
+            if (self._in_the_way(agents[n], p) if n in agents else foreign_in_the_way(p.position[2]))
+        }
         records: list[PlannerRecord] = []
         sent: list[tuple[str, tuple[float, float, float], float]] = []
         requests: list[tuple[DroneAgent, TrackedPose]] = []
@@ -203,8 +210,17 @@ class LoopIteration:
         self.recorder.setpoints(sent)
         self.recorder.planner_steps(now, self.tick, records)
 
-    def _take_plan(self, agent: DroneAgent, pose: TrackedPose, outcome: PlanResult | PlannerFault, now: float,
-                   frame: MocapFrame | None, sent: list, records: list, planned: list) -> None:
+    def _take_plan(
+        self,
+        agent: DroneAgent,
+        pose: TrackedPose,
+        outcome: PlanResult | PlannerFault,
+        now: float,
+        frame: MocapFrame | None,
+        sent: list,
+        records: list,
+        planned: list,
+    ) -> None:
         """Stream a drone's planned setpoint, or hold and land it on its planner's fault."""
         if isinstance(outcome, PlannerFault):
             self.commander.hold(agent, pose.xy, now, str(outcome), pose.velocity)
@@ -216,8 +232,13 @@ class LoopIteration:
         self._send(agent, outcome.setpoint, frame, sent)
         planned.append((agent, pose, outcome))
 
-    def _send(self, agent: DroneAgent, xy: complex, frame: MocapFrame | None,
-              sent: list[tuple[str, tuple[float, float, float], float]]) -> None:
+    def _send(
+        self,
+        agent: DroneAgent,
+        xy: complex,
+        frame: MocapFrame | None,
+        sent: list[tuple[str, tuple[float, float, float], float]],
+    ) -> None:
         z = agent.clamp_height(self.mission.flight.height)
         xy = agent.clamp(xy)
         origin = frame.receive_time_s if frame is not None else None
@@ -240,5 +261,9 @@ class LoopIteration:
         caught, self._stalls_seen = stalls != self._stalls_seen, stalls
         period = self.mission.flight.dt
         if interval_s > period + self.LATE_TICK_S and not caught:
-            self.events.emit(WARNING, "loop", f"flight loop late: {interval_s * 1e3:.0f} ms between two planning "
-                             f"ticks (period {period * 1e3:.0f} ms): the drones flew on old setpoints")
+            self.events.emit(
+                WARNING,
+                "loop",
+                f"flight loop late: {interval_s * 1e3:.0f} ms between two planning "
+                f"ticks (period {period * 1e3:.0f} ms): the drones flew on old setpoints",
+            )

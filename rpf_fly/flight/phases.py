@@ -39,12 +39,23 @@ class DronePhase(str, enum.Enum):
 
     @property
     def airborne(self) -> bool:
-        return self in (DronePhase.TAKEOFF, DronePhase.PLANNING, DronePhase.HOLDING, DronePhase.ARRIVED, DronePhase.LANDING)
+        return self in (
+            DronePhase.TAKEOFF,
+            DronePhase.PLANNING,
+            DronePhase.HOLDING,
+            DronePhase.ARRIVED,
+            DronePhase.LANDING,
+        )
 
     @property
     def terminal(self) -> bool:
-        return self in (DronePhase.LANDED, DronePhase.FAILED, DronePhase.GROUNDED, DronePhase.LINK_LOST,
-                        DronePhase.EMERGENCY)
+        return self in (
+            DronePhase.LANDED,
+            DronePhase.FAILED,
+            DronePhase.GROUNDED,
+            DronePhase.LINK_LOST,
+            DronePhase.EMERGENCY,
+        )
 
 
 class SwarmPhase(str, enum.Enum):

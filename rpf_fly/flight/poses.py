@@ -183,8 +183,9 @@ class PoseTracker:
     def _jump(a: tuple[float, ...], b: tuple[float, ...], dt: float) -> bool:
         return math.dist(a, b) > MAX_SPEED_M_S * max(dt, 0.0) + JUMP_TOLERANCE_M
 
-    def _accept(self, name: str, position: tuple[float, float, float], t: float, captured: float,
-                previous: TrackedPose | None) -> bool:
+    def _accept(
+        self, name: str, position: tuple[float, float, float], t: float, captured: float, previous: TrackedPose | None
+    ) -> bool:
         """Whether this sample may be followed (see the module docstring); updates the glitch state. The time a
         sample had to move is the longer of its receive and capture intervals: frames delayed and then received
         in a burst (a loaded host or network) are close in receive time but not in capture time."""
@@ -221,8 +222,14 @@ class PoseTracker:
             previous.valid = False
         return False
 
-    def _trust_orientation(self, name: str, quaternion: tuple[float, float, float, float], t: float,
-                           captured: float, trusted: tuple[float, float, float, float] | None) -> bool:
+    def _trust_orientation(
+        self,
+        name: str,
+        quaternion: tuple[float, float, float, float],
+        t: float,
+        captured: float,
+        trusted: tuple[float, float, float, float] | None,
+    ) -> bool:
         """Whether this sample's orientation may be followed (module docstring); updates the orientation glitch
         state. ``trusted``: the orientation the drone's pose holds now (None before its first pose)."""
         raw = self._raw_turn.get(name)
@@ -257,12 +264,12 @@ class PoseTracker:
             return None
         estimate, made_s = known
         off = math.hypot(position[0] - estimate[0], position[1] - estimate[1])
-        allowed = (ESTIMATE_TOLERANCE_M + ESTIMATE_SPEED_M_S * abs(t - made_s)
-                   + 0.5 * self.blind_drift_m_s2 * gap_s * gap_s)
+        allowed = (
+            ESTIMATE_TOLERANCE_M + ESTIMATE_SPEED_M_S * abs(t - made_s) + 0.5 * self.blind_drift_m_s2 * gap_s * gap_s
+        )
         return off if off > allowed else None
 
-    def _estimate_agrees(self, name: str, position: tuple[float, float, float],
-                         frozen: TrackedPose | None) -> bool:
+    def _estimate_agrees(self, name: str, position: tuple[float, float, float], frozen: TrackedPose | None) -> bool:
         """Whether a jumped track that held for ``REACQUIRE_S`` is the drone: without an ``estimate_of`` (a replay,
         a bare tracker) it is taken; with one, only when the drone's on-board estimate (which
         flew on its IMU alone while the glitch lasted: centimetres of drift) is nearer the new track than the frozen
@@ -299,8 +306,9 @@ class PoseTracker:
             qx, qy, qz, qw = body.quaternion
             position = (px, py, pz)
             quaternion = (qx, qy, qz, qw)
-            trusted = self._trust_orientation(name, quaternion, t, frame.capture_time_s,
-                                              previous.quaternion if previous is not None else None)
+            trusted = self._trust_orientation(
+                name, quaternion, t, frame.capture_time_s, previous.quaternion if previous is not None else None
+            )
             if not trusted and previous is not None:
                 quaternion = previous.quaternion
             jumped = name in self.glitching or name in reacquired
@@ -320,7 +328,11 @@ class PoseTracker:
                 else:
                     velocity = previous.velocity
             self.poses[name] = TrackedPose(
-                position, quaternion, velocity, t, frame.frame_number,
+                position,
+                quaternion,
+                velocity,
+                t,
+                frame.frame_number,
                 orientation_trusted=trusted,
             )
 

@@ -32,8 +32,9 @@ def awaits_data(problem: str) -> bool:
     return problem in (NO_LINK, NO_BATTERY) or problem.endswith(NOT_TRACKED)
 
 
-def preflight_problem(mission: Mission, agent: DroneAgent, state: DroneState | None, pose: TrackedPose | None,
-                      pose_age_s: float) -> str:
+def preflight_problem(
+    mission: Mission, agent: DroneAgent, state: DroneState | None, pose: TrackedPose | None, pose_age_s: float
+) -> str:
     """The first reason ``agent``'s drone must not take off, or ""."""
     s, arena = mission.safety, mission.arena
     if state is None or not state.link.up:
@@ -52,8 +53,10 @@ def preflight_problem(mission: Mission, agent: DroneAgent, state: DroneState | N
     if not (arena.x[0] <= x <= arena.x[1] and arena.y[0] <= y <= arena.y[1]):
         return f"outside the arena at ({x:.2f}, {y:.2f})"
     if abs(pose.xy - agent.start) > s.start_tolerance_m:
-        return (f"at ({x:.2f}, {y:.2f}), {abs(pose.xy - agent.start):.2f} m from its start "
-                f"({agent.start.real:.2f}, {agent.start.imag:.2f}); allowed {s.start_tolerance_m:.2f} m")
+        return (
+            f"at ({x:.2f}, {y:.2f}), {abs(pose.xy - agent.start):.2f} m from its start "
+            f"({agent.start.real:.2f}, {agent.start.imag:.2f}); allowed {s.start_tolerance_m:.2f} m"
+        )
     if z > ON_GROUND_MAX_Z_M:
         return f"not on the ground (z = {z:.2f} m)"
     return ""
@@ -63,9 +66,11 @@ def orientation_problem(tracker: PoseTracker, name: str) -> str:
     """Why a drone whose mocap orientation is refused as a jump (`PoseTracker.orientation_glitching`) must not take
     off: one of the two fits is wrong and nothing says which, and its estimator would start from that yaw."""
     degrees, seconds = tracker.last_turn.get(name, (math.nan, math.nan))
-    return (f"mocap's orientation of its rigid body turned {degrees:.0f} deg in {seconds * 1e3:.0f} ms and has not "
-            "turned back: a wrong fit of its markers (a nearly symmetric marker set?); which fit is right is "
-            "unknown, so its estimator is not started from it: check the rigid body in Motive")
+    return (
+        f"mocap's orientation of its rigid body turned {degrees:.0f} deg in {seconds * 1e3:.0f} ms and has not "
+        "turned back: a wrong fit of its markers (a nearly symmetric marker set?); which fit is right is "
+        "unknown, so its estimator is not started from it: check the rigid body in Motive"
+    )
 
 
 ESTIMATE_POSITION_TOLERANCE_M = 0.1
@@ -94,8 +99,10 @@ def estimate_problem(state: DroneState | None, pose: TrackedPose, since_s: float
     off = math.dist(state.position_m, pose.position)
     if off > ESTIMATE_POSITION_TOLERANCE_M:
         ex, ey, ez = state.position_m
-        return (f"its on-board position estimate ({ex:.2f}, {ey:.2f}, {ez:.2f}) is {off:.2f} m from mocap's: is "
-                "the rigid body the right drone, and does extpos reach it?")
+        return (
+            f"its on-board position estimate ({ex:.2f}, {ey:.2f}, {ez:.2f}) is {off:.2f} m from mocap's: is "
+            "the rigid body the right drone, and does extpos reach it?"
+        )
     return yaw_problem(state, pose)
 
 
@@ -107,6 +114,8 @@ def yaw_problem(state: DroneState | None, pose: TrackedPose) -> str:
     mocap_yaw = math.degrees(yaw_of(pose.quaternion))
     yaw_error = (state.yaw_deg - mocap_yaw + 180.0) % 360.0 - 180.0
     if abs(yaw_error) > ESTIMATE_YAW_TOLERANCE_DEG:
-        return (f"its on-board yaw estimate {state.yaw_deg:.0f} deg is {abs(yaw_error):.0f} deg from mocap's "
-                f"{mocap_yaw:.0f} deg: under position control it would fly off")
+        return (
+            f"its on-board yaw estimate {state.yaw_deg:.0f} deg is {abs(yaw_error):.0f} deg from mocap's "
+            f"{mocap_yaw:.0f} deg: under position control it would fly off"
+        )
     return ""

@@ -42,8 +42,9 @@ firmware's next position-loop tick; twice what an idle host takes (a head-on pai
 class ProximityCheck:
     """The separation and clearance checks with the memory their episodes need (the supervisor runs them)."""
 
-    def __init__(self, mission: Mission, obstacles: ObstacleSet,
-                 model_of: Callable[[str], Follower | None] = lambda name: None) -> None:
+    def __init__(
+        self, mission: Mission, obstacles: ObstacleSet, model_of: Callable[[str], Follower | None] = lambda name: None
+    ) -> None:
         """``model_of``: a streaming drone's response model (`TrackingCheck.model_of`), whose velocity and tilt
         are the drone's state for its stop: the mocap's filtered velocity trails a drone that speeds up."""
         self.safety = mission.safety
@@ -89,7 +90,8 @@ class ProximityCheck:
                 ahead = self._stopped_apart(pi, pj, commanded.get(ni), commanded.get(nj), tracker.latency_s)
                 pair = (ni, nj)
                 held = pair in self._close_pairs and (
-                    min(d, ahead) < 2 * self.r + RESUME_MARGIN_M or not (self._resting(ni) and self._resting(nj)))
+                    min(d, ahead) < 2 * self.r + RESUME_MARGIN_M or not (self._resting(ni) and self._resting(nj))
+                )
                 if min(d, ahead) < 2 * self.r or held:
                     pair = (ni, nj)
                     close_now.add(pair)
@@ -97,8 +99,10 @@ class ProximityCheck:
                         response = self.safety.on_separation
                         message = f"separation {d:.3f} m from {nj} is below 2r = {2 * self.r:.2f} m"
                         if d >= 2 * self.r:
-                            message = (f"separation {d:.3f} m from {nj}, closing: braking from here they would "
-                                       f"come within {ahead:.3f} m, below 2r = {2 * self.r:.2f} m")
+                            message = (
+                                f"separation {d:.3f} m from {nj}, closing: braking from here they would "
+                                f"come within {ahead:.3f} m, below 2r = {2 * self.r:.2f} m"
+                            )
                         out.append(Finding("separation", ERROR, message, ni, response))
                         if response != "warn" and nj in mine:
                             out.append(Finding("separation", ERROR, f"separation {d:.3f} m from {ni}", nj, response))
@@ -127,8 +131,9 @@ class ProximityCheck:
         ahead = pose.xy + velocity * (HOLD_REACTION_S + (latency_s or 0.0))
         return braking.stop_point(ahead, velocity, setpoint, tilt)
 
-    def _stopped_apart(self, pi: TrackedPose, pj: TrackedPose, ai: DroneAgent | None, aj: DroneAgent | None,
-                       latency_s: float | None) -> float:
+    def _stopped_apart(
+        self, pi: TrackedPose, pj: TrackedPose, ai: DroneAgent | None, aj: DroneAgent | None, latency_s: float | None
+    ) -> float:
         """The closest two drones come if both are held now (3D, centre to centre): each flies on to its
         `_stop_point`, both taken to cover their way in step."""
         a0, b0 = pi.xy, pj.xy
@@ -152,18 +157,20 @@ class ProximityCheck:
             way = pose.xy + (stop - pose.xy) * np.linspace(0.25, 1.0, 4)  # on its way to rest
             ahead = float(np.min(self.obstacles.signed_distance(way)))
             held = a.name in self._near_obstacle and (
-                min(clearance, ahead) < self.r + RESUME_MARGIN_M or not self._resting(a.name))
+                min(clearance, ahead) < self.r + RESUME_MARGIN_M or not self._resting(a.name)
+            )
             if min(clearance, ahead) < self.r or held:
                 near_now.add(a.name)
                 if a.name not in self._near_obstacle:
                     message = f"obstacle clearance {clearance:.3f} m is below r = {self.r:.2f} m"
                     if clearance >= self.r:
-                        message = (f"obstacle clearance {clearance:.3f} m, closing: braking from here it would come "
-                                   f"within {ahead:.3f} m, below r = {self.r:.2f} m")
+                        message = (
+                            f"obstacle clearance {clearance:.3f} m, closing: braking from here it would come "
+                            f"within {ahead:.3f} m, below r = {self.r:.2f} m"
+                        )
                     out.append(Finding("obstacle", ERROR, message, a.name, self.safety.on_obstacle))
         if self.safety.on_obstacle == "hold":
             for name in self._near_obstacle - near_now:
                 out.append(Finding("obstacle", INFO, "obstacle clearance restored: resuming", name, "resume"))
         self._near_obstacle = near_now
         return out
-

@@ -31,9 +31,13 @@ class RadioLoadFeed(PeriodicFeed):
     sample of ``fetch()`` (drone -> :class:`LinkCount`). ``dongles``: the mission's dongles, reported from the first
     window (zeros until their links connect)."""
 
-    def __init__(self, fetch: Callable[[], Mapping[str, LinkCount]],
-                 sink: Callable[[float, list[MeasuredLoad]], None], dongles: Iterable[int] = (),
-                 period_s: float = PERIOD_S) -> None:
+    def __init__(
+        self,
+        fetch: Callable[[], Mapping[str, LinkCount]],
+        sink: Callable[[float, list[MeasuredLoad]], None],
+        dongles: Iterable[int] = (),
+        period_s: float = PERIOD_S,
+    ) -> None:
         super().__init__("radio-load", period_s)
         self._fetch = fetch
         self._sink = sink

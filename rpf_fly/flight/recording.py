@@ -57,10 +57,20 @@ class McapRecorder:
     ``mocap``: whether the frames' poses are logged (``/mocap/<drone>``); a distributed flight's worker leaves them
     to the flight's mocap relay (rpf_fly/runtime/relay.py) and logs its drones' ``/tf`` only."""
 
-    def __init__(self, path: str | Path, mission: Mission, seed: int = 0, source: str = "flight",
-                 truth: Callable[[], TruthBatch] | None = None, sink: Sink | None = None,
-                 radio: Callable[[], Mapping[str, LinkCount]] | None = None, radio_period_s: float | None = None,
-                 out: Out | None = None, radio_dongles: Iterable[int] | None = None, mocap: bool = True):
+    def __init__(
+        self,
+        path: str | Path,
+        mission: Mission,
+        seed: int = 0,
+        source: str = "flight",
+        truth: Callable[[], TruthBatch] | None = None,
+        sink: Sink | None = None,
+        radio: Callable[[], Mapping[str, LinkCount]] | None = None,
+        radio_period_s: float | None = None,
+        out: Out | None = None,
+        radio_dongles: Iterable[int] | None = None,
+        mocap: bool = True,
+    ):
         self.mission = mission
         self._mocap = mocap
         self._offset_ns = time.time_ns() - time.monotonic_ns()
@@ -68,8 +78,9 @@ class McapRecorder:
         a replay gets the loop's own times back from the log, exactly for the tracker's stamps."""
         meta = mission_metadata(mission, seed, source=source)
         meta["monotonic_offset_ns"] = str(self._offset_ns)
-        self.log = FlightLog(path, meta, scenario_metadata(mission), poll_interval_s=POLL_FALLBACK_S, sink=sink,
-                             out=out)
+        self.log = FlightLog(
+            path, meta, scenario_metadata(mission), poll_interval_s=POLL_FALLBACK_S, sink=sink, out=out
+        )
         self._last_drain_s = -math.inf
         self._sensing = mission.planner.sensing_range
         self._last_tf_s = -math.inf
@@ -82,8 +93,9 @@ class McapRecorder:
         self.radio_feed = None
         if radio is not None:  # /radio/<dongle>: the measured load of each dongle (rpf_fly/flight/radio_load.py)
             dongles = self._plan if radio_dongles is None else set(radio_dongles)  # a worker: its own dongle's
-            feed = RadioLoadFeed(radio, self._radio, dongles, **({} if radio_period_s is None
-                                                                     else {"period_s": radio_period_s}))
+            feed = RadioLoadFeed(
+                radio, self._radio, dongles, **({} if radio_period_s is None else {"period_s": radio_period_s})
+            )
             self.radio_feed = feed.start()
 
     @property
@@ -109,20 +121,37 @@ class McapRecorder:
             self._last_tf_s = t_s
             self.log.tf(t, items)
 
-    def planner_steps(self, t_s: float, tick: int,
-                      records: list[tuple[DroneAgent, TrackedPose | None, PlanStep | None, str]]) -> None:
+    def planner_steps(
+        self, t_s: float, tick: int, records: list[tuple[DroneAgent, TrackedPose | None, PlanStep | None, str]]
+    ) -> None:
         """One tick's planner records. Only references cross to the writer thread (poses, goals and headings are
         immutable values, a step's fields numpy scalars); :meth:`_planner_message` builds the messages there."""
-        steps = {agent.name: (tick, pose.position, agent.goal, agent.heading, step, mode,
-                              agent.planned_from if step is not None else None)
-                 for agent, pose, step, mode in records if pose is not None}
+        steps = {
+            agent.name: (
+                tick,
+                pose.position,
+                agent.goal,
+                agent.heading,
+                step,
+                mode,
+                agent.planned_from if step is not None else None,
+            )
+            for agent, pose, step, mode in records
+            if pose is not None
+        }
         self.log.planner_steps(self._ns(t_s), steps, self._planner_message)
 
     def _planner_message(self, t_ns: int, value: tuple) -> bytes:
         """Writer thread: one ``rpf_fly.PlannerStep`` from what :meth:`planner_steps` handed over."""
         tick, position, goal, heading, step, mode, reference = value
-        fields: dict = dict(tick=tick, position=position, goal=goal, heading=math.atan2(heading.imag, heading.real),
-                            goal_distance=abs(goal - complex(position[0], position[1])), mode=mode)
+        fields: dict = dict(
+            tick=tick,
+            position=position,
+            goal=goal,
+            heading=math.atan2(heading.imag, heading.real),
+            goal_distance=abs(goal - complex(position[0], position[1])),
+            mode=mode,
+        )
         if reference is not None:
             fields["reference"] = reference
         if step is None:
@@ -130,9 +159,15 @@ class McapRecorder:
         else:
             d_o = float(step.obstacle_distance)
             fields.update(
-                eta=float(step.eta), lam=float(step.lam), f_a=complex(step.f_a), f_r=complex(step.f_r),
-                f_in=complex(step.f_in), direction=complex(step.direction), neighbours=int(step.neighbours),
-                obstacle_distance=d_o if d_o < min(FAR, self._sensing + 1e-9) else None)
+                eta=float(step.eta),
+                lam=float(step.lam),
+                f_a=complex(step.f_a),
+                f_r=complex(step.f_r),
+                f_in=complex(step.f_in),
+                direction=complex(step.direction),
+                neighbours=int(step.neighbours),
+                obstacle_distance=d_o if d_o < min(FAR, self._sensing + 1e-9) else None,
+            )
         return planner_json(t_ns, fields)
 
     def _truth(self, stamp_s: float, states: dict[str, Any]) -> None:
@@ -144,10 +179,17 @@ class McapRecorder:
         t = self._ns(t_s)
         for load in loads:
             plan = self._plan.get(load.dongle)
-            self.log.radio(t, load.dongle, drones=load.drones or (plan.drones if plan else ()), window_s=load.window_s,
-                           packets=load.packets, transactions=load.transactions,
-                           planned_per_s=plan.needed if plan else 0.0, budget_per_s=plan.budget if plan else 0.0,
-                           setpoints_superseded=load.superseded)
+            self.log.radio(
+                t,
+                load.dongle,
+                drones=load.drones or (plan.drones if plan else ()),
+                window_s=load.window_s,
+                packets=load.packets,
+                transactions=load.transactions,
+                planned_per_s=plan.needed if plan else 0.0,
+                budget_per_s=plan.budget if plan else 0.0,
+                setpoints_superseded=load.superseded,
+            )
 
     def after_tick(self, t_s: float) -> None:
         """The loop finished a planning tick and waits for the next frame: let the writer drain now (its GIL-holding
@@ -166,13 +208,22 @@ class McapRecorder:
         quality = state.link.quality_pct / 100.0 if state is not None and state.link.quality_pct is not None else None
         latency = state.link.latency_ms if state is not None else None
         outcome = agent.outcome.value if agent.outcome is not None and agent.phase.terminal else None
-        self.log.status(agent.name, self._ns(t_s), state=agent.phase.value, battery_v=battery, link_quality=quality,
-                        latency_ms=latency, outcome=outcome, estimate=state.position_m if state is not None else None,
-                        target=state.target_m if state is not None else None)
+        self.log.status(
+            agent.name,
+            self._ns(t_s),
+            state=agent.phase.value,
+            battery_v=battery,
+            link_quality=quality,
+            latency_ms=latency,
+            outcome=outcome,
+            estimate=state.position_m if state is not None else None,
+            target=state.target_m if state is not None else None,
+        )
 
     def event(self, event: FlightEvent) -> None:
-        self.log.event(self._ns(event.time_s), event.level, event.message, name=event.drone or "flight",
-                       file=event.kind)
+        self.log.event(
+            self._ns(event.time_s), event.level, event.message, name=event.drone or "flight", file=event.kind
+        )
 
     def close(self) -> None:
         if self.radio_feed is not None:

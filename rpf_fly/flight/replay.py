@@ -99,8 +99,10 @@ def replay_log(
     names = [d.name for d in mission.drones]
     rowless = [n for n in names if not data.topics.get(f"/{n}/planner")]
     if len(rowless) == len(names):
-        raise ReplayError(f"{log}: no planner rows (/<drone>/planner) for any drone of mission "
-                          f"{mission.name!r}: nothing to replay (the flight never reached its planning phase?)")
+        raise ReplayError(
+            f"{log}: no planner rows (/<drone>/planner) for any drone of mission "
+            f"{mission.name!r}: nothing to replay (the flight never reached its planning phase?)"
+        )
     frames = mocap_frames(data, names)
     if not frames:
         raise ReplayError(f"{log}: no mocap poses (/mocap/<drone>): the views cannot be rebuilt")
@@ -111,31 +113,41 @@ def replay_log(
     offset = meta.get("monotonic_offset_ns")
     times = TrackerClock(int(offset) if offset not in (None, "") else None, frames[0].t_ns)
     if not times.exact:
-        warnings.append("the log has no mission.monotonic_offset_ns (written before rpf-fly replay existed): "
-                        "its pose times are not the tracker's, so neighbour velocities are rebuilt only "
-                        "approximately: a guide, not a check (two such dry runs differed by up to 2e-4 and 0.12 "
-                        "from their third tick on, docs/replay.md)")
+        warnings.append(
+            "the log has no mission.monotonic_offset_ns (written before rpf-fly replay existed): "
+            "its pose times are not the tracker's, so neighbour velocities are rebuilt only "
+            "approximately: a guide, not a check (two such dry runs differed by up to 2e-4 and 0.12 "
+            "from their third tick on, docs/replay.md)"
+        )
     for topic in [f"/mocap/{n}" for n in names] + [f"/{n}/planner" for n in names]:
         missing = missing_sequences(data, topic)
         if missing:
-            warnings.append(f"{topic}: {missing} message(s) dropped by the flight's log queue: the replay may "
-                            "differ from the flight from there")
-    if any("reference" not in (m.data or {}) for n in names for m in data.topics.get(f"/{n}/planner", ())[:1]
-           if isinstance(m.data, dict) and m.data.get("mode") in PLANNING_MODES):
-        warnings.append("planner rows without `reference` (a log from before rpf-fly replay): each planning "
-                        "stretch restarts from the drone's pose one frame before, not the reference the flight "
-                        "restarted from (exact for the take-off, a guess after a hold)")
+            warnings.append(
+                f"{topic}: {missing} message(s) dropped by the flight's log queue: the replay may "
+                "differ from the flight from there"
+            )
+    if any(
+        "reference" not in (m.data or {})
+        for n in names
+        for m in data.topics.get(f"/{n}/planner", ())[:1]
+        if isinstance(m.data, dict) and m.data.get("mode") in PLANNING_MODES
+    ):
+        warnings.append(
+            "planner rows without `reference` (a log from before rpf-fly replay): each planning "
+            "stretch restarts from the drone's pose one frame before, not the reference the flight "
+            "restarted from (exact for the take-off, a guess after a hold)"
+        )
 
     inf = math.inf
     agents = {d.name: DroneAgent.for_mission(d, planner_factory(d), mission, budget_s=inf) for d in mission.drones}
-    shadow = {d.name: DroneAgent.for_mission(d, agents[d.name].planner, mission, budget_s=inf)
-              for d in mission.drones}
+    shadow = {d.name: DroneAgent.for_mission(d, agents[d.name].planner, mission, budget_s=inf) for d in mission.drones}
     swarm = SwarmPlanner(mission.planner.sensing_range, inf, hang_s=REPLAY_HANG_S)
     tracker = PoseTracker({n: n for n in names})
     results = {n: DroneReplay(n, tolerance) for n in names}
     for n in rowless:
-        results[n].note = (f"no planner rows (/{n}/planner) in the log: not replayed (its poses still count as a "
-                           "neighbour, by height)")
+        results[n].note = (
+            f"no planner rows (/{n}/planner) in the log: not replayed (its poses still count as a neighbour, by height)"
+        )
     last_planned: dict[str, LoggedRow] = {}
     previous_mode: dict[str, str] = {}
     batching_off_ns = batching_switched_off_ns(data)
@@ -148,14 +160,16 @@ def replay_log(
         for tick in ticks:
             while next_frame < len(frames) and frames[next_frame].t_ns <= tick.t_ns + FRAME_SLACK_NS:
                 before = {n: p.xy for n, p in tracker.poses.items()}
-                tracker.update(mocap_frame(next_frame + 1, frames[next_frame], times),
-                               reacquired.get(next_frame, ()))
+                tracker.update(mocap_frame(next_frame + 1, frames[next_frame], times), reacquired.get(next_frame, ()))
                 next_frame += 1
             if batching_off_ns is not None and tick.t_ns > batching_off_ns:
                 swarm.batching = False
             phases = {n: phase_of_mode(r.mode) for n, r in tick.rows.items()}
-            airborne = {n: p for n, p in tracker.poses.items()  # no row: by its height alone (on the floor:
-                        if in_the_way(phases.get(n, UNKNOWN_PHASE), p.position[2], height)}  # waiting, failed)
+            airborne = {
+                n: p
+                for n, p in tracker.poses.items()  # no row: by its height alone (on the floor:
+                if in_the_way(phases.get(n, UNKNOWN_PHASE), p.position[2], height)
+            }  # waiting, failed)
             requests: list[tuple[DroneAgent, complex]] = []
             for name in names:
                 row = tick.rows.get(name)
@@ -193,16 +207,24 @@ def replay_log(
                     step = outcome.step
                     mode, direction = MODE_NAMES.get(int(step.mode), "apf"), complex(step.direction)
                 results[agent.name].ticks.append(
-                    TickComparison(row.tick, row.t_ns, row.mode, row.direction, mode, direction))
+                    TickComparison(row.tick, row.t_ns, row.mode, row.direction, mode, direction)
+                )
     finally:
         for agent in agents.values():
             agent.close()
     seconds = clock() - started
     compared = sum(1 for t in ticks if any(r.mode in PLANNING_MODES for r in t.rows.values()))
     return ReplayResult(
-        planner=planner or mission.planner.kind, policy=policy, flown_planner=meta.get("planner", ""),
-        same_as_flown=same_as_flown, tolerance=tolerance, drones=results, ticks=compared, seconds=seconds,
-        exact_times=times.exact, warnings=warnings,
+        planner=planner or mission.planner.kind,
+        policy=policy,
+        flown_planner=meta.get("planner", ""),
+        same_as_flown=same_as_flown,
+        tolerance=tolerance,
+        drones=results,
+        ticks=compared,
+        seconds=seconds,
+        exact_times=times.exact,
+        warnings=warnings,
     )
 
 
@@ -221,8 +243,9 @@ def _restarts(row: LoggedRow, last: LoggedRow | None, previous_mode: str | None,
     return moved_to != row.reference
 
 
-def replay_setup(data: LogData, kind: str | None = None, policy: Path | None = None,
-                 tolerance: float | None = None) -> ReplaySetup:
+def replay_setup(
+    data: LogData, kind: str | None = None, policy: Path | None = None, tolerance: float | None = None
+) -> ReplaySetup:
     """The logged mission with ``kind`` and ``policy`` (None: the flight's own, from the mission metadata) and
     the planner factory the flight loop would have used. Raises :class:`ReplayError` (one line)."""
     from rpf_fly.log.metadata import file_sha256
@@ -237,11 +260,15 @@ def replay_setup(data: LogData, kind: str | None = None, policy: Path | None = N
     log = data.path
     meta = data.metadata.get("mission")
     if not meta or not meta.get("yaml"):
-        raise ReplayError(f"{log}: metadata mission.yaml: missing: the replay needs the mission the flight flew "
-                          "(a log written by rpf-fly fly)")
+        raise ReplayError(
+            f"{log}: metadata mission.yaml: missing: the replay needs the mission the flight flew "
+            "(a log written by rpf-fly fly)"
+        )
     if meta.get("source") == "sim":
-        raise ReplayError(f"{log}: metadata mission.source: 'sim': a simulation log has no flight loop views to "
-                          "rebuild; replay a flight or dry-run log (rpf-fly fly [--dry-run] --log)")
+        raise ReplayError(
+            f"{log}: metadata mission.source: 'sim': a simulation log has no flight loop views to "
+            "rebuild; replay a flight or dry-run log (rpf-fly fly [--dry-run] --log)"
+        )
     flown_kind = meta.get("planner", "")
     flown_sha = meta.get("policy_sha256", "")
     mission = logged_mission(meta, log, kind, policy)
@@ -256,9 +283,11 @@ def replay_setup(data: LogData, kind: str | None = None, policy: Path | None = N
     sha = file_sha256(mission.planner.policy)
     same = kind == flown_kind and sha == flown_sha
     if kind == flown_kind and sha != flown_sha and policy is None:
-        warnings.append(f"the policy found for the flight's planner ({mission.planner.policy}, sha256 {sha[:12]}...) "
-                        f"is not the one flown (sha256 {flown_sha[:12] or 'none'}...): the replay is not the "
-                        "flight's own planner; give --policy with the flown file")
+        warnings.append(
+            f"the policy found for the flight's planner ({mission.planner.policy}, sha256 {sha[:12]}...) "
+            f"is not the one flown (sha256 {flown_sha[:12] or 'none'}...): the replay is not the "
+            "flight's own planner; give --policy with the flown file"
+        )
     obstacles = obstacle_set(mission.obstacles)
     try:
         probe = mission_planner(mission, obstacles=obstacles)
@@ -267,5 +296,10 @@ def replay_setup(data: LogData, kind: str | None = None, policy: Path | None = N
     fixed = isinstance(probe, Planner) and isinstance(probe.gains, FixedGains)
     default_tolerance = FIXED_GAINS_TOLERANCE if fixed or mission.planner.policy is None else ONNX_TOLERANCE
     settings = mission.planner
-    return ReplaySetup(mission, lambda drone: mission_planner(mission, settings, obstacles), same,
-                       default_tolerance if tolerance is None else tolerance, warnings)
+    return ReplaySetup(
+        mission,
+        lambda drone: mission_planner(mission, settings, obstacles),
+        same,
+        default_tolerance if tolerance is None else tolerance,
+        warnings,
+    )

@@ -49,8 +49,9 @@ def logged_row(message: Any) -> LoggedRow | None:
         position = (float(p["x"]), float(p["y"]), float(p["z"]))
         ref = d.get("reference")
         reference = complex(float(ref["x"]), float(ref["y"])) if ref is not None else None
-        return LoggedRow(int(d["tick"]), message.publish_time, message.log_time, str(d["mode"]), direction, position,
-                         reference)
+        return LoggedRow(
+            int(d["tick"]), message.publish_time, message.log_time, str(d["mode"]), direction, position, reference
+        )
     except (KeyError, TypeError, ValueError):
         return None
 
@@ -86,8 +87,11 @@ def reacquisitions(data: LogData, frames: list[LoggedFrame]) -> dict[int, set[st
     times = [f.t_ns for f in frames]
     for message in data.topics.get("/events", ()):
         d = message.data
-        if not (isinstance(d, dict) and d.get("file") == "pose_glitch"
-                and str(d.get("message", "")).startswith("mocap track consistent again")):
+        if not (
+            isinstance(d, dict)
+            and d.get("file") == "pose_glitch"
+            and str(d.get("message", "")).startswith("mocap track consistent again")
+        ):
             continue
         name = str(d.get("name", ""))
         i = bisect.bisect_right(times, message.publish_time + FRAME_SLACK_NS) - 1
@@ -142,6 +146,8 @@ class TrackerClock:
 
 def mocap_frame(number: int, frame: LoggedFrame, clock: TrackerClock) -> MocapFrame:
     t = clock.seconds(frame.t_ns)
-    bodies = {name: RigidBodyPose(name, i + 1, position, quaternion, True)
-              for i, (name, (position, quaternion)) in enumerate(frame.poses.items())}
+    bodies = {
+        name: RigidBodyPose(name, i + 1, position, quaternion, True)
+        for i, (name, (position, quaternion)) in enumerate(frame.poses.items())
+    }
     return MocapFrame(number, t, t, None, bodies)

@@ -62,8 +62,10 @@ def find_flown_policy(text: str, kind: str, log: Path, sha256: str) -> Path | No
     name = Path(raw).name
     here, beside = Path.cwd(), log.parent
     checkout = Path(__file__).resolve().parents[2]
-    candidates = [beside / raw, here / raw] + [d / name for d in (here / "policies", beside, beside / "policies",
-                                                                  beside.parent / "policies", checkout / "policies")]
+    candidates = [beside / raw, here / raw] + [
+        d / name
+        for d in (here / "policies", beside, beside / "policies", beside.parent / "policies", checkout / "policies")
+    ]
     for candidate in candidates:
         try:
             if candidate.is_file() and file_sha256(candidate) == sha256:

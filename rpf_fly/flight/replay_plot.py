@@ -56,8 +56,9 @@ def replay_figure(result: ReplayResult, title: str = ""):
 
     drones = [d for d in result.drones.values() if d.ticks]
     rows = max(1, len(drones))
-    fig, axes = plt.subplots(rows, 2, figsize=(13, 2.6 * rows + 0.8), squeeze=False, sharex=True,
-                             gridspec_kw={"width_ratios": [3, 2]})
+    fig, axes = plt.subplots(
+        rows, 2, figsize=(13, 2.6 * rows + 0.8), squeeze=False, sharex=True, gridspec_kw={"width_ratios": [3, 2]}
+    )
     starts = [c.t_ns for d in drones for c in d.ticks]
     t0 = min(starts) if starts else 0
     for (ax, ax_diff), drone in zip(axes, drones):
@@ -67,10 +68,12 @@ def replay_figure(result: ReplayResult, title: str = ""):
         # the replayed heading drawn as the logged one plus their difference wrapped to (-180, 180]: the gap on the
         # plot is the angle between the two decisions (where the logged heading is zero, unwrapped on its own)
         gap = np.array([_heading_deg(c.replayed_direction) for c in ticks]) - np.array(
-            [_heading_deg(c.logged_direction) for c in ticks])
+            [_heading_deg(c.logged_direction) for c in ticks]
+        )
         gap = (gap + 180.0) % 360.0 - 180.0
-        replayed = np.where(np.isfinite(logged), logged + gap,
-                            _unwrapped([_heading_deg(c.replayed_direction) for c in ticks]))
+        replayed = np.where(
+            np.isfinite(logged), logged + gap, _unwrapped([_heading_deg(c.replayed_direction) for c in ticks])
+        )
         ax.plot(t, logged, "-", color="#1f77b4", lw=2.2, label="logged")
         what = result.planner + (f", {result.policy.name}" if result.policy is not None else "")
         ax.plot(t, replayed, "--", color="#ff7f0e", lw=1.4, label=f"replayed ({what})")
@@ -93,8 +96,9 @@ def replay_figure(result: ReplayResult, title: str = ""):
         ax_diff.grid(alpha=0.3, which="both")
         ax_diff.legend(loc="best", fontsize=7, framealpha=0.6)
         verdict = "reproduced" if first is None else f"first divergence at tick {first}"
-        ax_diff.set_title(f"max {drone.max_direction_diff:.2g}, mode differs on {drone.mode_changes} ticks: "
-                          f"{verdict}", fontsize=9)
+        ax_diff.set_title(
+            f"max {drone.max_direction_diff:.2g}, mode differs on {drone.mode_changes} ticks: {verdict}", fontsize=9
+        )
     if not drones:
         axes[0][0].text(0.5, 0.5, "no planning ticks to compare", ha="center", va="center")
     axes[-1][0].set_xlabel("time since the first planning tick [s]")

@@ -76,9 +76,15 @@ class FlightReport:
         if not self.host_behind_s or self.host_behind_s < HOST_BEHIND_REPORT_S:
             return ""
 
-        return (f"the host could not keep up for {self.host_behind_s:.1f} s (simulated steps or mocap frames more "
-                f"than {HOST_LATE_BOUND_S * 1000:.0f} ms late): this dry run is not evidence")
+        return (
+            f"the host could not keep up for {self.host_behind_s:.1f} s (simulated steps or mocap frames more "
+            f"than {HOST_LATE_BOUND_S * 1000:.0f} ms late): this dry run is not evidence"
+        )
 
     @property
     def success(self) -> bool:
-        return self.error is None and not self.interrupted and all(o == FlightOutcome.REACHED for o in self.outcomes.values())
+        return (
+            self.error is None
+            and not self.interrupted
+            and all(o == FlightOutcome.REACHED for o in self.outcomes.values())
+        )

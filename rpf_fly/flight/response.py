@@ -59,8 +59,14 @@ class ResponseGains:
     tilt_limit_deg: float = 20.0
     """``posCtlPid.pLimit`` (degrees)."""
 
-    PARAMS = {"posCtlPid.xKp": "pos_kp", "posCtlPid.xKi": "pos_ki", "velCtlPid.vxKp": "vel_kp",
-              "velCtlPid.vxKi": "vel_ki", "posCtlPid.xVelMax": "vel_max", "posCtlPid.pLimit": "tilt_limit_deg"}
+    PARAMS = {
+        "posCtlPid.xKp": "pos_kp",
+        "posCtlPid.xKi": "pos_ki",
+        "velCtlPid.vxKp": "vel_kp",
+        "velCtlPid.vxKi": "vel_ki",
+        "posCtlPid.xVelMax": "vel_max",
+        "posCtlPid.pLimit": "tilt_limit_deg",
+    }
     """The firmware parameters this model reads, and the field each sets."""
 
     @classmethod
@@ -86,8 +92,14 @@ class ResponseGains:
 DEFAULT_GAINS = ResponseGains()
 
 
-def respond(gains: ResponseGains, position: np.ndarray, velocity: np.ndarray, setpoints: np.ndarray,
-            duration_s: float, tilt_deg: np.ndarray | None = None) -> np.ndarray:
+def respond(
+    gains: ResponseGains,
+    position: np.ndarray,
+    velocity: np.ndarray,
+    setpoints: np.ndarray,
+    duration_s: float,
+    tilt_deg: np.ndarray | None = None,
+) -> np.ndarray:
     """Positions (steps x ... x 2) of drones that start at ``position`` with ``velocity`` (... x 2, m and m/s) and
     are held at ``setpoints`` (... x 2; or steps x ... x 2, one per 10 ms step) for ``duration_s``, one row per
     10 ms step. ``tilt_deg``: the tilt each starts with (default: what holds its velocity against drag, as in
@@ -173,9 +185,14 @@ class Braking:
         tilts = np.broadcast_to(TILTS_DEG[None, :, None], shape).ravel()
         n = speeds.size
         zeros = np.zeros(n)
-        track = respond(gains, np.zeros((n, 2)), np.stack([speeds, zeros], axis=1),
-                        np.stack([offsets.ravel(), zeros], axis=1), 3.0,
-                        tilt_deg=np.stack([tilts, zeros], axis=1))
+        track = respond(
+            gains,
+            np.zeros((n, 2)),
+            np.stack([speeds, zeros], axis=1),
+            np.stack([offsets.ravel(), zeros], axis=1),
+            3.0,
+            tilt_deg=np.stack([tilts, zeros], axis=1),
+        )
         farthest = np.maximum(track[:, :, 0].max(axis=0), 0.0).reshape(shape)
         near = farthest <= farthest.min(axis=2, keepdims=True) + NEAR_SHORTEST_M
         chosen = shape[2] - 1 - np.argmax(near[:, :, ::-1], axis=2)  # the last offset within reach of the shortest
@@ -206,8 +223,9 @@ class Braking:
         """Where to hold it, ahead of where it is along its way (negative: behind)."""
         return self._read(self._offset, speed_m_s, tilt_deg)
 
-    def _way(self, position: complex, velocity: complex, setpoint: complex | None) -> tuple[complex, float,
-                                                                                                 float | None]:
+    def _way(
+        self, position: complex, velocity: complex, setpoint: complex | None
+    ) -> tuple[complex, float, float | None]:
         """The drone's way (unit, 0 when it goes nowhere), its speed along it and its tilt along it (None: steady,
         when no setpoint is known)."""
         speed = abs(velocity)
@@ -220,8 +238,9 @@ class Braking:
             return 0j, 0.0, None
         return way, speed, None if tilt is None else (tilt * way.conjugate()).real
 
-    def stop_point(self, position: complex, velocity: complex, setpoint: complex | None = None,
-                   tilt_deg: complex | None = None) -> complex:
+    def stop_point(
+        self, position: complex, velocity: complex, setpoint: complex | None = None, tilt_deg: complex | None = None
+    ) -> complex:
         """Where a drone at ``position`` (x + iy), moving at ``velocity`` and streamed ``setpoint`` (None: in
         steady flight), comes to rest at the farthest if it is held now; ``tilt_deg`` (x + iy, towards where it
         accelerates): its tilt when known (a `Follower`'s), else the one its setpoint asks for."""

@@ -55,8 +55,7 @@ class ScenarioError(RuntimeError):
     """The scenario could not be flown (no link, no pose, the drone did not take off); the message says why."""
 
 
-def scenario_mission(scenario: Scenario, name: str = "cf1",
-                     uri: str = "radio://0/80/2M/E7E7E7E701") -> Mission:
+def scenario_mission(scenario: Scenario, name: str = "cf1", uri: str = "radio://0/80/2M/E7E7E7E701") -> Mission:
     """A one-drone mission around ``scenario``: the drone standing under its start, an arena 1 m beyond every
     point it names, mocap from the NatNet emulator on 127.0.0.1 (a dry run's)."""
     points = [scenario.start] + [tuple(r[1:4]) for r in scenario.setpoints]
@@ -79,14 +78,18 @@ drones:
     return parse_mission(text, f"<scenario {scenario.name}>")
 
 
-def plan_point(start: tuple[float, float, float], goal: tuple[float, float, float], duration_s: float,
-               elapsed_s: float) -> tuple[float, float, float]:
+def plan_point(
+    start: tuple[float, float, float], goal: tuple[float, float, float], duration_s: float, elapsed_s: float
+) -> tuple[float, float, float]:
     """The high-level commander's rest-to-rest piece (degree 7, zero velocity, acceleration and jerk at both ends:
     crazyflie-firmware pptraj.c, planner.c) at ``elapsed_s`` into it."""
     s = min(1.0, max(0.0, elapsed_s / duration_s)) if duration_s > 0 else 1.0
-    k = 35 * s ** 4 - 84 * s ** 5 + 70 * s ** 6 - 20 * s ** 7
-    return (start[0] + (goal[0] - start[0]) * k, start[1] + (goal[1] - start[1]) * k,
-            start[2] + (goal[2] - start[2]) * k)
+    k = 35 * s**4 - 84 * s**5 + 70 * s**6 - 20 * s**7
+    return (
+        start[0] + (goal[0] - start[0]) * k,
+        start[1] + (goal[1] - start[1]) * k,
+        start[2] + (goal[2] - start[2]) * k,
+    )
 
 
 @dataclass
@@ -94,8 +97,9 @@ class _Plan:
     """The plan position a command scenario's sp shows: pieces (start time, start, goal, duration)."""
 
     floor: tuple[float, float, float]
-    pieces: list[tuple[float, tuple[float, float, float], tuple[float, float, float], float]] = \
-        field(default_factory=list)
+    pieces: list[tuple[float, tuple[float, float, float], tuple[float, float, float], float]] = field(
+        default_factory=list
+    )
 
     def at(self, t_s: float) -> tuple[float, float, float]:
         current = self.floor
@@ -114,9 +118,18 @@ class ScenarioFlight:
     ``truth(name)``: the drone's true position in a simulated world (a dry run's or a lab's), None for a real drone
     (the trace then holds the mocap position). ``on_event(message)``: each step of the flight, for the console."""
 
-    def __init__(self, mission: Mission, name: str, scenario: Scenario, backend: Any, mocap: Any, uri: str,
-                 truth: Callable[[str], tuple[float, float, float]] | None = None,
-                 on_event: Callable[[str], None] = lambda message: None, log: Any = None) -> None:
+    def __init__(
+        self,
+        mission: Mission,
+        name: str,
+        scenario: Scenario,
+        backend: Any,
+        mocap: Any,
+        uri: str,
+        truth: Callable[[str], tuple[float, float, float]] | None = None,
+        on_event: Callable[[str], None] = lambda message: None,
+        log: Any = None,
+    ) -> None:
         self.mission = mission
         self.name = name
         self.scenario = scenario
@@ -343,13 +356,17 @@ def _check_lab_dynamics(lab: Any, say: Callable[[str], None] = lambda message: N
     try:
         dynamics = load_mission(Path(lab.mission)).dry_run.dynamics
     except Exception as err:  # noqa: BLE001 - the lab's file cannot be read from here: the lab itself cannot say
-        say(f"the lab's mission {lab.mission} cannot be read from here ({type(err).__name__}): its drones fly the "
-            "dynamics it says (dry_run.dynamics), not checked")
+        say(
+            f"the lab's mission {lab.mission} cannot be read from here ({type(err).__name__}): its drones fly the "
+            "dynamics it says (dry_run.dynamics), not checked"
+        )
         return
     if dynamics != "firmware":
-        raise ScenarioError(f"the lab's drones fly the {dynamics} model (its mission {lab.mission}, dry_run.dynamics): "
-                            "a scenario is flown on the firmware model; start the lab with dry_run: "
-                            "{dynamics: firmware}")
+        raise ScenarioError(
+            f"the lab's drones fly the {dynamics} model (its mission {lab.mission}, dry_run.dynamics): "
+            "a scenario is flown on the firmware model; start the lab with dry_run: "
+            "{dynamics: firmware}"
+        )
 
 
 def resample_truth(trace: dict[str, Any], track: list[tuple[float, tuple[float, float, float]]], t0: float) -> bool:
@@ -385,13 +402,22 @@ def _host_verdict(trace: dict[str, Any], rig: Any, flight: ScenarioFlight) -> No
         return
     trace["host_behind_s"] = behind
     if behind >= HOST_BEHIND_REPORT_S:
-        flight._event(f"the host could not keep up for {behind:.1f} s (simulated steps or mocap frames late): these "
-                      "figures are not evidence")
+        flight._event(
+            f"the host could not keep up for {behind:.1f} s (simulated steps or mocap frames late): these "
+            "figures are not evidence"
+        )
 
 
-def run_scenario(scenario: Scenario, mission: Mission, name: str, *, dry_run: bool, lab: Any = None,
-                 log_path: Path | None = None, on_event: Callable[[str], None] = lambda m: None
-                 ) -> dict[str, Any]:
+def run_scenario(
+    scenario: Scenario,
+    mission: Mission,
+    name: str,
+    *,
+    dry_run: bool,
+    lab: Any = None,
+    log_path: Path | None = None,
+    on_event: Callable[[str], None] = lambda m: None,
+) -> dict[str, Any]:
     """Fly ``scenario`` with drone ``name`` of ``mission``: on a private simulated drone (``dry_run``), on a running
     lab's (``lab``: its `rpf_fly.flight.lab.LabInfo`), else on the real one with the mission's mocap. Logs as a
     flight (``log_path``: poses, setpoints, events and, simulated, the truth). Returns the trace."""
@@ -419,8 +445,9 @@ def run_scenario(scenario: Scenario, mission: Mission, name: str, *, dry_run: bo
             else:
                 from rpf_fly.emulator.fake_world import FakeDroneConfig
 
-                still = FakeDroneConfig.at(drone.start[0], drone.start[1], 0.0, positioning="extpos",
-                                           turbulence_m_s2=0.0)
+                still = FakeDroneConfig.at(
+                    drone.start[0], drone.start[1], 0.0, positioning="extpos", turbulence_m_s2=0.0
+                )
                 rig = DryRun(one, dynamics="firmware", drone_configs={name: still}, radio_loss=None).__enter__()
             backend, mocap, uri = CflibBackend.for_mission(one, rig.cache_dir), rig.mocap, rig.uris[name]
             address = rig.addresses[name]
@@ -465,5 +492,5 @@ def run_scenario(scenario: Scenario, mission: Mission, name: str, *, dry_run: bo
             log.close()
         if rig is not None:
             rig.close()
-        elif 'mocap' in locals() and mocap is not None:
+        elif "mocap" in locals() and mocap is not None:
             mocap.close()

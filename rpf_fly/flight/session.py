@@ -48,8 +48,9 @@ def resolve_mocap_server(mission: Mission) -> str:
         infos = socket.getaddrinfo(host, port, family, type=socket.SOCK_DGRAM)
     except (socket.gaierror, UnicodeError) as err:
         reason = err.strerror if isinstance(err, socket.gaierror) and err.strerror else str(err)
-        error = UnresolvableServer(f"cannot resolve {host!r} ({reason}): expected the IP address or host name of "
-                                   f"{what}")
+        error = UnresolvableServer(
+            f"cannot resolve {host!r} ({reason}): expected the IP address or host name of {what}"
+        )
         error.field = field
         raise error from None
     return str(infos[0][4][0])
@@ -62,8 +63,10 @@ def real_flight_problem(mission: Mission) -> str | None:
     if m.kind == "sim":
         return "mocap.kind: 'sim' can only fly with --dry-run (real drones need motion capture)"
     if m.kind == "motioncapture" and m.system == "mock":
-        return ("mocap.type: 'mock' serves fixed poses from its options, not the drones': it can only fly with "
-                "--dry-run (which serves the simulated drones' poses, docs/mocap.md)")
+        return (
+            "mocap.type: 'mock' serves fixed poses from its options, not the drones': it can only fly with "
+            "--dry-run (which serves the simulated drones' poses, docs/mocap.md)"
+        )
     return None
 
 
@@ -72,8 +75,9 @@ def motioncapture_missing(mission: Mission, dry_run: bool, dry_run_mocap: str | 
     flight of kind ``motioncapture``, or a dry run whose mocap is ``motioncapture``: ``dry_run_mocap`` or, if None,
     the mission's kind); None otherwise. Checked before anything starts, without importing the C++ library."""
     if dry_run:
-        needed = (dry_run_mocap or ("motioncapture" if mission.mocap.kind == "motioncapture" else "natnet")) \
-            == "motioncapture"
+        needed = (
+            dry_run_mocap or ("motioncapture" if mission.mocap.kind == "motioncapture" else "natnet")
+        ) == "motioncapture"
     else:
         needed = mission.mocap.kind == "motioncapture"
     if not needed:
@@ -91,8 +95,14 @@ def motioncapture_source(mission: Mission, timeout_s: float = 5.0) -> MocapSourc
 
     m = mission.mocap
     assert m.system is not None
-    return MotioncaptureSource(m.system, m.hostname, dict(m.options), up_axis=m.up_axis,
-                               bodies=[d.rigid_body for d in mission.drones], connect_timeout_s=timeout_s)
+    return MotioncaptureSource(
+        m.system,
+        m.hostname,
+        dict(m.options),
+        up_axis=m.up_axis,
+        bodies=[d.rigid_body for d in mission.drones],
+        connect_timeout_s=timeout_s,
+    )
 
 
 def mocap_source(mission: Mission, timeout_s: float = 5.0) -> MocapSource:
@@ -109,8 +119,13 @@ def natnet_source(mission: Mission, timeout_s: float = 5.0) -> MocapSource:
     resolve_mocap_server(mission)
     m = mission.mocap
     client = NatNetClient(
-        m.server, multicast=m.multicast, local_ip=m.local_ip, multicast_group=m.multicast_group,
-        command_port=m.command_port, data_port=m.data_port, up_axis=m.up_axis,
+        m.server,
+        multicast=m.multicast,
+        local_ip=m.local_ip,
+        multicast_group=m.multicast_group,
+        command_port=m.command_port,
+        data_port=m.data_port,
+        up_axis=m.up_axis,
     )
     if not client.wait_for_server(timeout_s):
         client.close()
@@ -162,14 +177,36 @@ def run_flight(
         truth = rig.truth_samples if rig is not None and rig.truth else None  # only a dry run has a truth
         if live is not None:
             live.prepare(live_topics(mission, truth is not None))
-        recorder = McapRecorder(log_path, mission, seed, source="dry-run" if rig else "flight", truth=truth,
-                                sink=live.publish if live is not None else None, radio=backend.radio_counts)
+        recorder = McapRecorder(
+            log_path,
+            mission,
+            seed,
+            source="dry-run" if rig else "flight",
+            truth=truth,
+            sink=live.publish if live is not None else None,
+            radio=backend.radio_counts,
+        )
     try:
         try:
-            first_order = ({name for name, address in rig.addresses.items()
-                            if rig.drone_configs[address].vehicle.dynamics == "first_order"} if rig is not None else set())
-            loop = FlightLoop(mission, backend, source, planner_factory, uris=uris, recorder=recorder,
-                              status_hook=status_hook, first_order=first_order)
+            first_order = (
+                {
+                    name
+                    for name, address in rig.addresses.items()
+                    if rig.drone_configs[address].vehicle.dynamics == "first_order"
+                }
+                if rig is not None
+                else set()
+            )
+            loop = FlightLoop(
+                mission,
+                backend,
+                source,
+                planner_factory,
+                uris=uris,
+                recorder=recorder,
+                status_hook=status_hook,
+                first_order=first_order,
+            )
         except BaseException:
             if recorder is not None:  # the loop closes it once it exists; before that, nobody would
                 recorder.close()

@@ -91,8 +91,10 @@ the worst healthy link, so a healthy system never warns, and 2 cm of lag at 1 m/
 random fault campaign's 33 ms of mocap delay (plus the emulated camera's 4 ms), a picture five times older than a
 healthy one, would go unsaid."""
 
-def _pose_at(history: deque[tuple[float, tuple[float, float, float]]],
-             stamp_s: float | None) -> tuple[float, float, float] | None:
+
+def _pose_at(
+    history: deque[tuple[float, tuple[float, float, float]]], stamp_s: float | None
+) -> tuple[float, float, float] | None:
     """The mocap position at ``stamp_s`` (linear between the two poses around it); None without a stamp or when
     the history does not reach back that far (or forward: a stamp ahead of the newest pose by over 20 ms)."""
     if stamp_s is None or not history or stamp_s < history[0][0] or stamp_s > history[-1][0] + 0.02:
@@ -148,7 +150,6 @@ def blind_land_s(height_m: float, land_s: float) -> float:
     return min(land_s, max(BLIND_LAND_MIN_S, BLIND_LAND_S_PER_M * height_m))
 
 
-
 class Supervisor:
     """Stateless checks plus the memory needed for edge-triggered events."""
 
@@ -181,15 +182,24 @@ class Supervisor:
         self._blind_stopped: set[str] = set()
 
     def check(
-        self, now_s: float, agents: Iterable[DroneAgent], tracker: PoseTracker, states: dict[str, DroneState],
+        self,
+        now_s: float,
+        agents: Iterable[DroneAgent],
+        tracker: PoseTracker,
+        states: dict[str, DroneState],
         others: Iterable[str] = (),
     ) -> list[Finding]:
         """``others``: drones another process flies (a distributed flight's other workers): in the separation check
         at their mocap pose while off the floor; a finding names only this process's drones."""
         everyone = list(agents)
         agents = [a for a in everyone if a.phase.airborne]
-        uncommanded = [a for a in everyone if a.phase in (DronePhase.LINK_LOST, DronePhase.EMERGENCY)
-                       and (p := tracker.get(a.name)) is not None and p.position[2] > ON_FLOOR_Z_M]
+        uncommanded = [
+            a
+            for a in everyone
+            if a.phase in (DronePhase.LINK_LOST, DronePhase.EMERGENCY)
+            and (p := tracker.get(a.name)) is not None
+            and p.position[2] > ON_FLOOR_Z_M
+        ]
         grounded = [a for a in everyone if a.phase == DronePhase.GROUNDED]  # on the floor, in everyone's way
         findings: list[Finding] = []
         findings += self._links(agents, states)
@@ -249,8 +259,15 @@ class Supervisor:
             self._mocap_late = True
             oldest = max({**ages, **landing}.values())
             tail = "flying on the last ones" if all_late else "the landing drones land on their estimates"
-            out.append(Finding("mocap_late", WARNING, f"no mocap pose for any drone for {oldest * 1e3:.0f} ms: {tail}",
-                               None, "warn"))
+            out.append(
+                Finding(
+                    "mocap_late",
+                    WARNING,
+                    f"no mocap pose for any drone for {oldest * 1e3:.0f} ms: {tail}",
+                    None,
+                    "warn",
+                )
+            )
         elif not (late if flying else late_landing):
             self._mocap_late = False
         for name, age in landing.items():
@@ -259,8 +276,15 @@ class Supervisor:
             elif name not in self._late_landing:
                 self._late_landing.add(name)
                 if not (self._mocap_late or self._mocap_lost):
-                    out.append(Finding("pose_late", WARNING, f"no pose for {age * 1e3:.0f} ms while landing "
-                                       "(occluded?): it lands on its estimate", name, "warn"))
+                    out.append(
+                        Finding(
+                            "pose_late",
+                            WARNING,
+                            f"no pose for {age * 1e3:.0f} ms while landing (occluded?): it lands on its estimate",
+                            name,
+                            "warn",
+                        )
+                    )
         out += self._unseen(agents, tracker)
         for a in flying:
             age = ages[a.name]
@@ -269,13 +293,29 @@ class Supervisor:
             elif a.name not in self._late and age <= s.pose_timeout_s:
                 self._late.add(a.name)
                 if not all_late:
-                    out.append(Finding("pose_late", WARNING, f"no pose for {age * 1e3:.0f} ms (occluded?): "
-                                       "flying on its last one", a.name, "warn"))
+                    out.append(
+                        Finding(
+                            "pose_late",
+                            WARNING,
+                            f"no pose for {age * 1e3:.0f} ms (occluded?): flying on its last one",
+                            a.name,
+                            "warn",
+                        )
+                    )
             if age > s.pose_lost_land_s:
                 pose = tracker.get(a.name)
                 duration = blind_land_s(pose.position[2] if pose is not None else 1.0, self.mission.flight.land_s)
-                out.append(Finding("pose_lost", ERROR, f"no valid pose for {age:.1f} s: landing (in {duration:.1f} s: "
-                                   "without mocap its estimate drifts)", a.name, "land", duration))
+                out.append(
+                    Finding(
+                        "pose_lost",
+                        ERROR,
+                        f"no valid pose for {age:.1f} s: landing (in {duration:.1f} s: "
+                        "without mocap its estimate drifts)",
+                        a.name,
+                        "land",
+                        duration,
+                    )
+                )
             elif age > s.pose_timeout_s:
                 if a.name not in self._stale:
                     self._stale.add(a.name)
@@ -297,13 +337,37 @@ class Supervisor:
         if not named:
             return []
         if len(named) == len(agents) and len(agents) > 1:
-            return [Finding("mocap_late", WARNING, f"no mocap pose for any drone for {max(named.values()) * 1e3:.0f} "
-                            "ms while the loop was not reading (stalled): said after the fact", None, "warn")]
-        return [Finding("pose_late", WARNING, f"no pose for {gap * 1e3:.0f} ms while the loop was not reading "
-                        "(stalled; occluded?): said after the fact", name, "warn") for name, gap in named.items()]
+            return [
+                Finding(
+                    "mocap_late",
+                    WARNING,
+                    f"no mocap pose for any drone for {max(named.values()) * 1e3:.0f} "
+                    "ms while the loop was not reading (stalled): said after the fact",
+                    None,
+                    "warn",
+                )
+            ]
+        return [
+            Finding(
+                "pose_late",
+                WARNING,
+                f"no pose for {gap * 1e3:.0f} ms while the loop was not reading "
+                "(stalled; occluded?): said after the fact",
+                name,
+                "warn",
+            )
+            for name, gap in named.items()
+        ]
 
-    def _blind(self, now_s: float, agents: list[DroneAgent], uncommanded: list[DroneAgent], foreign: list[str],
-               tracker: PoseTracker, states: dict[str, DroneState] | None = None) -> list[Finding]:
+    def _blind(
+        self,
+        now_s: float,
+        agents: list[DroneAgent],
+        uncommanded: list[DroneAgent],
+        foreign: list[str],
+        tracker: PoseTracker,
+        states: dict[str, DroneState] | None = None,
+    ) -> list[Finding]:
         """A drone without a fresh pose flies on its estimate, which drifts (`blind_drift_m`). Its room: the
         clearance of its last pose to obstacle surfaces and the arena's edge (plus r, the geofence's allowance), and
         half its distance to another blind drone (both drift) or all of it to one mocap sees, less the bodies'
@@ -338,32 +402,63 @@ class Supervisor:
             fall = math.sqrt(2.0 * height / 9.81)
             if blind_drift_m(touchdown, rate) > room and blind_drift_m(age + fall, rate) >= room:
                 self._blind_stopped.add(a.name)
-                where = (f"{touchdown - age:.1f} s before its landing would end, " if a.phase == DronePhase.LANDING
-                         else "")
-                out.append(Finding("pose_lost", ERROR, f"no valid pose for {age:.1f} s, {room:.2f} m of room to "
-                                   f"{what}: its estimate may drift it {blind_drift_m(touchdown, rate):.2f} m before a "
-                                   f"landing could end: motors off ({where}at most {height:.2f} m up)", a.name,
-                                   "stop"))
-            elif (a.phase != DronePhase.LANDING and a.name not in self._blind_landed
-                  and blind_drift_m(touchdown, rate) >= LAND_EARLY_SHARE * room):
+                where = (
+                    f"{touchdown - age:.1f} s before its landing would end, " if a.phase == DronePhase.LANDING else ""
+                )
+                out.append(
+                    Finding(
+                        "pose_lost",
+                        ERROR,
+                        f"no valid pose for {age:.1f} s, {room:.2f} m of room to "
+                        f"{what}: its estimate may drift it {blind_drift_m(touchdown, rate):.2f} m before a "
+                        f"landing could end: motors off ({where}at most {height:.2f} m up)",
+                        a.name,
+                        "stop",
+                    )
+                )
+            elif (
+                a.phase != DronePhase.LANDING
+                and a.name not in self._blind_landed
+                and blind_drift_m(touchdown, rate) >= LAND_EARLY_SHARE * room
+            ):
                 self._blind_landed.add(a.name)
                 duration = blind_land_s(height, land_s)
-                out.append(Finding("pose_lost", ERROR, f"no valid pose for {age:.1f} s, {room:.2f} m of room to "
-                                   f"{what}: landing now (in {duration:.1f} s), before its estimate's drift could "
-                                   "take it there", a.name, "land", duration))
+                out.append(
+                    Finding(
+                        "pose_lost",
+                        ERROR,
+                        f"no valid pose for {age:.1f} s, {room:.2f} m of room to "
+                        f"{what}: landing now (in {duration:.1f} s), before its estimate's drift could "
+                        "take it there",
+                        a.name,
+                        "land",
+                        duration,
+                    )
+                )
         return out
 
     def _blind_height(self, now_s: float, pose_z: float, age: float, state: DroneState | None) -> float:
         """How high a blind drone may be: its estimate's height (telemetry under `ESTIMATE_FRESH_S` old) plus its
         possible drift, at most its last pose's height; the last pose's height without a fresh estimate."""
         height = pose_z
-        if (state is not None and state.position_m is not None and state.telemetry_stamp_s is not None
-                and now_s - state.telemetry_stamp_s <= ESTIMATE_FRESH_S):
+        if (
+            state is not None
+            and state.position_m is not None
+            and state.telemetry_stamp_s is not None
+            and now_s - state.telemetry_stamp_s <= ESTIMATE_FRESH_S
+        ):
             height = min(height, state.position_m[2] + blind_drift_m(age, self.safety.blind_drift_m_s2))
         return max(0.0, height)
 
-    def _room(self, name: str, position: tuple[float, float, float], ages: dict[str, float], tracker: PoseTracker,
-              airborne: list[DroneAgent], foreign: list[str]) -> tuple[float, str]:
+    def _room(
+        self,
+        name: str,
+        position: tuple[float, float, float],
+        ages: dict[str, float],
+        tracker: PoseTracker,
+        airborne: list[DroneAgent],
+        foreign: list[str],
+    ) -> tuple[float, str]:
         """How far a blind drone at ``position`` may drift before it touches something, and what."""
         x, y = position[0], position[1]
         arena = self.mission.arena
@@ -395,8 +490,11 @@ class Supervisor:
             x, y, z = pose.position
             outside = not (arena.x[0] <= x <= arena.x[1] and arena.y[0] <= y <= arena.y[1] and z <= arena.z[1])
             if outside:
-                out.append(Finding("geofence", ERROR, f"outside the arena at ({x:.2f}, {y:.2f}, {z:.2f}): landing",
-                                   a.name, "land"))
+                out.append(
+                    Finding(
+                        "geofence", ERROR, f"outside the arena at ({x:.2f}, {y:.2f}, {z:.2f}): landing", a.name, "land"
+                    )
+                )
         return out
 
     def _battery(self, agents: list[DroneAgent], states: dict[str, DroneState]) -> list[Finding]:
@@ -419,8 +517,10 @@ class Supervisor:
             self._low_battery[a.name] = (count, state.telemetry_stamp_s)
             if count == LOW_BATTERY_SAMPLES:
                 landing = a.phase == DronePhase.LANDING
-                message = (f"battery low ({battery.voltage_v:.2f} V, {battery.pm_state.name.lower()}; "
-                           f"{count} samples in a row): {'it is landing already' if landing else 'landing'}")
+                message = (
+                    f"battery low ({battery.voltage_v:.2f} V, {battery.pm_state.name.lower()}; "
+                    f"{count} samples in a row): {'it is landing already' if landing else 'landing'}"
+                )
                 out.append(Finding("battery", WARNING, message, a.name, "warn" if landing else "land"))
         return out
 
@@ -435,8 +535,15 @@ class Supervisor:
             age = float("inf") if stamp is None else now_s - stamp
             if age > TELEMETRY_STALE_S and a.name not in self._telemetry_stale:
                 self._telemetry_stale.add(a.name)
-                out.append(Finding("telemetry", WARNING, f"no status telemetry for {age:.1f} s: battery and "
-                                   "supervisor unwatched", a.name, "warn"))
+                out.append(
+                    Finding(
+                        "telemetry",
+                        WARNING,
+                        f"no status telemetry for {age:.1f} s: battery and supervisor unwatched",
+                        a.name,
+                        "warn",
+                    )
+                )
             elif age <= TELEMETRY_STALE_S and a.name in self._telemetry_stale:
                 self._telemetry_stale.discard(a.name)
                 out.append(Finding("telemetry", INFO, "status telemetry is back", a.name, "warn"))
@@ -451,11 +558,15 @@ class Supervisor:
                 self._glitching.add(a.name)
                 metres, seconds = tracker.last_jump.get(a.name, (math.nan, math.nan))
                 if tracker.last_jump_from_estimate.get(a.name, False):
-                    text = (f"mocap pose back after {seconds * 1e3:.0f} ms unseen lies {metres:.2f} m from the drone's "
-                            "own estimate (re-acquired on the wrong markers?): not followed, holding")
+                    text = (
+                        f"mocap pose back after {seconds * 1e3:.0f} ms unseen lies {metres:.2f} m from the drone's "
+                        "own estimate (re-acquired on the wrong markers?): not followed, holding"
+                    )
                 else:
-                    text = (f"mocap pose jumped {metres:.2f} m in {seconds * 1e3:.0f} ms, further than a drone can fly "
-                            "(marker swap?): not followed, holding")
+                    text = (
+                        f"mocap pose jumped {metres:.2f} m in {seconds * 1e3:.0f} ms, further than a drone can fly "
+                        "(marker swap?): not followed, holding"
+                    )
                 out.append(Finding("pose_glitch", WARNING, text, a.name, "hold"))
             elif not glitching and a.name in self._glitching:
                 self._glitching.discard(a.name)
@@ -471,11 +582,22 @@ class Supervisor:
             if turned and a.name not in self._turned:
                 self._turned.add(a.name)
                 degrees, seconds = tracker.last_turn.get(a.name, (math.nan, math.nan))
-                use = ("extpose sends its position only until it turns back" if extpose
-                       else "its orientation is not used in flight")
-                out.append(Finding("orientation_glitch", WARNING, f"mocap orientation turned {degrees:.0f} deg in "
-                                   f"{seconds * 1e3:.0f} ms, faster than a drone turns (a wrong fit of its "
-                                   f"markers?): not followed; {use}", a.name, "warn"))
+                use = (
+                    "extpose sends its position only until it turns back"
+                    if extpose
+                    else "its orientation is not used in flight"
+                )
+                out.append(
+                    Finding(
+                        "orientation_glitch",
+                        WARNING,
+                        f"mocap orientation turned {degrees:.0f} deg in "
+                        f"{seconds * 1e3:.0f} ms, faster than a drone turns (a wrong fit of its "
+                        f"markers?): not followed; {use}",
+                        a.name,
+                        "warn",
+                    )
+                )
             elif not turned and a.name in self._turned:
                 self._turned.discard(a.name)
                 out.append(Finding("orientation_glitch", INFO, "mocap orientation consistent again", a.name, "warn"))
@@ -488,12 +610,14 @@ class Supervisor:
             sup = states[a.name].supervisor if a.name in states else None
             if sup is not None and (sup.crashed or sup.tumbled or sup.locked):
                 what = "crashed" if sup.crashed else "tumbled" if sup.tumbled else "locked"
-                out.append(Finding("crashed", ERROR, f"its supervisor says {what}: motors cut, it falls",
-                                   a.name, "crashed"))
+                out.append(
+                    Finding("crashed", ERROR, f"its supervisor says {what}: motors cut, it falls", a.name, "crashed")
+                )
         return out
 
-    def _estimates(self, now_s: float, agents: list[DroneAgent], tracker: PoseTracker,
-                   states: dict[str, DroneState]) -> list[Finding]:
+    def _estimates(
+        self, now_s: float, agents: list[DroneAgent], tracker: PoseTracker, states: dict[str, DroneState]
+    ) -> list[Finding]:
         """The on-board estimate against mocap (``ESTIMATE_DIVERGENCE_M``), in two steps. Off the newest pose in 2
         samples: a warning (also what late telemetry on a full radio looks like at flight speed). Off EVERY pose of
         the last ``ESTIMATE_HISTORY_S`` in 2 samples: the estimate is not just late, it is wrong; motors off.
@@ -509,8 +633,14 @@ class Supervisor:
                 history.append((pose.stamp_s, pose.position))
             while history and history[0][0] < now_s - ESTIMATE_HISTORY_S:
                 history.popleft()
-            if (state is None or state.position_m is None or state.telemetry_stamp_s is None or pose is None
-                    or not pose.valid or now_s - pose.stamp_s > self.safety.pose_timeout_s):
+            if (
+                state is None
+                or state.position_m is None
+                or state.telemetry_stamp_s is None
+                or pose is None
+                or not pose.valid
+                or now_s - pose.stamp_s > self.safety.pose_timeout_s
+            ):
                 continue
             grounded = a.phase in (DronePhase.LANDING, DronePhase.TAKEOFF) and pose.position[2] <= ON_FLOOR_Z_M
             late, wrong, stamp = self._diverging.get(a.name, (0, 0, -1.0))
@@ -522,8 +652,9 @@ class Supervisor:
             if then is not None:  # the estimate against where mocap saw the drone when it was made
                 nearest = math.dist(state.position_m, then)
                 wrong_m, what = ESTIMATE_WRONG_M, "the mocap pose of its own time"
-            elif (state.estimate_stamp_s is not None and history
-                  and state.estimate_stamp_s < history[0][0]):  # made before the poses kept (the loop stalled)
+            elif (
+                state.estimate_stamp_s is not None and history and state.estimate_stamp_s < history[0][0]
+            ):  # made before the poses kept (the loop stalled)
                 nearest = None
             else:  # no stamp: only far from every recent pose is surely wrong, not late
                 nearest = min((math.dist(state.position_m, p) for _, p in history), default=off)
@@ -533,19 +664,43 @@ class Supervisor:
                 wrong = wrong + 1 if nearest > wrong_m else 0
             self._diverging[a.name] = (late, wrong, state.telemetry_stamp_s)
             if late == 2 and wrong < 2:
-                out.append(Finding("estimator", WARNING, f"on-board estimate {off:.2f} m from mocap (late telemetry "
-                                   "on a full radio, or an estimator that stopped taking extpos)", a.name, "warn"))
+                out.append(
+                    Finding(
+                        "estimator",
+                        WARNING,
+                        f"on-board estimate {off:.2f} m from mocap (late telemetry "
+                        "on a full radio, or an estimator that stopped taking extpos)",
+                        a.name,
+                        "warn",
+                    )
+                )
             if nearest is None:
                 continue
             if wrong == 2 and grounded:
-                out.append(Finding("estimator", WARNING, f"on-board estimate {nearest:.2f} m from {what}: the "
-                                   "estimator no longer follows extpos; on the floor, its landing's end is left to "
-                                   "it", a.name, "warn"))
+                out.append(
+                    Finding(
+                        "estimator",
+                        WARNING,
+                        f"on-board estimate {nearest:.2f} m from {what}: the "
+                        "estimator no longer follows extpos; on the floor, its landing's end is left to "
+                        "it",
+                        a.name,
+                        "warn",
+                    )
+                )
             if wrong >= 2 and not grounded and a.name not in self._estimate_stopped:
                 self._estimate_stopped.add(a.name)
-                out.append(Finding("estimator", ERROR, f"on-board estimate {nearest:.2f} m from {what}: the "
-                                   "estimator no longer follows extpos, and a landing would fly wherever the "
-                                   "estimate goes: motors off", a.name, "stop"))
+                out.append(
+                    Finding(
+                        "estimator",
+                        ERROR,
+                        f"on-board estimate {nearest:.2f} m from {what}: the "
+                        "estimator no longer follows extpos, and a landing would fly wherever the "
+                        "estimate goes: motors off",
+                        a.name,
+                        "stop",
+                    )
+                )
         return out
 
     def _link_quality(self, agents: list[DroneAgent], states: dict[str, DroneState]) -> list[Finding]:
@@ -557,8 +712,16 @@ class Supervisor:
                 continue
             if quality < LINK_QUALITY_WARN_PCT and a.name not in self._poor_link:
                 self._poor_link.add(a.name)
-                out.append(Finding("radio", WARNING, f"radio link quality {quality:.0f} % (packets retried or "
-                                   "lost): its setpoints and extpos arrive late", a.name, "warn"))
+                out.append(
+                    Finding(
+                        "radio",
+                        WARNING,
+                        f"radio link quality {quality:.0f} % (packets retried or "
+                        "lost): its setpoints and extpos arrive late",
+                        a.name,
+                        "warn",
+                    )
+                )
             elif quality >= LINK_QUALITY_CLEAR_PCT and a.name in self._poor_link:
                 self._poor_link.discard(a.name)
                 out.append(Finding("radio", INFO, f"radio link quality back to {quality:.0f} %", a.name, "warn"))
@@ -570,8 +733,15 @@ class Supervisor:
             return []
         if latency > MOCAP_LATENCY_WARN_S and not self._late_mocap:
             self._late_mocap = True
-            return [Finding("mocap_latency", WARNING, f"mocap latency {latency * 1e3:.0f} ms: estimators and "
-                            "planners act on an old picture", None, "warn")]
+            return [
+                Finding(
+                    "mocap_latency",
+                    WARNING,
+                    f"mocap latency {latency * 1e3:.0f} ms: estimators and planners act on an old picture",
+                    None,
+                    "warn",
+                )
+            ]
         if latency < MOCAP_LATENCY_WARN_S / 2 and self._late_mocap:
             self._late_mocap = False
             return [Finding("mocap_latency", INFO, f"mocap latency back to {latency * 1e3:.0f} ms", None, "warn")]

@@ -48,7 +48,9 @@ Outcome: TypeAlias = PlanResult | PlannerFault
 
 
 def _same_obstacles(a: ObstacleSet, b: ObstacleSet) -> bool:
-    return a is b or all(np.array_equal(getattr(a, f.name), getattr(b, f.name)) for f in dataclasses.fields(ObstacleSet))
+    return a is b or all(
+        np.array_equal(getattr(a, f.name), getattr(b, f.name)) for f in dataclasses.fields(ObstacleSet)
+    )
 
 
 def _same_gains(a: object, b: object) -> bool:
@@ -265,7 +267,9 @@ class SwarmPlanner:
     def _view_of(self, agent: DroneAgent, measured: complex, world: Neighbourhood):
         lag_s = agent.tracking_lag_s(measured)
         xy, velocity = world.others_of(agent)
-        return view_of_drone(agent.reference, agent.goal, agent.heading, xy + lag_s * velocity, velocity, self.sensing_range)
+        return view_of_drone(
+            agent.reference, agent.goal, agent.heading, xy + lag_s * velocity, velocity, self.sensing_range
+        )
 
     def _plan_alone(self, agent: DroneAgent, measured: complex, world: Neighbourhood) -> Outcome:
         """A drone of the product's own planner, planned inline on its own view."""
@@ -278,7 +282,9 @@ class SwarmPlanner:
         agents = [a for a, _ in group]
         measured = np.array([m for _, m in group], dtype=complex)
         lag_s = np.array([a.tracking_lag_s(m) for a, m in group])
-        present = np.array(world.names, dtype=object)[None, :] != np.array([a.name for a in agents], dtype=object)[:, None]
+        present = (
+            np.array(world.names, dtype=object)[None, :] != np.array([a.name for a in agents], dtype=object)[:, None]
+        )
         others = world.xy[None, :] + lag_s[:, None] * world.velocity[None, :]
         view = views_of_drones(
             np.array([a.reference for a in agents], dtype=complex),
@@ -310,4 +316,3 @@ class SwarmPlanner:
             for i, agent in enumerate(agents)
             if ok[i]
         }
-

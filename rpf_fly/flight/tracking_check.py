@@ -66,8 +66,16 @@ class _Follower:
     ``key``: the take-off's or landing's start (a new one starts a new follower); None while the drone plans,
     holds or hovers (both constants then the position loop's: one point)."""
 
-    def __init__(self, key: float | None, at: complex, now_s: float, momentum: complex, fast_s: float,
-                 slow_s: float, model: Follower | None = None) -> None:
+    def __init__(
+        self,
+        key: float | None,
+        at: complex,
+        now_s: float,
+        momentum: complex,
+        fast_s: float,
+        slow_s: float,
+        model: Follower | None = None,
+    ) -> None:
         self.key = key
         self.fast = self.slow = at
         self.then = self.since = now_s
@@ -103,8 +111,12 @@ class _Follower:
         off = min(_to_segment(position, self.fast, self.slow), _to_segment(position, self.slow, self.slow + overshoot))
         if self.touched is not None:
             fast, slow = self.touched
-            off = min(off, _to_segment(position, fast, self.fast), _to_segment(position, slow, self.slow),
-                      _to_segment(position, fast, slow))
+            off = min(
+                off,
+                _to_segment(position, fast, self.fast),
+                _to_segment(position, slow, self.slow),
+                _to_segment(position, fast, slow),
+            )
         return off
 
 
@@ -139,8 +151,9 @@ class TrackingCheck:
         follower = self._predicted.get(name)
         return follower.model if follower is not None else None
 
-    def check(self, now_s: float, agents: list[DroneAgent], tracker: PoseTracker,
-                  states: dict[str, DroneState]) -> list[Finding]:
+    def check(
+        self, now_s: float, agents: list[DroneAgent], tracker: PoseTracker, states: dict[str, DroneState]
+    ) -> list[Finding]:
         """Measured position against a follower of where the drone is being taken (``TRACKING_WARN_M``): the
         streamed setpoints while it plans, holds or hovers; while the high-level commander flies its take-off or
         landing, the firmware's own target (`_plan_target`), which keeps the x, y where the plan began (the
@@ -177,7 +190,7 @@ class TrackingCheck:
                 self._predicted.pop(a.name, None)
                 continue
             if not pose.valid:  # a frame or a few without it: the model waits (restarted at the next pose, one
-                continue        # dropped frame in a push would hide the push)
+                continue  # dropped frame in a push would hide the push)
             on_floor = planned and pose.position[2] <= ON_FLOOR_Z_M
             key = a.phase_since_s if planned else None  # a take-off or landing starts the model afresh
             follower = self._predicted.get(a.name)
@@ -187,8 +200,15 @@ class TrackingCheck:
                     continue
                 cascade = not planned and a.name not in self.first_order
                 model = Follower(a.braking.gains, pose.xy, pose.velocity) if cascade else None
-                follower = _Follower(key, pose.xy, now_s, pose.velocity * TRACKING_PLAN_TAU_S if planned else 0j,
-                                     TRACKING_TAU_S, TRACKING_PLAN_TAU_S if planned else TRACKING_TAU_S, model)
+                follower = _Follower(
+                    key,
+                    pose.xy,
+                    now_s,
+                    pose.velocity * TRACKING_PLAN_TAU_S if planned else 0j,
+                    TRACKING_TAU_S,
+                    TRACKING_PLAN_TAU_S if planned else TRACKING_TAU_S,
+                    model,
+                )
                 self._predicted[a.name] = follower
             follower.step(setpoint, now_s)
             if on_floor:
@@ -199,16 +219,23 @@ class TrackingCheck:
                 if now_s - started >= TRACKING_WARN_S and a.name not in self._off_track_warned:
                     self._off_track_warned.add(a.name)
                     being = {DronePhase.LANDING: " while landing", DronePhase.TAKEOFF: " while taking off"}
-                    out.append(Finding("tracking", WARNING, f"{off:.2f} m from where its setpoints should have "
-                                       f"brought it{being.get(a.phase, '')}: something pushes it (a gust, a "
-                                       "contact?)", a.name, "warn"))
+                    out.append(
+                        Finding(
+                            "tracking",
+                            WARNING,
+                            f"{off:.2f} m from where its setpoints should have "
+                            f"brought it{being.get(a.phase, '')}: something pushes it (a gust, a "
+                            "contact?)",
+                            a.name,
+                            "warn",
+                        )
+                    )
             else:
                 self._off_track.pop(a.name, None)
                 if off < TRACKING_WARN_M / 2 and a.name in self._off_track_warned:
                     self._off_track_warned.discard(a.name)
                     out.append(Finding("tracking", INFO, "following its setpoints again", a.name, "warn"))
         return out
-
 
     def _plan_target(self, a: DroneAgent, state: DroneState | None) -> complex | None:
         """The x, y the high-level commander's take-off or landing holds, from the firmware's logged target
@@ -233,4 +260,3 @@ class TrackingCheck:
             return held[1]
         self._plan_targets[a.name] = (a.phase_since_s, target, False, made)
         return None
-

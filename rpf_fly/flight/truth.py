@@ -39,8 +39,12 @@ class TruthFeed(PeriodicFeed):
     for each, oldest first. :meth:`stop` joins the thread and fetches one last time, so the log ends with the
     world's last state before the log closes. ``cpu_s``: the thread's CPU time (fetch, unpickle, hand-over)."""
 
-    def __init__(self, fetch: Callable[[], TruthBatch], sink: Callable[[float, dict[str, Any]], None],
-                 period_s: float = FETCH_PERIOD_S) -> None:
+    def __init__(
+        self,
+        fetch: Callable[[], TruthBatch],
+        sink: Callable[[float, dict[str, Any]], None],
+        period_s: float = FETCH_PERIOD_S,
+    ) -> None:
         super().__init__("truth-feed", period_s)
         self._fetch = fetch
         self._sink = sink

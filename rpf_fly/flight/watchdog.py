@@ -35,8 +35,14 @@ class LoopWatchdog:
     """Calls ``on_stall()`` when :meth:`beat` is not called for ``timeout_s`` while armed (once a stall; again after
     the loop ticked again), and ``on_emergency()`` when :meth:`emergency` is called."""
 
-    def __init__(self, on_stall: Callable[[], None], timeout_s: float = 0.35, *,
-                 on_emergency: Callable[[], None] | None = None, clock: Callable[[], float] = time.monotonic):
+    def __init__(
+        self,
+        on_stall: Callable[[], None],
+        timeout_s: float = 0.35,
+        *,
+        on_emergency: Callable[[], None] | None = None,
+        clock: Callable[[], float] = time.monotonic,
+    ):
         self._on_stall = on_stall
         self._on_emergency = on_emergency
         self._timeout_s = timeout_s

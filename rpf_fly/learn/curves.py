@@ -26,7 +26,9 @@ def plot_curves(csv_path: str | Path, png_path: str | Path, title: str = "") -> 
     axes[0, 1].plot(x, col("success_rate"), label="all")
     axes[0, 1].plot(x, col("success_rate_a"), label="arena A", alpha=0.7)
     axes[0, 1].plot(x, col("success_rate_b"), label="arena B", alpha=0.7)
-    validated = [(xi, float(r["eval_success"])) for xi, r in zip(x, rows) if r.get("eval_success") not in (None, "", "nan")]
+    validated = [
+        (xi, float(r["eval_success"])) for xi, r in zip(x, rows) if r.get("eval_success") not in (None, "", "nan")
+    ]
     validated = [(xi, v) for xi, v in validated if v == v]
     if validated:
         axes[0, 1].plot(*zip(*validated), "ko", ms=3, label="validation (deterministic)")

@@ -161,8 +161,13 @@ class SwarmEnv:
         self.scene_seeds: list[tuple[str, int] | None] = [None] * b
         """Per arena, the (family, training seed) of its current scene (None for the paper's arenas)."""
         self.world = World(
-            np.zeros((b, n), complex), np.ones((b, n), complex), config.speed, config.dt, 0.0,
-            np.tile([-1.0, 1.0], (b, 1)), np.tile([-1.0, 1.0], (b, 1)),
+            np.zeros((b, n), complex),
+            np.ones((b, n), complex),
+            config.speed,
+            config.dt,
+            0.0,
+            np.tile([-1.0, 1.0], (b, 1)),
+            np.tile([-1.0, 1.0], (b, 1)),
         )
         self.world.goal_tolerance = config.safety_radius  # the paper's arrival test d_g < r
         self.arena_x = np.zeros((b, 2))
@@ -200,8 +205,7 @@ class SwarmEnv:
         unknown = [f for f in c.curriculum if f not in FAMILIES]
         if unknown:
             raise GeneratorError(f"unknown scene family {unknown[0]!r} (expected some of {', '.join(FAMILIES)})")
-        return (max(FAMILIES[f].max_circles for f in c.curriculum),
-                max(FAMILIES[f].max_boxes for f in c.curriculum))
+        return (max(FAMILIES[f].max_circles for f in c.curriculum), max(FAMILIES[f].max_boxes for f in c.curriculum))
 
     def _scene(self) -> tuple[str, Scenario]:
         c = self.config
@@ -215,9 +219,7 @@ class SwarmEnv:
         self._scene_seed = None
         kind = c.arena if c.arena != "both" else ("a" if self.rng.random() < 0.5 else "b")
         if kind == "a":
-            scene = arena_a(
-                self.rng, c.n_robots, c.n_obstacles, c.obstacle_radius, c.arena_half_size, c.safety_radius
-            )
+            scene = arena_a(self.rng, c.n_robots, c.n_obstacles, c.obstacle_radius, c.arena_half_size, c.safety_radius)
         else:
             scene = arena_b(self.rng, c.n_robots, c.circle_radius)
         return kind, scene
@@ -254,7 +256,9 @@ class SwarmEnv:
         self.start[b] = scene.starts
         if self.guided:
             self.inflated = None  # rebuilt from the new obstacles at the next observation
-            guide = Guidance(scene.obstacles, self.planner.safety_radius + self.planner.margin, (scene.arena_x, scene.arena_y))
+            guide = Guidance(
+                scene.obstacles, self.planner.safety_radius + self.planner.margin, (scene.arena_x, scene.arena_y)
+            )
             k = guide.nodes.shape[0]
             self.node[b, 0, :] = FAR * (1 + 1j)
             self.node[b, 0, :k] = guide.nodes
@@ -297,13 +301,27 @@ class SwarmEnv:
         """Planned directions for actions ``(arenas, robots, size)``: gains (eta, lambda) or a heading change ``a``
         (the vanilla-PPO baseline: ``F = (v + a v_perp)/|...|``, paper Section V)."""
         if self.config.action == "gains":
-            step = apf_step(self.view, self.nearest, self.lambda_mask, action[..., 0], action[..., 1], self.planner,
-                            goal=self.world.goal)
+            step = apf_step(
+                self.view,
+                self.nearest,
+                self.lambda_mask,
+                action[..., 0],
+                action[..., 1],
+                self.planner,
+                goal=self.world.goal,
+            )
             return step.direction
         h = self.world.heading
         direction = unit(h + action[..., 0] * (1j * h))
-        return capture(direction, 0 * h.real.astype(np.int8), self.world.position, self.world.goal, 0 * h,
-                       self.nearest.distance, self.planner)[0]
+        return capture(
+            direction,
+            0 * h.real.astype(np.int8),
+            self.world.position,
+            self.world.goal,
+            0 * h,
+            self.nearest.distance,
+            self.planner,
+        )[0]
 
     def step(self, action: np.ndarray) -> StepResult:
         """Apply one action per robot (ignored for robots that are done) and advance every arena by ``dt``."""
@@ -357,8 +375,13 @@ class SwarmEnv:
             collided = int(self.collided[b].sum())
             episodes.append(
                 EpisodeStats(
-                    self.kinds[b], arrived == c.n_robots and collided == 0, arrived, collided, c.n_robots,
-                    float(self.returns[b].mean()), int(self.t[b]),
+                    self.kinds[b],
+                    arrived == c.n_robots and collided == 0,
+                    arrived,
+                    collided,
+                    c.n_robots,
+                    float(self.returns[b].mean()),
+                    int(self.t[b]),
                 )
             )
             self._reset_arena(b)

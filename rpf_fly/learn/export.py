@@ -89,7 +89,12 @@ def _export(model: ActorCritic, path: str | Path, metadata: dict[str, str] | Non
             str(path),
             input_names=["local", "neighbours", "mask"],
             output_names=["action"],
-            dynamic_axes={"local": {0: "batch"}, "neighbours": {0: "batch"}, "mask": {0: "batch"}, "action": {0: "batch"}},
+            dynamic_axes={
+                "local": {0: "batch"},
+                "neighbours": {0: "batch"},
+                "mask": {0: "batch"},
+                "action": {0: "batch"},
+            },
             opset_version=17,
             dynamo=False,
         )

@@ -325,9 +325,9 @@ class Trainer:
                 policy_loss = torch.max(-adv * ratio, -adv * ratio.clamp(1 - c.clip, 1 + c.clip)).mean()
                 old_value = batch["value"][idx]
                 clipped = old_value + (value - old_value).clamp(-c.clip, c.clip)
-                value_loss = 0.5 * torch.max(
-                    (value - batch["returns"][idx]) ** 2, (clipped - batch["returns"][idx]) ** 2
-                ).mean()
+                value_loss = (
+                    0.5 * torch.max((value - batch["returns"][idx]) ** 2, (clipped - batch["returns"][idx]) ** 2).mean()
+                )
                 loss = policy_loss - c.ent_coef * entropy.mean() + c.vf_coef * value_loss
                 if not torch.isfinite(loss):  # never let one bad minibatch poison the weights
                     self.skipped_minibatches += 1
@@ -359,13 +359,19 @@ class Trainer:
 
         result = evaluate_policy(self.model, self.config.env_config(), self.config.eval_seed, self.config.eval_episodes)
         log.eval_return, log.eval_success, log.eval_collisions = (
-            result.mean_return, result.success_rate, float(result.collisions)
+            result.mean_return,
+            result.success_rate,
+            float(result.collisions),
         )
         score = (result.success_rate, result.mean_return)
         if score > self.best_score:
             self.best_score = score
-            self.best = {"update": self.update, "model": {k: v.clone() for k, v in self.model.state_dict().items()},
-                         "success": result.success_rate, "return": result.mean_return}
+            self.best = {
+                "update": self.update,
+                "model": {k: v.clone() for k, v in self.model.state_dict().items()},
+                "success": result.success_rate,
+                "return": result.mean_return,
+            }
 
     def best_model(self) -> ActorCritic:
         """The weights with the best validation score (the current ones if no validation ran)."""
@@ -391,7 +397,10 @@ class Trainer:
             episodes=len(self.episodes),
             env_steps=self.env_steps,
             wall_s=round(self.wall_s, 2),
-            steps_per_s=self.config.rollout_steps * self.config.n_arenas * self.env.config.n_robots / max(seconds, 1e-9),
+            steps_per_s=self.config.rollout_steps
+            * self.config.n_arenas
+            * self.env.config.n_robots
+            / max(seconds, 1e-9),
             lr=self.optimizer.param_groups[0]["lr"],
             mean_return=float(np.mean([e.mean_return for e in recent])) if recent else float("nan"),
             success_rate=rate(None),
@@ -412,8 +421,13 @@ class Trainer:
                 writer.writerow(dataclasses.asdict(row))
 
     def summary(self) -> dict:
-        return {"config": dataclasses.asdict(self.config), "updates": self.update, "episodes": len(self.episodes),
-                "env_steps": self.env_steps, "wall_s": self.wall_s}
+        return {
+            "config": dataclasses.asdict(self.config),
+            "updates": self.update,
+            "episodes": len(self.episodes),
+            "env_steps": self.env_steps,
+            "wall_s": self.wall_s,
+        }
 
 
 def write_summary(trainer: Trainer) -> Path:

@@ -48,9 +48,16 @@ def pose_json(t_ns: int, position: Any, quaternion: Sequence[float] | None = Non
         x, y, z = position
         qx, qy, qz, qw = IDENTITY if quaternion is None else quaternion
         sec, nsec = divmod(int(t_ns), 1_000_000_000)
-        return _dumps({"timestamp": {"sec": sec, "nsec": nsec}, "frame_id": WORLD_FRAME, "pose": {
-            "position": {"x": float(x), "y": float(y), "z": float(z)},
-            "orientation": {"x": float(qx), "y": float(qy), "z": float(qz), "w": float(qw)}}})
+        return _dumps(
+            {
+                "timestamp": {"sec": sec, "nsec": nsec},
+                "frame_id": WORLD_FRAME,
+                "pose": {
+                    "position": {"x": float(x), "y": float(y), "z": float(z)},
+                    "orientation": {"x": float(qx), "y": float(qy), "z": float(qz), "w": float(qw)},
+                },
+            }
+        )
     except (TypeError, ValueError):
         return encode(pose_in_frame(t_ns, position, quaternion))
 
@@ -63,10 +70,15 @@ def tf_json(t_ns: int, poses: Mapping[str, tuple[Any, Sequence[float] | None]]) 
         for name, (p, q) in poses.items():
             x, y, z = p
             qx, qy, qz, qw = IDENTITY if q is None else q
-            transforms.append({
-                "timestamp": {"sec": sec, "nsec": nsec}, "parent_frame_id": WORLD_FRAME, "child_frame_id": str(name),
-                "translation": {"x": float(x), "y": float(y), "z": float(z)},
-                "rotation": {"x": float(qx), "y": float(qy), "z": float(qz), "w": float(qw)}})
+            transforms.append(
+                {
+                    "timestamp": {"sec": sec, "nsec": nsec},
+                    "parent_frame_id": WORLD_FRAME,
+                    "child_frame_id": str(name),
+                    "translation": {"x": float(x), "y": float(y), "z": float(z)},
+                    "rotation": {"x": float(qx), "y": float(qy), "z": float(qz), "w": float(qw)},
+                }
+            )
         return _dumps({"transforms": transforms})
     except (TypeError, ValueError):
         return encode(frame_transforms(t_ns, poses))
@@ -78,10 +90,16 @@ def truth_json(t_ns: int, position: Any, yaw: float, motors: bool, crashed: bool
         x, y, z = position
         ex, ey, ez = estimate
         sec, nsec = divmod(int(t_ns), 1_000_000_000)
-        return _dumps({"timestamp": {"sec": sec, "nsec": nsec},
-                       "position": {"x": float(x), "y": float(y), "z": float(z)}, "yaw": float(yaw),
-                       "motors": bool(motors), "crashed": bool(crashed),
-                       "estimate": {"x": float(ex), "y": float(ey), "z": float(ez)}})
+        return _dumps(
+            {
+                "timestamp": {"sec": sec, "nsec": nsec},
+                "position": {"x": float(x), "y": float(y), "z": float(z)},
+                "yaw": float(yaw),
+                "motors": bool(motors),
+                "crashed": bool(crashed),
+                "estimate": {"x": float(ex), "y": float(ey), "z": float(ez)},
+            }
+        )
     except (TypeError, ValueError):
         return encode(truth_state(t_ns, position, yaw, motors, crashed, estimate))
 
@@ -117,12 +135,20 @@ def planner_json(t_ns: int, fields: Mapping[str, Any]) -> bytes:
         gd = math.hypot(goal["x"] - x, goal["y"] - y) if gd is None else float(gd)
         sec, nsec = divmod(int(t_ns), 1_000_000_000)
         message = {
-            "timestamp": {"sec": sec, "nsec": nsec}, "tick": int(f["tick"]), "position": {"x": x, "y": y, "z": z},
-            "goal": goal, "eta": _opt_float(f.get("eta")),
+            "timestamp": {"sec": sec, "nsec": nsec},
+            "tick": int(f["tick"]),
+            "position": {"x": x, "y": y, "z": z},
+            "goal": goal,
+            "eta": _opt_float(f.get("eta")),
             "lambda": _opt_float(f["lambda"] if "lambda" in f else f.get("lam")),
-            "f_a": _xy_dict(f.get("f_a", 0j)), "f_r": _xy_dict(f.get("f_r", 0j)), "f_in": _xy_dict(f.get("f_in", 0j)),
-            "direction": _xy_dict(f.get("direction", 0j)), "mode": mode, "heading": float(f.get("heading", 0.0)),
-            "neighbours": int(f.get("neighbours", 0)), "obstacle_distance": _opt_float(f.get("obstacle_distance")),
+            "f_a": _xy_dict(f.get("f_a", 0j)),
+            "f_r": _xy_dict(f.get("f_r", 0j)),
+            "f_in": _xy_dict(f.get("f_in", 0j)),
+            "direction": _xy_dict(f.get("direction", 0j)),
+            "mode": mode,
+            "heading": float(f.get("heading", 0.0)),
+            "neighbours": int(f.get("neighbours", 0)),
+            "obstacle_distance": _opt_float(f.get("obstacle_distance")),
             "goal_distance": gd,
         }
         reference = f.get("reference")

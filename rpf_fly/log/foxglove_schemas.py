@@ -79,7 +79,8 @@ LOG: dict[str, Any] = _obj(
     {
         "timestamp": _time("Timestamp of log message"),
         "level": _enum(
-            "foxglove.LogLevel", {0: "UNKNOWN", 1: "DEBUG", 2: "INFO", 3: "WARNING", 4: "ERROR", 5: "FATAL"},
+            "foxglove.LogLevel",
+            {0: "UNKNOWN", 1: "DEBUG", 2: "INFO", 3: "WARNING", 4: "ERROR", 5: "FATAL"},
             "Log level",
         ),
         "message": {"type": "string", "description": "Log message"},
@@ -91,8 +92,11 @@ LOG: dict[str, Any] = _obj(
     description="A log message",
 )
 
-_KEY_VALUE = _obj({"key": {"type": "string"}, "value": {"type": "string"}}, title="foxglove.KeyValuePair",
-                  description="A key with its associated value")
+_KEY_VALUE = _obj(
+    {"key": {"type": "string"}, "value": {"type": "string"}},
+    title="foxglove.KeyValuePair",
+    description="A key with its associated value",
+)
 
 _ARROW = _obj(
     {
@@ -108,15 +112,21 @@ _ARROW = _obj(
 )
 
 _CUBE = _obj(
-    {"pose": _pose("Centre and orientation of the cube"), "size": _vector3("Size along each axis"),
-     "color": _color("Color of the cube")},
+    {
+        "pose": _pose("Centre and orientation of the cube"),
+        "size": _vector3("Size along each axis"),
+        "color": _color("Color of the cube"),
+    },
     title="foxglove.CubePrimitive",
     description="A primitive representing a cube or rectangular prism",
 )
 
 _SPHERE = _obj(
-    {"pose": _pose("Centre and orientation of the sphere"), "size": _vector3("Diameter along each axis"),
-     "color": _color("Color of the sphere")},
+    {
+        "pose": _pose("Centre and orientation of the sphere"),
+        "size": _vector3("Diameter along each axis"),
+        "color": _color("Color of the sphere"),
+    },
     title="foxglove.SpherePrimitive",
     description="A primitive representing a sphere or ellipsoid",
 )

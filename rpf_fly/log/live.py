@@ -102,8 +102,9 @@ class LiveView:
     by the log as ``sink_failed`` too), :attr:`slow_client_reports` the SDK's reports of a client's full outbox,
     :attr:`subscriptions` clients' subscriptions so far."""
 
-    def __init__(self, port: int = DEFAULT_PORT, host: str = DEFAULT_HOST, *, name: str = "rpf_fly",
-                 backlog: int = BACKLOG):
+    def __init__(
+        self, port: int = DEFAULT_PORT, host: str = DEFAULT_HOST, *, name: str = "rpf_fly", backlog: int = BACKLOG
+    ):
         fg = load_sdk()
         self._fg = fg
         self.host = host
@@ -125,8 +126,14 @@ class LiveView:
         if self._drop_logger.getEffectiveLevel() > logging.INFO:
             self._drop_logger.setLevel(logging.INFO)
         try:
-            self._server = fg.start_server(name=name, host=host, port=port, context=self._context,
-                                           server_listener=_listener(self), message_backlog_size=backlog)
+            self._server = fg.start_server(
+                name=name,
+                host=host,
+                port=port,
+                context=self._context,
+                server_listener=_listener(self),
+                message_backlog_size=backlog,
+            )
         except Exception as err:  # noqa: BLE001 - the SDK raises its own error type (address in use, bad host)
             self._drop_logger.removeHandler(self._drop_counter)
             raise LiveUnavailable(f"cannot serve the live view on {host}:{port}: {err}") from None
@@ -196,8 +203,10 @@ class LiveView:
         """One line for the end of a flight."""
         line = f"live: {self.published} messages served at {self.url}, {self.subscriptions} subscriptions"
         if self.slow_client_reports:
-            line += (f"; a client read too slowly and lost messages ({self.slow_client_reports} report"
-                     f"{'s' if self.slow_client_reports > 1 else ''} from the server)")
+            line += (
+                f"; a client read too slowly and lost messages ({self.slow_client_reports} report"
+                f"{'s' if self.slow_client_reports > 1 else ''} from the server)"
+            )
         if self.failed:
             line += f"; {self.failed} messages failed"
         return line

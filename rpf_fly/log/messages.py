@@ -66,42 +66,91 @@ def yaw_quaternion(yaw_rad: float) -> tuple[float, float, float, float]:
     return (0.0, 0.0, math.sin(half), math.cos(half))
 
 
-def pose_in_frame(t_ns: int, position: Any, quaternion: Sequence[float] | None = None,
-                  frame_id: str = WORLD_FRAME) -> dict[str, Any]:
+def pose_in_frame(
+    t_ns: int, position: Any, quaternion: Sequence[float] | None = None, frame_id: str = WORLD_FRAME
+) -> dict[str, Any]:
     """A ``foxglove.PoseInFrame``."""
-    return {"timestamp": stamp(t_ns), "frame_id": frame_id,
-            "pose": {"position": xyz(position), "orientation": quat(quaternion)}}
+    return {
+        "timestamp": stamp(t_ns),
+        "frame_id": frame_id,
+        "pose": {"position": xyz(position), "orientation": quat(quaternion)},
+    }
 
 
-def frame_transforms(t_ns: int, poses: Mapping[str, tuple[Any, Sequence[float] | None]],
-                     parent: str = WORLD_FRAME) -> dict[str, Any]:
+def frame_transforms(
+    t_ns: int, poses: Mapping[str, tuple[Any, Sequence[float] | None]], parent: str = WORLD_FRAME
+) -> dict[str, Any]:
     """A ``foxglove.FrameTransforms`` from ``parent`` to each named child: ``{name: (position, quaternion)}``."""
     ts = stamp(t_ns)
-    return {"transforms": [
-        {"timestamp": ts, "parent_frame_id": parent, "child_frame_id": str(name), "translation": xyz(p),
-         "rotation": quat(q)}
-        for name, (p, q) in poses.items()
-    ]}
+    return {
+        "transforms": [
+            {
+                "timestamp": ts,
+                "parent_frame_id": parent,
+                "child_frame_id": str(name),
+                "translation": xyz(p),
+                "rotation": quat(q),
+            }
+            for name, (p, q) in poses.items()
+        ]
+    }
 
 
-def log_message(t_ns: int, level: int, message: str, name: str = "rpf_fly", file: str = "", line: int = 0
-                ) -> dict[str, Any]:
+def log_message(
+    t_ns: int, level: int, message: str, name: str = "rpf_fly", file: str = "", line: int = 0
+) -> dict[str, Any]:
     """A ``foxglove.Log`` (level 1 debug, 2 info, 3 warning, 4 error, 5 fatal)."""
     level = int(level)
     if level not in LOG_LEVELS:
         raise ValueError(f"log level {level} is not one of 1..5")
-    return {"timestamp": stamp(t_ns), "level": level, "message": str(message), "name": str(name),
-            "file": str(file), "line": max(int(line), 0)}
+    return {
+        "timestamp": stamp(t_ns),
+        "level": level,
+        "message": str(message),
+        "name": str(name),
+        "file": str(file),
+        "line": max(int(line), 0),
+    }
 
 
-PLANNER_FIELDS = ("tick", "position", "goal", "eta", "lambda", "f_a", "f_r", "f_in", "direction", "mode", "heading",
-                  "neighbours", "obstacle_distance", "goal_distance", "reference")
+PLANNER_FIELDS = (
+    "tick",
+    "position",
+    "goal",
+    "eta",
+    "lambda",
+    "f_a",
+    "f_r",
+    "f_in",
+    "direction",
+    "mode",
+    "heading",
+    "neighbours",
+    "obstacle_distance",
+    "goal_distance",
+    "reference",
+)
 
 
-def planner_step(t_ns: int, tick: int, position: Any, goal: Any, mode: Any, eta: Any = None, lam: Any = None,
-                 f_a: Any = 0j, f_r: Any = 0j, f_in: Any = 0j, direction: Any = 0j, heading: float = 0.0,
-                 neighbours: int = 0, obstacle_distance: Any = None, goal_distance: Any = None,
-                 reference: Any = None, **extra: Any) -> dict[str, Any]:
+def planner_step(
+    t_ns: int,
+    tick: int,
+    position: Any,
+    goal: Any,
+    mode: Any,
+    eta: Any = None,
+    lam: Any = None,
+    f_a: Any = 0j,
+    f_r: Any = 0j,
+    f_in: Any = 0j,
+    direction: Any = 0j,
+    heading: float = 0.0,
+    neighbours: int = 0,
+    obstacle_distance: Any = None,
+    goal_distance: Any = None,
+    reference: Any = None,
+    **extra: Any,
+) -> dict[str, Any]:
     """A ``rpf_fly.PlannerStep``. ``mode`` is a name or a mode code (0 apf, 1 wall, 2 soft, -1 arrived); ``lam``
     (or ``lambda`` through ``**extra``) and ``eta`` may be NaN or None (no gains); ``goal_distance`` defaults to the
     distance from ``position`` to ``goal``; ``reference`` (where the drone planned from) is written only when
@@ -140,8 +189,16 @@ def planner_step(t_ns: int, tick: int, position: Any, goal: Any, mode: Any, eta:
     return out
 
 
-def drone_status(t_ns: int, state: str, battery_v: Any = None, link_quality: Any = None, latency_ms: Any = None,
-                 outcome: str | None = None, estimate: Any = None, target: Any = None) -> dict[str, Any]:
+def drone_status(
+    t_ns: int,
+    state: str,
+    battery_v: Any = None,
+    link_quality: Any = None,
+    latency_ms: Any = None,
+    outcome: str | None = None,
+    estimate: Any = None,
+    target: Any = None,
+) -> dict[str, Any]:
     """A ``rpf_fly.DroneStatus`` (unknown values None; ``estimate`` and ``target`` as ``(x, y, z)``)."""
     return {
         "timestamp": stamp(t_ns),
@@ -167,8 +224,17 @@ def truth_state(t_ns: int, position: Any, yaw: float, motors: bool, crashed: boo
     }
 
 
-def radio_load(t_ns: int, dongle: int, drones: Sequence[str], window_s: float, packets: float, transactions: float,
-               planned_per_s: float, budget_per_s: float, setpoints_superseded: float = 0.0) -> dict[str, Any]:
+def radio_load(
+    t_ns: int,
+    dongle: int,
+    drones: Sequence[str],
+    window_s: float,
+    packets: float,
+    transactions: float,
+    planned_per_s: float,
+    budget_per_s: float,
+    setpoints_superseded: float = 0.0,
+) -> dict[str, Any]:
     """A ``rpf_fly.RadioLoad`` (counts over ``window_s`` seconds ending at ``t_ns``)."""
     window = float(window_s)
     return {
@@ -193,8 +259,12 @@ def _colour(r: float, g: float, b: float, a: float = 1.0) -> dict[str, float]:
 def scene_entity(t_ns: int, entity_id: str, frame_id: str = WORLD_FRAME, **primitives: list) -> dict[str, Any]:
     """A ``foxglove.SceneEntity`` with every array present (empty unless given)."""
     entity: dict[str, Any] = {
-        "timestamp": stamp(t_ns), "frame_id": frame_id, "id": entity_id, "lifetime": {"sec": 0, "nsec": 0},
-        "frame_locked": False, "metadata": [],
+        "timestamp": stamp(t_ns),
+        "frame_id": frame_id,
+        "id": entity_id,
+        "lifetime": {"sec": 0, "nsec": 0},
+        "frame_locked": False,
+        "metadata": [],
     }
     for key in ("arrows", "cubes", "spheres", "cylinders", "lines", "triangles", "texts", "models"):
         entity[key] = list(primitives.pop(key, []))
@@ -207,8 +277,13 @@ def _flat_pose(x: float, y: float, z: float) -> dict[str, Any]:
     return {"position": {"x": float(x), "y": float(y), "z": float(z)}, "orientation": quat(None)}
 
 
-def scene_update(t_ns: int, obstacles: Iterable[Mapping[str, Any]] = (), goals: Mapping[str, Any] | None = None,
-                 arena: Mapping[str, Sequence[float]] | None = None, height: float = 0.0) -> dict[str, Any]:
+def scene_update(
+    t_ns: int,
+    obstacles: Iterable[Mapping[str, Any]] = (),
+    goals: Mapping[str, Any] | None = None,
+    arena: Mapping[str, Sequence[float]] | None = None,
+    height: float = 0.0,
+) -> dict[str, Any]:
     """A ``foxglove.SceneUpdate`` of the static scene: obstacles as cylinders (``{shape: circle, center, radius}``)
     and cubes (``{shape: box, min, max}``) spanning the arena's height, goals as discs with labels at ``height``,
     and the arena (``{x: [lo, hi], y: ..., z: ...}``) as a wire box."""
@@ -222,21 +297,40 @@ def scene_update(t_ns: int, obstacles: Iterable[Mapping[str, Any]] = (), goals: 
         if o["shape"] == "circle":
             cx, cy = o["center"]
             d = 2.0 * float(o["radius"])
-            cyl = {"pose": _flat_pose(cx, cy, z0 + tall / 2), "size": {"x": d, "y": d, "z": tall},
-                   "bottom_scale": 1.0, "top_scale": 1.0, "color": grey}
+            cyl = {
+                "pose": _flat_pose(cx, cy, z0 + tall / 2),
+                "size": {"x": d, "y": d, "z": tall},
+                "bottom_scale": 1.0,
+                "top_scale": 1.0,
+                "color": grey,
+            }
             entities.append(scene_entity(t_ns, f"obstacle/{k}", cylinders=[cyl]))
         else:
             (x0, y0), (x1, y1) = o["min"], o["max"]
-            cube = {"pose": _flat_pose((x0 + x1) / 2, (y0 + y1) / 2, z0 + tall / 2),
-                    "size": {"x": float(x1 - x0), "y": float(y1 - y0), "z": tall}, "color": grey}
+            cube = {
+                "pose": _flat_pose((x0 + x1) / 2, (y0 + y1) / 2, z0 + tall / 2),
+                "size": {"x": float(x1 - x0), "y": float(y1 - y0), "z": tall},
+                "color": grey,
+            }
             entities.append(scene_entity(t_ns, f"obstacle/{k}", cubes=[cube]))
     gold = _colour(1.0, 0.8, 0.1, 0.8)
     for name, g in (goals or {}).items():
         p = xy(g)
-        disc = {"pose": _flat_pose(p["x"], p["y"], height), "size": {"x": 0.2, "y": 0.2, "z": 0.01},
-                "bottom_scale": 1.0, "top_scale": 1.0, "color": gold}
-        label = {"pose": _flat_pose(p["x"], p["y"], height + 0.15), "billboard": True, "font_size": 14.0,
-                 "scale_invariant": True, "color": _colour(1.0, 1.0, 1.0, 1.0), "text": f"goal {name}"}
+        disc = {
+            "pose": _flat_pose(p["x"], p["y"], height),
+            "size": {"x": 0.2, "y": 0.2, "z": 0.01},
+            "bottom_scale": 1.0,
+            "top_scale": 1.0,
+            "color": gold,
+        }
+        label = {
+            "pose": _flat_pose(p["x"], p["y"], height + 0.15),
+            "billboard": True,
+            "font_size": 14.0,
+            "scale_invariant": True,
+            "color": _colour(1.0, 1.0, 1.0, 1.0),
+            "text": f"goal {name}",
+        }
         entities.append(scene_entity(t_ns, f"goal/{name}", cylinders=[disc], texts=[label]))
     if arena is not None:
         (ax0, ax1), (ay0, ay1) = arena["x"], arena["y"]
@@ -247,7 +341,15 @@ def scene_update(t_ns: int, obstacles: Iterable[Mapping[str, Any]] = (), goals: 
                 points += [{"x": float(a[0]), "y": float(a[1]), "z": z}, {"x": float(b[0]), "y": float(b[1]), "z": z}]
         for cx, cy in corners:  # vertical edges
             points += [{"x": float(cx), "y": float(cy), "z": z0}, {"x": float(cx), "y": float(cy), "z": z1}]
-        line = {"type": 2, "pose": _flat_pose(0, 0, 0), "thickness": 2.0, "scale_invariant": True, "points": points,
-                "color": _colour(0.3, 0.6, 1.0, 1.0), "colors": [], "indices": []}
+        line = {
+            "type": 2,
+            "pose": _flat_pose(0, 0, 0),
+            "thickness": 2.0,
+            "scale_invariant": True,
+            "points": points,
+            "color": _colour(0.3, 0.6, 1.0, 1.0),
+            "colors": [],
+            "indices": [],
+        }
         entities.append(scene_entity(t_ns, "arena", lines=[line]))
     return {"deletions": [], "entities": entities}

@@ -209,17 +209,19 @@ def salvage(src: str | Path, dst: str | Path) -> SalvageResult:
                     if isinstance(record, Message):
                         channel = channel_map.get(record.channel_id)
                         if channel is not None:
-                            writer.add_message(channel, record.log_time, record.data, record.publish_time,
-                                               record.sequence)
+                            writer.add_message(
+                                channel, record.log_time, record.data, record.publish_time, record.sequence
+                            )
                             messages += 1
                     elif isinstance(record, Schema):
                         if record.id not in schema_map:
-                            schema_map[record.id] = writer.register_schema(record.name, record.encoding,
-                                                                           record.data)
+                            schema_map[record.id] = writer.register_schema(record.name, record.encoding, record.data)
                     elif isinstance(record, Channel):
                         if record.id not in channel_map:
                             channel_map[record.id] = writer.register_channel(
-                                record.topic, record.message_encoding, schema_map.get(record.schema_id, 0),
+                                record.topic,
+                                record.message_encoding,
+                                schema_map.get(record.schema_id, 0),
                                 dict(record.metadata),
                             )
                     elif isinstance(record, Metadata):
@@ -228,8 +230,9 @@ def salvage(src: str | Path, dst: str | Path) -> SalvageResult:
                             metadata += 1
                     elif isinstance(record, Attachment):
                         if not data_end:
-                            writer.add_attachment(record.create_time, record.log_time, record.name,
-                                                  record.media_type, record.data)
+                            writer.add_attachment(
+                                record.create_time, record.log_time, record.name, record.media_type, record.data
+                            )
                     elif isinstance(record, DataEnd):
                         data_end = True  # the summary section repeats schemas and channels: already copied
                     elif isinstance(record, Footer):

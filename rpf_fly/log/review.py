@@ -130,36 +130,63 @@ class Review:
         """Everything the text summary says: the metrics JSON of docs/metrics.md with its keys where they are (None
         without metrics), extended by the review's own keys (docs/log-format.md, *Review*)."""
         doc: dict[str, Any] = self.metrics.to_json_dict() if self.metrics is not None else {}
-        doc.update({
-            "log": {"path": str(self.path), "source": self.source, "duration_s": self.duration_s,
-                    "truncated": self.truncated, "clean_end": self.clean_end, "start_ns": self.start_ns},
-            "interrupted": self.interrupted,
-            "interruptions": [i.to_json_dict() for i in self.interruptions],
-            "outcomes": dict(self.outcomes),
-            "topics": [
-                {"topic": t.topic, "schema": t.schema, "messages": t.count, "rate_hz": t.rate_hz,
-                 "gaps": len(t.gaps), "longest_gap_s": t.longest_gap_s, "missing": t.missing}
-                for t in self.topics
-            ],
-            "events": {
-                "by_level": dict(self.events_by_level),
-                "warnings": [
-                    {"t_s": e.t_s, "level": LOG_LEVELS.get(e.level, str(e.level)), "kind": e.kind, "name": e.name,
-                     "message": e.message}
-                    for e in self.events if e.level >= 3
+        doc.update(
+            {
+                "log": {
+                    "path": str(self.path),
+                    "source": self.source,
+                    "duration_s": self.duration_s,
+                    "truncated": self.truncated,
+                    "clean_end": self.clean_end,
+                    "start_ns": self.start_ns,
+                },
+                "interrupted": self.interrupted,
+                "interruptions": [i.to_json_dict() for i in self.interruptions],
+                "outcomes": dict(self.outcomes),
+                "topics": [
+                    {
+                        "topic": t.topic,
+                        "schema": t.schema,
+                        "messages": t.count,
+                        "rate_hz": t.rate_hz,
+                        "gaps": len(t.gaps),
+                        "longest_gap_s": t.longest_gap_s,
+                        "missing": t.missing,
+                    }
+                    for t in self.topics
                 ],
-            },
-            "tracking": {name: {"rms_m": rms, "max_m": peak} for name, (rms, peak) in self.tracking.items()},
-            "tracking_expected": self.tracking_expected_json(),
-            "battery": {name: {"first_v": a, "min_v": b, "last_v": c} for name, (a, b, c) in self.battery.items()},
-            "radio": {str(r.dongle): {"drones": list(r.drones), "windows": r.windows,
-                                      "mean_packets_per_s": r.mean_packets_per_s,
-                                      "peak_packets_per_s": r.peak_packets_per_s,
-                                      "peak_transactions_per_s": r.peak_transactions_per_s,
-                                      "planned_per_s": r.planned_per_s, "budget_per_s": r.budget_per_s,
-                                      "setpoints_superseded": r.setpoints_superseded}
-                      for r in self.radio},
-        })
+                "events": {
+                    "by_level": dict(self.events_by_level),
+                    "warnings": [
+                        {
+                            "t_s": e.t_s,
+                            "level": LOG_LEVELS.get(e.level, str(e.level)),
+                            "kind": e.kind,
+                            "name": e.name,
+                            "message": e.message,
+                        }
+                        for e in self.events
+                        if e.level >= 3
+                    ],
+                },
+                "tracking": {name: {"rms_m": rms, "max_m": peak} for name, (rms, peak) in self.tracking.items()},
+                "tracking_expected": self.tracking_expected_json(),
+                "battery": {name: {"first_v": a, "min_v": b, "last_v": c} for name, (a, b, c) in self.battery.items()},
+                "radio": {
+                    str(r.dongle): {
+                        "drones": list(r.drones),
+                        "windows": r.windows,
+                        "mean_packets_per_s": r.mean_packets_per_s,
+                        "peak_packets_per_s": r.peak_packets_per_s,
+                        "peak_transactions_per_s": r.peak_transactions_per_s,
+                        "planned_per_s": r.planned_per_s,
+                        "budget_per_s": r.budget_per_s,
+                        "setpoints_superseded": r.setpoints_superseded,
+                    }
+                    for r in self.radio
+                },
+            }
+        )
         if self.metrics is None:
             doc["metrics_error"] = self.metrics_error
         return doc
@@ -169,8 +196,11 @@ class Review:
         if not self.tracking_expected:
             return {}
         lag_s, who = self.tracking_lag
-        return {"lag_s": lag_s, "drones": who,
-                "per_drone": {name: e.to_json_dict() for name, e in self.tracking_expected.items()}}
+        return {
+            "lag_s": lag_s,
+            "drones": who,
+            "per_drone": {name: e.to_json_dict() for name, e in self.tracking_expected.items()},
+        }
 
 
 def topic_stats(data: LogData, topic: str, start_ns: int) -> TopicStats:
@@ -212,8 +242,13 @@ def review(data: LogData) -> Review:
     except ReviewError as err:
         error = str(err)
     events = [
-        ReviewEvent((m.log_time - start) / 1e9, int(m.data.get("level", 0)), str(m.data.get("message", "")),
-                    str(m.data.get("name", "")), str(m.data.get("file", "") or ""))
+        ReviewEvent(
+            (m.log_time - start) / 1e9,
+            int(m.data.get("level", 0)),
+            str(m.data.get("message", "")),
+            str(m.data.get("name", "")),
+            str(m.data.get("file", "") or ""),
+        )
         for m in data.messages("/events")
     ]
     by_level = {name: 0 for name in LOG_LEVELS.values()}
@@ -297,8 +332,9 @@ def clean_end(data: LogData, drones: list[str], source: str, events: list[Review
     return None
 
 
-def interruptions_of(data: LogData, events: list[ReviewEvent], clean: bool | None,
-                     duration_s: float) -> list[Interruption]:
+def interruptions_of(
+    data: LogData, events: list[ReviewEvent], clean: bool | None, duration_s: float
+) -> list[Interruption]:
     """What interrupted the flight, in time order: the flight's ``interrupt`` events (a signal or a
     KeyboardInterrupt), its ``flight loop failed`` errors, and a log without a clean end (a kill)."""
     found = []
@@ -308,11 +344,23 @@ def interruptions_of(data: LogData, events: list[ReviewEvent], clean: bool | Non
         elif e.kind == "error" and e.level >= 5 and e.message.startswith("flight loop failed"):
             found.append(Interruption("error", e.t_s, e.message))
     if data.truncated:
-        found.append(Interruption("killed", duration_s, "the log ends before its footer: the recording process was "
-                                                       "killed (SIGKILL, a crash, power lost); `--salvage` writes a "
-                                                       "finished copy"))
+        found.append(
+            Interruption(
+                "killed",
+                duration_s,
+                "the log ends before its footer: the recording process was "
+                "killed (SIGKILL, a crash, power lost); `--salvage` writes a "
+                "finished copy",
+            )
+        )
     elif clean is False:
-        found.append(Interruption("killed", duration_s, "the log has no clean end (the drones' final status is "
-                                                       "missing): the recording process was killed; this is a "
-                                                       "salvaged or cut copy"))
+        found.append(
+            Interruption(
+                "killed",
+                duration_s,
+                "the log has no clean end (the drones' final status is "
+                "missing): the recording process was killed; this is a "
+                "salvaged or cut copy",
+            )
+        )
     return found

@@ -46,7 +46,7 @@ def export_csv(data: LogData, directory: str | Path) -> list[Path]:
             rows.append(row)
         for name in [c for c in columns if any(d.startswith(c + ".") for d in columns)]:
             if all(row.get(name, "") == "" for row in rows):  # a nullable object, null in some rows: its fields are
-                del columns[name]                             # the columns
+                del columns[name]  # the columns
         path = directory / csv_name(topic)
         with open(path, "w", newline="") as f:
             writer = csv.DictWriter(f, fieldnames=list(columns), restval="")

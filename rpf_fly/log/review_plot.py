@@ -31,11 +31,24 @@ if TYPE_CHECKING:
 
 STATE_COLOURS = {
     # a flight's drone phases (rpf_fly.flight.phases.DronePhase), each its own colour
-    "waiting": "#c7c7c7", "ready": "#dbdb8d", "takeoff": "#98df8a", "planning": "#aec7e8", "holding": "#ffbb78",
-    "arrived": "#2ca02c", "landing": "#c5b0d5", "landed": "#7f7f7f", "failed": "#ff9896", "grounded": "#8c564b",
-    "link_lost": "#e377c2", "emergency": "#d62728",
+    "waiting": "#c7c7c7",
+    "ready": "#dbdb8d",
+    "takeoff": "#98df8a",
+    "planning": "#aec7e8",
+    "holding": "#ffbb78",
+    "arrived": "#2ca02c",
+    "landing": "#c5b0d5",
+    "landed": "#7f7f7f",
+    "failed": "#ff9896",
+    "grounded": "#8c564b",
+    "link_lost": "#e377c2",
+    "emergency": "#d62728",
     # a simulation's last state, and the states of older logs
-    "hover": "#9edae5", "connecting": "#f7b6d2", "preflight": "#bcbd22", "armed": "#ff7f0e", "error": "#c49c94",
+    "hover": "#9edae5",
+    "connecting": "#f7b6d2",
+    "preflight": "#bcbd22",
+    "armed": "#ff7f0e",
+    "error": "#c49c94",
 }
 """The flight phases' colours in the events panel and its legend: every state its own (a state not here is
 ``UNKNOWN_STATE_COLOUR``)."""
@@ -89,8 +102,7 @@ MAX_LISTED = 28
 """Named events listed under the XY panel (the rest are counted)."""
 
 
-def _event_list(fig, ax_xy, legend, named: list[tuple[R.ReviewEvent, str]],
-                cuts: list[R.Interruption]) -> None:
+def _event_list(fig, ax_xy, legend, named: list[tuple[R.ReviewEvent, str]], cuts: list[R.Interruption]) -> None:
     """The named events, numbered as on the events panel, listed under the XY panel's legend in their level's
     colour; then each interruption."""
     renderer = fig.canvas.get_renderer()
@@ -99,8 +111,10 @@ def _event_list(fig, ax_xy, legend, named: list[tuple[R.ReviewEvent, str]],
     inch = 1.0 / fig.get_figheight()
     top = bottom - 0.15 * inch
     fig.text(box.x0, top, "events named on the timeline", fontsize=9, fontweight="bold", va="top")
-    lines = [(f"{k + 1:>2}  {e.t_s:7.2f} s  {text}", LEVEL_COLOURS.get(e.level, "0.3"))
-             for k, (e, text) in enumerate(named[:MAX_LISTED])]
+    lines = [
+        (f"{k + 1:>2}  {e.t_s:7.2f} s  {text}", LEVEL_COLOURS.get(e.level, "0.3"))
+        for k, (e, text) in enumerate(named[:MAX_LISTED])
+    ]
     if len(named) > MAX_LISTED:
         lines.append((f"... and {len(named) - MAX_LISTED} more (rpf-fly review prints every warning)", "0.4"))
     for cut in (c for c in cuts if c.how == "killed"):  # a signal or an error is an event listed above
@@ -108,12 +122,17 @@ def _event_list(fig, ax_xy, legend, named: list[tuple[R.ReviewEvent, str]],
         text = f" !  {at}  interrupted ({cut.how}): {cut.message}"
         lines.append((text if len(text) <= 90 else text[:89] + "…", "#d62728"))
     for k, (text, colour) in enumerate(lines):
-        fig.text(box.x0, top - (0.22 + 0.15 * k) * inch, text, fontsize=7.5, family="monospace", va="top",
-                 color=colour)
+        fig.text(box.x0, top - (0.22 + 0.15 * k) * inch, text, fontsize=7.5, family="monospace", va="top", color=colour)
 
 
-LABEL_SPOTS = ((0, 6, "center", "bottom"), (0, -7, "center", "top"), (0, 17, "center", "bottom"),
-               (0, -18, "center", "top"), (7, 0, "left", "center"), (-7, 0, "right", "center"))
+LABEL_SPOTS = (
+    (0, 6, "center", "bottom"),
+    (0, -7, "center", "top"),
+    (0, 17, "center", "bottom"),
+    (0, -18, "center", "top"),
+    (7, 0, "left", "center"),
+    (-7, 0, "right", "center"),
+)
 """Where an event's number may go, in points from its marker, tried in this order: above, below, higher, lower,
 right, left; the first spot that covers no marker and no label already placed is taken."""
 
@@ -135,10 +154,20 @@ def _event_labels(fig, ax, clusters: list[tuple[float, int, list[int]]]) -> None
 
     def put(text: str, t: float, level: int, spot: tuple[int, int, str, str]):
         dx, dy, ha, va = spot
-        return ax.annotate(text, (t, level), xytext=(dx, dy), textcoords="offset points", fontsize=7,
-                           fontweight="bold", color=LEVEL_COLOURS.get(level, "0.3"), ha=ha, va=va,
-                           gid="event-label", zorder=4,
-                           bbox={"boxstyle": "square,pad=0.1", "fc": "white", "ec": "none", "alpha": 0.85})
+        return ax.annotate(
+            text,
+            (t, level),
+            xytext=(dx, dy),
+            textcoords="offset points",
+            fontsize=7,
+            fontweight="bold",
+            color=LEVEL_COLOURS.get(level, "0.3"),
+            ha=ha,
+            va=va,
+            gid="event-label",
+            zorder=4,
+            bbox={"boxstyle": "square,pad=0.1", "fc": "white", "ec": "none", "alpha": 0.85},
+        )
 
     for t, level, numbers in clusters:
         text = ",".join(map(str, numbers)) if len(numbers) <= 3 else f"{numbers[0]}-{numbers[-1]}"
@@ -210,9 +239,18 @@ def review_figure(data: LogData, result: R.Review):
     event_rows = 5 + len(drones)
     heights = [1.0] * (len(panels) - 1) + [max(1.4, 0.16 * event_rows)]
     fig = plt.figure(figsize=(17, max(10.0, 2.0 * sum(heights) + 1.2)), dpi=100)
-    grid = fig.add_gridspec(len(panels), 2, width_ratios=(1.0, 1.35), height_ratios=heights, hspace=0.32,
-                            wspace=0.14, left=0.05, right=0.98, top=0.94,
-                            bottom=0.95 / max(10.0, 2.0 * sum(heights) + 1.2))
+    grid = fig.add_gridspec(
+        len(panels),
+        2,
+        width_ratios=(1.0, 1.35),
+        height_ratios=heights,
+        hspace=0.32,
+        wspace=0.14,
+        left=0.05,
+        right=0.98,
+        top=0.94,
+        bottom=0.95 / max(10.0, 2.0 * sum(heights) + 1.2),
+    )
     ax_xy = fig.add_subplot(grid[:, 0], label="xy")
     axes: dict[str, Axes] = {}
     first: Axes | None = None
@@ -225,8 +263,9 @@ def review_figure(data: LogData, result: R.Review):
         title += f" ({result.source})"
     if result.metrics is not None:
         m = result.metrics
-        title += (f"  |  {m.reached}/{m.drones} reached, "
-                  f"{m.collisions_drone_drone + m.collisions_drone_obstacle} collisions")
+        title += (
+            f"  |  {m.reached}/{m.drones} reached, {m.collisions_drone_drone + m.collisions_drone_obstacle} collisions"
+        )
     if result.interrupted:
         title += "  |  INTERRUPTED (" + ", ".join(dict.fromkeys(c.how for c in result.interruptions)) + ")"
     if result.truncated:
@@ -257,22 +296,37 @@ def review_figure(data: LogData, result: R.Review):
             ax_xy.plot(*begin, "o", ms=7, mfc="white", mec=colour[d], mew=1.6, zorder=4)
         if i < len(goals):
             if begin is not None:
-                ax_xy.plot([begin[0], goals[i][0]], [begin[1], goals[i][1]], ls="-", lw=0.6, color=colour[d],
-                           alpha=0.45, zorder=2, gid=f"start-goal:{d}")
-            ax_xy.plot(goals[i][0], goals[i][1], "*", ms=15, mfc=colour[d], mec="k", mew=0.7, zorder=5,
-                       gid=f"goal:{d}")
+                ax_xy.plot(
+                    [begin[0], goals[i][0]],
+                    [begin[1], goals[i][1]],
+                    ls="-",
+                    lw=0.6,
+                    color=colour[d],
+                    alpha=0.45,
+                    zorder=2,
+                    gid=f"start-goal:{d}",
+                )
+            ax_xy.plot(goals[i][0], goals[i][1], "*", ms=15, mfc=colour[d], mec="k", mew=0.7, zorder=5, gid=f"goal:{d}")
     ax_xy.set_aspect("equal")
     ax_xy.set_xlabel("x [m]")
     ax_xy.set_ylabel("y [m]")
     ax_xy.set_title("XY tracks (/mocap)", fontsize=10)
     ax_xy.grid(True, lw=0.3, alpha=0.5)
     handles = [Line2D([], [], color=colour[d], lw=2, label=d) for d in drones[:16]]
-    handles += [Line2D([], [], ls="", marker="o", mfc="white", mec="k", label="start"),
-                Line2D([], [], ls="", marker="*", ms=13, mfc="0.8", mec="k", label="goal (drone's colour)"),
-                Line2D([], [], ls="-", lw=0.6, color="k", alpha=0.45, label="start to goal")]
+    handles += [
+        Line2D([], [], ls="", marker="o", mfc="white", mec="k", label="start"),
+        Line2D([], [], ls="", marker="*", ms=13, mfc="0.8", mec="k", label="goal (drone's colour)"),
+        Line2D([], [], ls="-", lw=0.6, color="k", alpha=0.45, label="start to goal"),
+    ]
     ax_xy.set_anchor("N")
-    legend = ax_xy.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.07), ncol=min(6, len(handles)),
-                 fontsize=8, frameon=False)
+    legend = ax_xy.legend(
+        handles=handles,
+        loc="upper center",
+        bbox_to_anchor=(0.5, -0.07),
+        ncol=min(6, len(handles)),
+        fontsize=8,
+        frameon=False,
+    )
 
     # altitude
     ax = axes["altitude"]
@@ -299,8 +353,9 @@ def review_figure(data: LogData, result: R.Review):
             low, high = (float(np.median([b[k] for b in bands])) for k in (0, 1))
             lag_s = judged[0].lag_s
             speed = float(np.median([x.speed_m_s for x in judged]))
-            ax.axhspan(low, high, color="0.85", zorder=0,
-                       label=f"expected while cruising: {lag_s:g} s x {speed:.2f} m/s")
+            ax.axhspan(
+                low, high, color="0.85", zorder=0, label=f"expected while cruising: {lag_s:g} s x {speed:.2f} m/s"
+            )
         rms, peak = series.rms_max(np.concatenate([e.values for e in tracking.values()]))
         ax.set_title(f"setpoint tracking error |setpoint - pose|: RMS {rms:.3f} m, max {peak:.3f} m", fontsize=10)
         ax.set_ylabel("error [m]")
@@ -331,9 +386,18 @@ def review_figure(data: LogData, result: R.Review):
             ax.axhline(r, color="#d62728", ls="--", lw=1.0, label=f"r = {r:g} m", gid="r")
             # named on its line, not in a legend: the panel is cut at the 95th percentile, so a legend at the top
             # would sit on the clearances above it
-            ax.annotate(f"r = {r:g} m", (1.0, r), xycoords=("axes fraction", "data"), xytext=(-4, 2),
-                        textcoords="offset points", ha="right", va="bottom", fontsize=7, color="#d62728",
-                        gid="r-label")
+            ax.annotate(
+                f"r = {r:g} m",
+                (1.0, r),
+                xycoords=("axes fraction", "data"),
+                xytext=(-4, 2),
+                textcoords="offset points",
+                ha="right",
+                va="bottom",
+                fontsize=7,
+                color="#d62728",
+                gid="r-label",
+            )
         top = max(float(np.percentile(c.values, 95)) for c in clearances.values())
         ax.set_ylim(min(0.0, lowest - 0.05), max(top, 2.5 * (r or 0.1)) * 1.1)
         ax.set_title(f"obstacle clearance (centre to the nearest surface): min {lowest:.3f} m", fontsize=10)
@@ -352,12 +416,14 @@ def review_figure(data: LogData, result: R.Review):
     seen_states: dict[str, None] = {}
     for row, d in enumerate(drones):
         for t0, t1, state in series.phases(data, d, start, end_s):
-            ax.broken_barh([(t0, max(t1 - t0, 1e-3))], (-row - 1.4, 0.8),
-                           facecolors=STATE_COLOURS.get(state, UNKNOWN_STATE_COLOUR))
+            ax.broken_barh(
+                [(t0, max(t1 - t0, 1e-3))], (-row - 1.4, 0.8), facecolors=STATE_COLOURS.get(state, UNKNOWN_STATE_COLOUR)
+            )
             seen_states[state] = None
     for event in result.events:
-        ax.plot(event.t_s, event.level, "v", ms=7, color=LEVEL_COLOURS.get(event.level, "0.3"), zorder=3,
-                gid="event-marker")
+        ax.plot(
+            event.t_s, event.level, "v", ms=7, color=LEVEL_COLOURS.get(event.level, "0.3"), zorder=3, gid="event-marker"
+        )
     named = labelled_events(result.events)
     clusters: list[tuple[float, int, list[int]]] = []  # events close in time on one level share one label
     for k, (event, _text) in enumerate(named):
@@ -368,18 +434,35 @@ def review_figure(data: LogData, result: R.Review):
             clusters.append((event.t_s, event.level, [k + 1]))
     for cut in result.interruptions:
         if cut.how == "killed" and cut.t_s is not None:  # no event says so: the log just ends
-            ax.annotate("killed: the log ends here", (cut.t_s, 5.0), xytext=(-4, 6), textcoords="offset points",
-                        fontsize=7, color="#d62728", ha="right", va="bottom", fontweight="bold")
+            ax.annotate(
+                "killed: the log ends here",
+                (cut.t_s, 5.0),
+                xytext=(-4, 6),
+                textcoords="offset points",
+                fontsize=7,
+                color="#d62728",
+                ha="right",
+                va="bottom",
+                fontweight="bold",
+            )
     ax.set_yticks(list(range(1, 6)) + [-row - 1 for row in range(len(drones))])
     ax.set_yticklabels(["debug", "info", "warning", "error", "fatal"] + list(drones), fontsize=7)
     ax.set_ylim(-len(drones) - 0.8, 6.6)
-    ax.set_title(f"events ({len(result.events)}; the first of each kind named) and flight phases (/status)",
-                 fontsize=10)
+    ax.set_title(
+        f"events ({len(result.events)}; the first of each kind named) and flight phases (/status)", fontsize=10
+    )
     if seen_states:
         spot = ax.get_position()
-        fig.legend(handles=[Patch(color=STATE_COLOURS.get(s, UNKNOWN_STATE_COLOUR), label=s) for s in seen_states],
-                   fontsize=7.5, loc="lower center", bbox_to_anchor=(spot.x0 + spot.width / 2, 0.0),
-                   ncol=min(11, len(seen_states)), frameon=False, title="flight phases", title_fontsize=7.5)
+        fig.legend(
+            handles=[Patch(color=STATE_COLOURS.get(s, UNKNOWN_STATE_COLOUR), label=s) for s in seen_states],
+            fontsize=7.5,
+            loc="lower center",
+            bbox_to_anchor=(spot.x0 + spot.width / 2, 0.0),
+            ncol=min(11, len(seen_states)),
+            frameon=False,
+            title="flight phases",
+            title_fontsize=7.5,
+        )
 
     # the shared time axis, interruptions through every panel
     for name, panel in axes.items():

@@ -33,12 +33,17 @@ class RadioSummary:
         """``rpf-fly review``'s line for this dongle."""
         use = self.peak_packets_per_s / self.budget_per_s if self.budget_per_s > 0 else 0.0
         over = "  OVER BUDGET" if self.peak_packets_per_s > self.budget_per_s > 0 else ""
-        lag = (f"; {self.setpoints_superseded:.0f} setpoints superseded before the radio took them (it lagged)"
-               if self.setpoints_superseded >= 0.5 else "")
-        return (f"radio dongle {self.dongle} ({len(self.drones)} drones): {self.peak_packets_per_s:.0f} packets/s "
-                f"in the busiest second, {self.mean_packets_per_s:.0f} on average; planned "
-                f"{self.planned_per_s:.0f}, budget {self.budget_per_s:.0f} ({use:.0%}); air in use "
-                f"{self.peak_transactions_per_s:.0f} transactions/s at most (polls included){lag}{over}")
+        lag = (
+            f"; {self.setpoints_superseded:.0f} setpoints superseded before the radio took them (it lagged)"
+            if self.setpoints_superseded >= 0.5
+            else ""
+        )
+        return (
+            f"radio dongle {self.dongle} ({len(self.drones)} drones): {self.peak_packets_per_s:.0f} packets/s "
+            f"in the busiest second, {self.mean_packets_per_s:.0f} on average; planned "
+            f"{self.planned_per_s:.0f}, budget {self.budget_per_s:.0f} ({use:.0%}); air in use "
+            f"{self.peak_transactions_per_s:.0f} transactions/s at most (polls included){lag}{over}"
+        )
 
 
 def radio_of(data: LogData) -> list[RadioSummary]:
@@ -51,11 +56,18 @@ def radio_of(data: LogData) -> list[RadioSummary]:
         if not msgs:
             continue
         last = msgs[-1]
-        out.append(RadioSummary(
-            int(last.get("dongle", 0)), tuple(last.get("drones", ())), len(msgs),
-            sum(float(m.get("packets", 0.0)) for m in msgs), sum(float(m.get("window_s", 0.0)) for m in msgs),
-            max(float(m.get("packets_per_s", 0.0)) for m in msgs),
-            max(float(m.get("transactions_per_s", 0.0)) for m in msgs),
-            float(last.get("planned_per_s", 0.0)), float(last.get("budget_per_s", 0.0)),
-            sum(float(m.get("setpoints_superseded", 0.0)) for m in msgs)))
+        out.append(
+            RadioSummary(
+                int(last.get("dongle", 0)),
+                tuple(last.get("drones", ())),
+                len(msgs),
+                sum(float(m.get("packets", 0.0)) for m in msgs),
+                sum(float(m.get("window_s", 0.0)) for m in msgs),
+                max(float(m.get("packets_per_s", 0.0)) for m in msgs),
+                max(float(m.get("transactions_per_s", 0.0)) for m in msgs),
+                float(last.get("planned_per_s", 0.0)),
+                float(last.get("budget_per_s", 0.0)),
+                sum(float(m.get("setpoints_superseded", 0.0)) for m in msgs),
+            )
+        )
     return sorted(out, key=lambda r: r.dongle)

@@ -64,9 +64,15 @@ class TrackingExpectation:
 
     def to_json_dict(self) -> dict[str, Any]:
         band = self.band_m
-        return {"cruise_samples": self.samples, "speed_m_s": self.speed_m_s, "expected_m": self.expected_m,
-                "measured_m": self.measured_m, "low_m": band[0] if band else None,
-                "high_m": band[1] if band else None, "outside": self.outside}
+        return {
+            "cruise_samples": self.samples,
+            "speed_m_s": self.speed_m_s,
+            "expected_m": self.expected_m,
+            "measured_m": self.measured_m,
+            "low_m": band[0] if band else None,
+            "high_m": band[1] if band else None,
+            "outside": self.outside,
+        }
 
 
 def tracking_lag(source: str, dynamics: str = "") -> tuple[float, str]:
@@ -113,5 +119,11 @@ def tracking_expectation(data: LogData, drone: str, start_ns: int, lag_s: float)
     if count < 5:
         return TrackingExpectation(drone, lag_s, count)
     v = float(np.median(speed[cruising]))
-    return TrackingExpectation(drone, lag_s, count, speed_m_s=v, expected_m=float(np.median(lag_s * speed[cruising])),
-                               measured_m=float(np.median(err[cruising])))
+    return TrackingExpectation(
+        drone,
+        lag_s,
+        count,
+        speed_m_s=v,
+        expected_m=float(np.median(lag_s * speed[cruising])),
+        measured_m=float(np.median(err[cruising])),
+    )

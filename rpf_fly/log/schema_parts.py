@@ -11,8 +11,9 @@ from collections.abc import Iterable
 from typing import Any
 
 
-def obj(properties: dict[str, Any], required: Iterable[str] | None = None, title: str = "",
-         description: str = "") -> dict[str, Any]:
+def obj(
+    properties: dict[str, Any], required: Iterable[str] | None = None, title: str = "", description: str = ""
+) -> dict[str, Any]:
     out: dict[str, Any] = {}
     if title:
         out["title"] = title
@@ -67,8 +68,11 @@ def point3(description: str = "A point in 3D space") -> dict[str, Any]:
 
 
 def quaternion(description: str) -> dict[str, Any]:
-    return obj({"x": num("x"), "y": num("y"), "z": num("z"), "w": num("w")}, title="foxglove.Quaternion",
-                description=description)
+    return obj(
+        {"x": num("x"), "y": num("y"), "z": num("z"), "w": num("w")},
+        title="foxglove.Quaternion",
+        description=description,
+    )
 
 
 def pose(description: str) -> dict[str, Any]:
@@ -80,8 +84,11 @@ def pose(description: str) -> dict[str, Any]:
 
 
 def color(description: str) -> dict[str, Any]:
-    return obj({"r": num("red 0..1"), "g": num("green 0..1"), "b": num("blue 0..1"), "a": num("alpha 0..1")},
-                title="foxglove.Color", description=description)
+    return obj(
+        {"r": num("red 0..1"), "g": num("green 0..1"), "b": num("blue 0..1"), "a": num("alpha 0..1")},
+        title="foxglove.Color",
+        description=description,
+    )
 
 
 def array(items: dict[str, Any], description: str) -> dict[str, Any]:

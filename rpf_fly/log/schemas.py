@@ -19,9 +19,18 @@ from rpf_fly.log.metadata import mission_metadata, scenario_metadata
 from rpf_fly.log.rpf_schemas import DRONE_STATUS, FIRMWARE_STATE, HOST_LAG, PLANNER_STEP, RADIO_LOAD, TRUTH_STATE
 
 __all__ = [
-    "SCHEMA_ENCODING", "MESSAGE_ENCODING", "SCHEMAS", "LAB_SCHEMAS", "schema_bytes", "topic_schema",
+    "SCHEMA_ENCODING",
+    "MESSAGE_ENCODING",
+    "SCHEMAS",
+    "LAB_SCHEMAS",
+    "schema_bytes",
+    "topic_schema",
     # documented as ``schemas.<name>`` (docs/log-format.md)
-    "encode", "truth_json", "truth_state", "mission_metadata", "scenario_metadata",
+    "encode",
+    "truth_json",
+    "truth_state",
+    "mission_metadata",
+    "scenario_metadata",
     # rpf_fly/flight/lab.py's ``S.stamp``
     "stamp",
 ]

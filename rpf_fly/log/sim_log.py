@@ -36,8 +36,9 @@ def _entries(flags: np.ndarray) -> np.ndarray:
     return flags & ~before
 
 
-def write_sim_log(path: str | Path, mission: Any, scenario: Any, rollout: Rollout, seed: int,
-                  start_ns: int = SIM_START_NS) -> Path:
+def write_sim_log(
+    path: str | Path, mission: Any, scenario: Any, rollout: Rollout, seed: int, start_ns: int = SIM_START_NS
+) -> Path:
     """Write ``rollout`` of ``scenario`` (from ``mission`` with ``seed``) to the MCAP file ``path``.
 
     Raises ``OSError`` when the file cannot be written."""
@@ -81,12 +82,21 @@ def write_sim_log(path: str | Path, mission: Any, scenario: Any, rollout: Rollou
     arena = {"x": list(scenario.arena_x), "y": list(scenario.arena_y), "z": list(mission.arena.z)}
     ident = IDENTITY
 
-    log = FlightLog(path, mission_metadata(mission, seed, source="sim"), scenario_metadata(mission, scenario),
-                    clock=None, block_when_full=True)
+    log = FlightLog(
+        path,
+        mission_metadata(mission, seed, source="sim"),
+        scenario_metadata(mission, scenario),
+        clock=None,
+        block_when_full=True,
+    )
     with log:
         log.scene(start_ns, shapes, {name: complex(g) for name, g in zip(names, goals)}, arena, height)
-        log.event(start_ns, 2, f"sim start: mission {mission.name}, planner {mission.planner.kind}, seed {seed}, "
-                               f"{n} drones, dt {dt:g} s", name="sim")
+        log.event(
+            start_ns,
+            2,
+            f"sim start: mission {mission.name}, planner {mission.planner.kind}, seed {seed}, {n} drones, dt {dt:g} s",
+            name="sim",
+        )
         for k in range(steps + 1):
             t = start_ns + k * dt_ns
             final = k == steps
@@ -94,35 +104,62 @@ def write_sim_log(path: str | Path, mission: Any, scenario: Any, rollout: Rollou
             for i, name in enumerate(names):
                 log.pose(name, t, xyz[i], ident)
             for i, name in enumerate(names):
-                common = dict(tick=k, position=xyz[i], goal=complex(goals[i]), heading=float(headings[k, i]),
-                              obstacle_distance=float(clearance[k, i]), goal_distance=float(goal_distance[k, i]))
+                common = dict(
+                    tick=k,
+                    position=xyz[i],
+                    goal=complex(goals[i]),
+                    heading=float(headings[k, i]),
+                    obstacle_distance=float(clearance[k, i]),
+                    goal_distance=float(goal_distance[k, i]),
+                )
                 if final:
-                    log.planner_step(name, t, mode=_FINAL_MODE[rollout.outcomes[i]], eta=None, lam=None,
-                                     neighbours=0, **common)
+                    log.planner_step(
+                        name, t, mode=_FINAL_MODE[rollout.outcomes[i]], eta=None, lam=None, neighbours=0, **common
+                    )
                     setpoint = xyz[i]
                 else:
                     mode = int(rollout.modes[k, i])
                     direction = complex(rollout.direction[k, i])
-                    log.planner_step(name, t, mode=mode, eta=float(rollout.eta[k, i]), lam=float(rollout.lam[k, i]),
-                                     f_a=complex(rollout.f_a[k, i]), f_r=complex(rollout.f_r[k, i]),
-                                     f_in=complex(rollout.f_in[k, i]), direction=direction,
-                                     neighbours=int(rollout.neighbours[k, i]), **common)
+                    log.planner_step(
+                        name,
+                        t,
+                        mode=mode,
+                        eta=float(rollout.eta[k, i]),
+                        lam=float(rollout.lam[k, i]),
+                        f_a=complex(rollout.f_a[k, i]),
+                        f_r=complex(rollout.f_r[k, i]),
+                        f_in=complex(rollout.f_in[k, i]),
+                        direction=direction,
+                        neighbours=int(rollout.neighbours[k, i]),
+                        **common,
+                    )
                     step = speed * dt * direction if mode >= 0 else 0j
                     setpoint = (xyz[i][0] + step.real, xyz[i][1] + step.imag, height)
                 log.setpoint(name, t, setpoint, float(headings[k, i]))
                 arrived = 0 <= arrival[i] <= k
-                log.status(name, t, state="arrived" if arrived else ("planning" if not final else "hover"),
-                           outcome=rollout.outcomes[i].value if final else None)
+                log.status(
+                    name,
+                    t,
+                    state="arrived" if arrived else ("planning" if not final else "hover"),
+                    outcome=rollout.outcomes[i].value if final else None,
+                )
             log.tf(t, {name: (xyz[i], ident) for i, name in enumerate(names)})
             for i in np.flatnonzero(arrival == k).tolist():
                 log.event(t, 2, f"{names[i]} reached its goal at {k * dt:.1f} s", name="sim")
             for i, j in zip(*np.nonzero(np.triu(pair_entries[k], 1))):
-                log.event(t, 4, f"collision {names[i]}-{names[j]}: centre distance {separation[k, i, j]:.3f} m "
-                                f"< 2r = {2 * r:g} m", name="sim")
+                log.event(
+                    t,
+                    4,
+                    f"collision {names[i]}-{names[j]}: centre distance {separation[k, i, j]:.3f} m < 2r = {2 * r:g} m",
+                    name="sim",
+                )
             for i in np.flatnonzero(obstacle_entries[k]).tolist():
-                log.event(t, 4, f"collision {names[i]} with an obstacle: clearance "
-                                f"{surface[k, i]:.3f} m < r = {r:g} m",
-                          name="sim")
+                log.event(
+                    t,
+                    4,
+                    f"collision {names[i]} with an obstacle: clearance {surface[k, i]:.3f} m < r = {r:g} m",
+                    name="sim",
+                )
         t_end = start_ns + steps * dt_ns
         for i, name in enumerate(names):
             clamps = int(rollout.geofence_clamps[i])

@@ -218,12 +218,17 @@ class FlightLog:
     def closed(self) -> bool:
         return self._closed
 
-    def pose(self, drone: str, t_ns: int, position_xyz: Sequence[float],
-             quaternion_xyzw: Sequence[float] | None = None) -> None:
+    def pose(
+        self, drone: str, t_ns: int, position_xyz: Sequence[float], quaternion_xyzw: Sequence[float] | None = None
+    ) -> None:
         """``/mocap/<drone>``: the pose as received (frame ``world``; quaternion ``(qx, qy, qz, qw)``, None:
         identity). ``t_ns``: the mocap frame time."""
-        self._put(self._poses.get(drone) or self._topic(self._poses, "/mocap/{}", drone), t_ns, pose_json,
-                  (position_xyz, quaternion_xyzw))
+        self._put(
+            self._poses.get(drone) or self._topic(self._poses, "/mocap/{}", drone),
+            t_ns,
+            pose_json,
+            (position_xyz, quaternion_xyzw),
+        )
 
     def poses(self, t_ns: int, poses: Mapping[str, tuple[Sequence[float], Sequence[float] | None]]) -> None:
         """``/mocap/<drone>`` of several drones at one frame time ``{drone: (position, quaternion)}``: the same
@@ -233,42 +238,52 @@ class FlightLog:
     def setpoints(self, setpoints: Iterable[tuple[str, int, Sequence[float], float]]) -> None:
         """``/<drone>/setpoint`` of several drones, ``(drone, t_ns, position, yaw)`` each (each its own send time):
         the same messages as :meth:`setpoint` per drone, queued as one entry."""
-        self._put_batch(self._setpoints, "/{}/setpoint", [(d, t, (p, yaw)) for d, t, p, yaw in setpoints],
-                        _setpoint_message)
+        self._put_batch(
+            self._setpoints, "/{}/setpoint", [(d, t, (p, yaw)) for d, t, p, yaw in setpoints], _setpoint_message
+        )
 
-    def planner_steps(self, t_ns: int, steps: Mapping[str, Any],
-                      build: Callable[[int, Any], bytes | dict] = planner_json) -> None:
+    def planner_steps(
+        self, t_ns: int, steps: Mapping[str, Any], build: Callable[[int, Any], bytes | dict] = planner_json
+    ) -> None:
         """``/<drone>/planner`` of several drones at one tick, queued as one entry. ``steps``: ``{drone: value}``;
         ``build(t_ns, value)`` makes each message on the writer thread (default: ``value`` is the fields mapping of
         :meth:`planner_step`). A flight's recorder passes its own ``build`` so that the loop thread only hands
         over references (rpf_fly/flight/recording.py)."""
         self._put_batch(self._planner, "/{}/planner", [(d, t_ns, (v,)) for d, v in steps.items()], build)
 
-    def truth(self, t_ns: int, states: Mapping[str, tuple[Sequence[float], float, bool, bool, Sequence[float]]]
-              ) -> None:
+    def truth(
+        self, t_ns: int, states: Mapping[str, tuple[Sequence[float], float, bool, bool, Sequence[float]]]
+    ) -> None:
         """``/truth/<drone>`` of every drone at one sample of a dry run's simulated world, queued as one entry:
         ``{drone: (position, yaw, motors, crashed, estimate)}`` (metres, radians; see
         :func:`rpf_fly.log.messages.truth_state`). ``t_ns``: when the world was in that state. Log time = ``t_ns``
         (not the clock at the call): the samples reach the flight's process in batches (docs/log-format.md)."""
-        self._put_batch(self._truth, "/truth/{}", [(d, t_ns, v) for d, v in states.items()], truth_json,
-                        log_at_publish=True)
+        self._put_batch(
+            self._truth, "/truth/{}", [(d, t_ns, v) for d, v in states.items()], truth_json, log_at_publish=True
+        )
 
     def setpoint(self, drone: str, t_ns: int, position_xyz: Sequence[float], yaw_rad: float = 0.0) -> None:
         """``/<drone>/setpoint``: the position setpoint sent, with its yaw (radians) as the orientation."""
-        self._put(self._setpoints.get(drone) or self._topic(self._setpoints, "/{}/setpoint", drone), t_ns,
-                  _setpoint_message, (position_xyz, yaw_rad))
+        self._put(
+            self._setpoints.get(drone) or self._topic(self._setpoints, "/{}/setpoint", drone),
+            t_ns,
+            _setpoint_message,
+            (position_xyz, yaw_rad),
+        )
 
     def planner_step(self, drone: str, t_ns: int, **fields: Any) -> None:
         """``/<drone>/planner``: one planning tick (fields of :func:`rpf_fly.log.messages.planner_step`: tick,
         position, goal, mode, eta, lam or lambda, f_a, f_r, f_in, direction, heading, neighbours,
         obstacle_distance, goal_distance)."""
-        self._put(self._planner.get(drone) or self._topic(self._planner, "/{}/planner", drone), t_ns, planner_json,
-                  (fields,))
+        self._put(
+            self._planner.get(drone) or self._topic(self._planner, "/{}/planner", drone), t_ns, planner_json, (fields,)
+        )
 
     def status(self, drone: str, t_ns: int, **fields: Any) -> None:
         """``/<drone>/status``: state, battery_v, link_quality, latency_ms, outcome."""
-        self._put(self._status.get(drone) or self._topic(self._status, "/{}/status", drone), t_ns, _status_message,
-                  (fields,))
+        self._put(
+            self._status.get(drone) or self._topic(self._status, "/{}/status", drone), t_ns, _status_message, (fields,)
+        )
 
     def radio(self, t_ns: int, dongle: int, **fields: Any) -> None:
         """``/radio/<dongle>``: one window of a dongle's measured load (fields of
@@ -276,12 +291,29 @@ class FlightLog:
         budget_per_s, optionally setpoints_superseded). Once a second per dongle: never dropped for a full queue
         (as events)."""
         topic = self._radio.get(str(dongle)) or self._topic(self._radio, "/radio/{}", str(dongle))
-        self._put(topic, t_ns, radio_load, (dongle, *(fields[k] for k in (
-            "drones", "window_s", "packets", "transactions", "planned_per_s", "budget_per_s")),
-            float(fields.get("setpoints_superseded", 0.0))), priority=True)
+        self._put(
+            topic,
+            t_ns,
+            radio_load,
+            (
+                dongle,
+                *(
+                    fields[k]
+                    for k in ("drones", "window_s", "packets", "transactions", "planned_per_s", "budget_per_s")
+                ),
+                float(fields.get("setpoints_superseded", 0.0)),
+            ),
+            priority=True,
+        )
 
-    def scene(self, t_ns: int, obstacles: Sequence[Mapping[str, Any]] = (), goals: Mapping[str, Any] | None = None,
-              arena: Mapping[str, Sequence[float]] | None = None, height: float = 0.0) -> None:
+    def scene(
+        self,
+        t_ns: int,
+        obstacles: Sequence[Mapping[str, Any]] = (),
+        goals: Mapping[str, Any] | None = None,
+        arena: Mapping[str, Sequence[float]] | None = None,
+        height: float = 0.0,
+    ) -> None:
         """``/scene``: obstacles (``{shape, center, radius}`` / ``{shape, min, max}``), goals ``{name: (x, y)}``,
         arena ``{x, y, z}`` ranges, goal markers at ``height``."""
         fields = {"obstacles": list(obstacles), "goals": dict(goals or {}), "arena": arena, "height": height}
@@ -293,8 +325,7 @@ class FlightLog:
 
     def event(self, t_ns: int, level: int, message: str, name: str = "rpf_fly", file: str = "", line: int = 0) -> None:
         """``/events``: a ``foxglove.Log`` (level 1 debug, 2 info, 3 warning, 4 error, 5 fatal)."""
-        self._put(self._fixed["/events"], t_ns, log_message, (level, message, name, file, line),
-                  priority=True)
+        self._put(self._fixed["/events"], t_ns, log_message, (level, message, name, file, line), priority=True)
 
     def message(self, topic: str, t_ns: int, log_time: int, data: bytes) -> None:
         """A message already encoded (the logger of a distributed flight: the bytes a worker published), with its
@@ -369,8 +400,9 @@ class FlightLog:
             self._pushed += n
             self._queue.append(entry)
 
-    def _put(self, topic: tuple[str, Any], t_ns: int, build: Callable[..., bytes | dict], args: tuple,
-             priority: bool = False) -> None:
+    def _put(
+        self, topic: tuple[str, Any], t_ns: int, build: Callable[..., bytes | dict], args: tuple, priority: bool = False
+    ) -> None:
         sequence = next(topic[1])
         if self._closed:
             self._count_drop()
@@ -381,8 +413,14 @@ class FlightLog:
         log_time = t_ns if self._clock is None else self._clock()
         self._enqueue(1, (topic[0], sequence, t_ns, log_time, build, args))
 
-    def _put_batch(self, table: dict[str, tuple[str, Any]], pattern: str, items: list[tuple[str, int, Any]],
-                   build: Callable[..., bytes | dict], log_at_publish: bool = False) -> None:
+    def _put_batch(
+        self,
+        table: dict[str, tuple[str, Any]],
+        pattern: str,
+        items: list[tuple[str, int, Any]],
+        build: Callable[..., bytes | dict],
+        log_at_publish: bool = False,
+    ) -> None:
         """Queue one message per ``(drone, t_ns, args)`` as one entry; ``build(t_ns, *args)`` runs on the writer.
         ``log_at_publish``: each message's log time is its ``t_ns`` instead of the clock at the call."""
         if not items:

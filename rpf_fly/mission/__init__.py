@@ -1,7 +1,7 @@
 """Mission files: the YAML format (docs/mission-format.md), its validated dataclasses and the loader.
 
-    from rpf_fly.mission import load_mission
-    mission = load_mission("missions/circle-8-r3.yaml")   # or MissionError: "FILE:LINE: FIELD: problem"
+from rpf_fly.mission import load_mission
+mission = load_mission("missions/circle-8-r3.yaml")   # or MissionError: "FILE:LINE: FIELD: problem"
 """
 
 import importlib
@@ -54,8 +54,14 @@ __all__ = [
 ]
 
 
-_LOADER = {"expand_formation": "parser", "field_line": "load", "load_mission": "load", "parse_mission": "load",
-           "parse_uri": "radio_uri", "with_planner": "load"}
+_LOADER = {
+    "expand_formation": "parser",
+    "field_line": "load",
+    "load_mission": "load",
+    "parse_mission": "load",
+    "parse_uri": "radio_uri",
+    "with_planner": "load",
+}
 """The loader's names, by the module of this package that holds each."""
 
 

@@ -22,6 +22,7 @@ _Choice = TypeVar("_Choice", bound=str)
 _HOST_NAME = re.compile(r"(?!-)[A-Za-z0-9-]{1,63}(?<!-)(\.(?!-)[A-Za-z0-9-]{1,63}(?<!-))*\.?")
 """A host name: dot-separated labels of letters, digits and hyphens, no label starting or ending with a hyphen."""
 
+
 class Bound(NamedTuple):
     text: str
     ok: Callable[[float], bool]
@@ -52,6 +53,7 @@ def did_you_mean(word: str, choices: Iterable[str]) -> str:
 def options_text(choices: Iterable[str]) -> str:
     return ", ".join(repr(c) for c in choices)
 
+
 class Checker:
     """Typed reads of :class:`YNode` values that raise a precise :class:`MissionError`."""
 
@@ -65,8 +67,9 @@ class Checker:
     def bad(self, node: YNode, expected: str) -> MissionError:
         return self.error(node, node.path, f"expected {expected}, got {describe(node)}")
 
-    def mapping(self, node: YNode, keys: Sequence[str], required: Sequence[str] = (),
-                what: str = "a mapping") -> dict[str, YNode]:
+    def mapping(
+        self, node: YNode, keys: Sequence[str], required: Sequence[str] = (), what: str = "a mapping"
+    ) -> dict[str, YNode]:
         """The entries of a mapping with only ``keys`` and all of ``required``."""
         if not node.is_map:
             raise self.bad(node, what)
@@ -95,8 +98,9 @@ class Checker:
         if isinstance(v, bool) or not isinstance(v, int):
             raise self.bad(node, "an integer")
         if lo is not None and v < lo:
-            raise self.error(node, node.path, f"must be at least {lo}, got {v}" if lo != 1
-                             else f"must be positive, got {v}")
+            raise self.error(
+                node, node.path, f"must be at least {lo}, got {v}" if lo != 1 else f"must be positive, got {v}"
+            )
         if hi is not None and v > hi:
             raise self.error(node, node.path, f"must be at most {hi}, got {v}")
         return v
@@ -123,8 +127,11 @@ class Checker:
         if not isinstance(node.value, str):
             raise self.bad(node, f"one of {options_text(choices)}")
         if node.value not in choices:
-            label = (f"unknown {what} {node.value!r}" if what
-                     else f"expected one of {options_text(choices)}, got {node.value!r}")
+            label = (
+                f"unknown {what} {node.value!r}"
+                if what
+                else f"expected one of {options_text(choices)}, got {node.value!r}"
+            )
             hint = did_you_mean(node.value, choices)
             known = f"; known: {', '.join(choices)}" if what else ""
             raise self.error(node, node.path, f"{label}{hint}{known}")

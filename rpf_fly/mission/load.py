@@ -58,7 +58,7 @@ def load_mission(path: str | Path) -> m.Mission:
     try:
         text = data.decode("utf-8")
     except UnicodeDecodeError as exc:
-        line = data[:exc.start].count(b"\n") + 1
+        line = data[: exc.start].count(b"\n") + 1
         raise MissionError(p, line, ROOT, f"not UTF-8 text (byte 0x{data[exc.start]:02x})") from None
     return parse_mission(text.removeprefix("\ufeff"), p)
 
@@ -108,8 +108,11 @@ def with_planner(mission: m.Mission, kind: str, policy: str | Path | None = None
         raw = DEFAULT_POLICY.format(kind=kind)
         found, looked = find_file(raw, search_dirs(base_dir))
         if found is None:
-            raise cli_error("--planner", f"planner kind {kind!r} needs a policy: give --policy, or provide the "
-                            f"default {raw!r} ({looked_in(looked)})")
+            raise cli_error(
+                "--planner",
+                f"planner kind {kind!r} needs a policy: give --policy, or provide the "
+                f"default {raw!r} ({looked_in(looked)})",
+            )
     else:
         found = None
 
@@ -117,8 +120,10 @@ def with_planner(mission: m.Mission, kind: str, policy: str | Path | None = None
     values: dict[str, Any] = {}
     for name, value in overrides.items():
         if name not in by_field:
-            raise TypeError(f"with_planner() got an unknown planner override {name!r}; "
-                            f"expected one of {', '.join(sorted(by_field))}")
+            raise TypeError(
+                f"with_planner() got an unknown planner override {name!r}; "
+                f"expected one of {', '.join(sorted(by_field))}"
+            )
         key, reader = by_field[name]
         option = "--" + key.replace("_", "-")
         raw_text = str(value).lower() if isinstance(value, bool) else str(value)

@@ -260,6 +260,7 @@ class SafetySettings:
     of the attitude estimate (at most 0.294 m/s^2); a lab that has measured its own drones' drift without a
     position source sets its figure here."""
 
+
 @dataclass(frozen=True)
 class CircleObstacle:
     """A vertical cylinder: centre (x, y) and radius in metres."""

@@ -34,8 +34,21 @@ from .yaml_nodes import ROOT, YNode, child_path, describe
 NAME_PATTERN = re.compile(r"[A-Za-z][A-Za-z0-9_-]*")
 """Drone names (and the formation's name prefix): usable as MCAP topic segments."""
 
-TOP_KEYS = ("name", "arena", "flight", "planner", "mocap", "radio", "sim", "safety", "obstacles", "drones", "formation",
-            "runtime", "dry_run")
+TOP_KEYS = (
+    "name",
+    "arena",
+    "flight",
+    "planner",
+    "mocap",
+    "radio",
+    "sim",
+    "safety",
+    "obstacles",
+    "drones",
+    "formation",
+    "runtime",
+    "dry_run",
+)
 DRONE_KEYS = ("name", "uri", "rigid_body", "start", "goal")
 FORMATION_KEYS = ("kind", "count", "radius", "center", "uri_base", "name_prefix", "phase_deg")
 FORMATION_KINDS = ("circle_swap",)
@@ -69,8 +82,9 @@ class MissionParser(Checker):
             raw = str(settings.policy)
             found, looked = find_file(raw, dirs)
             if found is None:
-                raise self.error(entries["policy"], "planner.policy",
-                                 f"policy file {raw!r} not found ({looked_in(looked)})")
+                raise self.error(
+                    entries["policy"], "planner.policy", f"policy file {raw!r} not found ({looked_in(looked)})"
+                )
         elif settings.kind in m.POLICY_KINDS:
             found = self.default_policy(settings.kind, entries.get("kind", node), "kind" not in entries)
         else:
@@ -85,9 +99,12 @@ class MissionParser(Checker):
         if found is None:
             whose = f"the default planner kind {kind!r}" if defaulted else f"planner kind {kind!r}"
             hint = " (or name another planner.kind, e.g. apf, which needs none)" if defaulted else ""
-            raise self.error(where, "planner.policy",
-                             f"{whose} needs a policy and none is given; the default {raw!r} was not found "
-                             f"({looked_in(looked)}){hint}")
+            raise self.error(
+                where,
+                "planner.policy",
+                f"{whose} needs a policy and none is given; the default {raw!r} was not found "
+                f"({looked_in(looked)}){hint}",
+            )
         return found
 
     def mocap(self, node: YNode) -> m.MocapSettings:
@@ -100,20 +117,24 @@ class MissionParser(Checker):
             return self.motioncapture(node, entries, settings)
         for key in MOTIONCAPTURE_KEYS:
             if key in entries:
-                raise self.error(entries[key].key_line, entries[key].path,
-                                 f"only for kind 'motioncapture' (this mocap is kind {settings.kind!r})")
+                raise self.error(
+                    entries[key].key_line,
+                    entries[key].path,
+                    f"only for kind 'motioncapture' (this mocap is kind {settings.kind!r})",
+                )
         return settings
 
-    def motioncapture(self, node: YNode, entries: dict[str, YNode],
-                      settings: m.MocapSettings) -> m.MocapSettings:
+    def motioncapture(self, node: YNode, entries: dict[str, YNode], settings: m.MocapSettings) -> m.MocapSettings:
         """`type`, `hostname` and `options` of kind `motioncapture`, checked against libmotioncapture's own table
         (rpf_fly/mocap/motioncapture_options.py): the library itself ignores unknown keys and misreads values."""
         from rpf_fly.mocap import motioncapture_options as mc
 
         if "type" not in entries:
-            raise self.error(node.key_line, child_path(node.path, "type"),
-                             f"missing required key: kind 'motioncapture' needs the system's type, one of "
-                             f"{', '.join(mc.TYPES)}")
+            raise self.error(
+                node.key_line,
+                child_path(node.path, "type"),
+                f"missing required key: kind 'motioncapture' needs the system's type, one of {', '.join(mc.TYPES)}",
+            )
         system = self.choice(entries["type"], tuple(mc.TYPES), what="motioncapture type")
         hostname = None
         if "hostname" in entries:
@@ -153,8 +174,9 @@ class MissionParser(Checker):
             items = value.seq if value.is_seq else [value]
             endpoints = tuple(self.endpoint(item) for item in items)
             lists[key] = endpoints
-        zenoh = m.ZenohSettings(mode=mode, config=config, connect=lists.get("connect", ()),
-                                listen=lists.get("listen", ()))
+        zenoh = m.ZenohSettings(
+            mode=mode, config=config, connect=lists.get("connect", ()), listen=lists.get("listen", ())
+        )
         return m.RuntimeSettings(zenoh=zenoh, mocap_relay=relay)
 
     def mocap_relay(self, node: YNode) -> Literal["auto", "on", "off"]:
@@ -184,8 +206,12 @@ class MissionParser(Checker):
         settings: m.DryRunSettings = self.settings(node, m.DryRunSettings, DRY_RUN_SPEC)
         if settings.vehicle is not None and settings.dynamics != "firmware":
             at = node.mapping["vehicle"]
-            raise self.error(at, "dry_run.vehicle", "a vehicle profile sets the firmware model's gains: give "
-                             f"dry_run.dynamics: firmware with it (it is {settings.dynamics})")
+            raise self.error(
+                at,
+                "dry_run.vehicle",
+                "a vehicle profile sets the firmware model's gains: give "
+                f"dry_run.dynamics: firmware with it (it is {settings.dynamics})",
+            )
         return settings
 
     def vehicle_profile(self, node: YNode) -> Any:
@@ -214,8 +240,12 @@ class MissionParser(Checker):
             raise self.bad(node, "a list of obstacles (write [] for none)")
         out: list[m.Obstacle] = []
         for item in node.seq:
-            e = self.mapping(item, ("shape", "center", "radius", "min", "max"), required=("shape",),
-                             what="an obstacle mapping {shape: circle|box, ...}")
+            e = self.mapping(
+                item,
+                ("shape", "center", "radius", "min", "max"),
+                required=("shape",),
+                what="an obstacle mapping {shape: circle|box, ...}",
+            )
             shape = self.choice(e["shape"], tuple(OBSTACLE_KEYS), what="obstacle shape")
             keys = OBSTACLE_KEYS[shape]
             e = self.mapping(item, keys, required=keys)
@@ -225,17 +255,24 @@ class MissionParser(Checker):
                 lo, hi = self.vec2(e["min"]), self.vec2(e["max"])
                 for axis in (0, 1):
                     if not lo[axis] < hi[axis]:
-                        raise self.error(e["max"], e["max"].path,
-                                         f"inverted box: min {fmt_point(lo)} must be below max {fmt_point(hi)} in "
-                                         f"{'xy'[axis]} ({fmt(lo[axis])} >= {fmt(hi[axis])})")
+                        raise self.error(
+                            e["max"],
+                            e["max"].path,
+                            f"inverted box: min {fmt_point(lo)} must be below max {fmt_point(hi)} in "
+                            f"{'xy'[axis]} ({fmt(lo[axis])} >= {fmt(hi[axis])})",
+                        )
                 out.append(m.BoxObstacle(min=lo, max=hi))
         return tuple(out)
 
     def drone_name(self, node: YNode, what: str = "drone name") -> str:
         name = self.string(node)
         if not NAME_PATTERN.fullmatch(name):
-            raise self.error(node, node.path, f"{what} {name!r} must start with a letter and contain only letters, "
-                             "digits, '_' and '-' (it names MCAP topics)")
+            raise self.error(
+                node,
+                node.path,
+                f"{what} {name!r} must start with a letter and contain only letters, "
+                "digits, '_' and '-' (it names MCAP topics)",
+            )
         return name
 
     def uri(self, node: YNode) -> tuple[str, RadioUri]:
@@ -255,32 +292,46 @@ class MissionParser(Checker):
         links: dict[tuple[int, str], YNode] = {}
         bodies: dict[str, YNode] = {}
         for item in node.seq:
-            e = self.mapping(item, DRONE_KEYS, required=("name", "uri", "start", "goal"),
-                             what="a drone mapping {name, uri, start, goal}")
+            e = self.mapping(
+                item,
+                DRONE_KEYS,
+                required=("name", "uri", "start", "goal"),
+                what="a drone mapping {name, uri, start, goal}",
+            )
             name = self.drone_name(e["name"])
             if name in names:
-                raise self.error(e["name"], e["name"].path,
-                                 f"duplicate drone name {name!r} (also {names[name].path}, line {names[name].line})")
+                raise self.error(
+                    e["name"],
+                    e["name"].path,
+                    f"duplicate drone name {name!r} (also {names[name].path}, line {names[name].line})",
+                )
             names[name] = e["name"]
             uri, parsed = self.uri(e["uri"])
             if parsed.link in links:
                 other = links[parsed.link]
-                raise self.error(e["uri"], e["uri"].path,
-                                 f"duplicate URI {uri!r}: same channel {parsed.channel} and address "
-                                 f"{parsed.address} as {other.path} ({other.value!r}, line {other.line}), "
-                                 "so both would reach the same Crazyflie")
+                raise self.error(
+                    e["uri"],
+                    e["uri"].path,
+                    f"duplicate URI {uri!r}: same channel {parsed.channel} and address "
+                    f"{parsed.address} as {other.path} ({other.value!r}, line {other.line}), "
+                    "so both would reach the same Crazyflie",
+                )
             links[parsed.link] = e["uri"]
             body_node = e.get("rigid_body", e["name"])
             body = self.string(body_node) if "rigid_body" in e else name
             if body in bodies:
                 other = bodies[body]
                 how = "" if "rigid_body" in e else " (defaulted from the name)"
-                raise self.error(body_node, child_path(item.path, "rigid_body"),
-                                 f"duplicate rigid_body {body!r}{how}: also the rigid body of "
-                                 f"{other.path.rsplit('.', 1)[0]} (line {other.line})")
+                raise self.error(
+                    body_node,
+                    child_path(item.path, "rigid_body"),
+                    f"duplicate rigid_body {body!r}{how}: also the rigid body of "
+                    f"{other.path.rsplit('.', 1)[0]} (line {other.line})",
+                )
             bodies[body] = body_node
-            drones.append(m.Drone(name=name, uri=uri, rigid_body=body,
-                                  start=self.vec2(e["start"]), goal=self.vec2(e["goal"])))
+            drones.append(
+                m.Drone(name=name, uri=uri, rigid_body=body, start=self.vec2(e["start"]), goal=self.vec2(e["goal"]))
+            )
         return tuple(drones)
 
     def formation(self, node: YNode) -> tuple[m.Formation, tuple[m.Drone, ...]]:
@@ -303,34 +354,49 @@ class MissionParser(Checker):
             parse_uri(formation.uri_base + "01")
         except ValueError as exc:
             at = e.get("uri_base", node)
-            raise self.error(at, "formation.uri_base",
-                             f"{formation.uri_base!r} followed by the drone number as 2 hex digits must be a URI: "
-                             f"{exc}") from None
+            raise self.error(
+                at,
+                "formation.uri_base",
+                f"{formation.uri_base!r} followed by the drone number as 2 hex digits must be a URI: {exc}",
+            ) from None
         return formation, expand_formation(formation)
 
     # -- the whole file -------------------------------------------------------------------------------------
 
     def parse(self, root: YNode, text: str, source: Path | None) -> m.Mission:
         if not root.is_map:
-            raise self.error(root, ROOT, "expected a mapping of mission keys (name, arena, drones, ...) at the top "
-                             f"level, got {describe(root)}")
+            raise self.error(
+                root,
+                ROOT,
+                f"expected a mapping of mission keys (name, arena, drones, ...) at the top level, got {describe(root)}",
+            )
         entries = self.mapping(root, TOP_KEYS, required=("arena",))
         if "drones" in entries and "formation" in entries:
             second = max(entries["drones"], entries["formation"], key=lambda n: n.key_line)
-            raise self.error(second.key_line, second.path,
-                             "give either `drones` or `formation`, not both")
+            raise self.error(second.key_line, second.path, "give either `drones` or `formation`, not both")
         if "drones" not in entries and "formation" not in entries:
             raise self.error(root.key_line, "drones", "missing: give a `drones` list or a `formation`")
         self.index(root)
 
-        parts: dict[str, Any] = {"flight": m.FlightSettings(), "planner": m.PlannerSettings(),
-                                 "mocap": m.MocapSettings(), "radio": m.RadioSettings(), "sim": m.SimSettings(),
-                                 "safety": m.SafetySettings(),
-                                 "obstacles": (), "formation": None,
-                                 "name": source.stem if source is not None else "mission"}
+        parts: dict[str, Any] = {
+            "flight": m.FlightSettings(),
+            "planner": m.PlannerSettings(),
+            "mocap": m.MocapSettings(),
+            "radio": m.RadioSettings(),
+            "sim": m.SimSettings(),
+            "safety": m.SafetySettings(),
+            "obstacles": (),
+            "formation": None,
+            "name": source.stem if source is not None else "mission",
+        }
         readers: dict[str, Callable[[YNode], Any]] = {
-            "name": self.string, "arena": self.arena, "planner": self.planner, "mocap": self.mocap,
-            "obstacles": self.obstacles, "drones": self.drones, "formation": self.formation,
+            "name": self.string,
+            "arena": self.arena,
+            "planner": self.planner,
+            "mocap": self.mocap,
+            "obstacles": self.obstacles,
+            "drones": self.drones,
+            "formation": self.formation,
             "flight": lambda n: self.settings(n, m.FlightSettings, FLIGHT_SPEC),
             "radio": lambda n: self.settings(n, m.RadioSettings, RADIO_SPEC),
             "sim": lambda n: self.settings(n, m.SimSettings, SIM_SPEC),
@@ -342,7 +408,8 @@ class MissionParser(Checker):
             parts[key] = readers[key](node)
         if "planner" not in entries and parts["planner"].kind in m.POLICY_KINDS:
             parts["planner"] = dataclasses.replace(
-                parts["planner"], policy=self.default_policy(parts["planner"].kind, root.key_line, True))
+                parts["planner"], policy=self.default_policy(parts["planner"].kind, root.key_line, True)
+            )
         if "formation" in entries:
             parts["formation"], parts["drones"] = parts["formation"]
 
@@ -358,14 +425,22 @@ class MissionParser(Checker):
         from rpf_fly.radio.packed_extpos import MAX_MM, shared_ids
 
         for channel, ident, names in shared_ids({d.name: d.uri for d in mission.drones}):
-            raise self.error(at, "radio.extpos", f"packed: drones {' and '.join(names)} both have id 0x{ident:02X} "
-                             f"(the last byte of their radio address) on channel {channel}; the firmware takes a "
-                             "packed position by that byte, so each would fly on the other's: give them addresses "
-                             "with different last bytes, or use extpos")
+            raise self.error(
+                at,
+                "radio.extpos",
+                f"packed: drones {' and '.join(names)} both have id 0x{ident:02X} "
+                f"(the last byte of their radio address) on channel {channel}; the firmware takes a "
+                "packed position by that byte, so each would fly on the other's: give them addresses "
+                "with different last bytes, or use extpos",
+            )
         reach = max(abs(v) for v in (*mission.arena.x, *mission.arena.y, *mission.arena.z))
         if reach * 1000.0 > MAX_MM:
-            raise self.error(at, "radio.extpos", f"packed: positions go as int16 millimetres (+-{MAX_MM / 1000} m) "
-                             f"and the arena reaches {reach:g} m: use extpos")
+            raise self.error(
+                at,
+                "radio.extpos",
+                f"packed: positions go as int16 millimetres (+-{MAX_MM / 1000} m) "
+                f"and the arena reaches {reach:g} m: use extpos",
+            )
 
     def index(self, node: YNode) -> None:
         self.nodes[node.path] = node
@@ -379,15 +454,16 @@ class MissionParser(Checker):
     def layout_error(self, mission: m.Mission, entries: dict[str, YNode]) -> LayoutError:
         def make(path: str, message: str, at: Sequence[str] = ()) -> MissionError:
             if path.startswith("drones[") and mission.formation is not None:
-                index = int(path[len("drones["):path.index("]")])
+                index = int(path[len("drones[") : path.index("]")])
                 line = entries["formation"].key_line
-                return MissionError(self.file, line, "formation",
-                                    f"{path} ({mission.drones[index].name}): {message}")
+                return MissionError(self.file, line, "formation", f"{path} ({mission.drones[index].name}): {message}")
             for candidate in (path, *at):
                 if candidate in self.nodes:
                     return MissionError(self.file, self.nodes[candidate].line, path, message)
             return MissionError(self.file, 1, path, message)
+
         return make
+
 
 def expand_formation(formation: m.Formation) -> tuple[m.Drone, ...]:
     """The explicit drones of a formation. ``circle_swap``: drone i (0-based) is ``f"{prefix}{i+1}"`` with URI
@@ -399,6 +475,13 @@ def expand_formation(formation: m.Formation) -> tuple[m.Drone, ...]:
         t = math.radians(formation.phase_deg) + 2.0 * math.pi * i / formation.count
         dx, dy = formation.radius * math.cos(t), formation.radius * math.sin(t)
         name = f"{formation.name_prefix}{i + 1}"
-        drones.append(m.Drone(name=name, uri=f"{formation.uri_base}{i + 1:02X}", rigid_body=name,
-                              start=(cx + dx, cy + dy), goal=(cx - dx, cy - dy)))
+        drones.append(
+            m.Drone(
+                name=name,
+                uri=f"{formation.uri_base}{i + 1:02X}",
+                rigid_body=name,
+                start=(cx + dx, cy + dy),
+                goal=(cx - dx, cy - dy),
+            )
+        )
     return tuple(drones)

@@ -10,8 +10,9 @@ from typing import NamedTuple
 
 URI_RATES = ("250K", "1M", "2M")
 MAX_CHANNEL = 125
-URI_FORM = ("radio://DONGLE/CHANNEL/RATE/ADDRESS[?key=value] (e.g. radio://0/80/2M/E7E7E7E701, "
-            "or fake:// with the same path)")
+URI_FORM = (
+    "radio://DONGLE/CHANNEL/RATE/ADDRESS[?key=value] (e.g. radio://0/80/2M/E7E7E7E701, or fake:// with the same path)"
+)
 
 
 class RadioUri(NamedTuple):
@@ -60,6 +61,8 @@ def parse_uri(uri: str) -> RadioUri:
     for pair in query.split("&") if has_query else ():
         key, _, value = pair.partition("=")
         if key == "rate_limit" and not re.fullmatch(r"[1-9][0-9]*", value):
-            raise ValueError(f"rate_limit {value!r} in {uri!r} must be a whole number of transactions a second "
-                             "(cflib's ?rate_limit=N, at least 1)")
+            raise ValueError(
+                f"rate_limit {value!r} in {uri!r} must be a whole number of transactions a second "
+                "(cflib's ?rate_limit=N, at least 1)"
+            )
     return RadioUri(scheme, int(dongle), int(channel), rate, address.upper(), query)

@@ -41,8 +41,12 @@ def _mocap_kind(c: Checker, n: YNode) -> str:
 
     kinds = ("natnet", "sim", "motioncapture")
     if isinstance(n.value, str) and n.value in TYPES:
-        raise c.error(n, n.path, f"expected one of {options_text(kinds)}, got {n.value!r} ({n.value} is a type of the "
-                      f"motioncapture package: kind: motioncapture, type: {n.value})")
+        raise c.error(
+            n,
+            n.path,
+            f"expected one of {options_text(kinds)}, got {n.value!r} ({n.value} is a type of the "
+            f"motioncapture package: kind: motioncapture, type: {n.value})",
+        )
     return c.choice(n, kinds)
 
 
@@ -85,21 +89,31 @@ def _speed(c: Checker, n: YNode) -> float:
     v = c.number(n, POSITIVE)
     limit = FIRMWARE_VELOCITY_LIMIT_M_S
     if v > limit:
-        raise c.error(n, n.path, f"{fmt(v)} m/s: above the firmware's {fmt(limit)} m/s velocity limit "
-                      f"(posCtlPid.xVelMax); speeds are in m/s{unit_slip(v, 'm/s', lambda x: 0.05 <= x <= limit)}")
+        raise c.error(
+            n,
+            n.path,
+            f"{fmt(v)} m/s: above the firmware's {fmt(limit)} m/s velocity limit "
+            f"(posCtlPid.xVelMax); speeds are in m/s{unit_slip(v, 'm/s', lambda x: 0.05 <= x <= limit)}",
+        )
     return v
 
 
 def _drone_length(what: str, default: float, bound: Bound = POSITIVE) -> Reader:
     """A length at the scale of a drone (at most :data:`MAX_DRONE_LENGTH_M`): ``what`` says what it is."""
+
     def read(c: Checker, n: YNode) -> float:
         v = c.number(n, bound)
         top = MAX_DRONE_LENGTH_M
         if v > top:
             hint = unit_slip(v, "m", lambda x: default / 5 <= x <= top)
-            raise c.error(n, n.path, f"{fmt(v)} m: above {fmt(top)} m, implausible for {what} (the default is "
-                          f"{fmt(default)} m; a Crazyflie 2.x is 92 mm across); lengths are in m{hint}")
+            raise c.error(
+                n,
+                n.path,
+                f"{fmt(v)} m: above {fmt(top)} m, implausible for {what} (the default is "
+                f"{fmt(default)} m; a Crazyflie 2.x is 92 mm across); lengths are in m{hint}",
+            )
         return v
+
     return read
 
 
@@ -110,8 +124,12 @@ def _flight_rate(c: Checker, n: YNode) -> float:
         hint = period_slip(v, lambda x: m.MIN_RATE_HZ <= x <= top)
         raise c.error(n, n.path, f"must be {RATE_HZ.text}, got {n.raw or fmt(v)}{hint}")
     if v > top:
-        raise c.error(n, n.path, f"{fmt(v)} Hz: above the firmware's {fmt(top)} Hz position loop (POSITION_RATE), "
-                      f"which never acts on a faster stream; rates are in Hz")
+        raise c.error(
+            n,
+            n.path,
+            f"{fmt(v)} Hz: above the firmware's {fmt(top)} Hz position loop (POSITION_RATE), "
+            f"which never acts on a faster stream; rates are in Hz",
+        )
     return v
 
 
@@ -119,8 +137,12 @@ def _mocap_rate(c: Checker, n: YNode) -> float:
     v = c.number(n, POSITIVE)
     top = FIRMWARE_MAIN_LOOP_HZ
     if v > top:
-        raise c.error(n, n.path, f"{fmt(v)} Hz: above the Crazyflie's {fmt(top)} Hz main loop (RATE_MAIN_LOOP), "
-                      f"which could use no faster poses; rates are in Hz")
+        raise c.error(
+            n,
+            n.path,
+            f"{fmt(v)} Hz: above the Crazyflie's {fmt(top)} Hz main loop (RATE_MAIN_LOOP), "
+            f"which could use no faster poses; rates are in Hz",
+        )
     return v
 
 
@@ -128,7 +150,8 @@ def _mocap_rate(c: Checker, n: YNode) -> float:
 RATE_HZ = Bound(
     f"at least {m.MIN_RATE_HZ:g} Hz, so the loop watchdog acts before the Crazyflie's "
     f"{m.FIRMWARE_SETPOINT_WATCHDOG_S:g} s setpoint watchdog levels the drones out",
-    lambda x: x >= m.MIN_RATE_HZ)
+    lambda x: x >= m.MIN_RATE_HZ,
+)
 FLIGHT_SPEC: dict[str, tuple[str, Reader]] = {
     k: (k, _num(POSITIVE)) for k in ("height", "speed", "rate_hz", "goal_tolerance", "takeoff_s", "land_s", "timeout_s")
 }

@@ -90,8 +90,7 @@ class _Loader(yaml.SafeLoader):
     """``SafeLoader`` that also reads ``1e-3`` as a number (YAML 1.2 does; PyYAML's YAML 1.1 wants ``1.0e-3``)."""
 
 
-_Loader.add_implicit_resolver(_STD + "float", re.compile(r"^[-+]?[0-9][0-9_]*[eE][-+]?[0-9]+$"),
-                              list("-+0123456789"))
+_Loader.add_implicit_resolver(_STD + "float", re.compile(r"^[-+]?[0-9][0-9_]*[eE][-+]?[0-9]+$"), list("-+0123456789"))
 
 
 def describe(node: YNode) -> str:
@@ -151,7 +150,7 @@ def _yaml_error(exc: yaml.MarkedYAMLError, file: str) -> MissionError:
 
 
 def _short_tag(tag: str) -> str:
-    return "!!" + tag[len(_STD):] if tag.startswith(_STD) else tag
+    return "!!" + tag[len(_STD) :] if tag.startswith(_STD) else tag
 
 
 class _Converter:
@@ -180,8 +179,10 @@ class _Converter:
             if isinstance(node, SequenceNode):
                 if node.tag != _SEQ_TAG:
                     raise self.fail(node, path, f"{TAG_MESSAGE}, found {_short_tag(node.tag)}")
-                items = [self.convert(item, child_path(path, i), item.start_mark.line + 1)
-                         for i, item in enumerate(node.value)]
+                items = [
+                    self.convert(item, child_path(path, i), item.start_mark.line + 1)
+                    for i, item in enumerate(node.value)
+                ]
                 return YNode(items, line, key_line, path)
             if isinstance(node, MappingNode):
                 return YNode(self.mapping(node, path), line, key_line, path)
@@ -192,7 +193,7 @@ class _Converter:
     def scalar(self, node: ScalarNode, path: str) -> Any:
         if node.tag not in _SCALAR_TAGS:
             raise self.fail(node, path, f"{TAG_MESSAGE}, found {_short_tag(node.tag)}")
-        kind = node.tag[len(_STD):]
+        kind = node.tag[len(_STD) :]
         if kind in ("str", "timestamp"):  # a date stays the text it was written as
             return str(node.value)
         try:
@@ -208,13 +209,17 @@ class _Converter:
 
     def key(self, node: Node, path: str) -> str:
         if not isinstance(node, ScalarNode):
-            raise self.fail(node, path, "mapping keys must be strings, got a "
-                            + ("list" if isinstance(node, SequenceNode) else "mapping"))
+            raise self.fail(
+                node,
+                path,
+                "mapping keys must be strings, got a " + ("list" if isinstance(node, SequenceNode) else "mapping"),
+            )
         value = self.scalar(node, path)
         if not isinstance(value, str):
             kind = "null" if value is None else "boolean" if isinstance(value, bool) else "number"
-            raise self.fail(node, path, f"mapping key {node.value!r} reads as a {kind}; keys must be strings "
-                            "(quote it)")
+            raise self.fail(
+                node, path, f"mapping key {node.value!r} reads as a {kind}; keys must be strings (quote it)"
+            )
         return value
 
     def mapping(self, node: MappingNode, path: str) -> dict[str, YNode]:

@@ -24,15 +24,24 @@ from dataclasses import dataclass, field
 from rpf_fly import install_hint
 
 __all__ = [
-    "LIBRARY_VERSION", "Option", "SystemType", "TYPES", "WHEEL_TYPES", "MISSING_LIBRARY",
-    "system_type", "check_hostname", "check_option", "check_options", "parse_rigid_bodies", "MockBody",
+    "LIBRARY_VERSION",
+    "Option",
+    "SystemType",
+    "TYPES",
+    "WHEEL_TYPES",
+    "MISSING_LIBRARY",
+    "system_type",
+    "check_hostname",
+    "check_option",
+    "check_options",
+    "parse_rigid_bodies",
+    "MockBody",
 ]
 
 LIBRARY_VERSION = "1.1"
 """The libmotioncapture release this table, the type list and docs/mocap.md's findings were checked against."""
 
-MISSING_LIBRARY = ("the motioncapture package is not installed: install the extra with "
-                   f"{install_hint('motioncapture')}")
+MISSING_LIBRARY = f"the motioncapture package is not installed: install the extra with {install_hint('motioncapture')}"
 """The one line every entry point prints when the optional ``motioncapture`` package is missing."""
 
 _HOST_NAME = re.compile(r"(?!-)[A-Za-z0-9-]{1,63}(?<!-)(\.(?!-)[A-Za-z0-9-]{1,63}(?<!-))*\.?")
@@ -71,40 +80,85 @@ class SystemType:
 
 
 _PORT_COMMAND = Option("int", "1510", "the NatNet command port of Motive")
-TYPES: dict[str, SystemType] = {t.name: t for t in (
-    SystemType("mock", "fixed rigid bodies from the `rigid_bodies` option, no hardware", True, None, "", {
-        "rigid_bodies": Option("rigid_bodies", "", "bodies `name(x,y,z,qw,qx,qy,qz)` joined by `;` (qw first)"),
-        "pointcloud": Option("pointcloud", "", "points `x,y,z` joined by `;`"),
-        "frequency": Option("int", "100", "frames per second", 1, 1000),
-    }),
-    SystemType("optitrack", "OptiTrack Motive, NatNet parsed by libmotioncapture's own decoder", True, "ip",
-               options={
-                   "interface_ip": Option("ipv4", "0.0.0.0", "the local interface multicast is joined on"),
-                   "port_command": _PORT_COMMAND,
-               }),
-    SystemType("vicon", "Vicon DataStream SDK", True, "endpoint", options={
-        "enable_objects": Option("bool", "true", "stream rigid bodies (subjects)"),
-        "enable_pointclout": Option("bool", "true", "stream unlabeled markers (the library's spelling)"),
-    }),
-    SystemType("qualisys", "Qualisys QTM real-time protocol", True, "host", options={
-        "port": Option("int", "22222", "the QTM real-time port"),
-        "enable_objects": Option("bool", "true", "stream 6DOF bodies"),
-        "enable_pointcloud": Option("bool", "true", "stream 3D markers"),
-    }),
-    SystemType("vrpn", "a VRPN server (trackers as rigid bodies)", True, "endpoint"),
-    SystemType("optitrack_closed_source", "OptiTrack through NaturalPoint's closed NatNet SDK", False, "ip",
-               options={"port_command": _PORT_COMMAND}),
-    SystemType("nokov", "NOKOV SDK", False, "host", options={
-        "enableFrequency": Option("bool", "false", "apply `updateFrequency`"),
-        "updateFrequency": Option("int", "100", "frames per second", 1, 10000),
-    }),
-    SystemType("motionanalysis", "Motion Analysis Cortex SDK", False, "host"),
-    SystemType("fzmotion", "FZMotion", False, "host", "fzmotion", {
-        "local_IP": Option("ipv4", "0.0.0.0", "the local interface"),
-        "local_port": Option("int", "9762", "the local port"),
-        "remote_port": Option("int", "9761", "the FZMotion server port"),
-    }),
-)}
+TYPES: dict[str, SystemType] = {
+    t.name: t
+    for t in (
+        SystemType(
+            "mock",
+            "fixed rigid bodies from the `rigid_bodies` option, no hardware",
+            True,
+            None,
+            "",
+            {
+                "rigid_bodies": Option("rigid_bodies", "", "bodies `name(x,y,z,qw,qx,qy,qz)` joined by `;` (qw first)"),
+                "pointcloud": Option("pointcloud", "", "points `x,y,z` joined by `;`"),
+                "frequency": Option("int", "100", "frames per second", 1, 1000),
+            },
+        ),
+        SystemType(
+            "optitrack",
+            "OptiTrack Motive, NatNet parsed by libmotioncapture's own decoder",
+            True,
+            "ip",
+            options={
+                "interface_ip": Option("ipv4", "0.0.0.0", "the local interface multicast is joined on"),
+                "port_command": _PORT_COMMAND,
+            },
+        ),
+        SystemType(
+            "vicon",
+            "Vicon DataStream SDK",
+            True,
+            "endpoint",
+            options={
+                "enable_objects": Option("bool", "true", "stream rigid bodies (subjects)"),
+                "enable_pointclout": Option("bool", "true", "stream unlabeled markers (the library's spelling)"),
+            },
+        ),
+        SystemType(
+            "qualisys",
+            "Qualisys QTM real-time protocol",
+            True,
+            "host",
+            options={
+                "port": Option("int", "22222", "the QTM real-time port"),
+                "enable_objects": Option("bool", "true", "stream 6DOF bodies"),
+                "enable_pointcloud": Option("bool", "true", "stream 3D markers"),
+            },
+        ),
+        SystemType("vrpn", "a VRPN server (trackers as rigid bodies)", True, "endpoint"),
+        SystemType(
+            "optitrack_closed_source",
+            "OptiTrack through NaturalPoint's closed NatNet SDK",
+            False,
+            "ip",
+            options={"port_command": _PORT_COMMAND},
+        ),
+        SystemType(
+            "nokov",
+            "NOKOV SDK",
+            False,
+            "host",
+            options={
+                "enableFrequency": Option("bool", "false", "apply `updateFrequency`"),
+                "updateFrequency": Option("int", "100", "frames per second", 1, 10000),
+            },
+        ),
+        SystemType("motionanalysis", "Motion Analysis Cortex SDK", False, "host"),
+        SystemType(
+            "fzmotion",
+            "FZMotion",
+            False,
+            "host",
+            "fzmotion",
+            {
+                "local_IP": Option("ipv4", "0.0.0.0", "the local interface"),
+                "local_port": Option("int", "9762", "the local port"),
+                "remote_port": Option("int", "9761", "the FZMotion server port"),
+            },
+        ),
+    )
+}
 WHEEL_TYPES: tuple[str, ...] = tuple(sorted(n for n, t in TYPES.items() if t.in_wheel))
 """The types compiled into the PyPI wheel of motioncapture 1.1."""
 

@@ -186,7 +186,10 @@ class MotioncaptureSource:
     def _start(self, start_timeout_s: float, connect_timeout_s: float) -> None:
         self._process = subprocess.Popen(
             [sys.executable, "-m", "rpf_fly.mocap.motioncapture_worker"],
-            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self._stderr, bufsize=0,
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=self._stderr,
+            bufsize=0,
         )
         assert self._process.stdin is not None and self._process.stdout is not None
         self._fd = self._process.stdout.fileno()
@@ -204,12 +207,15 @@ class MotioncaptureSource:
             pass  # the child is already gone: its end of the record pipe says why, below
         if not self._await(STARTED, start_timeout_s):
             raise MotioncaptureUnavailable(
-                self._why_not("did not start") or f"{self._where}: the library's process did not start within "
-                f"{start_timeout_s:g} s")
+                self._why_not("did not start")
+                or f"{self._where}: the library's process did not start within {start_timeout_s:g} s"
+            )
         if not self._await(READY, connect_timeout_s):
             raise MotioncaptureUnavailable(
-                self._why_not("died while connecting") or f"{self._where}: no answer within {connect_timeout_s:g} s "
-                "(is the system streaming, and this host on its network?)")
+                self._why_not("died while connecting")
+                or f"{self._where}: no answer within {connect_timeout_s:g} s "
+                "(is the system streaming, and this host on its network?)"
+            )
         _log.info("%s: connected (libmotioncapture %s, pid %d)", self._where, self.library_version, self.pid)
 
     def _await(self, kind: int, timeout_s: float) -> bool:
@@ -234,8 +240,10 @@ class MotioncaptureSource:
             return None
         error = self._error_record
         if error is not None and "Unknown motion capture type" in error:
-            return (f"{self._where}: this motioncapture build has no {self.system!r} (the PyPI wheel of "
-                    f"{self.library_version or 'the library'} has {', '.join(WHEEL_TYPES)}): {error}")
+            return (
+                f"{self._where}: this motioncapture build has no {self.system!r} (the PyPI wheel of "
+                f"{self.library_version or 'the library'} has {', '.join(WHEEL_TYPES)}): {error}"
+            )
         if error == MISSING_LIBRARY:
             return MISSING_LIBRARY
         if error is not None:
@@ -331,8 +339,13 @@ class MotioncaptureSource:
             was_alive = not self._dead
             self._handle(self._read())
             if was_alive and self._dead:
-                _log.error("%s: the library's process ended (%s)%s: no poses from it any more, the flight "
-                           "handles this as mocap loss", self._where, self._failure, self._stderr_tail())
+                _log.error(
+                    "%s: the library's process ended (%s)%s: no poses from it any more, the flight "
+                    "handles this as mocap loss",
+                    self._where,
+                    self._failure,
+                    self._stderr_tail(),
+                )
             if self._pending is not None:
                 return self._deliver()
             remaining = deadline - time.monotonic()
@@ -377,8 +390,10 @@ class MotioncaptureSource:
                 self._unnamed += 1
                 if not self._warned_unnamed:
                     self._warned_unnamed = True
-                    _log.warning("%s: a rigid body without a name (the library has no model definition for it) "
-                                 "is ignored", self._where)
+                    _log.warning(
+                        "%s: a rigid body without a name (the library has no model definition for it) is ignored",
+                        self._where,
+                    )
                 continue
             if y_up:
                 position, quaternion = (x, -z, y), (qx, -qz, qy, qw)

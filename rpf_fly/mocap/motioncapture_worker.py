@@ -107,7 +107,8 @@ def _writer(fd: int) -> Any:
     def write(record: bytes) -> None:
         view = memoryview(record)
         while view:
-            view = view[os.write(fd, view):]
+            view = view[os.write(fd, view) :]
+
     return write
 
 

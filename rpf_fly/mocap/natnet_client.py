@@ -177,8 +177,13 @@ class NatNetClient:
         return sock
 
     def _open_data_socket(self, port: int) -> socket.socket:
-        sock = open_data_socket(port, multicast=self._multicast, group=self._group,
-                                membership_ip=self._membership_ip, local_ip=self._local_ip)
+        sock = open_data_socket(
+            port,
+            multicast=self._multicast,
+            group=self._group,
+            membership_ip=self._membership_ip,
+            local_ip=self._local_ip,
+        )
         self._sockets.append(sock)
         _log.info(
             "NatNet data socket on port %d (%s)",
@@ -512,8 +517,9 @@ class NatNetClient:
         if self._frames.offer(data, receive_time_s):
             stats.superseded += 1  # the waiting frame, or a duplicate or reordered one older than the caller's
 
-    def _to_mocap_frame(self, data: FrameOfData, received: float,
-                        unseen: Mapping[str, float] = NO_UNSEEN) -> MocapFrame:
+    def _to_mocap_frame(
+        self, data: FrameOfData, received: float, unseen: Mapping[str, float] = NO_UNSEEN
+    ) -> MocapFrame:
         bodies, unknown, dropouts = rigid_body_poses(data, self._names, self._y_up)
         self._stats.body_dropouts += dropouts
         if unknown and self._models is not None and received - self._last_unknown_id >= _UNKNOWN_ID_INTERVAL_S:

@@ -109,8 +109,9 @@ class NewestFrame:
         return unseen or NO_UNSEEN
 
 
-def rigid_body_poses(data: FrameOfData, names: Mapping[int, str],
-                     y_up: bool) -> tuple[dict[str, RigidBodyPose], bool, int]:
+def rigid_body_poses(
+    data: FrameOfData, names: Mapping[int, str], y_up: bool
+) -> tuple[dict[str, RigidBodyPose], bool, int]:
     """The frame's bodies in the Z-up world frame, by name (``str(id)`` for an id ``names`` lacks); whether one
     lacked a name; how many were untracked. Y-up: positions (x, y, z) become (x, -z, y) and quaternion vectors
     (qx, qy, qz) become (qx, -qz, qy), qw unchanged."""

@@ -33,8 +33,7 @@ def open_command_socket(local_ip: str) -> socket.socket:
     return sock
 
 
-def open_data_socket(port: int, *, multicast: bool, group: str, membership_ip: str,
-                     local_ip: str) -> socket.socket:
+def open_data_socket(port: int, *, multicast: bool, group: str, membership_ip: str, local_ip: str) -> socket.socket:
     """The data socket on ``port``: joined to ``group`` on the interface ``membership_ip`` (multicast), or bound
     to ``local_ip`` (unicast)."""
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM, socket.IPPROTO_UDP)

@@ -29,9 +29,7 @@ MAX_INTER_ROBOT = 0.5
 """The moving neighbours' force is capped at this magnitude inside the capture radius (0 drops it)."""
 
 
-def captured(
-    position: Planar, goal: Planar, obstacle_distance: Scalar, config: PlannerConfig
-) -> np.ndarray | bool:
+def captured(position: Planar, goal: Planar, obstacle_distance: Scalar, config: PlannerConfig) -> np.ndarray | bool:
     """Where the capture rule applies: the goal nearer than ``capture_radius`` and than the nearest surface
     (``obstacle_distance``: the true signed distance, FAR when none). All false when the radius is 0."""
     d_g = norm(goal - position)

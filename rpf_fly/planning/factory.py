@@ -94,7 +94,9 @@ def mission_planner(mission: Mission, settings: PlannerSettings | None = None, o
     )
 
 
-def _make(settings: PlannerSettings, obstacles: ObstacleSet, config: PlannerConfig, bounds: Bounds | None) -> AnyPlanner:
+def _make(
+    settings: PlannerSettings, obstacles: ObstacleSet, config: PlannerConfig, bounds: Bounds | None
+) -> AnyPlanner:
     if settings.kind in ("apf", "apf-paper"):
         return Planner(obstacles, config, FixedGains(settings.eta, settings.lam), bounds)
     if settings.kind == "orca":

@@ -75,8 +75,12 @@ def repulsive_sum(surfaces: Surfaces, eta: Scalar, config: PlannerConfig) -> Pla
 
 
 def repulsion_one(
-    position: complex, circles: list[tuple[float, float, float]], boxes: list[tuple[float, float, float, float]],
-    statics: list[complex], static_radius: float, config: PlannerConfig,
+    position: complex,
+    circles: list[tuple[float, float, float]],
+    boxes: list[tuple[float, float, float, float]],
+    statics: list[complex],
+    static_radius: float,
+    config: PlannerConfig,
 ) -> tuple[complex, float, complex]:
     """:func:`repulsive_sum` for one drone with ``eta`` 1, in plain Python (the flight's one-drone call: a few
     obstacles, where a numpy call per array costs more than the loop), and the nearest of the mission's obstacles

@@ -94,8 +94,12 @@ class Guidance:
         self._rows = np.zeros((0, self.nodes.shape[0]))
         self._wide = self.inflated.axis()
         inf = self.inflated
-        self._circles = [(float(x), float(y), float(r) ** 2) for x, y, r in zip(inf.cx.ravel(), inf.cy.ravel(), inf.cr.ravel())]
-        self._boxes = [tuple(map(float, b)) for b in zip(inf.x0.ravel(), inf.x1.ravel(), inf.y0.ravel(), inf.y1.ravel())]
+        self._circles = [
+            (float(x), float(y), float(r) ** 2) for x, y, r in zip(inf.cx.ravel(), inf.cy.ravel(), inf.cr.ravel())
+        ]
+        self._boxes = [
+            tuple(map(float, b)) for b in zip(inf.x0.ravel(), inf.x1.ravel(), inf.y0.ravel(), inf.y1.ravel())
+        ]
         self._node_xy = [(float(v.real), float(v.imag)) for v in self.nodes]
 
     def prepare(self, goals: np.ndarray) -> None:
@@ -122,7 +126,10 @@ class Guidance:
         return self._rows[index].reshape(goal.shape + (self.nodes.shape[0],))
 
     def waypoint(
-        self, position: Planar, goal: Planar, parked: tuple[np.ndarray, np.ndarray] | None = None,
+        self,
+        position: Planar,
+        goal: Planar,
+        parked: tuple[np.ndarray, np.ndarray] | None = None,
     ) -> tuple[Planar, Scalar]:
         """Next visible waypoint and remaining path length for every drone (shapes of ``position``).
 
@@ -170,8 +177,9 @@ class Guidance:
             self._detours.popitem(last=False)
         return found
 
-    def _around_one(self, p: complex, g: complex, w: complex, remaining: float,
-                    parked: tuple[np.ndarray, np.ndarray]) -> tuple[complex, float]:
+    def _around_one(
+        self, p: complex, g: complex, w: complex, remaining: float, parked: tuple[np.ndarray, np.ndarray]
+    ) -> tuple[complex, float]:
         """One drone: its waypoint over the detour graph of the parked drones that may be in its way."""
         positions, mask = parked
         seen = [q for q, keep in zip(np.ravel(positions).tolist(), np.ravel(mask).tolist()) if keep]
@@ -181,8 +189,9 @@ class Guidance:
     DETOUR_ROUNDS = 3
     """Times the set of parked drones in the way is widened to the detour's own length (:meth:`_detour_of`)."""
 
-    def _detour_of(self, p: complex, g: complex, w: complex, remaining: float,
-                   seen: list[complex]) -> tuple[complex, float] | None:
+    def _detour_of(
+        self, p: complex, g: complex, w: complex, remaining: float, seen: list[complex]
+    ) -> tuple[complex, float] | None:
         """The detour past the parked drones ``seen`` that may lie in the way (None: none is, or no way round).
 
         Which ones may: ``|p - q| + |q - g|`` under the path length plus ``2 (parked_radius + delta)``; first the
@@ -217,8 +226,14 @@ class Guidance:
                 return w2, r2
         return None
 
-    def _around(self, position: Planar, goal: Planar, w: np.ndarray, remaining: np.ndarray,
-                parked: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    def _around(
+        self,
+        position: Planar,
+        goal: Planar,
+        w: np.ndarray,
+        remaining: np.ndarray,
+        parked: tuple[np.ndarray, np.ndarray],
+    ) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`_around_one` over leading shapes ``S`` (the drones with a parked one in the way: a loop)."""
         positions, mask = parked
         if not np.shape(mask) or not np.shape(mask)[-1] or not np.any(mask):
@@ -227,14 +242,21 @@ class Guidance:
         p = np.broadcast_to(np.asarray(position, dtype=complex), lead)
         g = np.broadcast_to(np.asarray(goal, dtype=complex), lead)
         slack = 2.0 * (self.parked_radius + self.delta)
-        relevant = mask & (abs(positions - p[..., None]) + abs(g[..., None] - positions) < (remaining + slack)[..., None])
+        relevant = mask & (
+            abs(positions - p[..., None]) + abs(g[..., None] - positions) < (remaining + slack)[..., None]
+        )
         rows = np.nonzero(relevant.any(axis=-1))
         if not rows[0].size:
             return w, remaining
         w, remaining = np.array(w, copy=True), np.array(remaining, copy=True)
         for index in zip(*rows):
-            found = self._detour_of(complex(p[index]), complex(g[index]), complex(w[index]), float(remaining[index]),
-                                    positions[index][mask[index]].tolist())
+            found = self._detour_of(
+                complex(p[index]),
+                complex(g[index]),
+                complex(w[index]),
+                float(remaining[index]),
+                positions[index][mask[index]].tolist(),
+            )
             if found is not None:
                 w[index], remaining[index] = found
         return w, remaining
@@ -245,7 +267,9 @@ class Guidance:
         if skip is None:
             skip = inside_one(p.real, p.imag, circles, boxes)
         goal_skip = inside_one(g.real, g.imag, circles, boxes)
-        return free_one(p.real, p.imag, g.real, g.imag, circles, boxes, (skip[0] | goal_skip[0], skip[1] | goal_skip[1]))
+        return free_one(
+            p.real, p.imag, g.real, g.imag, circles, boxes, (skip[0] | goal_skip[0], skip[1] | goal_skip[1])
+        )
 
     def _waypoint_one(self, p: complex, g: complex) -> tuple[complex, float]:
         """:func:`next_waypoint` for one drone in plain Python: the goal's segment first, then the nodes in the order
@@ -301,8 +325,11 @@ class _Detour(Guidance):
         parked = ObstacleSet(centers, np.full(centers.shape[0], radius), np.zeros(0, complex), np.zeros(0), np.zeros(0))
         self = cls.__new__(cls)
         self.obstacles = ObstacleSet(
-            np.concatenate([np.ravel(o.centers), centers]), np.concatenate([np.ravel(o.radii), parked.radii]),
-            np.ravel(o.box_center), np.ravel(o.box_half_x), np.ravel(o.box_half_y),
+            np.concatenate([np.ravel(o.centers), centers]),
+            np.concatenate([np.ravel(o.radii), parked.radii]),
+            np.ravel(o.box_center),
+            np.ravel(o.box_half_x),
+            np.ravel(o.box_half_y),
         )
         self.delta, self.bounds, self.parked_radius, self.parked_min_radius = base.delta, base.bounds, 0.0, 0.0
         self.inflated = Inflated.of(self.obstacles, self.delta)

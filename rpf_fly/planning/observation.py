@@ -77,7 +77,9 @@ def build_observation(
     k = view.neighbour_position.shape[-1]
     if k == 0:
         return Observation(
-            local, np.zeros(lead + (max_neighbours, NEIGHBOUR_SIZE), np.float32), np.zeros(lead + (max_neighbours,), bool)
+            local,
+            np.zeros(lead + (max_neighbours, NEIGHBOUR_SIZE), np.float32),
+            np.zeros(lead + (max_neighbours,), bool),
         )
     delta, dist = view.neighbour_offsets()
     order = _along_last_axis(

@@ -87,8 +87,9 @@ class NearestObstacle:
     normal: Planar
 
 
-def _circles(points: Planar, centers: np.ndarray, radii: np.ndarray | float,
-             offsets: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
+def _circles(
+    points: Planar, centers: np.ndarray, radii: np.ndarray | float, offsets: tuple[np.ndarray, np.ndarray] | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """Signed distance and outward normal for every circle ``S + (M,)``. ``offsets``: the centres' ``(c - p,
     |c - p|)`` when the caller has them (a view's :meth:`~rpf_fly.planning.view.LocalView.neighbour_offsets`;
     ``p - c`` is their exact negation, up to the sign of a zero offset)."""

@@ -289,8 +289,13 @@ class OrcaPlanner:
                 combined = float(radii[k]) + r
                 planes.append(
                     orca_half_plane(
-                        complex(centers[k]) - position, velocity, combined,
-                        self.obstacle_time_horizon, self.time_step, 1.0, velocity,
+                        complex(centers[k]) - position,
+                        velocity,
+                        combined,
+                        self.obstacle_time_horizon,
+                        self.time_step,
+                        1.0,
+                        velocity,
                     )
                 )
         if obstacles.n_boxes:
@@ -470,5 +475,5 @@ def _select(values: np.ndarray, index: tuple[int, ...]) -> np.ndarray:
     if values.ndim <= 1:
         return values
     lead = values.shape[:-1]
-    tail = index[len(index) - len(lead):] if len(lead) <= len(index) else (0,) * (len(lead) - len(index)) + index
+    tail = index[len(index) - len(lead) :] if len(lead) <= len(index) else (0,) * (len(lead) - len(index)) + index
     return values[tuple(i if n > 1 else 0 for i, n in zip(tail, lead))]

@@ -69,14 +69,17 @@ def static_mask(view: LocalView, config: PlannerConfig) -> np.ndarray:
     return view.neighbour_mask & (abs(view.neighbour_velocity) < config.static_speed)
 
 
-def sense_obstacles(view: LocalView, obstacles: ObstacleSet, config: PlannerConfig) -> tuple[NearestObstacle, np.ndarray]:
+def sense_obstacles(
+    view: LocalView, obstacles: ObstacleSet, config: PlannerConfig
+) -> tuple[NearestObstacle, np.ndarray]:
     """Nearest obstacle for each drone (static neighbours included as circles of radius r when the preset says so)
     and the mask of the neighbours that remain lambda-neighbours."""
     mask = view.neighbour_mask
     if config.static_neighbours_as_obstacles and mask.shape[-1]:
         static = static_mask(view, config)
-        nearest = nearest_obstacle(view.position, obstacles, view.neighbour_position, config.safety_radius, static,
-                                   view.neighbour_offsets())
+        nearest = nearest_obstacle(
+            view.position, obstacles, view.neighbour_position, config.safety_radius, static, view.neighbour_offsets()
+        )
         return nearest, mask & ~static
     return nearest_obstacle(view.position, obstacles), mask
 
@@ -106,14 +109,23 @@ def apf_step(
     f_a, d_g = attractive(view.position, view.goal)
     seen = perceived(nearest, config)
     f_r = repulsive(seen, eta, config) if repulsion is None else eta * repulsion
-    f_in, count = inter_robot(view.position, view.neighbour_position, lambda_mask, lam, config,
-                              view.neighbour_offsets())
+    f_in, count = inter_robot(
+        view.position, view.neighbour_position, lambda_mask, lam, config, view.neighbour_offsets()
+    )
     direction, mode = select_heading(f_a, f_r, f_in, view.heading, seen.distance, config)
-    direction, mode = capture(direction, mode, view.position, view.goal if goal is None else goal, f_in,
-                              nearest.distance, config)
+    direction, mode = capture(
+        direction, mode, view.position, view.goal if goal is None else goal, f_in, nearest.distance, config
+    )
     direction = yield_speed(direction, f_in, config)
-    direction = brake(direction, view.position, view.neighbour_position, view.neighbour_mask, config,
-                      nearest if walls is None else walls, view.neighbour_offsets())
+    direction = brake(
+        direction,
+        view.position,
+        view.neighbour_position,
+        view.neighbour_mask,
+        config,
+        nearest if walls is None else walls,
+        view.neighbour_offsets(),
+    )
     return PlanStep(
         direction=direction,
         mode=mode,
@@ -136,12 +148,20 @@ def make_guidance(obstacles: ObstacleSet, config: PlannerConfig, bounds: Bounds 
     if config.guidance != "path" or obstacles.is_empty:
         return None
     parked = config.safety_radius + config.parked_clearance if config.guide_around_parked else 0.0
-    return Guidance(obstacles, config.safety_radius + config.margin, bounds, parked,
-                    config.safety_radius if config.guide_around_parked else 0.0)
+    return Guidance(
+        obstacles,
+        config.safety_radius + config.margin,
+        bounds,
+        parked,
+        config.safety_radius if config.guide_around_parked else 0.0,
+    )
 
 
 def guided_view(
-    view: LocalView, guidance: Guidance | None, reach: float = 0.0, parked_mask: np.ndarray | None = None,
+    view: LocalView,
+    guidance: Guidance | None,
+    reach: float = 0.0,
+    parked_mask: np.ndarray | None = None,
 ) -> tuple[LocalView, Planar | None, Scalar | None]:
     """``view`` with its goal replaced by each drone's next visible waypoint, the waypoints and the remaining path
     lengths (the view itself and None without guidance). ``reach`` > 0: a drone nearer its waypoint corner than
@@ -160,8 +180,14 @@ def guided_view(
     return guided, waypoint, remaining
 
 
-def past_reached(guidance: Guidance, position: Planar, goal: Planar, waypoint: Planar,
-                 reach: float, parked: tuple[np.ndarray, np.ndarray] | None = None) -> Planar:
+def past_reached(
+    guidance: Guidance,
+    position: Planar,
+    goal: Planar,
+    waypoint: Planar,
+    reach: float,
+    parked: tuple[np.ndarray, np.ndarray] | None = None,
+) -> Planar:
     """The waypoints with every corner nearer its drone than ``reach`` replaced by the corner's own next waypoint.
 
     Why (docs/algorithm.md, *RPF-3's tuning*): a drone rounding a corner within the repulsion's band is pushed off
@@ -176,8 +202,10 @@ def past_reached(guidance: Guidance, position: Planar, goal: Planar, waypoint: P
         return waypoint
     rows = np.nonzero(near)
     if parked is not None:
-        parked = (np.broadcast_to(parked[0], near.shape + parked[0].shape[-1:])[rows],
-                  np.broadcast_to(parked[1], near.shape + parked[1].shape[-1:])[rows])
+        parked = (
+            np.broadcast_to(parked[0], near.shape + parked[0].shape[-1:])[rows],
+            np.broadcast_to(parked[1], near.shape + parked[1].shape[-1:])[rows],
+        )
     waypoint = np.array(waypoint, dtype=complex)  # a copy: the caller's waypoints stay as they are
     onward, _ = guidance.waypoint(waypoint[rows], np.broadcast_to(goal, near.shape)[rows], parked)
     waypoint[rows] = onward
@@ -228,10 +256,23 @@ class Planner:
         elif self.config.brake_distance and self.config.static_neighbours_as_obstacles:
             walls = nearest_obstacle(view.position, self.obstacles)
         if waypoint is None:
-            return apf_step(view, nearest, lambda_mask, eta, lam, self.config, observation, repulsion=repulsion,
-                            walls=walls)
-        return apf_step(guided, nearest, lambda_mask, eta, lam, self.config, observation, waypoint,
-                        norm(view.goal - view.position), view.goal, repulsion, walls)
+            return apf_step(
+                view, nearest, lambda_mask, eta, lam, self.config, observation, repulsion=repulsion, walls=walls
+            )
+        return apf_step(
+            guided,
+            nearest,
+            lambda_mask,
+            eta,
+            lam,
+            self.config,
+            observation,
+            waypoint,
+            norm(view.goal - view.position),
+            view.goal,
+            repulsion,
+            walls,
+        )
 
     def unit_repulsion(self, view: LocalView, lambda_mask: np.ndarray) -> tuple[Planar, NearestObstacle]:
         """The static repulsion summed over every surface (``config.repulsion_sum``) at ``eta`` 1: the mission's
@@ -245,18 +286,30 @@ class Planner:
                 o = self.obstacles
                 self._shapes = (
                     [(c.real, c.imag, r) for c, r in zip(np.ravel(o.centers).tolist(), np.ravel(o.radii).tolist())],
-                    [(c.real, c.imag, hx, hy) for c, hx, hy in zip(np.ravel(o.box_center).tolist(),
-                                                                  np.ravel(o.box_half_x).tolist(),
-                                                                  np.ravel(o.box_half_y).tolist())],
+                    [
+                        (c.real, c.imag, hx, hy)
+                        for c, hx, hy in zip(
+                            np.ravel(o.box_center).tolist(),
+                            np.ravel(o.box_half_x).tolist(),
+                            np.ravel(o.box_half_y).tolist(),
+                        )
+                    ],
                 )
             chosen = (mask & ~lambda_mask) if statics else ()
             others = [q for q, keep in zip(view.neighbour_position.tolist(), np.ravel(chosen).tolist()) if keep]
-            one_force, one_wall, one_normal = repulsion_one(complex(view.position), *self._shapes, others,
-                                                            config.safety_radius, config)
+            one_force, one_wall, one_normal = repulsion_one(
+                complex(view.position), *self._shapes, others, config.safety_radius, config
+            )
             return one_force, NearestObstacle(one_wall, one_normal)
         if statics:
-            surfaces = every_surface(view.position, self.obstacles, view.neighbour_position, config.safety_radius,
-                                     mask & ~lambda_mask, view.neighbour_offsets())
+            surfaces = every_surface(
+                view.position,
+                self.obstacles,
+                view.neighbour_position,
+                config.safety_radius,
+                mask & ~lambda_mask,
+                view.neighbour_offsets(),
+            )
         else:
             surfaces = every_surface(view.position, self.obstacles)
         force = repulsive_sum(surfaces, 1.0, config)
@@ -265,6 +318,7 @@ class Planner:
             shape = np.shape(view.position)
             return force, NearestObstacle(np.full(shape, FAR), np.zeros(shape, dtype=complex))
         k = surfaces.distance[..., :mapped].argmin(axis=-1)[..., None]
-        wall = NearestObstacle(np.take_along_axis(surfaces.distance, k, -1)[..., 0],
-                               np.take_along_axis(surfaces.normal, k, -1)[..., 0])
+        wall = NearestObstacle(
+            np.take_along_axis(surfaces.distance, k, -1)[..., 0], np.take_along_axis(surfaces.normal, k, -1)[..., 0]
+        )
         return force, wall

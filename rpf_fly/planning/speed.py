@@ -36,10 +36,15 @@ def yield_speed(direction: Planar, f_in: Planar, config: PlannerConfig) -> Plana
     return direction * factor
 
 
-
-def brake(direction: Planar, position: Planar, neighbour_position: np.ndarray, neighbour_mask: np.ndarray,
-          config: PlannerConfig, nearest: NearestObstacle | None = None,
-          offsets: tuple[np.ndarray, np.ndarray] | None = None) -> Planar:
+def brake(
+    direction: Planar,
+    position: Planar,
+    neighbour_position: np.ndarray,
+    neighbour_mask: np.ndarray,
+    config: PlannerConfig,
+    nearest: NearestObstacle | None = None,
+    offsets: tuple[np.ndarray, np.ndarray] | None = None,
+) -> Planar:
     """``direction`` scaled by ``min clip(gap / brake_distance, 0, 1)`` over what it heads toward: each neighbour
     ``j`` with ``d . (p_j - p) > 0``, ``gap = |p_j - p| - (2r + margin + brake_buffer)``; then, toward the
     ``nearest`` obstacle surface (``d . normal < 0``), only the inward part of the step is scaled by the same

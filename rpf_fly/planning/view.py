@@ -46,8 +46,9 @@ class LocalView:
 
     def with_goal(self, goal: Planar) -> LocalView:
         """The same view with another goal (guidance's waypoint), its neighbour offsets shared."""
-        view = LocalView(self.position, goal, self.heading, self.neighbour_position, self.neighbour_velocity,
-                         self.neighbour_mask)
+        view = LocalView(
+            self.position, goal, self.heading, self.neighbour_position, self.neighbour_velocity, self.neighbour_mask
+        )
         if "_offsets" in self.__dict__:
             object.__setattr__(view, "_offsets", self.__dict__["_offsets"])
         return view

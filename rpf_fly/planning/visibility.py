@@ -53,8 +53,9 @@ class Inflated:
         c = np.asarray(obstacles.centers)
         b = np.asarray(obstacles.box_center)
         hx, hy = np.asarray(obstacles.box_half_x) + delta, np.asarray(obstacles.box_half_y) + delta
-        return Inflated(c.real, c.imag, np.asarray(obstacles.radii) + delta,
-                        b.real - hx, b.real + hx, b.imag - hy, b.imag + hy)
+        return Inflated(
+            c.real, c.imag, np.asarray(obstacles.radii) + delta, b.real - hx, b.real + hx, b.imag - hy, b.imag + hy
+        )
 
     @property
     def n_circles(self) -> int:
@@ -77,8 +78,13 @@ class Inflated:
         return Inflated(*(getattr(self, f.name)[..., None, :] for f in dataclasses.fields(Inflated)))
 
 
-def blocked(a: np.ndarray, b: np.ndarray, inf: Inflated, a_inside: tuple[np.ndarray, np.ndarray] | None = None,
-            b_inside: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
+def blocked(
+    a: np.ndarray,
+    b: np.ndarray,
+    inf: Inflated,
+    a_inside: tuple[np.ndarray, np.ndarray] | None = None,
+    b_inside: tuple[np.ndarray, np.ndarray] | None = None,
+) -> np.ndarray:
     """Whether each segment ``a -> b`` (complex, broadcasting shapes ``S``) crosses the interior of an inflated
     obstacle that contains neither end point; ``inf``'s arrays broadcast as ``S + (M,)``. ``a_inside``,
     ``b_inside``: which obstacles contain the end points, when the caller knows (``S + (M,)`` each kind).

@@ -28,14 +28,20 @@ def _visible(position: np.ndarray, goal: np.ndarray, targets: np.ndarray, inf: I
     p_in = inf.inside(position.real, position.imag)
     g_in = inf.inside(goal.real, goal.imag)
     n = targets.shape[-1] - 1
-    c_in, b_in = (np.concatenate([gi[..., None, :], np.zeros(gi.shape[:-1] + (n, gi.shape[-1]), bool)], axis=-2)
-                  for gi in g_in)
+    c_in, b_in = (
+        np.concatenate([gi[..., None, :], np.zeros(gi.shape[:-1] + (n, gi.shape[-1]), bool)], axis=-2) for gi in g_in
+    )
     return ~blocked(position[..., None], targets, wide, (p_in[0][..., None, :], p_in[1][..., None, :]), (c_in, b_in))
 
 
 def next_waypoint(
-    position: Planar, goal: Planar, nodes: np.ndarray, cost: np.ndarray, inf: Inflated,
-    wide: Inflated | None = None, candidates: int | None = CANDIDATES,
+    position: Planar,
+    goal: Planar,
+    nodes: np.ndarray,
+    cost: np.ndarray,
+    inf: Inflated,
+    wide: Inflated | None = None,
+    candidates: int | None = CANDIDATES,
 ) -> tuple[Planar, Scalar]:
     """The waypoint each drone should fly to (complex ``S``) and its remaining path length (metres, ``S``).
 
@@ -64,7 +70,9 @@ def next_waypoint(
         rows = np.nonzero(unresolved)
         full = np.broadcast_to(np.arange(bound.shape[-1]), (rows[0].shape[0], bound.shape[-1]))
         sub = Inflated(*(np.broadcast_to(a, lead + a.shape[-1:])[rows] for a in dataclasses.astuple(inf)))
-        w2, r2, _ = _choose(position[rows], goal[rows], direct[rows], all_nodes[rows], bound[rows], full, sub, sub.axis())
+        w2, r2, _ = _choose(
+            position[rows], goal[rows], direct[rows], all_nodes[rows], bound[rows], full, sub, sub.axis()
+        )
         waypoint = waypoint.copy()
         remaining = remaining.copy()
         waypoint[rows] = w2

@@ -20,8 +20,14 @@ from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
-CONTROLLER_PARAMS = ("posCtlPid.xKp", "posCtlPid.xKi", "posCtlPid.xVelMax", "posCtlPid.pLimit", "velCtlPid.vxKp",
-                     "velCtlPid.vxKi")
+CONTROLLER_PARAMS = (
+    "posCtlPid.xKp",
+    "posCtlPid.xKi",
+    "posCtlPid.xVelMax",
+    "posCtlPid.pLimit",
+    "velCtlPid.vxKp",
+    "velCtlPid.vxKi",
+)
 """The position controller's parameters a backend reads at connect (`DroneState.controller_params`): what the
 ground station's model of the drone's response needs (rpf_fly/flight/response.py)."""
 
@@ -230,8 +236,9 @@ class DroneBackend(Protocol):
         """High-level go-to an absolute position and yaw (degrees) in `duration_s`."""
         ...
 
-    def send_position_setpoint(self, name: str, x: float, y: float, z: float, yaw_deg: float,
-                               origin_s: float | None = None) -> bool:
+    def send_position_setpoint(
+        self, name: str, x: float, y: float, z: float, yaw_deg: float, origin_s: float | None = None
+    ) -> bool:
         """Stream one low-level position setpoint (metres, yaw in degrees). Streaming takes priority over the
         high-level commander; the firmware levels out 0.5 s after the last one and cuts the motors after 2 s.
         ``origin_s``: the `time.monotonic()` of the data it was planned from (a mocap frame's receipt), for a
@@ -280,4 +287,3 @@ class DroneBackend(Protocol):
     def link(self, name: str) -> LinkState:
         """Link state of one drone."""
         ...
-

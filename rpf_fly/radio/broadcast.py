@@ -124,8 +124,12 @@ class PackedExtposSender:
     position, or `GROUP_WAIT_S` after the first did. One thread per dongle and channel sends its groups' packets in
     turn, so a broadcast never waits in the caller's thread. Thread-safe."""
 
-    def __init__(self, uris: Mapping[str, str], opener: Callable[[str, int, int, str], Broadcaster] = open_broadcast,
-                 group_wait_s: float = GROUP_WAIT_S) -> None:
+    def __init__(
+        self,
+        uris: Mapping[str, str],
+        opener: Callable[[str, int, int, str], Broadcaster] = open_broadcast,
+        group_wait_s: float = GROUP_WAIT_S,
+    ) -> None:
         self._opener = opener
         self._wait_s = group_wait_s
         self._cond = threading.Condition()
@@ -159,8 +163,9 @@ class PackedExtposSender:
                     for name in entry.group.names:
                         errors[name] = f"packed extpos: no broadcast on dongle {dongle} channel {channel}: {exc}"
                 continue
-            air.thread = threading.Thread(target=self._run, args=(air,), daemon=True,
-                                          name=f"rpf-packed-{dongle}-{channel}")
+            air.thread = threading.Thread(
+                target=self._run, args=(air,), daemon=True, name=f"rpf-packed-{dongle}-{channel}"
+            )
             air.thread.start()
         return errors
 
@@ -244,5 +249,13 @@ class PackedExtposSender:
         return (bytes((HEADER,)) + encode(items), len(items)) if items else (None, 0)
 
 
-__all__ = ["BROADCAST_COPIES", "Broadcaster", "CflibBroadcast", "GROUP_WAIT_S", "PackedExtposSender",
-           "open_broadcast", "register", "unregister"]
+__all__ = [
+    "BROADCAST_COPIES",
+    "Broadcaster",
+    "CflibBroadcast",
+    "GROUP_WAIT_S",
+    "PackedExtposSender",
+    "open_broadcast",
+    "register",
+    "unregister",
+]

@@ -132,8 +132,12 @@ class DongleLoad:
     @property
     def late(self) -> bool:
         """The model's setpoints or extpos miss their period, or newer ones replace them."""
-        return (self.setpoint_p99_s > self.setpoint_period_s or self.setpoints_superseded > SUPERSEDED_LIMIT
-                or self.extpos_p99_s > self.extpos_period_s or self.extpos_delivered < EXTPOS_DELIVERED_LIMIT)
+        return (
+            self.setpoint_p99_s > self.setpoint_period_s
+            or self.setpoints_superseded > SUPERSEDED_LIMIT
+            or self.extpos_p99_s > self.extpos_period_s
+            or self.extpos_delivered < EXTPOS_DELIVERED_LIMIT
+        )
 
     @property
     def over(self) -> bool:
@@ -180,9 +184,19 @@ def radio_loads(mission: Mission) -> list[DongleLoad]:
     for name, uri in uris.items():
         per.setdefault(dongle_of(uri), []).append(name)
     radio = mission.radio
-    return [_dongle_load(dongle, tuple((n, uris[n]) for n in names), radio.dongle_type, radio.extpos,
-                         radio.extpos_rate_hz, mission.flight.rate_hz, mission.mocap.rate_hz, radio.budget_packets_s)
-            for dongle, names in sorted(per.items())]
+    return [
+        _dongle_load(
+            dongle,
+            tuple((n, uris[n]) for n in names),
+            radio.dongle_type,
+            radio.extpos,
+            radio.extpos_rate_hz,
+            mission.flight.rate_hz,
+            mission.mocap.rate_hz,
+            radio.budget_packets_s,
+        )
+        for dongle, names in sorted(per.items())
+    ]
 
 
 def link_rate_limits(mission: Mission) -> dict[str, int]:
@@ -191,8 +205,16 @@ def link_rate_limits(mission: Mission) -> dict[str, int]:
 
 
 @lru_cache(maxsize=64)
-def _dongle_load(dongle: int, drones: tuple[tuple[str, str], ...], radio_type: str, mode: str, extpos_hz: float,
-                 setpoint_hz: float, frame_hz: float, measured_budget: float | None) -> DongleLoad:
+def _dongle_load(
+    dongle: int,
+    drones: tuple[tuple[str, str], ...],
+    radio_type: str,
+    mode: str,
+    extpos_hz: float,
+    setpoint_hz: float,
+    frame_hz: float,
+    measured_budget: float | None,
+) -> DongleLoad:
     names = tuple(n for n, _ in drones)
     uris = dict(drones)
     n = len(names)
@@ -203,8 +225,12 @@ def _dongle_load(dongle: int, drones: tuple[tuple[str, str], ...], radio_type: s
     timing = _timing(radio_type, air_rate)
     switching = n > 1 or packed
     unicast_bytes = EXTPOSE_BYTES if mode == "extpose" else EXTPOS_BYTES
-    per_drone = {"setpoints": setpoint_hz, "extpos": 0.0 if packed else rate, "pings": LINK_PING_HZ,
-                 "keepalives": KEEPALIVE_HZ}
+    per_drone = {
+        "setpoints": setpoint_hz,
+        "extpos": 0.0 if packed else rate,
+        "pings": LINK_PING_HZ,
+        "keepalives": KEEPALIVE_HZ,
+    }
     sizes = {"setpoints": SETPOINT_BYTES, "extpos": unicast_bytes, "pings": PING_BYTES, "keepalives": KEEPALIVE_BYTES}
     busy = n * sum(hz * _expected_s(timing, sizes[kind], switching) for kind, hz in per_drone.items())
     downlink_bits = n * (STATUS_TELEMETRY_HZ * (STATUS_BYTES - 1) + LINK_PING_HZ * (PING_BYTES - 1)) * 8
@@ -219,14 +245,35 @@ def _dongle_load(dongle: int, drones: tuple[tuple[str, str], ...], radio_type: s
         timing = replace(timing, scale=ceiling / measured_budget)
         busy *= ceiling / measured_budget
     budget = needed / busy if busy > 0 else math.inf
-    load = DongleLoad(dongle, names, radio_type, n * setpoint_hz, n * per_drone["extpos"], broadcasts,
-                      n * LINK_PING_HZ, n * KEEPALIVE_HZ, busy, budget, measured_budget is not None,
-                      setpoint_period_s=1.0 / setpoint_hz, extpos_period_s=1.0 / rate)
+    load = DongleLoad(
+        dongle,
+        names,
+        radio_type,
+        n * setpoint_hz,
+        n * per_drone["extpos"],
+        broadcasts,
+        n * LINK_PING_HZ,
+        n * KEEPALIVE_HZ,
+        busy,
+        budget,
+        measured_budget is not None,
+        setpoint_period_s=1.0 / setpoint_hz,
+        extpos_period_s=1.0 / rate,
+    )
     return _with_model(load, uris, groups, timing, mode, rate, setpoint_hz, frame_hz, sum(per_drone.values()))
 
 
-def _with_model(load: DongleLoad, uris: Mapping[str, str], groups: list, timing: Timing, mode: str, rate: float,
-                setpoint_hz: float, frame_hz: float, packets_hz: float) -> DongleLoad:
+def _with_model(
+    load: DongleLoad,
+    uris: Mapping[str, str],
+    groups: list,
+    timing: Timing,
+    mode: str,
+    rate: float,
+    setpoint_hz: float,
+    frame_hz: float,
+    packets_hz: float,
+) -> DongleLoad:
     """The load with its rate limits and modelled latencies: each candidate limit (`RATE_LIMIT_FACTORS`, or the
     URIs' own) run through the dongle model, the lowest setpoint latency taken among those on time (`DongleLoad.late`
     false), else among all."""
@@ -244,17 +291,32 @@ def _with_model(load: DongleLoad, uris: Mapping[str, str], groups: list, timing:
         links = []
         for name in names:
             link = parse_link(uris[name])
-            links.append(LinkTraffic((link.channel, link.rate, link.address), limits[name],
-                                     setpoint_bytes=SETPOINT_BYTES,
-                                     extpos_hz=0.0 if mode == "packed" else rate, extpos_phase=phases[name],
-                                     extpos_bytes=unicast_bytes, ping_hz=LINK_PING_HZ, ping_bytes=PING_BYTES,
-                                     keepalive_hz=KEEPALIVE_HZ, keepalive_bytes=KEEPALIVE_BYTES,
-                                     status_hz=STATUS_TELEMETRY_HZ, status_bytes=STATUS_BYTES))
-        traffic = Traffic(tuple(links), setpoint_hz, frame_hz, rate, broadcasts, loss=EXPECTED_ATTEMPT_LOSS,
-                          copies=BROADCAST_COPIES)
+            links.append(
+                LinkTraffic(
+                    (link.channel, link.rate, link.address),
+                    limits[name],
+                    setpoint_bytes=SETPOINT_BYTES,
+                    extpos_hz=0.0 if mode == "packed" else rate,
+                    extpos_phase=phases[name],
+                    extpos_bytes=unicast_bytes,
+                    ping_hz=LINK_PING_HZ,
+                    ping_bytes=PING_BYTES,
+                    keepalive_hz=KEEPALIVE_HZ,
+                    keepalive_bytes=KEEPALIVE_BYTES,
+                    status_hz=STATUS_TELEMETRY_HZ,
+                    status_bytes=STATUS_BYTES,
+                )
+            )
+        traffic = Traffic(
+            tuple(links), setpoint_hz, frame_hz, rate, broadcasts, loss=EXPECTED_ATTEMPT_LOSS, copies=BROADCAST_COPIES
+        )
         run = simulate(traffic, timing, seconds=MODEL_SECONDS)
-        on_time = (run.setpoints_superseded <= SUPERSEDED_LIMIT and run.extpos_delivered >= EXTPOS_DELIVERED_LIMIT
-                   and run.setpoint_p(0.99) <= load.setpoint_period_s and run.extpos_p(0.99) <= load.extpos_period_s)
+        on_time = (
+            run.setpoints_superseded <= SUPERSEDED_LIMIT
+            and run.extpos_delivered >= EXTPOS_DELIVERED_LIMIT
+            and run.setpoint_p(0.99) <= load.setpoint_period_s
+            and run.extpos_p(0.99) <= load.extpos_period_s
+        )
         score = (not on_time, run.setpoint_p(0.99))
         if best is None or score < best[0]:
             best = (score, limits, run)
@@ -262,42 +324,84 @@ def _with_model(load: DongleLoad, uris: Mapping[str, str], groups: list, timing:
             break  # the URIs set their own: nothing to choose
     assert best is not None
     _, limits, run = best
-    return replace(load, rate_limits=limits, setpoint_p50_s=run.setpoint_p(0.5), setpoint_p99_s=run.setpoint_p(0.99),
-                   extpos_p99_s=run.extpos_p(0.99), setpoints_superseded=run.setpoints_superseded,
-                   extpos_delivered=run.extpos_delivered)
+    return replace(
+        load,
+        rate_limits=limits,
+        setpoint_p50_s=run.setpoint_p(0.5),
+        setpoint_p99_s=run.setpoint_p(0.99),
+        extpos_p99_s=run.extpos_p(0.99),
+        setpoints_superseded=run.setpoints_superseded,
+        extpos_delivered=run.extpos_delivered,
+    )
 
 
 def over_budget_message(load: DongleLoad, mission_name: str = "") -> str:
     """One line naming the dongle, what it needs and what it has, and the ways out."""
     n = len(load.drones)
-    extpos = ("packed extpos at radio.extpos_rate_hz" if load.broadcasts else "extpos at radio.extpos_rate_hz")
-    why = (f"needs {load.needed:.0f} transactions/s ({load.needed / n:.0f} a drone: setpoints at flight.rate_hz, "
-           f"{extpos}, cflib's {LINK_PING_HZ:.0f} pings, {KEEPALIVE_HZ:.0f} keep-alives) and a {load.radio_type} "
-           f"carries about {load.budget:.0f} of them ({load.use:.0%}, at most {USE_LIMIT:.0%} planned)")
+    extpos = "packed extpos at radio.extpos_rate_hz" if load.broadcasts else "extpos at radio.extpos_rate_hz"
+    why = (
+        f"needs {load.needed:.0f} transactions/s ({load.needed / n:.0f} a drone: setpoints at flight.rate_hz, "
+        f"{extpos}, cflib's {LINK_PING_HZ:.0f} pings, {KEEPALIVE_HZ:.0f} keep-alives) and a {load.radio_type} "
+        f"carries about {load.budget:.0f} of them ({load.use:.0%}, at most {USE_LIMIT:.0%} planned)"
+    )
     if load.use <= USE_LIMIT:
-        why = (f"would hold its setpoints {load.setpoint_p99_s * 1e3:.0f} ms (p99; a planning period is "
-               f"{load.setpoint_period_s * 1e3:.0f} ms) and its extpos {load.extpos_p99_s * 1e3:.0f} ms (an extpos "
-               f"period is {load.extpos_period_s * 1e3:.0f} ms) with {load.needed:.0f} transactions/s of "
-               f"{load.budget:.0f}")
+        why = (
+            f"would hold its setpoints {load.setpoint_p99_s * 1e3:.0f} ms (p99; a planning period is "
+            f"{load.setpoint_period_s * 1e3:.0f} ms) and its extpos {load.extpos_p99_s * 1e3:.0f} ms (an extpos "
+            f"period is {load.extpos_period_s * 1e3:.0f} ms) with {load.needed:.0f} transactions/s of "
+            f"{load.budget:.0f}"
+        )
     names = ", ".join(load.drones) if n <= 4 else f"{load.drones[0]}, ..., {load.drones[-1]}"
-    return (f"radio dongle {load.dongle} ({n} drones: {names}) {why}: lower the rates, set radio.extpos: packed, "
-            f"spread the drones over more dongles (the URI's first number), or set radio.allow_over_budget: true")
+    return (
+        f"radio dongle {load.dongle} ({n} drones: {names}) {why}: lower the rates, set radio.extpos: packed, "
+        f"spread the drones over more dongles (the URI's first number), or set radio.allow_over_budget: true"
+    )
 
 
 def budget_table(loads: list[DongleLoad]) -> list[str]:
     """Plain lines for ``rpf-fly check``: a header, then one per dongle."""
-    rows = [["dongle", "radio", "drones", "setpoints/s", "extpos/s", "packed/s", "pings+keep-alives/s", "needed/s",
-             "carries/s", "use", "rate_limit", "setpoint ms p50/p99", "extpos ms p99"]]
+    rows = [
+        [
+            "dongle",
+            "radio",
+            "drones",
+            "setpoints/s",
+            "extpos/s",
+            "packed/s",
+            "pings+keep-alives/s",
+            "needed/s",
+            "carries/s",
+            "use",
+            "rate_limit",
+            "setpoint ms p50/p99",
+            "extpos ms p99",
+        ]
+    ]
     for load in loads:
         limits = sorted(set(load.rate_limits.values()))
         limit = f"{limits[0]}" if len(limits) == 1 else f"{limits[0]}-{limits[-1]}"
-        rows.append([str(load.dongle), load.radio_type, str(len(load.drones)), f"{load.setpoints:.0f}",
-                     f"{load.extpos:.0f}", f"{load.broadcasts:.0f}", f"{load.pings + load.keepalives:.0f}",
-                     f"{load.needed:.0f}", f"{load.budget:.0f}{'*' if load.measured else ''}", f"{load.use:.0%}",
-                     limit, f"{_ms(load.setpoint_p50_s)}/{_ms(load.setpoint_p99_s)}", _ms(load.extpos_p99_s)])
+        rows.append(
+            [
+                str(load.dongle),
+                load.radio_type,
+                str(len(load.drones)),
+                f"{load.setpoints:.0f}",
+                f"{load.extpos:.0f}",
+                f"{load.broadcasts:.0f}",
+                f"{load.pings + load.keepalives:.0f}",
+                f"{load.needed:.0f}",
+                f"{load.budget:.0f}{'*' if load.measured else ''}",
+                f"{load.use:.0%}",
+                limit,
+                f"{_ms(load.setpoint_p50_s)}/{_ms(load.setpoint_p99_s)}",
+                _ms(load.extpos_p99_s),
+            ]
+        )
     widths = [max(len(row[k]) for row in rows) for k in range(len(rows[0]))]
-    lines = ["  ".join(cell.ljust(w) if k == 1 else cell.rjust(w) for k, (cell, w) in enumerate(zip(row, widths)))
-             for row in rows]
+    lines = [
+        "  ".join(cell.ljust(w) if k == 1 else cell.rjust(w) for k, (cell, w) in enumerate(zip(row, widths)))
+        for row in rows
+    ]
     lines = [lines[0]] + [line + ("  OVER BUDGET" if load.over else "") for line, load in zip(lines[1:], loads)]
     if any(load.measured for load in loads):
         lines.append("* scaled to radio.budget_packets_s, the lab's own figure")

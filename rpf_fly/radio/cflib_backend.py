@@ -115,6 +115,7 @@ class _Command(Protocol):
 
     def __call__(self, cf: Any, drone: CflibDrone) -> None: ...
 
+
 logger = logging.getLogger(__name__)
 
 KEEPALIVE_PERIOD_S = 0.2
@@ -200,9 +201,13 @@ class CflibBackend(CflibConnection, CflibTelemetry):
         from rpf_fly.radio.budget import link_rate_limits
 
         packed = mission.radio.extpos == "packed"
-        return cls(cache_dir=cache_dir, use_extpose=mission.radio.extpos == "extpose", packed_extpos=packed,
-                   ext_pos_std_dev=PACKED_EXT_POS_STD_DEV_M if packed else None,
-                   rate_limits=link_rate_limits(mission))
+        return cls(
+            cache_dir=cache_dir,
+            use_extpose=mission.radio.extpos == "extpose",
+            packed_extpos=packed,
+            ext_pos_std_dev=PACKED_EXT_POS_STD_DEV_M if packed else None,
+            rate_limits=link_rate_limits(mission),
+        )
 
     def close(self) -> None:
         """Close every link (on the ground only: cflib sends a zero-thrust setpoint when closing). A drone whose
@@ -256,8 +261,9 @@ class CflibBackend(CflibConnection, CflibTelemetry):
             if fresh:
                 break
             if now - asked > REBOOT_STATUS_WAIT_S:
-                logger.warning("drone %s: no status since its last command: not rebooted (its watchdog stops it)",
-                               drone.name)
+                logger.warning(
+                    "drone %s: no status since its last command: not rebooted (its watchdog stops it)", drone.name
+                )
                 return
             if now - fed_at >= KEEPALIVE_PERIOD_S:
                 fed_at = now
@@ -266,8 +272,11 @@ class CflibBackend(CflibConnection, CflibTelemetry):
             time.sleep(0.01)
         supervisor = SupervisorState(bits or 0)
         if supervisor.flying or supervisor.locked:
-            logger.warning("drone %s: %s at the end: not rebooted", drone.name,
-                           "locked" if supervisor.locked else "still flying (its watchdog stops it)")
+            logger.warning(
+                "drone %s: %s at the end: not rebooted",
+                drone.name,
+                "locked" if supervisor.locked else "still flying (its watchdog stops it)",
+            )
             return
         with drone.command_lock:
             cf.send_packet(CRTPPacket(BOOTLOADER_HEADER, [NRF_TARGET, BOOTLOADER_CMD_RESET_INIT]))
@@ -329,7 +338,9 @@ class CflibBackend(CflibConnection, CflibTelemetry):
         """Wait until every command queued so far to ``names`` (default: all) went out to cflib or was dropped;
         False on timeout. Commands return once queued; tests and scripts that need the packet sent call this."""
         with self._lock:
-            boxes = [d.outbox for n, d in self._drones.items() if d.outbox is not None and (names is None or n in names)]
+            boxes = [
+                d.outbox for n, d in self._drones.items() if d.outbox is not None and (names is None or n in names)
+            ]
         return self._pool.wait_idle(boxes, timeout_s)
 
     def take_setpoint_latencies(self) -> list[float]:
@@ -408,11 +419,13 @@ class CflibBackend(CflibConnection, CflibTelemetry):
 
         return self._queue(name, action, "ends_stream")
 
-    def send_position_setpoint(self, name: str, x: float, y: float, z: float, yaw_deg: float,
-                               origin_s: float | None = None) -> bool:
+    def send_position_setpoint(
+        self, name: str, x: float, y: float, z: float, yaw_deg: float, origin_s: float | None = None
+    ) -> bool:
         """Queue one streamed setpoint (latest wins). ``origin_s``: the `time.monotonic()` its data came from
         (the mocap frame's receipt); the time from it to cflib taking the packet is kept for
         `take_setpoint_latencies`."""
+
         def action(cf: Any, drone: CflibDrone) -> None:
             cf.commander.send_position_setpoint(x, y, z, yaw_deg)
             drone.streaming = True
@@ -455,8 +468,9 @@ class CflibBackend(CflibConnection, CflibTelemetry):
     link whose queue is full (and a pool thread stuck there holds cflib's send lock); each drone's stop goes out
     from a thread of its own meanwhile."""
 
-    def emergency_stop(self, name: str | Iterable[str] | None = None, repeats: int = 3,
-                       wait_s: float = EMERGENCY_DEADLINE_S) -> dict[str, str]:
+    def emergency_stop(
+        self, name: str | Iterable[str] | None = None, repeats: int = 3, wait_s: float = EMERGENCY_DEADLINE_S
+    ) -> dict[str, str]:
         """Emergency stop (latched until reboot) of one drone, several, or (None) all, sent `repeats` times
         (idempotent, safety critical). Each drone's queued commands are dropped and its outbox refuses anything
         more; the packets go out at once, not through the outbox (no command lock: cflib's send lock alone orders
@@ -480,8 +494,14 @@ class CflibBackend(CflibConnection, CflibTelemetry):
                 cf.supervisor.send_emergency_stop()
 
         errors = self._parallel(stop_one, [self._drones[t] for t in targets], wait_s)
-        errors = {t: ("emergency stop still being sent (its link is blocked)" if why == "timed out"
-                      else f"emergency stop not delivered: {why}") for t, why in errors.items()}
+        errors = {
+            t: (
+                "emergency stop still being sent (its link is blocked)"
+                if why == "timed out"
+                else f"emergency stop not delivered: {why}"
+            )
+            for t, why in errors.items()
+        }
         for target, why in errors.items():
             logger.error("drone %s: %s", target, why)
         return errors

@@ -89,12 +89,14 @@ class CflibConnection:
         uris = list(drones.values())
         if len(set(uris)) != len(uris):
             raise ValueError("two drones share a URI")
-        if self._init_drivers and not any(isinstance(c, type) and issubclass(c, RadioDriver)
-                                          for c in cflib.crtp.CLASSES):
+        if self._init_drivers and not any(
+            isinstance(c, type) and issubclass(c, RadioDriver) for c in cflib.crtp.CLASSES
+        ):
             cflib.crtp.init_drivers()
         with self._lock:
-            self._drones = {name: CflibDrone(name, uri, link_uri(uri, self._rate_limits.get(name)))
-                            for name, uri in drones.items()}
+            self._drones = {
+                name: CflibDrone(name, uri, link_uri(uri, self._rate_limits.get(name))) for name, uri in drones.items()
+            }
         links = [d.link_uri for d in self._drones.values()]
         self._swarm = Swarm(links, factory=CachedCfFactory(rw_cache=self._cache_dir))
         by_uri = {d.link_uri: d for d in self._drones.values()}
@@ -112,8 +114,9 @@ class CflibConnection:
             logger.warning("drone %s: %s", name, message)
         return errors
 
-    def _parallel(self, func: Callable[[CflibDrone], None], drones: list[CflibDrone],
-                  timeout_s: float) -> dict[str, str]:
+    def _parallel(
+        self, func: Callable[[CflibDrone], None], drones: list[CflibDrone], timeout_s: float
+    ) -> dict[str, str]:
         """Run `func(drone)` on one thread per drone; name -> error for those that raised or overran."""
         errors: dict[str, str] = {}
 
@@ -155,8 +158,11 @@ class CflibConnection:
 
         cf.connection_lost.add_callback(partial(self._on_connection_lost, drone.name))
         cf.disconnected.add_callback(partial(self._on_disconnected, drone.name))
-        temporary = ((cf.fully_connected, on_fully_connected), (cf.connection_failed, on_failed),
-                     (cf.connection_lost, on_lost))
+        temporary = (
+            (cf.fully_connected, on_fully_connected),
+            (cf.connection_failed, on_failed),
+            (cf.connection_lost, on_lost),
+        )
         for caller, callback in temporary:
             caller.add_callback(callback)
         deadline = time.monotonic() + self._connect_timeout_s

@@ -141,12 +141,18 @@ class CflibTelemetry:
             drone.pm_state = int(data["pm.state"])
             drone.sup_bits = int(data["supervisor.info"])
             if "stateEstimateZ.x" in data:
-                drone.position = (data["stateEstimateZ.x"] * MM, data["stateEstimateZ.y"] * MM,
-                                  data["stateEstimateZ.z"] * MM)
+                drone.position = (
+                    data["stateEstimateZ.x"] * MM,
+                    data["stateEstimateZ.y"] * MM,
+                    data["stateEstimateZ.z"] * MM,
+                )
                 drone.target = (data["ctrltargetZ.x"] * MM, data["ctrltargetZ.y"] * MM, data["ctrltargetZ.z"] * MM)
             else:
-                drone.position = (float(data["stateEstimate.x"]), float(data["stateEstimate.y"]),
-                                  float(data["stateEstimate.z"]))
+                drone.position = (
+                    float(data["stateEstimate.x"]),
+                    float(data["stateEstimate.y"]),
+                    float(data["stateEstimate.z"]),
+                )
             drone.yaw_deg = float(data["stateEstimate.yaw"])
             drone.stamp_s = arrived
             drone.measured_s = drone.clock.measured_at(int(timestamp), arrived)
@@ -211,9 +217,16 @@ class CflibTelemetry:
         transactions, and those with an uplink packet), and the setpoints its outbox superseded before the radio
         took them, by name; kept after `close` (the last window, under 0.1 s, is never reported by cflib)."""
         with self._lock:
-            return {d.name: LinkCount(d.uri, d.radio_transactions, d.radio_packets,
-                                      float(d.outbox.setpoints_replaced) if d.outbox is not None else 0.0)
-                    for d in self._drones.values() if d.radio_window_at is not None}
+            return {
+                d.name: LinkCount(
+                    d.uri,
+                    d.radio_transactions,
+                    d.radio_packets,
+                    float(d.outbox.setpoints_replaced) if d.outbox is not None else 0.0,
+                )
+                for d in self._drones.values()
+                if d.radio_window_at is not None
+            }
 
     # State ----------------------------------------------------------------------------------------------------
 

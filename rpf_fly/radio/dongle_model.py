@@ -77,8 +77,16 @@ def timing_of(radio: Any, rate: str, scale: float = 1.0) -> Timing:
 
     code = {"250K": ct.DR_250K, "1M": ct.DR_1M, "2M": ct.DR_2M}[rate]
     wait = radio.ack_timeout_s if radio.ack_timeout_s is not None else ct.ard_s(0x80 | 32, code)
-    return Timing(radio.control_s, radio.bulk_out_s + radio.bulk_in_s, radio.upload_s_per_byte, radio.ramp_s,
-                  ct.RATE_BPS[code], radio.irq_s[code], wait, scale)
+    return Timing(
+        radio.control_s,
+        radio.bulk_out_s + radio.bulk_in_s,
+        radio.upload_s_per_byte,
+        radio.ramp_s,
+        ct.RATE_BPS[code],
+        radio.irq_s[code],
+        wait,
+        scale,
+    )
 
 
 @dataclass(frozen=True)

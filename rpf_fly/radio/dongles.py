@@ -39,8 +39,10 @@ def radio_problem(uris: Iterable[str], find: Callable[[], Sequence[Any]] = find_
     try:
         devices = find()
     except Exception as exc:  # noqa: BLE001 - no libusb backend, USB not readable: say so instead of a traceback
-        return f"cannot look for a Crazyradio on USB ({type(exc).__name__}: {exc}): plug one in and check libusb, " \
-               "or fly with --dry-run"
+        return (
+            f"cannot look for a Crazyradio on USB ({type(exc).__name__}: {exc}): plug one in and check libusb, "
+            "or fly with --dry-run"
+        )
     if not devices:
         return NO_RADIO
     serials: list[str] | None = None
@@ -48,8 +50,10 @@ def radio_problem(uris: Iterable[str], find: Callable[[], Sequence[Any]] = find_
         dongle = urlparse(uri).netloc
         if len(dongle) < 10 and dongle.isdigit():
             if int(dongle) >= len(devices):
-                return (f"{uri} needs Crazyradio number {int(dongle)} (counting from 0), but {len(devices)} "
-                        f"found on USB: plug in another, or fly with --dry-run")
+                return (
+                    f"{uri} needs Crazyradio number {int(dongle)} (counting from 0), but {len(devices)} "
+                    f"found on USB: plug in another, or fly with --dry-run"
+                )
             continue
         if serials is None:
             try:

@@ -296,8 +296,12 @@ class Outbox:
     # ------------------------------------------------------------------------------------------ state (lock held)
 
     def _pending(self) -> bool:
-        return (bool(self._commands) or self._setpoint is not None or self._extpos is not None
-                or self._keepalive is not None)
+        return (
+            bool(self._commands)
+            or self._setpoint is not None
+            or self._extpos is not None
+            or self._keepalive is not None
+        )
 
     def _idle(self) -> bool:
         return not self._busy and not self._pending()

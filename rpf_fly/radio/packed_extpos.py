@@ -135,7 +135,7 @@ def packed_groups(uris: Mapping[str, str]) -> list[PackedGroup]:
     groups = []
     for (dongle, channel, rate), members in per.items():
         for k in range(0, len(members), ITEMS_PER_PACKET):
-            chunk = members[k:k + ITEMS_PER_PACKET]
+            chunk = members[k : k + ITEMS_PER_PACKET]
             groups.append(PackedGroup(dongle, channel, rate, tuple(n for n, _ in chunk), tuple(i for _, i in chunk)))
     return groups
 

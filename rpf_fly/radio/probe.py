@@ -95,8 +95,9 @@ class _Link:
         self._stop = threading.Event()
         self.driver = cflib.crtp.get_link_driver(uri, self._on_stats, self._on_error)
         if self.driver is None:
-            raise ProbeError(f"{uri}: no cflib link driver takes this URI "
-                             "(expected radio://DONGLE/CHANNEL/RATE/ADDRESS)")
+            raise ProbeError(
+                f"{uri}: no cflib link driver takes this URI (expected radio://DONGLE/CHANNEL/RATE/ADDRESS)"
+            )
         self._thread = threading.Thread(target=self._ping, name=f"probe-{uri}", daemon=True)
 
     def _on_stats(self, stats: dict[str, float]) -> None:
@@ -114,8 +115,10 @@ class _Link:
         deadline = time.monotonic() + timeout_s
         while self.acks == 0:
             if self.error is not None or time.monotonic() > deadline:
-                raise ProbeError(f"{self.uri}: no answer from the drone within {timeout_s:g} s "
-                                 f"({self.error or 'is it on, on this channel and address?'})")
+                raise ProbeError(
+                    f"{self.uri}: no answer from the drone within {timeout_s:g} s "
+                    f"({self.error or 'is it on, on this channel and address?'})"
+                )
             time.sleep(0.01)
         self._thread.start()
 
@@ -161,8 +164,13 @@ class _Link:
             if pk is None:
                 continue
             data = bytes(pk.data)
-            if pk.port == 15 and pk.channel == 0 and len(data) >= 3 and data[0] == PING_MARK \
-                    and struct.unpack_from("<H", data, 1)[0] == seq:
+            if (
+                pk.port == 15
+                and pk.channel == 0
+                and len(data) >= 3
+                and data[0] == PING_MARK
+                and struct.unpack_from("<H", data, 1)[0] == seq
+            ):
                 return time.monotonic() - sent
 
     def radio_version(self) -> float | None:
@@ -207,8 +215,15 @@ def _measure(links: list[_Link], seconds: float) -> tuple[float, list[float], li
     return sum(per_link), per_link, rtts, retries / (1.0 + retries), sum(end[3] for end in ends)
 
 
-def probe(uris: list[str], *, seconds: float = 2.0, ping_hz: float = 20.0, radio: str | None = None,
-          warmup_s: float = 0.3, on_progress: Callable[[str], None] = lambda line: None) -> list[ProbeRun]:
+def probe(
+    uris: list[str],
+    *,
+    seconds: float = 2.0,
+    ping_hz: float = 20.0,
+    radio: str | None = None,
+    warmup_s: float = 0.3,
+    on_progress: Callable[[str], None] = lambda line: None,
+) -> list[ProbeRun]:
     """Measure the dongle of ``uris`` (all on one dongle number): a run with the first link alone, then (with more
     than one URI) a run with all of them. ``radio``: the dongle type to report (None: from the version cflib reads).
     Needs cflib's radio driver registered (``cflib.crtp.init_drivers()``); raises `ProbeError` for what it cannot
@@ -230,7 +245,7 @@ def probe(uris: list[str], *, seconds: float = 2.0, ping_hz: float = 20.0, radio
     opened: list[_Link] = []
     try:
         single: float | None = None
-        for count in ([1, len(uris)] if len(uris) > 1 else [1]):
+        for count in [1, len(uris)] if len(uris) > 1 else [1]:
             while len(opened) < count:
                 link = _Link(uris[len(opened)], ping_hz)
                 opened.append(link)
@@ -247,18 +262,35 @@ def probe(uris: list[str], *, seconds: float = 2.0, ping_hz: float = 20.0, radio
             if single is None:
                 single = total
             switch_ms = 1000.0 * (1.0 / total - 1.0 / single) if count > 1 else 0.0
-            runs.append(ProbeRun(dongle, kind, count, total, per_link,
-                                 {"p50": 1000.0 * _percentile(rtts, 50), "p99": 1000.0 * _percentile(rtts, 99)},
-                                 switch_ms, loss, lost))
+            runs.append(
+                ProbeRun(
+                    dongle,
+                    kind,
+                    count,
+                    total,
+                    per_link,
+                    {"p50": 1000.0 * _percentile(rtts, 50), "p99": 1000.0 * _percentile(rtts, 99)},
+                    switch_ms,
+                    loss,
+                    lost,
+                )
+            )
     finally:
         for link in opened:
             link.close()
     return runs
 
 
-def dry_run_probe(links: int, *, dongle: int = 0, radio: str = "crazyradio_pa", seconds: float = 2.0,
-                  ping_hz: float = 20.0, seed: int = 0,
-                  on_progress: Callable[[str], None] = lambda line: None) -> list[ProbeRun]:
+def dry_run_probe(
+    links: int,
+    *,
+    dongle: int = 0,
+    radio: str = "crazyradio_pa",
+    seconds: float = 2.0,
+    ping_hz: float = 20.0,
+    seed: int = 0,
+    on_progress: Callable[[str], None] = lambda line: None,
+) -> list[ProbeRun]:
     """`probe` an emulated dongle ``dongle`` of type ``radio`` (`rpf_fly.emulator.crazyradio`) carrying ``links``
     simulated drones standing on the floor, each link with the dry run's bursty loss (`flight.dry_run.RADIO_LOSS`)."""
     from dataclasses import replace
@@ -282,8 +314,13 @@ def dry_run_probe(links: int, *, dongle: int = 0, radio: str = "crazyradio_pa", 
     world = FakeWorld(configs, seed=seed)
     crazyradio.plug(world, dongles=dongle + 1, radio=radio)
     try:
-        return probe([f"radio://{dongle}/80/2M/{a:010X}" for a in addresses], seconds=seconds, ping_hz=ping_hz,
-                     radio=radio, on_progress=on_progress)
+        return probe(
+            [f"radio://{dongle}/80/2M/{a:010X}" for a in addresses],
+            seconds=seconds,
+            ping_hz=ping_hz,
+            radio=radio,
+            on_progress=on_progress,
+        )
     finally:
         crazyradio.wait_released([dongle])
         crazyradio.unplug()
@@ -294,9 +331,16 @@ DEFAULT_DRY_RUN_LINKS = 4
 """Simulated drones on a dry-run probe's dongle when ``--links`` is not given."""
 
 
-def probe_dongle(*, drones: list[str] | None = None, dry_run: bool = False, dongle: int | None = None,
-                 links: int | None = None, radio: str | None = None, seconds: float = 2.0,
-                 on_progress: Callable[[str], None] = lambda line: None) -> list[ProbeRun]:
+def probe_dongle(
+    *,
+    drones: list[str] | None = None,
+    dry_run: bool = False,
+    dongle: int | None = None,
+    links: int | None = None,
+    radio: str | None = None,
+    seconds: float = 2.0,
+    on_progress: Callable[[str], None] = lambda line: None,
+) -> list[ProbeRun]:
     """``rpf-fly radio probe``: a real dongle with ``drones`` (``radio://`` URIs on one dongle; ``links``: the first
     that many), or with ``dry_run`` an emulated one of type ``radio`` carrying ``links`` simulated drones. Raises
     `ProbeError` (one line naming the option) for what cannot be probed."""
@@ -308,26 +352,35 @@ def probe_dongle(*, drones: list[str] | None = None, dry_run: bool = False, dong
         raise ProbeError(f"--dongle {dongle}: expected a dongle number >= 0")
     if dry_run:
         if drones:
-            raise ProbeError("--drones: a dry run probes simulated drones; give --links N with --dry-run, or real "
-                             "drones without it")
-        return dry_run_probe(DEFAULT_DRY_RUN_LINKS if links is None else links, dongle=dongle or 0,
-                             radio=radio or "crazyradio_pa", seconds=seconds, on_progress=on_progress)
+            raise ProbeError(
+                "--drones: a dry run probes simulated drones; give --links N with --dry-run, or real drones without it"
+            )
+        return dry_run_probe(
+            DEFAULT_DRY_RUN_LINKS if links is None else links,
+            dongle=dongle or 0,
+            radio=radio or "crazyradio_pa",
+            seconds=seconds,
+            on_progress=on_progress,
+        )
     if not drones:
-        raise ProbeError("--drones: expected the radio:// URIs of powered-on drones on one dongle "
-                         "(radio://0/80/2M/E7E7E7E701,...), or --dry-run for an emulated dongle")
+        raise ProbeError(
+            "--drones: expected the radio:// URIs of powered-on drones on one dongle "
+            "(radio://0/80/2M/E7E7E7E701,...), or --dry-run for an emulated dongle"
+        )
     bad = next((u for u in drones if not u.startswith("radio://")), None)
     if bad is not None:
         raise ProbeError(f"--drones: {bad!r} is not a radio:// URI (expected radio://DONGLE/CHANNEL/RATE/ADDRESS)")
     numbers = sorted({uri_dongle(u) for u in drones})
     if len(numbers) > 1:
-        raise ProbeError(f"--drones: the URIs are on dongles {', '.join(map(str, numbers))}: probe one dongle at a "
-                         "time (the URI's first number)")
+        raise ProbeError(
+            f"--drones: the URIs are on dongles {', '.join(map(str, numbers))}: probe one dongle at a "
+            "time (the URI's first number)"
+        )
     if dongle is not None and dongle != numbers[0]:
         raise ProbeError(f"--dongle {dongle}: the drones' URIs are on dongle {numbers[0]}")
     if links is not None and links > len(drones):
         raise ProbeError(f"--links {links}: only {len(drones)} drone(s) given in --drones")
-    return probe(drones[:links] if links is not None else drones, seconds=seconds, radio=radio,
-                 on_progress=on_progress)
+    return probe(drones[:links] if links is not None else drones, seconds=seconds, radio=radio, on_progress=on_progress)
 
 
 def describe(runs: list[ProbeRun]) -> list[str]:
@@ -339,10 +392,14 @@ def describe(runs: list[ProbeRun]) -> list[str]:
         share = f" ({statistics.fmean(run.per_link_per_s):.0f} a link)" if run.links > 1 else ""
         switch = f"; address switch {run.address_switch_ms:.2f} ms" if run.links > 1 else ""
         lost = f"; {run.echoes_lost} echo(es) lost" if run.echoes_lost else ""
-        lines.append(f"dongle {run.dongle} ({run.radio}), {links}: {run.transactions_per_s:.0f} transactions/s"
-                     f"{share}; setpoint round trip p50 {rtt['p50']:.1f} ms, p99 {rtt['p99']:.1f} ms{switch}; "
-                     f"loss {100 * run.loss:.1f} %{lost}")
+        lines.append(
+            f"dongle {run.dongle} ({run.radio}), {links}: {run.transactions_per_s:.0f} transactions/s"
+            f"{share}; setpoint round trip p50 {rtt['p50']:.1f} ms, p99 {rtt['p99']:.1f} ms{switch}; "
+            f"loss {100 * run.loss:.1f} %{lost}"
+        )
     last = runs[-1]
-    lines.append(f"radio.budget_packets_s: {last.transactions_per_s:.0f}   (what dongle {last.dongle} carried with "
-                 f"{last.links} link{'s' if last.links > 1 else ''}: the mission's radio section takes it)")
+    lines.append(
+        f"radio.budget_packets_s: {last.transactions_per_s:.0f}   (what dongle {last.dongle} carried with "
+        f"{last.links} link{'s' if last.links > 1 else ''}: the mission's radio section takes it)"
+    )
     return lines

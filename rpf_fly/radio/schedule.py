@@ -125,8 +125,9 @@ class MeasuredLoad:
         return self.transactions / self.window_s if self.window_s > 0 else 0.0
 
 
-def dongle_loads(before: Mapping[str, LinkCount], after: Mapping[str, LinkCount], window_s: float,
-                 dongles: Iterable[int] = ()) -> list[MeasuredLoad]:
+def dongle_loads(
+    before: Mapping[str, LinkCount], after: Mapping[str, LinkCount], window_s: float, dongles: Iterable[int] = ()
+) -> list[MeasuredLoad]:
     """Each dongle's traffic between two samples of the links' counts (drone name -> :class:`LinkCount`), in dongle
     order; ``dongles``: dongles to report even with no link counted yet (zeros). A drone missing from ``before``
     counts from zero."""
@@ -137,7 +138,16 @@ def dongle_loads(before: Mapping[str, LinkCount], after: Mapping[str, LinkCount]
         transactions = now.transactions - (then.transactions if then is not None else 0.0)
         superseded = now.superseded - (then.superseded if then is not None else 0.0)
         per.setdefault(dongle_of(now.uri), []).append(
-            (name, max(0.0, packets), max(0.0, transactions), max(0.0, superseded)))
-    return [MeasuredLoad(dongle, tuple(row[0] for row in rows), window_s, sum(row[1] for row in rows),
-                         sum(row[2] for row in rows), sum(row[3] for row in rows))
-            for dongle, rows in sorted(per.items())]
+            (name, max(0.0, packets), max(0.0, transactions), max(0.0, superseded))
+        )
+    return [
+        MeasuredLoad(
+            dongle,
+            tuple(row[0] for row in rows),
+            window_s,
+            sum(row[1] for row in rows),
+            sum(row[2] for row in rows),
+            sum(row[3] for row in rows),
+        )
+        for dongle, rows in sorted(per.items())
+    ]

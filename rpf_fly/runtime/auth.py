@@ -53,8 +53,9 @@ def signed_by(key: bytes, payload: bytes, attachment: bytes | None) -> bool:
     return attachment is not None and len(attachment) > 0 and hmac.compare_digest(mac(key, payload), bytes(attachment))
 
 
-def sign(secret: str, flight: str, command: str, seq: int, reason: str = "",
-         grounded: tuple[str, ...] = ()) -> tuple[bytes, bytes]:
+def sign(
+    secret: str, flight: str, command: str, seq: int, reason: str = "", grounded: tuple[str, ...] = ()
+) -> tuple[bytes, bytes]:
     """The payload and its signature (the sample's attachment) of one command."""
     body = {"command": command, "seq": int(seq), "reason": reason, "t_ns": time.time_ns(), "flight": flight}
     if grounded:
@@ -80,7 +81,12 @@ class CommandVerifier:
             return None, "command with a wrong signature (not this flight's secret)"
         try:
             body = json.loads(payload)
-            command, seq, reason, flight = body["command"], int(body["seq"]), str(body.get("reason", "")), body["flight"]
+            command, seq, reason, flight = (
+                body["command"],
+                int(body["seq"]),
+                str(body.get("reason", "")),
+                body["flight"],
+            )
             grounded = body.get("grounded", [])
             if not isinstance(grounded, list) or not all(isinstance(n, str) for n in grounded):
                 raise TypeError("grounded")

@@ -87,8 +87,7 @@ class FlightBus:
         payload, signature = sign(secret, self.keys.flight, command, self._seq, reason, grounded)
         self.session.put(self.keys.command, payload, attachment=signature)
 
-    def on_commands(self, secret: str, obey: Callable[[Command], None],
-                    refuse: Callable[[str], None]) -> None:
+    def on_commands(self, secret: str, obey: Callable[[Command], None], refuse: Callable[[str], None]) -> None:
         """A worker: ``obey`` each command of its coordinator; ``refuse(why)`` each other one (a warning)."""
         verifier = CommandVerifier(secret, self.keys.flight)
 
@@ -111,6 +110,7 @@ class FlightBus:
 
     def subscribe(self, key: str, callback: Callable[[Any], None], remote_only: bool = False) -> Any:
         """A subscriber whose callback's exceptions are counted and logged, never raised into Zenoh."""
+
         def received(sample: Any) -> None:
             try:
                 callback(sample)

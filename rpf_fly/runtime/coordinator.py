@@ -65,12 +65,22 @@ class Coordinator(SwarmViews, MocapRelayProcess, SwarmPhases):
     (rpf_fly/runtime/swarm_views.py), the mocap relay's process (relay_process.py), the swarm's phases
     (swarm_phases.py); here: its processes, from start to end."""
 
-    def __init__(self, mission: Mission, mission_path: Path, log_path: Path, *, dry_run: bool,
-                 remote_dongles: tuple[int, ...] = (), listen: tuple[str, ...] = (),
-                 say: Callable[[str], None] = print, radio_loss: bool = True,
-                 remote_wait_s: float = REMOTE_WAIT_S, worker_args: tuple[str, ...] = (),
-                 status_hook: Callable[[Coordinator], None] | None = None,
-                 start_faults: Mapping[str, Any] | None = None):
+    def __init__(
+        self,
+        mission: Mission,
+        mission_path: Path,
+        log_path: Path,
+        *,
+        dry_run: bool,
+        remote_dongles: tuple[int, ...] = (),
+        listen: tuple[str, ...] = (),
+        say: Callable[[str], None] = print,
+        radio_loss: bool = True,
+        remote_wait_s: float = REMOTE_WAIT_S,
+        worker_args: tuple[str, ...] = (),
+        status_hook: Callable[[Coordinator], None] | None = None,
+        start_faults: Mapping[str, Any] | None = None,
+    ):
         """``start_faults``: a dry run's power-on faults (``DryRun(start_faults=...)``: a drone standing off its
         start, rotated, tumbled, with a failing motor), applied by the simulated drones themselves."""
         self.mission = mission
@@ -90,11 +100,16 @@ class Coordinator(SwarmViews, MocapRelayProcess, SwarmPhases):
         dongles = sorted({dongle_of(d.uri) for d in mission.drones})
         unknown = sorted(set(remote_dongles) - set(dongles))
         if unknown:
-            raise ValueError(f"--remote-dongles: the mission has no dongle {', '.join(map(str, unknown))} (its "
-                             f"dongles: {', '.join(map(str, dongles))})")
-        self.workers = {worker_name(k): WorkerView(worker_name(k), k, [d.name for d in mission.drones
-                                                                       if dongle_of(d.uri) == k], k in remote_dongles)
-                        for k in dongles}
+            raise ValueError(
+                f"--remote-dongles: the mission has no dongle {', '.join(map(str, unknown))} (its "
+                f"dongles: {', '.join(map(str, dongles))})"
+            )
+        self.workers = {
+            worker_name(k): WorkerView(
+                worker_name(k), k, [d.name for d in mission.drones if dongle_of(d.uri) == k], k in remote_dongles
+            )
+            for k in dongles
+        }
         if listen:
             self.listen = tuple(listen)
         elif mission.runtime.zenoh.listen:
@@ -145,9 +160,16 @@ class Coordinator(SwarmViews, MocapRelayProcess, SwarmPhases):
 
     def _serve_rig(self, query: Any) -> None:
         world = self.rig.world
-        query.reply(query.key_expr, json.dumps({
-            "radio": list(world.radio), "natnet_command_port": world.natnet_command_port,
-            "air_time_s": self.rig.timing.transaction_s}).encode())
+        query.reply(
+            query.key_expr,
+            json.dumps(
+                {
+                    "radio": list(world.radio),
+                    "natnet_command_port": world.natnet_command_port,
+                    "air_time_s": self.rig.timing.transaction_s,
+                }
+            ).encode(),
+        )
 
     # ------------------------------------------------------------------------------------------ the flight
 
@@ -155,7 +177,9 @@ class Coordinator(SwarmViews, MocapRelayProcess, SwarmPhases):
         """Fly the mission; the exit code (0 every drone reached its goal, 1 otherwise, 130 interrupted)."""
         from rpf_fly.flight.recording import McapRecorder
 
-        session = open_session(self.mission.runtime.zenoh, listen=self.listen, mode="router")  # ZenohUnavailable: nothing armed
+        session = open_session(
+            self.mission.runtime.zenoh, listen=self.listen, mode="router"
+        )  # ZenohUnavailable: nothing armed
         self.bus = bus = FlightBus(session, self.flight, COORDINATOR)
         keys = bus.keys
         self.events.subscribe(lambda e: self.recorder.event(e) if self.recorder is not None else None)
@@ -170,8 +194,13 @@ class Coordinator(SwarmViews, MocapRelayProcess, SwarmPhases):
             if self.dry_run:
                 self._start_rig(bus)
             truth = self.rig.truth_samples if self.rig is not None and self.rig.truth else None
-            self.recorder = McapRecorder(Path(f"zenoh-{self.flight}-coordinator"), self.mission,
-                                         source="dry-run" if self.dry_run else "flight", truth=truth, out=bus.out)
+            self.recorder = McapRecorder(
+                Path(f"zenoh-{self.flight}-coordinator"),
+                self.mission,
+                source="dry-run" if self.dry_run else "flight",
+                truth=truth,
+                out=bus.out,
+            )
             self._start_logger()
             self._start_relay()
             self._start_workers()
@@ -179,9 +208,19 @@ class Coordinator(SwarmViews, MocapRelayProcess, SwarmPhases):
                 self._command("abort", "not every worker is alive: nothing takes off")
                 self._end_workers()
                 return 1
-            bus.put_json("runtime", json.dumps({"flight_id": self.flight, "workers": [
-                {k: w.info.get(k) for k in ("name", "dongle", "host", "pid", "drones")} for w in
-                self.workers.values()], **self._relay_record()}).encode())
+            bus.put_json(
+                "runtime",
+                json.dumps(
+                    {
+                        "flight_id": self.flight,
+                        "workers": [
+                            {k: w.info.get(k) for k in ("name", "dongle", "host", "pid", "drones")}
+                            for w in self.workers.values()
+                        ],
+                        **self._relay_record(),
+                    }
+                ).encode(),
+            )
             self.started_s = time.monotonic()
             self._fly()
             self._end_workers()
@@ -194,52 +233,90 @@ class Coordinator(SwarmViews, MocapRelayProcess, SwarmPhases):
         from rpf_fly.flight.dry_run import RADIO_LOSS, DryRun, world_exit_report_for
 
         host = self.rig_host or "127.0.0.1"  # where the workers reach the coordinator, they reach the drones
-        self.rig = DryRun(self.mission, radio_loss=RADIO_LOSS if self.radio_loss else None,
-                          world_exit_report=world_exit_report_for(self.log_path), host=host,
-                          start_faults=self.start_faults).__enter__()
+        self.rig = DryRun(
+            self.mission,
+            radio_loss=RADIO_LOSS if self.radio_loss else None,
+            world_exit_report=world_exit_report_for(self.log_path),
+            host=host,
+            start_faults=self.start_faults,
+        ).__enter__()
         if not host.startswith("127."):
-            self.say(f"dry run: the simulated drones serve on {host} (radio udp/{self.rig.world.radio[1]}, NatNet "
-                     f"udp/{self.rig.world.natnet_command_port}), as Zenoh listens there")
+            self.say(
+                f"dry run: the simulated drones serve on {host} (radio udp/{self.rig.world.radio[1]}, NatNet "
+                f"udp/{self.rig.world.natnet_command_port}), as Zenoh listens there"
+            )
         if self.rig.mocap is not None:  # the workers receive the mocap; the coordinator needs none
             self.rig.mocap.close()
             self.rig.mocap = None
         bus._handles.append(bus.session.declare_queryable(bus.keys.rig, self._serve_rig))  # noqa: SLF001
 
     def _start_logger(self) -> None:
-        cmd = [sys.executable, "-m", "rpf_fly.runtime.logger", str(self.mission_path), "--flight", self.flight,
-               "--log", str(self.log_path), "--connect", self.local_endpoint,
-               "--source", "dry-run" if self.dry_run else "flight"]
+        cmd = [
+            sys.executable,
+            "-m",
+            "rpf_fly.runtime.logger",
+            str(self.mission_path),
+            "--flight",
+            self.flight,
+            "--log",
+            str(self.log_path),
+            "--connect",
+            self.local_endpoint,
+            "--source",
+            "dry-run" if self.dry_run else "flight",
+        ]
         self.logger_process = subprocess.Popen(cmd, stdin=subprocess.DEVNULL)
         deadline = time.monotonic() + LOGGER_WAIT_S
         while not self.logger_alive and time.monotonic() < deadline:
             if self.logger_process.poll() is not None:
-                raise StartError(f"the logger exited at start (code {self.logger_process.returncode}; see "
-                                 f"{self.log_path.stem}.logger.log): nothing armed")
+                raise StartError(
+                    f"the logger exited at start (code {self.logger_process.returncode}; see "
+                    f"{self.log_path.stem}.logger.log): nothing armed"
+                )
             self._wake.wait(0.1)
             self._wake.clear()
         if not self.logger_alive:
-            raise StartError(f"the logger did not come up within {LOGGER_WAIT_S:.0f} s (see "
-                             f"{self.log_path.stem}.logger.log): nothing armed")
+            raise StartError(
+                f"the logger did not come up within {LOGGER_WAIT_S:.0f} s (see "
+                f"{self.log_path.stem}.logger.log): nothing armed"
+            )
 
     def worker_command(self, dongle: int, endpoint: str) -> list[str]:
-        return ["worker", str(self.mission_path), "--dongle", str(dongle), "--flight", self.flight,
-                "--connect", endpoint] + (["--dry-run"] if self.dry_run else []) + list(self.worker_args)
+        return (
+            ["worker", str(self.mission_path), "--dongle", str(dongle), "--flight", self.flight, "--connect", endpoint]
+            + (["--dry-run"] if self.dry_run else [])
+            + list(self.worker_args)
+        )
 
     def _start_workers(self) -> None:
         for worker in self.workers.values():
             if worker.remote:
-                self.say(f"waiting for dongle {worker.dongle} ({', '.join(worker.drones)}): on its host run  "
-                         f"{SECRET_ENV}={self.secret} rpf-fly "
-                         + " ".join(self.worker_command(worker.dongle, "tcp/<this host>:" +
-                                                        self.listen[0].rsplit(':', 1)[-1])))
+                self.say(
+                    f"waiting for dongle {worker.dongle} ({', '.join(worker.drones)}): on its host run  "
+                    f"{SECRET_ENV}={self.secret} rpf-fly "
+                    + " ".join(
+                        self.worker_command(worker.dongle, "tcp/<this host>:" + self.listen[0].rsplit(":", 1)[-1])
+                    )
+                )
                 continue
             out = self.log_path.with_name(f"{self.log_path.stem}.{worker.name}.log")
-            env = dict(os.environ, **{SECRET_ENV: self.secret, "RPF_FLY_WORKER_LOG": str(
-                self.log_path.with_name(f"{self.log_path.stem}.{worker.name}.records.log"))})
+            env = dict(
+                os.environ,
+                **{
+                    SECRET_ENV: self.secret,
+                    "RPF_FLY_WORKER_LOG": str(
+                        self.log_path.with_name(f"{self.log_path.stem}.{worker.name}.records.log")
+                    ),
+                },
+            )
             with open(out, "ab") as handle:
                 worker.process = subprocess.Popen(
                     [sys.executable, "-m", "rpf_fly", *self.worker_command(worker.dongle, self.local_endpoint)],
-                    env=env, stdin=subprocess.DEVNULL, stdout=handle, stderr=subprocess.STDOUT)
+                    env=env,
+                    stdin=subprocess.DEVNULL,
+                    stdout=handle,
+                    stderr=subprocess.STDOUT,
+                )
 
     def _wait_workers(self) -> bool:
         start = time.monotonic()
@@ -249,8 +326,12 @@ class Coordinator(SwarmViews, MocapRelayProcess, SwarmPhases):
                 return True
             for w in missing:
                 if w.process is not None and w.process.poll() is not None:
-                    self.events.emit(ERROR, "worker", f"worker {w.name} exited at start (code {w.process.returncode}"
-                                     f"; see {self.log_path.stem}.{w.name}.log)")
+                    self.events.emit(
+                        ERROR,
+                        "worker",
+                        f"worker {w.name} exited at start (code {w.process.returncode}"
+                        f"; see {self.log_path.stem}.{w.name}.log)",
+                    )
                     return False
             waited = time.monotonic() - start
             local = [w for w in missing if not w.remote]
@@ -319,7 +400,8 @@ class Coordinator(SwarmViews, MocapRelayProcess, SwarmPhases):
         if self._interrupts:
             return 130
         ok = all(v.outcome == "reached" for v in self.drones.values()) and not any(
-            w.lost for w in self.workers.values())
+            w.lost for w in self.workers.values()
+        )
         return 0 if ok else 1
 
     def summary(self) -> list[str]:
@@ -327,11 +409,12 @@ class Coordinator(SwarmViews, MocapRelayProcess, SwarmPhases):
         for name, view in self.drones.items():
             lines.append(f"{name}: {view.outcome or view.state}")
         for w in self.workers.values():
-            latency = (w.info.get("latency") or {})
+            latency = w.info.get("latency") or {}
             if latency.get("latency_p50_s") is not None:
-                lines.append(f"{w.name}: mocap-to-setpoint latency p50 {latency['latency_p50_s'] * 1e3:.2f} ms "
-                             f"p99 {latency['latency_p99_s'] * 1e3:.2f} ms"
-                             + (" (lost)" if w.lost else ""))
+                lines.append(
+                    f"{w.name}: mocap-to-setpoint latency p50 {latency['latency_p50_s'] * 1e3:.2f} ms "
+                    f"p99 {latency['latency_p99_s'] * 1e3:.2f} ms" + (" (lost)" if w.lost else "")
+                )
             elif w.lost:
                 lines.append(f"{w.name}: lost")
         lines += self._relay_summary()

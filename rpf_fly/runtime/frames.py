@@ -71,15 +71,29 @@ class FrameSigner:
     def sign(self, frame: MocapFrame) -> tuple[bytes, bytes]:
         """The payload and its attachment (signature) of one frame."""
         self.seq += 1
-        bodies = [{"name": b.name, "id": int(b.id), "position": [float(v) for v in b.position],
-                   "quaternion": [float(v) for v in b.quaternion], "valid": bool(b.valid),
-                   "marker_error": float(b.marker_error)} for b in frame.bodies.values()]
-        payload = orjson.dumps({
-            "flight": self._flight, "seq": self.seq, "frame_number": int(frame.frame_number),
-            "capture_time_s": float(frame.capture_time_s),
-            "latency_s": None if frame.latency_s is None else float(frame.latency_s),
-            "relay_receive_ns": round(frame.receive_time_s * 1e9) + self._offset_ns,
-            "relay_publish_ns": time.time_ns(), "bodies": bodies})
+        bodies = [
+            {
+                "name": b.name,
+                "id": int(b.id),
+                "position": [float(v) for v in b.position],
+                "quaternion": [float(v) for v in b.quaternion],
+                "valid": bool(b.valid),
+                "marker_error": float(b.marker_error),
+            }
+            for b in frame.bodies.values()
+        ]
+        payload = orjson.dumps(
+            {
+                "flight": self._flight,
+                "seq": self.seq,
+                "frame_number": int(frame.frame_number),
+                "capture_time_s": float(frame.capture_time_s),
+                "latency_s": None if frame.latency_s is None else float(frame.latency_s),
+                "relay_receive_ns": round(frame.receive_time_s * 1e9) + self._offset_ns,
+                "relay_publish_ns": time.time_ns(),
+                "bodies": bodies,
+            }
+        )
         return payload, mac(self._key, payload)
 
 
@@ -118,12 +132,20 @@ class FrameVerifier:
                 if not isinstance(name, str) or not name:
                     raise ValueError("body name: expected text")
                 bodies[name] = RigidBodyPose(
-                    name, _int(item["id"], "id"), _vec3(item["position"], "position"),
-                    _quat(item["quaternion"], "quaternion"), bool(item["valid"]),
-                    _number(item["marker_error"], "marker_error"))
-            frame = MocapFrame(_int(body["frame_number"], "frame_number"),
-                               _number(body["capture_time_s"], "capture_time_s"), receive_time_s,
-                               None if latency is None else _number(latency, "latency_s"), bodies)
+                    name,
+                    _int(item["id"], "id"),
+                    _vec3(item["position"], "position"),
+                    _quat(item["quaternion"], "quaternion"),
+                    bool(item["valid"]),
+                    _number(item["marker_error"], "marker_error"),
+                )
+            frame = MocapFrame(
+                _int(body["frame_number"], "frame_number"),
+                _number(body["capture_time_s"], "capture_time_s"),
+                receive_time_s,
+                None if latency is None else _number(latency, "latency_s"),
+                bodies,
+            )
             relay_ns = _int(body["relay_receive_ns"], "relay_receive_ns")
         except KeyError as err:
             return Verdict(None, f"malformed mocap frame (no {err.args[0]!r})", malformed=True)

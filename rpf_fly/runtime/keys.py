@@ -74,7 +74,7 @@ class FlightKeys:
     def suffix_of(self, key: str) -> str | None:
         """``rpf_fly/<flight>/setpoint/cf1`` -> ``setpoint/cf1``; None for another flight's key."""
         head = self.prefix + "/"
-        return key[len(head):] if key.startswith(head) else None
+        return key[len(head) :] if key.startswith(head) else None
 
 
 COORDINATOR = "coordinator"

@@ -140,14 +140,22 @@ def main(argv: list[str] | None = None) -> int:
                     break
         finally:
             flight_logger.close()
-            bus.put_json(f"workers/{LOGGER}", json.dumps({
-                "name": LOGGER, "state": "done", "cpu_s": time.process_time(), "written": flight_logger.received,
-                "cpu_pct": _share(flight_logger.first_at),
-                "dropped": flight_logger.dropped}).encode())
+            bus.put_json(
+                f"workers/{LOGGER}",
+                json.dumps(
+                    {
+                        "name": LOGGER,
+                        "state": "done",
+                        "cpu_s": time.process_time(),
+                        "written": flight_logger.received,
+                        "cpu_pct": _share(flight_logger.first_at),
+                        "dropped": flight_logger.dropped,
+                    }
+                ).encode(),
+            )
             time.sleep(0.1)
             bus.close()
-        logger.info("logger: %d messages written, %d malformed dropped", flight_logger.received,
-                    flight_logger.dropped)
+        logger.info("logger: %d messages written, %d malformed dropped", flight_logger.received, flight_logger.dropped)
     return 0
 
 

@@ -72,8 +72,11 @@ def describe_source(mission: Mission, dry_run: bool) -> str:
     """What the relay reads, for its record and the console."""
     m = mission.mocap
     if dry_run:
-        return ("the dry run's NatNet emulator (multicast, through the motioncapture package's OptiTrack decoder)"
-                if m.kind == "motioncapture" else "the dry run's NatNet emulator (unicast)")
+        return (
+            "the dry run's NatNet emulator (multicast, through the motioncapture package's OptiTrack decoder)"
+            if m.kind == "motioncapture"
+            else "the dry run's NatNet emulator (unicast)"
+        )
     if m.kind == "motioncapture":
         return f"motioncapture {m.system}" + (f" at {m.hostname}" if m.hostname else "")
     return f"NatNet {m.server} ({'multicast' if m.multicast else 'unicast'})"
@@ -84,8 +87,17 @@ class FrameRelay:
     ``signed`` (the workers fly on it), and each drone's valid pose on ``mocap/<drone>`` (``drones``: rigid body
     name -> drone name; ``offset_ns``: this process's Unix-epoch ns minus its monotonic ns)."""
 
-    def __init__(self, bus: Any, source: Any, secret: str, event: Callable[[int, str], None], *,
-                 signed: bool = True, drones: dict[str, str] | None = None, offset_ns: int = 0):
+    def __init__(
+        self,
+        bus: Any,
+        source: Any,
+        secret: str,
+        event: Callable[[int, str], None],
+        *,
+        signed: bool = True,
+        drones: dict[str, str] | None = None,
+        offset_ns: int = 0,
+    ):
         import zenoh
 
         from rpf_fly.runtime.frames import FrameSigner
@@ -100,8 +112,11 @@ class FrameRelay:
         # Mocap is the flight's most urgent data: sent at once (express, no batching), ahead of the other
         # priorities; a congested link drops a frame (the next one supersedes it) rather than delay the relay.
         self.publisher = bus.session.declare_publisher(
-            bus.keys.mocap_frames, congestion_control=zenoh.CongestionControl.DROP, priority=zenoh.Priority.REAL_TIME,
-            express=True)
+            bus.keys.mocap_frames,
+            congestion_control=zenoh.CongestionControl.DROP,
+            priority=zenoh.Priority.REAL_TIME,
+            express=True,
+        )
         self.published = 0
         self.failed = 0
         self.first_at: tuple[float, float] | None = None
@@ -196,8 +211,9 @@ def main(argv: list[str] | None = None) -> int:
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     secret = os.environ.get(SECRET_ENV, "")
     if len(secret) < 32:
-        print(f"relay: {SECRET_ENV}: the flight's secret is missing (the coordinator starts the relay)",
-              file=sys.stderr)
+        print(
+            f"relay: {SECRET_ENV}: the flight's secret is missing (the coordinator starts the relay)", file=sys.stderr
+        )
         return 2
     log_path = Path(args.log)
     with route_logging(log_path.with_name(log_path.stem + ".relay.log"), False):
@@ -214,13 +230,23 @@ def main(argv: list[str] | None = None) -> int:
         def event(level: int, message: str) -> None:
             t_ns = time.monotonic_ns() + offset_ns
             logger.log(10 * level, "relay: %s", message)
-            bus.out("/events", t_ns, t_ns, encode(log_message(t_ns, level, message, name=RELAY,
-                                                              file="mocap_relay")))
+            bus.out("/events", t_ns, t_ns, encode(log_message(t_ns, level, message, name=RELAY, file="mocap_relay")))
 
         def info(state: str, **extra: Any) -> None:
-            bus.put_json(f"workers/{RELAY}", json.dumps({
-                "name": RELAY, "host": socket.gethostname(), "pid": os.getpid(), "state": state,
-                "source": what, "key": bus.keys.mocap_frames, **extra}).encode())
+            bus.put_json(
+                f"workers/{RELAY}",
+                json.dumps(
+                    {
+                        "name": RELAY,
+                        "host": socket.gethostname(),
+                        "pid": os.getpid(),
+                        "state": state,
+                        "source": what,
+                        "key": bus.keys.mocap_frames,
+                        **extra,
+                    }
+                ).encode(),
+            )
 
         alive: set[str] = set()
         seen = {"coordinator": False}
@@ -239,21 +265,33 @@ def main(argv: list[str] | None = None) -> int:
             bus.close()
             return 2
         signed = uses_relay(mission)
-        relay = FrameRelay(bus, source, secret, event, signed=signed, offset_ns=offset_ns,
-                           drones={d.rigid_body: d.name for d in mission.drones})
+        relay = FrameRelay(
+            bus,
+            source,
+            secret,
+            event,
+            signed=signed,
+            offset_ns=offset_ns,
+            drones={d.rigid_body: d.name for d in mission.drones},
+        )
         try:
             bus.watch_alive(bus.keys.alive_all, changed)
             info("relaying")
             bus.token(RELAY)
-            event(2, f"relaying {what} to the workers on {bus.keys.mocap_frames}" if signed else
-                  f"publishing {what}'s poses for the log on mocap/<drone> (the workers read their own mocap)")
+            event(
+                2,
+                f"relaying {what} to the workers on {bus.keys.mocap_frames}"
+                if signed
+                else f"publishing {what}'s poses for the log on mocap/<drone> (the workers read their own mocap)",
+            )
             relay.run(stop, gone)
         finally:
             stats = source.stats
             source.close()
             relay.close()
-            info("done", frames=relay.published, cpu_s=time.process_time(), cpu_pct=relay.cpu_pct(),
-                 mocap=asdict(stats))
+            info(
+                "done", frames=relay.published, cpu_s=time.process_time(), cpu_pct=relay.cpu_pct(), mocap=asdict(stats)
+            )
             time.sleep(0.1)  # the last record leaves before the session closes
             bus.close()
         logger.info("relay: %d frames published", relay.published)

@@ -54,12 +54,24 @@ class MocapRelayProcess:
     def _start_relay(self) -> None:
         """Start the mocap relay (rpf_fly/runtime/relay.py) and wait for its token before any worker starts;
         :class:`RelayError` (one line: the relay's own reason when it exited) if it never comes."""
-        cmd = [sys.executable, "-m", "rpf_fly.runtime.relay", str(self.mission_path), "--flight", self.flight,
-               "--log", str(self.log_path), "--connect", self.local_endpoint] + (["--dry-run"] if self.dry_run else [])
-        self.relay_process = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stderr=subprocess.PIPE,
-                                              env=dict(os.environ, **{SECRET_ENV: self.secret}))
-        threading.Thread(target=self._relay_stderr, args=(self.relay_process,), name="relay-stderr",
-                         daemon=True).start()
+        cmd = [
+            sys.executable,
+            "-m",
+            "rpf_fly.runtime.relay",
+            str(self.mission_path),
+            "--flight",
+            self.flight,
+            "--log",
+            str(self.log_path),
+            "--connect",
+            self.local_endpoint,
+        ] + (["--dry-run"] if self.dry_run else [])
+        self.relay_process = subprocess.Popen(
+            cmd, stdin=subprocess.DEVNULL, stderr=subprocess.PIPE, env=dict(os.environ, **{SECRET_ENV: self.secret})
+        )
+        threading.Thread(
+            target=self._relay_stderr, args=(self.relay_process,), name="relay-stderr", daemon=True
+        ).start()
         deadline = time.monotonic() + RELAY_WAIT_S
         while not self.relay_alive and time.monotonic() < deadline:
             code = self.relay_process.poll()
@@ -70,11 +82,15 @@ class MocapRelayProcess:
             self._wake.wait(0.1)
             self._wake.clear()
         if not self.relay_alive:
-            raise RelayError(f"the mocap relay did not come up within {RELAY_WAIT_S:.0f} s (see "
-                             f"{self.log_path.stem}.relay.log); nothing armed")
+            raise RelayError(
+                f"the mocap relay did not come up within {RELAY_WAIT_S:.0f} s (see "
+                f"{self.log_path.stem}.relay.log); nothing armed"
+            )
         if self.relayed:
-            self.say(f"mocap relay up (pid {self.relay_process.pid}): the workers fly on its frames "
-                     f"({self.bus.keys.mocap_frames if self.bus is not None else 'mocap_frames'})")
+            self.say(
+                f"mocap relay up (pid {self.relay_process.pid}): the workers fly on its frames "
+                f"({self.bus.keys.mocap_frames if self.bus is not None else 'mocap_frames'})"
+            )
         else:
             self.say(f"mocap relay up (pid {self.relay_process.pid}): the log's mocap; the workers read their own")
 
@@ -95,19 +111,30 @@ class MocapRelayProcess:
             if not self._closing:
                 pid, host = self.relay_info.get("pid", "?"), self.relay_info.get("host", "?")
                 if self.relayed:  # no worker sees anything any more: land now, not once each pose is stale
-                    self.events.emit(FATAL, "relay_lost", f"the mocap relay (pid {pid} on {host}) is gone: the "
-                                     "workers get no mocap; every drone lands")
+                    self.events.emit(
+                        FATAL,
+                        "relay_lost",
+                        f"the mocap relay (pid {pid} on {host}) is gone: the workers get no mocap; every drone lands",
+                    )
                     self._stop_reason = self._stop_reason or "the mocap relay is gone: landing every drone"
                 else:
-                    self.events.emit(WARNING, "relay_lost", f"the mocap relay (pid {pid} on {host}) is gone: the "
-                                     "workers fly on their own mocap; the log's /mocap ends here")
+                    self.events.emit(
+                        WARNING,
+                        "relay_lost",
+                        f"the mocap relay (pid {pid} on {host}) is gone: the "
+                        "workers fly on their own mocap; the log's /mocap ends here",
+                    )
         self._wake.set()
 
     def _relay_record(self) -> dict[str, Any]:
         """The ``runtime`` record's ``relay`` (the log's metadata): the process, and whether the workers fly on its
         frames (``relayed``; else it publishes the log's mocap only)."""
-        return {"relay": {**{k: self.relay_info.get(k) for k in ("name", "host", "pid", "source", "key")},
-                          "relayed": self.relayed}}
+        return {
+            "relay": {
+                **{k: self.relay_info.get(k) for k in ("name", "host", "pid", "source", "key")},
+                "relayed": self.relayed,
+            }
+        }
 
     def _stop_relay(self) -> None:
         process = self.relay_process
@@ -125,10 +152,15 @@ class MocapRelayProcess:
         """The relay's line: frames relayed, its CPU, and each worker's hop from the relay's receipt to its own."""
         if not self.relay_info:
             return []
-        hops = [f"{w.name} p50 {w.info['relay_transit_p50_s'] * 1e3:.2f} ms p99 "
-                f"{w.info['relay_transit_p99_s'] * 1e3:.2f} ms" for w in self.workers.values()
-                if w.info.get("relay_transit_p50_s") is not None]
+        hops = [
+            f"{w.name} p50 {w.info['relay_transit_p50_s'] * 1e3:.2f} ms p99 "
+            f"{w.info['relay_transit_p99_s'] * 1e3:.2f} ms"
+            for w in self.workers.values()
+            if w.info.get("relay_transit_p50_s") is not None
+        ]
         cpu = self.relay_info.get("cpu_pct")
-        return [f"relay: {self.relay_info.get('frames', 0)} frames"
-                + (f", {cpu:.1f} % of a core" if cpu is not None else "")
-                + (f"; relay to worker: {', '.join(hops)}" if hops else "")]
+        return [
+            f"relay: {self.relay_info.get('frames', 0)} frames"
+            + (f", {cpu:.1f} % of a core" if cpu is not None else "")
+            + (f"; relay to worker: {', '.join(hops)}" if hops else "")
+        ]

@@ -38,8 +38,7 @@ class RelayedMocap:
     """The flight's relayed mocap frames, verified with its secret. ``warn(message)``: where refusals are reported
     (the worker sets it to its loop's events once the loop exists; Python's logging always gets them too)."""
 
-    def __init__(self, session: Any, key: str, secret: str, flight: str,
-                 warn: Callable[[str], None] | None = None):
+    def __init__(self, session: Any, key: str, secret: str, flight: str, warn: Callable[[str], None] | None = None):
         self.key = key
         self.warn = warn
         self._verifier = FrameVerifier(secret, flight)
@@ -140,6 +139,7 @@ class RelayedMocap:
     def __enter__(self) -> RelayedMocap:
         return self
 
-    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
-                 tb: TracebackType | None) -> None:
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
         self.close()

@@ -62,8 +62,10 @@ def rig_host(listen: Sequence[str]) -> str:
     if host in ("0.0.0.0", "::", ""):
         return "0.0.0.0"
     if ":" in host:
-        raise ValueError(f"--listen {listen[0]}: a dry run's simulated drones serve IPv4 only: listen on an IPv4 "
-                         "address (or 0.0.0.0) first")
+        raise ValueError(
+            f"--listen {listen[0]}: a dry run's simulated drones serve IPv4 only: listen on an IPv4 "
+            "address (or 0.0.0.0) first"
+        )
     try:
         return socket.gethostbyname(host)
     except OSError as err:
@@ -79,8 +81,9 @@ def rig_address(advertised: str, connect: Sequence[str]) -> str:
     return "127.0.0.1" if host is None or host in ("0.0.0.0", "::", "", "localhost", "::1") else host
 
 
-def zenoh_config(settings: ZenohSettings, *, connect: Sequence[str] = (), listen: Sequence[str] = (),
-                 mode: str | None = None) -> Any:
+def zenoh_config(
+    settings: ZenohSettings, *, connect: Sequence[str] = (), listen: Sequence[str] = (), mode: str | None = None
+) -> Any:
     """A ``zenoh.Config``: the mission's config file when it names one (TLS, access control: untouched), then the
     mission's settings on top, with the command line's endpoints replacing its own."""
     import zenoh
@@ -100,8 +103,9 @@ def zenoh_config(settings: ZenohSettings, *, connect: Sequence[str] = (), listen
     return config
 
 
-def open_session(settings: ZenohSettings, *, connect: Sequence[str] = (), listen: Sequence[str] = (),
-                 mode: str | None = None) -> Any:
+def open_session(
+    settings: ZenohSettings, *, connect: Sequence[str] = (), listen: Sequence[str] = (), mode: str | None = None
+) -> Any:
     """Open the session; :class:`ZenohUnavailable` with one line if it cannot (nothing has been armed)."""
     import zenoh
 

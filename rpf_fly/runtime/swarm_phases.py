@@ -41,8 +41,11 @@ class SwarmPhases:
 
     def _command(self, command: str, reason: str = "", grounded: tuple[str, ...] = ()) -> None:
         assert self.bus is not None
-        self.events.emit(INFO if command in ("go", "takeoff", "finish") else WARNING, "command", f"{command}"
-                         f"{': ' + reason if reason else ''}")
+        self.events.emit(
+            INFO if command in ("go", "takeoff", "finish") else WARNING,
+            "command",
+            f"{command}{': ' + reason if reason else ''}",
+        )
         self.bus.command(self.secret, command, reason, grounded)
 
     def _live(self) -> list[WorkerView]:
@@ -91,23 +94,37 @@ class SwarmPhases:
                     self._command("abort", f"preflight failed for {', '.join(failed)}: no drone takes off")
                     self.phase = "aborted"
                 else:  # the failed stay down; the go names them, each worker keeps down its drones beside them
-                    self._command("go", f"every worker finished its preflight; {', '.join(failed)} stay on the "
-                                  "ground, with every drone that could not take off or land beside them" if failed
-                                  else "every worker passed its preflight", tuple(failed))
+                    self._command(
+                        "go",
+                        f"every worker finished its preflight; {', '.join(failed)} stay on the "
+                        "ground, with every drone that could not take off or land beside them"
+                        if failed
+                        else "every worker passed its preflight",
+                        tuple(failed),
+                    )
                     self.phase = "arming"
                     arming_since = now
             elif self.phase == "arming":
                 if all(w.info.get("state") == "armed" for w in live):
                     down = self._grounded_at_takeoff(live)
-                    self._command("takeoff", "every worker armed" + (
-                        f"; {', '.join(down)} stay on the ground, with every drone that could not take off or land "
-                        "beside them" if down else ""), tuple(down))
+                    self._command(
+                        "takeoff",
+                        "every worker armed"
+                        + (
+                            f"; {', '.join(down)} stay on the ground, with every drone that could not take off or land "
+                            "beside them"
+                            if down
+                            else ""
+                        ),
+                        tuple(down),
+                    )
                     self.phase = "flying"
                     self.events.emit(INFO, "phase", "swarm: flying")
                 elif now - arming_since > ARM_WAIT_S:
                     waiting = [w.name for w in live if w.info.get("state") != "armed"]
-                    self._command("abort", f"{', '.join(waiting)} did not arm within {ARM_WAIT_S:.0f} s: no drone "
-                                  "takes off")
+                    self._command(
+                        "abort", f"{', '.join(waiting)} did not arm within {ARM_WAIT_S:.0f} s: no drone takes off"
+                    )
                     self.phase = "aborted"
             elif self.phase == "flying":
                 if states and all(s == "arrived" or s in DOWN_STATES for s in states) and "arrived" in states:

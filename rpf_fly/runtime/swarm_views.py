@@ -27,6 +27,7 @@ logger = logging.getLogger(__name__)
 class DroneView:
     """What the coordinator knows of one drone: its status messages (state, outcome, battery, link), where its
     worker's ``tf`` last put it, and the reason its worker gave at the end."""
+
     state: str = "connecting"
     outcome: str | None = None
     battery_v: float | None = None
@@ -80,13 +81,23 @@ class SwarmViews:
         rows = []
         for name, view in self.drones.items():
             worker, pos = worker_of[name], view.position
-            reason = view.reason or (f"worker {worker.name} lost: left to its firmware's watchdog" if worker.lost
-                                     else "")
-            rows.append({"name": name, "phase": view.state, "position": pos,
-                         "goal_distance": abs(self._goals[name] - complex(pos[0], pos[1])) if pos is not None
-                         else None,
-                         "battery_v": view.battery_v, "link_pct": view.link_pct, "reason": reason,
-                         "outcome": view.outcome, "worker": worker.name, "lost": worker.lost})
+            reason = view.reason or (
+                f"worker {worker.name} lost: left to its firmware's watchdog" if worker.lost else ""
+            )
+            rows.append(
+                {
+                    "name": name,
+                    "phase": view.state,
+                    "position": pos,
+                    "goal_distance": abs(self._goals[name] - complex(pos[0], pos[1])) if pos is not None else None,
+                    "battery_v": view.battery_v,
+                    "link_pct": view.link_pct,
+                    "reason": reason,
+                    "outcome": view.outcome,
+                    "worker": worker.name,
+                    "lost": worker.lost,
+                }
+            )
         return rows
 
     def _show(self) -> None:
@@ -159,8 +170,12 @@ class SwarmViews:
         if name == LOGGER:
             self.logger_alive = alive
             if not alive and self.phase not in ("done",) and not self._closing:
-                self.events.emit(ERROR, "logger", "the logger is gone: the flight goes on, the log ends here "
-                                 f"(rpf-fly review --salvage {self.log_path})")
+                self.events.emit(
+                    ERROR,
+                    "logger",
+                    "the logger is gone: the flight goes on, the log ends here "
+                    f"(rpf-fly review --salvage {self.log_path})",
+                )
             self._wake.set()
             return
         worker = self.workers.get(name)
@@ -174,7 +189,10 @@ class SwarmViews:
                 worker.lost = True
                 pid = worker.info.get("pid", "?")
                 host = worker.info.get("host", "?")
-                self.events.emit(FATAL, "worker_lost",
-                                 f"worker {name} (dongle {worker.dongle}, pid {pid} on {host}) is gone: its drones "
-                                 f"{', '.join(worker.drones)} are left to their firmware's watchdog; the others fly on")
+                self.events.emit(
+                    FATAL,
+                    "worker_lost",
+                    f"worker {name} (dongle {worker.dongle}, pid {pid} on {host}) is gone: its drones "
+                    f"{', '.join(worker.drones)} are left to their firmware's watchdog; the others fly on",
+                )
         self._wake.set()

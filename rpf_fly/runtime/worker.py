@@ -74,8 +74,11 @@ def logging_cpu(since: tuple[float, float | None], metered: MeteredRecorder, rec
     wall0, zenoh0 = since
     span = time.monotonic() - wall0
     zenoh1 = zenoh_threads_cpu_s(ZENOH_SENDING)
-    parts = {"loop_pct": metered.cpu_s, "writer_pct": recorder.log.writer_cpu_s,
-             "zenoh_pct": None if zenoh0 is None or zenoh1 is None else zenoh1 - zenoh0}
+    parts = {
+        "loop_pct": metered.cpu_s,
+        "writer_pct": recorder.log.writer_cpu_s,
+        "zenoh_pct": None if zenoh0 is None or zenoh1 is None else zenoh1 - zenoh0,
+    }
     out: dict[str, Any] = {k: None if v is None else round(100 * v / span, 3) for k, v in parts.items()}
     out["total_pct"] = round(100 * sum(v for v in parts.values() if v is not None) / span, 3)
     out["span_s"] = round(span, 1)
@@ -84,8 +87,15 @@ def logging_cpu(since: tuple[float, float | None], metered: MeteredRecorder, rec
 
 
 def worker_info(mission: Mission, dongle: int, state: str, **extra: Any) -> dict[str, Any]:
-    return {"name": worker_name(dongle), "dongle": dongle, "host": socket.gethostname(), "pid": os.getpid(),
-            "drones": dongle_drones(mission, dongle), "state": state, **extra}
+    return {
+        "name": worker_name(dongle),
+        "dongle": dongle,
+        "host": socket.gethostname(),
+        "pid": os.getpid(),
+        "drones": dongle_drones(mission, dongle),
+        "state": state,
+        **extra,
+    }
 
 
 class CoordinatorLink:
@@ -190,8 +200,10 @@ def discover_flight(session: Any, timeout_s: float = COORDINATOR_WAIT_S) -> str:
         if len(flights) > 1:
             raise WorkerError(f"several flights reachable ({', '.join(sorted(flights))}): give --flight")
         if time.monotonic() > deadline:
-            raise WorkerError(f"no coordinator reachable within {timeout_s:.0f} s (start `rpf-fly fly MISSION "
-                              "--distributed` first; is --connect right?)")
+            raise WorkerError(
+                f"no coordinator reachable within {timeout_s:.0f} s (start `rpf-fly fly MISSION "
+                "--distributed` first; is --connect right?)"
+            )
         time.sleep(0.2)
 
 
@@ -207,8 +219,10 @@ def find_rig(bus: FlightBus) -> dict[str, Any]:
         if rig is None:
             time.sleep(0.2)
     if rig is None:
-        raise WorkerError(f"flight {bus.keys.flight!r}: the coordinator serves no dry-run rig (is it a dry run? "
-                          "start the worker with --dry-run only for one)")
+        raise WorkerError(
+            f"flight {bus.keys.flight!r}: the coordinator serves no dry-run rig (is it a dry run? "
+            "start the worker with --dry-run only for one)"
+        )
     return rig
 
 
@@ -220,9 +234,11 @@ def relay_transit(source: Any, since_s: float) -> dict[str, Any]:
     if not transit:
         return {}
     ordered = sorted(transit)
-    return {"relay_transit_p50_s": ordered[len(ordered) // 2],
-            "relay_transit_p99_s": ordered[min(len(ordered) - 1, round(0.99 * (len(ordered) - 1)))],
-            "relay_transit_us": [round(v * 1e6) for v in transit]}
+    return {
+        "relay_transit_p50_s": ordered[len(ordered) // 2],
+        "relay_transit_p99_s": ordered[min(len(ordered) - 1, round(0.99 * (len(ordered) - 1)))],
+        "relay_transit_us": [round(v * 1e6) for v in transit],
+    }
 
 
 def rig_mocap(mission: Mission, rig: dict[str, Any], host: str) -> Any:
@@ -235,12 +251,19 @@ def rig_mocap(mission: Mission, rig: dict[str, Any], host: str) -> Any:
 
     if mission.mocap.kind == "motioncapture":
         try:
-            return emulator_motioncapture_source(host, int(rig["natnet_command_port"]), mission.mocap.up_axis,
-                                                 [d.rigid_body for d in mission.drones])
+            return emulator_motioncapture_source(
+                host, int(rig["natnet_command_port"]), mission.mocap.up_axis, [d.rigid_body for d in mission.drones]
+            )
         except Exception as err:  # noqa: BLE001 - the library's own words, in one line
             raise WorkerError(f"dry run: the motioncapture package could not read the emulator: {err}") from err
-    client = NatNetClient(host, multicast=False, local_ip=client_ip(host),
-                          command_port=int(rig["natnet_command_port"]), data_port=None, up_axis=mission.mocap.up_axis)
+    client = NatNetClient(
+        host,
+        multicast=False,
+        local_ip=client_ip(host),
+        command_port=int(rig["natnet_command_port"]),
+        data_port=None,
+        up_axis=mission.mocap.up_axis,
+    )
     if not client.wait_for_server(5.0):
         client.close()
         raise WorkerError("dry run: the coordinator's NatNet emulator did not answer within 5 s")
@@ -274,8 +297,10 @@ class WorkerRun:
         names = dongle_drones(self.mission, self.dongle)
         if not names:
             dongles = sorted({dongle_of(d.uri) for d in self.mission.drones})
-            raise WorkerError(f"--dongle {self.dongle}: no drone of the mission is on it (its dongles: "
-                              f"{', '.join(map(str, dongles))})")
+            raise WorkerError(
+                f"--dongle {self.dongle}: no drone of the mission is on it (its dongles: "
+                f"{', '.join(map(str, dongles))})"
+            )
         session = self.session or open_session(self.mission.runtime.zenoh, connect=self.connect)
         if not self.flight:
             try:
@@ -287,26 +312,44 @@ class WorkerRun:
         name = worker_name(self.dongle)
         bus = FlightBus(session, self.flight, name)
         try:
+
             def info(state: str, **extra: Any) -> None:
-                bus.put_json(f"workers/{name}", json.dumps(worker_info(self.mission, self.dongle, state,
-                                                                       **extra)).encode())
+                bus.put_json(
+                    f"workers/{name}", json.dumps(worker_info(self.mission, self.dongle, state, **extra)).encode()
+                )
 
             link = CoordinatorLink(bus, info)
             bus.watch_alive(bus.keys.alive(COORDINATOR), link.alive_changed)
             if not link.coordinator_seen.wait(COORDINATOR_WAIT_S):
-                raise WorkerError(f"no coordinator of flight {self.flight!r} within {COORDINATOR_WAIT_S:.0f} s "
-                                  f"(start `rpf-fly fly MISSION --distributed` first; is --connect right?)")
+                raise WorkerError(
+                    f"no coordinator of flight {self.flight!r} within {COORDINATOR_WAIT_S:.0f} s "
+                    f"(start `rpf-fly fly MISSION --distributed` first; is --connect right?)"
+                )
             bus.on_commands(self.secret, link.obey, link.refuse)
             backend, source, uris = self._rig(bus)
             logging_since = (time.monotonic(), zenoh_threads_cpu_s(ZENOH_SENDING))
-            recorder = McapRecorder(Path(f"zenoh-{self.flight}-{name}"), self.mission,
-                                    source="dry-run" if self.dry_run else "flight", out=bus.out,
-                                    radio=backend.radio_counts, radio_dongles=(self.dongle,), mocap=False)
+            recorder = McapRecorder(
+                Path(f"zenoh-{self.flight}-{name}"),
+                self.mission,
+                source="dry-run" if self.dry_run else "flight",
+                out=bus.out,
+                radio=backend.radio_counts,
+                radio_dongles=(self.dongle,),
+                mocap=False,
+            )
             metered = MeteredRecorder(recorder)
             try:
-                loop = FlightLoop(self.mission, backend, source, self.planner_factory, uris=uris,
-                                  recorder=metered, drones=names, swarm=link,
-                                  tick_offset=tick_offset(self.mission, self.dongle))
+                loop = FlightLoop(
+                    self.mission,
+                    backend,
+                    source,
+                    self.planner_factory,
+                    uris=uris,
+                    recorder=metered,
+                    drones=names,
+                    swarm=link,
+                    tick_offset=tick_offset(self.mission, self.dongle),
+                )
             except BaseException:
                 recorder.close()
                 raise
@@ -326,14 +369,19 @@ class WorkerRun:
             report = loop.run()
             wall0, cpu0 = link.go_at or (time.monotonic(), time.process_time())
             flown_s = time.monotonic() - wall0
-            info("done", outcomes={n: o.value for n, o in report.outcomes.items()},
-                 reasons={n: r for n, r in report.reasons.items() if r},
-                 latency=report.stats.summary(), cpu_s=time.process_time(),
-                 cpu_pct=round(100 * (time.process_time() - cpu0) / flown_s, 1) if flown_s > 0 else None,
-                 publish_cpu_pct=round(100 * recorder.log.writer_cpu_s / flown_s, 2) if flown_s > 0 else None,
-                 logging_cpu=logging_cpu(logging_since, metered, recorder),
-                 latencies_us=[round(v * 1e6) for v in report.stats.latencies],
-                 mocap=asdict(source.stats), **relay_transit(source, wall0))
+            info(
+                "done",
+                outcomes={n: o.value for n, o in report.outcomes.items()},
+                reasons={n: r for n, r in report.reasons.items() if r},
+                latency=report.stats.summary(),
+                cpu_s=time.process_time(),
+                cpu_pct=round(100 * (time.process_time() - cpu0) / flown_s, 1) if flown_s > 0 else None,
+                publish_cpu_pct=round(100 * recorder.log.writer_cpu_s / flown_s, 2) if flown_s > 0 else None,
+                logging_cpu=logging_cpu(logging_since, metered, recorder),
+                latencies_us=[round(v * 1e6) for v in report.stats.latencies],
+                mocap=asdict(source.stats),
+                **relay_transit(source, wall0),
+            )
             time.sleep(0.2)  # the last messages leave before the session closes
             return report
         finally:
@@ -349,8 +397,10 @@ class WorkerRun:
         source = RelayedMocap(bus.session, bus.keys.mocap_frames, self.secret, bus.keys.flight)
         self._closers.append(source.close)
         if not source.wait_first(RELAY_FRAME_WAIT_S):
-            raise WorkerError(f"no mocap frame from the flight's relay within {RELAY_FRAME_WAIT_S:.0f} s (on "
-                              f"{bus.keys.mocap_frames}; is alive/relay up, is RPF_FLY_SECRET this flight's?)")
+            raise WorkerError(
+                f"no mocap frame from the flight's relay within {RELAY_FRAME_WAIT_S:.0f} s (on "
+                f"{bus.keys.mocap_frames}; is alive/relay up, is RPF_FLY_SECRET this flight's?)"
+            )
         return source
 
     def _rig(self, bus: FlightBus) -> tuple[Any, Any, dict[str, str] | None]:
@@ -378,8 +428,13 @@ class WorkerRun:
         rig = find_rig(bus)
         addresses = tuple(uri_address(d.uri) for d in self.mission.drones)
         host = rig_address(str(rig["radio"][0]), self.connect or self.mission.runtime.zenoh.connect)
-        fake_radio.register(RemoteWorld((host, int(rig["radio"][1])), addresses,
-                                        RadioTiming(transaction_s=float(rig.get("air_time_s", AIR_TIME_S)))))
+        fake_radio.register(
+            RemoteWorld(
+                (host, int(rig["radio"][1])),
+                addresses,
+                RadioTiming(transaction_s=float(rig.get("air_time_s", AIR_TIME_S))),
+            )
+        )
         self._closers.append(fake_radio.unregister)
         if relayed:
             client = self._relayed(bus)

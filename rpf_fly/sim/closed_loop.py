@@ -101,8 +101,15 @@ class FirmwareRollout(Rollout):
 class _Scene:
     """One scene's state in a shared swarm: its columns, agents, planner and records."""
 
-    def __init__(self, scenario: Scenario, planner: AnyPlanner, params: SimParams, firmware: FirmwareParams,
-                 settings: PlannerSettings, first_column: int):
+    def __init__(
+        self,
+        scenario: Scenario,
+        planner: AnyPlanner,
+        params: SimParams,
+        firmware: FirmwareParams,
+        settings: PlannerSettings,
+        first_column: int,
+    ):
         from rpf_fly.flight.agent import DroneAgent
 
         self.scenario = scenario
@@ -116,10 +123,16 @@ class _Scene:
         arena = Arena((x0, x1), (y0, y1)) if z is None else Arena((x0, x1), (y0, y1), z)
         # The flight's agents (its carrot, geofence and tracking lag); the planning budget is the flight's worry.
         self.agents = [
-            DroneAgent(Drone(name, "sim://closed-loop", name, (s.real, s.imag), (g.real, g.imag)),
-                       planner,
-                       height=firmware.height_m, speed=params.speed, dt=params.dt, arena=arena,
-                       budget_s=float("inf"), body_radius_m=settings.safety_radius)
+            DroneAgent(
+                Drone(name, "sim://closed-loop", name, (s.real, s.imag), (g.real, g.imag)),
+                planner,
+                height=firmware.height_m,
+                speed=params.speed,
+                dt=params.dt,
+                arena=arena,
+                budget_s=float("inf"),
+                body_radius_m=settings.safety_radius,
+            )
             for name, s, g in zip(scenario.names, scenario.starts, scenario.goals)
         ]
         self.z = np.array([a.clamp_height(firmware.height_m) for a in self.agents])
@@ -129,9 +142,9 @@ class _Scene:
         self.velocities: list[np.ndarray] = []
         self.truth: list[np.ndarray] = []
         self.setpoints: list[np.ndarray] = []
-        self.records: dict[str, list[np.ndarray]] = {k: [] for k in
-                                                     ("mode", "eta", "lam", "f_a", "f_r", "f_in", "direction",
-                                                      "neighbours")}
+        self.records: dict[str, list[np.ndarray]] = {
+            k: [] for k in ("mode", "eta", "lam", "f_a", "f_r", "f_in", "direction", "neighbours")
+        }
         self.clamps = np.zeros(n, dtype=int)
         self.tail_until: int | None = None
         """Truth sample index after which this scene's record ends (set when its run ends)."""
@@ -156,8 +169,9 @@ class _Scene:
         lag_s = np.array([a.tracking_lag_s(complex(m)) for a, m in zip(self.agents, measured)])
         others = measured[idx] + lag_s[:, None] * velocity[idx]
         references = np.array([a.reference for a in self.agents], dtype=complex)
-        return views_of_drones(references, goals, headings, others, velocity[idx], np.ones(idx.shape, dtype=bool),
-                               self.sensing_range)
+        return views_of_drones(
+            references, goals, headings, others, velocity[idx], np.ones(idx.shape, dtype=bool), self.sensing_range
+        )
 
     def plan(self, plan_from: PlanFrom) -> np.ndarray:
         """One planning tick: the setpoint (x + iy) of every drone, planned or held."""
@@ -189,19 +203,43 @@ class _Scene:
         window = min(int(round(STALL_WINDOW_S / params.dt)), track.shape[0] - 1)
         progress = abs(track[-1] - track[-1 - window])
         stalled = progress < 0.1 * params.speed * window * params.dt
-        outcomes = tuple(DroneOutcome.REACHED if self.arrived[i]
-                         else (DroneOutcome.STALLED if stalled[i] else DroneOutcome.TIMEOUT) for i in range(n))
-        dtypes = {"mode": np.int8, "eta": float, "lam": float, "f_a": complex, "f_r": complex, "f_in": complex,
-                  "direction": complex, "neighbours": int}
-        stacked: dict[str, np.ndarray] = {k: (np.array(v, dtype=dtypes[k]) if v else np.zeros((0, n), dtype=dtypes[k]))
-                   for k, v in self.records.items()}
+        outcomes = tuple(
+            DroneOutcome.REACHED if self.arrived[i] else (DroneOutcome.STALLED if stalled[i] else DroneOutcome.TIMEOUT)
+            for i in range(n)
+        )
+        dtypes = {
+            "mode": np.int8,
+            "eta": float,
+            "lam": float,
+            "f_a": complex,
+            "f_r": complex,
+            "f_in": complex,
+            "direction": complex,
+            "neighbours": int,
+        }
+        stacked: dict[str, np.ndarray] = {
+            k: (np.array(v, dtype=dtypes[k]) if v else np.zeros((0, n), dtype=dtypes[k]))
+            for k, v in self.records.items()
+        }
         return FirmwareRollout(
-            scenario=self.scenario, params=params, positions=track, modes=stacked["mode"], eta=stacked["eta"],
-            lam=stacked["lam"], outcomes=outcomes, geofence_clamps=self.clamps.copy(), f_a=stacked["f_a"],
-            f_r=stacked["f_r"], f_in=stacked["f_in"], direction=stacked["direction"],
-            neighbours=stacked["neighbours"], truth=np.array(self.truth), truth_dt=STEP_S,
+            scenario=self.scenario,
+            params=params,
+            positions=track,
+            modes=stacked["mode"],
+            eta=stacked["eta"],
+            lam=stacked["lam"],
+            outcomes=outcomes,
+            geofence_clamps=self.clamps.copy(),
+            f_a=stacked["f_a"],
+            f_r=stacked["f_r"],
+            f_in=stacked["f_in"],
+            direction=stacked["direction"],
+            neighbours=stacked["neighbours"],
+            truth=np.array(self.truth),
+            truth_dt=STEP_S,
             setpoints=np.array(self.setpoints) if self.setpoints else np.zeros((0, n), dtype=complex),
-            velocity=np.array(self.velocities), firmware=firmware,
+            velocity=np.array(self.velocities),
+            firmware=firmware,
         )
 
 
@@ -271,15 +309,21 @@ def firmware_rollouts(
     return [scene.rollout(firmware) for scene in scenes]
 
 
-def firmware_metrics(
-    rollout: FirmwareRollout, settings: PlannerSettings, label: str = "", seed: int = 0
-) -> Metrics:
+def firmware_metrics(rollout: FirmwareRollout, settings: PlannerSettings, label: str = "", seed: int = 0) -> Metrics:
     """The metrics of a closed-loop run: arrival, travel, smoothness and makespan from the truth at the planning
     ticks (as the kinematic rollout is scored); collisions, separation, clearance and margin breaches from the
     100 Hz truth (a pass between two ticks counts); success needs both."""
     sc, p = rollout.scenario, rollout.params
-    common: dict[str, Any] = dict(goal_tolerance=p.goal_tolerance, safety_radius=settings.safety_radius, obstacles=sc.obstacles,
-                  names=sc.names, mission=label, planner=settings.kind, seed=seed, margin=settings.margin_m)
+    common: dict[str, Any] = dict(
+        goal_tolerance=p.goal_tolerance,
+        safety_radius=settings.safety_radius,
+        obstacles=sc.obstacles,
+        names=sc.names,
+        mission=label,
+        planner=settings.kind,
+        seed=seed,
+        margin=settings.margin_m,
+    )
     ticks = compute_metrics(rollout.positions, sc.goals, p.dt, **common)
     fine = compute_metrics(rollout.truth, sc.goals, rollout.truth_dt, **common)
     collisions = fine.collisions_drone_drone + fine.collisions_drone_obstacle
@@ -316,8 +360,11 @@ def run_firmware(
 
     chosen = [settings] * len(scenarios) if isinstance(settings, PlannerSettings) else list(settings)
     if planners is None:
-        planners = [make_planner(st, sc.obstacles, (sc.arena_x, sc.arena_y), sc.goals)
-                    for sc, st in zip(scenarios, chosen)]
+        planners = [
+            make_planner(st, sc.obstacles, (sc.arena_x, sc.arena_y), sc.goals) for sc, st in zip(scenarios, chosen)
+        ]
     rollouts = firmware_rollouts(scenarios, planners, params, chosen, firmware)
-    return [Run(label, st.kind, seed, firmware_metrics(r, st, label, seed), r if keep else None)
-            for r, st, seed, label in zip(rollouts, chosen, seeds, labels)]
+    return [
+        Run(label, st.kind, seed, firmware_metrics(r, st, label, seed), r if keep else None)
+        for r, st, seed, label in zip(rollouts, chosen, seeds, labels)
+    ]

@@ -43,8 +43,16 @@ def run_scenario(
     planner = make_planner(settings, scenario.obstacles, (scenario.arena_x, scenario.arena_y), scenario.goals)
     result = rollout(scenario, planner, params)
     metrics = compute_metrics(
-        result.positions, scenario.goals, params.dt, params.goal_tolerance, settings.safety_radius,
-        scenario.obstacles, scenario.names, mission=label, planner=settings.kind, seed=seed,
+        result.positions,
+        scenario.goals,
+        params.dt,
+        params.goal_tolerance,
+        settings.safety_radius,
+        scenario.obstacles,
+        scenario.names,
+        mission=label,
+        planner=settings.kind,
+        seed=seed,
         margin=settings.margin_m,
     )
     return Run(label, settings.kind, seed, metrics, result if keep else None)

@@ -86,12 +86,20 @@ def _room(h: float) -> list[Obstacle]:
     a door makes a dead end against the geofence, which no planner senses: the room's walls make it an obstacle
     the planners see, as a lab's walls or net are."""
     w = ROOM_WALL
-    return [_box(-h - w, h + w, h, h + w), _box(-h - w, h + w, -h - w, -h),
-            _box(h, h + w, -h, h), _box(-h - w, -h, -h, h)]
+    return [
+        _box(-h - w, h + w, h, h + w),
+        _box(-h - w, h + w, -h - w, -h),
+        _box(h, h + w, -h, h),
+        _box(-h - w, -h, -h, h),
+    ]
 
 
 def _scatter(
-    rng: np.random.Generator, n: int, x: tuple[float, float], y: tuple[float, float], spacing: float = SPACING,
+    rng: np.random.Generator,
+    n: int,
+    x: tuple[float, float],
+    y: tuple[float, float],
+    spacing: float = SPACING,
     keep: Callable[[complex], bool] | None = None,
 ) -> np.ndarray | None:
     """``n`` points uniform in the rectangle, pairwise at least ``spacing`` apart (None if they do not fit)."""
@@ -138,6 +146,7 @@ def _pair_up(rng: np.random.Generator, starts: np.ndarray, goals: np.ndarray) ->
 
 
 # --------------------------------------------------------------------------------------------- families
+
 
 def _corridor(rng: np.random.Generator, n: int, r: float) -> Scenario:
     """Two rooms joined by a long slot through the barrier between them: the only way from the starts (one room)
@@ -290,8 +299,16 @@ def _passage(rng: np.random.Generator, n: int, r: float) -> Scenario:
 
 
 def _fields(scene: Scenario) -> tuple:
-    return (scene.name, scene.names, scene.starts, scene.goals, scene.shapes, scene.obstacles, scene.arena_x,
-            scene.arena_y)
+    return (
+        scene.name,
+        scene.names,
+        scene.starts,
+        scene.goals,
+        scene.shapes,
+        scene.obstacles,
+        scene.arena_x,
+        scene.arena_y,
+    )
 
 
 class _Redraw(Exception):
@@ -378,6 +395,7 @@ def split_seeds(split: str, count: int, first: int = 0) -> list[int]:
 
 # ---------------------------------------------------------------------------------------- the check
 
+
 def check_scene(scene: Scenario, safety_radius: float = 0.1, margin: float = DEFAULT_MARGIN) -> list[str]:
     """What is wrong with a scene (empty when valid): an endpoint outside the arena or inside an obstacle inflated
     by ``r + margin``, two starts or two goals closer than ``2r + margin``, a goal not reachable from its start
@@ -426,8 +444,9 @@ def grid_distance(xs: np.ndarray, ys: np.ndarray, obstacles: ObstacleSet) -> np.
     for c, rad in zip(obstacles.centers.reshape(-1), obstacles.radii.reshape(-1)):
         d = np.sqrt((xs[None, :] - c.real) ** 2 + (ys[:, None] - c.imag) ** 2) - rad
         np.minimum(out, d, out=out)
-    for c, hx, hy in zip(obstacles.box_center.reshape(-1), obstacles.box_half_x.reshape(-1),
-                         obstacles.box_half_y.reshape(-1)):
+    for c, hx, hy in zip(
+        obstacles.box_center.reshape(-1), obstacles.box_half_x.reshape(-1), obstacles.box_half_y.reshape(-1)
+    ):
         qx = (np.abs(xs - c.real) - hx)[None, :]
         qy = (np.abs(ys - c.imag) - hy)[:, None]
         d = np.hypot(np.maximum(qx, 0.0), np.maximum(qy, 0.0)) + np.minimum(np.maximum(qx, qy), 0.0)

@@ -82,31 +82,65 @@ def rollout_figure(result: Rollout, metrics: Metrics | None = None, title: str =
         track = pos[:, i]
         for mode, a, b in mode_runs(result.modes[:, i]):
             seen_modes.add(mode)
-            part = track[a:b + 1]  # positions a..b: the steps a..b-1 of this mode
-            ax.plot(part.real, part.imag, color=colour, lw=1.7, ls=MODE_STYLES.get(mode, "-"), zorder=3,
-                    solid_capstyle="butt", dash_capstyle="butt", gid=f"track:{name}:{mode}")
+            part = track[a : b + 1]  # positions a..b: the steps a..b-1 of this mode
+            ax.plot(
+                part.real,
+                part.imag,
+                color=colour,
+                lw=1.7,
+                ls=MODE_STYLES.get(mode, "-"),
+                zorder=3,
+                solid_capstyle="butt",
+                dash_capstyle="butt",
+                gid=f"track:{name}:{mode}",
+            )
         start, goal = track[0], scenario.goals[i]
-        ax.plot([start.real, goal.real], [start.imag, goal.imag], ls="-", lw=0.6, color=colour, alpha=0.45, zorder=2,
-                gid=f"start-goal:{name}")
+        ax.plot(
+            [start.real, goal.real],
+            [start.imag, goal.imag],
+            ls="-",
+            lw=0.6,
+            color=colour,
+            alpha=0.45,
+            zorder=2,
+            gid=f"start-goal:{name}",
+        )
         ax.plot(start.real, start.imag, "o", ms=7, mfc="white", mec=colour, mew=1.6, zorder=4, gid=f"start:{name}")
         ax.plot(goal.real, goal.imag, "*", ms=15, mfc=colour, mec="k", mew=0.7, zorder=5, gid=f"goal:{name}")
-        ax.annotate(name, (start.real, start.imag), textcoords="offset points", xytext=(5, 5), fontsize=8,
-                    color=colour, fontweight="bold", zorder=6)
+        ax.annotate(
+            name,
+            (start.real, start.imag),
+            textcoords="offset points",
+            xytext=(5, 5),
+            fontsize=8,
+            color=colour,
+            fontweight="bold",
+            zorder=6,
+        )
 
-    handles = [Line2D([], [], color=palette[i % len(palette)], lw=2.2, label=name)
-               for i, name in enumerate(names[:20])]
+    handles = [Line2D([], [], color=palette[i % len(palette)], lw=2.2, label=name) for i, name in enumerate(names[:20])]
     if len(names) > 20:
         handles.append(Line2D([], [], ls="", label=f"... {len(names) - 20} more"))
     handles.append(Line2D([], [], ls="", label=""))
-    handles += [Line2D([], [], color="k", lw=1.7, ls=MODE_STYLES[m], label=MODE_LABELS[m])
-                for m in sorted(MODE_STYLES) if m in seen_modes or m == 0]
+    handles += [
+        Line2D([], [], color="k", lw=1.7, ls=MODE_STYLES[m], label=MODE_LABELS[m])
+        for m in sorted(MODE_STYLES)
+        if m in seen_modes or m == 0
+    ]
     handles += [
         Line2D([], [], ls="", marker="o", mfc="white", mec="k", label="start"),
         Line2D([], [], ls="", marker="*", ms=13, mfc="0.8", mec="k", label="goal (drone's colour)"),
         Line2D([], [], ls="-", lw=0.6, color="k", alpha=0.45, label="start to goal"),
     ]
-    ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=8, frameon=False,
-              borderaxespad=0.0, handlelength=3.0)
+    ax.legend(
+        handles=handles,
+        loc="upper left",
+        bbox_to_anchor=(1.02, 1.0),
+        fontsize=8,
+        frameon=False,
+        borderaxespad=0.0,
+        handlelength=3.0,
+    )
     ax.set_aspect("equal")
     pad = 0.3
     ax.set_xlim(x0 - pad, x1 + pad)

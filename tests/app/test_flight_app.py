@@ -48,16 +48,25 @@ def test_an_invalid_mission_is_one_line_naming_its_file_and_line(tmp_path: Path)
     assert str(err).startswith(f"{path}:4: planner.kind: ") and "\n" not in str(err)
 
 
-@pytest.mark.parametrize("request_, line", [
-    (FlightRequest(lab=True, dry_run=True),
-     "--lab and --dry-run: choose one (--lab flies a running lab's drones, --dry-run private ones)"),
-    (FlightRequest(remote_dongles="1"), "--remote-dongles and --listen go with --distributed"),
-    (FlightRequest(dry_run=True, mocap="vicon"), "--mocap: expected natnet, motioncapture or sim, got 'vicon'"),
-    (FlightRequest(dry_run=True, distributed=True, live=True),
-     "--distributed flies without --foxglove or --mocap sim (docs/distributed.md)"),
-    (FlightRequest(dry_run=True, distributed=True, listen=("nowhere",)),
-     "--listen: expected a Zenoh endpoint such as tcp/127.0.0.1:7447, got 'nowhere'"),
-])
+@pytest.mark.parametrize(
+    "request_, line",
+    [
+        (
+            FlightRequest(lab=True, dry_run=True),
+            "--lab and --dry-run: choose one (--lab flies a running lab's drones, --dry-run private ones)",
+        ),
+        (FlightRequest(remote_dongles="1"), "--remote-dongles and --listen go with --distributed"),
+        (FlightRequest(dry_run=True, mocap="vicon"), "--mocap: expected natnet, motioncapture or sim, got 'vicon'"),
+        (
+            FlightRequest(dry_run=True, distributed=True, live=True),
+            "--distributed flies without --foxglove or --mocap sim (docs/distributed.md)",
+        ),
+        (
+            FlightRequest(dry_run=True, distributed=True, listen=("nowhere",)),
+            "--listen: expected a Zenoh endpoint such as tcp/127.0.0.1:7447, got 'nowhere'",
+        ),
+    ],
+)
 def test_fly_refuses_what_the_command_refuses(mission: Path, tmp_path: Path, request_: FlightRequest, line: str):
     request_ = FlightRequest(**{**request_.__dict__, "log": tmp_path / "f.mcap"})
     err = refused(lambda: FlightApp(mission).prepare_flight(request_))
@@ -94,16 +103,19 @@ def test_a_worker_without_the_flights_secret_is_refused(mission: Path):
     request = WorkerRequest(dongle=0, dry_run=True, environ={})
     err = refused(lambda: FlightApp(mission).prepare_worker(request))
     assert str(err).startswith("RPF_FLY_SECRET: the flight's secret is missing")
-    worker = FlightApp(mission).prepare_worker(WorkerRequest(dongle=0, dry_run=True, flight="f1",
-                                                             environ={"RPF_FLY_SECRET": "s" * 32}))
+    worker = FlightApp(mission).prepare_worker(
+        WorkerRequest(dongle=0, dry_run=True, flight="f1", environ={"RPF_FLY_SECRET": "s" * 32})
+    )
     assert worker.text_log == Path("rpf-fly-worker-f1-dongle-0.log")
 
 
 def test_a_scenario_for_a_real_drone_needs_its_mission(tmp_path: Path):
     missing = tmp_path / "nope.yaml"
     assert str(refused(lambda: prepare_scenario(ScenarioRequest(missing, dry_run=True)))) == f"{missing}: no such file"
-    assert str(refused(lambda: prepare_scenario(ScenarioRequest(missing, dry_run=True, lab=True)))) == \
-        "--dry-run and --lab: choose one"
+    assert (
+        str(refused(lambda: prepare_scenario(ScenarioRequest(missing, dry_run=True, lab=True))))
+        == "--dry-run and --lab: choose one"
+    )
 
 
 class Loop:

@@ -72,7 +72,9 @@ def test_tiny_bench_runs_every_available_pair_and_marks_the_missing_policy(tiny)
     # ORCA on lab-3 succeeds and flies nearly straight (start-goal distances 3.84, 3.0, 3.84 m, less the tolerance).
     assert rows[("orca", "lab-3")]["success_rate"] == 1.0
     assert rows[("orca", "lab-3")]["travel_distance_m"]["successful"]["mean"] < 3.7
-    assert {(t.planner, t.scene, t.seed) for t in result.trajectories} == {(p, "lab-3", 0) for p in ("rpf", "apf", "orca")}
+    assert {(t.planner, t.scene, t.seed) for t in result.trajectories} == {
+        (p, "lab-3", 0) for p in ("rpf", "apf", "orca")
+    }
 
 
 def test_tiny_bench_writes_json_markdown_and_png(tiny, tmp_path):
@@ -102,13 +104,17 @@ def test_tiny_bench_writes_json_markdown_and_png(tiny, tmp_path):
 
 
 def test_missing_policy_and_bad_names(tmp_path):
-    plan = prepare(BenchConfig(planners=("rpf-mean", "orca"), scenes=("lab-3",), episodes=1, policies_dir=tmp_path,
-                               missions_dir=MISSIONS))
+    plan = prepare(
+        BenchConfig(
+            planners=("rpf-mean", "orca"), scenes=("lab-3",), episodes=1, policies_dir=tmp_path, missions_dir=MISSIONS
+        )
+    )
     assert plan.missing == {("rpf-mean", "lab-3"): f"no policy file {tmp_path / 'rpf-mean.onnx'}"}
     assert plan.total_runs == 1
     (tmp_path / "ppo.onnx").write_bytes(b"not an onnx file")
-    plan = prepare(BenchConfig(planners=("ppo",), scenes=("lab-3",), episodes=1, policies_dir=tmp_path,
-                               missions_dir=MISSIONS))
+    plan = prepare(
+        BenchConfig(planners=("ppo",), scenes=("lab-3",), episodes=1, policies_dir=tmp_path, missions_dir=MISSIONS)
+    )
     assert "cannot load ONNX policy" in plan.missing[("ppo", "lab-3")]
     result = run_bench(plan)
     assert result.runs == [] and result.rows[0]["status"] == "missing"
@@ -120,8 +126,15 @@ def test_missing_policy_and_bad_names(tmp_path):
 
 def test_wrong_action_policy_is_missing(policy_dir):
     # The exported RPF policy sets gains; used as the PPO heading policy it is unusable.
-    plan = prepare(BenchConfig(planners=("ppo",), scenes=("lab-3",), episodes=1,
-                               policy_paths={"ppo": policy_dir / "rpf.onnx"}, missions_dir=MISSIONS))
+    plan = prepare(
+        BenchConfig(
+            planners=("ppo",),
+            scenes=("lab-3",),
+            episodes=1,
+            policy_paths={"ppo": policy_dir / "rpf.onnx"},
+            missions_dir=MISSIONS,
+        )
+    )
     assert "cannot drive planner 'ppo'" in plan.missing[("ppo", "lab-3")]
 
 
@@ -129,8 +142,22 @@ def test_cli_bench_json_and_missing_rows(tmp_path):
     runner = CliRunner()
     result = runner.invoke(
         get_app(),
-        ["bench", "--episodes", "1", "--planners", "orca,ppo", "--scenes", "lab-3", "--policies", str(tmp_path),
-         "--missions", str(MISSIONS), "--json", "--out", str(tmp_path / "out")],
+        [
+            "bench",
+            "--episodes",
+            "1",
+            "--planners",
+            "orca,ppo",
+            "--scenes",
+            "lab-3",
+            "--policies",
+            str(tmp_path),
+            "--missions",
+            str(MISSIONS),
+            "--json",
+            "--out",
+            str(tmp_path / "out"),
+        ],
     )
     assert result.exit_code == 0, result.output
     doc = json.loads(result.stdout)
@@ -150,8 +177,16 @@ def test_the_bench_runs_the_default_planner_rpf3_by_default():
 
     assert DEFAULT_KIND in PLANNERS and BenchConfig().planners == PLANNERS
     assert tuple(bench_cmd._PLANNERS.split(",")) == PLANNERS  # noqa: SLF001
-    plan = prepare(BenchConfig(planners=("rpf3",), scenes=("lab-3",), episodes=1, policies_dir=ROOT / "policies",
-                               missions_dir=MISSIONS, trajectory_scenes=()))
+    plan = prepare(
+        BenchConfig(
+            planners=("rpf3",),
+            scenes=("lab-3",),
+            episodes=1,
+            policies_dir=ROOT / "policies",
+            missions_dir=MISSIONS,
+            trajectory_scenes=(),
+        )
+    )
     assert not plan.missing and plan.policies["rpf3"].path.name == "rpf3.onnx"
     (row,) = run_bench(plan).rows
     assert row["status"] == "ok" and row["planner"] == "rpf3" and row["success_rate"] == 1.0
@@ -167,10 +202,20 @@ def _row(planner, scene, success_rate, travel=None, smooth=None, runs=20, collis
         return None if value is None or successes == 0 else {"mean": value, "std": 0.1, "n": successes}
 
     return {
-        "planner": planner, "scene": scene, "status": "ok", "reason": None, "runs": runs, "successes": successes,
-        "success_rate": success_rate, "reached_rate": 1.0,
-        "collisions": {"drone_drone": collisions, "drone_obstacle": 0, "total": collisions,
-                       "runs_with_collision": min(collisions, runs)},
+        "planner": planner,
+        "scene": scene,
+        "status": "ok",
+        "reason": None,
+        "runs": runs,
+        "successes": successes,
+        "success_rate": success_rate,
+        "reached_rate": 1.0,
+        "collisions": {
+            "drone_drone": collisions,
+            "drone_obstacle": 0,
+            "total": collisions,
+            "runs_with_collision": min(collisions, runs),
+        },
         "travel_distance_m": {"successful": s(travel), "all": s(travel)},
         "smoothness": {"successful": s(smooth), "all": s(smooth)},
         "makespan_s": {"successful": s(20.0), "all": s(20.0)},
@@ -180,8 +225,10 @@ def _row(planner, scene, success_rate, travel=None, smooth=None, runs=20, collis
 
 
 def _runs(planner, scene, successes, failure="timeout"):
-    return [{"planner": planner, "scene": scene, "seed": i, "success": ok, "failure": None if ok else failure}
-            for i, ok in enumerate(successes)]
+    return [
+        {"planner": planner, "scene": scene, "seed": i, "success": ok, "failure": None if ok else failure}
+        for i, ok in enumerate(successes)
+    ]
 
 
 def _paper_results(changes=None):
@@ -218,7 +265,9 @@ def test_claims_all_held():
 
 def test_claims_not_held():
     # (a) APF smoother than RPF-1 on the 3 m circle.
-    assert _status(_paper_results({("apf", "circle-8-r3"): _row("apf", "circle-8-r3", 1.0, 8.0, 0.005)}))["a"] == NOT_HELD
+    assert (
+        _status(_paper_results({("apf", "circle-8-r3"): _row("apf", "circle-8-r3", 1.0, 8.0, 0.005)}))["a"] == NOT_HELD
+    )
     # (b) PPO succeeds wherever RPF-1 does.
     results = _paper_results()
     results["runs"] = _runs("rpf", "circle-8-r8", [True] * 20) + _runs("ppo", "circle-8-r8", [True] * 15 + [False] * 5)
@@ -228,9 +277,14 @@ def test_claims_not_held():
     assert _status(_paper_results({("orca", "lab-3"): _row("orca", "lab-3", 1.0, 5.0, 0.012)}))["c"] == HELD
     assert _status(_paper_results({("rpf-mean", "lab-3"): _row("rpf-mean", "lab-3", 1.0, 5.0, 0.012)}))["c"] == NOT_HELD
     # (d) one collision, or 97 % success, breaks it; (e) likewise on fresh scenes.
-    assert _status(_paper_results({("rpf", "lab-3"): _row("rpf", "lab-3", 1.0, 6.0, 0.01, collisions=1)}))["d"] == NOT_HELD
+    assert (
+        _status(_paper_results({("rpf", "lab-3"): _row("rpf", "lab-3", 1.0, 6.0, 0.01, collisions=1)}))["d"] == NOT_HELD
+    )
     assert _status(_paper_results({("rpf", "arena-b-6"): _row("rpf", "arena-b-6", 0.85, 6.0, 0.01)}))["d"] == NOT_HELD
-    assert _status(_paper_results({("rpf", "arena-a-fresh"): _row("rpf", "arena-a-fresh", 0.95, 6, 0.01)}))["e"] == NOT_HELD
+    assert (
+        _status(_paper_results({("rpf", "arena-a-fresh"): _row("rpf", "arena-a-fresh", 0.95, 6, 0.01)}))["e"]
+        == NOT_HELD
+    )
 
 
 def test_claims_edge_cases():
@@ -244,7 +298,9 @@ def test_claims_edge_cases():
     # A missing row makes the claim 'not evaluated', not 'not held'.
     results = _paper_results()
     results["rows"] = [r for r in results["rows"] if (r["planner"], r["scene"]) != ("ppo", "circle-8-r8")]
-    results["rows"].append({"planner": "ppo", "scene": "circle-8-r8", "status": "missing", "reason": "no policy", "runs": 0})
+    results["rows"].append(
+        {"planner": "ppo", "scene": "circle-8-r8", "status": "missing", "reason": "no policy", "runs": 0}
+    )
     claims = {c.id: c for c in evaluate_claims(results)}
     assert claims["b"].status == NOT_EVALUATED and claims["b"].held is None and "no policy" in claims["b"].note
     assert _status({"rows": [], "runs": []}) == dict.fromkeys("abcde", NOT_EVALUATED)

@@ -27,15 +27,19 @@ def test_the_kinematic_default_reproduces_the_shipped_results():
     existed), record for record."""
     families = json.loads((SHIPPED / "families.json").read_text())
     shipped = {(r["guidance"], r["planner"], r["scene"], r["seed"]): r for r in families["runs"]}
-    result = run_families(prepare_families(FamiliesConfig(planners=("apf", "orca"), families=("arena-b", "crossing"),
-                                                          seeds=2, guidance=("none",))))
+    result = run_families(
+        prepare_families(
+            FamiliesConfig(planners=("apf", "orca"), families=("arena-b", "crossing"), seeds=2, guidance=("none",))
+        )
+    )
     assert len(result.runs) == 8
     for mode, record in result.runs:
         assert {**record.to_json_dict(), "guidance": mode} == shipped[(mode, record.planner, record.scene, record.seed)]
     paper = json.loads((SHIPPED / "results.json").read_text())
     shipped = {(r["planner"], r["scene"], r["seed"]): r for r in paper["runs"]}
-    bench = run_bench(prepare(BenchConfig(planners=("apf", "orca"), scenes=("lab-3",), episodes=2,
-                                          missions_dir=ROOT / "missions")))
+    bench = run_bench(
+        prepare(BenchConfig(planners=("apf", "orca"), scenes=("lab-3",), episodes=2, missions_dir=ROOT / "missions"))
+    )
     assert [r.to_json_dict() for r in bench.runs] == [shipped[(r.planner, r.scene, r.seed)] for r in bench.runs]
     doc = results_json(bench)
     assert doc["dynamics"] == "kinematic" and "closed_loop" not in doc
@@ -43,11 +47,28 @@ def test_the_kinematic_default_reproduces_the_shipped_results():
 
 
 def test_the_families_suite_flies_the_firmware_closed_loop(tmp_path):
-    result = CliRunner().invoke(get_app(), [
-        "bench", "--suite", "families", "--seeds", "1", "--families", "arena-b", "--planners", "orca",
-        "--guidance", "none", "--dynamics", "firmware", "--json-file", str(tmp_path / "f.json"),
-        "--markdown", str(tmp_path / "f.md"),
-    ])
+    result = CliRunner().invoke(
+        get_app(),
+        [
+            "bench",
+            "--suite",
+            "families",
+            "--seeds",
+            "1",
+            "--families",
+            "arena-b",
+            "--planners",
+            "orca",
+            "--guidance",
+            "none",
+            "--dynamics",
+            "firmware",
+            "--json-file",
+            str(tmp_path / "f.json"),
+            "--markdown",
+            str(tmp_path / "f.md"),
+        ],
+    )
     assert result.exit_code == 0, result.output
     doc = json.loads((tmp_path / "f.json").read_text())
     assert doc["dynamics"] == "firmware" and doc["closed_loop"]["truth_hz"] == 100
@@ -64,8 +85,9 @@ def test_the_paper_suite_flies_the_firmware_closed_loop(tmp_path):
     for y, goal in (("-1.2", "1.2"), ("0.0", "0.0"), ("1.2", "-1.2")):
         text = text.replace(f"start: [-1.5, {y}], goal: [1.5, {goal}]", f"start: [0.9, {y}], goal: [1.5, {y}]")
     (tmp_path / "lab-3.yaml").write_text(text)
-    plan = prepare(BenchConfig(planners=("apf",), scenes=("lab-3",), episodes=1, missions_dir=tmp_path,
-                               dynamics="firmware"))
+    plan = prepare(
+        BenchConfig(planners=("apf",), scenes=("lab-3",), episodes=1, missions_dir=tmp_path, dynamics="firmware")
+    )
     assert not plan.missing
     result = run_bench(plan)
     [record] = result.runs

@@ -14,10 +14,22 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 def bench(episodes: int, tmp_path: Path) -> str:
-    result = CliRunner().invoke(get_app(), [
-        "bench", "--episodes", str(episodes), "--planners", "apf,orca,ppo", "--scenes", "lab-3,arena-b-6",
-        "--policies", str(ROOT / "policies"), "--missions", str(ROOT / "missions"),
-    ])
+    result = CliRunner().invoke(
+        get_app(),
+        [
+            "bench",
+            "--episodes",
+            str(episodes),
+            "--planners",
+            "apf,orca,ppo",
+            "--scenes",
+            "lab-3,arena-b-6",
+            "--policies",
+            str(ROOT / "policies"),
+            "--missions",
+            str(ROOT / "missions"),
+        ],
+    )
     assert result.exit_code == 0, result.output
     return result.stdout
 

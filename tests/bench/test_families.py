@@ -51,8 +51,11 @@ def test_smoke_runs_every_planner_on_both_families(smoke):
     assert keys == {(p, f, m) for p in FAMILY_PLANNERS for f in ("arena-a", "arena-b") for m in modes}
     for row in result.rows:
         assert row["status"] == "ok" and row["runs"] == 1
-        run = next(r for m, r in result.runs
-                   if r.planner == row["planner"] and r.scene == row["scene"] and m == row["guidance"])
+        run = next(
+            r
+            for m, r in result.runs
+            if r.planner == row["planner"] and r.scene == row["scene"] and m == row["guidance"]
+        )
         assert row["min_separation_m"]["min"] == run.min_separation_m
         bar = row["below_margin"]["separation_bar_m"]
         assert bar == pytest.approx(0.25)
@@ -64,8 +67,11 @@ def test_smoke_runs_every_planner_on_both_families(smoke):
     # the product's default is PlannerSettings().kind (RPF-3): flown exactly as that kind by name
     assert PlannerSettings().kind == "rpf3"
     default = {(m, r.scene): r for m, r in result.runs if r.planner == "default"}
-    named = run_families(prepare_families(FamiliesConfig(planners=("rpf3",), families=("arena-a", "arena-b"), seeds=1,
-                                                         policies_dir=POLICIES)))
+    named = run_families(
+        prepare_families(
+            FamiliesConfig(planners=("rpf3",), families=("arena-a", "arena-b"), seeds=1, policies_dir=POLICIES)
+        )
+    )
     same = {(m, r.scene): r for m, r in named.runs}
     assert {s: r.travel_distance_m for s, r in default.items()} == {s: r.travel_distance_m for s, r in same.items()}
 
@@ -142,8 +148,11 @@ def test_prepare_refuses_bad_names_and_marks_a_missing_policy(tmp_path):
         prepare_families(FamiliesConfig(seeds=0))
     with pytest.raises(BenchError):
         prepare_families(FamiliesConfig(guidance=("teleport",)))
-    plan = prepare_families(FamiliesConfig(planners=("rpf", "apf"), families=("arena-b",), seeds=1,
-                                           policy_paths={"rpf": tmp_path / "none.onnx"}))
+    plan = prepare_families(
+        FamiliesConfig(
+            planners=("rpf", "apf"), families=("arena-b",), seeds=1, policy_paths={"rpf": tmp_path / "none.onnx"}
+        )
+    )
     assert "no policy file" in plan.missing["rpf"] and plan.total_runs == len(guidance_modes())
     result = run_families(plan)
     rows = {r["planner"]: r for r in result.rows}
@@ -151,8 +160,23 @@ def test_prepare_refuses_bad_names_and_marks_a_missing_policy(tmp_path):
 
 
 def _record(seed, sep, clear, success=True):
-    return RunRecord("apf", "doorway", seed, 2, 2, success, 0, 0, 5.0, 0.01, 12.0, sep, clear,
-                     {"reached": 2, "stalled": 0, "timeout": 0}, None if success else "stalled")
+    return RunRecord(
+        "apf",
+        "doorway",
+        seed,
+        2,
+        2,
+        success,
+        0,
+        0,
+        5.0,
+        0.01,
+        12.0,
+        sep,
+        clear,
+        {"reached": 2, "stalled": 0, "timeout": 0},
+        None if success else "stalled",
+    )
 
 
 def test_margin_counts_are_strictly_below_the_bars():
@@ -165,9 +189,26 @@ def test_margin_counts_are_strictly_below_the_bars():
 
 
 def _row(planner, scene, travel, smooth, successes=2):
-    runs = [RunRecord(planner, scene, s, 4, 4, s < successes, 0, 0, travel, smooth, 10.0, 0.3, None,
-                      {"reached": 4, "stalled": 0, "timeout": 0}, None if s < successes else "stalled")
-            for s in range(2)]
+    runs = [
+        RunRecord(
+            planner,
+            scene,
+            s,
+            4,
+            4,
+            s < successes,
+            0,
+            0,
+            travel,
+            smooth,
+            10.0,
+            0.3,
+            None,
+            {"reached": 4, "stalled": 0, "timeout": 0},
+            None if s < successes else "stalled",
+        )
+        for s in range(2)
+    ]
     return {**summarise_runs(planner, scene, runs), "guidance": "none"}, [r.to_json_dict() for r in runs]
 
 
@@ -186,10 +227,22 @@ def test_a_family_claim_holds_only_where_it_holds_on_every_family():
 
 
 def test_cli_families_suite_writes_json_and_markdown(tmp_path):
-    result = CliRunner().invoke(get_app(), [
-        "bench", "--suite", "families", "--seeds", "1", "--families", "arena-b", "--planners", "apf,orca",
-        "--out", str(tmp_path),
-    ])
+    result = CliRunner().invoke(
+        get_app(),
+        [
+            "bench",
+            "--suite",
+            "families",
+            "--seeds",
+            "1",
+            "--families",
+            "arena-b",
+            "--planners",
+            "apf,orca",
+            "--out",
+            str(tmp_path),
+        ],
+    )
     assert result.exit_code == 0, result.output
     doc = json.loads((tmp_path / "families.json").read_text())
     assert doc["families"] == ["arena-b"] and {r["planner"] for r in doc["rows"]} == {"apf", "orca"}
@@ -203,20 +256,48 @@ def test_cli_families_suite_writes_json_and_markdown(tmp_path):
 
 def test_first_seed_runs_later_bench_seeds_and_says_so(tmp_path):
     """--first-seed F: seeds F..F+N-1 (scenes nobody looked at), in the JSON, each run and the command line."""
-    result = CliRunner().invoke(get_app(), [
-        "bench", "--suite", "families", "--seeds", "2", "--first-seed", "140", "--families", "arena-b",
-        "--planners", "apf", "--guidance", "path", "--json-file", str(tmp_path / "f.json"),
-    ])
+    result = CliRunner().invoke(
+        get_app(),
+        [
+            "bench",
+            "--suite",
+            "families",
+            "--seeds",
+            "2",
+            "--first-seed",
+            "140",
+            "--families",
+            "arena-b",
+            "--planners",
+            "apf",
+            "--guidance",
+            "path",
+            "--json-file",
+            str(tmp_path / "f.json"),
+        ],
+    )
     assert result.exit_code == 0, result.output
     doc = json.loads((tmp_path / "f.json").read_text())
     assert doc["seeds"] == {"first": 140, "count": 2} and [r["seed"] for r in doc["runs"]] == [140, 141]
     assert "--seeds 2 --first-seed 140 --families arena-b" in doc["command"]
-    later = run_families(prepare_families(FamiliesConfig(planners=("apf",), families=("arena-b",), seeds=1,
-                                                         guidance=("path",), first_seed=141)))
-    assert later.runs[0][1].to_json_dict() == [r for m, r in
-                                               run_families(prepare_families(FamiliesConfig(
-                                                   planners=("apf",), families=("arena-b",), seeds=2,
-                                                   guidance=("path",), first_seed=140))).runs][1].to_json_dict()
+    later = run_families(
+        prepare_families(
+            FamiliesConfig(planners=("apf",), families=("arena-b",), seeds=1, guidance=("path",), first_seed=141)
+        )
+    )
+    assert (
+        later.runs[0][1].to_json_dict()
+        == [
+            r
+            for m, r in run_families(
+                prepare_families(
+                    FamiliesConfig(
+                        planners=("apf",), families=("arena-b",), seeds=2, guidance=("path",), first_seed=140
+                    )
+                )
+            ).runs
+        ][1].to_json_dict()
+    )
     paper = CliRunner().invoke(get_app(), ["bench", "--first-seed", "3", "--episodes", "1"])
     assert paper.exit_code == 2 and "--first-seed" in paper.stderr
     negative = CliRunner().invoke(get_app(), ["bench", "--suite", "families", "--first-seed", "-1", "--seeds", "1"])

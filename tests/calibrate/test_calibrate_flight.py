@@ -24,17 +24,28 @@ from rpf_fly.emulator.host_lag import HOST_BEHIND_REPORT_S
 
 pytestmark = pytest.mark.xdist_group("calibrate_flights")
 
-CHANGED = {"posCtlPid.xKp": 1.4, "velCtlPid.vxKp": 32.5, "posCtlPid.yKp": 2.6, "velCtlPid.vyKp": 32.5,
-           "posCtlPid.zKp": 2.6, "velCtlPid.vzKp": 17.5, "posCtlPid.zKi": 0.65}
+CHANGED = {
+    "posCtlPid.xKp": 1.4,
+    "velCtlPid.vxKp": 32.5,
+    "posCtlPid.yKp": 2.6,
+    "velCtlPid.vyKp": 32.5,
+    "posCtlPid.zKp": 2.6,
+    "velCtlPid.vzKp": 17.5,
+    "posCtlPid.zKi": 0.65,
+}
 """The calibrated drone's gains: each x0.7 or x1.3 of the firmware's (2, 25 and the height's 0.5): x slower and
 more damped, y faster as damped, z faster and less damped."""
 LATENCY_S = 0.0235
 """Its mocap's latency: the emulator's own (2-9.5 ms, 6 on average) and two frames more
 (`VehicleProfile.mocap_delay_s`)."""
 NOISE_M = 0.001
-SCENARIO = {"name": "calib_carrot", "start": [0.0, 0.0, 1.0], "duration_s": 8.0, "stream_hz": 10.0,
-            "setpoints": [[k / 10, round(0.05 * k, 3), round(0.04 * k, 3), round(1.0 + 0.02 * k, 3)]
-                          for k in range(31)]}
+SCENARIO = {
+    "name": "calib_carrot",
+    "start": [0.0, 0.0, 1.0],
+    "duration_s": 8.0,
+    "stream_hz": 10.0,
+    "setpoints": [[k / 10, round(0.05 * k, 3), round(0.04 * k, 3), round(1.0 + 0.02 * k, 3)] for k in range(31)],
+}
 """A carrot along x, y and z at once (0.5, 0.4 and 0.2 m/s for 3 s), then still: every axis moves and stops."""
 MISSION = """\
 name: calibrate
@@ -50,8 +61,9 @@ _refly = {"left": 1}
 
 
 def rpf_fly(*args: str, cwd: Path) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "rpf_fly", *args], capture_output=True, text=True, cwd=cwd,
-                          timeout=240)
+    return subprocess.run(
+        [sys.executable, "-m", "rpf_fly", *args], capture_output=True, text=True, cwd=cwd, timeout=240
+    )
 
 
 def fly(folder: Path, profile: Path) -> tuple[dict[str, Any], Path]:
@@ -63,8 +75,17 @@ def fly(folder: Path, profile: Path) -> tuple[dict[str, Any], Path]:
         (folder / profile.name).write_text(profile.read_text())
     while True:
         log = folder / "flight.mcap"
-        done = rpf_fly("scenario", "scenario.yaml", "--dry-run", "--mission", "mission.yaml", "--log", str(log),
-                       "--json", cwd=folder)
+        done = rpf_fly(
+            "scenario",
+            "scenario.yaml",
+            "--dry-run",
+            "--mission",
+            "mission.yaml",
+            "--log",
+            str(log),
+            "--json",
+            cwd=folder,
+        )
         assert done.returncode == 0, done.stderr
         trace = json.loads(done.stdout)
         print(f"{folder.name}: flown, the host behind {trace.get('host_behind_s')} s")
@@ -78,8 +99,9 @@ def calibrated(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     """The changed drone's flight, and ``rpf-fly calibrate`` of its log: the fit (``--json``) and its profile."""
     folder = tmp_path_factory.mktemp("changed")
     true = folder / "changed.yaml"
-    true.write_text(yaml.safe_dump({"format": 1, "params": CHANGED,
-                                    "mocap": {"latency_s": LATENCY_S, "noise_m": NOISE_M}}))
+    true.write_text(
+        yaml.safe_dump({"format": 1, "params": CHANGED, "mocap": {"latency_s": LATENCY_S, "noise_m": NOISE_M}})
+    )
     trace, log = fly(folder, true)
     done = rpf_fly("calibrate", str(log), "--out", "fitted.yaml", "--json", cwd=folder)
     assert done.returncode == 0, done.stderr
@@ -107,8 +129,10 @@ def test_the_changed_gains_come_back(calibrated: dict[str, Any]) -> None:
         print(f"| {name} | {value:g} | {fit['params'][name]:.3f} | {fit['params'][name] / value:.3f} |")
     print(f"| mocap latency_s | {LATENCY_S} (+ the emulator's) | {fit['latency_s']:.4f} | |")
     print(f"| mocap noise_m | {NOISE_M} | {fit['noise_m']:.5f} | {fit['noise_m'] / NOISE_M:.3f} |")
-    print(f"residual {fit['residual_rms_m'] * 1000:.2f} mm RMS ({fit['default_residual_rms_m'] * 1000:.1f} with the "
-          f"firmware's defaults), delay {fit['delay_s'] * 1000:.1f} ms, {fit['iterations']} iterations")
+    print(
+        f"residual {fit['residual_rms_m'] * 1000:.2f} mm RMS ({fit['default_residual_rms_m'] * 1000:.1f} with the "
+        f"firmware's defaults), delay {fit['delay_s'] * 1000:.1f} ms, {fit['iterations']} iterations"
+    )
     assert fit["not_identified"] == {}
     for name, value in CHANGED.items():
         assert fit["params"][name] == pytest.approx(value, rel=0.15), f"{name}: {fit['params']}{note}"
@@ -126,8 +150,11 @@ def axis_figures(trace: dict[str, Any], axis: int) -> dict[str, Any]:
     order = [axis] + [k for k in range(3) if k != axis]
     rows = [[row[0], *[row[1 + k] for k in order]] for row in SCENARIO["setpoints"]]
     scenario = Scenario.from_dict({**SCENARIO, "start": [SCENARIO["start"][k] for k in order], "setpoints": rows})
-    swapped = {"t": trace["t"], "sp": [[p[k] for k in order] for p in trace["sp"]],
-               "pos": [[p[k] for k in order] for p in trace["pos"]]}
+    swapped = {
+        "t": trace["t"],
+        "sp": [[p[k] for k in order] for p in trace["sp"]],
+        "pos": [[p[k] for k in order] for p in trace["pos"]],
+    }
     return figures(swapped, scenario)
 
 

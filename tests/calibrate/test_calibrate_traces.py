@@ -21,11 +21,21 @@ from rpf_fly.log.writer import FlightLog
 from rpf_fly.mission import parse_mission
 
 TRACES = Path(__file__).resolve().parents[1] / "data" / "crazyflie_dynamics" / "traces"
-OFF = {"posCtlPid.xKp": 1.4, "velCtlPid.vxKp": 32.5, "posCtlPid.yKp": 2.6, "velCtlPid.vyKp": 17.5,
-       "posCtlPid.zKp": 2.6, "velCtlPid.vzKp": 17.5, "posCtlPid.zKi": 0.35}
+OFF = {
+    "posCtlPid.xKp": 1.4,
+    "velCtlPid.vxKp": 32.5,
+    "posCtlPid.yKp": 2.6,
+    "velCtlPid.vyKp": 17.5,
+    "posCtlPid.zKp": 2.6,
+    "velCtlPid.vzKp": 17.5,
+    "posCtlPid.zKi": 0.35,
+}
 """The fit's start: each gain x0.7 or x1.3 of the firmware's."""
-GAINS = {"x": ("posCtlPid.xKp", "velCtlPid.vxKp"), "y": ("posCtlPid.yKp", "velCtlPid.vyKp"),
-         "z": ("posCtlPid.zKp", "velCtlPid.vzKp", "posCtlPid.zKi")}
+GAINS = {
+    "x": ("posCtlPid.xKp", "velCtlPid.vxKp"),
+    "y": ("posCtlPid.yKp", "velCtlPid.vyKp"),
+    "z": ("posCtlPid.zKp", "velCtlPid.vzKp", "posCtlPid.zKi"),
+}
 MOVED = {"p_circle_r0p5_v0p3": "xy", "p_hl_slow": "xz"}
 """The axes each trace's setpoints move (the others: x only)."""
 
@@ -40,14 +50,18 @@ def start(tmp_path_factory: pytest.TempPathFactory) -> Path:
 @pytest.mark.parametrize("trace", sorted(p.stem for p in TRACES.glob("*.json")))
 def test_a_reference_trace_gives_the_default_gains_back(trace: str, start: Path, tmp_path: Path) -> None:
     out = tmp_path / "profile.yaml"
-    done = CliRunner().invoke(get_app(), ["calibrate", str(TRACES / f"{trace}.json"), "--start", str(start),
-                                          "--out", str(out), "--json"])
+    done = CliRunner().invoke(
+        get_app(), ["calibrate", str(TRACES / f"{trace}.json"), "--start", str(start), "--out", str(out), "--json"]
+    )
     assert done.exit_code == 0, done.output
     fit = json.loads(done.stdout)["drones"][trace]
     defaults = CfGains().params()
     moved = MOVED.get(trace, "x")
-    print(f"| {trace} | " + ", ".join(f"{n} x{fit['params'][n] / defaults[n]:.3f}" for a in moved for n in GAINS[a])
-          + f" | {fit['residual_rms_m'] * 1000:.2f} |")  # docs/dynamics.md's table (pytest -s)
+    print(
+        f"| {trace} | "
+        + ", ".join(f"{n} x{fit['params'][n] / defaults[n]:.3f}" for a in moved for n in GAINS[a])
+        + f" | {fit['residual_rms_m'] * 1000:.2f} |"
+    )  # docs/dynamics.md's table (pytest -s)
     for axis, names in GAINS.items():
         for name in names:
             if axis in moved:
@@ -64,8 +78,9 @@ def test_a_reference_trace_gives_the_default_gains_back(trace: str, start: Path,
 
 
 def run_cli(*args: str, cwd: Path) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "rpf_fly", "calibrate", *args], capture_output=True, text=True,
-                          cwd=cwd, timeout=60)
+    return subprocess.run(
+        [sys.executable, "-m", "rpf_fly", "calibrate", *args], capture_output=True, text=True, cwd=cwd, timeout=60
+    )
 
 
 def test_not_a_log_is_one_line_and_exit_2(tmp_path: Path) -> None:
@@ -73,15 +88,19 @@ def test_not_a_log_is_one_line_and_exit_2(tmp_path: Path) -> None:
     junk.write_text("flew fine, battery 3.9 V\n")
     done = run_cli(str(junk), "--out", "p.yaml", cwd=tmp_path)
     assert done.returncode == 2
-    assert done.stderr == f"{junk}: neither an MCAP flight log nor a trace JSON with t, sp and pos " \
-                          "(tests/data/crazyflie_dynamics/README.md)\n"
+    assert (
+        done.stderr == f"{junk}: neither an MCAP flight log nor a trace JSON with t, sp and pos "
+        "(tests/data/crazyflie_dynamics/README.md)\n"
+    )
     assert not (tmp_path / "p.yaml").exists()
 
 
 def test_a_log_without_setpoints_is_one_line_and_exit_2(tmp_path: Path) -> None:
     """A real MCAP flight log (the recorder's writer) with poses and events but no setpoint stream."""
-    mission = parse_mission("arena: {x: [-1, 1], y: [-1, 1]}\nplanner: {kind: apf}\ndrones:\n"
-                            "  - {name: cf1, uri: radio://0/80/2M/E7E7E7E701, start: [0, 0], goal: [0.5, 0]}\n")
+    mission = parse_mission(
+        "arena: {x: [-1, 1], y: [-1, 1]}\nplanner: {kind: apf}\ndrones:\n"
+        "  - {name: cf1, uri: radio://0/80/2M/E7E7E7E701, start: [0, 0], goal: [0.5, 0]}\n"
+    )
     log = tmp_path / "hover.mcap"
     with FlightLog(log, S.mission_metadata(mission, 0, "flight"), S.scenario_metadata(mission)) as flight:
         for k in range(50):
@@ -89,8 +108,10 @@ def test_a_log_without_setpoints_is_one_line_and_exit_2(tmp_path: Path) -> None:
         flight.event(1_800_000_000_500_000_000, 2, "cf1: hover")
     done = run_cli(str(log), cwd=tmp_path)
     assert done.returncode == 2
-    assert done.stderr == f"{log}: no setpoints in the log (no /<drone>/setpoint topic): calibrate needs a streamed " \
-                          "flight's log (rpf-fly fly or rpf-fly scenario with --log)\n"
+    assert (
+        done.stderr == f"{log}: no setpoints in the log (no /<drone>/setpoint topic): calibrate needs a streamed "
+        "flight's log (rpf-fly fly or rpf-fly scenario with --log)\n"
+    )
 
 
 def test_a_flight_the_model_cannot_explain_is_calibrated_with_a_warning(tmp_path: Path) -> None:
@@ -116,8 +137,10 @@ def test_a_log_written_from_a_trace_is_fitted_as_the_trace(tmp_path: Path) -> No
     back: the default gains, no latency, no noise; and since the logged mission names no dynamics, its dry run flew
     the first-order model, which the calibration says."""
     doc = json.loads((TRACES / "c_carrot_1p0.json").read_text())
-    mission = parse_mission("arena: {x: [-1, 4], y: [-1, 1]}\nplanner: {kind: apf}\ndrones:\n"
-                            "  - {name: cf1, uri: radio://0/80/2M/E7E7E7E701, start: [0, 0], goal: [3, 0]}\n")
+    mission = parse_mission(
+        "arena: {x: [-1, 4], y: [-1, 1]}\nplanner: {kind: apf}\ndrones:\n"
+        "  - {name: cf1, uri: radio://0/80/2M/E7E7E7E701, start: [0, 0], goal: [3, 0]}\n"
+    )
     log, t0 = tmp_path / "carrot.mcap", 1_800_000_000_000_000_000
     scenario = yaml.safe_load((TRACES.parent / "scenarios" / "c_carrot_1p0.yaml").read_text())
     with FlightLog(log, S.mission_metadata(mission, 0, "dry-run"), S.scenario_metadata(mission)) as flight:
@@ -138,5 +161,7 @@ def test_a_log_written_from_a_trace_is_fitted_as_the_trace(tmp_path: Path) -> No
         assert fit["params"][name] == pytest.approx(CfGains().params()[name], rel=0.02), fit
     assert fit["latency_from"] == "truth" and fit["latency_s"] == 0.0 and fit["noise_m"] < 1e-6
     assert abs(fit["delay_s"]) < 0.003 and fit["residual_axis_rms_m"]["x"] < 0.001, fit
-    assert fit["warnings"] == ["its simulated drones flew the first-order model (the logged mission's "
-                               "dry_run.dynamics), not the firmware's cascade: no gains describe them"]
+    assert fit["warnings"] == [
+        "its simulated drones flew the first-order model (the logged mission's "
+        "dry_run.dynamics), not the firmware's cascade: no gains describe them"
+    ]

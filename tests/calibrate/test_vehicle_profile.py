@@ -61,23 +61,43 @@ def test_the_profile_is_read_relative_to_the_mission(tmp_path: Path, monkeypatch
     assert mission_mocap_noise(own).position_m == 0.002
 
 
-@pytest.mark.parametrize("dry_run, profile, expected", [
-    ("{dynamics: firmware, vehicle: profiles/none.yaml}", PROFILE,
-     "m.yaml:4: dry_run.vehicle: vehicle profile 'profiles/none.yaml' not found (looked in "),
-    ("{dynamics: firmware, vehicle: profiles/cf.yaml}", PROFILE.replace("xKp", "xKq"),
-     "cf.yaml: params.posCtlPid.xKq: not a parameter of the simulated firmware's controller"),
-    ("{dynamics: firmware, vehicle: profiles/cf.yaml}", PROFILE.replace("1.4", "fast"),
-     "cf.yaml: params.posCtlPid.xKp: expected a finite number, got 'fast'"),
-    ("{dynamics: firmware, vehicle: profiles/cf.yaml}", "params: [1, 2]\n",
-     "cf.yaml: params: expected a mapping of firmware parameters, got list"),
-    ("{dynamics: firmware, vehicle: profiles/cf.yaml}", "params: {}\nmocap: {latency_ms: 3}\n",
-     "cf.yaml: mocap.latency_ms: unknown key (mocap has latency_s, latency_from, noise_m)"),
-    ("{dynamics: firmware, vehicle: profiles/cf.yaml}", "params: {posCtlPid.xKp: 2}: x\n",
-     "cf.yaml: not YAML ("),
-    ("{vehicle: profiles/cf.yaml}", PROFILE,
-     "m.yaml:4: dry_run.vehicle: a vehicle profile sets the firmware model's gains: give dry_run.dynamics: "
-     "firmware with it (it is first-order)"),
-])
+@pytest.mark.parametrize(
+    "dry_run, profile, expected",
+    [
+        (
+            "{dynamics: firmware, vehicle: profiles/none.yaml}",
+            PROFILE,
+            "m.yaml:4: dry_run.vehicle: vehicle profile 'profiles/none.yaml' not found (looked in ",
+        ),
+        (
+            "{dynamics: firmware, vehicle: profiles/cf.yaml}",
+            PROFILE.replace("xKp", "xKq"),
+            "cf.yaml: params.posCtlPid.xKq: not a parameter of the simulated firmware's controller",
+        ),
+        (
+            "{dynamics: firmware, vehicle: profiles/cf.yaml}",
+            PROFILE.replace("1.4", "fast"),
+            "cf.yaml: params.posCtlPid.xKp: expected a finite number, got 'fast'",
+        ),
+        (
+            "{dynamics: firmware, vehicle: profiles/cf.yaml}",
+            "params: [1, 2]\n",
+            "cf.yaml: params: expected a mapping of firmware parameters, got list",
+        ),
+        (
+            "{dynamics: firmware, vehicle: profiles/cf.yaml}",
+            "params: {}\nmocap: {latency_ms: 3}\n",
+            "cf.yaml: mocap.latency_ms: unknown key (mocap has latency_s, latency_from, noise_m)",
+        ),
+        ("{dynamics: firmware, vehicle: profiles/cf.yaml}", "params: {posCtlPid.xKp: 2}: x\n", "cf.yaml: not YAML ("),
+        (
+            "{vehicle: profiles/cf.yaml}",
+            PROFILE,
+            "m.yaml:4: dry_run.vehicle: a vehicle profile sets the firmware model's gains: give dry_run.dynamics: "
+            "firmware with it (it is first-order)",
+        ),
+    ],
+)
 def test_a_bad_profile_is_one_line(tmp_path: Path, dry_run: str, profile: str, expected: str) -> None:
     text = load_error(mission(tmp_path, dry_run, profile))
     assert expected in text

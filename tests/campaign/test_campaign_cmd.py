@@ -15,8 +15,9 @@ KINDS = ("loop_stall", "blackout")
 
 
 def campaign(*args: str, cwd: Path, timeout: float = 240) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "rpf_fly", "campaign", *args], capture_output=True, text=True,
-                          cwd=cwd, timeout=timeout)
+    return subprocess.run(
+        [sys.executable, "-m", "rpf_fly", "campaign", *args], capture_output=True, text=True, cwd=cwd, timeout=timeout
+    )
 
 
 def test_a_campaign_on_lab_3_reports_each_kind_judged_on_the_truth(tmp_path):
@@ -49,18 +50,33 @@ def test_a_campaign_on_lab_3_reports_each_kind_judged_on_the_truth(tmp_path):
 
 
 def test_a_misspelt_kind_is_one_line_with_the_kind_meant_and_exit_2(tmp_path):
-    done = campaign(str(ROOT / "missions" / "lab-3.yaml"), "--kinds", "loop_stall,occlusoin", "--out", "R.md",
-                    cwd=tmp_path, timeout=60)
+    done = campaign(
+        str(ROOT / "missions" / "lab-3.yaml"),
+        "--kinds",
+        "loop_stall,occlusoin",
+        "--out",
+        "R.md",
+        cwd=tmp_path,
+        timeout=60,
+    )
     assert done.returncode == 2
     assert done.stderr.strip().splitlines() == ["--kinds: unknown fault kind 'occlusoin' (did you mean 'occlusion'?)"]
     assert done.stdout == "" and not (tmp_path / "R.md").exists()  # nothing flew, no report
 
 
 def test_a_random_campaign_refuses_a_lab_kind_and_a_missing_mission_is_named(tmp_path):
-    lab = campaign(str(ROOT / "missions" / "lab-3.yaml"), "--random", "2", "--kinds", "gust,dongle_unplug",
-                   cwd=tmp_path, timeout=60)
+    lab = campaign(
+        str(ROOT / "missions" / "lab-3.yaml"),
+        "--random",
+        "2",
+        "--kinds",
+        "gust,dongle_unplug",
+        cwd=tmp_path,
+        timeout=60,
+    )
     assert lab.returncode == 2 and len(lab.stderr.strip().splitlines()) == 1
     assert "dongle_unplug" in lab.stderr and "--random" in lab.stderr
     missing = campaign("no-such-mission.yaml", cwd=tmp_path, timeout=60)
     assert missing.returncode == 2 and missing.stderr.strip().splitlines() == [
-        "no-such-mission.yaml:0: (file): no such file"]
+        "no-such-mission.yaml:0: (file): no such file"
+    ]

@@ -32,8 +32,9 @@ def test_the_dynamics_copy_carries_dry_run_dynamics_and_keeps_the_mission(tmp_pa
     back = load_mission(with_dynamics(with_dynamics(LAB_3, "firmware", tmp_path), "first-order", tmp_path))
     assert back.dry_run.dynamics == "first-order"
     # with the other copies, in the order a campaign makes them: each keeps what the one before changed
-    chained = load_mission(with_world_seed(with_dynamics(with_extpose(LAB_3, tmp_path), "firmware", tmp_path),
-                                           21003, tmp_path))
+    chained = load_mission(
+        with_world_seed(with_dynamics(with_extpose(LAB_3, tmp_path), "firmware", tmp_path), 21003, tmp_path)
+    )
     assert (chained.dry_run.dynamics, chained.dry_run.seed, chained.radio.extpos) == ("firmware", 21003, "extpose")
     with pytest.raises(ValueError, match="first-order or firmware"):
         with_dynamics(LAB_3, "firmwre", tmp_path)
@@ -42,7 +43,8 @@ def test_the_dynamics_copy_carries_dry_run_dynamics_and_keeps_the_mission(tmp_pa
 def test_a_copy_still_finds_the_missions_vehicle_profile(tmp_path):
     (tmp_path / "lab" / "profiles").mkdir(parents=True)
     (tmp_path / "lab" / "profiles" / "cf.yaml").write_text(
-        "format: 1\ndrone: cf1\nparams: {posCtlPid.xKp: 1.4}\nmocap: {latency_s: 0.01, noise_m: 0.001}\n")
+        "format: 1\ndrone: cf1\nparams: {posCtlPid.xKp: 1.4}\nmocap: {latency_s: 0.01, noise_m: 0.001}\n"
+    )
     text = LAB_3.read_text().replace("policy: ../policies/rpf3.onnx", f"policy: {ROOT / 'policies' / 'rpf3.onnx'}")
     mission = tmp_path / "lab" / "m.yaml"
     mission.write_text(text + "dry_run: {dynamics: firmware, vehicle: profiles/cf.yaml}\n")
@@ -82,10 +84,12 @@ def test_every_path_of_a_campaign_flies_the_dynamics_asked_for(flown, tmp_path):
     # the lab's gust, its 4 kills and 1 unplug; the tool's 2 gusts, 8 kills and 2 unplugs
     assert len(flown) == 6 + 12 and all(d == "firmware" for _, d in flown), flown
     flown.clear()
-    rand = maintainers_campaign(random_runs=3, seed=21, faults_per_run=2, vary_world=True, dynamics="firmware",
-                                keep=tmp_path / "c")
-    assert rand.command.endswith("--random 3 --seed 21 --planners mission,rpf3 --faults-per-run 2 --vary-world "
-                                 "--dynamics firmware")
+    rand = maintainers_campaign(
+        random_runs=3, seed=21, faults_per_run=2, vary_world=True, dynamics="firmware", keep=tmp_path / "c"
+    )
+    assert rand.command.endswith(
+        "--random 3 --seed 21 --planners mission,rpf3 --faults-per-run 2 --vary-world --dynamics firmware"
+    )
     mine = mission_campaign(LAB_3, random_runs=2, seed=4, dynamics="firmware", keep=tmp_path / "d")
     assert mine.command.endswith("--random 2 --seed 4 --faults-per-run 2 --dynamics firmware")
     assert len(flown) == 5 and all(d == "firmware" for _, d in flown), flown
@@ -96,30 +100,51 @@ def test_every_path_of_a_campaign_flies_the_dynamics_asked_for(flown, tmp_path):
 
 def test_the_same_seed_draws_the_same_runs_on_either_model(flown, tmp_path):
     first = maintainers_campaign(random_runs=4, seed=22, faults_per_run=2, vary_world=True, keep=tmp_path / "a")
-    firmware = maintainers_campaign(random_runs=4, seed=22, faults_per_run=2, vary_world=True, dynamics="firmware",
-                                    keep=tmp_path / "b")
+    firmware = maintainers_campaign(
+        random_runs=4, seed=22, faults_per_run=2, vary_world=True, dynamics="firmware", keep=tmp_path / "b"
+    )
     assert [(v.kind, v.mission, v.params) for v in first.verdicts] == [
-        (v.kind, v.mission, v.params) for v in firmware.verdicts]
+        (v.kind, v.mission, v.params) for v in firmware.verdicts
+    ]
 
 
 def test_the_firmware_campaigns_reports_have_names_of_their_own():
-    names = {default_report(planner, runs, seed, k, extpose, dynamics).name
-             for planner, runs, seed, k, extpose, dynamics in [(None, 0, 0, 1, False, "firmware"),
-                                                                (None, 12, 21, 2, False, "firmware"),
-                                                                ("rpf3", 0, 0, 1, True, "firmware"),
-                                                                (None, 60, 2, 1, False, "firmware"),
-                                                                (None, 0, 0, 1, False, "first-order")]}
-    assert names == {"fixed-firmware.md", "compound-firmware-seed21.md", "rpf3-extpose-firmware.md",
-                     "random-firmware-seed2.md", "fixed.md"}
+    names = {
+        default_report(planner, runs, seed, k, extpose, dynamics).name
+        for planner, runs, seed, k, extpose, dynamics in [
+            (None, 0, 0, 1, False, "firmware"),
+            (None, 12, 21, 2, False, "firmware"),
+            ("rpf3", 0, 0, 1, True, "firmware"),
+            (None, 60, 2, 1, False, "firmware"),
+            (None, 0, 0, 1, False, "first-order"),
+        ]
+    }
+    assert names == {
+        "fixed-firmware.md",
+        "compound-firmware-seed21.md",
+        "rpf3-extpose-firmware.md",
+        "random-firmware-seed2.md",
+        "fixed.md",
+    }
 
 
 def test_a_bad_dynamics_is_one_line_and_exit_2_before_anything_flies(tmp_path):
-    done = subprocess.run([sys.executable, "-m", "rpf_fly", "campaign", str(LAB_3), "--dynamics", "firmwre",
-                           "--out", "R.md"], capture_output=True, text=True, cwd=tmp_path, timeout=60)
+    done = subprocess.run(
+        [sys.executable, "-m", "rpf_fly", "campaign", str(LAB_3), "--dynamics", "firmwre", "--out", "R.md"],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        timeout=60,
+    )
     assert done.returncode == 2
     assert done.stderr.strip().splitlines() == ["--dynamics: expected first-order or firmware, got 'firmwre'"]
     assert done.stdout == "" and not list(tmp_path.iterdir())
-    tool = subprocess.run([sys.executable, str(ROOT / "tools" / "fault_campaign.py"), "--dynamics", "first_order",
-                           "--out", "-"], capture_output=True, text=True, cwd=tmp_path, timeout=60)
+    tool = subprocess.run(
+        [sys.executable, str(ROOT / "tools" / "fault_campaign.py"), "--dynamics", "first_order", "--out", "-"],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        timeout=60,
+    )
     assert tool.returncode == 2 and "--dynamics: invalid choice: 'first_order'" in tool.stderr
     assert tool.stdout == "" and not list(tmp_path.iterdir())

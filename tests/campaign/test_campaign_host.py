@@ -13,8 +13,10 @@ from rpf_fly.mission import load_mission
 
 ROOT = Path(__file__).resolve().parents[2]
 LAB_3 = ROOT / "missions" / "lab-3.yaml"
-BEHIND = ("the host could not keep up for 0.4 s (simulated steps or mocap frames more than 50 ms late): this dry run "
-          "is not evidence")
+BEHIND = (
+    "the host could not keep up for 0.4 s (simulated steps or mocap frames more than 50 ms late): this dry run "
+    "is not evidence"
+)
 
 
 def record(behind: bool, lab: bool = False) -> FlightRecord:
@@ -61,7 +63,8 @@ def test_a_run_whose_host_fell_behind_every_time_fails_as_no_evidence(monkeypatc
     flown = stub(monkeypatch, [True] * runner.HOST_TRIES)
     verdict = runner.fly_and_judge([], LAB_3, tmp_path)
     assert len(flown) == runner.HOST_TRIES and not verdict.passed
-    assert verdict.failures == [f"the host fell behind on each of {runner.HOST_TRIES} tries: not evidence, fly it "
-                                "again"]
+    assert verdict.failures == [
+        f"the host fell behind on each of {runner.HOST_TRIES} tries: not evidence, fly it again"
+    ]
     # a killed flight leaves no log of its own: its output's line counts
     assert runner.host_fell_behind(FlightRecord(load_mission(LAB_3), [], stderr=f"[host] {BEHIND}\n"))

@@ -49,22 +49,36 @@ def good_record() -> FlightRecord:
     """cf2 occluded for 1 s at 3 s into the planning, said at once, lands early; the three cross the lab's middle
     at once, 0.3 m apart in height, and cf1 and cf3 reach their goals; exit 1 as not every drone reached."""
     d = {x.name: x for x in LAB_3.drones}
-    truth = {name: flown(d[name].start, d[name].goal, height, land_at_s)
-             for name, height, land_at_s in (("cf1", 0.6, 9.5), ("cf2", 0.9, 6.3), ("cf3", 1.2, 9.5))}
-    events = [event(3.0, 2, "phase", "swarm: flying"), event(6.0, 2, "fault", "injected occlusion for 1 s", "cf2"),
-              event(6.25, 3, "supervisor", "pose_stale: pose 250 ms old: holding", "cf2"),
-              event(11.5, 2, "phase", "end")]
-    return FlightRecord(LAB_3, [fault_fields("occlusion", "cf2", {"duration_s": 1.0})], exit_code=1, limit_s=130.0,
-                        seconds=14.0, stdout="cf1: reached\ncf2: landed_early (pose lost)\ncf3: reached\n",
-                        topics={"/events": events, **{f"/truth/{n}": s for n, s in truth.items()}})
+    truth = {
+        name: flown(d[name].start, d[name].goal, height, land_at_s)
+        for name, height, land_at_s in (("cf1", 0.6, 9.5), ("cf2", 0.9, 6.3), ("cf3", 1.2, 9.5))
+    }
+    events = [
+        event(3.0, 2, "phase", "swarm: flying"),
+        event(6.0, 2, "fault", "injected occlusion for 1 s", "cf2"),
+        event(6.25, 3, "supervisor", "pose_stale: pose 250 ms old: holding", "cf2"),
+        event(11.5, 2, "phase", "end"),
+    ]
+    return FlightRecord(
+        LAB_3,
+        [fault_fields("occlusion", "cf2", {"duration_s": 1.0})],
+        exit_code=1,
+        limit_s=130.0,
+        seconds=14.0,
+        stdout="cf1: reached\ncf2: landed_early (pose lost)\ncf3: reached\n",
+        topics={"/events": events, **{f"/truth/{n}": s for n, s in truth.items()}},
+    )
 
 
 def set_truth(name: str, k: int, **changes: object) -> Callable[[FlightRecord], None]:
     def change(r: FlightRecord) -> None:
         t, m = r.topics[f"/truth/{name}"][k]
         pos = {**m["position"], **{a: v for a, v in changes.items() if a in "xyz"}}
-        r.topics[f"/truth/{name}"][k] = (t, {**m, "position": pos, **{a: v for a, v in changes.items()
-                                                                      if a not in "xyz"}})
+        r.topics[f"/truth/{name}"][k] = (
+            t,
+            {**m, "position": pos, **{a: v for a, v in changes.items() if a not in "xyz"}},
+        )
+
     return change
 
 
@@ -75,8 +89,10 @@ def hover_at_end(r: FlightRecord) -> None:
 
 def near_miss(r: FlightRecord) -> None:
     """cf3 flies at cf1's height: they cross at the middle of the lab together."""
-    r.topics["/truth/cf3"] = [(t, {**m, "position": {**m["position"], "z": 0.6 if m["position"]["z"] else 0.0}})
-                              for t, m in r.topics["/truth/cf3"]]
+    r.topics["/truth/cf3"] = [
+        (t, {**m, "position": {**m["position"], "z": 0.6 if m["position"]["z"] else 0.0}})
+        for t, m in r.topics["/truth/cf3"]
+    ]
 
 
 def silent(r: FlightRecord) -> None:
@@ -89,13 +105,19 @@ FAILING: dict[str, tuple[Callable[[FlightRecord], None], str]] = {
     "not down": (hover_at_end, "cf3 not down at the end (motors True, z 0.60 m)"),
     "out of the arena": (set_truth("cf1", 50, x=2.5), "outside the arena by more than r: cf1 0.50 m"),
     "no warning": (silent, "no warning naming cf2 within 1 s of its occlusion"),
-    "did not reach": (lambda r: setattr(r, "stdout", r.stdout.replace("cf3: reached", "cf3: landed_early")),
-                      "did not reach their goals: cf3"),
+    "did not reach": (
+        lambda r: setattr(r, "stdout", r.stdout.replace("cf3: reached", "cf3: landed_early")),
+        "did not reach their goals: cf3",
+    ),
     "exit code": (lambda r: setattr(r, "exit_code", 0), "exit code 0, expected 1"),
-    "traceback": (lambda r: setattr(r, "stderr", "Traceback (most recent call last):\n"),
-                  "traceback in the flight's output"),
-    "review": (lambda r: setattr(r, "review_error", "log cut short"),
-               "the flight's log does not review: log cut short"),
+    "traceback": (
+        lambda r: setattr(r, "stderr", "Traceback (most recent call last):\n"),
+        "traceback in the flight's output",
+    ),
+    "review": (
+        lambda r: setattr(r, "review_error", "log cut short"),
+        "the flight's log does not review: log cut short",
+    ),
     "never exited": (lambda r: setattr(r, "exit_code", None), "did not exit within 130 s"),
     "log unreadable": (lambda r: setattr(r, "log_error", "bad magic"), "log unreadable: bad magic"),
 }
@@ -145,11 +167,20 @@ def kill_record(down_after_s: float) -> LabRecord:
             up = S <= t - T0 and t < killed + int(down_after_s * S)
             samples.append((t, state(d.start[0], d.start[1], 0.6 if up else 0.0, up)))
         truth[f"/truth/{d.name}"] = samples
-    stderr = ("[takeoff] take-off commanded: 3 drone(s)\n[phase] swarm: flying\n"
-              "[fault] injected ground_station_kill at planning + 3 s: SIGKILL of this ground station\n")
-    return LabRecord(LAB_3, [{"kind": "ground_station_kill", "at_phase": "planning", "at_s": 3.0}],
-                     exit_code=-signal.SIGKILL, limit_s=130.0, stderr=stderr, lab_topics=truth, struck_ns=killed,
-                     exited_ns=killed)
+    stderr = (
+        "[takeoff] take-off commanded: 3 drone(s)\n[phase] swarm: flying\n"
+        "[fault] injected ground_station_kill at planning + 3 s: SIGKILL of this ground station\n"
+    )
+    return LabRecord(
+        LAB_3,
+        [{"kind": "ground_station_kill", "at_phase": "planning", "at_s": 3.0}],
+        exit_code=-signal.SIGKILL,
+        limit_s=130.0,
+        stderr=stderr,
+        lab_topics=truth,
+        struck_ns=killed,
+        exited_ns=killed,
+    )
 
 
 def test_the_lab_judge_passes_drones_down_in_time_and_fails_them_later():
@@ -165,8 +196,10 @@ def test_the_lab_judge_passes_drones_down_in_time_and_fails_them_later():
 
 
 def test_the_phase_a_kill_struck_in_is_read_from_the_flights_stderr():
-    stderr = ("[phase] swarm: takeoff\n[takeoff] take-off commanded: 3 drone(s)\n[phase] swarm: flying\n"
-              "[phase] swarm: landing (mission complete)\n[fault] injected ground_station_kill at landing + 0.7 s\n")
+    stderr = (
+        "[phase] swarm: takeoff\n[takeoff] take-off commanded: 3 drone(s)\n[phase] swarm: flying\n"
+        "[phase] swarm: landing (mission complete)\n[fault] injected ground_station_kill at landing + 0.7 s\n"
+    )
     assert phase_at_kill(stderr) == "landing"
     assert phase_at_kill(stderr.replace("[phase] swarm: landing (mission complete)\n", "")) == "flying"
 

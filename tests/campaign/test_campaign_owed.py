@@ -29,17 +29,24 @@ def test_a_compound_schedule_parses_and_each_fault_needs_its_own_warning():
     from rpf_fly.mission import load_mission
 
     mission = load_mission(ROOT / "missions" / "lab-3.yaml")
-    faults = [fault_fields("occlusion", "cf1", None, 2.0), fault_fields("gust", "cf3", None, 4.0),
-              fault_fields("blackout", None, None, 5.0)]
+    faults = [
+        fault_fields("occlusion", "cf1", None, 2.0),
+        fault_fields("gust", "cf3", None, 4.0),
+        fault_fields("blackout", None, None, 5.0),
+    ]
     parsed = parse_faults(schedule_of(faults), "compound.yaml", mission)
     assert [(f.kind, f.drone) for f in parsed] == [("occlusion", "cf1"), ("gust", "cf3"), ("blackout", None)]
 
     def event(t_s: float, level: int, file: str, message: str, name: str = "") -> tuple[int, dict]:
         return int(t_s * 1e9), {"level": level, "file": file, "message": message, "name": name}
 
-    events = [event(2.0, 1, "fault", "injected occlusion", "cf1"), event(2.3, 3, "supervisor", "pose stale", "cf1"),
-              event(4.0, 1, "fault", "injected gust", "cf3"), event(4.2, 3, "supervisor", "pose stale", "cf1"),
-              event(6.5, 3, "supervisor", "mocap_lost: no fresh mocap pose", "")]
+    events = [
+        event(2.0, 1, "fault", "injected occlusion", "cf1"),
+        event(2.3, 3, "supervisor", "pose stale", "cf1"),
+        event(4.0, 1, "fault", "injected gust", "cf3"),
+        event(4.2, 3, "supervisor", "pose stale", "cf1"),
+        event(6.5, 3, "supervisor", "mocap_lost: no fresh mocap pose", ""),
+    ]
     occlusion, gust, blackout = faults
     assert [m["message"] for m in warnings_for(occlusion, events, 0)] == ["pose stale"]
     assert warnings_for(gust, events, 0) == []  # cf1's warning is not cf3's
@@ -103,8 +110,12 @@ def test_a_gust_owes_a_warning_only_when_it_could_push_its_drone_past_the_tracki
         samples = []
         for k in range(361, 471):  # 10 ms steps from 3.61 s to 4.70 s
             t = k / 100
-            samples.append((int(t * 1e9), {"position": {"x": 0.0, "y": 0.0, "z": 0.0 if t >= touchdown_s else 0.3},
-                                            "motors": True}))
+            samples.append(
+                (
+                    int(t * 1e9),
+                    {"position": {"x": 0.0, "y": 0.0, "z": 0.0 if t >= touchdown_s else 0.3}, "motors": True},
+                )
+            )
         return {"cf4": samples}
 
     short = gust_push_bound(gust, events, truth(3.85))
@@ -122,9 +133,18 @@ def test_a_slow_estimator_divergence_is_owed_a_warning_from_when_it_leaves_the_t
 
     def said_at(rate: float, after_s: float) -> bool:
         fault = fault_fields("estimator_divergence", "cf2", {"rate_m_s": rate}, 2.85)
-        events = [(int(2.85e9), {"level": 2, "file": "fault", "name": "cf2",
-                                 "message": f"injected estimator_divergence: rate_m_s {rate}"}),
-                  (int((2.85 + after_s) * 1e9), {"level": 4, "file": "estimator", "name": "cf2", "message": "off"})]
+        events = [
+            (
+                int(2.85e9),
+                {
+                    "level": 2,
+                    "file": "fault",
+                    "name": "cf2",
+                    "message": f"injected estimator_divergence: rate_m_s {rate}",
+                },
+            ),
+            (int((2.85 + after_s) * 1e9), {"level": 4, "file": "estimator", "name": "cf2", "message": "off"}),
+        ]
         return bool(warnings_for(fault, events, 0))
 
     assert said_at(0.12, 1.3) and not said_at(0.12, 1.5)
@@ -153,9 +173,18 @@ def test_a_frame_fault_wholly_inside_a_loop_stall_owes_nothing_but_one_outliving
     """A pose jump that began and ended while the loop was stalled never reached the stack (it reads only the newest
     frame when it wakes); one that outlives the stall does, and owes its warning. A pose gap is not such a fault:
     the stack says it after the fact."""
-    events = [(int(3.0e9), {"level": 2, "file": "fault", "name": "flight", "message": "injected loop_stall for 1.5 s"}),
-              (int(3.5e9), {"level": 2, "file": "fault", "name": "cf2",
-                            "message": "injected pose_jump for 0.4 s: offset_m [0.6, 0.0, 0.0]"})]
+    events = [
+        (int(3.0e9), {"level": 2, "file": "fault", "name": "flight", "message": "injected loop_stall for 1.5 s"}),
+        (
+            int(3.5e9),
+            {
+                "level": 2,
+                "file": "fault",
+                "name": "cf2",
+                "message": "injected pose_jump for 0.4 s: offset_m [0.6, 0.0, 0.0]",
+            },
+        ),
+    ]
     inside = fault_fields("pose_jump", "cf2", {"duration_s": 0.4, "offset_m": [0.6, 0.0, 0.0]}, 3.5)
     assert inside_loop_stall(inside, events)
     outliving = fault_fields("pose_jump", "cf2", {"duration_s": 1.2, "offset_m": [0.6, 0.0, 0.0]}, 3.5)
@@ -169,8 +198,9 @@ def test_a_loop_stall_that_delayed_no_tick_past_the_late_line_owes_nothing():
     made one tick 59 ms late (0.126 s after the last one): under the period plus 0.1 s, the loop's own late line,
     so owed nothing. The same stall at 100 Hz holds the ticks 0.13 s apart, past 0.11 s: owed."""
     stall = fault_fields("loop_stall", None, {"duration_s": 0.12}, 4.74)
-    events = [(int(4.742e9), {"level": 2, "file": "fault", "name": "flight",
-                              "message": "injected loop_stall for 0.12 s"})]
+    events = [
+        (int(4.742e9), {"level": 2, "file": "fault", "name": "flight", "message": "injected loop_stall for 0.12 s"})
+    ]
 
     def ticks(period: float, gap: float) -> dict:
         """Ticks every ``period`` from 4.0 s; the one after 4.742 s comes ``gap`` later; then every period."""

@@ -85,8 +85,12 @@ def test_the_lab_kinds_fly_each_phase_on_two_missions_and_every_run_parses(tmp_p
     pillars = str(ROOT / "missions" / "campaign" / "pillars-6.yaml")
     other = lab_runs(["dongle_unplug", "ground_station_kill"], [pillars], None, False, tmp_path)
     assert [(k, f.get("dongle", f.get("at_phase"))) for k, _, f in other] == [
-        ("ground_station_kill", "takeoff"), ("ground_station_kill", "settle"), ("ground_station_kill", "planning"),
-        ("ground_station_kill", "landing"), ("dongle_unplug", 1)]
+        ("ground_station_kill", "takeoff"),
+        ("ground_station_kill", "settle"),
+        ("ground_station_kill", "planning"),
+        ("ground_station_kill", "landing"),
+        ("dongle_unplug", 1),
+    ]
     assert lab_runs(["occlusion"], None, None, False, tmp_path) == []
 
 

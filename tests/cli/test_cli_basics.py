@@ -41,14 +41,20 @@ def test_version_in_a_real_process():
 def test_mocap_help_names_every_system_watch_reads():
     """`mocap --help` (and the group's line in `--help`) says `watch` reads NatNet and the motioncapture package's
     systems (`--system`), not OptiTrack alone."""
+
     def run(*args: str) -> str:
-        proc = subprocess.run([sys.executable, "-m", "rpf_fly", *args], capture_output=True, text=True, timeout=60,
-                              env={**os.environ, **WIDE})
+        proc = subprocess.run(
+            [sys.executable, "-m", "rpf_fly", *args],
+            capture_output=True,
+            text=True,
+            timeout=60,
+            env={**os.environ, **WIDE},
+        )
         assert proc.returncode == 0, proc.stderr
         return " ".join(proc.stdout.replace("│", " ").split())
 
     group = run("mocap", "--help")
-    about = group[group.index("COMMAND [ARGS]...") + len("COMMAND [ARGS]..."):group.index("Options")]
+    about = group[group.index("COMMAND [ARGS]...") + len("COMMAND [ARGS]...") : group.index("Options")]
     assert "motioncapture" in about and "Vicon" in about and "NatNet" in about, about
     assert "motioncapture" in run("--help").split(" mocap ", 1)[1]
 
@@ -115,8 +121,9 @@ def test_a_log_that_cannot_be_written_is_one_line_before_anything_flies(tmp_path
     mission = Path(__file__).resolve().parents[1] / "runtime" / "two-dongles.yaml"
     (tmp_path / "file").write_text("")
     path = tmp_path / "file" / "x.mcap" if where == "under a file" else Path("/proc/rpf-fly-test.mcap")
-    result = runner.invoke(get_app(), ["fly", str(mission), "--dry-run", "--log", str(path)]
-                           + (["--distributed"] if distributed else []))
+    result = runner.invoke(
+        get_app(), ["fly", str(mission), "--dry-run", "--log", str(path)] + (["--distributed"] if distributed else [])
+    )
     assert result.exit_code == 2, result.output
     line = result.output.strip()
     assert "\n" not in line and line.startswith(f"--log {path}: cannot "), line

@@ -56,8 +56,11 @@ def private_cross_imports(path: Path) -> list[str]:
             value = node.value
             if isinstance(value, ast.Name) and value.id in modules:
                 found.append(f"{path.name}:{node.lineno}: {value.id}.{node.attr}")
-            elif (isinstance(value, ast.Attribute) and ast.unparse(value).startswith("rpf_fly.cli.")
-                  and ast.unparse(value) != own):
+            elif (
+                isinstance(value, ast.Attribute)
+                and ast.unparse(value).startswith("rpf_fly.cli.")
+                and ast.unparse(value) != own
+            ):
                 found.append(f"{path.name}:{node.lineno}: {ast.unparse(node)}")
     return found
 
@@ -84,31 +87,46 @@ def imports_of(path: Path) -> list[tuple[int, str]]:
 
 def test_no_cli_module_imports_another_cli_modules_private_names():
     found = [hit for path in sorted(CLI.glob("*.py")) for hit in private_cross_imports(path)]
-    assert found == [], "shared by two commands: move it to rpf_fly/app/ (or make it a public name of cli/output.py, " \
-                        "cli/errors.py):\n" + "\n".join(found)
+    assert found == [], (
+        "shared by two commands: move it to rpf_fly/app/ (or make it a public name of cli/output.py, "
+        "cli/errors.py):\n" + "\n".join(found)
+    )
 
 
 def test_the_check_sees_a_private_cross_import(tmp_path):
     """The check itself: each way a command could reach into another is found, its own names and dunders are not."""
     module = CLI / "probe_cmd.py"  # never written: parsed from tmp_path under this name
     source = tmp_path / module.name
-    source.write_text("from rpf_fly.cli.fly_cmd import _summary, fly\n"
-                      "from rpf_fly.cli import fly_cmd, app, _root\n"
-                      "from . import worker_cmd\n"
-                      "import rpf_fly.cli.lab_cmd\n"
-                      "from rpf_fly.cli.probe_cmd import _mine\n"
-                      "from rpf_fly.cli import __doc__\n"
-                      "fly_cmd._print_event(None)\n"
-                      "worker_cmd._say(None)\n"
-                      "rpf_fly.cli.lab_cmd._gone\n"
-                      "app._private_of_typer\n")
+    source.write_text(
+        "from rpf_fly.cli.fly_cmd import _summary, fly\n"
+        "from rpf_fly.cli import fly_cmd, app, _root\n"
+        "from . import worker_cmd\n"
+        "import rpf_fly.cli.lab_cmd\n"
+        "from rpf_fly.cli.probe_cmd import _mine\n"
+        "from rpf_fly.cli import __doc__\n"
+        "fly_cmd._print_event(None)\n"
+        "worker_cmd._say(None)\n"
+        "rpf_fly.cli.lab_cmd._gone\n"
+        "app._private_of_typer\n"
+    )
     found = [hit.split(": ", 1)[1] for hit in private_cross_imports(source)]
-    assert sorted(found) == sorted(["rpf_fly.cli.fly_cmd._summary", "rpf_fly.cli._root", "fly_cmd._print_event",
-                                    "worker_cmd._say", "rpf_fly.cli.lab_cmd._gone"])
+    assert sorted(found) == sorted(
+        [
+            "rpf_fly.cli.fly_cmd._summary",
+            "rpf_fly.cli._root",
+            "fly_cmd._print_event",
+            "worker_cmd._say",
+            "rpf_fly.cli.lab_cmd._gone",
+        ]
+    )
 
 
 def test_nothing_below_the_cli_imports_it():
-    found = [f"{path.relative_to(PACKAGE.parent)}:{line}: {module}"
-             for path in sorted(PACKAGE.rglob("*.py")) if CLI not in path.parents and path not in ENTRY_POINTS
-             for line, module in imports_of(path) if module == "rpf_fly.cli" or module.startswith("rpf_fly.cli.")]
-    assert found == [], "the CLI is the top layer (docs/architecture.md, \"Layers\"):\n" + "\n".join(found)
+    found = [
+        f"{path.relative_to(PACKAGE.parent)}:{line}: {module}"
+        for path in sorted(PACKAGE.rglob("*.py"))
+        if CLI not in path.parents and path not in ENTRY_POINTS
+        for line, module in imports_of(path)
+        if module == "rpf_fly.cli" or module.startswith("rpf_fly.cli.")
+    ]
+    assert found == [], 'the CLI is the top layer (docs/architecture.md, "Layers"):\n' + "\n".join(found)

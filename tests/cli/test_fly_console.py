@@ -15,12 +15,14 @@ def final_table(stderr: str) -> list[str]:
     lines = stderr.splitlines()
     bottom = max(i for i, line in enumerate(lines) if line.startswith("└"))
     top = max(i for i, line in enumerate(lines[:bottom]) if line.startswith("┏"))
-    return lines[top - 1:bottom + 1]
+    return lines[top - 1 : bottom + 1]
 
 
 def rows(table: list[str]) -> dict[str, list[str]]:
-    return {cells[0]: cells for cells in ([c.strip() for c in line.strip("│").split("│")]
-                                          for line in table if line.startswith("│"))}
+    return {
+        cells[0]: cells
+        for cells in ([c.strip() for c in line.strip("│").split("│")] for line in table if line.startswith("│"))
+    }
 
 
 def test_a_clean_flight_ends_with_every_drone_landed(clean_cli_flight):
@@ -46,8 +48,11 @@ def test_a_ctrl_c_is_said_once_plainly(landed_cli_flight):
     flight = landed_cli_flight
     assert flight.returncode == 130, flight.stderr
     lines = flight.stderr.splitlines()
-    events = [line for line in lines[lines.index("[phase] swarm: flying") + 1:lines.index("[phase] swarm: done")]
-              if line.startswith(("[interrupt]", "[phase]"))]
+    events = [
+        line
+        for line in lines[lines.index("[phase] swarm: flying") + 1 : lines.index("[phase] swarm: done")]
+        if line.startswith(("[interrupt]", "[phase]"))
+    ]
     assert events == ["[interrupt] Ctrl-C: all drones land (Ctrl-C again: emergency stop)", "[phase] swarm: landing"]
     for cells in rows(final_table(flight.stderr)).values():
         assert cells[1:3] == ["landed", "landed_early"] and cells[-1] == "interrupted by Ctrl-C", cells
@@ -77,18 +82,61 @@ def test_a_distributed_flight_ends_with_the_same_table_naming_each_drones_worker
     from pathlib import Path
 
     mission = Path(__file__).resolve().parents[1] / "runtime" / "two-dongles.yaml"
-    flight = subprocess.run([sys.executable, "-m", "rpf_fly", "fly", str(mission), "--dry-run", "--distributed",
-                             "--log", str(tmp_path / "flight.mcap")], capture_output=True, text=True, timeout=180,
-                            cwd=tmp_path, env=dict(os.environ, PYTHONUNBUFFERED="1"))
+    flight = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "rpf_fly",
+            "fly",
+            str(mission),
+            "--dry-run",
+            "--distributed",
+            "--log",
+            str(tmp_path / "flight.mcap"),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=180,
+        cwd=tmp_path,
+        env=dict(os.environ, PYTHONUNBUFFERED="1"),
+    )
     assert flight.returncode == 0, flight.stderr
     table = final_table(flight.stderr)
     assert table[0].strip() == "two-dongles: done"
-    assert table[2].split() == ["┃", "drone", "┃", "worker", "┃", "state", "┃", "outcome", "┃", "x", "┃", "y", "┃",
-                                "z", "┃", "to", "goal", "[m]", "┃", "battery", "[V]", "┃", "link", "[%]", "┃"]
+    assert table[2].split() == [
+        "┃",
+        "drone",
+        "┃",
+        "worker",
+        "┃",
+        "state",
+        "┃",
+        "outcome",
+        "┃",
+        "x",
+        "┃",
+        "y",
+        "┃",
+        "z",
+        "┃",
+        "to",
+        "goal",
+        "[m]",
+        "┃",
+        "battery",
+        "[V]",
+        "┃",
+        "link",
+        "[%]",
+        "┃",
+    ]
     found = rows(table)
     assert {name: cells[1:4] for name, cells in found.items()} == {
-        "cf1": ["dongle-0", "landed", "reached"], "cf2": ["dongle-0", "landed", "reached"],
-        "cf3": ["dongle-1", "landed", "reached"], "cf4": ["dongle-1", "landed", "reached"]}
+        "cf1": ["dongle-0", "landed", "reached"],
+        "cf2": ["dongle-0", "landed", "reached"],
+        "cf3": ["dongle-1", "landed", "reached"],
+        "cf4": ["dongle-1", "landed", "reached"],
+    }
     for cells in found.values():
         assert float(cells[6]) < 0.1 and float(cells[7]) <= 0.1 and 3.0 < float(cells[8]) < 4.3, cells  # z, goal
     assert flight.stderr.count("two-dongles: done") == 1  # the table once

@@ -36,9 +36,27 @@ def test_review_piped_names_every_schema_in_full(tmp_path):
 
 
 def test_train_piped_prints_progress_lines_not_a_bar(tmp_path):
-    proc = subprocess.run([sys.executable, "-m", "rpf_fly", "train", "--out", str(tmp_path / "t.onnx"), "--episodes",
-                           "1", "--arenas", "2", "--eval-seeds", "0", "--threads", "1"],
-                          capture_output=True, text=True, timeout=300)
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "rpf_fly",
+            "train",
+            "--out",
+            str(tmp_path / "t.onnx"),
+            "--episodes",
+            "1",
+            "--arenas",
+            "2",
+            "--eval-seeds",
+            "0",
+            "--threads",
+            "1",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert proc.returncode == 0, proc.stderr
     lines = proc.stdout.splitlines()
     progress = [line for line in lines if line.startswith("train: ")]

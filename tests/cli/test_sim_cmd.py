@@ -75,7 +75,8 @@ VALID = WALL_MISSION
 INVALID = {
     "missing drones": VALID.split("drones:")[0],
     "empty drones": VALID.split("drones:")[0] + "drones: []\n",
-    "duplicate names": VALID + "  - {name: cf1, uri: radio://0/80/2M/E7E7E7E702, start: [0.0, 2.0], goal: [6.0, 2.0]}\n",
+    "duplicate names": VALID
+    + "  - {name: cf1, uri: radio://0/80/2M/E7E7E7E702, start: [0.0, 2.0], goal: [6.0, 2.0]}\n",
     "duplicate uris": VALID + "  - {name: cf2, uri: radio://0/80/2M/E7E7E7E701, start: [0.0, 2.0], goal: [6.0, 2.0]}\n",
     "malformed uri": VALID.replace("radio://0/80/2M/E7E7E7E701", "radio://0/80/3M/E7E7"),
     "wrong type": VALID.replace("time_limit_s: 60", "time_limit_s: soon"),
@@ -83,7 +84,8 @@ INVALID = {
     "start outside arena": VALID.replace("start: [0.0, 0.0]", "start: [-3.0, 0.0]"),
     "goal inside obstacle": VALID.replace("goal: [6.0, 0.0]", "goal: [2.1, 0.0]"),
     "start equals goal": VALID.replace("goal: [6.0, 0.0]", "goal: [0.0, 0.0]"),
-    "starts closer than 2r": VALID + "  - {name: cf2, uri: radio://0/80/2M/E7E7E7E702, start: [0.1, 0.0], goal: [6.0, 2.0]}\n",
+    "starts closer than 2r": VALID
+    + "  - {name: cf2, uri: radio://0/80/2M/E7E7E7E702, start: [0.1, 0.0], goal: [6.0, 2.0]}\n",
     "inverted range": VALID.replace("x: [-1.0, 8.0]", "x: [8.0, -1.0]"),
     "unknown key": VALID.replace("sim: {time_limit_s: 60}", "sim: {time_limit: 60}"),
     "unknown planner": VALID + "planner: {kind: rfp}\n",
@@ -139,7 +141,8 @@ def test_exit_1_when_no_drone_reached_0_when_one_did(tmp_path):
     mission.write_text(WALL_MISSION)
     stuck = run(mission, "--no-wall-following", "--guidance", "none")
     assert stuck.exit_code == 1 and "failure: 0/1 reached" in stuck.stdout
-    mission.write_text(WALL_MISSION + "  - {name: cf2, uri: radio://0/80/2M/E7E7E7E702, start: [0.0, 3.0], "
-                                      "goal: [6.0, 3.0]}\n")
+    mission.write_text(
+        WALL_MISSION + "  - {name: cf2, uri: radio://0/80/2M/E7E7E7E702, start: [0.0, 3.0], goal: [6.0, 3.0]}\n"
+    )
     one = run(mission, "--no-wall-following", "--guidance", "none")
     assert one.exit_code == 0 and "failure: 1/2 reached" in one.stdout

@@ -49,8 +49,9 @@ def synthetic_world(faults: LinkFaults, seed: int = 0) -> tuple[FakeWorld, Synth
     return world, clock
 
 
-def attempts(world: FakeWorld, clock: SyntheticClock, seconds: float,
-             start_s: float = 0.0) -> list[tuple[float, bool, bool]]:
+def attempts(
+    world: FakeWorld, clock: SyntheticClock, seconds: float, start_s: float = 0.0
+) -> list[tuple[float, bool, bool]]:
     """(world time, lost, first) of every radio attempt of empty polls every `PERIOD_S` through the drone's real
     `DronePort.transact`: an acknowledged transaction that used ``r`` retries lost ``r`` attempts first, a lost one
     all of its 4; ``first``: the transaction's first attempt (made at an arbitrary moment, unlike its retries,
@@ -103,7 +104,9 @@ def test_bursty_loss_comes_in_bursts_at_the_configured_long_run_rate() -> None:
     runs = run_lengths(lost)
     independent_run = 1.0 / (1.0 - rate)  # mean run of lost attempts if each were lost on its own (geometric)
     assert statistics.mean(runs) > 1.5 * independent_run  # measured 1.8 times (8 seeds)
-    assert sum(r >= 4 for r in runs) / len(runs) > 100 * rate**3  # independent loss: p^3 of the runs; 1200-1800 times that
+    assert (
+        sum(r >= 4 for r in runs) / len(runs) > 100 * rate**3
+    )  # independent loss: p^3 of the runs; 1200-1800 times that
     assert lag1_autocorrelation(lost) > 0.3  # 0.44-0.46
     # the losses are where the channel is bad: 60 % of attempts inside the bursts, 1 % outside
     bursts = world.radio_bursts(A, 0.0, SYNTHETIC_S)
@@ -120,7 +123,7 @@ def test_bursty_loss_comes_in_bursts_at_the_configured_long_run_rate() -> None:
 def bursts_near(bursts: list[tuple[float, float]], t: float) -> list[tuple[float, float]]:
     """The burst that could contain ``t`` (the list is sorted by start)."""
     i = bisect.bisect_right([a for a, _ in bursts], t)
-    return bursts[max(0, i - 1):i]
+    return bursts[max(0, i - 1) : i]
 
 
 def test_independent_loss_of_the_same_mean_is_not_bursty() -> None:
@@ -166,8 +169,11 @@ def test_link_quality_dips_in_the_bursts(make_world: MakeWorld, toc_cache: Path)
     quality (its `RadioLinkStatistics`, 10 points a retry over the last 100 acks) falls in the bursts, far more
     often than between them, and dips below 100 % without nearing the supervisor's 96 % warning."""
     model = BurstLoss()
-    world = make_world({A: FakeDroneConfig.at(0.0, 0.0, faults=LinkFaults(burst=model))}, seed=3,
-                       timing=RadioTiming(transaction_s=0.001))
+    world = make_world(
+        {A: FakeDroneConfig.at(0.0, 0.0, faults=LinkFaults(burst=model))},
+        seed=3,
+        timing=RadioTiming(transaction_s=0.001),
+    )
     quality: list[tuple[float, float]] = []
     with SyncCrazyflie(world.uri(A), cf=Crazyflie(rw_cache=str(toc_cache))) as scf:
         scf.cf.link_statistics.link_quality_updated.add_callback(lambda q: quality.append((world.time_s(), q)))

@@ -97,7 +97,11 @@ def test_legacy_mixer_formulas() -> None:
     thrust, roll, pitch, yaw = 40000.0, 1001, -601, 50
     r, p = 500, -300  # half of roll and pitch, truncated towards zero (int16)
     assert legacy_power_distribution(thrust, roll, pitch, yaw) == (
-        thrust - r + p + yaw, thrust - r - p - yaw, thrust + r - p + yaw, thrust + r + p - yaw)
+        thrust - r + p + yaw,
+        thrust - r - p - yaw,
+        thrust + r - p + yaw,
+        thrust + r + p - yaw,
+    )
 
 
 def test_mixer_lowers_all_motors_by_the_excess_and_floors_at_zero() -> None:
@@ -189,11 +193,23 @@ def test_midpoint_and_rk4_agree() -> None:
 def test_gains_carry_the_firmware_parameter_names() -> None:
     gains = CfGains()
     params = gains.params()
-    for name, value in (("posCtlPid.xKp", 2.0), ("posCtlPid.zKi", 0.5), ("velCtlPid.vxKp", 25.0),
-                        ("velCtlPid.vzKi", 15.0), ("pid_attitude.roll_kp", 6.0), ("pid_attitude.yaw_kd", 0.35),
-                        ("pid_rate.roll_kp", 250.0), ("pid_rate.roll_kd", 2.5), ("pid_rate.yaw_ki", 16.7),
-                        ("posCtlPid.xVelMax", 1.0), ("posCtlPid.zVelMax", 1.0), ("posCtlPid.thrustBase", 36000.0),
-                        ("posCtlPid.thrustMin", 20000.0), ("posCtlPid.rLimit", 20.0), ("posCtlPid.pLimit", 20.0)):
+    for name, value in (
+        ("posCtlPid.xKp", 2.0),
+        ("posCtlPid.zKi", 0.5),
+        ("velCtlPid.vxKp", 25.0),
+        ("velCtlPid.vzKi", 15.0),
+        ("pid_attitude.roll_kp", 6.0),
+        ("pid_attitude.yaw_kd", 0.35),
+        ("pid_rate.roll_kp", 250.0),
+        ("pid_rate.roll_kd", 2.5),
+        ("pid_rate.yaw_ki", 16.7),
+        ("posCtlPid.xVelMax", 1.0),
+        ("posCtlPid.zVelMax", 1.0),
+        ("posCtlPid.thrustBase", 36000.0),
+        ("posCtlPid.thrustMin", 20000.0),
+        ("posCtlPid.rLimit", 20.0),
+        ("posCtlPid.pLimit", 20.0),
+    ):
         assert params[name] == value
     assert set(PARAM_NAMES) == set(params)
     assert all(name.split(".")[0] in ("posCtlPid", "velCtlPid", "pid_attitude", "pid_rate") for name in params)
@@ -269,8 +285,14 @@ def test_resets_on_a_mode_change_and_on_zero_thrust() -> None:
 
 
 def test_setpoint_conversion() -> None:
-    sp = Setpoint((AxisMode.DISABLE, AxisMode.DISABLE, AxisMode.ABS), (0.0, 0.0, 0.7), yaw_mode=AxisMode.VELOCITY,
-                  yaw_rate_deg_s=30.0, attitude_mode=AxisMode.ABS, attitude_deg=(5.0, -3.0))
+    sp = Setpoint(
+        (AxisMode.DISABLE, AxisMode.DISABLE, AxisMode.ABS),
+        (0.0, 0.0, 0.7),
+        yaw_mode=AxisMode.VELOCITY,
+        yaw_rate_deg_s=30.0,
+        attitude_mode=AxisMode.ABS,
+        attitude_deg=(5.0, -3.0),
+    )
     c = ControlSetpoint.from_setpoint(sp)
     assert c.modes == (MODE_DISABLE, MODE_DISABLE, MODE_ABS, MODE_ABS, MODE_ABS, MODE_VELOCITY)
     assert (c.z, c.roll, c.pitch, c.yaw_rate) == (0.7, 5.0, -3.0, 30.0)

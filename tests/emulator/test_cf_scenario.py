@@ -134,7 +134,7 @@ def test_a_circle_is_trailed_along_its_track_like_a_line() -> None:
     assert abs(figs["radial_cm"]) < 1.5
     assert figs["err_mean_cm"] <= figs["err_max_cm"] < figs["err_mean_cm"] * 1.3
     # the centripetal acceleration v^2 / R = 0.2 m/s^2 needs a tilt of about 1.2 degrees
-    assert figs["peak_tilt_deg"] == pytest.approx(math.degrees(math.atan(0.4 ** 2 / 0.8 / 9.81)), rel=0.4)
+    assert figs["peak_tilt_deg"] == pytest.approx(math.degrees(math.atan(0.4**2 / 0.8 / 9.81)), rel=0.4)
 
 
 def test_hold_overshoot_grows_with_the_speed() -> None:

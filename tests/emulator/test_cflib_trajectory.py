@@ -61,14 +61,17 @@ def upload(cf: Crazyflie, pieces: list[Piece], trajectory_id: int = 1) -> bool:
     return True
 
 
-def test_cflib_finds_the_memories_and_round_trips_the_trajectory_memory(make_world: MakeWorld,
-                                                                       toc_cache: Path) -> None:
+def test_cflib_finds_the_memories_and_round_trips_the_trajectory_memory(make_world: MakeWorld, toc_cache: Path) -> None:
     world = make_world(1)
     with SyncCrazyflie(world.uri(A), cf=Crazyflie(rw_cache=str(toc_cache))) as scf:
         cf = scf.cf
         assert [(m.id, m.type) for m in cf.mem.mems] == [
-            (0, MemoryElement.TYPE_I2C), (1, MemoryElement.TYPE_TRAJ), (2, MemoryElement.TYPE_MEMORY_TESTER),
-            (3, MemoryElement.TYPE_DECK_MEMORY), (4, MemoryElement.TYPE_DECKCTRL_DFU)]
+            (0, MemoryElement.TYPE_I2C),
+            (1, MemoryElement.TYPE_TRAJ),
+            (2, MemoryElement.TYPE_MEMORY_TESTER),
+            (3, MemoryElement.TYPE_DECK_MEMORY),
+            (4, MemoryElement.TYPE_DECKCTRL_DFU),
+        ]
         (trajectory_mem,) = cf.mem.get_mems(MemoryElement.TYPE_TRAJ)
         assert trajectory_mem.size == 4096
         pieces = figure_eight()
@@ -107,8 +110,10 @@ def test_figure_eights_are_flown_on_the_polynomial(make_world: MakeWorld, toc_ca
     duration = total_duration(pieces)
     b_hover, b_yaw = (0.0, 2.0, 0.6), 1.0
     samples: dict[int, list[FirmwareSnapshot]] = {A: [], B: []}
-    with SyncCrazyflie(world.uri(A), cf=Crazyflie(rw_cache=str(toc_cache))) as a, \
-            SyncCrazyflie(world.uri(B), cf=Crazyflie(rw_cache=str(toc_cache))) as b:
+    with (
+        SyncCrazyflie(world.uri(A), cf=Crazyflie(rw_cache=str(toc_cache))) as a,
+        SyncCrazyflie(world.uri(B), cf=Crazyflie(rw_cache=str(toc_cache))) as b,
+    ):
         assert upload(a.cf, pieces) and upload(b.cf, small, trajectory_id=3)
         a.cf.high_level_commander.takeoff(0.5, 1.0)
         b.cf.high_level_commander.takeoff(b_hover[2], 1.0, yaw=b_yaw)
@@ -137,15 +142,20 @@ def test_figure_eights_are_flown_on_the_polynomial(make_world: MakeWorld, toc_ca
     expectations = {A: (lambda t: reference(pieces, t)[0], duration), B: (expected_b, 0.75 * duration)}
     for address, (expected, length) in expectations.items():
         plan_start = samples[address][-1].hl_plan_start_s  # the trajectory's (earlier samples: the take-off's)
-        flying = [snap for snap in samples[address]
-                  if snap.hl_plan_start_s == plan_start and snap.time_s - plan_start <= length]
+        flying = [
+            snap
+            for snap in samples[address]
+            if snap.hl_plan_start_s == plan_start and snap.time_s - plan_start <= length
+        ]
         assert len(flying) > 0.7 * length / 0.02, f"{len(flying)} samples of {address:X}"
-        errors = [(snap.time_s - plan_start, math.dist(snap.position, expected(snap.time_s - plan_start)))
-                  for snap in flying]
+        errors = [
+            (snap.time_s - plan_start, math.dist(snap.position, expected(snap.time_s - plan_start))) for snap in flying
+        ]
         start_error = max(e for t, e in errors if t < 0.25)
         later_error = max(e for t, e in errors if t >= 0.25)
-        assert start_error < 0.012 and later_error < 0.006, f"{address:X}: {start_error * 1000:.1f} mm, " \
-                                                            f"{later_error * 1000:.1f} mm off the polynomial"
+        assert start_error < 0.012 and later_error < 0.006, (
+            f"{address:X}: {start_error * 1000:.1f} mm, {later_error * 1000:.1f} mm off the polynomial"
+        )
         # it went round the figure: 0.4 m (A) or 0.3 m (B) either side of the start
         spread = max(math.dist(snap.position[:2], flying[0].position[:2]) for snap in flying)
         assert spread > (0.38 if address == A else 0.28)

@@ -100,8 +100,9 @@ def test_plain_cflib_swarm_script_flies_ten_fake_drones(make_world: Callable[...
         x, y, _ = starts[uri]
         assert report[uri]["controller"] == "0" and report[uri]["armed"] is True
         _, data, _ = report[uri]["samples"][-1]  # type: ignore[index]
-        assert (data["stateEstimate.x"], data["stateEstimate.y"], data["pm.vbat"]) == pytest.approx((x, y, 4.15),
-                                                                                                     abs=0.01)
+        assert (data["stateEstimate.x"], data["stateEstimate.y"], data["pm.vbat"]) == pytest.approx(
+            (x, y, 4.15), abs=0.01
+        )
         assert (positions[uri].x, positions[uri].y) == pytest.approx((x, y))
         assert after_takeoff[address].position == pytest.approx((x, y, 0.5), abs=0.02)
         assert after_takeoff[address].flying
@@ -117,8 +118,7 @@ def test_plain_cflib_swarm_script_flies_ten_fake_drones(make_world: Callable[...
     assert not any(world.snapshot(a).locked for a in world.addresses[1:])
 
 
-def test_streamed_setpoints_are_followed_by_the_estimate(make_world: Callable[..., FakeWorld],
-                                                        toc_cache: Path) -> None:
+def test_streamed_setpoints_are_followed_by_the_estimate(make_world: Callable[..., FakeWorld], toc_cache: Path) -> None:
     world = make_world(1)
     uri = world.uri(world.addresses[0])
     estimates: list[tuple[float, float]] = []
@@ -128,8 +128,9 @@ def test_streamed_setpoints_are_followed_by_the_estimate(make_world: Callable[..
         config.add_variable("stateEstimate.x", "float")
         config.add_variable("stateEstimate.z", "float")
         cf.log.add_config(config)
-        config.data_received_cb.add_callback(lambda ts, data, conf: estimates.append((data["stateEstimate.x"],
-                                                                                     data["stateEstimate.z"])))
+        config.data_received_cb.add_callback(
+            lambda ts, data, conf: estimates.append((data["stateEstimate.x"], data["stateEstimate.z"]))
+        )
         config.start()
         cf.high_level_commander.takeoff(0.5, 0.6)
         time.sleep(0.8)
@@ -155,14 +156,18 @@ def test_register_without_a_world_serves_any_unchanged_cflib_program(toc_cache: 
     try:
         uris = ["fake://0/80/2M/E7E7E7E701", "fake://0/80/2M/E7E7E7E702", "fake://0/80/2M/E7E7E7E703?x=0.5&y=1.5"]
         # ------------------------------------------ the user script ------------------------------------------
-        with SyncCrazyflie(uris[0], cf=Crazyflie(rw_cache=str(toc_cache))) as a, \
-                SyncCrazyflie(uris[1], cf=Crazyflie(rw_cache=str(toc_cache))) as b, \
-                SyncCrazyflie(uris[2], cf=Crazyflie(rw_cache=str(toc_cache))) as c:
+        with (
+            SyncCrazyflie(uris[0], cf=Crazyflie(rw_cache=str(toc_cache))) as a,
+            SyncCrazyflie(uris[1], cf=Crazyflie(rw_cache=str(toc_cache))) as b,
+            SyncCrazyflie(uris[2], cf=Crazyflie(rw_cache=str(toc_cache))) as c,
+        ):
             for scf in (a, b, c):
                 scf.cf.high_level_commander.takeoff(0.4, 1.0)
             time.sleep(1.6)
-            heights = {scf.cf.link_uri: driver.world.snapshot(int(scf.cf.link_uri.split("/")[5][:10], 16)).position
-                       for scf in (a, b, c)}
+            heights = {
+                scf.cf.link_uri: driver.world.snapshot(int(scf.cf.link_uri.split("/")[5][:10], 16)).position
+                for scf in (a, b, c)
+            }
             for scf in (a, b, c):
                 scf.cf.high_level_commander.land(0.0, 1.0)
             time.sleep(1.5)
@@ -179,8 +184,9 @@ def test_register_without_a_world_serves_any_unchanged_cflib_program(toc_cache: 
         fake_radio.unregister()
 
 
-def test_plain_cflib_swarm_script_uploads_and_flies_trajectories(make_world: Callable[..., FakeWorld],
-                                                                 toc_cache: Path) -> None:
+def test_plain_cflib_swarm_script_uploads_and_flies_trajectories(
+    make_world: Callable[..., FakeWorld], toc_cache: Path
+) -> None:
     """Contract: the trajectory part of cflib (trajectory memory upload with `write_data_sync`, `define_trajectory`,
     `start_trajectory` relative) works unchanged for 10 drones, as in cflib's autonomous_sequence_high_level
     example. The figure is this test's own (`trajectory_shapes.figure_eight`), given as the rows of coefficients a

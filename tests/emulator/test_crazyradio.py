@@ -68,12 +68,17 @@ def plugged(radio_only: None) -> Iterator[list[Plugged]]:
 
 
 def _world() -> FakeWorld:
-    return FakeWorld({E1: FakeDroneConfig.at(0.0, 0.0), E2: FakeDroneConfig.at(0.5, 0.0, channel=90),
-                      E3: FakeDroneConfig.at(1.0, 0.0), E7: FakeDroneConfig.at(1.5, 0.0)})
+    return FakeWorld(
+        {
+            E1: FakeDroneConfig.at(0.0, 0.0),
+            E2: FakeDroneConfig.at(0.5, 0.0, channel=90),
+            E3: FakeDroneConfig.at(1.0, 0.0),
+            E7: FakeDroneConfig.at(1.5, 0.0),
+        }
+    )
 
 
-def test_plug_shows_dongles_to_pyusb_and_cflib_and_unplug_gives_the_real_backend_back(
-        plugged: list[Plugged]) -> None:
+def test_plug_shows_dongles_to_pyusb_and_cflib_and_unplug_gives_the_real_backend_back(plugged: list[Plugged]) -> None:
     real = libusb_package.get_libusb1_backend
     plug = crazyradio.plug(_world(), dongles=2, radio="crazyradio_pa")
     plugged.append(plug)
@@ -140,7 +145,8 @@ def test_plug_without_a_world_brings_drones_on_their_first_connection(plugged: l
 
 
 def test_a_plain_cflib_program_flies_several_drones_through_cflibs_own_radio_driver(
-        plugged: list[Plugged], cache: Path) -> None:
+    plugged: list[Plugged], cache: Path
+) -> None:
     world = _world()
     plug = crazyradio.plug(world)
     plugged.append(plug)
@@ -181,8 +187,7 @@ def test_a_plain_cflib_program_flies_several_drones_through_cflibs_own_radio_dri
         assert plug.dongles[0].counters.packets[address] == drone.passed_on + 1
 
 
-def test_links_on_one_dongle_share_it_one_setup_call_per_address_switch(
-        plugged: list[Plugged], cache: Path) -> None:
+def test_links_on_one_dongle_share_it_one_setup_call_per_address_switch(plugged: list[Plugged], cache: Path) -> None:
     plug = crazyradio.plug(_world(), radio="crazyradio_2")
     plugged.append(plug)
     dongle = plug.dongles[0]
@@ -193,12 +198,22 @@ def test_links_on_one_dongle_share_it_one_setup_call_per_address_switch(
     try:
         time.sleep(0.3)
         with dongle._lock:
-            before = (time.monotonic(), dongle.counters.bulk_writes, dongle.counters.address_switches,
-                      dongle.counters.channel_switches, dict(dongle.counters.vendor_requests))
+            before = (
+                time.monotonic(),
+                dongle.counters.bulk_writes,
+                dongle.counters.address_switches,
+                dongle.counters.channel_switches,
+                dict(dongle.counters.vendor_requests),
+            )
         time.sleep(1.5)
         with dongle._lock:
-            after = (time.monotonic(), dongle.counters.bulk_writes, dongle.counters.address_switches,
-                     dongle.counters.channel_switches, dict(dongle.counters.vendor_requests))
+            after = (
+                time.monotonic(),
+                dongle.counters.bulk_writes,
+                dongle.counters.address_switches,
+                dongle.counters.channel_switches,
+                dict(dongle.counters.vendor_requests),
+            )
     finally:
         for scf in links:
             scf.close_link()
@@ -218,7 +233,8 @@ def test_links_on_one_dongle_share_it_one_setup_call_per_address_switch(
 
 
 def test_what_each_firmware_transmits_a_safelink_echo_and_the_data_rates_and_channels_it_refuses(
-        plugged: list[Plugged]) -> None:
+    plugged: list[Plugged],
+) -> None:
     safelink = (0xFF, 0x05, 0x01)
     for name in ("crazyradio_pa", "crazyradio_2"):
         plug = crazyradio.plug(_world(), radio=name)

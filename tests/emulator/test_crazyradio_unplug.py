@@ -57,8 +57,7 @@ def _fly(worlds: list[FakeWorld], cache: Path, n: int) -> tuple[crazyradio.Plugg
     world = FakeWorld({address(i): FakeDroneConfig.at(0.5 * i, 0.0) for i in range(n)})
     worlds.append(world)
     plug = crazyradio.plug(world, radio="crazyradio_pa")
-    links = [SyncCrazyflie(f"radio://0/80/2M/{address(i):010X}", cf=Crazyflie(rw_cache=str(cache)))
-             for i in range(n)]
+    links = [SyncCrazyflie(f"radio://0/80/2M/{address(i):010X}", cf=Crazyflie(rw_cache=str(cache))) for i in range(n)]
     for scf in links:
         scf.open_link()
     return plug, links
@@ -97,10 +96,13 @@ def _pulled_out(links: list[SyncCrazyflie], caplog: pytest.LogCaptureFixture, pu
 
 @pytest.mark.filterwarnings("ignore::pytest.PytestUnhandledThreadExceptionWarning")  # cflib's ping thread (doc)
 def test_a_dongle_pulled_out_under_several_links_fails_every_send_and_cflib_never_says_lost(
-        worlds: list[FakeWorld], tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    worlds: list[FakeWorld], tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
     plug, links = _fly(worlds, tmp_path, 3)
-    mission = parse_mission("name: m\narena: {x: [-2, 2], y: [-2, 2]}\ndrones:\n"
-                            "  - {name: cf1, uri: radio://0/80/2M/E7E7E7E7E0, start: [0, 0], goal: [1, 0]}\n")
+    mission = parse_mission(
+        "name: m\narena: {x: [-2, 2], y: [-2, 2]}\ndrones:\n"
+        "  - {name: cf1, uri: radio://0/80/2M/E7E7E7E7E0, start: [0, 0], goal: [1, 0]}\n"
+    )
     unplug = Fault(kind="dongle_unplug", params={"dongle": 0})
     # the fault's own injection: the fake radio's dongle 0 (no link on it here) and the emulated Crazyradio 0
     lost = _pulled_out(links, caplog, lambda: FaultInjection(mission, [unplug])._apply(unplug, None, None))
@@ -119,7 +121,8 @@ def test_a_dongle_pulled_out_under_several_links_fails_every_send_and_cflib_neve
 
 @pytest.mark.filterwarnings("ignore::pytest.PytestUnhandledThreadExceptionWarning")  # cflib's ping thread (doc)
 def test_a_dongle_pulled_out_under_one_link_fails_its_sends_and_cflib_never_says_lost(
-        worlds: list[FakeWorld], tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    worlds: list[FakeWorld], tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
     plug, links = _fly(worlds, tmp_path, 1)
     lost = _pulled_out(links, caplog, lambda: crazyradio.pull_out(0))
     assert lost == {}  # hangs in link_statistics.stop (module doc)
@@ -171,8 +174,10 @@ def test_a_broadcast_reaches_every_drone_on_the_channel_at_each_of_its_attempts(
     from rpf_fly.radio.broadcast import CflibBroadcast
     from rpf_fly.radio.packed_extpos import BROADCAST_COPIES, HEADER, drone_id, encode
 
-    world = FakeWorld({address(i): FakeDroneConfig.at(0.5 * i, 0.0) for i in range(3)}
-                      | {address(9): FakeDroneConfig.at(0.0, 1.0, channel=90)})
+    world = FakeWorld(
+        {address(i): FakeDroneConfig.at(0.5 * i, 0.0) for i in range(3)}
+        | {address(9): FakeDroneConfig.at(0.0, 1.0, channel=90)}
+    )
     worlds.append(world)
     plug = crazyradio.plug(world, radio="crazyradio_pa")
     sender = CflibBroadcast(0, 80, "2M")

@@ -34,8 +34,9 @@ def stream(send: Callable[[], None], seconds: float, rate_hz: float = 50.0) -> N
         time.sleep(1.0 / rate_hz)
 
 
-def test_rpyt_thrust_is_locked_until_a_zero_thrust_packet(make_world: Callable[..., FakeWorld],
-                                                           toc_cache: Path) -> None:
+def test_rpyt_thrust_is_locked_until_a_zero_thrust_packet(
+    make_world: Callable[..., FakeWorld], toc_cache: Path
+) -> None:
     world = make_world(1)
     with SyncCrazyflie(world.uri(address(0)), cf=Crazyflie(rw_cache=str(toc_cache))) as scf:
         stream(lambda: scf.cf.commander.send_setpoint(0.0, 0.0, 0.0, 45000), 0.6)
@@ -48,8 +49,9 @@ def test_rpyt_thrust_is_locked_until_a_zero_thrust_packet(make_world: Callable[.
     assert unlocked.motors_on and unlocked.position[2] > 0.15
 
 
-def test_an_rpyt_thrust_over_the_hover_thrust_climbs_and_under_it_sinks(make_world: Callable[..., FakeWorld],
-                                                                         toc_cache: Path) -> None:
+def test_an_rpyt_thrust_over_the_hover_thrust_climbs_and_under_it_sinks(
+    make_world: Callable[..., FakeWorld], toc_cache: Path
+) -> None:
     """No height is held in RPYT: 45000 (1.25 x the hover thrust) climbs ever faster, 30000 comes down."""
     world = make_world(1)
     heights: list[tuple[float, float]] = []
@@ -76,7 +78,8 @@ def test_an_rpyt_thrust_over_the_hover_thrust_climbs_and_under_it_sinks(make_wor
 
 @pytest.mark.parametrize(("pitch_deg", "roll_deg"), [(10.0, 0.0), (0.0, 10.0)])
 def test_roll_and_pitch_accelerate_the_drone_as_the_firmware_signs_them(
-        make_world: Callable[..., FakeWorld], toc_cache: Path, pitch_deg: float, roll_deg: float) -> None:
+    make_world: Callable[..., FakeWorld], toc_cache: Path, pitch_deg: float, roll_deg: float
+) -> None:
     """z-distance carries the firmware's own angles (a positive pitch flies backwards, a positive roll to the
     right: -x, -y); cflib's RPYT negates the pitch it is given (a positive pitch flies forwards). 10 degrees of tilt
     is g tan(10) = 1.73 m/s^2 sideways: decimetres in half a second where the old model stood still."""

@@ -46,8 +46,10 @@ def on_the_floor_where_it_fell(world: FakeWorld, address: int) -> tuple[float, f
 def test_two_drones_commanded_into_each_other_both_crash(make_world: MakeWorld, toc_cache: Path) -> None:
     world = make_world({A: FakeDroneConfig.at(0.0, 0.0), B: FakeDroneConfig.at(1.0, 0.0)})
     cache = str(toc_cache)
-    with SyncCrazyflie(world.uri(A), cf=Crazyflie(rw_cache=cache)) as a, \
-            SyncCrazyflie(world.uri(B), cf=Crazyflie(rw_cache=cache)) as b:
+    with (
+        SyncCrazyflie(world.uri(A), cf=Crazyflie(rw_cache=cache)) as a,
+        SyncCrazyflie(world.uri(B), cf=Crazyflie(rw_cache=cache)) as b,
+    ):
         take_off([a, b], world)
         a.cf.high_level_commander.go_to(1.0, 0.0, 0.5, 0.0, 2.0)  # each to the other's place: they meet midway
         b.cf.high_level_commander.go_to(0.0, 0.0, 0.5, 0.0, 2.0)
@@ -75,8 +77,9 @@ def test_two_drones_commanded_into_each_other_both_crash(make_world: MakeWorld, 
     assert not world.snapshot(A).crashed and not world.snapshot(A).locked
 
 
-@pytest.mark.parametrize("obstacle", [CircleObstacle((1.0, 0.0), 0.1), BoxObstacle((0.9, -0.5), (1.3, 0.5))],
-                         ids=["pole", "box"])
+@pytest.mark.parametrize(
+    "obstacle", [CircleObstacle((1.0, 0.0), 0.1), BoxObstacle((0.9, -0.5), (1.3, 0.5))], ids=["pole", "box"]
+)
 def test_a_drone_flown_into_an_obstacle_crashes(make_world: MakeWorld, toc_cache: Path, obstacle) -> None:
     world = make_world({A: FakeDroneConfig.at(0.0, 0.0)}, obstacles=[obstacle])
     with SyncCrazyflie(world.uri(A), cf=Crazyflie(rw_cache=str(toc_cache))) as scf:
@@ -95,8 +98,10 @@ def test_drones_that_pass_0_2_m_apart_do_not_crash(make_world: MakeWorld, toc_ca
     pole = CircleObstacle((0.5, -0.3), 0.1)  # 0.2 m from A's path to its surface, too
     world = make_world({A: FakeDroneConfig.at(0.0, 0.0), B: FakeDroneConfig.at(1.0, 0.2)}, obstacles=[pole])
     cache = str(toc_cache)
-    with SyncCrazyflie(world.uri(A), cf=Crazyflie(rw_cache=cache)) as a, \
-            SyncCrazyflie(world.uri(B), cf=Crazyflie(rw_cache=cache)) as b:
+    with (
+        SyncCrazyflie(world.uri(A), cf=Crazyflie(rw_cache=cache)) as a,
+        SyncCrazyflie(world.uri(B), cf=Crazyflie(rw_cache=cache)) as b,
+    ):
         take_off([a, b], world)
         a.cf.high_level_commander.go_to(1.0, 0.0, 0.5, 0.0, 2.0)
         b.cf.high_level_commander.go_to(0.0, 0.2, 0.5, 0.0, 2.0)

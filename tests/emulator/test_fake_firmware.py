@@ -88,17 +88,33 @@ def test_tocs_decode_with_cflib_and_have_stable_distinct_crcs() -> None:
             ident = struct.unpack("<H", item[1:3])[0]
             element = element_class(ident, item[3:])
             assert (element.ident, element.group, element.name, element.ctype) == (
-                entry.ident, entry.group, entry.name, entry.ctype)
+                entry.ident,
+                entry.group,
+                entry.name,
+                entry.ctype,
+            )
         count, crc = struct.unpack("<HI", toc.info_reply()[1:])
         assert count == len(toc.entries) and crc == toc.crc
     assert LOG_TOC.crc != PARAM_TOC.crc
-    needed = {"stateEstimate.x", "stateEstimate.vz", "pm.vbat", "pm.state", "supervisor.info", "kalman.varPZ",
-              "radio.rssi"}
+    needed = {
+        "stateEstimate.x",
+        "stateEstimate.vz",
+        "pm.vbat",
+        "pm.state",
+        "supervisor.info",
+        "kalman.varPZ",
+        "radio.rssi",
+    }
     assert needed <= set(LOG_TOC.by_name)
     assert LOG_TOC.by_name["pm.state"].ctype == "int8_t"
     assert LOG_TOC.by_name["supervisor.info"].ctype == "uint16_t"
-    assert {"stabilizer.estimator", "commander.enHighLevel", "locSrv.extQuatStdDev", "locSrv.extPosStdDev",
-            "kalman.resetEstimation"} <= set(PARAM_TOC.by_name)
+    assert {
+        "stabilizer.estimator",
+        "commander.enHighLevel",
+        "locSrv.extQuatStdDev",
+        "locSrv.extPosStdDev",
+        "kalman.resetEstimation",
+    } <= set(PARAM_TOC.by_name)
     # what the backend's status log and reset_estimator use, with the firmware's types
     assert LOG_TOC.by_name["stateEstimate.yaw"].ctype == "float"
     for name in ("kalman.initialX", "kalman.initialY", "kalman.initialZ", "kalman.initialYaw"):
@@ -421,8 +437,9 @@ def test_other_setpoint_types() -> None:
     x = sim.snap().position[0]
     sim.run(1.0, lambda t: sim.send(7, 0, struct.pack("<Bffff", 10, 0.0, 0.0, 0.0, 0.7)))  # hover: vx, vy, z
     assert sim.snap().position[2] == pytest.approx(0.7, abs=0.02) and sim.snap().position[0] - x < 0.1
-    full = struct.pack("<BhhhhhhhhhIhhh", 6, 300, -200, 600, 0, 0, 0, 0, 0, 0,
-                       compress_quaternion([0.0, 0.0, 0.0, 1.0]), 0, 0, 0)
+    full = struct.pack(
+        "<BhhhhhhhhhIhhh", 6, 300, -200, 600, 0, 0, 0, 0, 0, 0, compress_quaternion([0.0, 0.0, 0.0, 1.0]), 0, 0, 0
+    )
     sim.run(1.5, lambda t: sim.send(7, 0, full))
     assert sim.snap().position == pytest.approx((0.3, -0.2, 0.6), abs=0.01)
     sim.send(7, 0, bytes([0]))  # stop setpoint: motors off; nothing refreshes it, so the watchdog locks
@@ -434,8 +451,9 @@ def test_other_setpoint_types() -> None:
 
 def set_param(sim: Sim, name: str, value: float) -> None:
     entry = PARAM_TOC.by_name[name]
-    payload = struct.pack("<H", entry.ident) + (struct.pack("<f", value) if entry.ctype == "float"
-                                                 else bytes([int(value)]))
+    payload = struct.pack("<H", entry.ident) + (
+        struct.pack("<f", value) if entry.ctype == "float" else bytes([int(value)])
+    )
     assert sim.send(2, 2, payload) == [(2, 2, payload)]
 
 

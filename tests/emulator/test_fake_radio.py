@@ -145,8 +145,10 @@ def test_sync_logger_at_10_hz(make_world: MakeWorld, toc_cache: Path) -> None:
     for name in ("stateEstimate.x", "stateEstimate.y", "stateEstimate.z", "pm.vbat"):
         config.add_variable(name, "float")
     samples = []
-    with SyncCrazyflie(world.uri(address(0)), cf=Crazyflie(rw_cache=str(toc_cache))) as scf, \
-            SyncLogger(scf, config) as logger:
+    with (
+        SyncCrazyflie(world.uri(address(0)), cf=Crazyflie(rw_cache=str(toc_cache))) as scf,
+        SyncLogger(scf, config) as logger,
+    ):
         for timestamp, data, _ in logger:
             samples.append((timestamp, data, time.monotonic()))
             if len(samples) == 6:
@@ -163,8 +165,10 @@ def test_watchdog_through_cflib_while_high_level_hover_is_unaffected(make_world:
     world = make_world(2)
     streamer, hoverer = address(0), address(1)
     cache = str(toc_cache)
-    with SyncCrazyflie(world.uri(streamer), cf=Crazyflie(rw_cache=cache)) as scf, \
-            SyncCrazyflie(world.uri(hoverer), cf=Crazyflie(rw_cache=cache)) as other_scf:
+    with (
+        SyncCrazyflie(world.uri(streamer), cf=Crazyflie(rw_cache=cache)) as scf,
+        SyncCrazyflie(world.uri(hoverer), cf=Crazyflie(rw_cache=cache)) as other_scf,
+    ):
         for cf in (scf.cf, other_scf.cf):
             cf.high_level_commander.takeoff(0.5, 0.6)
         assert world.wait_until(lambda w: all(abs(s.position[2] - 0.5) < 0.02 for s in w.snapshots().values()), 3.0)
@@ -286,8 +290,10 @@ def test_links_on_one_dongle_share_its_air_time(make_world: MakeWorld) -> None:
     timing = RadioTiming(transaction_s=0.01)  # 100 transactions/s per dongle
     shared, separate = make_world(3, timing=timing), make_world(3, timing=timing)
     links = [FakeLink(shared, parse_fake_uri(shared.uri(a, devid=0)), None, None) for a in shared.addresses]
-    links += [FakeLink(separate, parse_fake_uri(separate.uri(a, devid=i)), None, None)
-              for i, a in enumerate(separate.addresses)]
+    links += [
+        FakeLink(separate, parse_fake_uri(separate.uri(a, devid=i)), None, None)
+        for i, a in enumerate(separate.addresses)
+    ]
     try:
         time.sleep(0.1)
         before = [w.drone(a).transactions for w in (shared, separate) for a in w.addresses]
@@ -301,8 +307,9 @@ def test_links_on_one_dongle_share_its_air_time(make_world: MakeWorld) -> None:
     assert sum(counts[3:]) >= 2 * sum(counts[:3])  # one dongle each
 
 
-def test_a_dongle_is_held_for_the_air_time_only_not_for_a_slow_drone_answer(make_world: MakeWorld,
-                                                                             toc_cache: Path) -> None:
+def test_a_dongle_is_held_for_the_air_time_only_not_for_a_slow_drone_answer(
+    make_world: MakeWorld, toc_cache: Path
+) -> None:
     """Two cflib links on one dongle (1 ms of air a transaction); one drone's answer takes 4 ms (as a loaded world
     process's round trip can): the other link keeps the dongle's air to itself meanwhile, so it gets its 150 extpos
     through while the slow one gets about one in five. Held for the whole round trip instead, the dongle would
@@ -317,17 +324,22 @@ def test_a_dongle_is_held_for_the_air_time_only_not_for_a_slow_drone_answer(make
                 got[drone].append(stamp)
             if delay_s:
                 time.sleep(delay_s)  # the drone's answer is late; the radio's air is not busy meanwhile
+
         return seen
 
     cache = str(toc_cache)
-    with SyncCrazyflie(world.uri(slow), cf=Crazyflie(rw_cache=cache)) as slow_scf, \
-            SyncCrazyflie(world.uri(fast), cf=Crazyflie(rw_cache=cache)) as fast_scf:
+    with (
+        SyncCrazyflie(world.uri(slow), cf=Crazyflie(rw_cache=cache)) as slow_scf,
+        SyncCrazyflie(world.uri(fast), cf=Crazyflie(rw_cache=cache)) as fast_scf,
+    ):
         world.add_packet_observer(slow, observer(slow, 0.004))
         world.add_packet_observer(fast, observer(fast, 0.0))
         air = world.dongle(0)
         before = air.transactions
-        senders = [threading.Thread(target=lambda cf=scf.cf: [cf.extpos.send_extpos(0.0, 0.0, 0.0) for _ in range(150)])
-                   for scf in (slow_scf, fast_scf)]  # one sender each: a full link holds its sender back
+        senders = [
+            threading.Thread(target=lambda cf=scf.cf: [cf.extpos.send_extpos(0.0, 0.0, 0.0) for _ in range(150)])
+            for scf in (slow_scf, fast_scf)
+        ]  # one sender each: a full link holds its sender back
         for sender in senders:
             sender.start()
         assert world.wait_until(lambda w: len(got[fast]) >= 150, 10.0)
@@ -341,8 +353,9 @@ def test_a_dongle_is_held_for_the_air_time_only_not_for_a_slow_drone_answer(make
     assert slots >= 300  # every packet took a slot of the dongle's air (polls too)
 
 
-def test_a_link_holds_two_packets_at_most_and_then_holds_back_its_sender(make_world: MakeWorld,
-                                                                         toc_cache: Path) -> None:
+def test_a_link_holds_two_packets_at_most_and_then_holds_back_its_sender(
+    make_world: MakeWorld, toc_cache: Path
+) -> None:
     """cflib's radio driver queues one packet a link (and its radio thread sends one): a sender faster than the
     radio (here 10 ms of air a transaction) is held in ``send_packet`` instead of building a queue of stale
     packets. After each send returns, the firmware has every extpos but the last two at most (the drone gets a

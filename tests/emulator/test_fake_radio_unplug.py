@@ -23,8 +23,9 @@ def address(index: int) -> int:
     return 0xE7E7E7E700 + index
 
 
-def test_unplugging_a_dongle_fails_its_links_at_once_and_leaves_the_others(make_world: MakeWorld,
-                                                                           toc_cache: Path) -> None:
+def test_unplugging_a_dongle_fails_its_links_at_once_and_leaves_the_others(
+    make_world: MakeWorld, toc_cache: Path
+) -> None:
     configs = {address(i): FakeDroneConfig.at(0.5 * i, 0.0) for i in range(4)}
     world = make_world(configs)
     uris = [world.uri(a, devid=0 if i % 2 == 0 else 1) for i, a in enumerate(configs)]  # cf0, cf2 on 0; cf1, cf3 on 1

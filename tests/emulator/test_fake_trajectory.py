@@ -51,8 +51,10 @@ class Sim:
 
     def write(self, address: int, data: bytes, mem_id: int = 1) -> list[int]:
         """Write as cflib does, 24 bytes a packet; the status of each packet."""
-        return [self.send(4, 2, struct.pack("<BI", mem_id, address + i) + data[i:i + 24])[5]
-                for i in range(0, len(data), 24)]
+        return [
+            self.send(4, 2, struct.pack("<BI", mem_id, address + i) + data[i : i + 24])[5]
+            for i in range(0, len(data), 24)
+        ]
 
     def read(self, address: int, length: int, mem_id: int = 1) -> bytes | int:
         """One read packet: the data, or the error status."""
@@ -70,8 +72,14 @@ def define(trajectory_id: int, offset: int, n_pieces: int, kind: int = 0, locati
     return struct.pack("<BBBBIB", 6, trajectory_id, location, kind, offset, n_pieces)
 
 
-def start(trajectory_id: int, timescale: float = 1.0, relative: bool = False, relative_yaw: bool = False,
-          reversed_: bool = False, group: int = 0) -> bytes:
+def start(
+    trajectory_id: int,
+    timescale: float = 1.0,
+    relative: bool = False,
+    relative_yaw: bool = False,
+    reversed_: bool = False,
+    group: int = 0,
+) -> bytes:
     return struct.pack("<BBBBBBf", 13, group, relative, relative_yaw, reversed_, trajectory_id, timescale)
 
 
@@ -81,8 +89,9 @@ def upload(sim: Sim, pieces: list[Piece], trajectory_id: int = 1, offset: int = 
     assert sim.hl(define(trajectory_id, offset, len(pieces))) == 0
 
 
-def fly_and_compare(sim: Sim, expected, seconds: float, end_s: float,
-                    boundaries: tuple[float, ...] = ()) -> tuple[float, float]:
+def fly_and_compare(
+    sim: Sim, expected, seconds: float, end_s: float, boundaries: tuple[float, ...] = ()
+) -> tuple[float, float]:
     """Step `seconds`; each tick compare the commander's setpoint with `expected(t since start)` (the plan is
     evaluated at the start of the tick's interval, `SUBSTEP_S` before the snapshot time) and, until the trajectory
     ends at `end_s`, the true position with `expected` at the snapshot time. Velocities are not compared at the
@@ -111,7 +120,12 @@ def test_memory_map_is_a_deckless_crazyflie_21() -> None:
     assert sim.send(4, 0, bytes([1])) == bytes([1, 5])
     infos = [struct.unpack("<BBBI8s", sim.send(4, 0, bytes([2, i]))) for i in range(5)]
     assert [(i[1], i[2], i[3]) for i in infos] == [
-        (0, 0x00, EEPROM_SIZE), (1, 0x12, 4096), (2, 0x15, 0x1000), (3, 0x19, 5 * 0x10000000), (4, 0x20, 0x18000)]
+        (0, 0x00, EEPROM_SIZE),
+        (1, 0x12, 4096),
+        (2, 0x15, 0x1000),
+        (3, 0x19, 5 * 0x10000000),
+        (4, 0x20, 0x18000),
+    ]
     assert all(i[4] == bytes(8) for i in infos)
     assert sim.send(4, 0, bytes([2, 5])) == bytes([2, 5])  # no such memory: the protocol document's answer
     # EEPROM: the config block v1 with the drone's own channel and address, then erased bytes
@@ -195,8 +209,11 @@ def test_time_scale_and_relative_position_and_yaw() -> None:
 
     def expected(t: float):
         (x, y, z), (vx, vy, vz), yaw = reference(pieces, t, timescale=1.5)
-        return ((c * x - s * y + shift[0], s * x + c * y + shift[1], z + shift[2]),
-                (c * vx - s * vy, s * vx + c * vy, vz), yaw + rotation)
+        return (
+            (c * x - s * y + shift[0], s * x + c * y + shift[1], z + shift[2]),
+            (c * vx - s * vy, s * vx + c * vy, vz),
+            yaw + rotation,
+        )
 
     assert expected(0.0)[0] == pytest.approx(goal, abs=1e-6)  # the figure starts at the origin: no jump
     duration = 1.5 * total_duration(pieces)
@@ -254,8 +271,10 @@ def test_compressed_trajectory_is_flown_and_its_limits_answer_enoexec() -> None:
     sim = Sim()
     sim.hover(0.5)
     start_point = CompressedStart(0.0, 0.0, 0.5, 0.0)
-    segments = [CompressedSegment(1.5, [0.1, 0.2, 0.4, 0.5, 0.6, 0.6, 0.6], [0.2, 0.2, 0.2], [0.8], []),
-                CompressedSegment(1.0, [0.3], [], [0.5, 0.5, 0.5], [0.5])]
+    segments = [
+        CompressedSegment(1.5, [0.1, 0.2, 0.4, 0.5, 0.6, 0.6, 0.6], [0.2, 0.2, 0.2], [0.8], []),
+        CompressedSegment(1.0, [0.3], [], [0.5, 0.5, 0.5], [0.5]),
+    ]
     data = start_point.pack() + b"".join(segment.pack() for segment in segments)
     assert sim.write(0, data) == [0] * math.ceil(len(data) / 24)
     assert sim.hl(define(2, 0, len(segments), kind=1)) == 0
@@ -267,8 +286,12 @@ def test_compressed_trajectory_is_flown_and_its_limits_answer_enoexec() -> None:
         """Each coordinate a Bezier from the previous end (mm / decidegree rounding as cflib encodes)."""
         x0, y0, z0, yaw0 = 0.0, 0.0, 0.5, 0.0
         first = ([x0] + [int(v * 1000) / 1000 for v in segments[0].x], [y0] + [0.2] * 3, [z0, 0.8], [yaw0])
-        second = ([first[0][-1], 0.3], [first[1][-1]], [first[2][-1]] + [0.5] * 3,
-                  [yaw0, int(math.degrees(0.5) * 10) / 10 * math.pi / 180])
+        second = (
+            [first[0][-1], 0.3],
+            [first[1][-1]],
+            [first[2][-1]] + [0.5] * 3,
+            [yaw0, int(math.degrees(0.5) * 10) / 10 * math.pi / 180],
+        )
         for curves, duration in ((first, 1.5), (second, 1.0)):
             if t < duration:
                 s = t / duration

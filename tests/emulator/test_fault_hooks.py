@@ -181,8 +181,7 @@ def test_packet_loss_lowers_link_quality_and_loses_acks_then_recovers(rig: DryRu
     scf = connect(rig, "cf1", toc_cache, lost)
     address = rig.addresses["cf1"]
     try:
-        scf.cf.link_statistics.link_quality_updated.add_callback(
-            lambda q: quality.append((time.monotonic(), q)))
+        scf.cf.link_statistics.link_quality_updated.add_callback(lambda q: quality.append((time.monotonic(), q)))
         time.sleep(1.2)
         assert quality[-1][1] == pytest.approx(100.0)
         before = rig.world.radio_counters(address)
@@ -208,7 +207,8 @@ def test_packet_loss_lowers_link_quality_and_loses_acks_then_recovers(rig: DryRu
 
 
 def test_a_gust_pushes_a_hovering_drone_off_by_the_documented_amount_and_it_comes_back(
-        rig: DryRun, toc_cache: Path) -> None:
+    rig: DryRun, toc_cache: Path
+) -> None:
     scf = connect(rig, "cf1", toc_cache)
     mocap = Mocap(rig, "cf1", scf)
     try:
@@ -236,7 +236,8 @@ def test_estimator_divergence_drifts_the_true_drone_opposite_to_its_estimate(rig
     for axis in "xyz":
         config.add_variable(f"stateEstimate.{axis}", "float")
     config.data_received_cb.add_callback(
-        lambda _t, data, _c: estimates.append(tuple(data[f"stateEstimate.{a}"] for a in "xyz")))
+        lambda _t, data, _c: estimates.append(tuple(data[f"stateEstimate.{a}"] for a in "xyz"))
+    )
     try:
         scf.cf.log.add_config(config)
         config.start()
@@ -280,7 +281,8 @@ def open_fails(rig: DryRun, name: str, cache: Path) -> str:
 
 
 def test_a_reboot_in_flight_falls_fails_the_link_and_a_new_connection_finds_a_fresh_drone(
-        rig: DryRun, toc_cache: Path) -> None:
+    rig: DryRun, toc_cache: Path
+) -> None:
     lost: list[str] = []
     scf = connect(rig, "cf1", toc_cache, lost)
     mocap = Mocap(rig, "cf1", scf)

@@ -231,8 +231,15 @@ def test_the_gains_are_firmware_parameters_that_act_at_once() -> None:
         entry = PARAM_TOC.by_name[name]
         assert entry.persistent and not entry.read_only
         assert entry.ctype == ("uint16_t" if name in ("posCtlPid.thrustBase", "posCtlPid.thrustMin") else "float")
-    assert {"posCtlPid.xKp", "posCtlPid.zKi", "velCtlPid.vzKi", "pid_attitude.yawMaxDelta", "pid_rate.yaw_kff",
-            "posCtlPid.xVelMax", "posCtlPid.thrustBase"} <= set(PARAM_NAMES)
+    assert {
+        "posCtlPid.xKp",
+        "posCtlPid.zKi",
+        "velCtlPid.vzKi",
+        "pid_attitude.yawMaxDelta",
+        "pid_rate.yaw_kff",
+        "posCtlPid.xVelMax",
+        "posCtlPid.thrustBase",
+    } <= set(PARAM_NAMES)
     sim = firmware_sim()
     assert sim.snap().params["posCtlPid.thrustBase"] == defaults["posCtlPid.thrustBase"] == 36000
     set_param(sim, "posCtlPid.xKp", 1.0)

@@ -22,8 +22,9 @@ def test_the_jitter_and_the_dropouts_have_the_documented_figures():
     positions = np.array([p for p, _, _ in samples])
     assert positions.mean(axis=0) == pytest.approx((1.0, -2.0, 0.5), abs=2e-5)
     assert positions.std(axis=0) == pytest.approx([0.0005] * 3, rel=0.03)
-    angles = np.array([math.degrees(2 * math.acos(min(1.0, abs(sum(a * b for a, b in zip(q, true_q))))))
-                       for _, q, _ in samples])
+    angles = np.array(
+        [math.degrees(2 * math.acos(min(1.0, abs(sum(a * b for a, b in zip(q, true_q)))))) for _, q, _ in samples]
+    )
     # the angle of a rotation with 0.5 degrees per axis: a chi distribution of 3 degrees of freedom
     assert np.sqrt(np.mean(angles**2)) == pytest.approx(0.5 * math.sqrt(3), rel=0.03)
     assert angles.max() < 5.0
@@ -33,8 +34,11 @@ def test_the_jitter_and_the_dropouts_have_the_documented_figures():
 
 def test_no_noise_serves_the_truth_exactly():
     noise = MocapNoise(0.0, 0.0, 0.0)
-    assert noise.off and noise.apply(random.Random(0), (1.0, 2.0, 3.0), (0.0, 0.0, 0.0, 1.0)) == \
-        ((1.0, 2.0, 3.0), (0.0, 0.0, 0.0, 1.0), True)
+    assert noise.off and noise.apply(random.Random(0), (1.0, 2.0, 3.0), (0.0, 0.0, 0.0, 1.0)) == (
+        (1.0, 2.0, 3.0),
+        (0.0, 0.0, 0.0, 1.0),
+        True,
+    )
 
 
 def test_the_served_poses_carry_it_with_each_dry_runs_seed():

@@ -64,8 +64,12 @@ def test_cflib_flies_a_drone_of_the_child_process(child, tmp_path: Path) -> None
 def test_obstacles_and_truth_reach_across_the_processes(tmp_path: Path) -> None:
     """The mission's obstacles go to the child's world with its settings (a drone flown into one crashes there);
     the child's truth samples, one per world step stamped with its ``time.monotonic()``, come back in batches."""
-    process = WorldProcess({A1: FakeDroneConfig.at(0.0, 0.0), A2: FakeDroneConfig.at(0.0, 1.0)},
-                           {A1: "cf1", A2: "cf2"}, natnet=None, obstacles=[CircleObstacle((1.0, 0.0), 0.1)])
+    process = WorldProcess(
+        {A1: FakeDroneConfig.at(0.0, 0.0), A2: FakeDroneConfig.at(0.0, 1.0)},
+        {A1: "cf1", A2: "cf2"},
+        natnet=None,
+        obstacles=[CircleObstacle((1.0, 0.0), 0.1)],
+    )
     fake_radio.register(RemoteWorld(process.radio, process.addresses))
     try:
         process.truth_samples()
@@ -129,14 +133,22 @@ def test_the_child_ignores_sigint(child) -> None:
 
 
 def test_the_child_exits_when_its_parent_is_killed() -> None:
-    parent = subprocess.Popen([sys.executable, "-c", textwrap.dedent("""
+    parent = subprocess.Popen(
+        [
+            sys.executable,
+            "-c",
+            textwrap.dedent("""
         import sys, time
         from rpf_fly.emulator.fake_world import FakeDroneConfig
         from rpf_fly.emulator.world_process import WorldProcess
         process = WorldProcess({0xE7E7E7E701: FakeDroneConfig.at(0.0, 0.0)}, {0xE7E7E7E701: "cf1"})
         print(process._process.pid, flush=True)
         time.sleep(60)
-    """)], stdout=subprocess.PIPE, text=True)
+    """),
+        ],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
     try:
         pid = int(parent.stdout.readline())  # type: ignore[union-attr]
         os.kill(parent.pid, signal.SIGKILL)
@@ -175,8 +187,11 @@ def test_an_orphan_whose_drone_hovers_on_a_high_level_plan_exits_at_its_cap(tmp_
     exits."""
     report = tmp_path / "exit.json"
     cap_s = 2.0
-    parent = subprocess.Popen([sys.executable, "-c", HOVERING_PARENT, str(report), str(cap_s), str(tmp_path)],
-                              stdout=subprocess.PIPE, text=True)
+    parent = subprocess.Popen(
+        [sys.executable, "-c", HOVERING_PARENT, str(report), str(cap_s), str(tmp_path)],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
     try:
         pid = int(parent.stdout.readline())  # type: ignore[union-attr]
         os.kill(parent.pid, signal.SIGKILL)

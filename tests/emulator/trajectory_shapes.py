@@ -53,22 +53,35 @@ def hermite7(f: Derivatives, t0: float, duration: float) -> tuple[float, ...]:
 
 
 def sine(amplitude: float, omega: float, offset: float = 0.0) -> Derivatives:
-    return lambda t: (offset + amplitude * math.sin(omega * t), amplitude * omega * math.cos(omega * t),
-                      -amplitude * omega**2 * math.sin(omega * t), -amplitude * omega**3 * math.cos(omega * t))
+    return lambda t: (
+        offset + amplitude * math.sin(omega * t),
+        amplitude * omega * math.cos(omega * t),
+        -amplitude * omega**2 * math.sin(omega * t),
+        -amplitude * omega**3 * math.cos(omega * t),
+    )
 
 
-def figure_eight(a: float = 0.4, b: float = 0.2, period_s: float = 4.0, height: float = 0.5,
-                 yaw_amplitude: float = 0.5, pieces: int = 8) -> list[Piece]:
+def figure_eight(
+    a: float = 0.4,
+    b: float = 0.2,
+    period_s: float = 4.0,
+    height: float = 0.5,
+    yaw_amplitude: float = 0.5,
+    pieces: int = 8,
+) -> list[Piece]:
     """A figure-8 through the origin (at `height`), starting and ending there."""
     omega = 2.0 * math.pi / period_s
     axes = (sine(a, omega), sine(b, 2.0 * omega), sine(0.0, 0.0, height), sine(yaw_amplitude, omega))
     duration = period_s / pieces
-    return [Piece(tuple(hermite7(f, i * duration, duration) for f in axes), _f32(duration))  # type: ignore[arg-type]
-            for i in range(pieces)]
+    return [
+        Piece(tuple(hermite7(f, i * duration, duration) for f in axes), _f32(duration))  # type: ignore[arg-type]
+        for i in range(pieces)
+    ]
 
 
-def reference(pieces: Sequence[Piece], t: float, timescale: float = 1.0
-              ) -> tuple[tuple[float, float, float], tuple[float, float, float], float]:
+def reference(
+    pieces: Sequence[Piece], t: float, timescale: float = 1.0
+) -> tuple[tuple[float, float, float], tuple[float, float, float], float]:
     """Position, velocity and yaw of `pieces` `t` seconds after the start; after the end: the end, at rest."""
     for piece in pieces:
         length = piece.duration * timescale

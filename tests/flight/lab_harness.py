@@ -19,9 +19,14 @@ class LabProcess:
         self.log = tmp_path / "lab.mcap"
         self.tmp_path = tmp_path
         self.mission = mission
-        self.proc = subprocess.Popen([sys.executable, "-m", "rpf_fly", "lab", str(mission), "--log", str(self.log)],
-                                     stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=self.env,
-                                     cwd=tmp_path)
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "rpf_fly", "lab", str(mission), "--log", str(self.log)],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+            env=self.env,
+            cwd=tmp_path,
+        )
         deadline = time.monotonic() + 60
         while not (tmp_path / "lab.json").exists():
             assert self.proc.poll() is None, self.proc.stdout.read()  # type: ignore[union-attr]
@@ -29,12 +34,24 @@ class LabProcess:
             time.sleep(0.05)
 
     def run(self, *args: str, timeout: float = 120) -> subprocess.CompletedProcess:
-        return subprocess.run([sys.executable, "-m", "rpf_fly", *args], capture_output=True, text=True,
-                              env=self.env, cwd=self.tmp_path, timeout=timeout)
+        return subprocess.run(
+            [sys.executable, "-m", "rpf_fly", *args],
+            capture_output=True,
+            text=True,
+            env=self.env,
+            cwd=self.tmp_path,
+            timeout=timeout,
+        )
 
     def start(self, *args: str, stdout: int = subprocess.DEVNULL) -> subprocess.Popen:
-        return subprocess.Popen([sys.executable, "-m", "rpf_fly", *args], stdout=stdout,
-                                stderr=subprocess.PIPE, text=True, env=self.env, cwd=self.tmp_path)
+        return subprocess.Popen(
+            [sys.executable, "-m", "rpf_fly", *args],
+            stdout=stdout,
+            stderr=subprocess.PIPE,
+            text=True,
+            env=self.env,
+            cwd=self.tmp_path,
+        )
 
     def stop(self) -> str:
         self.proc.send_signal(signal.SIGTERM)

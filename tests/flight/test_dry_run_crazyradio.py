@@ -26,23 +26,31 @@ ADDRESSES = {name: 0xE7E7E7E700 + i for i, name in enumerate(NAMES, start=1)}
 
 
 def test_the_mission_keys_choose_the_radio_and_the_dongles_type() -> None:
-    mission = parse_mission(SHORT_MISSION.replace("radio://0/80/2M/E7E7E7E703", "fake://2/80/2M/E7E7E7E703")
-                            + "radio: {dongle_type: crazyradio_2}\ndry_run: {radio: crazyradio}\n")
+    mission = parse_mission(
+        SHORT_MISSION.replace("radio://0/80/2M/E7E7E7E703", "fake://2/80/2M/E7E7E7E703")
+        + "radio: {dongle_type: crazyradio_2}\ndry_run: {radio: crazyradio}\n"
+    )
     rig = DryRun(mission)  # not started: nothing plugged yet
     assert (rig.radio, rig.crazyradio, rig.plugged) == ("crazyradio", "crazyradio_2", None)  # the lab's dongle type
-    assert rig.uris == {"cf1": "radio://0/80/2M/E7E7E7E701", "cf2": "radio://0/80/2M/E7E7E7E702",
-                        "cf3": "radio://2/80/2M/E7E7E7E703"}  # as the mission says them, a fake:// one as radio://
+    assert rig.uris == {
+        "cf1": "radio://0/80/2M/E7E7E7E701",
+        "cf2": "radio://0/80/2M/E7E7E7E702",
+        "cf3": "radio://2/80/2M/E7E7E7E703",
+    }  # as the mission says them, a fake:// one as radio://
     assert DryRun(parse_mission(SHORT_MISSION)).uris["cf1"] == "fake://0/80/2M/E7E7E7E701"  # the default: fake
-    with pytest.raises(MissionError, match=r"^<string>:12: dry_run.radio: expected one of 'fake', 'crazyradio', "
-                                           r"got 'usb'$"):
+    with pytest.raises(
+        MissionError,
+        match=r"^<string>:12: dry_run.radio: expected one of 'fake', 'crazyradio', "
+        r"got 'usb'$",
+    ):
         parse_mission(SHORT_MISSION + "dry_run: {radio: usb}\n")
 
 
 def test_a_dry_run_flies_every_drone_to_its_goal_through_cflibs_radio_driver(
-        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     mission = tmp_path / "short-3.yaml"
-    mission.write_text(SHORT_MISSION.replace("mocap: {kind: sim, rate_hz: 100}", "mocap: {kind: natnet}")
-                       + CRAZYRADIO)
+    mission.write_text(SHORT_MISSION.replace("mocap: {kind: sim, rate_hz: 100}", "mocap: {kind: natnet}") + CRAZYRADIO)
     plugs: list[crazyradio.Plugged] = []
     real_plug = crazyradio.plug
 
@@ -89,18 +97,26 @@ print("packets", sum(plug.dongles[0].counters.packets.values()))
 """
 
 
-def test_a_cflib_program_plugged_into_a_running_lab_reaches_its_drones_and_a_flight_checks_them(
-        tmp_path: Path) -> None:
+def test_a_cflib_program_plugged_into_a_running_lab_reaches_its_drones_and_a_flight_checks_them(tmp_path: Path) -> None:
     mission = tmp_path / "lab-short-3.yaml"
-    mission.write_text(SHORT_MISSION.replace("mocap: {kind: sim, rate_hz: 100}",
-                                             "mocap: {kind: natnet, server: 127.0.0.1, rate_hz: 100}") + CRAZYRADIO)
+    mission.write_text(
+        SHORT_MISSION.replace(
+            "mocap: {kind: sim, rate_hz: 100}", "mocap: {kind: natnet, server: 127.0.0.1, rate_hz: 100}"
+        )
+        + CRAZYRADIO
+    )
     lab = LabProcess(tmp_path, mission)
     try:
         script = tmp_path / "program.py"
         script.write_text(LATCH)
         uris = [f"radio://0/80/2M/{a:010X}" for a in ADDRESSES.values()]
-        program = subprocess.run([sys.executable, str(script), str(tmp_path / "toc"), *uris], capture_output=True,
-                                 text=True, env=lab.env, timeout=90)
+        program = subprocess.run(
+            [sys.executable, str(script), str(tmp_path / "toc"), *uris],
+            capture_output=True,
+            text=True,
+            env=lab.env,
+            timeout=90,
+        )
         assert program.returncode == 0, program.stdout + program.stderr
         lines = program.stdout.splitlines()
         assert [line.split()[0] for line in lines[:3]] == uris and all(line.split()[1].isdigit() for line in lines[:3])

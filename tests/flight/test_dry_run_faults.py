@@ -59,8 +59,9 @@ def test_a_push_during_a_mid_flight_landing_is_said_and_the_other_landing_drones
 
     flight = fly(mission, tmp_path, when_flying=land_then_push)
     tracking = flight.events("tracking")
-    assert [(e.drone, e.level) for e in tracking if e.level >= WARNING] == [("cf2", WARNING)], \
-        [(e.drone, e.message) for e in tracking]
+    assert [(e.drone, e.level) for e in tracking if e.level >= WARNING] == [("cf2", WARNING)], [
+        (e.drone, e.message) for e in tracking
+    ]
     assert "while landing" in tracking[0].message
     assert tracking[0].time_s - pushed_at[0] < 1.0
     assert all(s.position[2] < 0.05 and not s.motors_on for s in flight.snapshots.values())
@@ -76,6 +77,7 @@ def test_a_blackout_inside_a_loop_stall_is_said_when_the_loop_reads_again(tmp_pa
     for 0.4 s and finds them again. The loop then reads only the newest frame, but the NatNet client saw the gap
     in the frames it drained, so one swarm-wide warning says it after the fact (as in compound campaign seed 17,
     run 15)."""
+
     def stall_then_black_out(loop, rig):
         time.sleep(0.5)
         rig.mocap.stall(1.3)
@@ -96,6 +98,7 @@ def test_a_body_re_acquired_on_the_wrong_markers_after_a_blackout_is_not_fed_to_
     the controller would fly the true drone the jump's length into a neighbour (random fault campaign, seed 19,
     run 2). The pose is checked against cf2's own estimate, refused and said; the estimate stays on the truth and
     cf2 in its lane."""
+
     def black_out_and_swap(loop, rig):
         time.sleep(1.0)
         rig.blackout(0.45)
@@ -104,8 +107,11 @@ def test_a_body_re_acquired_on_the_wrong_markers_after_a_blackout_is_not_fed_to_
 
     flight = fly(short_mission, tmp_path, when_flying=black_out_and_swap)
     truth = [m.data for m in flight.log.messages("/truth/cf2")]
-    wrong = max(math.dist((d["estimate"]["x"], d["estimate"]["y"]), (d["position"]["x"], d["position"]["y"]))
-                for d in truth if d["position"]["z"] > 0.1)  # in the air (on the floor before the estimator's reset)
+    wrong = max(
+        math.dist((d["estimate"]["x"], d["estimate"]["y"]), (d["position"]["x"], d["position"]["y"]))
+        for d in truth
+        if d["position"]["z"] > 0.1
+    )  # in the air (on the floor before the estimator's reset)
     assert wrong < 0.1, wrong  # the estimator never took the swapped pose (it took it whole: 0.6 m, until fixed)
     assert max(abs(d["position"]["y"]) for d in truth) < 0.15  # and cf2 kept to its lane
     said = [e.message for e in flight.events("pose_glitch", "cf2")]

@@ -77,8 +77,15 @@ def validate_every_message(path):
                 validators[schema.id] = jsonschema.validators.validator_for(document)(document)
             validators[schema.id].validate(json.loads(message.data))
             seen.add(schema.name)
-    assert {"foxglove.PoseInFrame", "foxglove.SceneUpdate", "foxglove.FrameTransforms", "foxglove.Log",
-            "rpf_fly.PlannerStep", "rpf_fly.DroneStatus", "rpf_fly.TruthState"} <= seen  # a dry run: truth too
+    assert {
+        "foxglove.PoseInFrame",
+        "foxglove.SceneUpdate",
+        "foxglove.FrameTransforms",
+        "foxglove.Log",
+        "rpf_fly.PlannerStep",
+        "rpf_fly.DroneStatus",
+        "rpf_fly.TruthState",
+    } <= seen  # a dry run: truth too
 
 
 def test_one_rigid_body_lost_for_half_a_second_holds_then_resumes(tmp_path, short_mission):
@@ -233,7 +240,9 @@ def test_a_drone_failing_its_preflight_stays_on_the_ground_and_the_others_fly(tm
     assert flight.report.outcomes["cf2"] == FlightOutcome.NOT_FLOWN
     assert flight.report.outcomes["cf1"] == flight.report.outcomes["cf3"] == FlightOutcome.REACHED
     assert not flight.snapshots["cf2"].motors_on and flight.snapshots["cf2"].position[2] < 0.01
-    assert flight.snapshots["cf2"].transitions == () or all(t.new.value != "Flying" for t in flight.snapshots["cf2"].transitions)
+    assert flight.snapshots["cf2"].transitions == () or all(
+        t.new.value != "Flying" for t in flight.snapshots["cf2"].transitions
+    )
     assert any("cf2 stay on the ground" in m for m in flight.logged_events())
     metrics = metrics_of(flight.log)  # the review reads a flight with a drone that never planned
     assert metrics.reached == 2 and not metrics.success
@@ -274,7 +283,9 @@ def test_simulated_mocap_source_flies_too(tmp_path, short_mission):
 
 def test_simulated_drones_on_threads_of_this_process_fly_too(tmp_path, short_mission):
     """``DryRun(process=False)``: the simulated drones and the NatNet emulator in the flight's own process."""
-    flight = fly(short_mission, tmp_path, process=False, when_flying=lambda loop, rig: (time.sleep(0.5), rig.hide("cf2", 0.5)))
+    flight = fly(
+        short_mission, tmp_path, process=False, when_flying=lambda loop, rig: (time.sleep(0.5), rig.hide("cf2", 0.5))
+    )
     assert flight.report.success, flight.report.reasons
     stale = flight.events("pose_stale", "cf2")  # the hook reached the in-process NatNet emulator
     assert stale and any("resuming" in e.message for e in stale)

@@ -61,11 +61,28 @@ def test_a_mock_mission_dry_runs_through_the_library_and_reaches_its_goals(tmp_p
     mission = tmp_path / "mock.yaml"
     mission.write_text(MOCK_MISSION)
     done = subprocess.run(
-        [sys.executable, "-m", "rpf_fly", "fly", str(mission), "--dry-run", "--no-console", "--log",
-         str(tmp_path / "f.mcap")], capture_output=True, text=True, timeout=180, cwd=tmp_path)
+        [
+            sys.executable,
+            "-m",
+            "rpf_fly",
+            "fly",
+            str(mission),
+            "--dry-run",
+            "--no-console",
+            "--log",
+            str(tmp_path / "f.mcap"),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=180,
+        cwd=tmp_path,
+    )
     assert done.returncode == 0, done.stderr[-2000:]
     assert [line for line in done.stdout.splitlines() if line.startswith("cf")] == [
-        "cf1: reached", "cf2: reached", "cf3: reached"]
+        "cf1: reached",
+        "cf2: reached",
+        "cf3: reached",
+    ]
 
 
 def test_the_librarys_process_killed_mid_flight_is_mocap_loss(tmp_path):

@@ -57,8 +57,9 @@ def test_dry_run_log_has_the_truth_of_every_drone(tmp_path, short_mission):
         assert [m.sequence for m in truth] == list(range(len(truth)))  # nothing dropped
         # Truth (the world), not mocap: the tracked poses agree with it within a few cm at the mocap's times (a
         # pose is logged when the loop handles its frame, a few ms after the world was there) ...
-        error = np.linalg.norm(p_mocap - np.column_stack([np.interp(t_mocap, t_truth, p_truth[:, k])
-                                                          for k in range(3)]), axis=1)
+        error = np.linalg.norm(
+            p_mocap - np.column_stack([np.interp(t_mocap, t_truth, p_truth[:, k]) for k in range(3)]), axis=1
+        )
         assert np.median(error) < 0.01 and np.percentile(error, 95) < 0.05, (name, np.percentile(error, 95))
         # ... and each is, to NatNet's float32 and the emulated room's jitter (0.5 mm per axis: 3.5 mm is seven of
         # it), the truth of one world step shortly before: the emulator serves the world's state, the latency is the
@@ -79,8 +80,10 @@ def test_dry_run_log_has_the_truth_of_every_drone(tmp_path, short_mission):
         assert -np.pi <= min(m.data["yaw"] for m in truth) and max(m.data["yaw"] for m in truth) <= np.pi
     # `rpf-fly review` reads such a log: summary (with the truth topics), metrics, CSV and the figure.
     runner = CliRunner()
-    result = runner.invoke(get_app(), ["review", str(flight.log_path), "--csv", str(tmp_path / "csv"), "--plot",
-                                       str(tmp_path / "review.png")])
+    result = runner.invoke(
+        get_app(),
+        ["review", str(flight.log_path), "--csv", str(tmp_path / "csv"), "--plot", str(tmp_path / "review.png")],
+    )
     assert result.exit_code == 0, result.output
     assert "/truth/cf1" in result.stdout and (tmp_path / "csv" / "truth_cf3.csv").stat().st_size > 10_000
     result = runner.invoke(get_app(), ["review", str(flight.log_path), "--json"])
@@ -145,7 +148,9 @@ def test_a_crash_in_a_dry_run_is_in_the_truth(tmp_path):
     flight = fly(mission, tmp_path, when_flying=push)
     snap = flight.snapshots["cf2"]
     assert snap.crashed and snap.crash_reason == "obstacle" and snap.locked and snap.position[2] == 0.0
-    assert flight.report.outcomes["cf1"] == flight.report.outcomes["cf3"] == FlightOutcome.REACHED, flight.report.reasons
+    assert flight.report.outcomes["cf1"] == flight.report.outcomes["cf3"] == FlightOutcome.REACHED, (
+        flight.report.reasons
+    )
     truth = [m.data for m in flight.log.messages("/truth/cf2")]
     crashed = [d["crashed"] for d in truth]
     first = crashed.index(True)

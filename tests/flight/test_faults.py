@@ -38,12 +38,20 @@ def parse(mission, *entries: str) -> list[Fault]:  # type: ignore[no-untyped-def
 
 
 def test_both_kinds_parse_with_their_fields_and_the_kill_counts_from_its_phase(mission) -> None:
-    kill, late, unplug, other = parse(mission, "{kind: ground_station_kill, at_phase: takeoff}",
-                                      "{kind: ground_station_kill, at_phase: landing, at_s: 1.5}",
-                                      "{kind: dongle_unplug, dongle: 2, at_s: 3}",
-                                      "{kind: occlusion, drone: cf1, at_s: 2, duration_s: 1}")
+    kill, late, unplug, other = parse(
+        mission,
+        "{kind: ground_station_kill, at_phase: takeoff}",
+        "{kind: ground_station_kill, at_phase: landing, at_s: 1.5}",
+        "{kind: dongle_unplug, dongle: 2, at_s: 3}",
+        "{kind: occlusion, drone: cf1, at_s: 2, duration_s: 1}",
+    )
     assert (kill.kind, kill.drone, kill.at_s, kill.params, kill.phase) == (
-        "ground_station_kill", None, 0.0, {"at_phase": "takeoff"}, "takeoff")  # at_s defaults to 0
+        "ground_station_kill",
+        None,
+        0.0,
+        {"at_phase": "takeoff"},
+        "takeoff",
+    )  # at_s defaults to 0
     assert (late.at_s, late.phase) == (1.5, "landing")
     assert (unplug.drone, unplug.at_s, unplug.params, unplug.phase) == (None, 3.0, {"dongle": 2}, "planning")
     assert other.phase == "planning"  # every other timed kind counts from the planning phase
@@ -52,42 +60,73 @@ def test_both_kinds_parse_with_their_fields_and_the_kill_counts_from_its_phase(m
         assert parse(mission, f"{{kind: ground_station_kill, at_phase: {phase}}}")[0].phase == phase
 
 
-@pytest.mark.parametrize("entry, line", [
-    ("{kind: ground_station_kil, at_phase: takeoff}",
-     "f.yaml:2: faults[0].kind: unknown fault kind 'ground_station_kil' (did you mean 'ground_station_kill'?); "
-     "one of occlusion, "),
-    ("{kind: dongle_unplg, dongle: 0, at_s: 1}",
-     "f.yaml:2: faults[0].kind: unknown fault kind 'dongle_unplg' (did you mean 'dongle_unplug'?); one of "),
-    ("{kind: ground_station_kill}",
-     "f.yaml:2: faults[0].at_phase: missing (the ground_station_kill fault needs at_phase)"),
-    ("{kind: ground_station_kill, at_phase: planing}",
-     "f.yaml:2: faults[0].at_phase: expected one of takeoff, settle, planning, landing, got 'planing' "
-     "(did you mean 'planning'?)"),
-    ("{kind: ground_station_kill, at_phase: flying}",
-     "f.yaml:2: faults[0].at_phase: expected one of takeoff, settle, planning, landing, got 'flying' "
-     "(did you mean 'planning'?)"),
-    ("{kind: ground_station_kill, at_phase: 3}",
-     "f.yaml:2: faults[0].at_phase: expected one of takeoff, settle, planning, landing, got '3'"),
-    ("{kind: ground_station_kill, at_phase: takeoff, at_s: -1}",
-     "f.yaml:2: faults[0].at_s: expected seconds >= 0, got -1"),
-    ("{kind: ground_station_kill, at_phase: takeoff, drone: cf1}",
-     "f.yaml:2: faults[0].drone: not a field of a ground_station_kill fault; its fields: at_phase, at_s, kind"),
-    ("{kind: dongle_unplug, dongle: 1, at_s: 1}",
-     "f.yaml:2: faults[0].dongle: expected a dongle of the mission (the first number of its radio URIs: 0, 2), "
-     "got '1'"),
-    ("{kind: dongle_unplug, dongle: radio, at_s: 1}",
-     "f.yaml:2: faults[0].dongle: expected a dongle of the mission (the first number of its radio URIs: 0, 2), "
-     "got 'radio'"),
-    ("{kind: dongle_unplug, dongle: 2.0, at_s: 1}",
-     "f.yaml:2: faults[0].dongle: expected a dongle of the mission (the first number of its radio URIs: 0, 2), "
-     "got '2.0'"),
-    ("{kind: dongle_unplug, at_s: 1}",
-     "f.yaml:2: faults[0].dongle: missing (the dongle_unplug fault needs at_s, dongle)"),
-    ("{kind: dongle_unplug, dongle: 0}",
-     "f.yaml:2: faults[0].at_s: missing (the dongle_unplug fault needs at_s, dongle)"),
-    ("{kind: dongle_unplug, dongle: 0, at_s: 1, drone: cf1}",
-     "f.yaml:2: faults[0].drone: not a field of a dongle_unplug fault; its fields: at_s, dongle, kind"),
-])
+@pytest.mark.parametrize(
+    "entry, line",
+    [
+        (
+            "{kind: ground_station_kil, at_phase: takeoff}",
+            "f.yaml:2: faults[0].kind: unknown fault kind 'ground_station_kil' (did you mean 'ground_station_kill'?); "
+            "one of occlusion, ",
+        ),
+        (
+            "{kind: dongle_unplg, dongle: 0, at_s: 1}",
+            "f.yaml:2: faults[0].kind: unknown fault kind 'dongle_unplg' (did you mean 'dongle_unplug'?); one of ",
+        ),
+        (
+            "{kind: ground_station_kill}",
+            "f.yaml:2: faults[0].at_phase: missing (the ground_station_kill fault needs at_phase)",
+        ),
+        (
+            "{kind: ground_station_kill, at_phase: planing}",
+            "f.yaml:2: faults[0].at_phase: expected one of takeoff, settle, planning, landing, got 'planing' "
+            "(did you mean 'planning'?)",
+        ),
+        (
+            "{kind: ground_station_kill, at_phase: flying}",
+            "f.yaml:2: faults[0].at_phase: expected one of takeoff, settle, planning, landing, got 'flying' "
+            "(did you mean 'planning'?)",
+        ),
+        (
+            "{kind: ground_station_kill, at_phase: 3}",
+            "f.yaml:2: faults[0].at_phase: expected one of takeoff, settle, planning, landing, got '3'",
+        ),
+        (
+            "{kind: ground_station_kill, at_phase: takeoff, at_s: -1}",
+            "f.yaml:2: faults[0].at_s: expected seconds >= 0, got -1",
+        ),
+        (
+            "{kind: ground_station_kill, at_phase: takeoff, drone: cf1}",
+            "f.yaml:2: faults[0].drone: not a field of a ground_station_kill fault; its fields: at_phase, at_s, kind",
+        ),
+        (
+            "{kind: dongle_unplug, dongle: 1, at_s: 1}",
+            "f.yaml:2: faults[0].dongle: expected a dongle of the mission (the first number of its radio URIs: 0, 2), "
+            "got '1'",
+        ),
+        (
+            "{kind: dongle_unplug, dongle: radio, at_s: 1}",
+            "f.yaml:2: faults[0].dongle: expected a dongle of the mission (the first number of its radio URIs: 0, 2), "
+            "got 'radio'",
+        ),
+        (
+            "{kind: dongle_unplug, dongle: 2.0, at_s: 1}",
+            "f.yaml:2: faults[0].dongle: expected a dongle of the mission (the first number of its radio URIs: 0, 2), "
+            "got '2.0'",
+        ),
+        (
+            "{kind: dongle_unplug, at_s: 1}",
+            "f.yaml:2: faults[0].dongle: missing (the dongle_unplug fault needs at_s, dongle)",
+        ),
+        (
+            "{kind: dongle_unplug, dongle: 0}",
+            "f.yaml:2: faults[0].at_s: missing (the dongle_unplug fault needs at_s, dongle)",
+        ),
+        (
+            "{kind: dongle_unplug, dongle: 0, at_s: 1, drone: cf1}",
+            "f.yaml:2: faults[0].drone: not a field of a dongle_unplug fault; its fields: at_s, dongle, kind",
+        ),
+    ],
+)
 def test_each_error_is_one_line(mission, entry: str, line: str) -> None:
     with pytest.raises(MissionError) as err:
         parse(mission, entry)
@@ -112,16 +151,20 @@ def test_the_kill_strikes_at_its_phase_and_every_other_kind_counts_from_the_plan
     """Phases 0.5 s apart: take-off commanded at 0, planning at 0.5 s (settle: takeoff_s 0.3 s after the take-off),
     landing at 1.0 s. Each kill is due at_s after its own phase's start; the occlusion at_s after the planning
     phase's start, as before."""
-    faults = parse(mission, "{kind: ground_station_kill, at_phase: landing, at_s: 0.1}",
-                   "{kind: ground_station_kill, at_phase: takeoff, at_s: 0.1}",
-                   "{kind: ground_station_kill, at_phase: settle}",
-                   "{kind: ground_station_kill, at_phase: planning, at_s: 0.2}",
-                   "{kind: occlusion, drone: cf1, at_s: 0.1, duration_s: 1}")
+    faults = parse(
+        mission,
+        "{kind: ground_station_kill, at_phase: landing, at_s: 0.1}",
+        "{kind: ground_station_kill, at_phase: takeoff, at_s: 0.1}",
+        "{kind: ground_station_kill, at_phase: settle}",
+        "{kind: ground_station_kill, at_phase: planning, at_s: 0.2}",
+        "{kind: occlusion, drone: cf1, at_s: 0.1, duration_s: 1}",
+    )
     kills: list[float] = []
     injection = FaultInjection(mission, faults, kill=lambda: kills.append(time.monotonic()))
     hidden: list[float] = []
-    rig = SimpleNamespace(mocap=StallableMocap(SimpleNamespace()),
-                          hide=lambda name, seconds: hidden.append(time.monotonic()))
+    rig = SimpleNamespace(
+        mocap=StallableMocap(SimpleNamespace()), hide=lambda name, seconds: hidden.append(time.monotonic())
+    )
     loop = _Loop()
     seen: list[str] = []
     loop.events.subscribe(lambda e: seen.append(e.message) if e.kind == "fault" else None)
@@ -146,17 +189,16 @@ def test_the_kill_strikes_at_its_phase_and_every_other_kind_counts_from_the_plan
     assert phases["settle"] - phases["takeoff"] == pytest.approx(0.3)
     assert phases["takeoff"] < phases["planning"] < phases["landing"]
     due = [phases["takeoff"] + 0.1, phases["settle"], phases["planning"] + 0.2, phases["landing"] + 0.1]
-    assert len(kills) == 4 and all(0.0 <= k - d < 0.05 for k, d in zip(kills, due)), \
-        [k - d for k, d in zip(kills, due)]
+    assert len(kills) == 4 and all(0.0 <= k - d < 0.05 for k, d in zip(kills, due)), [k - d for k, d in zip(kills, due)]
     assert len(hidden) == 1 and 0.0 <= hidden[0] - (phases["planning"] + 0.1) < 0.05
     assert injection.t0 == phases["planning"]
     kill_events = [m for m in seen if m.startswith("injected ground_station_kill")]
-    assert kill_events == ["injected ground_station_kill at takeoff + 0.1 s: SIGKILL of this ground station "
-                           "(no landing, no log close)", "injected ground_station_kill at settle + 0 s: SIGKILL of "
-                           "this ground station (no landing, no log close)",
-                           "injected ground_station_kill at planning + 0.2 s: SIGKILL of this ground station "
-                           "(no landing, no log close)", "injected ground_station_kill at landing + 0.1 s: SIGKILL "
-                           "of this ground station (no landing, no log close)"]
+    assert kill_events == [
+        "injected ground_station_kill at takeoff + 0.1 s: SIGKILL of this ground station (no landing, no log close)",
+        "injected ground_station_kill at settle + 0 s: SIGKILL of this ground station (no landing, no log close)",
+        "injected ground_station_kill at planning + 0.2 s: SIGKILL of this ground station (no landing, no log close)",
+        "injected ground_station_kill at landing + 0.1 s: SIGKILL of this ground station (no landing, no log close)",
+    ]
 
 
 def test_a_phase_the_flight_never_reaches_injects_nothing(mission) -> None:

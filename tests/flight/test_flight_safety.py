@@ -81,8 +81,11 @@ def test_a_planner_that_blocks_faults_its_drone_only(tmp_path, short_mission):
     assert flight.events("loop") == []
     faulted = event_time_ns(flight, "did not return within")
     for name in ("cf1", "cf3"):
-        times = [m.log_time for m in flight.log.messages(f"/{name}/setpoint")
-                 if faulted - 1_000_000_000 < m.log_time < faulted + 500_000_000]
+        times = [
+            m.log_time
+            for m in flight.log.messages(f"/{name}/setpoint")
+            if faulted - 1_000_000_000 < m.log_time < faulted + 500_000_000
+        ]
         gaps = [(b - a) / 1e9 for a, b in zip(times, times[1:])]
         assert len(times) > 10 and max(gaps) < short_mission.flight.dt + 0.08, (name, max(gaps))
     assert flight.report.outcomes["cf2"] == FlightOutcome.LANDED_EARLY
@@ -239,8 +242,9 @@ def test_a_flight_whose_last_drone_lost_its_link_ends_once_mocap_sees_it_down(tm
     last = truth[-1]
     assert not last["motors"] and last["position"]["z"] < 0.05, last
     assert flight.log.messages(f"/truth/{name}")[-1].log_time > dropped_at[0] + 1_000_000_000
-    cut = next(m.log_time for m in flight.log.messages(f"/truth/{name}")
-               if m.log_time > dropped_at[0] and not m.data["motors"])
+    cut = next(
+        m.log_time for m in flight.log.messages(f"/truth/{name}") if m.log_time > dropped_at[0] and not m.data["motors"]
+    )
     assert 0.6e9 < cut - dropped_at[0] < 1.3e9, (cut - dropped_at[0]) / 1e9  # the watchdog, not the 2 s one
 
 
@@ -279,13 +283,16 @@ def test_a_drone_whose_mocap_orientation_flipped_on_the_ground_does_not_take_off
 
     log_path = tmp_path / "flight.mcap"
     with DryRun(short_mission, mocap="natnet") as rig:
+
         def flip_when_tracked(loop) -> None:  # type: ignore[no-untyped-def]
             def act() -> None:
                 deadline = time.monotonic() + 20
-                while (loop.phase != SwarmPhase.PREFLIGHT or loop.tracker.get("cf1") is None) \
-                        and time.monotonic() < deadline:  # tracked first: the flip is a jump, not its first pose
+                while (
+                    loop.phase != SwarmPhase.PREFLIGHT or loop.tracker.get("cf1") is None
+                ) and time.monotonic() < deadline:  # tracked first: the flip is a jump, not its first pose
                     time.sleep(0.002)
                 rig.orientation_flip("cf1", 90.0, 60.0)
+
             threading.Thread(target=act, daemon=True).start()
 
         report = run_flight(short_mission, default_factory(short_mission), log_path, rig=rig, on_loop=flip_when_tracked)

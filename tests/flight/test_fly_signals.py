@@ -23,18 +23,23 @@ from rpf_fly.log.reader import read_log, salvage
 WORLD_MODULE = "rpf_fly.emulator.world_process"
 
 
-def start_flight(tmp_path: Path, *, goal_x: float = 1.5, timeout_s: int = 60,
-                 stderr: Path | None = None) -> tuple[subprocess.Popen, Path]:
+def start_flight(
+    tmp_path: Path, *, goal_x: float = 1.5, timeout_s: int = 60, stderr: Path | None = None
+) -> tuple[subprocess.Popen, Path]:
     """``rpf-fly fly`` of the short mission (its goals at ``goal_x``) as a subprocess; stderr piped, or to a file."""
     mission = tmp_path / "short.yaml"
-    mission.write_text(SHORT_MISSION.replace("timeout_s: 30", f"timeout_s: {timeout_s}")
-                       .replace("goal: [1.0,", f"goal: [{goal_x},"))
+    mission.write_text(
+        SHORT_MISSION.replace("timeout_s: 30", f"timeout_s: {timeout_s}").replace("goal: [1.0,", f"goal: [{goal_x},")
+    )
     log = tmp_path / "flight.mcap"
     env = dict(os.environ, PYTHONUNBUFFERED="1")
     err = open(stderr, "w") if stderr is not None else subprocess.PIPE  # noqa: SIM115 - the child owns it
     proc = subprocess.Popen(
         [sys.executable, "-m", "rpf_fly", "fly", str(mission), "--dry-run", "--no-console", "--log", str(log)],
-        stdout=subprocess.PIPE if stderr is None else subprocess.DEVNULL, stderr=err, text=True, env=env,
+        stdout=subprocess.PIPE if stderr is None else subprocess.DEVNULL,
+        stderr=err,
+        text=True,
+        env=env,
         cwd=tmp_path,
     )
     if stderr is not None:
@@ -130,8 +135,10 @@ def test_sigkill_the_drones_fall_by_the_firmware_watchdog_and_the_log_is_salvage
     assert exited is not None, "the simulated drones' process outlived its cap"
     report = json.loads(world_exit_report_for(log).read_text())
     assert report["all_down"] and not report["capped"] and report["world_pid"] == world
-    assert report["detected_by"] in ("the control connection closed without a close call",  # whichever is first
-                                     "the parent process is gone (the child was re-parented)")
+    assert report["detected_by"] in (
+        "the control connection closed without a close call",  # whichever is first
+        "the parent process is gone (the child was re-parented)",
+    )
     assert report["parent_death_monotonic_s"] - killed < 0.5  # noticed at once
     assert exited < report["elapsed_s"] + 1.5  # and exited right after the last drone came down
     assert set(report["drones"]) == {"cf1", "cf2", "cf3"}
@@ -202,8 +209,9 @@ def test_sigint_twice_stops_every_motor_and_closes_the_log(tmp_path):
 def run_cli(tmp_path: Path, *args: str, mission_text: str) -> subprocess.CompletedProcess:
     mission = tmp_path / "m.yaml"
     mission.write_text(mission_text)
-    return subprocess.run([sys.executable, "-m", "rpf_fly", *args, str(mission)], capture_output=True, text=True,
-                          cwd=tmp_path, timeout=60)
+    return subprocess.run(
+        [sys.executable, "-m", "rpf_fly", *args, str(mission)], capture_output=True, text=True, cwd=tmp_path, timeout=60
+    )
 
 
 NATNET_MISSION = SHORT_MISSION.replace("mocap: {kind: sim, rate_hz: 100}", "mocap: {kind: natnet, server: SERVER}")

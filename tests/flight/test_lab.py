@@ -72,8 +72,13 @@ def test_check_then_fly_against_one_lab_flies_every_drone_also_one_latched_by_a_
     try:
         script = tmp_path / "latch.py"
         script.write_text(LATCH)
-        latch = subprocess.run([sys.executable, str(script), "fake://0/80/2M/E7E7E7E702", str(tmp_path / "toc")],
-                               capture_output=True, text=True, env=lab.env, timeout=60)
+        latch = subprocess.run(
+            [sys.executable, str(script), "fake://0/80/2M/E7E7E7E702", str(tmp_path / "toc")],
+            capture_output=True,
+            text=True,
+            env=lab.env,
+            timeout=60,
+        )
         assert latch.returncode == 0, latch.stderr
         check = lab.run("check", str(mission), "--lab")
         assert check.returncode == 0, check.stdout + check.stderr
@@ -128,11 +133,14 @@ def _kill_when(proc: subprocess.Popen, line: str, delay_s: float) -> int:
     return killed
 
 
-@pytest.mark.parametrize("phase, line, delay_s", [
-    ("takeoff", "take-off commanded", 1.0),
-    ("planning", "swarm: flying", 2.0),
-    ("landing", "swarm: landing", 0.7),
-])
+@pytest.mark.parametrize(
+    "phase, line, delay_s",
+    [
+        ("takeoff", "take-off commanded", 1.0),
+        ("planning", "swarm: flying", 2.0),
+        ("landing", "swarm: landing", 0.7),
+    ],
+)
 def test_a_ground_station_killed_leaves_no_drone_flying_on(tmp_path, phase, line, delay_s):
     """SIGKILL of ``fly --lab``: within 1.5 s every drone's motors are off or it is on the floor, none moved more
     than 1 m after the kill, and none is above the floor with motors on 5 s after (the lab's truth)."""

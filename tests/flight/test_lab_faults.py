@@ -42,8 +42,17 @@ def _lab_and_flight(tmp_path: Path, faults: str) -> tuple[subprocess.CompletedPr
     schedule.write_text(faults)
     lab = LabProcess(tmp_path, mission)
     try:
-        flight = lab.start("fly", str(mission), "--lab", "--faults", str(schedule), "--no-console", "--log",
-                           str(tmp_path / "flight.mcap"), stdout=subprocess.PIPE)
+        flight = lab.start(
+            "fly",
+            str(mission),
+            "--lab",
+            "--faults",
+            str(schedule),
+            "--no-console",
+            "--log",
+            str(tmp_path / "flight.mcap"),
+            stdout=subprocess.PIPE,
+        )
         struck = None
         err = []
         for line in flight.stderr:  # type: ignore[union-attr]
@@ -61,7 +70,8 @@ def _lab_and_flight(tmp_path: Path, faults: str) -> tuple[subprocess.CompletedPr
 
 def test_a_ground_station_killed_in_its_planning_phase_leaves_no_drone_flying(tmp_path):
     flight, struck, lab_log = _lab_and_flight(
-        tmp_path, "faults:\n  - {kind: ground_station_kill, at_phase: planning, at_s: 2.0}\n")
+        tmp_path, "faults:\n  - {kind: ground_station_kill, at_phase: planning, at_s: 2.0}\n"
+    )
     assert flight.returncode == -signal.SIGKILL, flight.stdout + flight.stderr
     assert "Traceback" not in flight.stderr
     before = flight.stderr.split("injected ground_station_kill")[0]

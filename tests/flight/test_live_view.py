@@ -31,8 +31,9 @@ def _require(module: str) -> None:
     try:
         __import__(module)
     except ImportError as err:
-        pytest.fail(f"{module} is missing: the tests need the live extra: pip install -e '.[dev,live]' ({err})",
-                    pytrace=False)
+        pytest.fail(
+            f"{module} is missing: the tests need the live extra: pip install -e '.[dev,live]' ({err})", pytrace=False
+        )
 
 
 _require("foxglove")
@@ -62,8 +63,13 @@ async def connect(port: int, deadline: float, *, slow: bool = False) -> websocke
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 2048)
         try:
             sock.connect(("127.0.0.1", port))
-            return await websockets.connect(f"ws://127.0.0.1:{port}", sock=sock, subprotocols=[SUBPROTOCOL],
-                                            max_size=None, max_queue=1 if slow else 1024)
+            return await websockets.connect(
+                f"ws://127.0.0.1:{port}",
+                sock=sock,
+                subprotocols=[SUBPROTOCOL],
+                max_size=None,
+                max_queue=1 if slow else 1024,
+            )
         except OSError:
             sock.close()
             if time.monotonic() > deadline:
@@ -79,8 +85,9 @@ async def subscribe_new(ws: websockets.ClientConnection, text: str, channels: di
     fresh = [c for c in message["channels"] if c["id"] not in channels]
     channels.update({c["id"]: c for c in fresh})
     if fresh:
-        await ws.send(json.dumps({"op": "subscribe", "subscriptions": [{"id": c["id"], "channelId": c["id"]}
-                                                                        for c in fresh]}))
+        await ws.send(
+            json.dumps({"op": "subscribe", "subscriptions": [{"id": c["id"], "channelId": c["id"]} for c in fresh]})
+        )
 
 
 async def reader(port: int, deadline: float) -> tuple[dict[int, dict], list[tuple[str, int, bytes]]]:
@@ -131,9 +138,24 @@ def test_a_live_client_receives_every_topic_as_the_log_has_it_and_a_stalled_one_
     log_path = tmp_path / "flight.mcap"
     port = free_port()
     proc = subprocess.Popen(
-        [sys.executable, "-m", "rpf_fly", "fly", str(mission), "--dry-run", "--no-console", "--log", str(log_path),
-         "--foxglove", "--foxglove-port", str(port)],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path,
+        [
+            sys.executable,
+            "-m",
+            "rpf_fly",
+            "fly",
+            str(mission),
+            "--dry-run",
+            "--no-console",
+            "--log",
+            str(log_path),
+            "--foxglove",
+            "--foxglove-port",
+            str(port),
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        cwd=tmp_path,
         env=dict(os.environ, PYTHONUNBUFFERED="1"),
     )
     try:
@@ -154,10 +176,13 @@ def test_a_live_client_receives_every_topic_as_the_log_has_it_and_a_stalled_one_
         assert json.loads(channel["schema"]) == S.SCHEMAS[log.schemas[topic]]
     topics = {topic for topic, _, _ in received}
     advertised = {c["topic"]: c["id"] for c in channels.values()}
-    missing = {t: (f"channel {advertised[t]}" if t in advertised else "never advertised", len(log.messages(t)))
-               for t in set(log.topics) - topics}
-    assert topics == EXPECTED_TOPICS == set(log.topics), f"not received live (how advertised, messages logged): " \
-                                                         f"{missing}; channels {sorted(advertised)}"
+    missing = {
+        t: (f"channel {advertised[t]}" if t in advertised else "never advertised", len(log.messages(t)))
+        for t in set(log.topics) - topics
+    }
+    assert topics == EXPECTED_TOPICS == set(log.topics), (
+        f"not received live (how advertised, messages logged): {missing}; channels {sorted(advertised)}"
+    )
     assert set(advertised) == EXPECTED_TOPICS  # every channel advertised from the start, none the log lacks
 
     # One source of truth: each live message is the log's message of that topic at that log time.

@@ -62,7 +62,9 @@ def test_frames_received_in_a_burst_are_judged_on_their_capture_times():
     1 ms. That is motion, not a jump."""
     tracker = PoseTracker({"cf1": "cf1"})
     fly_along_x(tracker, 0, 50)
-    late = MocapFrame(70, 0.70, 0.491, None, {"cf1": RigidBodyPose("cf1", 1, (0.35, 0.0, 1.0), (0.0, 0.0, 0.0, 1.0), True)})
+    late = MocapFrame(
+        70, 0.70, 0.491, None, {"cf1": RigidBodyPose("cf1", 1, (0.35, 0.0, 1.0), (0.0, 0.0, 0.0, 1.0), True)}
+    )
     tracker.update(late)
     assert not tracker.glitches and tracker.get("cf1").position[0] == 0.35
 
@@ -82,8 +84,9 @@ def test_a_fall_and_a_reappearance_after_occlusion_are_not_glitches():
     assert not tracker.glitches and tracker.get("cf1").position == (0.3, 0.0, 0.0)
 
 
-def turned_frame(n: int, yaw_deg: float, position: tuple[float, float, float] = (0.0, 0.0, 1.0),
-                 valid: bool = True) -> MocapFrame:
+def turned_frame(
+    n: int, yaw_deg: float, position: tuple[float, float, float] = (0.0, 0.0, 1.0), valid: bool = True
+) -> MocapFrame:
     """Frame ``n`` of a body at ``position`` turned ``yaw_deg`` about the vertical."""
     t = n / RATE_HZ
     half = math.radians(yaw_deg) / 2.0
@@ -120,8 +123,9 @@ def test_an_orientation_flip_is_refused_while_its_position_is_followed_until_the
 def test_a_flip_about_a_horizontal_axis_is_refused_too(axis):
     tracker = PoseTracker({"cf1": "cf1"})
     level = RigidBodyPose("cf1", 1, (0.0, 0.0, 1.0), (0.0, 0.0, 0.0, 1.0), True)
-    flipped = RigidBodyPose("cf1", 1, (0.0, 0.0, 1.0), (1.0, 0.0, 0.0, 0.0) if axis == "x" else (0.0, 1.0, 0.0, 0.0),
-                            True)
+    flipped = RigidBodyPose(
+        "cf1", 1, (0.0, 0.0, 1.0), (1.0, 0.0, 0.0, 0.0) if axis == "x" else (0.0, 1.0, 0.0, 0.0), True
+    )
     for n, body in enumerate([level] * 5 + [flipped]):
         tracker.update(MocapFrame(n, n / RATE_HZ, n / RATE_HZ, None, {"cf1": body}))
     assert "cf1" in tracker.orientation_glitching
@@ -172,9 +176,14 @@ def occluded(tracker: PoseTracker, start: int, stop: int) -> None:
         tracker.update(frame(n, (0.0, 0.0, 0.0), valid=False))
 
 
-@pytest.mark.parametrize("back_at, refused", [((1.6, 0.6, 1.0), True),    # re-acquired 1.4 m off: a swap
-                                              ((0.30, 0.0, 1.0), False),  # where the drone flew meanwhile
-                                              ((0.45, 0.0, 1.0), False)])  # within the estimate's tolerance
+@pytest.mark.parametrize(
+    "back_at, refused",
+    [
+        ((1.6, 0.6, 1.0), True),  # re-acquired 1.4 m off: a swap
+        ((0.30, 0.0, 1.0), False),  # where the drone flew meanwhile
+        ((0.45, 0.0, 1.0), False),
+    ],
+)  # within the estimate's tolerance
 def test_the_first_pose_after_a_gap_must_lie_near_the_flying_drones_own_estimate(back_at, refused):
     """After 0.43 s unseen the frame-to-frame bound allows 2.2 m, so a body re-acquired on the wrong markers was
     taken, fed to the estimator, and the drone flew the jump's length into a neighbour (random fault campaign, seed
@@ -211,9 +220,15 @@ def test_without_a_flying_estimate_or_without_a_gap_the_sample_is_judged_on_moti
     assert not diverged.glitches and diverged.get("cf1").position[0] == pytest.approx(0.295)
 
 
-@pytest.mark.parametrize("made_s, back_frame, off_m, refused", [
-    (0.73, 93, 0.47, False), (0.73, 93, 0.51, True),      # estimate 0.2 s old: 0.15 + 0.30 + 0.04 m
-    (2.49, 250, 1.03, False), (2.49, 250, 1.10, True)])   # 2 s blind: 0.15 + 0.015 + 0.90 m
+@pytest.mark.parametrize(
+    "made_s, back_frame, off_m, refused",
+    [
+        (0.73, 93, 0.47, False),
+        (0.73, 93, 0.51, True),  # estimate 0.2 s old: 0.15 + 0.30 + 0.04 m
+        (2.49, 250, 1.03, False),
+        (2.49, 250, 1.10, True),
+    ],
+)  # 2 s blind: 0.15 + 0.015 + 0.90 m
 def test_the_estimates_age_and_the_blind_drift_widen_what_may_be_taken(made_s, back_frame, off_m, refused):
     """An estimate made 0.2 s before the sample may be 0.3 m behind a drone at 1.5 m/s, and after 2 s blind its
     drift may reach 0.5 x 0.45 m/s^2 (the default ``safety.blind_drift_m_s2``) x (2 s)^2 = 0.9 m: within those the

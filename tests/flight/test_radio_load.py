@@ -19,17 +19,23 @@ from rpf_fly.radio.cflib_backend import CflibBackend
 
 ADDRESSES = (0xE7E7E7E701, 0xE7E7E7E702, 0xE7E7E7E703)
 DONGLES = (0, 0, 1)
-MISSION = ("name: radio-load\narena: {x: [-3, 3], y: [-3, 3]}\nflight: {rate_hz: 10}\nradio: {extpos_rate_hz: 50}\n"
-           "drones:\n" + "".join(f"  - {{name: cf{i + 1}, uri: radio://{d}/80/2M/{a:010X}, start: [{i * 0.5}, 0], "
-                                 f"goal: [{i * 0.5}, 1]}}\n" for i, (a, d) in enumerate(zip(ADDRESSES, DONGLES))))
+MISSION = (
+    "name: radio-load\narena: {x: [-3, 3], y: [-3, 3]}\nflight: {rate_hz: 10}\nradio: {extpos_rate_hz: 50}\n"
+    "drones:\n"
+    + "".join(
+        f"  - {{name: cf{i + 1}, uri: radio://{d}/80/2M/{a:010X}, start: [{i * 0.5}, 0], goal: [{i * 0.5}, 1]}}\n"
+        for i, (a, d) in enumerate(zip(ADDRESSES, DONGLES))
+    )
+)
 
 
 def test_the_logged_load_of_each_dongle_is_what_the_firmwares_received(tmp_path: Path, toc_cache: Path) -> None:
     """Three drones on two dongles (1 ms of air), extpos at 50 Hz and setpoints at 10 Hz for 1.5 s. Tolerance: 2
     packets a drone at each end (cflib's statistics close a window every 0.1 s; the one straddling an end carries
     only its 10 Hz pings, as nothing else is sent then) plus 1 %."""
-    world = FakeWorld({a: FakeDroneConfig.at(0.5 * i, 0.0) for i, a in enumerate(ADDRESSES)},
-                      timing=RadioTiming(transaction_s=0.001))
+    world = FakeWorld(
+        {a: FakeDroneConfig.at(0.5 * i, 0.0) for i, a in enumerate(ADDRESSES)}, timing=RadioTiming(transaction_s=0.001)
+    )
     fake_radio.register(world)
     names = [f"cf{i + 1}" for i in range(3)]
     uris = {n: world.uri(a, devid=d) for n, a, d in zip(names, ADDRESSES, DONGLES)}
@@ -40,6 +46,7 @@ def test_the_logged_load_of_each_dongle_is_what_the_firmwares_received(tmp_path:
         def on_packet(port: int, channel: int, payload: bytes, stamp: float) -> None:
             with lock:
                 counted[name] += 1
+
         return on_packet
 
     backend = CflibBackend(cache_dir=toc_cache)

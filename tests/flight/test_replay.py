@@ -60,8 +60,9 @@ def replay(*args: object):  # noqa: ANN201 - click's Result
 
 def planning_rows(path: Path) -> dict[str, int]:
     data = read_log(path)
-    return {d: sum(m.data["mode"] in PLANNING_MODES for m in data.topics[f"/{d}/planner"])
-            for d in ("cf1", "cf2", "cf3")}
+    return {
+        d: sum(m.data["mode"] in PLANNING_MODES for m in data.topics[f"/{d}/planner"]) for d in ("cf1", "cf2", "cf3")
+    }
 
 
 # ---------------------------------------------------------------------------------------------- reproduction
@@ -126,8 +127,9 @@ def test_orca_on_an_apf_flight_shows_where_it_would_have_decided_otherwise(apf_l
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
-@pytest.mark.parametrize("args", [("--planner", "apf"), ("--policy", ROOT / "policies" / "rpf-mean.onnx")],
-                         ids=["apf", "rpf-mean-policy"])
+@pytest.mark.parametrize(
+    "args", [("--planner", "apf"), ("--policy", ROOT / "policies" / "rpf-mean.onnx")], ids=["apf", "rpf-mean-policy"]
+)
 def test_another_planner_or_policy_on_an_rpf_flight_diverges(rpf_log: Path, args: tuple) -> None:
     result = replay(rpf_log, *args, "--json")
     assert result.exit_code == 0, result.output
@@ -195,13 +197,15 @@ def copy_log(src: Path, dst: Path, drop: set[str] = frozenset(), metadata: dict 
             elif isinstance(record, Schema) and record.id not in schemas:
                 schemas[record.id] = writer.register_schema(record.name, record.encoding, record.data)
             elif isinstance(record, Channel) and record.id not in channels and record.topic not in drop:
-                channels[record.id] = writer.register_channel(record.topic, record.message_encoding,
-                                                              schemas[record.schema_id], dict(record.metadata))
+                channels[record.id] = writer.register_channel(
+                    record.topic, record.message_encoding, schemas[record.schema_id], dict(record.metadata)
+                )
             elif isinstance(record, Metadata) and record.name not in (metadata or {}):
                 writer.add_metadata(record.name, dict(record.metadata))
             elif isinstance(record, Message) and record.channel_id in channels:
-                writer.add_message(channels[record.channel_id], record.log_time, record.data, record.publish_time,
-                                   record.sequence)
+                writer.add_message(
+                    channels[record.channel_id], record.log_time, record.data, record.publish_time, record.sequence
+                )
             elif isinstance(record, Footer):
                 break
         for name, values in (metadata or {}).items():
@@ -217,13 +221,14 @@ def one_line(result) -> str:  # noqa: ANN001
     return lines[0]
 
 
-def test_a_drone_without_planner_rows_is_named_in_one_line_and_the_others_replay(apf_log: Path,
-                                                                                  tmp_path: Path) -> None:
+def test_a_drone_without_planner_rows_is_named_in_one_line_and_the_others_replay(apf_log: Path, tmp_path: Path) -> None:
     log = copy_log(apf_log, tmp_path / "no-cf2.mcap", drop={"/cf2/planner"})
     result = replay(log, "--json")
     assert result.exit_code == 0, result.output
-    assert one_line(result) == (f"{log}: no planner rows (/cf2/planner) in the log: not replayed (its poses still "
-                                "count as a neighbour, by height)")
+    assert one_line(result) == (
+        f"{log}: no planner rows (/cf2/planner) in the log: not replayed (its poses still "
+        "count as a neighbour, by height)"
+    )
     out = json.loads(result.stdout)
     assert out["drones"]["cf2"]["ticks"] == 0 and out["drones"]["cf2"]["first_divergence_tick"] is None
     assert out["drones"]["cf1"]["ticks"] > 20 and out["drones"]["cf1"]["first_divergence_tick"] is None
@@ -256,8 +261,7 @@ def test_a_truncated_log_replays_what_it_holds_with_one_warning(apf_log: Path, t
 
 
 @pytest.mark.parametrize("case", ["not-mcap", "missing", "no-mission", "sim-log", "missing-policy"])
-def test_unreplayable_logs_are_one_line_and_exit_2(case: str, apf_log: Path, rpf_log: Path,
-                                                   tmp_path: Path) -> None:
+def test_unreplayable_logs_are_one_line_and_exit_2(case: str, apf_log: Path, rpf_log: Path, tmp_path: Path) -> None:
     args: list[object] = []
     if case == "not-mcap":
         log = tmp_path / "x.mcap"
@@ -277,8 +281,13 @@ def test_unreplayable_logs_are_one_line_and_exit_2(case: str, apf_log: Path, rpf
     assert result.exit_code == 2, result.output
     line = one_line(result)
     assert line.startswith(f"{log}: "), line
-    expected = {"not-mcap": "", "missing": "", "no-mission": "mission.yaml", "sim-log": "mission.source",
-                "missing-policy": "planner.policy"}[case]
+    expected = {
+        "not-mcap": "",
+        "missing": "",
+        "no-mission": "mission.yaml",
+        "sim-log": "mission.source",
+        "missing-policy": "planner.policy",
+    }[case]
     assert expected in line, line
     if case == "missing-policy":  # and with a planner of its own it replays all the same
         assert "--policy" in line
@@ -287,8 +296,9 @@ def test_unreplayable_logs_are_one_line_and_exit_2(case: str, apf_log: Path, rpf
         assert json.loads(ok.stdout)["planner"] == "apf"
 
 
-def test_the_flown_policy_is_found_by_its_hash_when_its_relative_path_does_not_resolve(rpf_log: Path,
-                                                                                      tmp_path: Path) -> None:
+def test_the_flown_policy_is_found_by_its_hash_when_its_relative_path_does_not_resolve(
+    rpf_log: Path, tmp_path: Path
+) -> None:
     """missions/*.yaml name ``../policies/rpf.onnx`` relative to the mission's folder, which the log does not
     record: the replay finds the file with the logged SHA-256 instead (here: this checkout's policies/)."""
     mission = dict(read_log(rpf_log).metadata["mission"])
@@ -302,25 +312,41 @@ def test_the_flown_policy_is_found_by_its_hash_when_its_relative_path_does_not_r
 
 
 @pytest.mark.parametrize("up_axis", ["z", "y"])
-def test_emulate_replay_serves_the_logged_poses_over_natnet_at_their_logged_times(apf_log: Path,
-                                                                                  up_axis: str) -> None:
+def test_emulate_replay_serves_the_logged_poses_over_natnet_at_their_logged_times(apf_log: Path, up_axis: str) -> None:
     """`rpf-fly mocap emulate --replay LOG` on 127.0.0.1 (its own process, unicast), read back with our NatNet
     client: every frame received is the logged frame of that number, to the float32 of the wire (a dry run's
     poses came in as float32, so exactly), and the frames keep their logged spacing (at 4x speed)."""
     frames = mocap_frames(read_log(apf_log))
     speed = 4.0
     proc = subprocess.Popen(
-        [sys.executable, "-m", "rpf_fly", "mocap", "emulate", "--replay", str(apf_log), "--unicast",
-         "--command-port", "0", "--data-port", "0", "--replay-speed", str(speed), "--up-axis", up_axis],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        [
+            sys.executable,
+            "-m",
+            "rpf_fly",
+            "mocap",
+            "emulate",
+            "--replay",
+            str(apf_log),
+            "--unicast",
+            "--command-port",
+            "0",
+            "--data-port",
+            "0",
+            "--replay-speed",
+            str(speed),
+            "--up-axis",
+            up_axis,
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
     )
     received: list[tuple[int, float, dict]] = []
     try:
         first = proc.stdout.readline()
         assert "command port" in first, first + proc.stderr.read()
         port = int(first.split("command port ")[1].split(",")[0])
-        with NatNetClient("127.0.0.1", multicast=False, command_port=port, up_axis=up_axis,
-                          keepalive_s=0.2) as client:
+        with NatNetClient("127.0.0.1", multicast=False, command_port=port, up_axis=up_axis, keepalive_s=0.2) as client:
             assert client.wait_for_server(10.0)
             deadline = time.monotonic() + 60
             while proc.poll() is None and time.monotonic() < deadline:
@@ -354,16 +380,34 @@ def test_mocap_watch_reads_an_emulated_replay_back_to_1e_6(apf_log: Path) -> Non
     speed = 4.0
     span_s = (frames[-1].t_ns - frames[0].t_ns) / 1e9 / speed
     proc = subprocess.Popen(
-        [sys.executable, "-m", "rpf_fly", "mocap", "emulate", "--replay", str(apf_log), "--unicast",
-         "--command-port", "0", "--data-port", "0", "--replay-speed", str(speed)],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        [
+            sys.executable,
+            "-m",
+            "rpf_fly",
+            "mocap",
+            "emulate",
+            "--replay",
+            str(apf_log),
+            "--unicast",
+            "--command-port",
+            "0",
+            "--data-port",
+            "0",
+            "--replay-speed",
+            str(speed),
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
     )
     try:
         first = proc.stdout.readline()
         assert "command port" in first, first + proc.stderr.read()
         port = first.split("command port ")[1].split(",")[0]
-        watch = runner.invoke(get_app(), ["mocap", "watch", "--unicast", "--command-port", port, "--json",
-                                          "--duration", f"{span_s + 2.0:.1f}"])
+        watch = runner.invoke(
+            get_app(),
+            ["mocap", "watch", "--unicast", "--command-port", port, "--json", "--duration", f"{span_s + 2.0:.1f}"],
+        )
         proc.communicate(timeout=30)
     finally:
         proc.kill()
@@ -376,15 +420,19 @@ def test_mocap_watch_reads_an_emulated_replay_back_to_1e_6(apf_log: Path) -> Non
         assert {n for n, b in obj["bodies"].items() if b["valid"]} == set(logged), obj["frame"]
         for name, (position, quaternion) in logged.items():
             body = obj["bodies"][name]
-            worst = max(worst, float(np.max(np.abs(np.array(body["position"]) - np.asarray(position)))),
-                        float(np.max(np.abs(np.array(body["quaternion"]) - np.asarray(quaternion)))))
+            worst = max(
+                worst,
+                float(np.max(np.abs(np.array(body["position"]) - np.asarray(position)))),
+                float(np.max(np.abs(np.array(body["quaternion"]) - np.asarray(quaternion)))),
+            )
     assert worst <= 1e-6, worst
 
 
 def test_emulate_replay_of_a_log_without_mocap_is_one_line(apf_log: Path, tmp_path: Path) -> None:
     log = copy_log(apf_log, tmp_path / "nomocap.mcap", drop={f"/mocap/cf{i}" for i in (1, 2, 3)})
-    result = runner.invoke(get_app(), ["mocap", "emulate", "--replay", str(log), "--unicast", "--command-port", "0",
-                                       "--data-port", "0"])
+    result = runner.invoke(
+        get_app(), ["mocap", "emulate", "--replay", str(log), "--unicast", "--command-port", "0", "--data-port", "0"]
+    )
     assert result.exit_code == 2
     assert one_line(result) == f"{log}: no mocap poses (/mocap/<drone>) to serve"
 
@@ -422,8 +470,11 @@ def test_pose_playback_sends_each_frame_at_its_time_and_stops_when_asked() -> No
     with the frame's poses (all tracked; absent bodies are the server's to stream untracked)."""
     now = [100.0]
     sent: list[tuple[float, dict]] = []
-    frames = [(5.0, {"cf1": ((0.0, 0.0, 0.5), (0, 0, 0, 1))}), (5.5, {"cf1": ((0.1, 0.0, 0.5), (0, 0, 0, 1))}),
-              (6.5, {"cf2": ((1.0, 1.0, 0.5), (0, 0, 0, 1))})]
+    frames = [
+        (5.0, {"cf1": ((0.0, 0.0, 0.5), (0, 0, 0, 1))}),
+        (5.5, {"cf1": ((0.1, 0.0, 0.5), (0, 0, 0, 1))}),
+        (6.5, {"cf2": ((1.0, 1.0, 0.5), (0, 0, 0, 1))}),
+    ]
     playback = PosePlayback(frames, speed=2.0)
 
     class Server:

@@ -29,8 +29,9 @@ def test_a_steady_carrot_is_trailed_by_speed_over_gain_and_the_drag() -> None:
 
 
 def test_the_gains_come_from_the_drones_parameters() -> None:
-    soft = ResponseGains.from_params({"posCtlPid.xKp": 1.0, "velCtlPid.vxKp": 12.5, "posCtlPid.pLimit": 10.0,
-                                      "unrelated.param": 3.0})
+    soft = ResponseGains.from_params(
+        {"posCtlPid.xKp": 1.0, "velCtlPid.vxKp": 12.5, "posCtlPid.pLimit": 10.0, "unrelated.param": 3.0}
+    )
     assert (soft.pos_kp, soft.vel_kp, soft.tilt_limit_deg, soft.vel_ki) == (1.0, 12.5, 10.0, DEFAULT_GAINS.vel_ki)
     assert braking_for(None).gains == DEFAULT_GAINS
     # a 10 degree tilt limit brakes at half the deceleration: the drone needs further to stop

@@ -33,9 +33,23 @@ PUBLIC = sorted(path.stem for path in DATA.glob("*.yaml"))
 
 
 def run(tmp_path: Path, scenario: Path) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "rpf_fly", "scenario", str(scenario), "--dry-run", "--json",
-                           "--log", str(tmp_path / "scenario.mcap")], capture_output=True, text=True,
-                          cwd=tmp_path, timeout=240)
+    return subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "rpf_fly",
+            "scenario",
+            str(scenario),
+            "--dry-run",
+            "--json",
+            "--log",
+            str(tmp_path / "scenario.mcap"),
+        ],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        timeout=240,
+    )
 
 
 MADE = (carrot_scenario(0.7, name="c_carrot_0p7"), hold_scenario(0.45, name="p_hold_0p45"))
@@ -51,8 +65,10 @@ _WANTED: list[str] = []
 
 @pytest.fixture(scope="module", autouse=True)
 def _selected(request: pytest.FixtureRequest) -> None:
-    fixed = {"test_a_carrot_scenario_flies_through_the_stack_and_prints_its_trace": "c_carrot_0p5",
-             "test_a_command_scenario_traces_the_high_level_plan": "p_hl_slow"}
+    fixed = {
+        "test_a_carrot_scenario_flies_through_the_stack_and_prints_its_trace": "c_carrot_0p5",
+        "test_a_command_scenario_traces_the_high_level_plan": "p_hl_slow",
+    }
     for item in request.session.items:
         if getattr(item, "module", None) is not request.module:
             continue
@@ -67,10 +83,18 @@ def made_path(scenario: Scenario, tmp_path_factory: pytest.TempPathFactory) -> P
     path = tmp_path_factory.getbasetemp() / "made-scenarios" / f"{scenario.name}.yaml"
     if not path.exists():
         path.parent.mkdir(exist_ok=True)
-        path.write_text(yaml.safe_dump({
-            "name": scenario.name, "start": list(scenario.start), "duration_s": scenario.duration_s,
-            "stream_hz": scenario.stream_hz, "setpoints": [list(row) for row in scenario.setpoints],
-            **({"hold_at": scenario.hold_at} if scenario.hold_at is not None else {})}))
+        path.write_text(
+            yaml.safe_dump(
+                {
+                    "name": scenario.name,
+                    "start": list(scenario.start),
+                    "duration_s": scenario.duration_s,
+                    "stream_hz": scenario.stream_hz,
+                    "setpoints": [list(row) for row in scenario.setpoints],
+                    **({"hold_at": scenario.hold_at} if scenario.hold_at is not None else {}),
+                }
+            )
+        )
     return path
 
 
@@ -81,8 +105,9 @@ def _fly(scenario: Path, folder: Path) -> tuple[dict[str, Any], Path]:
     return json.loads(done.stdout), folder
 
 
-def flown(scenario: Path, tmp_path_factory: pytest.TempPathFactory, *, again: bool = False
-          ) -> tuple[dict[str, Any], Path]:
+def flown(
+    scenario: Path, tmp_path_factory: pytest.TempPathFactory, *, again: bool = False
+) -> tuple[dict[str, Any], Path]:
     """The trace of ``rpf-fly scenario SCENARIO --dry-run --json`` and its log's folder, flown once per worker
     (``again``: flown anew, alone). The first call starts every scenario's flight, `CONCURRENT` at a time."""
     if not _POOL:
@@ -146,16 +171,20 @@ def assert_flies_as(scenario: Path, reference: dict[str, Any], tmp_path_factory:
         trace, folder = flown(scenario, tmp_path_factory, again=True)
         missed = misses(trace["figures"], reference)
         if missed and trace.get("host_behind_s", 0.0) >= HOST_BEHIND_REPORT_S:
-            pytest.fail(f"the host could not keep up for {trace['host_behind_s']:.1f} s in two flights: this dry "
-                        f"run is not evidence (misses {missed}; {folder})")
+            pytest.fail(
+                f"the host could not keep up for {trace['host_behind_s']:.1f} s in two flights: this dry "
+                f"run is not evidence (misses {missed}; {folder})"
+            )
     if set(missed) == {"settle_s"}:
         stray = step_stray_m(trace, Scenario.load(scenario), reference["settle_s"])
         if stray is not None and stray <= KNIFE_EDGE_M:
-            pytest.xfail(f"{scenario.stem}: settles in {trace['figures']['settle_s']:.2f} s, not "
-                         f"{reference['settle_s']:.2f} s: after that it strays {stray * 1000:.1f} mm beyond the 2 % "
-                         "band, which the reference's own undershoot passes 3.3 mm inside: as when the extpos "
-                         "reaches the drone a world step (10 ms) late (docs/dynamics.md, \"rpf-fly scenario against "
-                         "the reference\")")
+            pytest.xfail(
+                f"{scenario.stem}: settles in {trace['figures']['settle_s']:.2f} s, not "
+                f"{reference['settle_s']:.2f} s: after that it strays {stray * 1000:.1f} mm beyond the 2 % "
+                "band, which the reference's own undershoot passes 3.3 mm inside: as when the extpos "
+                'reaches the drone a world step (10 ms) late (docs/dynamics.md, "rpf-fly scenario against '
+                'the reference")'
+            )
     assert missed == {}, f"{folder}: host behind {trace.get('host_behind_s')} s"
 
 
@@ -182,8 +211,9 @@ def test_a_public_scenario_flies_as_the_reference(name: str, tmp_path_factory: p
 
 
 @pytest.mark.parametrize("scenario", MADE, ids=lambda s: s.name)
-def test_a_scenario_not_in_the_folder_flies_as_the_offline_model(scenario: Scenario,
-                                                                 tmp_path_factory: pytest.TempPathFactory) -> None:
+def test_a_scenario_not_in_the_folder_flies_as_the_offline_model(
+    scenario: Scenario, tmp_path_factory: pytest.TempPathFactory
+) -> None:
     path = made_path(scenario, tmp_path_factory)
     assert Scenario.load(path) == scenario
     assert_flies_as(path, fly(scenario)["figures"], tmp_path_factory)

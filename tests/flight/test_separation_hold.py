@@ -38,11 +38,16 @@ def test_a_separation_hold_at_1_m_s_keeps_the_drones_apart(tmp_path: Path) -> No
     mission = parse_mission(HEAD_ON, "head-on.yaml")
     flight = fly(mission, tmp_path)
     assert not [s for s in flight.snapshots.values() if s.crashed], flight.snapshots
-    truth = {name: [(m.log_time / 1e9, _xyz(m.data)) for m in flight.log.messages(f"/truth/{name}")]
-             for name in ("cf1", "cf2")}
+    truth = {
+        name: [(m.log_time / 1e9, _xyz(m.data)) for m in flight.log.messages(f"/truth/{name}")]
+        for name in ("cf1", "cf2")
+    }
     pairs = list(zip(truth["cf1"], truth["cf2"]))
-    held = [e for e in flight.log.messages("/events") if e.data.get("file") == "separation"
-            and "closing" in str(e.data.get("message"))]  # the log's event: kind in "file", drone in "name"
+    held = [
+        e
+        for e in flight.log.messages("/events")
+        if e.data.get("file") == "separation" and "closing" in str(e.data.get("message"))
+    ]  # the log's event: kind in "file", drone in "name"
     assert held, "the supervisor never held the closing pair"
     first = held[0].log_time / 1e9
     # flying at the mission's 1 m/s when it held them (the carrot leads far enough on the firmware's lag)
@@ -50,10 +55,15 @@ def test_a_separation_hold_at_1_m_s_keeps_the_drones_apart(tmp_path: Path) -> No
     speed = math.dist(before[-1][1][:2], before[0][1][:2]) / (before[-1][0] - before[0][0])
     assert speed >= 0.9, speed
     # braking from 1 m/s each (2 m/s closing) they stay 2r apart (2r = 0.2 m) until the hold ends
-    resumed = [e.log_time / 1e9 for e in flight.log.messages("/events") if e.data.get("file") == "separation"
-               and "restored" in str(e.data.get("message")) and e.log_time / 1e9 > first]
+    resumed = [
+        e.log_time / 1e9
+        for e in flight.log.messages("/events")
+        if e.data.get("file") == "separation" and "restored" in str(e.data.get("message")) and e.log_time / 1e9 > first
+    ]
     end = resumed[0] if resumed else first + 3.0
-    episode = [(round(t - first, 2), round(math.dist(a[:2], b[:2]), 3)) for (t, a), (_, b) in pairs if first <= t <= end]
+    episode = [
+        (round(t - first, 2), round(math.dist(a[:2], b[:2]), 3)) for (t, a), (_, b) in pairs if first <= t <= end
+    ]
     assert min(d for _, d in episode) >= 2 * mission.planner.safety_radius, episode[::5]
     # and nothing after brings them into contact (the planners still fly at each other after each resume)
     airborne = [math.dist(a, b) for (_, a), (_, b) in pairs if a[2] > 0.1 and b[2] > 0.1]

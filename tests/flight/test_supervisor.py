@@ -21,23 +21,39 @@ from rpf_fly.sim.scenario import obstacle_set
 
 def setup(mission_text: str = SHORT_MISSION):  # type: ignore[no-untyped-def]
     mission = parse_mission(mission_text)
-    agents = {d.name: DroneAgent(d, None, height=0.5, speed=0.5, dt=0.1, arena=mission.arena, budget_s=1.0)  # type: ignore[arg-type]
-              for d in mission.drones}
+    agents = {
+        d.name: DroneAgent(d, None, height=0.5, speed=0.5, dt=0.1, arena=mission.arena, budget_s=1.0)  # type: ignore[arg-type]
+        for d in mission.drones
+    }
     for agent in agents.values():
         agent.set_phase(DronePhase.PLANNING, 0.0)
     tracker = PoseTracker({d.name: d.rigid_body for d in mission.drones})
     return mission, agents, tracker, Supervisor(mission, obstacle_set(mission.obstacles))
 
 
-def see(tracker: PoseTracker, n: int, t: float, positions: dict[str, tuple[float, float, float]],
-        latency_s: float | None = None) -> None:
-    bodies = {name: RigidBodyPose(name, i, p, (0.0, 0.0, 0.0, 1.0), True) for i, (name, p) in enumerate(positions.items())}
+def see(
+    tracker: PoseTracker,
+    n: int,
+    t: float,
+    positions: dict[str, tuple[float, float, float]],
+    latency_s: float | None = None,
+) -> None:
+    bodies = {
+        name: RigidBodyPose(name, i, p, (0.0, 0.0, 0.0, 1.0), True) for i, (name, p) in enumerate(positions.items())
+    }
     tracker.update(MocapFrame(n, t, t, latency_s, bodies))
 
 
 def state(name: str, t: float, vbat: float = 3.9, up: bool = True) -> DroneState:
-    return DroneState(name, "fake://0/80/2M/E7E7E7E701", LinkState(up), BatteryState(vbat, PmState.BATTERY),
-                      SupervisorState(0x0018), (0.0, 0.0, 0.5), t)
+    return DroneState(
+        name,
+        "fake://0/80/2M/E7E7E7E701",
+        LinkState(up),
+        BatteryState(vbat, PmState.BATTERY),
+        SupervisorState(0x0018),
+        (0.0, 0.0, 0.5),
+        t,
+    )
 
 
 POSITIONS = {"cf1": (-1.0, -0.6, 0.5), "cf2": (-1.0, 0.0, 0.5), "cf3": (-1.0, 0.6, 0.5)}
@@ -97,14 +113,20 @@ def test_stale_telemetry_of_a_linked_drone_is_an_event():
     see(tracker, 2, TELEMETRY_STALE_S + 0.1, POSITIONS)
     states["cf1"] = state("cf1", TELEMETRY_STALE_S + 0.1)
     states["cf2"] = state("cf2", TELEMETRY_STALE_S + 0.1)
-    found = [f for f in supervisor.check(TELEMETRY_STALE_S + 0.1, agents.values(), tracker, states) if f.kind == "telemetry"]
+    found = [
+        f for f in supervisor.check(TELEMETRY_STALE_S + 0.1, agents.values(), tracker, states) if f.kind == "telemetry"
+    ]
     assert [(f.drone, f.level) for f in found] == [("cf3", 3)]
-    again = [f for f in supervisor.check(TELEMETRY_STALE_S + 0.2, agents.values(), tracker, states) if f.kind == "telemetry"]
+    again = [
+        f for f in supervisor.check(TELEMETRY_STALE_S + 0.2, agents.values(), tracker, states) if f.kind == "telemetry"
+    ]
     assert again == []  # edge-triggered
 
 
 def test_a_separation_hold_resumes_when_the_pair_is_clear_again():
-    mission_text = SHORT_MISSION.replace("planner: {kind: apf, margin: 0}", "planner: {kind: apf, margin: 0}\nsafety: {on_separation: hold}")
+    mission_text = SHORT_MISSION.replace(
+        "planner: {kind: apf, margin: 0}", "planner: {kind: apf, margin: 0}\nsafety: {on_separation: hold}"
+    )
     _, agents, tracker, supervisor = setup(mission_text)
     close = dict(POSITIONS, cf2=(-1.0, -0.45, 0.5))  # 0.15 m from cf1 < 2r = 0.2 m
     see(tracker, 1, 0.0, close)
@@ -169,7 +191,9 @@ def test_mocap_latency_four_times_a_healthy_links_is_a_warning_once_and_its_end_
     for k, latency in enumerate([0.006] * 5 + [0.030] * 5 + [0.015] * 3 + [0.006] * 3):
         t = 0.01 * k
         see(tracker, k + 1, t, POSITIONS, latency_s=latency)
-        said += [(k, f.level) for f in supervisor.check(t, agents.values(), tracker, states) if f.kind == "mocap_latency"]
+        said += [
+            (k, f.level) for f in supervisor.check(t, agents.values(), tracker, states) if f.kind == "mocap_latency"
+        ]
     assert [k for k, _ in said] == [5, 13]
     assert said[0][1] == WARNING and said[1][1] < WARNING
 
@@ -187,8 +211,11 @@ def test_a_pose_gap_shorter_than_the_hold_is_said_once_per_drone_and_a_swarm_wid
         for k in range(frames):
             t = t0 + 0.01 * k
             see(tracker, int(t * 100) + 1, t, {n: p for n, p in POSITIONS.items() if n not in hidden})
-            found += [f for f in supervisor.check(t, agents.values(), tracker, states)
-                      if f.kind in ("pose_late", "pose_stale", "mocap_late", "mocap_lost")]
+            found += [
+                f
+                for f in supervisor.check(t, agents.values(), tracker, states)
+                if f.kind in ("pose_late", "pose_stale", "mocap_late", "mocap_lost")
+            ]
         return found
 
     assert run(0.0, 10, set()) == []
@@ -198,8 +225,11 @@ def test_a_pose_gap_shorter_than_the_hold_is_said_once_per_drone_and_a_swarm_wid
     found = []
     for k in range(15):  # no frame at all for 0.15 s: the loop still checks
         t = 0.35 + 0.01 * k
-        found += [f for f in supervisor.check(t, agents.values(), tracker, states)
-                  if f.kind in ("pose_late", "pose_stale", "mocap_late", "mocap_lost")]
+        found += [
+            f
+            for f in supervisor.check(t, agents.values(), tracker, states)
+            if f.kind in ("pose_late", "pose_stale", "mocap_late", "mocap_lost")
+        ]
     assert [(f.kind, f.drone, f.level) for f in found] == [("mocap_late", None, WARNING)]
     assert POSE_LATE_S < 0.25
 
@@ -238,11 +268,13 @@ def test_a_push_is_said_through_frames_the_mocap_dropped():
         bodies = {}
         for i, (name, (x, y, z)) in enumerate(POSITIONS.items()):
             push = 0.12 * min(1.0, max(0.0, (k - 20) / 30)) if name == "cf2" else 0.0
-            bodies[name] = RigidBodyPose(name, i, (x, y + push, z), (0.0, 0.0, 0.0, 1.0),
-                                         not (name == "cf2" and k % 25 == 0))
+            bodies[name] = RigidBodyPose(
+                name, i, (x, y + push, z), (0.0, 0.0, 0.0, 1.0), not (name == "cf2" and k % 25 == 0)
+            )
         tracker.update(MocapFrame(k + 1, t, t, None, bodies))
-        said += [(t, f.drone, f.level) for f in supervisor.check(t, agents.values(), tracker, states)
-                 if f.kind == "tracking"]
+        said += [
+            (t, f.drone, f.level) for f in supervisor.check(t, agents.values(), tracker, states) if f.kind == "tracking"
+        ]
     assert [(d, level) for _, d, level in said] == [("cf2", WARNING)], said
     assert said[0][0] - 0.2 < 1.0
 
@@ -285,8 +317,12 @@ def test_an_orientation_flip_in_flight_is_a_warning_once_and_its_end_is_said():
     for n in range(30):  # cf2 turned 180 degrees by Motive from frame 10 to 19
         t = n / 100.0
         flipped = 10 <= n < 20
-        bodies = {name: RigidBodyPose(name, i, p, (0.0, 0.0, 1.0, 0.0) if name == "cf2" and flipped
-                                      else (0.0, 0.0, 0.0, 1.0), True) for i, (name, p) in enumerate(POSITIONS.items())}
+        bodies = {
+            name: RigidBodyPose(
+                name, i, p, (0.0, 0.0, 1.0, 0.0) if name == "cf2" and flipped else (0.0, 0.0, 0.0, 1.0), True
+            )
+            for i, (name, p) in enumerate(POSITIONS.items())
+        }
         tracker.update(MocapFrame(n, t, t, None, bodies))
         found += [f for f in supervisor.check(t, agents.values(), tracker, states) if f.kind == "orientation_glitch"]
     assert [(f.drone, f.level, f.response) for f in found] == [("cf2", WARNING, "warn"), ("cf2", INFO, "warn")]
@@ -294,8 +330,14 @@ def test_an_orientation_flip_in_flight_is_a_warning_once_and_its_end_is_said():
     assert not [a for a in agents.values() if a.phase != DronePhase.PLANNING]  # it flies on
 
 
-def fly_with_telemetry(estimate_of, truth_of, stamp_lag_s: float, seconds: float = 1.2,  # type: ignore[no-untyped-def]
-                       stamped: bool = True, phase: DronePhase = DronePhase.PLANNING):
+def fly_with_telemetry(
+    estimate_of,
+    truth_of,
+    stamp_lag_s: float,
+    seconds: float = 1.2,  # type: ignore[no-untyped-def]
+    stamped: bool = True,
+    phase: DronePhase = DronePhase.PLANNING,
+):
     """cf1's truth ``truth_of(t)`` seen by mocap at 100 Hz, its status telemetry at 10 Hz carrying the estimate
     ``estimate_of(t)`` made ``stamp_lag_s`` before it arrives (with its firmware timestamp on the host clock unless
     not ``stamped``), cf1 in ``phase``; the estimator findings and their times."""
@@ -308,8 +350,9 @@ def fly_with_telemetry(estimate_of, truth_of, stamp_lag_s: float, seconds: float
         see(tracker, k + 1, t, {**POSITIONS, "cf1": truth_of(t)})
         if k % 10 == 5:
             made = t - stamp_lag_s
-            states["cf1"] = replace(state("cf1", t), position_m=estimate_of(made),
-                                    estimate_stamp_s=made if stamped else None)
+            states["cf1"] = replace(
+                state("cf1", t), position_m=estimate_of(made), estimate_stamp_s=made if stamped else None
+            )
         found += [(t, f) for f in supervisor.check(t, agents.values(), tracker, states) if f.kind == "estimator"]
     return found
 
@@ -330,6 +373,7 @@ def test_a_wrong_estimate_is_stopped_by_the_mocap_pose_of_its_own_time():
     drifts off at 0.57 m/s. With the telemetry's timestamps it is stopped within 0.3 s; without them (the
     check had to find the estimate far from every pose of the last 0.5 s) it took 0.55 s more, 0.6 m off its track
     in the random campaign's u-trap flight."""
+
     def truth(t: float) -> tuple[float, float, float]:
         x, y, z = moving(t)
         return (x, y - 0.57 * max(0.0, t - 0.2), z)
@@ -352,6 +396,7 @@ def test_an_estimator_that_diverges_while_its_drone_lands_or_takes_off_is_stoppe
     landing flew the estimate's way and the true drone slid 0.16 m sideways in its last 0.5 s of descent, without a
     word (the check skipped landing and take-off drones: it dated from when its answer was to land). Motors off
     once the estimate is 0.1 m off the pose of its own time; a drone near the floor is warned about, not cut."""
+
     def truth(t: float) -> tuple[float, float, float]:
         x, y, z = descending(t)
         return (x, y - 0.38 * max(0.0, t - 0.2), z)
@@ -361,8 +406,9 @@ def test_an_estimator_that_diverges_while_its_drone_lands_or_takes_off_is_stoppe
         stops = [(t, f) for t, f in found if f.response == "stop"]
         assert stops and stops[0][0] - 0.2 <= 0.6, (phase, found)
     assert not fly_with_telemetry(descending, descending, 0.01, phase=DronePhase.LANDING)  # a healthy landing
-    on_floor = fly_with_telemetry(lambda t: (-1.0, -0.6, 0.0), lambda t: (-1.0 + 0.5 * t, -0.6, 0.0), 0.01,
-                                  phase=DronePhase.LANDING)
+    on_floor = fly_with_telemetry(
+        lambda t: (-1.0, -0.6, 0.0), lambda t: (-1.0 + 0.5 * t, -0.6, 0.0), 0.01, phase=DronePhase.LANDING
+    )
     assert [f.response for _, f in on_floor] == ["warn"], on_floor  # below 0.1 m: said, not cut
     assert "on the floor" in on_floor[0][1].message
 
@@ -414,8 +460,9 @@ def test_mocap_is_said_back_only_when_a_pose_is_back_not_when_the_blind_drones_l
     assert [f.response for f in said] == ["hold"]
     for agent in agents.values():  # blind for pose_lost_land_s: each drone lands
         agent.set_phase(DronePhase.LANDING, 1.6)
-    landing = [f for t in (1.6, 1.8) for f in supervisor.check(t, agents.values(), tracker, states)
-               if f.kind == "mocap_lost"]
+    landing = [
+        f for t in (1.6, 1.8) for f in supervisor.check(t, agents.values(), tracker, states) if f.kind == "mocap_lost"
+    ]
     assert landing == []  # not "mocap poses are back" with none back
     see(tracker, 2, 2.0, POSITIONS)
     back = [f for f in supervisor.check(2.0, agents.values(), tracker, states) if f.kind == "mocap_lost"]
@@ -427,8 +474,12 @@ LOW_DRIFT_MISSION = SHORT_MISSION + "safety: {blind_drift_m_s2: 0.1}\n"
 0.5 m up lands before pose_lost_land_s within 1.76 m of something: `test_a_lab_that_measured_...`)."""
 
 
-def fly_blind(cf3_at: tuple[float, float, float], seconds: float = 3.0,  # type: ignore[no-untyped-def]
-              telemetry: bool = False, mission_text: str = LOW_DRIFT_MISSION):
+def fly_blind(
+    cf3_at: tuple[float, float, float],
+    seconds: float = 3.0,  # type: ignore[no-untyped-def]
+    telemetry: bool = False,
+    mission_text: str = LOW_DRIFT_MISSION,
+):
     """cf3 loses its mocap at t = 0 (the others keep theirs); a ``land`` finding lands it as the loop would
     (phase LANDING, touchdown after the finding's duration). ``telemetry``: its status keeps coming at 10 Hz with
     an estimate that descends with the landing (else its last status is from t = 0). The blind findings of cf3,
@@ -541,8 +592,11 @@ def test_a_landing_drone_that_loses_its_pose_is_said_and_a_blackout_while_all_la
             t = t0 + 0.01 * k
             if seen:
                 see(tracker, int(t * 100) + 1, t, {n: p for n, p in POSITIONS.items() if n not in hidden})
-            found += [f for f in supervisor.check(t, agents.values(), tracker, states)
-                      if f.kind in ("pose_late", "pose_stale", "mocap_late", "mocap_lost")]
+            found += [
+                f
+                for f in supervisor.check(t, agents.values(), tracker, states)
+                if f.kind in ("pose_late", "pose_stale", "mocap_late", "mocap_lost")
+            ]
         return found
 
     assert run(0.0, 10, set()) == []
@@ -555,8 +609,13 @@ def test_a_landing_drone_that_loses_its_pose_is_said_and_a_blackout_while_all_la
     assert "land on their estimates" in found[0].message
 
 
-def landing_with(target_of, pose_of, seconds: float = 2.0, phase: DronePhase = DronePhase.LANDING,  # type: ignore[no-untyped-def]
-                 telemetry_at_s: float = 0.0):
+def landing_with(
+    target_of,
+    pose_of,
+    seconds: float = 2.0,
+    phase: DronePhase = DronePhase.LANDING,  # type: ignore[no-untyped-def]
+    telemetry_at_s: float = 0.0,
+):
     """Every drone in ``phase`` (a high-level take-off or landing) from t = 0 (touchdown at 2 s), seen at 100 Hz at
     ``pose_of(name, t)`` (None: untracked), with 10 Hz telemetry (from ``telemetry_at_s``) whose logged firmware target
     is ``target_of(name, t)``; returns the tracking findings as (time, drone, level, message)."""
@@ -568,13 +627,25 @@ def landing_with(target_of, pose_of, seconds: float = 2.0, phase: DronePhase = D
     for k in range(int(seconds * 100)):
         t = 0.01 * k
         poses = {n: pose_of(n, t) for n in agents}  # None: not tracked in this frame
-        tracker.update(MocapFrame(k + 1, t, t, None, {
-            n: RigidBodyPose(n, i, p if p is not None else (0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0), p is not None)
-            for i, (n, p) in enumerate(poses.items())}))
+        tracker.update(
+            MocapFrame(
+                k + 1,
+                t,
+                t,
+                None,
+                {
+                    n: RigidBodyPose(n, i, p if p is not None else (0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0), p is not None)
+                    for i, (n, p) in enumerate(poses.items())
+                },
+            )
+        )
         if k % 10 == round(telemetry_at_s * 100) % 10:
             states = {n: replace(state(n, t), estimate_stamp_s=t, target_m=target_of(n, t)) for n in agents}
-        said += [(t, f.drone, f.level, f.message) for f in supervisor.check(t, agents.values(), tracker, states)
-                 if f.kind == "tracking"]
+        said += [
+            (t, f.drone, f.level, f.message)
+            for f in supervisor.check(t, agents.values(), tracker, states)
+            if f.kind == "tracking"
+        ]
     return said
 
 
@@ -639,6 +710,7 @@ def test_a_landing_begun_at_speed_may_overshoot_its_point_and_a_take_off_is_watc
 def test_without_a_logged_target_a_landing_is_not_judged():
     """A firmware that logs no controller target (`DroneState.target_m` None): the landing's point is unknown, and
     nothing is guessed."""
+
     def pose_of(name: str, t: float) -> tuple[float, float, float]:
         x, y, _ = POSITIONS[name]
         return (x + (0.2 if name == "cf2" and t > 0.5 else 0.0), y, 0.5 - 0.2 * t)
@@ -650,14 +722,20 @@ def test_a_pose_gap_the_loop_did_not_see_is_said_after_the_fact_once():
     """A frame whose source saw bodies untracked between it and the loop's previous frame
     (`MocapFrame.unseen_untracked_s`: the loop was stalled) is said once: one drone, a `pose_late` naming it; every
     airborne drone, one swarm-wide `mocap_late`."""
-    for unseen, expected in (({"cf2": 0.3}, [("pose_late", "cf2")]),
-                             ({"cf1": 0.5, "cf2": 0.5, "cf3": 0.4}, [("mocap_late", None)])):
+    for unseen, expected in (
+        ({"cf2": 0.3}, [("pose_late", "cf2")]),
+        ({"cf1": 0.5, "cf2": 0.5, "cf3": 0.4}, [("mocap_late", None)]),
+    ):
         agents, tracker, supervisor, states = holding_their_spots()
-        bodies = {name: RigidBodyPose(name, i, p, (0.0, 0.0, 0.0, 1.0), True) for i, (name, p) in enumerate(POSITIONS.items())}
+        bodies = {
+            name: RigidBodyPose(name, i, p, (0.0, 0.0, 0.0, 1.0), True) for i, (name, p) in enumerate(POSITIONS.items())
+        }
         tracker.update(MocapFrame(1, 0.0, 0.0, None, bodies))
         assert not [f for f in supervisor.check(0.0, agents.values(), tracker, states) if f.level >= WARNING]
         tracker.update(MocapFrame(2, 0.5, 0.5, None, bodies, unseen))
-        said = [(f.kind, f.drone) for f in supervisor.check(0.5, agents.values(), tracker, states) if f.level >= WARNING]
+        said = [
+            (f.kind, f.drone) for f in supervisor.check(0.5, agents.values(), tracker, states) if f.level >= WARNING
+        ]
         assert said == expected, said
         tracker.update(MocapFrame(3, 0.51, 0.51, None, bodies))
         assert not [f for f in supervisor.check(0.51, agents.values(), tracker, states) if f.level >= WARNING]
@@ -669,6 +747,7 @@ def test_an_old_mocap_picture_of_a_moving_drone_widens_the_tracking_line_by_spee
     the delay (8 cm at 0.6 m/s) and takes a while to settle. The line widens by the drone's speed times the
     largest latency of the last 0.5 s, so that is no push; the same picture with a healthy 4 ms latency is one (it
     trails the firmware's own response by 8 cm more)."""
+
     def fly(latency_s):  # type: ignore[no-untyped-def]
         agents, tracker, supervisor, states = holding_their_spots()
         said = []
@@ -681,8 +760,11 @@ def test_an_old_mocap_picture_of_a_moving_drone_widens_the_tracking_line_by_spee
             lag = 0.55 + (0.137 if 0.5 <= t < 1.0 else 0.0)
             seen = max(0.0, t - lag)
             see(tracker, k + 1, t, {n: (x + 0.6 * seen, y, z) for n, (x, y, z) in POSITIONS.items()}, latency_s)
-            said += [(f.drone, f.level) for f in supervisor.check(t, agents.values(), tracker, states)
-                     if f.kind == "tracking" and f.level >= WARNING]
+            said += [
+                (f.drone, f.level)
+                for f in supervisor.check(t, agents.values(), tracker, states)
+                if f.kind == "tracking" and f.level >= WARNING
+            ]
         return said
 
     assert fly(0.137) == []
@@ -704,11 +786,11 @@ def test_a_landing_drone_first_seen_on_the_floor_or_snapping_back_in_the_air_is_
         if name == "cf2":  # landed blind 0.25 m off
             return (x - 0.25, y, 0.0)
         if name == "cf3":  # blind, 0.35 m off, until 0.5 s in the air; its estimate then snaps back and it
-            if t < 0.5:    # flies to its target
+            if t < 0.5:  # flies to its target
                 return None
             return (x - 0.35 * math.exp(-(t - 0.5) / 0.25), y, max(0.0, 0.5 - 0.25 * t))
-        if t < 1.3:        # cf1: blind, 0.3 m off, until 1.3 s (0.125 m up); it heads for its target and reaches
-            return None    # the floor 0.1 s later, where it stays (seed 17, run 11: its cf1 reached its point)
+        if t < 1.3:  # cf1: blind, 0.3 m off, until 1.3 s (0.125 m up); it heads for its target and reaches
+            return None  # the floor 0.1 s later, where it stays (seed 17, run 11: its cf1 reached its point)
         return (x - 0.3 * math.exp(-(min(t, 1.4) - 1.3) / 0.25), y, max(0.0, 0.5 - 0.25 * t - 0.05))
 
     assert landing_with(target_of, pose_of) == []

@@ -25,8 +25,13 @@ def swarm(make_planner, n: int = 6, seed: int = 0):  # type: ignore[no-untyped-d
     start = 2.2 * np.exp(1j * angles)
     agents = []
     for i in range(n):
-        drone = Drone(name=f"cf{i}", uri=f"radio://0/80/2M/E7E7E7E70{i}", rigid_body=f"cf{i}",
-                      start=(start[i].real, start[i].imag), goal=(-start[i].real, -start[i].imag))
+        drone = Drone(
+            name=f"cf{i}",
+            uri=f"radio://0/80/2M/E7E7E7E70{i}",
+            rigid_body=f"cf{i}",
+            start=(start[i].real, start[i].imag),
+            goal=(-start[i].real, -start[i].imag),
+        )
         agent = DroneAgent(drone, make_planner(), height=1.0, speed=0.5, dt=0.01, arena=ARENA, budget_s=1.0)
         agent.begin_planning(start[i] * rng.uniform(0.3, 0.9), 0.0)
         agent.heading = np.exp(1j * rng.uniform(-np.pi, np.pi))

@@ -86,6 +86,7 @@ def test_a_stop_while_the_drones_arm_sends_no_take_off(tmp_path):
     mission = parse_mission(SWAP, tmp_path / "refused.yaml")
     log_path = tmp_path / "flight.mcap"
     with DryRun(mission, start_faults={"cf3": StartFault(motor_fault=True)}) as rig:
+
         def on_loop(loop) -> None:  # type: ignore[no-untyped-def]
             def stop_while_arming() -> None:
                 while loop.phase != SwarmPhase.TAKEOFF:

@@ -42,7 +42,9 @@ def test_guided_env_steps_the_guided_planner():
         env.step(gains(env))
     for b in range(env.config.n_arenas):
         m = int((env.centers[b, 0].real < 1e5).sum())
-        obstacles = ObstacleSet(env.centers[b, 0, :m], env.radii[b, 0, :m], np.zeros(0, complex), np.zeros(0), np.zeros(0))
+        obstacles = ObstacleSet(
+            env.centers[b, 0, :m], env.radii[b, 0, :m], np.zeros(0, complex), np.zeros(0), np.zeros(0)
+        )
         planner = Planner(obstacles, env.planner, FixedGains(0.04, 1.5), ((-half, half), (-half, half)))
         step = planner.step(views_from_states(w.position[b], w.velocity[b], w.goal[b], w.heading[b], 6.0))
         assert env.view.goal[b] == pytest.approx(step.waypoint, abs=1e-12)

@@ -58,9 +58,17 @@ def test_guidance_on_family_scenes_with_walls():
     for b in range(env.config.n_arenas):
         m = int((env.centers[b, 0].real < 1e5).sum())
         k = int((env.box_center[b, 0].real < 1e5).sum()) if env.box_center.ndim == 3 else 0
-        obstacles = ObstacleSet(env.centers[b, 0, :m], env.radii[b, 0, :m], env.box_center[b, 0, :k],
-                                env.box_half_x[b, 0, :k], env.box_half_y[b, 0, :k]) if k else \
-            ObstacleSet(env.centers[b, 0, :m], env.radii[b, 0, :m], np.zeros(0, complex), np.zeros(0), np.zeros(0))
+        obstacles = (
+            ObstacleSet(
+                env.centers[b, 0, :m],
+                env.radii[b, 0, :m],
+                env.box_center[b, 0, :k],
+                env.box_half_x[b, 0, :k],
+                env.box_half_y[b, 0, :k],
+            )
+            if k
+            else ObstacleSet(env.centers[b, 0, :m], env.radii[b, 0, :m], np.zeros(0, complex), np.zeros(0), np.zeros(0))
+        )
         bounds = ((w._lo_x[b, 0], w._hi_x[b, 0]), (w._lo_y[b, 0], w._hi_y[b, 0]))
         planner = Planner(obstacles, env.planner, FixedGains(), bounds)
         step = planner.step(views_from_states(w.position[b], w.velocity[b], w.goal[b], w.heading[b], 6.0))

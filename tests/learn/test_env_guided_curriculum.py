@@ -27,8 +27,13 @@ def test_guided_curriculum_with_walls_sizes_its_nodes_and_steps_the_guided_plann
         family, seed = env.scene_seeds[b]
         scene = generate(family, seed, split="train", n_drones=6)
         n = scene.obstacles.n_boxes
-        obstacles = ObstacleSet(np.zeros(0, complex), np.zeros(0), env.box_center[b, 0, :n],
-                                env.box_half_x[b, 0, :n], env.box_half_y[b, 0, :n])
+        obstacles = ObstacleSet(
+            np.zeros(0, complex),
+            np.zeros(0),
+            env.box_center[b, 0, :n],
+            env.box_half_x[b, 0, :n],
+            env.box_half_y[b, 0, :n],
+        )
         planner = Planner(obstacles, env.planner, FixedGains(0.05, 2.0), (scene.arena_x, scene.arena_y))
         step = planner.step(views_from_states(w.position[b], w.velocity[b], w.goal[b], w.heading[b], 6.0))
         assert env.view.goal[b] == pytest.approx(step.waypoint, abs=1e-9)

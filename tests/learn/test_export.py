@@ -25,7 +25,9 @@ def trained_looking(config):
 
 
 @pytest.mark.parametrize(
-    "config", [ModelConfig(), ModelConfig(embedding="mean"), ModelConfig(action="heading")], ids=["rpf", "rpf-mean", "ppo"]
+    "config",
+    [ModelConfig(), ModelConfig(embedding="mean"), ModelConfig(action="heading")],
+    ids=["rpf", "rpf-mean", "ppo"],
 )
 def test_export_parity_and_metadata(tmp_path, config):
     model = trained_looking(config)
@@ -38,7 +40,11 @@ def test_export_parity_and_metadata(tmp_path, config):
     local, neighbours, mask = random_observations(3, config.max_neighbours)
     empty = Observation(local, neighbours * 0, np.zeros_like(mask, dtype=bool))
     with torch.no_grad():
-        want = model.deterministic(torch.from_numpy(local), torch.zeros_like(torch.from_numpy(neighbours)), torch.zeros(3, config.max_neighbours))
+        want = model.deterministic(
+            torch.from_numpy(local),
+            torch.zeros_like(torch.from_numpy(neighbours)),
+            torch.zeros(3, config.max_neighbours),
+        )
     np.testing.assert_allclose(policy.act(empty), want.numpy(), rtol=1e-5, atol=1e-6)
     single = Observation(local[0], neighbours[0], mask[0].astype(bool))
     assert policy.act(single).shape == (config.action_size,)
@@ -68,7 +74,9 @@ def test_non_rpf_onnx_and_wrong_kind_are_refused(tmp_path):
 @pytest.mark.parametrize("kind, config", [("rpf", ModelConfig()), ("ppo", ModelConfig(action="heading"))])
 def test_exported_policy_flies_in_the_simulator(tmp_path, kind, config):
     path = export_onnx(ActorCritic(config), tmp_path / f"{kind}.onnx")
-    run = run_scenario(circle_swap(4, 2.0), planner_settings(kind, path), SimParams(time_limit_s=40), 0, "c4", keep=True)
+    run = run_scenario(
+        circle_swap(4, 2.0), planner_settings(kind, path), SimParams(time_limit_s=40), 0, "c4", keep=True
+    )
     assert run.metrics.drones == 4
     if kind == "rpf":  # the untrained gains policy is the vanilla APF with eta 0.05, lambda 2.5
         assert run.metrics.success

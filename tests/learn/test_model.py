@@ -89,8 +89,10 @@ def test_ppo_update_survives_a_one_sample_minibatch(tmp_path):
     batch = trainer._collect()
     keep = 4 * ((batch["local"].shape[0] - 1) // 4) + 1  # a remainder of exactly one sample
     assert keep % 4 == 1 and keep > 1
-    batch = {k: (v[:keep] if hasattr(v, "shape") and v.shape[:1] == batch["local"].shape[:1] else v)
-             for k, v in batch.items()}
+    batch = {
+        k: (v[:keep] if hasattr(v, "shape") and v.shape[:1] == batch["local"].shape[:1] else v)
+        for k, v in batch.items()
+    }
     trainer._learn(batch)
     assert all(torch.isfinite(p).all() for p in trainer.model.parameters())
 
@@ -99,8 +101,16 @@ def test_training_resumes_from_its_checkpoint(tmp_path):
     """A run stopped after 2 updates continues from the checkpoint: weights, optimiser, counters and curve."""
     from rpf_fly.learn.ppo import PPOConfig, Trainer
 
-    config = PPOConfig(n_arenas=2, rollout_steps=16, minibatch_size=64, eval_every=10**9, checkpoint_every=1, threads=1,
-                       episodes=10**9, max_updates=2)
+    config = PPOConfig(
+        n_arenas=2,
+        rollout_steps=16,
+        minibatch_size=64,
+        eval_every=10**9,
+        checkpoint_every=1,
+        threads=1,
+        episodes=10**9,
+        max_updates=2,
+    )
     first = Trainer(config, tmp_path)
     first.run()
     saved = {k: v.clone() for k, v in first.model.state_dict().items()}

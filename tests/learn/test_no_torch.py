@@ -43,7 +43,7 @@ def test_sim_with_onnx_policy_and_runtime_packages_without_torch(tmp_path):
             raise SystemExit("torch import was not blocked")
         assert "torch" not in sys.modules
         from rpf_fly.cli import main
-        sys.argv = ["rpf-fly", "sim", {str(ROOT / 'missions' / 'circle-8-r3.yaml')!r}, "--planner", "rpf",
+        sys.argv = ["rpf-fly", "sim", {str(ROOT / "missions" / "circle-8-r3.yaml")!r}, "--planner", "rpf",
                     "--policy", {str(policy)!r}, "--json"]
         main()
         """

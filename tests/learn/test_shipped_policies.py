@@ -15,8 +15,9 @@ ROOT = Path(__file__).resolve().parents[2]
 
 @pytest.mark.parametrize("mission", ["lab-3", "circle-8-r3", "arena-a-6"])
 def test_shipped_rpf_policy_succeeds_on_paper_missions(mission):
-    result = CliRunner().invoke(get_app(), ["sim", str(ROOT / "missions" / f"{mission}.yaml"), "--json", "--seed", "3",
-                                            "--planner", "rpf"])  # lab-3 flies the default planner, RPF-3
+    result = CliRunner().invoke(
+        get_app(), ["sim", str(ROOT / "missions" / f"{mission}.yaml"), "--json", "--seed", "3", "--planner", "rpf"]
+    )  # lab-3 flies the default planner, RPF-3
     assert result.exit_code == 0, result.output
     metrics = json.loads(result.stdout)
     assert metrics["planner"] == "rpf"

@@ -34,8 +34,9 @@ def test_rpf3_card_matches_the_policy_and_records_guidance_and_margin():
 def test_rpf3_reads_the_guided_training_observation():
     """The env RPF-3 trained in (guidance, margin, walled families) gives observations the ONNX graph takes as is;
     its gains lie in the trained ranges and drive the env's steps."""
-    env = SwarmEnv(EnvConfig(n_arenas=3, curriculum=("doorway", "pillars", "circle"), guidance="path", margin=0.05),
-                   seed=4)
+    env = SwarmEnv(
+        EnvConfig(n_arenas=3, curriculum=("doorway", "pillars", "circle"), guidance="path", margin=0.05), seed=4
+    )
     policy = OnnxPolicy(POLICY)
     for _ in range(3):
         action = policy.act(env.observation)

@@ -70,7 +70,6 @@ def test_guidance_and_margin_are_checked_before_training(tmp_path):
     assert not out.with_suffix(".run").exists()
 
 
-
 def test_the_card_of_a_guided_run_records_guidance_margin_cpu_time_and_load(tmp_path):
     """What ``rpf-fly train`` writes after training (one tiny guided update, then the CLI's own export and card)."""
     import yaml
@@ -79,8 +78,19 @@ def test_the_card_of_a_guided_run_records_guidance_margin_cpu_time_and_load(tmp_
     from rpf_fly.learn.ppo import PPOConfig, Trainer
     from rpf_fly.planning.onnx_policy import OnnxPolicy
 
-    config = PPOConfig(n_arenas=1, rollout_steps=8, max_updates=1, episodes=10**9, curriculum=("arena-b",),
-                       guidance="path", margin=0.05, threads=1, epochs=1, minibatch_size=8, eval_every=10**9)
+    config = PPOConfig(
+        n_arenas=1,
+        rollout_steps=8,
+        max_updates=1,
+        episodes=10**9,
+        curriculum=("arena-b",),
+        guidance="path",
+        margin=0.05,
+        threads=1,
+        epochs=1,
+        minibatch_size=8,
+        eval_every=10**9,
+    )
     trainer = Trainer(config, tmp_path / "g.run")
     trainer.run()
     out = tmp_path / "g.onnx"

@@ -19,8 +19,14 @@ UPDATES = 20
 
 def test_short_training_raises_return_and_exports_with_parity(tmp_path):
     config = PPOConfig(
-        seed=0, arena="both", n_arenas=8, episodes=10**9, max_updates=UPDATES, eval_every=10**9,
-        checkpoint_every=10**9, threads=1,
+        seed=0,
+        arena="both",
+        n_arenas=8,
+        episodes=10**9,
+        max_updates=UPDATES,
+        eval_every=10**9,
+        checkpoint_every=10**9,
+        threads=1,
     )
     trainer = Trainer(config, tmp_path / "run")
     scenes = dataclasses.replace(config.env_config(), n_arenas=24)

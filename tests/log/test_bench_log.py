@@ -28,9 +28,13 @@ def test_bench_log_writes_every_message_of_a_small_flight(tmp_path, batched):
     assert result["dropped"] == 0
     assert result["calls"] == ("batched" if batched else "per message")
     counts = {topic: len(messages) for topic, messages in read_log(path).topics.items()}
-    expected = {"/tf": 10, **{f"/mocap/cf{i}": ticks for i in (1, 2, 3)},
-                **{f"/cf{i}/setpoint": ticks for i in (1, 2, 3)}, **{f"/cf{i}/planner": ticks for i in (1, 2, 3)},
-                **{f"/cf{i}/status": 5 for i in (1, 2, 3)}}
+    expected = {
+        "/tf": 10,
+        **{f"/mocap/cf{i}": ticks for i in (1, 2, 3)},
+        **{f"/cf{i}/setpoint": ticks for i in (1, 2, 3)},
+        **{f"/cf{i}/planner": ticks for i in (1, 2, 3)},
+        **{f"/cf{i}/status": 5 for i in (1, 2, 3)},
+    }
     assert counts == expected
     assert result["messages"] == sum(expected.values())
     assert result["logging_cpu_pct"] > 0 and result["writer_us_per_msg"] > 0

@@ -45,8 +45,13 @@ def foxglove_reader() -> Path:
     with lock_path.open("w") as lock:
         fcntl.flock(lock, fcntl.LOCK_EX)
         if not marker.is_file() or marker.read_text() != lock_digest:
-            done = subprocess.run([npm, "ci", "--no-audit", "--no-fund", "--ignore-scripts"], cwd=JS,
-                                  capture_output=True, text=True, timeout=600)
+            done = subprocess.run(
+                [npm, "ci", "--no-audit", "--no-fund", "--ignore-scripts"],
+                cwd=JS,
+                capture_output=True,
+                text=True,
+                timeout=600,
+            )
             assert done.returncode == 0, f"npm ci in {JS} failed:\n{done.stdout}\n{done.stderr}"
             marker.write_text(lock_digest)
     return JS / "read.mjs"
@@ -78,7 +83,8 @@ def read_py(log: Path) -> tuple[dict[str, dict], bool]:
                 elif isinstance(record, Message):
                     digest = hashlib.sha256(record.data).hexdigest()
                     lines[channels[record.channel_id]].append(
-                        f"{record.log_time}:{record.publish_time}:{record.sequence}:{digest}")
+                        f"{record.log_time}:{record.publish_time}:{record.sequence}:{digest}"
+                    )
             complete = True
         except Exception:  # noqa: BLE001 - a killed log's torn end (EndOfFile, struct.error, ...)
             complete = False
@@ -93,8 +99,11 @@ def same_messages(js: dict, py: dict[str, dict]) -> None:
     assert set(js["topics"]) == set(py)
     for topic, ours in py.items():
         theirs = js["topics"][topic]
-        assert (theirs["schema"], theirs["count"], theirs["digest"]) == (ours["schema"], ours["count"],
-                                                                          ours["digest"]), topic
+        assert (theirs["schema"], theirs["count"], theirs["digest"]) == (
+            ours["schema"],
+            ours["count"],
+            ours["digest"],
+        ), topic
 
 
 def every_message_valid(js: dict) -> None:
@@ -122,13 +131,19 @@ def test_foxglove_reads_a_finished_dry_run_log_message_for_message_as_we_do(foxg
     assert js["statistics_message_count"] == sum(t["count"] for t in py.values())
     assert set(js["metadata"]) >= {"mission"}
     kinds = {t["schema"] for t in js["topics"].values()}
-    assert {"foxglove.PoseInFrame", "foxglove.FrameTransforms", "foxglove.SceneUpdate", "foxglove.Log",
-            "rpf_fly.TruthState"} <= kinds
+    assert {
+        "foxglove.PoseInFrame",
+        "foxglove.FrameTransforms",
+        "foxglove.SceneUpdate",
+        "foxglove.Log",
+        "rpf_fly.TruthState",
+    } <= kinds
     assert js["topics"]["/events"]["count"] > 0 and js["topics"]["/truth/cf1"]["count"] > 0
 
 
-def test_foxglove_reads_a_killed_flights_log_unindexed_and_its_salvage_indexed(foxglove_reader, killed_cli_flight,
-                                                                              tmp_path):
+def test_foxglove_reads_a_killed_flights_log_unindexed_and_its_salvage_indexed(
+    foxglove_reader, killed_cli_flight, tmp_path
+):
     """A SIGKILL leaves no summary or footer: the app's indexed reader refuses the file, its stream reader (what the
     app falls back to for an unindexed file) reads every message of every complete chunk, the same ones as ours;
     the salvaged copy opens indexed with exactly those messages."""
@@ -162,8 +177,9 @@ def test_foxglove_reader_flags_a_message_its_schema_refuses_and_text_that_is_not
     with path.open("wb") as f:
         writer = Writer(f)
         writer.start(library="test")
-        schema = writer.register_schema("foxglove.PoseInFrame", "jsonschema",
-                                        json.dumps(SCHEMAS["foxglove.PoseInFrame"]).encode())
+        schema = writer.register_schema(
+            "foxglove.PoseInFrame", "jsonschema", json.dumps(SCHEMAS["foxglove.PoseInFrame"]).encode()
+        )
         channel = writer.register_channel("/mocap/cf1", "json", schema)
         pose = {"position": {"x": 0.0, "y": 0.0, "z": 0.0}, "orientation": {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0}}
         for k, (sec, nsec) in enumerate([(1, 5), (1, 1_500_000_000)]):

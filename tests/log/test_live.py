@@ -28,8 +28,13 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 def small_flight(log: FlightLog, ticks: int = 40) -> None:
-    log.scene(T0, [{"shape": "circle", "center": [0, 0], "radius": 0.1}], {"cf1": (1.0, 1.0)},
-              {"x": [-2, 2], "y": [-2, 2], "z": [0, 1.5]}, 0.6)
+    log.scene(
+        T0,
+        [{"shape": "circle", "center": [0, 0], "radius": 0.1}],
+        {"cf1": (1.0, 1.0)},
+        {"x": [-2, 2], "y": [-2, 2], "z": [0, 1.5]},
+        0.6,
+    )
     log.event(T0, 2, "takeoff")
     for k in range(ticks):
         t = T0 + k * 10 * MS
@@ -47,8 +52,10 @@ def test_the_sink_sees_every_written_message_with_the_files_bytes_and_log_time(t
     with FlightLog(path, MISSION, SCENARIO, sink=lambda topic, t, data: seen.append((topic, t, data))) as log:
         small_flight(log)
     with open(path, "rb") as f:
-        written = [(channel.topic, message.log_time, message.data)
-                   for _, channel, message in make_reader(f).iter_messages(log_time_order=False)]
+        written = [
+            (channel.topic, message.log_time, message.data)
+            for _, channel, message in make_reader(f).iter_messages(log_time_order=False)
+        ]
     assert len(written) == log.written == 40 * 7 + 3
     assert seen == written  # same order, topics, log times and bytes: the file is the one source
 
@@ -86,11 +93,14 @@ def test_fly_foxglove_without_the_sdk_refuses_in_one_line_before_anything_flies(
     from rpf_fly.cli import get_app
 
     log = tmp_path / "flight.mcap"
-    result = CliRunner().invoke(get_app(), ["fly", str(ROOT / "missions" / "lab-3.yaml"), "--dry-run", "--no-console",
-                                            "--log", str(log), "--foxglove"])
+    result = CliRunner().invoke(
+        get_app(),
+        ["fly", str(ROOT / "missions" / "lab-3.yaml"), "--dry-run", "--no-console", "--log", str(log), "--foxglove"],
+    )
     assert result.exit_code == 2
     assert result.output.strip().splitlines() == [
-        "--foxglove: the live view needs foxglove-sdk, which is not installed: pip install 'rpf_fly[live]'"]
+        "--foxglove: the live view needs foxglove-sdk, which is not installed: pip install 'rpf_fly[live]'"
+    ]
     assert not log.exists()  # refused before the log was opened, let alone a drone connected
 
 
@@ -102,8 +112,9 @@ def _require(module: str) -> None:
     try:
         __import__(module)
     except ImportError as err:
-        pytest.fail(f"{module} is missing: the tests need the live extra: pip install -e '.[dev,live]' ({err})",
-                    pytrace=False)
+        pytest.fail(
+            f"{module} is missing: the tests need the live extra: pip install -e '.[dev,live]' ({err})", pytrace=False
+        )
 
 
 @pytest.fixture
@@ -119,8 +130,13 @@ async def _connect(port: int, *, stalled: bool = False):  # type: ignore[no-unty
     if stalled:  # a tiny window and a one-message queue: once it stops reading, the server's sends back up
         sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 2048)
     sock.connect(("127.0.0.1", port))
-    return await websockets.connect(f"ws://127.0.0.1:{port}", sock=sock, subprotocols=["foxglove.sdk.v1"],
-                                    max_size=None, max_queue=1 if stalled else 4096)
+    return await websockets.connect(
+        f"ws://127.0.0.1:{port}",
+        sock=sock,
+        subprotocols=["foxglove.sdk.v1"],
+        max_size=None,
+        max_queue=1 if stalled else 4096,
+    )
 
 
 async def _subscribe_all(ws, topics: set[str]) -> dict[int, str]:  # type: ignore[no-untyped-def]
@@ -130,8 +146,14 @@ async def _subscribe_all(ws, topics: set[str]) -> dict[int, str]:  # type: ignor
         message = json.loads(await asyncio.wait_for(ws.recv(), 10))
         if message["op"] == "advertise":
             channels.update({c["id"]: c["topic"] for c in message["channels"]})
-            await ws.send(json.dumps({"op": "subscribe", "subscriptions": [
-                {"id": c["id"], "channelId": c["id"]} for c in message["channels"]]}))
+            await ws.send(
+                json.dumps(
+                    {
+                        "op": "subscribe",
+                        "subscriptions": [{"id": c["id"], "channelId": c["id"]} for c in message["channels"]],
+                    }
+                )
+            )
     return channels
 
 
@@ -158,9 +180,11 @@ def test_the_sdks_log_records_reach_the_applications_handlers_never_stderr_by_th
     """A client subscribing to a channel id that does not exist makes foxglove-sdk log an error: with no handler
     configured it stays off stderr (not Python's last resort, which printed it on a flight's console); with a handler
     on the root logger (``rpf-fly fly``'s text log) it arrives there, named and levelled."""
+
     def run(mode: str) -> subprocess.CompletedProcess:
-        proc = subprocess.run([sys.executable, "-c", SUBSCRIBE_UNKNOWN, mode], capture_output=True, text=True,
-                              timeout=60, cwd=ROOT)
+        proc = subprocess.run(
+            [sys.executable, "-c", SUBSCRIBE_UNKNOWN, mode], capture_output=True, text=True, timeout=60, cwd=ROOT
+        )
         assert proc.returncode == 0, proc.stderr
         return proc
 
@@ -253,9 +277,12 @@ def test_a_client_that_subscribes_late_still_gets_the_scene(sdk: None, tmp_path:
     with open(path, "rb") as f:
         logged = [(m.log_time, m.data) for _, _, m in make_reader(f).iter_messages(topics=["/scene"])]
     assert scene == logged  # once, with the file's log time and bytes
-    assert json.loads(scene[0][1])["entities"] == M.scene_update(T0, goals={"cf1": (1.0, 1.0)},
-                                                                  arena={"x": [-2, 2], "y": [-2, 2], "z": [0, 1.5]},
-                                                                  height=0.6)["entities"]
+    assert (
+        json.loads(scene[0][1])["entities"]
+        == M.scene_update(T0, goals={"cf1": (1.0, 1.0)}, arena={"x": [-2, 2], "y": [-2, 2], "z": [0, 1.5]}, height=0.6)[
+            "entities"
+        ]
+    )
 
 
 def test_a_port_already_taken_refuses_in_one_line(sdk: None, tmp_path: Path):
@@ -265,9 +292,19 @@ def test_a_port_already_taken_refuses_in_one_line(sdk: None, tmp_path: Path):
     from rpf_fly.log.live import LiveView
 
     with LiveView(0) as taken:
-        result = CliRunner().invoke(get_app(), ["fly", str(ROOT / "missions" / "lab-3.yaml"), "--dry-run",
-                                                "--no-console", "--log", str(tmp_path / "f.mcap"),
-                                                "--foxglove-port", str(taken.port)])
+        result = CliRunner().invoke(
+            get_app(),
+            [
+                "fly",
+                str(ROOT / "missions" / "lab-3.yaml"),
+                "--dry-run",
+                "--no-console",
+                "--log",
+                str(tmp_path / "f.mcap"),
+                "--foxglove-port",
+                str(taken.port),
+            ],
+        )
     assert result.exit_code == 2
     lines = result.output.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith(f"--foxglove: cannot serve the live view on 127.0.0.1:{taken.port}")

@@ -40,7 +40,7 @@ def test_review_json_reproduces_sim_json(tmp_path, mission):
     assert result.exit_code == 0, result.output
     assert result.stderr == ""
     got = json.loads(result.stdout)
-    assert list(got)[:len(expected)] == list(expected)  # the metrics JSON first, its keys where they always were
+    assert list(got)[: len(expected)] == list(expected)  # the metrics JSON first, its keys where they always were
     assert_close({k: got[k] for k in expected}, expected)
     assert result.stdout.count("\n") == 1
 
@@ -59,7 +59,11 @@ def test_log_carries_the_mission_and_scenario(lab_log):
     loaded = load_mission(MISSIONS / "lab-3.yaml")
     policy_sha = hashlib.sha256(loaded.planner.policy.read_bytes()).hexdigest() if loaded.planner.policy else ""
     assert (mission["name"], mission["planner"], mission["seed"], mission["policy_sha256"]) == (
-        "lab-3", loaded.planner.kind, "0", policy_sha)
+        "lab-3",
+        loaded.planner.kind,
+        "0",
+        policy_sha,
+    )
     assert mission["rpf_fly_version"] == __version__
     scenario = json.loads(data.metadata["scenario"]["json"])
     assert scenario["names"] == ["cf1", "cf2", "cf3"] and scenario["dt"] == 0.1 and scenario["height"] == 0.6
@@ -81,7 +85,7 @@ def test_planner_ticks_cover_every_step_and_a_final_tick(lab_log):
     # cf1 arrives before the end: later ticks say so
     arrived = [m.data["mode"] for m in data.messages("/cf1/planner")]
     assert arrived.index("arrived") == round(metrics["per_drone"][0]["time_to_goal_s"] / 0.1)
-    assert set(arrived[arrived.index("arrived"):]) == {"arrived"}
+    assert set(arrived[arrived.index("arrived") :]) == {"arrived"}
 
 
 def test_summary_of_a_simulated_log(lab_log):
@@ -120,8 +124,9 @@ def test_truth_topics_name_drones_not_a_drone_called_truth(tmp_path):
     t0 = 1_700_000_000_000_000_000
     with FlightLog(path, {}, {}, clock=None) as log:
         for k in range(20):
-            log.truth(t0 + k * 10_000_000, {d: ((0.0, 0.0, 0.5), 0.0, True, False, (0.0, 0.0, 0.5))
-                                            for d in ("cf1", "cf2")})
+            log.truth(
+                t0 + k * 10_000_000, {d: ((0.0, 0.0, 0.5), 0.0, True, False, (0.0, 0.0, 0.5)) for d in ("cf1", "cf2")}
+            )
             log.pose("cf1", t0 + k * 10_000_000, (0, 0, 0.5))
     data = read_log(path)
     assert sorted(drones_of(data)) == ["cf1", "cf2"]
@@ -132,8 +137,19 @@ def test_truth_topics_name_drones_not_a_drone_called_truth(tmp_path):
     assert "/truth/cf1" in result.stdout
     with open(tmp_path / "csv" / "truth_cf1.csv", newline="") as f:
         rows = list(csv.reader(f))
-    assert rows[0][3:] == ["timestamp.sec", "timestamp.nsec", "position.x", "position.y", "position.z", "yaw", "motors",
-                           "crashed", "estimate.x", "estimate.y", "estimate.z"]
+    assert rows[0][3:] == [
+        "timestamp.sec",
+        "timestamp.nsec",
+        "position.x",
+        "position.y",
+        "position.z",
+        "yaw",
+        "motors",
+        "crashed",
+        "estimate.x",
+        "estimate.y",
+        "estimate.z",
+    ]
     assert len(rows) == 21 and rows[1][9:11] == ["True", "False"]
 
 
@@ -155,17 +171,52 @@ def test_plot_and_csv(lab_log, tmp_path):
         return rows[0], rows[1:]
 
     header, rows = header_and_rows("mocap_cf1.csv")
-    assert header == ["log_time_ns", "publish_time_ns", "sequence", "timestamp.sec", "timestamp.nsec", "frame_id",
-                      "pose.position.x", "pose.position.y", "pose.position.z", "pose.orientation.x",
-                      "pose.orientation.y", "pose.orientation.z", "pose.orientation.w"]
+    assert header == [
+        "log_time_ns",
+        "publish_time_ns",
+        "sequence",
+        "timestamp.sec",
+        "timestamp.nsec",
+        "frame_id",
+        "pose.position.x",
+        "pose.position.y",
+        "pose.position.z",
+        "pose.orientation.x",
+        "pose.orientation.y",
+        "pose.orientation.z",
+        "pose.orientation.w",
+    ]
     assert len(rows) == len(data.messages("/mocap/cf1")) and rows[0][5] == "world"
     header, rows = header_and_rows("cf2_planner.csv")
-    for column in ("tick", "position.x", "goal.y", "eta", "lambda", "f_a.x", "f_r.y", "f_in.x", "direction.y", "mode",
-                   "heading", "neighbours", "obstacle_distance", "goal_distance"):
+    for column in (
+        "tick",
+        "position.x",
+        "goal.y",
+        "eta",
+        "lambda",
+        "f_a.x",
+        "f_r.y",
+        "f_in.x",
+        "direction.y",
+        "mode",
+        "heading",
+        "neighbours",
+        "obstacle_distance",
+        "goal_distance",
+    ):
         assert column in header, column
     header, rows = header_and_rows("cf1_status.csv")
-    assert header[3:] == ["timestamp.sec", "timestamp.nsec", "state", "battery_v", "link_quality", "latency_ms",
-                          "outcome", "estimate", "target"]  # a simulation's drones have no firmware: both null
+    assert header[3:] == [
+        "timestamp.sec",
+        "timestamp.nsec",
+        "state",
+        "battery_v",
+        "link_quality",
+        "latency_ms",
+        "outcome",
+        "estimate",
+        "target",
+    ]  # a simulation's drones have no firmware: both null
     assert rows[-1][header.index("outcome")] == "reached" and rows[0][header.index("battery_v")] == ""
     header, rows = header_and_rows("events.csv")
     assert {"level", "message", "name", "file", "line"} <= set(header)

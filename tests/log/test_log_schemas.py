@@ -24,8 +24,22 @@ FOXGLOVE_REQUIRED = {
     "foxglove.FrameTransform": ["timestamp", "parent_frame_id", "child_frame_id", "translation", "rotation"],
     "foxglove.Log": ["timestamp", "level", "message", "name", "file", "line"],
     "foxglove.SceneUpdate": ["deletions", "entities"],
-    "foxglove.SceneEntity": ["timestamp", "frame_id", "id", "lifetime", "frame_locked", "metadata", "arrows", "cubes",
-                             "spheres", "cylinders", "lines", "triangles", "texts", "models"],
+    "foxglove.SceneEntity": [
+        "timestamp",
+        "frame_id",
+        "id",
+        "lifetime",
+        "frame_locked",
+        "metadata",
+        "arrows",
+        "cubes",
+        "spheres",
+        "cylinders",
+        "lines",
+        "triangles",
+        "texts",
+        "models",
+    ],
     "foxglove.SceneEntityDeletion": ["timestamp", "type", "id"],
     "foxglove.ArrowPrimitive": ["pose", "shaft_length", "shaft_diameter", "head_length", "head_diameter", "color"],
     "foxglove.CubePrimitive": ["pose", "size", "color"],
@@ -132,26 +146,55 @@ def test_builders_reject_what_the_schemas_forbid():
 T = 1_700_000_000_123_456_789
 
 
-@pytest.mark.parametrize("position, quaternion", [
-    ((0.1, 2.0, 0.6), (0.0, 0.0, 0.5, 0.8660254)), (np.array([1.0, 2.0, 3.0]), None), ((1, 2, 3), (0, 0, 0, 1)),
-    (1 + 2j, None), ((1.0, 2.0), None), ((float("nan"), 0.0, 0.0), None), ((np.float32(0.1), 1.0, 1.0), None),
-])
+@pytest.mark.parametrize(
+    "position, quaternion",
+    [
+        ((0.1, 2.0, 0.6), (0.0, 0.0, 0.5, 0.8660254)),
+        (np.array([1.0, 2.0, 3.0]), None),
+        ((1, 2, 3), (0, 0, 0, 1)),
+        (1 + 2j, None),
+        ((1.0, 2.0), None),
+        ((float("nan"), 0.0, 0.0), None),
+        ((np.float32(0.1), 1.0, 1.0), None),
+    ],
+)
 def test_fast_pose_encoder_equals_the_builder(position, quaternion):
     assert E.pose_json(T, position, quaternion) == E.encode(M.pose_in_frame(T, position, quaternion))
 
 
-@pytest.mark.parametrize("fields", [
-    dict(tick=3, position=(0.1, 0.2, 0.6), goal=1 + 1j, mode=0, eta=0.05, lam=float("nan"), f_a=0.7 + 0.7j,
-         f_r=(0.1, -0.2), f_in=np.complex128(0.3j), direction=1 + 0j, heading=0.1, neighbours=np.int64(2),
-         obstacle_distance=None),
-    dict(tick=0, position=(0, 0, 0), goal=(1, 0), mode="arrived"),
-    {"tick": 0, "position": np.array([0.0, 1.0, 2.0]), "goal": np.array([1.0, 2.0]), "mode": np.int8(-1),
-     "lambda": 2.0, "goal_distance": np.float64(3.0)},
-    dict(tick=0, position=1 + 1j, goal=(1, 0), mode="hold"),
-    dict(tick=0, position=(0, 0, 0), goal=(1, 0), mode="apf", obstacle_distance=float("inf")),
-    dict(tick=5, position=(0.1, 0.2, 0.5), goal=(1, 0), mode="soft", direction=0.6 + 0.8j, reference=0.15 + 0.2j),
-    dict(tick=5, position=(0.1, 0.2, 0.5), goal=(1, 0), mode="apf", reference=(np.float64(0.3), 0.1)),
-])
+@pytest.mark.parametrize(
+    "fields",
+    [
+        dict(
+            tick=3,
+            position=(0.1, 0.2, 0.6),
+            goal=1 + 1j,
+            mode=0,
+            eta=0.05,
+            lam=float("nan"),
+            f_a=0.7 + 0.7j,
+            f_r=(0.1, -0.2),
+            f_in=np.complex128(0.3j),
+            direction=1 + 0j,
+            heading=0.1,
+            neighbours=np.int64(2),
+            obstacle_distance=None,
+        ),
+        dict(tick=0, position=(0, 0, 0), goal=(1, 0), mode="arrived"),
+        {
+            "tick": 0,
+            "position": np.array([0.0, 1.0, 2.0]),
+            "goal": np.array([1.0, 2.0]),
+            "mode": np.int8(-1),
+            "lambda": 2.0,
+            "goal_distance": np.float64(3.0),
+        },
+        dict(tick=0, position=1 + 1j, goal=(1, 0), mode="hold"),
+        dict(tick=0, position=(0, 0, 0), goal=(1, 0), mode="apf", obstacle_distance=float("inf")),
+        dict(tick=5, position=(0.1, 0.2, 0.5), goal=(1, 0), mode="soft", direction=0.6 + 0.8j, reference=0.15 + 0.2j),
+        dict(tick=5, position=(0.1, 0.2, 0.5), goal=(1, 0), mode="apf", reference=(np.float64(0.3), 0.1)),
+    ],
+)
 def test_fast_planner_encoder_equals_the_builder(fields):
     assert E.planner_json(T, fields) == E.encode(M.planner_step(T, **fields))
 
@@ -164,18 +207,20 @@ def test_planner_reference_is_optional_exact_and_valid():
     assert "reference" not in without
     validator.validate(without)
     ref = complex(0.1 + 0.2, -1 / 3)
-    with_ref = json.loads(E.planner_json(T, dict(tick=1, position=(0, 0, 0.5), goal=(1, 0), mode="apf",
-                                                 reference=ref)))
+    with_ref = json.loads(E.planner_json(T, dict(tick=1, position=(0, 0, 0.5), goal=(1, 0), mode="apf", reference=ref)))
     assert complex(with_ref["reference"]["x"], with_ref["reference"]["y"]) == ref
     validator.validate(with_ref)
 
 
-@pytest.mark.parametrize("state", [
-    ((0.1, 2.0, 0.6), 0.5, True, False, (0.11, 2.0, 0.6)),
-    ((np.float64(1.0), 2, 3), np.float32(0.25), np.bool_(False), 1, np.array([1.0, 2.0, 3.0])),
-    ((float("nan"), 0.0, 0.0), float("inf"), False, True, (0.0, 0.0, 0.0)),
-    ((1.0, 2.0), 0.0, True, False, 1 + 2j),
-])
+@pytest.mark.parametrize(
+    "state",
+    [
+        ((0.1, 2.0, 0.6), 0.5, True, False, (0.11, 2.0, 0.6)),
+        ((np.float64(1.0), 2, 3), np.float32(0.25), np.bool_(False), 1, np.array([1.0, 2.0, 3.0])),
+        ((float("nan"), 0.0, 0.0), float("inf"), False, True, (0.0, 0.0, 0.0)),
+        ((1.0, 2.0), 0.0, True, False, 1 + 2j),
+    ],
+)
 def test_fast_truth_encoder_equals_the_builder_and_validates(state):
     assert E.truth_json(T, *state) == E.encode(M.truth_state(T, *state))
     message = json.loads(E.truth_json(T, *state))
@@ -189,7 +234,11 @@ def test_fast_encoders_raise_what_the_builders_raise():
         E.planner_json(T, dict(tick=0, position=(0, 0, 0), goal=(1, 0), mode="dancing"))
     with pytest.raises(TypeError):
         E.planner_json(T, dict(tick=0, position=(0, 0, 0), goal=(1, 0), mode="apf", colour="red"))
-    poses = {"cf1": ((1, 2, 3), None), "cf2": (np.array([1.0, 2.0, 3.0]), (0, 0, 0.1, 0.9)), 'q"uote': ((0, 0, 0), None)}
+    poses = {
+        "cf1": ((1, 2, 3), None),
+        "cf2": (np.array([1.0, 2.0, 3.0]), (0, 0, 0.1, 0.9)),
+        'q"uote': ((0, 0, 0), None),
+    }
     assert E.tf_json(T, poses) == E.encode(M.frame_transforms(T, poses))
 
 

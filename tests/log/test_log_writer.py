@@ -21,26 +21,57 @@ SCENARIO = {"json": '{"names": ["cf1", "cf2"]}'}
 def write_flight(path, drones=("cf1", "cf2"), ticks=50):  # type: ignore[no-untyped-def]
     """A small flight on every topic, with log time = publish time (clock=None)."""
     with FlightLog(path, MISSION, SCENARIO, clock=None) as log:
-        log.scene(T0, [{"shape": "circle", "center": [0, 0], "radius": 0.1},
-                       {"shape": "box", "min": [1, 1], "max": [1.5, 2]}],
-                  {d: (1.0, 1.0) for d in drones}, {"x": [-2, 2], "y": [-2, 2], "z": [0, 1.5]}, 0.6)
+        log.scene(
+            T0,
+            [{"shape": "circle", "center": [0, 0], "radius": 0.1}, {"shape": "box", "min": [1, 1], "max": [1.5, 2]}],
+            {d: (1.0, 1.0) for d in drones},
+            {"x": [-2, 2], "y": [-2, 2], "z": [0, 1.5]},
+            0.6,
+        )
         log.event(T0, 2, "takeoff", file="flight.py", line=12)
         for k in range(ticks):
             t = T0 + k * 10 * MS
             for i, d in enumerate(drones):
                 log.pose(d, t, (0.01 * k, float(i), 0.6), (0.0, 0.0, 0.0, 1.0))
                 log.setpoint(d, t, (0.01 * k + 0.05, float(i), 0.6), 0.25)
-                log.planner_step(d, t, tick=k, position=(0.01 * k, float(i), 0.6), goal=1 + 1j, mode="apf",
-                                 eta=0.05, lam=2.0, f_a=0.7 + 0.7j, f_r=-0.1j, f_in=0j, direction=1 + 0j,
-                                 heading=0.0, neighbours=1, obstacle_distance=0.4)
+                log.planner_step(
+                    d,
+                    t,
+                    tick=k,
+                    position=(0.01 * k, float(i), 0.6),
+                    goal=1 + 1j,
+                    mode="apf",
+                    eta=0.05,
+                    lam=2.0,
+                    f_a=0.7 + 0.7j,
+                    f_r=-0.1j,
+                    f_in=0j,
+                    direction=1 + 0j,
+                    heading=0.0,
+                    neighbours=1,
+                    obstacle_distance=0.4,
+                )
                 if k % 10 == 0:
                     log.status(d, t, state="planning", battery_v=3.9, link_quality=0.98, latency_ms=4.0)
             log.tf(t, {d: ((0.01 * k, float(i), 0.6), None) for i, d in enumerate(drones)})
-            log.truth(t, {d: ((0.01 * k, float(i), 0.6), 0.1, True, False, (0.01 * k, float(i) + 0.01, 0.6))
-                          for i, d in enumerate(drones)})
+            log.truth(
+                t,
+                {
+                    d: ((0.01 * k, float(i), 0.6), 0.1, True, False, (0.01 * k, float(i) + 0.01, 0.6))
+                    for i, d in enumerate(drones)
+                },
+            )
             if k % 25 == 24:
-                log.radio(t, 0, drones=list(drones), window_s=0.25, packets=25.0 * len(drones),
-                          transactions=60.0 * len(drones), planned_per_s=100.0 * len(drones), budget_per_s=1000.0)
+                log.radio(
+                    t,
+                    0,
+                    drones=list(drones),
+                    window_s=0.25,
+                    packets=25.0 * len(drones),
+                    transactions=60.0 * len(drones),
+                    planned_per_s=100.0 * len(drones),
+                    budget_per_s=1000.0,
+                )
         log.event(T0 + ticks * 10 * MS, 3, "landing early")
     return log
 
@@ -55,19 +86,30 @@ def test_seeking_reader_reads_the_summary(tmp_path):
         stats = summary.statistics
         counts = {summary.channels[c].topic: n for c, n in stats.channel_message_counts.items()}
         assert counts == {
-            "/scene": 1, "/events": 2, "/tf": 50,
+            "/scene": 1,
+            "/events": 2,
+            "/tf": 50,
             **{f"/mocap/{d}": 50 for d in ("cf1", "cf2")},
             **{f"/{d}/setpoint": 50 for d in ("cf1", "cf2")},
             **{f"/{d}/planner": 50 for d in ("cf1", "cf2")},
             **{f"/{d}/status": 5 for d in ("cf1", "cf2")},
-            **{f"/truth/{d}": 50 for d in ("cf1", "cf2")}, "/radio/0": 2,
+            **{f"/truth/{d}": 50 for d in ("cf1", "cf2")},
+            "/radio/0": 2,
         }
         assert stats.message_count == sum(counts.values()) == log.written
         assert stats.message_start_time == T0 and stats.message_end_time == T0 + 500 * MS
         assert stats.chunk_count >= 1
         schemas = {summary.schemas[c.schema_id].name for c in summary.channels.values()}
-        assert schemas == {"foxglove.PoseInFrame", "foxglove.SceneUpdate", "foxglove.FrameTransforms", "foxglove.Log",
-                           "rpf_fly.PlannerStep", "rpf_fly.DroneStatus", "rpf_fly.TruthState", "rpf_fly.RadioLoad"}
+        assert schemas == {
+            "foxglove.PoseInFrame",
+            "foxglove.SceneUpdate",
+            "foxglove.FrameTransforms",
+            "foxglove.Log",
+            "rpf_fly.PlannerStep",
+            "rpf_fly.DroneStatus",
+            "rpf_fly.TruthState",
+            "rpf_fly.RadioLoad",
+        }
         assert all(s.encoding == "jsonschema" for s in summary.schemas.values())
         assert all(c.message_encoding == "json" for c in summary.channels.values())
         metadata = {m.name: m.metadata for m in reader.iter_metadata()}
@@ -81,7 +123,9 @@ def test_seeking_reader_reads_the_summary(tmp_path):
     data = read_log(path)
     assert not data.truncated and data.counts == counts
     step = data.messages("/cf1/planner")[3].data
-    assert step["tick"] == 3 and step["mode"] == "apf" and step["lambda"] == 2.0 and step["f_r"] == {"x": 0.0, "y": -0.1}
+    assert (
+        step["tick"] == 3 and step["mode"] == "apf" and step["lambda"] == 2.0 and step["f_r"] == {"x": 0.0, "y": -0.1}
+    )
     assert data.messages("/cf1/setpoint")[0].data["pose"]["orientation"]["z"] == pytest.approx(0.12467473)
 
 
@@ -104,17 +148,27 @@ def test_truth_is_one_entry_per_sample_with_the_sample_time_as_log_time(tmp_path
         log.pose("cf0", T0, gate)
         assert gate.entered.wait(5)  # the writer is held inside that message: the queue holds what follows
         for k in range(10):
-            log.truth(T0 + k * 10 * MS, {"cf1": ((0.1 * k, 0.0, 0.5), 0.0, True, False, (0.1 * k, 0.0, 0.5)),
-                                         "cf2": ((1.0, 0.0, 0.0), -1.5, False, True, (1.0, 0.02, 0.0))})
+            log.truth(
+                T0 + k * 10 * MS,
+                {
+                    "cf1": ((0.1 * k, 0.0, 0.5), 0.0, True, False, (0.1 * k, 0.0, 0.5)),
+                    "cf2": ((1.0, 0.0, 0.0), -1.5, False, True, (1.0, 0.02, 0.0)),
+                },
+            )
         assert len(log._queue) == 10 and log._pending() == 20  # noqa: SLF001 - one entry per sample, 2 messages each
         gate.release.set()
     data = read_log(path)
     cf1, cf2 = data.messages("/truth/cf1"), data.messages("/truth/cf2")
     assert [m.log_time for m in cf1] == [m.publish_time for m in cf1] == [T0 + k * 10 * MS for k in range(10)]
     assert [m.sequence for m in cf2] == list(range(10)) and data.schemas["/truth/cf2"] == "rpf_fly.TruthState"
-    assert cf1[3].data == {"timestamp": {"sec": 1_700_000_000, "nsec": 30 * MS},
-                           "position": {"x": pytest.approx(0.3), "y": 0.0, "z": 0.5}, "yaw": 0.0, "motors": True,
-                           "crashed": False, "estimate": {"x": pytest.approx(0.3), "y": 0.0, "z": 0.5}}
+    assert cf1[3].data == {
+        "timestamp": {"sec": 1_700_000_000, "nsec": 30 * MS},
+        "position": {"x": pytest.approx(0.3), "y": 0.0, "z": 0.5},
+        "yaw": 0.0,
+        "motors": True,
+        "crashed": False,
+        "estimate": {"x": pytest.approx(0.3), "y": 0.0, "z": 0.5},
+    }
     assert cf2[0].data["crashed"] is True and cf2[0].data["motors"] is False and cf2[0].data["yaw"] == -1.5
 
 
@@ -122,6 +176,7 @@ def test_threads_log_concurrently(tmp_path):
     path = tmp_path / "threads.mcap"
     n = 2000
     with FlightLog(path, MISSION, SCENARIO) as log:
+
         def fly(name: str) -> None:
             for k in range(n):
                 log.pose(name, T0 + k, (k, 0, 0))
@@ -260,9 +315,21 @@ def test_drain_soon_writes_without_waiting_for_the_poll(tmp_path):
 
 
 def _planner_fields(k: int, i: int) -> dict:
-    return dict(tick=k, position=(0.01 * k, float(i), 0.6), goal=1 + 1j, mode="apf", eta=0.05, lam=2.0,
-                f_a=0.7 + 0.7j, f_r=-0.1j, f_in=0j, direction=1 + 0j, heading=0.0, neighbours=1,
-                obstacle_distance=0.4)
+    return dict(
+        tick=k,
+        position=(0.01 * k, float(i), 0.6),
+        goal=1 + 1j,
+        mode="apf",
+        eta=0.05,
+        lam=2.0,
+        f_a=0.7 + 0.7j,
+        f_r=-0.1j,
+        f_in=0j,
+        direction=1 + 0j,
+        heading=0.0,
+        neighbours=1,
+        obstacle_distance=0.4,
+    )
 
 
 def test_batch_calls_write_what_the_per_message_calls_write(tmp_path):
@@ -283,8 +350,9 @@ def test_batch_calls_write_what_the_per_message_calls_write(tmp_path):
             log.poses(t, {d: ((0.01 * k, float(i), 0.6), (0.0, 0.0, 0.1, 0.99)) for i, d in enumerate(drones)})
             if k == 7:  # one drone logged alone in between: the per-drone sequences stay one series
                 log.setpoint("cf1", t, (0.01 * k + 0.05, 0.0, 0.6), 0.25)
-                log.setpoints([(d, t + i, (0.01 * k + 0.05, float(i), 0.6), 0.25) for i, d in enumerate(drones)
-                               if d != "cf1"])
+                log.setpoints(
+                    [(d, t + i, (0.01 * k + 0.05, float(i), 0.6), 0.25) for i, d in enumerate(drones) if d != "cf1"]
+                )
             else:
                 log.setpoints([(d, t + i, (0.01 * k + 0.05, float(i), 0.6), 0.25) for i, d in enumerate(drones)])
             log.planner_steps(t, {d: _planner_fields(k, i) for i, d in enumerate(drones)})
@@ -294,8 +362,9 @@ def test_batch_calls_write_what_the_per_message_calls_write(tmp_path):
         for topic in (f"/mocap/{d}", f"/{d}/setpoint", f"/{d}/planner"):
             ma, mb = a.messages(topic), b.messages(topic)
             assert len(ma) == len(mb) == 20, topic
-            assert [(m.log_time, m.publish_time, m.sequence, m.data) for m in ma] == \
-                   [(m.log_time, m.publish_time, m.sequence, m.data) for m in mb], topic
+            assert [(m.log_time, m.publish_time, m.sequence, m.data) for m in ma] == [
+                (m.log_time, m.publish_time, m.sequence, m.data) for m in mb
+            ], topic
 
 
 def test_batch_calls_drop_whole_and_count_every_message(tmp_path):
@@ -319,8 +388,14 @@ def test_batch_calls_drop_whole_and_count_every_message(tmp_path):
 def test_a_bad_value_in_a_batch_loses_that_message_only(tmp_path):
     path = tmp_path / "bad.mcap"
     with FlightLog(path, MISSION, SCENARIO, clock=None) as log:
-        log.planner_steps(T0, {"cf1": _planner_fields(0, 0), "cf2": {**_planner_fields(0, 1), "mode": "dancing"},
-                               "cf3": _planner_fields(0, 2)})
+        log.planner_steps(
+            T0,
+            {
+                "cf1": _planner_fields(0, 0),
+                "cf2": {**_planner_fields(0, 1), "mode": "dancing"},
+                "cf3": _planner_fields(0, 2),
+            },
+        )
     assert log.failed == 1 and log.written == 2
     data = read_log(path)
     assert [len(data.messages(f"/{d}/planner")) for d in ("cf1", "cf2", "cf3")] == [1, 0, 1]

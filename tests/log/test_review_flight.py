@@ -19,8 +19,22 @@ from rpf_fly.log.review import review
 pytestmark = pytest.mark.xdist_group("cli_flights")
 
 runner = CliRunner()
-METRIC_KEYS = ["mission", "planner", "seed", "drones", "reached", "success", "collisions", "margin", "min_separation_m",
-               "min_obstacle_clearance_m", "travel_distance_m", "smoothness", "makespan_s", "per_drone"]
+METRIC_KEYS = [
+    "mission",
+    "planner",
+    "seed",
+    "drones",
+    "reached",
+    "success",
+    "collisions",
+    "margin",
+    "min_separation_m",
+    "min_obstacle_clearance_m",
+    "travel_distance_m",
+    "smoothness",
+    "makespan_s",
+    "per_drone",
+]
 
 
 def run(*args):  # type: ignore[no-untyped-def]
@@ -38,7 +52,7 @@ def text_and_json(log):  # type: ignore[no-untyped-def]
 def test_a_clean_flight_is_not_interrupted_and_the_json_says_what_the_text_says(clean_cli_flight):
     text, doc = text_and_json(clean_cli_flight.log)
     assert "interrupted" not in text
-    assert list(doc)[:len(METRIC_KEYS)] == METRIC_KEYS  # the metrics JSON, keys where they were
+    assert list(doc)[: len(METRIC_KEYS)] == METRIC_KEYS  # the metrics JSON, keys where they were
     assert doc["interrupted"] is False and doc["interruptions"] == []
     assert doc["log"]["source"] == "dry-run" and doc["log"]["clean_end"] is True and doc["log"]["truncated"] is False
     assert doc["outcomes"] == {"cf1": "reached", "cf2": "reached", "cf3": "reached"}
@@ -106,7 +120,7 @@ def test_a_dry_run_logs_each_dongles_measured_load_and_review_prints_it(clean_cl
     assert all(w["planned_per_s"] == 165.0 and 500.0 < w["budget_per_s"] < 572.0 for w in windows)
     full = [w for w in windows if w["window_s"] > 0.9]
     assert len(full) >= len(windows) - 2 and all(w["window_s"] < 1.5 for w in full)  # once a second
-    busy = sorted(w["packets_per_s"] for w in full)[len(full) // 2:]
+    busy = sorted(w["packets_per_s"] for w in full)[len(full) // 2 :]
     assert 0.8 * 150 <= busy[len(busy) // 2] <= 1.2 * 150  # measured, not copied from the plan
     assert all(w["transactions_per_s"] >= w["packets_per_s"] for w in windows)  # polls fill the gaps
     text, doc = text_and_json(clean_cli_flight.log)

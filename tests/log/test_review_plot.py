@@ -67,7 +67,8 @@ def test_goals_in_their_drones_colour_joined_to_the_start(dry_figure):
         assert goal.get_xydata()[0] == pytest.approx(scenario["goals"][i])
         first = pose_series(data, drone, result.start_ns).values[0, :2]
         assert line.get_xydata()[0] == pytest.approx(first) and line.get_xydata()[1] == pytest.approx(
-            scenario["goals"][i])
+            scenario["goals"][i]
+        )
         assert line.get_linewidth() < track.get_linewidth()  # thin
     colours = {to_rgba(by_gid(xy, f"goal:{d}")[0].get_markerfacecolor()) for d in result.drones}
     assert len(colours) == len(result.drones)
@@ -134,8 +135,12 @@ def test_a_simulated_log_has_no_tracking_or_battery_panel(lab_log, tmp_path):
 def test_errors_are_always_named():
     from rpf_fly.log.review import ReviewEvent
 
-    events = [ReviewEvent(1.0, 4, "link lost", "cf1", "link"), ReviewEvent(2.0, 4, "link lost", "cf2", "link"),
-              ReviewEvent(3.0, 2, "arrived", "cf1", "arrived"), ReviewEvent(4.0, 2, "arrived", "cf2", "arrived")]
+    events = [
+        ReviewEvent(1.0, 4, "link lost", "cf1", "link"),
+        ReviewEvent(2.0, 4, "link lost", "cf2", "link"),
+        ReviewEvent(3.0, 2, "arrived", "cf1", "arrived"),
+        ReviewEvent(4.0, 2, "arrived", "cf2", "arrived"),
+    ]
     texts = [t for _, t in labelled_events(events)]
     assert texts == ["cf1: link lost", "cf2: link lost", "cf1: arrived (x2)"]
 
@@ -167,7 +172,7 @@ def test_event_numbers_cover_no_marker_and_no_other_number(flight, request):
         markers = marker_boxes(fig, ax)
         for i, box in enumerate(boxes):
             assert not any(box.overlaps(m) for m in markers), labels[i].get_text()
-            assert not any(box.overlaps(other) for other in boxes[i + 1:]), labels[i].get_text()
+            assert not any(box.overlaps(other) for other in boxes[i + 1 :]), labels[i].get_text()
             assert labels[i].get_bbox_patch() is not None
     finally:
         plt.close(fig)
@@ -190,8 +195,12 @@ def test_no_time_panel_legend_covers_a_curve(flight, request):
                 if line.get_gid() in ("interruption", "r", "2r"):  # vertical, or the threshold the legend names
                     continue
                 points = ax.transData.transform(np.column_stack([line.get_xdata(), line.get_ydata()]))
-                inside = (box.x0 < points[:, 0]) & (points[:, 0] < box.x1) & (box.y0 < points[:, 1]) & (
-                    points[:, 1] < box.y1)
+                inside = (
+                    (box.x0 < points[:, 0])
+                    & (points[:, 0] < box.x1)
+                    & (box.y0 < points[:, 1])
+                    & (points[:, 1] < box.y1)
+                )
                 assert not inside.any(), (name, line.get_label(), int(inside.sum()))
     finally:
         plt.close(fig)
@@ -202,17 +211,22 @@ def test_a_label_counts_only_events_that_are_the_same_thing():
     one; a take-off commanded is not a drone airborne."""
     from rpf_fly.log.review import ReviewEvent
 
-    events = [ReviewEvent(1.0, 2, "take-off commanded: 3 drone(s) to 0.60 m in 2 s", "flight", "takeoff"),
-              ReviewEvent(3.0, 2, "airborne at 0.60 m: planning", "cf1", "takeoff"),
-              ReviewEvent(3.1, 2, "airborne at 0.59 m: planning", "cf2", "takeoff"),
-              ReviewEvent(4.0, 2, "injected occlusion for 0.6 s", "cf2", "fault"),
-              ReviewEvent(6.0, 2, "injected gust for 1 s: accel (0.0, 1.5, 0.0)", "cf2", "fault"),
-              ReviewEvent(8.0, 2, "injected low_battery", "cf2", "fault"),
-              ReviewEvent(9.0, 2, "injected occlusion for 0.3 s", "cf1", "fault")]
+    events = [
+        ReviewEvent(1.0, 2, "take-off commanded: 3 drone(s) to 0.60 m in 2 s", "flight", "takeoff"),
+        ReviewEvent(3.0, 2, "airborne at 0.60 m: planning", "cf1", "takeoff"),
+        ReviewEvent(3.1, 2, "airborne at 0.59 m: planning", "cf2", "takeoff"),
+        ReviewEvent(4.0, 2, "injected occlusion for 0.6 s", "cf2", "fault"),
+        ReviewEvent(6.0, 2, "injected gust for 1 s: accel (0.0, 1.5, 0.0)", "cf2", "fault"),
+        ReviewEvent(8.0, 2, "injected low_battery", "cf2", "fault"),
+        ReviewEvent(9.0, 2, "injected occlusion for 0.3 s", "cf1", "fault"),
+    ]
     assert [t for _, t in labelled_events(events)] == [
-        "take-off commanded: 3 drone(s) to 0.60 m in 2 s", "cf1: airborne at 0.60 m: planning (x2)",
-        "cf2: injected occlusion for 0.6 s (x2)", "cf2: injected gust for 1 s: accel (0.0, 1.5, 0.0)",
-        "cf2: injected low_battery"]
+        "take-off commanded: 3 drone(s) to 0.60 m in 2 s",
+        "cf1: airborne at 0.60 m: planning (x2)",
+        "cf2: injected occlusion for 0.6 s (x2)",
+        "cf2: injected gust for 1 s: accel (0.0, 1.5, 0.0)",
+        "cf2: injected low_battery",
+    ]
 
 
 def test_every_flight_phase_has_a_colour_of_its_own():

@@ -23,8 +23,18 @@ def carrot_log(path, source: str, behind: dict[str, float], yaml: str = "name: c
     """Each drone's setpoint moves along x at 0.5 m/s for 6 s (10 Hz) from a 1 s hover; the drone (mocap at 100 Hz)
     is ``behind[drone]`` metres behind it once moving (the lag building up over the first second)."""
     mission = {"name": "carrot", "yaml": yaml, "seed": 0, "source": source, "planner": "apf"}
-    scenario = {"json": json.dumps({"names": list(behind), "goals": [[3.0, float(i)] for i in range(len(behind))],
-                                    "obstacles": [], "dt": 0.1, "goal_tolerance": 0.1, "safety_radius": 0.1})}
+    scenario = {
+        "json": json.dumps(
+            {
+                "names": list(behind),
+                "goals": [[3.0, float(i)] for i in range(len(behind))],
+                "obstacles": [],
+                "dt": 0.1,
+                "goal_tolerance": 0.1,
+                "safety_radius": 0.1,
+            }
+        )
+    }
 
     def setpoint_x(t: float) -> float:
         return max(0.0, t - 1.0) * SPEED
@@ -40,9 +50,23 @@ def carrot_log(path, source: str, behind: dict[str, float], yaml: str = "name: c
                 if k % 10 == 0:
                     x = setpoint_x(t) - lag(t, full)
                     log.setpoint(drone, T0 + k * 10 * MS, (setpoint_x(t), float(i), 0.6))
-                    log.planner_step(drone, T0 + k * 10 * MS, tick=k // 10, position=(x, float(i), 0.6),
-                                     goal=complex(3.0, i), mode="apf", eta=0.05, lam=2.0, f_a=1 + 0j, f_r=0j,
-                                     f_in=0j, direction=1 + 0j, heading=0.0, neighbours=1, obstacle_distance=1.0)
+                    log.planner_step(
+                        drone,
+                        T0 + k * 10 * MS,
+                        tick=k // 10,
+                        position=(x, float(i), 0.6),
+                        goal=complex(3.0, i),
+                        mode="apf",
+                        eta=0.05,
+                        lam=2.0,
+                        f_a=1 + 0j,
+                        f_r=0j,
+                        f_in=0j,
+                        direction=1 + 0j,
+                        heading=0.0,
+                        neighbours=1,
+                        obstacle_distance=1.0,
+                    )
     return path
 
 
@@ -60,11 +84,15 @@ def test_a_crazyflie_trailing_by_its_lag_is_as_expected_and_one_trailing_far_mor
     assert text.exit_code == 0, text.output
     lines = text.stdout.splitlines()
     said = next(line for line in lines if line.startswith("expected while cruising"))
-    assert said == ("expected while cruising: Crazyflies with the firmware's default gains trail a moving setpoint "
-                    "by about 0.55 s x its speed: 0.28 m at the flown 0.50 m/s; measured (median) cf1 0.28, cf2 0.60 m")
+    assert said == (
+        "expected while cruising: Crazyflies with the firmware's default gains trail a moving setpoint "
+        "by about 0.55 s x its speed: 0.28 m at the flown 0.50 m/s; measured (median) cf1 0.28, cf2 0.60 m"
+    )
     flagged = [line.strip() for line in lines if "outside the expected" in line]
-    assert flagged == ["cf2: 0.60 m from its setpoint while cruising at 0.50 m/s, outside the expected 0.19-0.36 m "
-                       "(pushed: a gust, a contact; late poses; other gains than expected)"]
+    assert flagged == [
+        "cf2: 0.60 m from its setpoint while cruising at 0.50 m/s, outside the expected 0.19-0.36 m "
+        "(pushed: a gust, a contact; late poses; other gains than expected)"
+    ]
 
     doc = json.loads(CliRunner().invoke(get_app(), ["review", str(path), "--json"]).stdout)
     assert doc["tracking_expected"]["lag_s"] == CRAZYFLIE_LAG_S
@@ -75,14 +103,14 @@ def test_a_crazyflie_trailing_by_its_lag_is_as_expected_and_one_trailing_far_mor
 
 def test_a_dry_run_is_judged_against_its_simulated_drones_lag(tmp_path):
     """The dry run's drones trail by 0.25 s x speed: one trailing as a default-gain Crazyflie would is outside."""
-    path = carrot_log(tmp_path / "dry.mcap", "dry-run", {"cf1": DRY_RUN_LAG_S * SPEED,
-                                                         "cf2": CRAZYFLIE_LAG_S * SPEED})
+    path = carrot_log(tmp_path / "dry.mcap", "dry-run", {"cf1": DRY_RUN_LAG_S * SPEED, "cf2": CRAZYFLIE_LAG_S * SPEED})
     result = review(read_log(path))
     assert not result.tracking_expected["cf1"].outside and result.tracking_expected["cf2"].outside
     text = CliRunner().invoke(get_app(), ["review", str(path)]).stdout
-    assert ("expected while cruising: the dry run's simulated drones trail a moving setpoint by about 0.25 s x its "
-            "speed (a Crazyflie with the firmware's default gains: about 0.55 s): 0.12 m at the flown 0.50 m/s") \
-        in " ".join(text.split())
+    assert (
+        "expected while cruising: the dry run's simulated drones trail a moving setpoint by about 0.25 s x its "
+        "speed (a Crazyflie with the firmware's default gains: about 0.55 s): 0.12 m at the flown 0.50 m/s"
+    ) in " ".join(text.split())
 
 
 def test_the_dry_run_lag_is_the_simulated_drones():
@@ -107,7 +135,11 @@ def test_a_dry_run_whose_drones_fly_the_firmwares_cascade_is_judged_as_crazyflie
     assert dry_run_dynamics("name: m\n") == dry_run_dynamics("{not yaml") == ""
     assert tracking_lag("dry-run", "firmware")[0] == CRAZYFLIE_LAG_S
     assert tracking_lag("dry-run", "first-order")[0] == DRY_RUN_LAG_S
-    path = carrot_log(tmp_path / "cascade.mcap", "dry-run", {"cf1": CRAZYFLIE_LAG_S * SPEED},
-                      yaml="name: carrot\ndry_run: {dynamics: firmware}\n")
+    path = carrot_log(
+        tmp_path / "cascade.mcap",
+        "dry-run",
+        {"cf1": CRAZYFLIE_LAG_S * SPEED},
+        yaml="name: carrot\ndry_run: {dynamics: firmware}\n",
+    )
     result = review(read_log(path))
     assert result.tracking_lag[0] == CRAZYFLIE_LAG_S and not result.tracking_expected["cf1"].outside

@@ -43,8 +43,10 @@ def test_a_wheel_layout_without_a_checkout_loads_the_default_planner(tmp_path):
     shutil.copytree(PROJECT_POLICIES, prefix / INSTALLED_POLICIES, ignore=shutil.ignore_patterns("*.png", "*.csv"))
     mission = tmp_path / "flights" / "m.yaml"
     mission.parent.mkdir()
-    mission.write_text("name: m\narena: {x: [-2, 2], y: [-2, 2], z: [0, 2]}\n"
-                       "drones:\n  - {name: cf1, uri: 'radio://0/80/2M/E7E7E7E701', start: [0, 0], goal: [1, 0]}\n")
+    mission.write_text(
+        "name: m\narena: {x: [-2, 2], y: [-2, 2], z: [0, 2]}\n"
+        "drones:\n  - {name: cf1, uri: 'radio://0/80/2M/E7E7E7E701', start: [0, 0], goal: [1, 0]}\n"
+    )
     copied = tmp_path / "flights" / "copied.yaml"
     copied.write_text((ROOT / "missions" / "lab-3.yaml").read_text())
     script = (
@@ -54,8 +56,14 @@ def test_a_wheel_layout_without_a_checkout_loads_the_default_planner(tmp_path):
         f"print(load_mission({str(copied)!r}).planner.policy)\n"
     )
     venv_site = sysconfig.get_path("purelib")
-    done = subprocess.run([sys.executable, "-S", "-c", script], capture_output=True, text=True, cwd=tmp_path,
-                          env={"PYTHONPATH": f"{site}:{venv_site}", "PATH": "/usr/bin:/bin"}, timeout=120)
+    done = subprocess.run(
+        [sys.executable, "-S", "-c", script],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        env={"PYTHONPATH": f"{site}:{venv_site}", "PATH": "/usr/bin:/bin"},
+        timeout=120,
+    )
     assert done.returncode == 0, done.stderr
     package, default_policy, copied_policy = done.stdout.split()
     assert Path(package).is_relative_to(site)

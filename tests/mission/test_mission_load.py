@@ -74,19 +74,44 @@ def test_full_mission_round_trips(workdir):
     assert mission == Mission(
         name="lab-3",
         arena=Arena(x=(-2.0, 2.0), y=(-2.0, 2.0), z=(0.0, 1.5)),
-        flight=FlightSettings(height=0.6, speed=0.5, rate_hz=20.0, goal_tolerance=0.1, takeoff_s=2.0, land_s=2.0,
-                              timeout_s=60.0),
-        planner=PlannerSettings(kind="rpf", policy=policy.resolve(), sensing_range=6.0, safety_radius=0.1,
-                                influence_range=10.0, wall_following=False, wall_threshold=0.5, preset="paper",
-                                neighbour_aggregate="mean", eta=0.04, lam=1.5),
-        mocap=MocapSettings(kind="natnet", server="10.0.0.10", local_ip="10.0.0.2", multicast=True,
-                            multicast_group="239.255.42.99", command_port=1510, data_port=1511, up_axis="y",
-                            noise_m=0.001, latency_s=0.01, rate_hz=120.0, dropout=0.05, timeout_s=0.3),
+        flight=FlightSettings(
+            height=0.6, speed=0.5, rate_hz=20.0, goal_tolerance=0.1, takeoff_s=2.0, land_s=2.0, timeout_s=60.0
+        ),
+        planner=PlannerSettings(
+            kind="rpf",
+            policy=policy.resolve(),
+            sensing_range=6.0,
+            safety_radius=0.1,
+            influence_range=10.0,
+            wall_following=False,
+            wall_threshold=0.5,
+            preset="paper",
+            neighbour_aggregate="mean",
+            eta=0.04,
+            lam=1.5,
+        ),
+        mocap=MocapSettings(
+            kind="natnet",
+            server="10.0.0.10",
+            local_ip="10.0.0.2",
+            multicast=True,
+            multicast_group="239.255.42.99",
+            command_port=1510,
+            data_port=1511,
+            up_axis="y",
+            noise_m=0.001,
+            latency_s=0.01,
+            rate_hz=120.0,
+            dropout=0.05,
+            timeout_s=0.3,
+        ),
         radio=RadioSettings(kind="cflib", min_battery_v=3.6, extpos="extpose"),
         sim=SimSettings(time_limit_s=60.0, start_jitter_m=0.05, angle_jitter_deg=5.0),
         obstacles=(CircleObstacle(center=(0.0, 0.5), radius=0.1), BoxObstacle(min=(1.0, -0.5), max=(1.2, 0.5))),
-        drones=(Drone("cf1", "radio://0/80/2M/E7E7E7E701", "cf1", (-1.5, 0.0), (1.5, 1.0)),
-                Drone("cf_2", "fake://0/80/250K/e7e7e7e702?rate_limit=100", "Body 2", (-1.5, 1.0), (1.5, -1.0))),
+        drones=(
+            Drone("cf1", "radio://0/80/2M/E7E7E7E701", "cf1", (-1.5, 0.0), (1.5, 1.0)),
+            Drone("cf_2", "fake://0/80/250K/e7e7e7e702?rate_limit=100", "Body 2", (-1.5, 1.0), (1.5, -1.0)),
+        ),
         formation=None,
         source=path,
         text=FULL,
@@ -124,7 +149,9 @@ def test_the_default_planners_missing_policy_is_one_line_naming_the_default(tmp_
     with pytest.raises(MissionError) as err:
         load_mission(path)
     text = str(err.value)
-    assert "\n" not in text and text.startswith(f"{path}:1: planner.policy: the default planner kind 'rpf3' needs a policy")
+    assert "\n" not in text and text.startswith(
+        f"{path}:1: planner.policy: the default planner kind 'rpf3' needs a policy"
+    )
     assert "policies/rpf3.onnx" in text and "planner.kind" in text
     path.write_text(BASE + "planner: {kind: rpf3}\n")
     with pytest.raises(MissionError, match=r"m.yaml:\d+: planner.policy: planner kind 'rpf3' needs a policy"):
@@ -214,8 +241,15 @@ def test_formation_expansion(load):
         formation: {kind: circle_swap, count: 12, radius: 3, center: [1, -0.5], phase_deg: 90,
                     uri_base: radio://1/90/1M/E7E7E7E7, name_prefix: uav}
         """)
-    f = Formation(kind="circle_swap", count=12, radius=3.0, center=(1.0, -0.5), uri_base="radio://1/90/1M/E7E7E7E7",
-                  name_prefix="uav", phase_deg=90.0)
+    f = Formation(
+        kind="circle_swap",
+        count=12,
+        radius=3.0,
+        center=(1.0, -0.5),
+        uri_base="radio://1/90/1M/E7E7E7E7",
+        name_prefix="uav",
+        phase_deg=90.0,
+    )
     assert mission.formation == f
     assert len(mission.drones) == 12
     assert [d.name for d in mission.drones] == [f"uav{i}" for i in range(1, 13)]
@@ -400,8 +434,9 @@ def test_safety_section_defaults_and_values(tmp_path):
         "drones:\n  - {name: cf1, uri: radio://0/80/2M/E7E7E7E701, start: [0, 0], goal: [1, 0]}\n"
     )
     assert parse_mission(base).safety == SafetySettings()
-    m = parse_mission(base + "safety: {pose_timeout_s: 0.5, on_separation: land, arrival_hold_s: 0}\n"
-                      "radio: {extpos_rate_hz: 50}\n")
+    m = parse_mission(
+        base + "safety: {pose_timeout_s: 0.5, on_separation: land, arrival_hold_s: 0}\nradio: {extpos_rate_hz: 50}\n"
+    )
     assert m.safety.pose_timeout_s == 0.5 and m.safety.on_separation == "land" and m.radio.extpos_rate_hz == 50
 
 
@@ -424,8 +459,15 @@ def test_safety_section_rejects_unknown_response():
 
 @pytest.mark.parametrize(
     "kind, guidance, margin",
-    [("apf", "path", 0.05), ("orca", "none", 0.05), ("apf-paper", "none", 0.0), ("rpf", "none", 0.0),
-     ("rpf-mean", "none", 0.0), ("ppo", "none", 0.0), ("rpf3", "path", 0.05)],
+    [
+        ("apf", "path", 0.05),
+        ("orca", "none", 0.05),
+        ("apf-paper", "none", 0.0),
+        ("rpf", "none", 0.0),
+        ("rpf-mean", "none", 0.0),
+        ("ppo", "none", 0.0),
+        ("rpf3", "path", 0.05),
+    ],
 )
 def test_guidance_and_margin_default_by_kind(kind, guidance, margin):
     """On for the product's planner; the paper's planners stay as the paper wrote them."""

@@ -39,8 +39,7 @@ def test_only_document_marker(fail):
 
 
 def test_invalid_yaml_unclosed_flow_sequence(fail):
-    fail("arena: {x: [-2, 2], y: [-2, 2]}\ndrones:\n  - {name: cf1, start: [1, 2}\n",
-         "m.yaml:3: (file): invalid YAML:")
+    fail("arena: {x: [-2, 2], y: [-2, 2]}\ndrones:\n  - {name: cf1, start: [1, 2}\n", "m.yaml:3: (file): invalid YAML:")
 
 
 def test_invalid_yaml_bad_indentation(fail):
@@ -60,14 +59,18 @@ def test_two_documents(fail):
 
 
 def test_python_object_tag_is_refused(fail):
-    fail("arena: {x: [-2, 2], y: [-2, 2]}\nname: !!python/object/apply:os.system ['echo hi']\n",
-         "m.yaml:2: name: YAML tags that construct objects are not allowed (safe loading only)",
-         "!!python/object/apply:os.system")
+    fail(
+        "arena: {x: [-2, 2], y: [-2, 2]}\nname: !!python/object/apply:os.system ['echo hi']\n",
+        "m.yaml:2: name: YAML tags that construct objects are not allowed (safe loading only)",
+        "!!python/object/apply:os.system",
+    )
 
 
 def test_python_object_tag_on_the_whole_document(fail):
-    fail("!!python/object/apply:os.system\nargs: ['echo hi']\n",
-         "m.yaml:1: (file): YAML tags that construct objects are not allowed (safe loading only)")
+    fail(
+        "!!python/object/apply:os.system\nargs: ['echo hi']\n",
+        "m.yaml:1: (file): YAML tags that construct objects are not allowed (safe loading only)",
+    )
 
 
 def test_local_tag_is_refused_deep_in_a_drone(fail):
@@ -120,8 +123,10 @@ def test_recursive_alias(fail):
 
 def test_alias_expansion_bomb(fail, monkeypatch):
     monkeypatch.setattr(yaml_nodes, "MAX_NODES", 1000)
-    text = "a: &a [1, 1, 1, 1, 1, 1, 1, 1, 1, 1]\nb: &b [*a, *a, *a, *a, *a, *a, *a, *a, *a, *a]\n" \
-           "c: &c [*b, *b, *b, *b, *b, *b, *b, *b, *b, *b]\n"
+    text = (
+        "a: &a [1, 1, 1, 1, 1, 1, 1, 1, 1, 1]\nb: &b [*a, *a, *a, *a, *a, *a, *a, *a, *a, *a]\n"
+        "c: &c [*b, *b, *b, *b, *b, *b, *b, *b, *b, *b]\n"
+    )
     fail(text, "m.yaml:1: c[", "more than 1000 values")
 
 

@@ -55,8 +55,9 @@ def test_a_policy_of_ones_own_has_no_fallback(tmp_path, monkeypatch):
 def test_a_missing_policy_names_each_place_once_with_dots_folded(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     mission = tmp_path / "m.yaml"
-    mission.write_text((ROOT / "missions" / "lab-3.yaml").read_text().replace("../policies/rpf3.onnx",
-                                                                                "../policies/nope.onnx"))
+    mission.write_text(
+        (ROOT / "missions" / "lab-3.yaml").read_text().replace("../policies/rpf3.onnx", "../policies/nope.onnx")
+    )
     with pytest.raises(MissionError) as info:
         load_mission(mission)
     looked = str(info.value).split("(looked in ", 1)[1].rstrip(")").split(", ")
@@ -65,7 +66,12 @@ def test_a_missing_policy_names_each_place_once_with_dots_folded(tmp_path, monke
 
 def test_sim_of_a_copied_mission_in_a_real_process(tmp_path):
     shutil.copy(ROOT / "missions" / "lab-3.yaml", tmp_path / "lab.yaml")
-    proc = subprocess.run([sys.executable, "-m", "rpf_fly", "sim", "lab.yaml", "--json"], capture_output=True,
-                          text=True, cwd=tmp_path, timeout=120)
+    proc = subprocess.run(
+        [sys.executable, "-m", "rpf_fly", "sim", "lab.yaml", "--json"],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        timeout=120,
+    )
     assert proc.returncode == 0, proc.stderr
     assert json.loads(proc.stdout)["planner"] == "rpf3"

@@ -79,9 +79,7 @@ def test_watch_fails_with_one_line_when_no_server_answers():
         result = runner.invoke(app, ["mocap", "watch", "--command-port", str(port), "--timeout", "0.5", "--unicast"])
     assert result.exit_code == 1
     assert result.stdout == ""
-    assert result.stderr.strip().splitlines() == [
-        f"error: no NatNet server answered at 127.0.0.1:{port} within 0.5 s"
-    ]
+    assert result.stderr.strip().splitlines() == [f"error: no NatNet server answered at 127.0.0.1:{port} within 0.5 s"]
 
 
 def test_watch_fails_when_the_server_answers_but_no_frames_come():
@@ -142,9 +140,9 @@ def summary_of(text: str) -> tuple[str, dict[str, float]]:
     """The summary's head line and each body's valid %."""
     lines = text.splitlines()
     start = next(i for i, line in enumerate(lines) if "summary: " in line)
-    lines[start] = lines[start][lines[start].index("summary: "):]  # after a terminal's cursor codes
+    lines[start] = lines[start][lines[start].index("summary: ") :]  # after a terminal's cursor codes
     valid = {}
-    for line in lines[start + 1:]:
+    for line in lines[start + 1 :]:
         name, rest = line.strip().split(": valid ")
         valid[name] = float(rest.split("%")[0])
     return lines[start], valid
@@ -177,8 +175,9 @@ def test_watch_json_keeps_every_frame_on_stdout_and_the_summary_on_stderr():
 
 def test_watch_on_a_terminal_redraws_one_table():
     with NatNetServer(lambda: POSES, version=(4, 1), multicast=False, rate_hz=200, up_axis="y") as server:
-        result = runner.invoke(app, watch_args(server, False, "--duration", "1.0"),
-                               env={"TTY_COMPATIBLE": "1", "COLUMNS": "120"})
+        result = runner.invoke(
+            app, watch_args(server, False, "--duration", "1.0"), env={"TTY_COMPATIBLE": "1", "COLUMNS": "120"}
+        )
     assert result.exit_code == 0, result.output
     out = result.stdout
     assert "\x1b[" in out  # cursor control: the table is redrawn in place
@@ -194,8 +193,9 @@ def test_watch_stops_on_ctrl_c_with_the_summary():
 
     command = [sys.executable, "-m", "rpf_fly", "mocap", "watch"]
     with NatNetServer(lambda: POSES, version=(4, 1), multicast=False, rate_hz=100, up_axis="y") as server:
-        proc = subprocess.Popen(command + watch_args(server, False)[2:], stdout=subprocess.PIPE,
-                                stderr=subprocess.PIPE, text=True)
+        proc = subprocess.Popen(
+            command + watch_args(server, False)[2:], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+        )
         try:
             header = proc.stdout.readline()
             assert "rigid bodies" in header, header + proc.stderr.read()
@@ -212,15 +212,30 @@ def test_watch_stops_on_ctrl_c_with_the_summary():
 
 # -- the up axis: watch says which it assumed, and hints at the other when the bodies look streamed with it --------
 
-ON_THE_FLOOR = {"cf1": ((0.5, -0.999, 0.03), (0.0, 0.0, 0.0, 1.0), True),
-                "cf2": ((-1.0, 1.0, 0.03), (0.0, 0.0, 0.0, 1.0), True)}
+ON_THE_FLOOR = {
+    "cf1": ((0.5, -0.999, 0.03), (0.0, 0.0, 0.0, 1.0), True),
+    "cf2": ((-1.0, 1.0, 0.03), (0.0, 0.0, 0.0, 1.0), True),
+}
 """Two drones on the floor (Z-up world), one of them at y -0.999."""
 
 
 def up_axis_watch(streams: str, poses: dict, *args: str):  # type: ignore[no-untyped-def]
     with NatNetServer(lambda: poses, version=(4, 1), multicast=False, rate_hz=100, up_axis=streams) as server:
-        return runner.invoke(app, ["mocap", "watch", "--command-port", str(server.command_port), "--unicast",
-                                   "--duration", "1.5", "--rate", "2", *args])
+        return runner.invoke(
+            app,
+            [
+                "mocap",
+                "watch",
+                "--command-port",
+                str(server.command_port),
+                "--unicast",
+                "--duration",
+                "1.5",
+                "--rate",
+                "2",
+                *args,
+            ],
+        )
 
 
 def test_a_y_up_stream_watched_as_z_up_says_what_it_assumed_and_how_to_change_it():
@@ -229,8 +244,10 @@ def test_a_y_up_stream_watched_as_z_up_says_what_it_assumed_and_how_to_change_it
     lines = result.stdout.splitlines()
     assert "assuming Z-up (--up-axis z; NatNet does not say which Motive streams), shown Z-up" in lines[0]
     assert "cf2 (-1.000, +0.030, -1.000) ok" in lines[1]  # its depth shown as z, below the floor
-    hint = ("hint: cf2 is at z -1.000 m, below the floor: the stream looks Y-up (Motive's default), not the Z-up "
-            "assumed (--up-axis z): watch with --up-axis y, and fly with mocap.up_axis: y")
+    hint = (
+        "hint: cf2 is at z -1.000 m, below the floor: the stream looks Y-up (Motive's default), not the Z-up "
+        "assumed (--up-axis z): watch with --up-axis y, and fly with mocap.up_axis: y"
+    )
     assert lines.count(hint) == 2 and lines[-1] == hint  # once the first second is in, and after the summary
 
 
@@ -240,15 +257,22 @@ def test_a_z_up_stream_watched_as_y_up_hints_at_z():
     assert "assuming Y-up (--up-axis y;" in result.stdout.splitlines()[0]
     assert result.stdout.splitlines()[-1] == (
         "hint: cf1 is at z -0.999 m, below the floor: the stream looks Z-up, not the Y-up assumed (--up-axis y): "
-        "watch with --up-axis z, and fly with mocap.up_axis: z")
+        "watch with --up-axis z, and fly with mocap.up_axis: z"
+    )
     # bodies at rest, all at y near 0 and one high: their height is in y (said if they stand on the floor)
-    result = up_axis_watch("z", {"cf1": ((1.0, 2.0, 0.03), (0.0, 0.0, 0.0, 1.0), True),
-                                 "cf2": ((0.0, 0.5, 0.03), (0.0, 0.0, 0.0, 1.0), True)}, "--up-axis", "y", "--json")
+    result = up_axis_watch(
+        "z",
+        {"cf1": ((1.0, 2.0, 0.03), (0.0, 0.0, 0.0, 1.0), True), "cf2": ((0.0, 0.5, 0.03), (0.0, 0.0, 0.0, 1.0), True)},
+        "--up-axis",
+        "y",
+        "--json",
+    )
     assert result.exit_code == 0, result.output
     assert result.stderr.splitlines()[-1] == (
         "hint: every body at rest has y within 0.1 m of 0 while cf1 is at z +2.000 m: if they stand on the floor, "
         "the stream looks Z-up, not the Y-up assumed (--up-axis y): watch with --up-axis z, and fly with "
-        "mocap.up_axis: z")
+        "mocap.up_axis: z"
+    )
     assert all(line.startswith("{") for line in result.stdout.splitlines())  # the JSON lines stay JSON
 
 

@@ -36,9 +36,24 @@ def test_watch_optitrack_reads_the_emulator_through_the_library(up_axis):
     """`--system optitrack --host 127.0.0.1` reads `rpf-fly mocap emulate` (multicast on loopback: the library's
     interface_ip becomes 127.0.0.1 by itself, as the NatNet client's membership does)."""
     with NatNetServer(lambda: POSES, version="4.1", multicast=True, rate_hz=200, up_axis=up_axis) as server:
-        result = runner.invoke(app, ["mocap", "watch", "--system", "optitrack", "--host", "127.0.0.1",
-                                     "--command-port", str(server.command_port), "--up-axis", up_axis,
-                                     "--frames", "3", "--json"])
+        result = runner.invoke(
+            app,
+            [
+                "mocap",
+                "watch",
+                "--system",
+                "optitrack",
+                "--host",
+                "127.0.0.1",
+                "--command-port",
+                str(server.command_port),
+                "--up-axis",
+                up_axis,
+                "--frames",
+                "3",
+                "--json",
+            ],
+        )
     assert result.exit_code == 0, result.output
     objects = [json.loads(line) for line in result.stdout.splitlines()]
     assert len(objects) == 3
@@ -57,9 +72,25 @@ def test_the_summary_tells_the_frames_span_from_the_watchs_duration():
     the rate over it, and the watch's 3 s apart."""
     with NatNetServer(lambda: POSES, version="4.1", multicast=True, rate_hz=200, up_axis="z") as server:
         timer = stop_after(server, 1.5)
-        result = runner.invoke(app, ["mocap", "watch", "--system", "optitrack", "--host", "127.0.0.1",
-                                     "--command-port", str(server.command_port), "--duration", "3.5",
-                                     "--timeout", "5", "--rate", "1"])
+        result = runner.invoke(
+            app,
+            [
+                "mocap",
+                "watch",
+                "--system",
+                "optitrack",
+                "--host",
+                "127.0.0.1",
+                "--command-port",
+                str(server.command_port),
+                "--duration",
+                "3.5",
+                "--timeout",
+                "5",
+                "--rate",
+                "1",
+            ],
+        )
         timer.join()
     assert result.exit_code == 0, result.output
     head = next(line for line in result.stdout.splitlines() if line.startswith("summary: "))
@@ -72,8 +103,21 @@ def test_local_ip_is_the_librarys_interface_ip():
     """`--local-ip` reaches the library as `interface_ip`: 127.0.0.1 reads the loopback multicast, an address this
     host does not have makes the library's own multicast join fail (RFC 5737's TEST-NET-1)."""
     with NatNetServer(lambda: POSES, version="4.1", multicast=True, rate_hz=200, up_axis="z") as server:
-        args = ["mocap", "watch", "--system", "optitrack", "--host", "127.0.0.1", "--command-port",
-                str(server.command_port), "--frames", "2", "--json", "--timeout", "3"]
+        args = [
+            "mocap",
+            "watch",
+            "--system",
+            "optitrack",
+            "--host",
+            "127.0.0.1",
+            "--command-port",
+            str(server.command_port),
+            "--frames",
+            "2",
+            "--json",
+            "--timeout",
+            "3",
+        ]
         read = runner.invoke(app, [*args, "--local-ip", "127.0.0.1"])
         refused = runner.invoke(app, [*args, "--local-ip", "192.0.2.1"])
     assert read.exit_code == 0, read.output
@@ -84,18 +128,48 @@ def test_local_ip_is_the_librarys_interface_ip():
 
 
 def test_watch_mock_prints_its_bodies_and_frames():
-    result = runner.invoke(app, ["mocap", "watch", "--system", "mock", "--frames", "2", "--json",
-                                 "--option", "rigid_bodies=cf1(1,2,0.5,1,0,0,0)", "--option", "frequency=50"])
+    result = runner.invoke(
+        app,
+        [
+            "mocap",
+            "watch",
+            "--system",
+            "mock",
+            "--frames",
+            "2",
+            "--json",
+            "--option",
+            "rigid_bodies=cf1(1,2,0.5,1,0,0,0)",
+            "--option",
+            "frequency=50",
+        ],
+    )
     assert result.exit_code == 0, result.output
     objects = [json.loads(line) for line in result.stdout.splitlines()]
     assert [o["bodies"] for o in objects] == [
-        {"cf1": {"position": [1.0, 2.0, 0.5], "quaternion": [0.0, 0.0, 0.0, 1.0], "valid": True}}] * 2
+        {"cf1": {"position": [1.0, 2.0, 0.5], "quaternion": [0.0, 0.0, 0.0, 1.0], "valid": True}}
+    ] * 2
     assert objects[0]["frame"] < objects[1]["frame"] and all(math.isfinite(o["timestamp"]) for o in objects)
 
 
 def test_watch_mock_piped_prints_at_most_rate_lines_a_second_and_a_summary():
-    result = runner.invoke(app, ["mocap", "watch", "--system", "mock", "--duration", "1.5", "--rate", "4",
-                                 "--option", "rigid_bodies=cf1(1,2,0.5,1,0,0,0)", "--option", "frequency=100"])
+    result = runner.invoke(
+        app,
+        [
+            "mocap",
+            "watch",
+            "--system",
+            "mock",
+            "--duration",
+            "1.5",
+            "--rate",
+            "4",
+            "--option",
+            "rigid_bodies=cf1(1,2,0.5,1,0,0,0)",
+            "--option",
+            "frequency=100",
+        ],
+    )
     assert result.exit_code == 0, result.output
     lines = result.stdout.splitlines()
     assert lines[0].startswith("motioncapture mock") and "at most 4 lines a second" in lines[0]
@@ -115,15 +189,32 @@ def test_watch_mock_without_bodies_still_streams_and_says_how_to_add_them():
     assert "--option 'rigid_bodies=" in result.stderr
 
 
-@pytest.mark.parametrize("args, code, line", [
-    (["--system", "vicon", "--option", "enable_objects=yes"], 2,
-     "error: --option enable_objects: expected true or false, got 'yes'"),
-    (["--system", "vicon", "--option", "enable_pointcloud=true"], 2,
-     "error: --option enable_pointcloud: unknown option 'enable_pointcloud' of type 'vicon' (did you mean "
-     "'enable_pointclout'?); vicon takes enable_objects, enable_pointclout"),
-    (["--system", "vicom"], 2, "error: --system/--host: unknown motioncapture type 'vicom' (did you mean 'vicon'?);"),
-    (["--system", "nokov", "--timeout", "1"], 1, "error: motioncapture nokov: this motioncapture build has no 'nokov'"),
-])
+@pytest.mark.parametrize(
+    "args, code, line",
+    [
+        (
+            ["--system", "vicon", "--option", "enable_objects=yes"],
+            2,
+            "error: --option enable_objects: expected true or false, got 'yes'",
+        ),
+        (
+            ["--system", "vicon", "--option", "enable_pointcloud=true"],
+            2,
+            "error: --option enable_pointcloud: unknown option 'enable_pointcloud' of type 'vicon' (did you mean "
+            "'enable_pointclout'?); vicon takes enable_objects, enable_pointclout",
+        ),
+        (
+            ["--system", "vicom"],
+            2,
+            "error: --system/--host: unknown motioncapture type 'vicom' (did you mean 'vicon'?);",
+        ),
+        (
+            ["--system", "nokov", "--timeout", "1"],
+            1,
+            "error: motioncapture nokov: this motioncapture build has no 'nokov'",
+        ),
+    ],
+)
 def test_watch_refuses_in_one_line(args, code, line):
     result = runner.invoke(app, ["mocap", "watch", *args])
     assert result.exit_code == code, result.output
@@ -151,7 +242,8 @@ def test_fly_and_check_refuse_real_drones_on_mock_poses(tmp_path):
     assert flown.exit_code == 2
     assert flown.stderr.strip() == (
         f"{path}:2: mocap.type: 'mock' serves fixed poses from its options, not the drones': it can only fly with "
-        "--dry-run (which serves the simulated drones' poses, docs/mocap.md)")
+        "--dry-run (which serves the simulated drones' poses, docs/mocap.md)"
+    )
     checked = runner.invoke(app, ["check", str(path)])
     assert checked.exit_code == 0 and "preflight skipped: mocap.type: 'mock' serves fixed poses" in checked.stdout
 

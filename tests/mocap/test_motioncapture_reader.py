@@ -47,12 +47,28 @@ def read_both(version: str, up_axis: str, names=NAMES, frames: int = 25, seed: i
     """Send ``frames`` frames; yield (number, our client's frame, the library's frame, what was streamed)."""
     rng = random.Random(seed)
     current = {"poses": random_poses(rng, names)}
-    with NatNetServer(lambda: current["poses"], version=version, multicast=True, local_ip="127.0.0.1", rate_hz=0,
-                      up_axis=up_axis, bodies=list(names)) as server:
-        with NatNetClient("127.0.0.1", multicast=True, local_ip="127.0.0.1", command_port=server.command_port,
-                          data_port=None, up_axis=up_axis) as ours, \
-                MotioncaptureSource("optitrack", "127.0.0.1", {"port_command": server.command_port},
-                                    up_axis=up_axis, bodies=list(names)) as library:
+    with NatNetServer(
+        lambda: current["poses"],
+        version=version,
+        multicast=True,
+        local_ip="127.0.0.1",
+        rate_hz=0,
+        up_axis=up_axis,
+        bodies=list(names),
+    ) as server:
+        with (
+            NatNetClient(
+                "127.0.0.1",
+                multicast=True,
+                local_ip="127.0.0.1",
+                command_port=server.command_port,
+                data_port=None,
+                up_axis=up_axis,
+            ) as ours,
+            MotioncaptureSource(
+                "optitrack", "127.0.0.1", {"port_command": server.command_port}, up_axis=up_axis, bodies=list(names)
+            ) as library,
+        ):
             assert ours.wait_for_server(5.0)
             ids = server.body_ids
             assert ours.rigid_body_names == {i: n for n, i in ids.items()}
@@ -101,8 +117,9 @@ def test_bitstream_4_2_with_one_rigid_body_reads_alike():
 def test_bitstream_4_2_with_two_rigid_bodies_crashes_the_library_in_its_child_not_here():
     poses = {name: ((0.1, 0.2, 0.3), (0.0, 0.0, 0.0, 1.0), True) for name in ("cf1", "cf2")}
     with NatNetServer(lambda: poses, version="4.2", multicast=True, rate_hz=50) as server:
-        with NatNetClient("127.0.0.1", multicast=True, local_ip="127.0.0.1", command_port=server.command_port,
-                          data_port=None) as ours:
+        with NatNetClient(
+            "127.0.0.1", multicast=True, local_ip="127.0.0.1", command_port=server.command_port, data_port=None
+        ) as ours:
             assert ours.wait_for_server(5.0)  # our client reads the stream
             frame = ours.receive(2.0)
             assert frame is not None and sorted(frame.bodies) == ["cf1", "cf2"]
@@ -117,9 +134,12 @@ def test_a_body_added_after_connect_is_named_by_our_client_only():
     fly on it). Our client asks for the definitions again and names it."""
     poses = {name: ((0.1 * i, 0.2, 0.3), (0.0, 0.0, 0.0, 1.0), True) for i, name in enumerate(("cf1", "cf2"))}
     with NatNetServer(lambda: poses, version="4.1", multicast=True, rate_hz=0, bodies=["cf1"]) as server:
-        with NatNetClient("127.0.0.1", multicast=True, local_ip="127.0.0.1", command_port=server.command_port,
-                          data_port=None) as ours, \
-                MotioncaptureSource("optitrack", "127.0.0.1", {"port_command": server.command_port}) as library:
+        with (
+            NatNetClient(
+                "127.0.0.1", multicast=True, local_ip="127.0.0.1", command_port=server.command_port, data_port=None
+            ) as ours,
+            MotioncaptureSource("optitrack", "127.0.0.1", {"port_command": server.command_port}) as library,
+        ):
             assert ours.wait_for_server(5.0)
             server.set_bodies(["cf1", "cf2"])
             for _ in range(5):

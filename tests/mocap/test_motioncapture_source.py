@@ -77,8 +77,10 @@ def test_mock_bodies_arrive_z_up_with_names_and_validity():
 
 def test_a_body_the_library_stops_reporting_is_invalid_at_its_last_pose():
     """The library leaves untracked bodies out of a frame; the source reports them as NatNet does: invalid."""
-    poses = {"cf1": ((0.5, 0.25, 1.0), (0.0, 0.0, 0.0, 1.0), True),
-             "cf2": ((1.0, 1.0, 0.5), (0.0, 0.0, 0.0, 1.0), True)}
+    poses = {
+        "cf1": ((0.5, 0.25, 1.0), (0.0, 0.0, 0.0, 1.0), True),
+        "cf2": ((1.0, 1.0, 0.5), (0.0, 0.0, 0.0, 1.0), True),
+    }
     with NatNetServer(lambda: poses, version="4.1", multicast=True, rate_hz=0, up_axis="z") as server:
         with MotioncaptureSource("optitrack", "127.0.0.1", {"port_command": server.command_port}) as source:
             server.send_frame()
@@ -199,10 +201,13 @@ def test_connect_gives_up_in_one_line_when_nothing_answers():
     silent.bind(("127.0.0.1", 0))
     with silent:
         with pytest.raises(MotioncaptureUnavailable) as info:
-            MotioncaptureSource("optitrack", "127.0.0.1", {"port_command": silent.getsockname()[1]},
-                                connect_timeout_s=0.5)
-    assert str(info.value) == ("motioncapture optitrack at 127.0.0.1: no answer within 0.5 s (is the system "
-                               "streaming, and this host on its network?)")
+            MotioncaptureSource(
+                "optitrack", "127.0.0.1", {"port_command": silent.getsockname()[1]}, connect_timeout_s=0.5
+            )
+    assert str(info.value) == (
+        "motioncapture optitrack at 127.0.0.1: no answer within 0.5 s (is the system "
+        "streaming, and this host on its network?)"
+    )
 
 
 def test_a_crash_while_connecting_is_one_line():
@@ -212,7 +217,8 @@ def test_a_crash_while_connecting_is_one_line():
         with pytest.raises(MotioncaptureUnavailable) as info:
             MotioncaptureSource("optitrack", "127.0.0.1", {"port_command": server.command_port})
     assert str(info.value).startswith(
-        "motioncapture optitrack at 127.0.0.1: the library's process died while connecting (killed by SIGSEGV)")
+        "motioncapture optitrack at 127.0.0.1: the library's process died while connecting (killed by SIGSEGV)"
+    )
     assert "\n" not in str(info.value)
 
 
@@ -223,7 +229,8 @@ def test_a_type_this_build_lacks_is_one_line_naming_the_wheels_types(system):
     where = f"motioncapture {system}" + (" at 127.0.0.1" if system == "optitrack_closed_source" else "")
     assert str(info.value) == (
         f"{where}: this motioncapture build has no {system!r} (the PyPI wheel of 1.1 has "
-        f"{', '.join(WHEEL_TYPES)}): RuntimeError: Unknown motion capture type!")
+        f"{', '.join(WHEEL_TYPES)}): RuntimeError: Unknown motion capture type!"
+    )
 
 
 def test_the_wheel_has_the_types_the_table_says():

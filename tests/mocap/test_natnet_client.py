@@ -276,6 +276,7 @@ def test_a_gap_the_caller_never_saw_is_reported_with_the_frame_after_it(fake_ser
     frame (`MocapFrame.unseen_untracked_s`, server time, to a frame), once: here body 1 is lost for 0.5 s and body 2 for
     0.05 s (one frame at 100 Hz would not count either). A gap whose start the caller saw (a frame it was given
     showed the body untracked) is not: the caller saw it live."""
+
     def at(n: int, *bodies: RigidBodyData) -> bytes:
         return encode_frame(FrameOfData(n, rigid_bodies=list(bodies), timestamp=n / 100.0), V)
 
@@ -283,13 +284,13 @@ def test_a_gap_the_caller_never_saw_is_reported_with_the_frame_after_it(fake_ser
         feed(client, encode_server_info(server_info(V)), at(100, rb(1), rb(2)))
         assert client.receive(0.0).unseen_untracked_s == {}
         queued = [at(n, rb(1, valid=not 110 <= n < 160), rb(2, valid=not 120 <= n < 125)) for n in range(101, 200)]
-        feed(client, *queued)                      # the caller was stalled: all of them wait in the socket
+        feed(client, *queued)  # the caller was stalled: all of them wait in the socket
         delivered = client.receive(0.0)
         assert delivered.frame_number == 199
         assert delivered.unseen_untracked_s == {"1": pytest.approx(0.50, abs=0.011)}  # 50 frames, within one
         feed(client, at(200, rb(1), rb(2)))
         assert client.receive(0.0).unseen_untracked_s == {}  # said once
         feed(client, at(201, rb(1, valid=False), rb(2)))
-        assert not client.receive(0.0).bodies["1"].valid   # the caller sees the gap begin ...
+        assert not client.receive(0.0).bodies["1"].valid  # the caller sees the gap begin ...
         feed(client, *[at(n, rb(1, valid=n >= 260), rb(2)) for n in range(202, 262)])
         assert client.receive(0.0).unseen_untracked_s == {}  # ... so its end is not news

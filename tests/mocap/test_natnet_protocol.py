@@ -121,8 +121,13 @@ def test_4_2_model_def_misread_as_4_1_fails():
 def test_pre_4_1_force_plate_device_and_camera_descriptions_are_skipped():
     version = (3, 0)
     force_plate = (
-        struct.pack("<i", 1) + b"FP-01\0" + struct.pack("<2f3f", 0.5, 0.6, 0, 0, 0) + bytes(4 * 144) + bytes(4 * 12)
-        + struct.pack("<iii", 1, 0, 2) + b"Fx\0Fy\0"
+        struct.pack("<i", 1)
+        + b"FP-01\0"
+        + struct.pack("<2f3f", 0.5, 0.6, 0, 0, 0)
+        + bytes(4 * 144)
+        + bytes(4 * 12)
+        + struct.pack("<iii", 1, 0, 2)
+        + b"Fx\0Fy\0"
     )
     device = struct.pack("<i", 4) + b"NI-DAQ\0SN1\0" + struct.pack("<iii", 1, 0, 1) + b"ch0\0"
     camera = b"Prime13\0" + struct.pack("<3f4f", 1, 2, 3, 0, 0, 0, 1)
@@ -130,9 +135,12 @@ def test_pre_4_1_force_plate_device_and_camera_descriptions_are_skipped():
     count = struct.unpack_from("<i", tail)[0]
     payload = (
         struct.pack("<i", count + 3)
-        + struct.pack("<i", 3) + force_plate
-        + struct.pack("<i", 4) + device
-        + struct.pack("<i", 5) + camera
+        + struct.pack("<i", 3)
+        + force_plate
+        + struct.pack("<i", 4)
+        + device
+        + struct.pack("<i", 5)
+        + camera
         + tail[4:]
     )
     model = decode_model_def(payload, version)
@@ -259,7 +267,9 @@ def test_frame_without_markers_rejects_every_malformed_payload_the_full_decode_r
     payload = decode_header(encode_frame(rich_frame(version), version))[1]
     variants = [payload[:cut] for cut in range(len(payload))]
     # every int32 count or size field of the marker sections, set far too large
-    variants += [payload[:k] + struct.pack("<i", 10_000) + payload[k + 4:] for k in range(4, min(len(payload), 600) - 4)]
+    variants += [
+        payload[:k] + struct.pack("<i", 10_000) + payload[k + 4 :] for k in range(4, min(len(payload), 600) - 4)
+    ]
     for bad in variants:
         try:
             full = decode_frame(bad, version)

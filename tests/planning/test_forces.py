@@ -150,7 +150,9 @@ def test_guided_influence_range_limits_static_repulsion_only_with_guidance():
     nearest = nearest_obstacle(0j, obstacles)
     guided = PlannerConfig.robust(guidance="path", guided_influence_range=0.3)
     assert repulsive(nearest, 0.05, guided) == 0
-    assert repulsive(nearest, 0.05, PlannerConfig.robust(guided_influence_range=0.3)) == repulsive(nearest, 0.05, ROBUST)
+    assert repulsive(nearest, 0.05, PlannerConfig.robust(guided_influence_range=0.3)) == repulsive(
+        nearest, 0.05, ROBUST
+    )
     # Inside it: eta (1/d - 1/0.3) / d^2 at d = 0.2, pointing away from the obstacle.
     near = nearest_obstacle(0.3 + 0j, obstacles)
     assert repulsive(near, 0.05, guided) == pytest.approx(-0.05 * (1 / 0.2 - 1 / 0.3) / 0.04 + 0j)
@@ -192,8 +194,11 @@ def test_summed_repulsion_cancels_across_a_gap_where_the_nearest_one_flips_side(
     surfaces = every_surface(points, obstacles, np.array([[0.55j], [5 + 5j]]), 0.1, np.array([[True], [False]]))
     assert surfaces.mapped == 2 and surfaces.distance.shape == (2, 3)
     batch = repulsive_sum(surfaces, 0.05, replace(config, static_influence_range=0.5))
-    one = repulsive_sum(every_surface(points[0], obstacles, np.array([0.55j]), 0.1, np.array([True])), 0.05,
-                        replace(config, static_influence_range=0.5))
+    one = repulsive_sum(
+        every_surface(points[0], obstacles, np.array([0.55j]), 0.1, np.array([True])),
+        0.05,
+        replace(config, static_influence_range=0.5),
+    )
     assert batch[0] == pytest.approx(one)
     # The hovering neighbour 0.5 m away (0.35 m seen): out of the guided range, inside the static one.
     assert repulsive_sum(surfaces, 0.05, config)[0] != pytest.approx(batch[0])

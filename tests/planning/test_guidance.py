@@ -11,7 +11,9 @@ from rpf_fly.planning.guidance import Guidance, path_length
 from rpf_fly.planning.obstacles import nearest_obstacle
 from rpf_fly.planning.visibility import Inflated, blocked
 
-U_TRAP = ObstacleSet.from_shapes(boxes=[((0.0, -1.0), (0.2, 1.0)), ((-1.4, 0.8), (0.2, 1.0)), ((-1.4, -1.0), (0.2, -0.8))])
+U_TRAP = ObstacleSet.from_shapes(
+    boxes=[((0.0, -1.0), (0.2, 1.0)), ((-1.4, 0.8), (0.2, 1.0)), ((-1.4, -1.0), (0.2, -0.8))]
+)
 MIXED = ObstacleSet.from_shapes(
     circles=[((0.5, 0.5), 0.5), ((-2.0, 1.0), 0.1), ((2.5, -2.0), 0.3)],
     boxes=[((-3.0, -3.0), (-1.0, -2.5)), ((1.0, 2.0), (1.2, 3.5))],
@@ -37,7 +39,11 @@ def test_u_trap_path_goes_out_of_the_mouth_and_around():
     delta = 0.15
     g = Guidance(U_TRAP, delta, ((-3.5, 3.5), (-2.5, 2.5)))
     path = g.path(-0.5 + 0j, 2.2 + 0j)
-    corners = [complex(-1.4 - delta, -0.8 + delta), complex(-1.4 - delta, -1.0 - delta), complex(0.2 + delta, -1.0 - delta)]
+    corners = [
+        complex(-1.4 - delta, -0.8 + delta),
+        complex(-1.4 - delta, -1.0 - delta),
+        complex(0.2 + delta, -1.0 - delta),
+    ]
     mirrored = [c.conjugate() for c in corners]
     inner = path[1:-1]
     assert len(inner) == 3
@@ -107,7 +113,9 @@ def test_margin_shifts_every_distance_the_forces_see():
     pos = np.array([0.9 + 0.1j, -1.5 + 0.2j])
     nearest = nearest_obstacle(pos, MIXED)
     shifted = type(nearest)(nearest.distance - m, nearest.normal)
-    assert np.array_equal(repulsive(perceived(nearest, with_margin), 0.05, with_margin), repulsive(shifted, 0.05, without))
+    assert np.array_equal(
+        repulsive(perceived(nearest, with_margin), 0.05, with_margin), repulsive(shifted, 0.05, without)
+    )
     assert perceived(nearest, without) is nearest
     me, other = 0j, np.array([[0.4 + 0.3j]])
     f_m, _ = inter_robot(np.array([me]), other, np.array([[True]]), 2.0, with_margin)
@@ -204,7 +212,9 @@ def test_detour_one_drone_call_equals_batched_call():
     goals = rng.uniform(-4, 4, n) + 1j * rng.uniform(-4, 4, n)
     # neighbours near the straight line between start and goal, so that many of them are in the way
     along = rng.uniform(0.2, 0.8, (n, k))
-    others = pos[:, None] + along * (goals - pos)[:, None] + 0.3 * (rng.normal(size=(n, k)) + 1j * rng.normal(size=(n, k)))
+    others = (
+        pos[:, None] + along * (goals - pos)[:, None] + 0.3 * (rng.normal(size=(n, k)) + 1j * rng.normal(size=(n, k)))
+    )
     mask = rng.random((n, k)) < 0.7
     w, r = g.waypoint(pos, goals, (others, mask))
     one = [g.waypoint(complex(p), complex(q), (o, m)) for p, q, o, m in zip(pos, goals, others, mask)]
@@ -242,9 +252,15 @@ def test_detour_graph_equals_the_graph_of_the_grown_obstacles_built_from_scratch
         parked = [complex(*np.round(rng.uniform(-3.5, 3.5, 2) / PARKED_QUANTUM) * PARKED_QUANTUM) for _ in range(4)]
         detour = g.detour(parked)
         scratch = Guidance(
-            ObstacleSet(np.concatenate([MIXED.centers, parked]), np.concatenate([MIXED.radii, np.full(4, 0.2)]),
-                        MIXED.box_center, MIXED.box_half_x, MIXED.box_half_y),
-            0.15, bounds,
+            ObstacleSet(
+                np.concatenate([MIXED.centers, parked]),
+                np.concatenate([MIXED.radii, np.full(4, 0.2)]),
+                MIXED.box_center,
+                MIXED.box_half_x,
+                MIXED.box_half_y,
+            ),
+            0.15,
+            bounds,
         )
         pos = rng.uniform(-4, 4, 40) + 1j * rng.uniform(-4, 4, 40)
         goals = rng.uniform(-4, 4, 40) + 1j * rng.uniform(-4, 4, 40)

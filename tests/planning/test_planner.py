@@ -36,7 +36,9 @@ RPF3 = PlannerConfig.robust(margin=0.05, guidance="path", **RPF3_TUNING)
 """The rpf3 kind's configuration: guidance, summed repulsion, the corner reach, yielding and braking."""
 
 
-@pytest.mark.parametrize("config", [PlannerConfig.robust(), PlannerConfig.paper(), RPF3], ids=["robust", "paper", "rpf3"])
+@pytest.mark.parametrize(
+    "config", [PlannerConfig.robust(), PlannerConfig.paper(), RPF3], ids=["robust", "paper", "rpf3"]
+)
 def test_one_drone_call_equals_batched_call(config):
     """The flight path (one drone, Python numbers) and the simulator path (arrays) are the same function."""
     rng = np.random.default_rng(3)
@@ -160,7 +162,8 @@ def test_a_corner_within_reach_counts_as_reached_and_the_pull_moves_on():
     for reach, expect_near in ((0.0, first), (0.05, second)):
         one = guided_view(view_of_drone(near, goal, 1j, np.zeros(0), np.zeros(0), 6.0), guidance, reach)[1]
         assert one == pytest.approx(expect_near, abs=1e-5)
-        views = views_from_states(np.array([near, far]), np.zeros(2, complex), np.array([goal, goal]),
-                                  np.array([1j, 1j]), 6.0)
+        views = views_from_states(
+            np.array([near, far]), np.zeros(2, complex), np.array([goal, goal]), np.array([1j, 1j]), 6.0
+        )
         batch = guided_view(views, guidance, reach)[1]
         assert batch == pytest.approx([expect_near, first], abs=1e-5)

@@ -63,6 +63,12 @@ def test_brake_toward_a_wall_scales_only_the_inward_part_of_the_step():
     assert at_bar == pytest.approx(complex(heading.real, 0.0))
     # Batched rows equal one-drone calls.
     walls = NearestObstacle(np.array([0.21, 0.16]), np.array([1j, 1j]))
-    rows = brake(np.array([heading, heading]), np.zeros(2, complex), np.zeros((2, 0), complex), np.zeros((2, 0), bool),
-                 config, walls)
+    rows = brake(
+        np.array([heading, heading]),
+        np.zeros(2, complex),
+        np.zeros((2, 0), complex),
+        np.zeros((2, 0), bool),
+        config,
+        walls,
+    )
     assert rows == pytest.approx([slid, at_bar])

@@ -43,8 +43,10 @@ def mission_text(count: int, rate_hz: float, radio: str = "", dongles: int = 1) 
         lines.append(f"radio: {{{radio}}}")
     lines.append("drones:")
     for i in range(count):
-        lines.append(f"  - {{name: cf{i + 1}, uri: radio://{i % dongles}/80/2M/E7E7E7E7{i + 1:02X}, rigid_body: cf{i + 1}, "
-                     f"start: [{-3.5 + 0.5 * i:.1f}, -2.0], goal: [{-3.5 + 0.5 * i:.1f}, 2.0]}}")
+        lines.append(
+            f"  - {{name: cf{i + 1}, uri: radio://{i % dongles}/80/2M/E7E7E7E7{i + 1:02X}, rigid_body: cf{i + 1}, "
+            f"start: [{-3.5 + 0.5 * i:.1f}, -2.0], goal: [{-3.5 + 0.5 * i:.1f}, 2.0]}}"
+        )
     return "\n".join(lines) + "\n"
 
 
@@ -76,8 +78,12 @@ def test_each_dongle_needs_its_drones_traffic_and_carries_what_its_figures_allow
         assert (load.pings, load.keepalives) == (5 * LINK_PING_HZ, 5 * KEEPALIVE_HZ)
         assert load.needed == 5 * (10 + 30 + 10 + 5)
         # every transaction behind an address switch (five links take turns), at the budget's expected loss
-        busy = 5 * (10 * expected_s(CRAZYRADIO_PA, 18) + 30 * expected_s(CRAZYRADIO_PA, 13)
-                    + 10 * expected_s(CRAZYRADIO_PA, 10) + 5 * expected_s(CRAZYRADIO_PA, 2)) + downlink_s(5)
+        busy = 5 * (
+            10 * expected_s(CRAZYRADIO_PA, 18)
+            + 30 * expected_s(CRAZYRADIO_PA, 13)
+            + 10 * expected_s(CRAZYRADIO_PA, 10)
+            + 5 * expected_s(CRAZYRADIO_PA, 2)
+        ) + downlink_s(5)
         assert load.busy_s == pytest.approx(busy, rel=1e-9)
         assert load.budget == pytest.approx(load.needed / busy)
         # about the ceiling of crazyradio_timing for links taking turns (572 smallest transactions a second)
@@ -87,24 +93,39 @@ def test_each_dongle_needs_its_drones_traffic_and_carries_what_its_figures_allow
 
 
 def test_a_crazyradio_2_carries_less_its_setup_calls_take_two_and_a_half_times_as_long() -> None:
-    pa, = radio_loads(parse_mission(mission_text(6, 10.0)))
-    two, = radio_loads(parse_mission(mission_text(6, 10.0, radio="dongle_type: crazyradio_2")))
+    (pa,) = radio_loads(parse_mission(mission_text(6, 10.0)))
+    (two,) = radio_loads(parse_mission(mission_text(6, 10.0, radio="dongle_type: crazyradio_2")))
     assert two.radio_type == "crazyradio_2" and pa.radio_type == "crazyradio_pa"  # the documented default
     assert two.needed == pa.needed and two.budget < 0.65 * pa.budget
-    assert two.budget == pytest.approx(two.needed / (
-        6 * (10 * expected_s(CRAZYRADIO_2, 18) + 30 * expected_s(CRAZYRADIO_2, 13) + 10 * expected_s(CRAZYRADIO_2, 10)
-             + 5 * expected_s(CRAZYRADIO_2, 2)) + downlink_s(6)))
+    assert two.budget == pytest.approx(
+        two.needed
+        / (
+            6
+            * (
+                10 * expected_s(CRAZYRADIO_2, 18)
+                + 30 * expected_s(CRAZYRADIO_2, 13)
+                + 10 * expected_s(CRAZYRADIO_2, 10)
+                + 5 * expected_s(CRAZYRADIO_2, 2)
+            )
+            + downlink_s(6)
+        )
+    )
 
 
 def test_packed_extpos_costs_one_broadcast_per_four_drones_and_a_frame_instead_of_one_packet_a_drone() -> None:
-    unicast, = radio_loads(parse_mission(mission_text(10, 10.0)))
-    packed, = radio_loads(parse_mission(mission_text(10, 10.0, radio="extpos: packed")))
+    (unicast,) = radio_loads(parse_mission(mission_text(10, 10.0)))
+    (packed,) = radio_loads(parse_mission(mission_text(10, 10.0, radio="extpos: packed")))
     assert (unicast.extpos, unicast.broadcasts) == (300.0, 0.0)
     assert (packed.extpos, packed.broadcasts) == (0.0, 3 * 30.0)  # groups of 4, 4 and 2 drones, 30 times a second
     assert packed.needed == unicast.needed - 300 + 90
     # a broadcast: an address switch and four unanswered attempts of the packed packet (1 + 7 per drone bytes)
-    broadcast = {n: CRAZYRADIO_PA.control_s + CRAZYRADIO_PA.bulk_out_s + CRAZYRADIO_PA.bulk_in_s
-                 + radio_s(CRAZYRADIO_PA, DR_2M, 1 + 7 * n, 0, 4, False, ard_s(0x80 | 32, DR_2M)) for n in (4, 2)}
+    broadcast = {
+        n: CRAZYRADIO_PA.control_s
+        + CRAZYRADIO_PA.bulk_out_s
+        + CRAZYRADIO_PA.bulk_in_s
+        + radio_s(CRAZYRADIO_PA, DR_2M, 1 + 7 * n, 0, 4, False, ard_s(0x80 | 32, DR_2M))
+        for n in (4, 2)
+    }
     saved = 300 * expected_s(CRAZYRADIO_PA, 13) - 30 * (2 * broadcast[4] + broadcast[2])
     assert unicast.busy_s - packed.busy_s == pytest.approx(saved, rel=1e-9)
     assert broadcast[4] < 4 * expected_s(CRAZYRADIO_PA, 13)  # four drones' extpos: 4.6 ms against 7.2 ms
@@ -113,8 +134,8 @@ def test_packed_extpos_costs_one_broadcast_per_four_drones_and_a_frame_instead_o
 
 
 def test_a_labs_measured_figure_scales_every_time() -> None:
-    figures, = radio_loads(parse_mission(mission_text(4, 10.0)))
-    lab, = radio_loads(parse_mission(mission_text(4, 10.0, radio="budget_packets_s: 286")))
+    (figures,) = radio_loads(parse_mission(mission_text(4, 10.0)))
+    (lab,) = radio_loads(parse_mission(mission_text(4, 10.0, radio="budget_packets_s: 286")))
     ceiling = ceiling_per_s(CRAZYRADIO_PA, switching=True)  # 572: the lab's dongle does half of it
     assert lab.measured and not figures.measured
     assert lab.budget == pytest.approx(figures.budget * 286 / ceiling)
@@ -127,8 +148,12 @@ def test_the_model_of_cflibs_shared_radio_meets_the_ceilings_of_the_figures() ->
     for radio in (CRAZYRADIO_PA, CRAZYRADIO_2):
         timing = timing_of(radio, "2M")
         for links, switching in ((1, False), (3, True)):
-            traffic = Traffic(tuple(LinkTraffic((80, "2M", k), None, ping_hz=0, keepalive_hz=0, status_hz=0)
-                                    for k in range(links)), 0.0, 100.0, 0.0)
+            traffic = Traffic(
+                tuple(LinkTraffic((80, "2M", k), None, ping_hz=0, keepalive_hz=0, status_hz=0) for k in range(links)),
+                0.0,
+                100.0,
+                0.0,
+            )
             run = simulate(traffic, timing, seconds=1.0)
             assert run.transactions == pytest.approx(ceiling_per_s(radio, switching), abs=2)
             assert run.busy > 0.999
@@ -151,8 +176,9 @@ def test_without_rate_limits_idle_polls_starve_the_broadcasts_and_with_them_the_
 
 
 def test_each_radio_link_is_opened_with_its_rate_limit_and_cflib_reads_it() -> None:
-    mission = parse_mission(mission_text(3, 10.0).replace("radio://0/80/2M/E7E7E7E703,",
-                                                          '"radio://0/80/2M/E7E7E7E703?rate_limit=77",'))
+    mission = parse_mission(
+        mission_text(3, 10.0).replace("radio://0/80/2M/E7E7E7E703,", '"radio://0/80/2M/E7E7E7E703?rate_limit=77",')
+    )
     limits = link_rate_limits(mission)
     assert limits["cf3"] == 77 and limits["cf1"] == limits["cf2"] > 55  # the URI's own is kept
     uri = link_uri(mission.drones[0].uri, limits["cf1"])
@@ -169,8 +195,9 @@ def test_bad_radio_keys_and_a_packed_mission_whose_ids_clash_are_mission_errors(
     with pytest.raises(MissionError, match="radio.dongle_type"):
         parse_mission(mission_text(2, 10.0, radio="dongle_type: crazyradio_9"))
     with pytest.raises(MissionError, match="rate_limit 'x'"):
-        parse_mission(mission_text(2, 10.0).replace("radio://0/80/2M/E7E7E7E702,",
-                                                    '"radio://0/80/2M/E7E7E7E702?rate_limit=x",'))
+        parse_mission(
+            mission_text(2, 10.0).replace("radio://0/80/2M/E7E7E7E702,", '"radio://0/80/2M/E7E7E7E702?rate_limit=x",')
+        )
     clash = mission_text(2, 10.0, radio="extpos: packed").replace("E7E7E7E702,", "A1A1A1A101,")
     with pytest.raises(MissionError, match="cf1 and cf2 both have id 0x01") as err:
         parse_mission(clash)
@@ -192,8 +219,11 @@ def test_check_refuses_ten_drones_at_100_hz_with_per_drone_extpos_on_one_dongle_
     error = result.stderr.strip().splitlines()
     assert len(error) == 1
     assert error[0].startswith(f"{path}:"), error[0]
-    assert error[0].split(": ", 1)[1].startswith("radio: radio dongle 0 (10 drones: cf1, ..., cf10) needs 1450 "
-                                                 "transactions/s"), error[0]
+    assert (
+        error[0]
+        .split(": ", 1)[1]
+        .startswith("radio: radio dongle 0 (10 drones: cf1, ..., cf10) needs 1450 transactions/s")
+    ), error[0]
     assert "a crazyradio_pa carries about" in error[0] and "radio.extpos: packed" in error[0]
 
 

@@ -79,7 +79,8 @@ def test_status_block_fits_one_log_packet() -> None:
 
 
 def test_the_controllers_target_is_in_the_telemetry_and_a_landing_holds_its_x_y(
-        make_world: MakeWorld, toc_cache: Path, backends: Callable[..., CflibBackend]) -> None:
+    make_world: MakeWorld, toc_cache: Path, backends: Callable[..., CflibBackend]
+) -> None:
     """The status block carries the firmware's controller target (`ctrltargetZ`, mm): the streamed setpoint while
     one streams, then the high-level landing's point, which keeps the x, y of the estimate when the land command
     arrived (the supervisor's tracking check of a landing reads it: docs/flight.md, *Tracking*). A firmware whose
@@ -96,17 +97,18 @@ def test_the_controllers_target_is_in_the_telemetry_and_a_landing_holds_its_x_y(
     assert wait_for(lambda: (backend.state("cf0").estimate_stamp_s or 0.0) > landed_at + 0.3, 1.0)
     state = backend.state("cf0")
     assert state.target_m[:2] == pytest.approx(state.position_m[:2], abs=0.01)  # the estimate's x, y: it hovered
-    assert state.target_m[:2] == pytest.approx((0.3, 0.1), abs=0.03)           # there
-    assert 0.05 < state.target_m[2] < 0.45                                        # on the way down
+    assert state.target_m[:2] == pytest.approx((0.3, 0.1), abs=0.03)  # there
+    assert 0.05 < state.target_m[2] < 0.45  # on the way down
 
     toc = copy.deepcopy(backend._drones["cf0"].scf.cf.log.toc)  # the real TOC cflib read from the firmware
     assert status_variables(toc) == STATUS_VARIABLES
-    del toc.toc["ctrltargetZ"]                                    # a firmware without the compressed groups
+    del toc.toc["ctrltargetZ"]  # a firmware without the compressed groups
     assert status_variables(toc) == STATUS_VARIABLES_FLOAT
 
 
-def test_connects_ten_drones_and_reports_preflight_state(make_world: MakeWorld, toc_cache: Path,
-                                                         backends: Callable[..., CflibBackend]) -> None:
+def test_connects_ten_drones_and_reports_preflight_state(
+    make_world: MakeWorld, toc_cache: Path, backends: Callable[..., CflibBackend]
+) -> None:
     world = make_world(10)
     backend = backends(cache_dir=toc_cache)
     start = time.monotonic()
@@ -127,8 +129,9 @@ def test_connects_ten_drones_and_reports_preflight_state(make_world: MakeWorld, 
     assert wait_for(lambda: backend.state("cf4").telemetry_stamp_s > stamp, 0.5)  # 10 Hz status
 
 
-def test_one_drones_failure_does_not_block_the_others(make_world: MakeWorld, toc_cache: Path,
-                                                      backends: Callable[..., CflibBackend]) -> None:
+def test_one_drones_failure_does_not_block_the_others(
+    make_world: MakeWorld, toc_cache: Path, backends: Callable[..., CflibBackend]
+) -> None:
     world = make_world(3)
     drones = names_to_uris(world)
     drones["ghost"] = world.uri(address(9))
@@ -148,8 +151,9 @@ def test_one_drones_failure_does_not_block_the_others(make_world: MakeWorld, toc
         backend.state("nobody")
 
 
-def test_flight_cycle_with_arming_streaming_hand_over_and_landing(make_world: MakeWorld, toc_cache: Path,
-                                                                  backends: Callable[..., CflibBackend]) -> None:
+def test_flight_cycle_with_arming_streaming_hand_over_and_landing(
+    make_world: MakeWorld, toc_cache: Path, backends: Callable[..., CflibBackend]
+) -> None:
     world = make_world({address(i): FakeDroneConfig.at(0.5 * i, 0.0, auto_arm=False) for i in range(2)})
     backend = backends(cache_dir=toc_cache)
     assert backend.connect(names_to_uris(world)) == {}
@@ -161,8 +165,9 @@ def test_flight_cycle_with_arming_streaming_hand_over_and_landing(make_world: Ma
     assert world.snapshot(address(0)).hl_commands_rejected == 1
     for name in backend.names():
         assert backend.takeoff(name, 0.5, 0.8)
-    assert wait_for(lambda: all(s.supervisor.flying and abs(s.position_m[2] - 0.5) < 0.02
-                                for s in backend.states().values()), 2.5)
+    assert wait_for(
+        lambda: all(s.supervisor.flying and abs(s.position_m[2] - 0.5) < 0.02 for s in backend.states().values()), 2.5
+    )
     for _ in range(20):  # 1 s at 20 Hz
         for i, name in enumerate(backend.names()):
             assert backend.send_position_setpoint(name, 0.5 * i + 0.2, 0.1, 0.6, 30.0)
@@ -186,8 +191,9 @@ def test_flight_cycle_with_arming_streaming_hand_over_and_landing(make_world: Ma
     assert backend.stop("cf0") and world.snapshot(address(0)).hl_state == "IDLE"
 
 
-def test_streaming_then_land_hands_over_with_notify(make_world: MakeWorld, toc_cache: Path,
-                                                    backends: Callable[..., CflibBackend]) -> None:
+def test_streaming_then_land_hands_over_with_notify(
+    make_world: MakeWorld, toc_cache: Path, backends: Callable[..., CflibBackend]
+) -> None:
     world = make_world(1)
     backend = backends(cache_dir=toc_cache)
     assert backend.connect(names_to_uris(world)) == {}
@@ -206,9 +212,9 @@ def test_streaming_then_land_hands_over_with_notify(make_world: MakeWorld, toc_c
 
 
 @pytest.mark.parametrize("command", ["land", "hand_over", "go_to"])
-def test_the_hand_over_from_streaming_never_cuts_the_motors(make_world: MakeWorld, toc_cache: Path,
-                                                            backends: Callable[..., CflibBackend],
-                                                            command: str) -> None:
+def test_the_hand_over_from_streaming_never_cuts_the_motors(
+    make_world: MakeWorld, toc_cache: Path, backends: Callable[..., CflibBackend], command: str
+) -> None:
     """Leaving the stream for the high-level commander: the firmware tick between the two packets finds the drone
     holding its last setpoint. A slow radio (15 ms a transaction) puts one or two ticks between them every time; with
     notify-setpoint-stop sent first those ticks were motors-off (the idle high-level commander)."""
@@ -237,14 +243,14 @@ def test_the_hand_over_from_streaming_never_cuts_the_motors(make_world: MakeWorl
     assert world.snapshot(address(0)).hl_state == ("LANDING" if command == "land" else "FLYING")
 
 
-def test_link_loss_is_surfaced_per_drone(make_world: MakeWorld, toc_cache: Path,
-                                         backends: Callable[..., CflibBackend]) -> None:
+def test_link_loss_is_surfaced_per_drone(
+    make_world: MakeWorld, toc_cache: Path, backends: Callable[..., CflibBackend]
+) -> None:
     world = make_world(3)
     backend = backends(cache_dir=toc_cache)
     lost: list[tuple[str, str, float]] = []
     event = threading.Event()
-    backend.add_link_lost_callback(lambda name, reason: (lost.append((name, reason, time.monotonic())),
-                                                         event.set()))
+    backend.add_link_lost_callback(lambda name, reason: (lost.append((name, reason, time.monotonic())), event.set()))
     assert backend.connect(names_to_uris(world)) == {}
     take_off_all(backend, world)
     dropped_at = time.monotonic()
@@ -258,15 +264,17 @@ def test_link_loss_is_surfaced_per_drone(make_world: MakeWorld, toc_cache: Path,
     stamps = {n: backend.state(n).telemetry_stamp_s for n in ("cf0", "cf2")}
     assert wait_for(lambda: all(backend.state(n).telemetry_stamp_s > stamps[n] for n in stamps), 0.5)
     assert backend.land("cf0", 0.0, 0.5) and backend.land("cf2", 0.0, 0.5)
-    assert world.wait_until(lambda w: w.snapshot(address(0)).position[2] == 0.0
-                            and w.snapshot(address(2)).position[2] == 0.0, 2.0)
+    assert world.wait_until(
+        lambda w: w.snapshot(address(0)).position[2] == 0.0 and w.snapshot(address(2)).position[2] == 0.0, 2.0
+    )
     assert world.snapshot(address(1)).flying  # the lost drone hovers on under its high-level commander
     time.sleep(0.2)
     assert len(lost) == 1
 
 
-def test_emergency_stop_one_then_all(make_world: MakeWorld, toc_cache: Path,
-                                     backends: Callable[..., CflibBackend]) -> None:
+def test_emergency_stop_one_then_all(
+    make_world: MakeWorld, toc_cache: Path, backends: Callable[..., CflibBackend]
+) -> None:
     world = make_world(3)
     backend = backends(cache_dir=toc_cache)
     assert backend.connect(names_to_uris(world)) == {}
@@ -276,26 +284,30 @@ def test_emergency_stop_one_then_all(make_world: MakeWorld, toc_cache: Path,
     assert world.wait_until(lambda w: w.snapshot(address(1)).position[2] == 0.0, 1.0)
     assert world.snapshot(address(0)).flying and world.snapshot(address(2)).flying
     assert backend.emergency_stop() == {}
-    assert wait_for(lambda: all(s.supervisor.locked and not s.supervisor.flying
-                                for s in backend.states().values()), 1.0)
+    assert wait_for(
+        lambda: all(s.supervisor.locked and not s.supervisor.flying for s in backend.states().values()), 1.0
+    )
     # every drone down (a fall from 0.5 m takes about 0.3 s, more on a loaded machine's clock): then nothing that
     # follows the stop may spin a motor up again
-    assert world.wait_until(lambda w: all(s.position[2] == 0.0 and not s.motors_on
-                                          for s in w.snapshots().values()), 2.0)
+    assert world.wait_until(
+        lambda w: all(s.position[2] == 0.0 and not s.motors_on for s in w.snapshots().values()), 2.0
+    )
     backend.takeoff("cf0", 0.5, 0.5)
     backend.send_position_setpoint("cf2", 0.0, 0.0, 0.5, 0.0)
     time.sleep(0.3)
     assert all(s.position[2] == 0.0 and not s.motors_on for s in world.snapshots().values())
 
 
-def test_extpose_configures_and_feeds_the_estimator(make_world: MakeWorld, toc_cache: Path,
-                                                   backends: Callable[..., CflibBackend]) -> None:
+def test_extpose_configures_and_feeds_the_estimator(
+    make_world: MakeWorld, toc_cache: Path, backends: Callable[..., CflibBackend]
+) -> None:
     world = make_world({address(0): FakeDroneConfig.at(1.0, 1.0, positioning="extpos")})
     backend = backends(cache_dir=toc_cache, use_extpose=True, ext_quat_std_dev=0.01, ext_pos_std_dev=0.002)
     assert backend.connect(names_to_uris(world)) == {}
     params = world.snapshot(address(0)).params
     assert params["locSrv.extQuatStdDev"] == pytest.approx(0.01) and params["locSrv.extPosStdDev"] == pytest.approx(
-        0.002)
+        0.002
+    )
     # no mocap yet: the estimate started at kalman.initialX/Y/Z (0, 0, 0) and drifts with the IMU, far from the truth
     assert math.dist(backend.state("cf0").position_m, (1.0, 1.0, 0.0)) > 0.5
     yaw = math.radians(45.0)
@@ -309,8 +321,9 @@ def test_extpose_configures_and_feeds_the_estimator(make_world: MakeWorld, toc_c
     assert world.snapshot(address(0)).estimate_yaw_deg == pytest.approx(45.0, abs=1e-3)  # extpos leaves yaw alone
 
 
-def test_reset_estimators_and_low_battery(make_world: MakeWorld, toc_cache: Path,
-                                          backends: Callable[..., CflibBackend]) -> None:
+def test_reset_estimators_and_low_battery(
+    make_world: MakeWorld, toc_cache: Path, backends: Callable[..., CflibBackend]
+) -> None:
     world = make_world({address(0): FakeDroneConfig(), address(1): FakeDroneConfig.at(0.5, 0.0, initial_vbat_v=3.1)})
     backend = backends(cache_dir=toc_cache, reset_estimators=True)
     start = time.monotonic()
@@ -335,6 +348,7 @@ GOAL = (0.3, 0.0, 0.5)
 
 def mocap_drone(world: FakeWorld, backend: CflibBackend, *, extpose: bool = False) -> Callable[[], object]:
     """A function that sends cf0 its true pose, as a mocap would: extpos (position only) or extpose."""
+
     def send() -> object:
         position, quaternion = world.true_poses()[address(0)]
         if extpose:
@@ -367,8 +381,9 @@ def facing_world(make_world: MakeWorld) -> FakeWorld:
     return make_world({address(0): FakeDroneConfig.at(0.0, 0.0, yaw_deg=FACING_DEG, positioning="extpos")})
 
 
-def test_yaw_error_with_position_only_extpos_flies_off(make_world: MakeWorld, toc_cache: Path,
-                                                       backends: Callable[..., CflibBackend]) -> None:
+def test_yaw_error_with_position_only_extpos_flies_off(
+    make_world: MakeWorld, toc_cache: Path, backends: Callable[..., CflibBackend]
+) -> None:
     world = facing_world(make_world)
     backend = backends(cache_dir=toc_cache)
     assert backend.connect(names_to_uris(world)) == {}
@@ -384,8 +399,9 @@ def test_yaw_error_with_position_only_extpos_flies_off(make_world: MakeWorld, to
     assert snap.supervisor_state == "Flying"
 
 
-def test_reset_estimator_to_the_mocap_pose_cures_the_yaw_error(make_world: MakeWorld, toc_cache: Path,
-                                                              backends: Callable[..., CflibBackend]) -> None:
+def test_reset_estimator_to_the_mocap_pose_cures_the_yaw_error(
+    make_world: MakeWorld, toc_cache: Path, backends: Callable[..., CflibBackend]
+) -> None:
     world = facing_world(make_world)
     backend = backends(cache_dir=toc_cache)
     assert backend.connect(names_to_uris(world)) == {}
@@ -399,7 +415,8 @@ def test_reset_estimator_to_the_mocap_pose_cures_the_yaw_error(make_world: MakeW
     params = world.snapshot(address(0)).params
     assert params["kalman.initialYaw"] == pytest.approx(math.radians(FACING_DEG), rel=1e-6)
     assert (params["kalman.initialX"], params["kalman.initialY"], params["kalman.initialZ"]) == pytest.approx(
-        position, abs=1e-6)
+        position, abs=1e-6
+    )
     assert params["kalman.resetEstimation"] == 0  # the firmware clears the trigger when it resets
     assert world.snapshot(address(0)).estimate_yaw_deg == pytest.approx(FACING_DEG, abs=1e-3)
     worst = fly_to_goal(world, backend, mocap, 3.0)
@@ -408,8 +425,9 @@ def test_reset_estimator_to_the_mocap_pose_cures_the_yaw_error(make_world: MakeW
     assert worst < 0.01
 
 
-def test_extpose_corrects_the_yaw_estimate_and_the_drone_tracks(make_world: MakeWorld, toc_cache: Path,
-                                                               backends: Callable[..., CflibBackend]) -> None:
+def test_extpose_corrects_the_yaw_estimate_and_the_drone_tracks(
+    make_world: MakeWorld, toc_cache: Path, backends: Callable[..., CflibBackend]
+) -> None:
     world = facing_world(make_world)
     backend = backends(cache_dir=toc_cache, use_extpose=True)
     assert backend.connect(names_to_uris(world)) == {}
@@ -423,8 +441,9 @@ def test_extpose_corrects_the_yaw_estimate_and_the_drone_tracks(make_world: Make
     assert worst < 0.01
 
 
-def test_drone_state_yaw_is_the_estimate_in_degrees(make_world: MakeWorld, toc_cache: Path,
-                                                    backends: Callable[..., CflibBackend]) -> None:
+def test_drone_state_yaw_is_the_estimate_in_degrees(
+    make_world: MakeWorld, toc_cache: Path, backends: Callable[..., CflibBackend]
+) -> None:
     world = facing_world(make_world)
     backend = backends(cache_dir=toc_cache)
     assert backend.connect(names_to_uris(world)) == {}
@@ -435,8 +454,9 @@ def test_drone_state_yaw_is_the_estimate_in_degrees(make_world: MakeWorld, toc_c
     assert not backend.reset_estimator("cf0", (math.nan, 0.0, 0.0), 0.0)  # refused, nothing sent
 
 
-def test_reset_estimator_on_a_lost_link_returns_false(make_world: MakeWorld, toc_cache: Path,
-                                                      backends: Callable[..., CflibBackend]) -> None:
+def test_reset_estimator_on_a_lost_link_returns_false(
+    make_world: MakeWorld, toc_cache: Path, backends: Callable[..., CflibBackend]
+) -> None:
     world = make_world(2)
     backend = backends(cache_dir=toc_cache, param_timeout_s=0.3)
     assert backend.connect(names_to_uris(world)) == {}
@@ -446,8 +466,9 @@ def test_reset_estimator_on_a_lost_link_returns_false(make_world: MakeWorld, toc
     assert backend.reset_estimator("cf0", (0.0, 0.0, 0.0), 0.0)
 
 
-def test_estimate_drifts_without_extpos_and_recovers_when_it_resumes(make_world: MakeWorld, toc_cache: Path,
-                                                                     backends: Callable[..., CflibBackend]) -> None:
+def test_estimate_drifts_without_extpos_and_recovers_when_it_resumes(
+    make_world: MakeWorld, toc_cache: Path, backends: Callable[..., CflibBackend]
+) -> None:
     world = make_world({address(0): FakeDroneConfig.at(0.0, 0.0, positioning="extpos")})
     backend = backends(cache_dir=toc_cache)
     assert backend.connect(names_to_uris(world)) == {}
@@ -478,8 +499,9 @@ def test_estimate_drifts_without_extpos_and_recovers_when_it_resumes(make_world:
     assert math.dist(snap.estimate, snap.position) < 0.01 and snap.position == pytest.approx(hover, abs=0.01)
 
 
-def test_a_dying_link_holds_back_no_other_drone(make_world: MakeWorld, toc_cache: Path,
-                                                backends: Callable[..., CflibBackend]) -> None:
+def test_a_dying_link_holds_back_no_other_drone(
+    make_world: MakeWorld, toc_cache: Path, backends: Callable[..., CflibBackend]
+) -> None:
     """One link dies in flight: cflib's send to it blocks (its driver's queue stays full while the radio retries,
     until cflib gives up on the link), but each drone's commands go out from a thread of its own, so the caller
     never waits and the other drones' setpoints keep flowing. With one thread sending for all, the stream of every
@@ -506,12 +528,14 @@ def test_a_dying_link_holds_back_no_other_drone(make_world: MakeWorld, toc_cache
     assert slowest[0] < 0.1, f"a send blocked its caller for {slowest[0]:.3f} s"
     assert all(n >= 30 for n in received.values()), f"setpoints received in 0.6 s at 100 Hz: {received}"
     assert backend.land("cf0", 0.0, 0.5) and backend.land("cf2", 0.0, 0.5)
-    assert world.wait_until(lambda w: w.snapshot(address(0)).position[2] == 0.0
-                            and w.snapshot(address(2)).position[2] == 0.0, 2.0)
+    assert world.wait_until(
+        lambda w: w.snapshot(address(0)).position[2] == 0.0 and w.snapshot(address(2)).position[2] == 0.0, 2.0
+    )
 
 
-def test_no_setpoint_reaches_a_drone_after_its_landing(make_world: MakeWorld, toc_cache: Path,
-                                                       backends: Callable[..., CflibBackend]) -> None:
+def test_no_setpoint_reaches_a_drone_after_its_landing(
+    make_world: MakeWorld, toc_cache: Path, backends: Callable[..., CflibBackend]
+) -> None:
     """A slow radio (15 ms a transaction) and setpoints queued faster than it carries them: the newest setpoint
     wins, and the landing queued after them drops the one still waiting, so the drone lands (a setpoint after the
     land would take the priority back and hold it in the air)."""
@@ -535,8 +559,9 @@ def test_no_setpoint_reaches_a_drone_after_its_landing(make_world: MakeWorld, to
     assert world.wait_until(lambda w: w.snapshot(address(0)).position[2] == 0.0, 2.0)
 
 
-def test_setpoint_latency_is_measured_to_cflibs_hand_over(make_world: MakeWorld, toc_cache: Path,
-                                                          backends: Callable[..., CflibBackend]) -> None:
+def test_setpoint_latency_is_measured_to_cflibs_hand_over(
+    make_world: MakeWorld, toc_cache: Path, backends: Callable[..., CflibBackend]
+) -> None:
     world = make_world(1)
     backend = backends(cache_dir=toc_cache)
     assert backend.connect(names_to_uris(world)) == {}
@@ -550,8 +575,9 @@ def test_setpoint_latency_is_measured_to_cflibs_hand_over(make_world: MakeWorld,
     backend.stop("cf0")
 
 
-def test_an_emergency_stop_waits_for_no_blocked_link(make_world: MakeWorld, toc_cache: Path,
-                                                     backends: Callable[..., CflibBackend]) -> None:
+def test_an_emergency_stop_waits_for_no_blocked_link(
+    make_world: MakeWorld, toc_cache: Path, backends: Callable[..., CflibBackend]
+) -> None:
     """cf1's link dies while the pool's thread is inside a send to it (holding cflib's send lock): an emergency
     stop of cf0 and cf1 with a short wait returns at once, cf0 stops, cf1's stop is reported as still being sent,
     and nothing queued afterwards goes out to the stopped drones."""

@@ -49,8 +49,14 @@ def backends() -> Iterator[Callable[..., CflibBackend]]:
         backend.close()
 
 
-def arm_and_take_off(backend: CflibBackend, world: FakeWorld, name: str = "cf0", index: int = 0,
-                     height_m: float = 0.5, timeout_s: float = 3.0) -> bool:
+def arm_and_take_off(
+    backend: CflibBackend,
+    world: FakeWorld,
+    name: str = "cf0",
+    index: int = 0,
+    height_m: float = 0.5,
+    timeout_s: float = 3.0,
+) -> bool:
     """Arm, take off with the high-level commander; True when the world's true height reached ``height_m``."""
     assert backend.arm(name)
     assert wait_for(lambda: backend.state(name).supervisor.can_fly, 1.0)
@@ -60,8 +66,10 @@ def arm_and_take_off(backend: CflibBackend, world: FakeWorld, name: str = "cf0",
 
 # --------------------------------------------------------------------------- a latch left by an earlier connection
 
-def test_a_latch_left_by_an_earlier_connection_is_released(make_world: MakeWorld, toc_cache: Path,
-                                                          backends: Callable[..., CflibBackend]) -> None:
+
+def test_a_latch_left_by_an_earlier_connection_is_released(
+    make_world: MakeWorld, toc_cache: Path, backends: Callable[..., CflibBackend]
+) -> None:
     """A plain cflib program (a check, an earlier flight, cfclient) sends a low-level setpoint and closes (cflib's
     close_link sends another): the firmware keeps the CRTP priority, and its high-level commander, lower, is refused
     until something relaxes it. A new backend relaxes it at connect, so its take-off flies."""
@@ -92,7 +100,8 @@ def fly_a_long_plan(backend: CflibBackend, world: FakeWorld, index: int = 0) -> 
 
 
 def test_a_fed_watchdog_lets_a_flight_go_on_while_the_flight_loop_is_silent(
-        make_world: MakeWorld, toc_cache: Path, backends: Callable[..., CflibBackend]) -> None:
+    make_world: MakeWorld, toc_cache: Path, backends: Callable[..., CflibBackend]
+) -> None:
     """Keep-alives come from the backend's own thread: a flight that sends nothing for 2.5 s (a busy loop, a hold)
     is not stopped; the firmware got one about every 0.2 s."""
     world = make_world(1)
@@ -109,7 +118,8 @@ def test_a_fed_watchdog_lets_a_flight_go_on_while_the_flight_loop_is_silent(
 
 
 def test_a_backend_that_stops_feeding_has_its_drone_stopped_within_a_second(
-        make_world: MakeWorld, toc_cache: Path, backends: Callable[..., CflibBackend]) -> None:
+    make_world: MakeWorld, toc_cache: Path, backends: Callable[..., CflibBackend]
+) -> None:
     """The ground station dies (its process: no more keep-alives, the links stay open): the firmware's watchdog
     stops the drone 1 s after the last keep-alive, in the middle of a high-level plan, and locks it."""
     world = make_world(2)
@@ -122,14 +132,14 @@ def test_a_backend_that_stops_feeding_has_its_drone_stopped_within_a_second(
     assert world.wait_until(lambda w: not w.snapshot(address(0)).motors_on, 2.0)
     snap = world.snapshot(address(0))
     assert 0.75 < snap.entered(FREE_FALL) - stopped_at < 1.1
-    assert world.wait_until(lambda w: w.snapshot(address(0)).locked and w.snapshot(address(0)).position[2] == 0.0,
-                            1.0)
+    assert world.wait_until(lambda w: w.snapshot(address(0)).locked and w.snapshot(address(0)).position[2] == 0.0, 1.0)
     assert world.snapshot(address(1)).motors_on and world.snapshot(address(1)).flying
     assert backend.land("cf1", 0.0, 0.8)
 
 
-def test_a_dropped_link_stops_its_drone_within_a_second(make_world: MakeWorld, toc_cache: Path,
-                                                        backends: Callable[..., CflibBackend]) -> None:
+def test_a_dropped_link_stops_its_drone_within_a_second(
+    make_world: MakeWorld, toc_cache: Path, backends: Callable[..., CflibBackend]
+) -> None:
     """An unplugged dongle or a link out of range: no keep-alive reaches the drone, whose firmware stops it."""
     world = make_world(1)
     backend = backends(cache_dir=toc_cache)
@@ -145,6 +155,7 @@ def test_a_dropped_link_stops_its_drone_within_a_second(make_world: MakeWorld, t
 
 # --------------------------------------------------------------------------- the end-of-flight reboot
 
+
 def land_and_disarm(backend: CflibBackend, name: str = "cf0") -> None:
     """Land, wait until the supervisor no longer says flying (2 s after the motors stopped), disarm: what the
     flight does before it closes."""
@@ -154,7 +165,8 @@ def land_and_disarm(backend: CflibBackend, name: str = "cf0") -> None:
 
 
 def test_a_flown_drone_is_rebooted_at_close_and_the_next_backend_flies_it(
-        make_world: MakeWorld, toc_cache: Path, backends: Callable[..., CflibBackend]) -> None:
+    make_world: MakeWorld, toc_cache: Path, backends: Callable[..., CflibBackend]
+) -> None:
     """Its watchdog is never disarmed by the firmware: without the reboot the drone would lock 1 s after close.
     Rebooted over its link, it boots fresh on the floor and a new backend arms it and takes off. A drone whose
     watchdog was never armed is not rebooted."""
@@ -179,8 +191,9 @@ def test_a_flown_drone_is_rebooted_at_close_and_the_next_backend_flies_it(
     assert arm_and_take_off(again, world)
 
 
-def test_a_locked_or_flying_drone_is_not_rebooted(make_world: MakeWorld, toc_cache: Path,
-                                                 backends: Callable[..., CflibBackend]) -> None:
+def test_a_locked_or_flying_drone_is_not_rebooted(
+    make_world: MakeWorld, toc_cache: Path, backends: Callable[..., CflibBackend]
+) -> None:
     """A drone locked by an emergency stop stays locked (a person looks at it); one still flying at close is left
     to its watchdog (cflib's close_link already cut its motors)."""
     world = make_world(2)
@@ -210,7 +223,8 @@ def test_the_nrf_reset_commands_reboot_the_simulated_drone() -> None:
     firmware.handle(9, 1, bytes([0x04]), 1.0)  # a keep-alive: its watchdog armed
     assert firmware.handle(PORT_LINK, 3, bytes([0xFE, 0xF0, 0x01]), 1.0) == []  # no reset-init yet
     assert firmware.handle(PORT_LINK, 3, bytes([0xFE, 0xFF]), 1.0) == [
-        (PORT_LINK, 3, bytes([0xFE, 0xFF, 0x01, 0xE7, 0xE7, 0xE7, 0xE7, 0x00]))]
+        (PORT_LINK, 3, bytes([0xFE, 0xFF, 0x01, 0xE7, 0xE7, 0xE7, 0xE7, 0x00]))
+    ]
     assert firmware.handle(PORT_LINK, 3, bytes([0xFE, 0xF0, 0x00]), 1.0) == [] and not firmware.booting
     assert firmware.handle(PORT_LINK, 3, bytes([0xFE, 0xF0, 0x01]), 1.0) == [] and firmware.booting
     assert firmware.handle(PORT_LINK, 0, b"echo", 1.1) == []  # silent while it boots

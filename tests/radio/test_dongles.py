@@ -40,8 +40,14 @@ def radio_mission(tmp_path: Path) -> Path:
 @pytest.mark.parametrize("command", [("check",), ("fly", "--no-console"), ("fly",)])
 def test_no_crazyradio_is_one_line_exit_2_and_nothing_connects(tmp_path, command):
     mission = radio_mission(tmp_path)
-    proc = subprocess.run([sys.executable, "-m", "rpf_fly", *command, mission.name], capture_output=True, text=True,
-                          cwd=tmp_path, timeout=60, env={**_env(), "HOME": str(tmp_path)})
+    proc = subprocess.run(
+        [sys.executable, "-m", "rpf_fly", *command, mission.name],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        timeout=60,
+        env={**_env(), "HOME": str(tmp_path)},
+    )
     assert proc.returncode == 2, proc.stderr
     assert proc.stderr == NO_RADIO + "\n"
     if command[0] == "check":
@@ -58,8 +64,9 @@ def test_radio_problem_counts_dongles_and_reads_serials_only_when_named():
     assert radio_problem(uris, find=lambda: ["A"]).startswith("radio://1/90/2M/E7E7E7E702 needs Crazyradio number 1")
     assert radio_problem(uris, find=lambda: ["A", "B"]) is None
     assert radio_problem(["radio://ABCDEF1234/80/2M/E7E7E7E701"], find=lambda: ["abcdef1234"]) is None
-    assert "no Crazyradio with serial 0000000001" in radio_problem(["radio://0000000001/80/2M/E7E7E7E701"],
-                                                                   find=lambda: ["ABCDEF1234"])
+    assert "no Crazyradio with serial 0000000001" in radio_problem(
+        ["radio://0000000001/80/2M/E7E7E7E701"], find=lambda: ["ABCDEF1234"]
+    )
 
     def no_usb():
         raise OSError("No backend available")

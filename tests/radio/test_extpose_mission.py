@@ -30,7 +30,8 @@ FIRMWARE_DEFAULT = 4.5e-3
 
 @pytest.mark.parametrize("extpos", ["extpose", "extpos"])
 def test_a_dry_run_check_sets_the_pose_std_dev_of_an_extpose_mission(
-        extpos: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    extpos: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     """``rpf-fly check --dry-run`` connects the mission's simulated drones as a flight does: with extpose each
     drone's estimator gets the backend's orientation standard deviation, with extpos it keeps the firmware's."""
     from rpf_fly.app.flight import FlightApp

@@ -29,6 +29,7 @@ class Radio:
                 self.inside.set()
                 self.hold.wait(5.0)
             action()
+
         return run
 
     def packet(self, label: str) -> Callable[[], None]:

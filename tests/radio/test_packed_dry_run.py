@@ -24,8 +24,11 @@ planner: {kind: apf, margin: 0}
 mocap: {kind: sim, rate_hz: 50}
 radio: {extpos: packed, extpos_rate_hz: 50}
 drones:
-""" + "".join(f"  - {{name: cf{k + 1}, uri: radio://0/80/2M/E7E7E7E7{k + 1:02X}, start: [{-1.25 + 0.5 * k:.2f}, -1.0], "
-              f"goal: [{-1.25 + 0.5 * k:.2f}, 1.0]}}\n" for k in range(6))
+""" + "".join(
+    f"  - {{name: cf{k + 1}, uri: radio://0/80/2M/E7E7E7E7{k + 1:02X}, start: [{-1.25 + 0.5 * k:.2f}, -1.0], "
+    f"goal: [{-1.25 + 0.5 * k:.2f}, 1.0]}}\n"
+    for k in range(6)
+)
 
 
 def test_a_packed_extpos_dry_run_reaches_every_goal_on_broadcast_positions(tmp_path: Path) -> None:
@@ -34,8 +37,9 @@ def test_a_packed_extpos_dry_run_reaches_every_goal_on_broadcast_positions(tmp_p
     assert load.broadcasts == 2 * 50.0 and load.extpos == 0.0 and not load.over
     obstacles = obstacle_set(mission.obstacles)
     with DryRun(mission) as rig:
-        report = run_flight(mission, lambda drone: make_planner(mission.planner, obstacles), tmp_path / "f.mcap",
-                            rig=rig)
+        report = run_flight(
+            mission, lambda drone: make_planner(mission.planner, obstacles), tmp_path / "f.mcap", rig=rig
+        )
         snapshots = {d.name: rig.snapshot(d.name) for d in mission.drones}
     assert report.error is None and report.success, report.reasons
     assert all(outcome == FlightOutcome.REACHED for outcome in report.outcomes.values()), report.outcomes

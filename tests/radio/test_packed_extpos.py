@@ -32,8 +32,11 @@ def test_a_drones_id_is_its_addresss_last_byte_and_groups_follow_dongle_channel_
     uris["cf9"] = "radio://0/90/2M/E7E7E7E709"
     groups = packed_groups(uris)
     assert [(g.dongle, g.channel, g.names) for g in groups] == [
-        (0, 80, ("cf1", "cf2", "cf3", "cf4")), (0, 80, ("cf5", "cf6")), (1, 80, ("cf7", "cf8")),
-        (0, 90, ("cf9",))]
+        (0, 80, ("cf1", "cf2", "cf3", "cf4")),
+        (0, 80, ("cf5", "cf6")),
+        (1, 80, ("cf7", "cf8")),
+        (0, 90, ("cf9",)),
+    ]
     assert groups[0].ids == (1, 2, 3, 4)
     assert shared_ids(uris) == []
     uris["cf10"] = "radio://1/80/2M/A1A1A1A101"  # cf1's id on cf1's channel (another dongle: the same air)
@@ -41,10 +44,12 @@ def test_a_drones_id_is_its_addresss_last_byte_and_groups_follow_dongle_channel_
 
 
 def test_each_simulated_firmware_takes_its_own_position_from_a_packed_packet() -> None:
-    firmwares = {address: FakeFirmware(VehicleConfig(position=(0.0, 0.0, 0.0), positioning="extpos"),
-                                       radio_address=address, seed=k)
-                 for k, address in enumerate((0xE7E7E7E701, 0xE7E7E7E702, 0xE7E7E7E703, 0xE7E7E7E704,
-                                              0xE7E7E7E705))}
+    firmwares = {
+        address: FakeFirmware(
+            VehicleConfig(position=(0.0, 0.0, 0.0), positioning="extpos"), radio_address=address, seed=k
+        )
+        for k, address in enumerate((0xE7E7E7E701, 0xE7E7E7E702, 0xE7E7E7E703, 0xE7E7E7E704, 0xE7E7E7E705))
+    }
     truth = {0x01: (1.0, 0.5, 0.0), 0x02: (-1.25, 2.0, 0.0), 0x03: (0.0, -3.0, 0.0), 0x04: (2.5, 2.5, 0.0)}
     packet = encode(list(truth.items()))
     for fw in firmwares.values():
@@ -73,12 +78,16 @@ def test_the_sender_broadcasts_each_groups_positions_through_the_fake_radio_to_e
 
     addresses = {f"cf{i}": 0xE7E7E7E700 + i for i in range(1, 8)}
     channels = {name: 90 if name == "cf7" else 80 for name in addresses}
-    world = FakeWorld({a: FakeDroneConfig.at(0.0, 0.0, 0.0, positioning="extpos", channel=channels[n])
-                       for n, a in addresses.items()}, timing=RadioTiming(transaction_s=0.001)).start()
+    world = FakeWorld(
+        {a: FakeDroneConfig.at(0.0, 0.0, 0.0, positioning="extpos", channel=channels[n]) for n, a in addresses.items()},
+        timing=RadioTiming(transaction_s=0.001),
+    ).start()
     heard: dict[str, int] = {name: 0 for name in addresses}
     for name, address in addresses.items():
-        world.add_packet_observer(address, lambda port, ch, data, stamp, name=name: heard.__setitem__(
-            name, heard[name] + (port == 6 and ch == 2)))
+        world.add_packet_observer(
+            address,
+            lambda port, ch, data, stamp, name=name: heard.__setitem__(name, heard[name] + (port == 6 and ch == 2)),
+        )
     fake_radio.register(world)
     uris = {name: f"fake://0/{channels[name]}/2M/{address:010X}" for name, address in addresses.items()}
     sender = PackedExtposSender({n: u for n, u in uris.items() if n != "cf7"})

@@ -26,8 +26,16 @@ def test_a_dry_run_probe_of_one_dongle_with_eight_links_stays_within_its_figures
     code, out, err = _probe("--dry-run", "--links", str(LINKS), "--seconds", str(SECONDS), "--json")
     assert code == 0, err
     one, many = (json.loads(line) for line in out.splitlines())
-    assert set(one) == {"dongle", "radio", "links", "transactions_per_s", "per_link_per_s", "setpoint_rtt_ms",
-                        "address_switch_ms", "loss"}
+    assert set(one) == {
+        "dongle",
+        "radio",
+        "links",
+        "transactions_per_s",
+        "per_link_per_s",
+        "setpoint_rtt_ms",
+        "address_switch_ms",
+        "loss",
+    }
     assert (one["dongle"], one["radio"], one["links"], many["links"]) == (0, "crazyradio_pa", 1, LINKS)
     pa = RADIO_TYPES["crazyradio_pa"]
     # what the dongle carried: never more than its figures allow (a transaction counted at either edge of the window
@@ -62,19 +70,31 @@ def test_the_text_report_gives_the_missions_budget_figure() -> None:
     assert carried <= ceiling_per_s(RADIO_TYPES["crazyradio_2"], switching=True) + 2 / 0.5
 
 
-@pytest.mark.parametrize("args, message", [
-    ((), "radio probe: --drones: expected the radio:// URIs of powered-on drones on one dongle"),
-    (("--dry-run", "--drones", "radio://0/80/2M/E7E7E7E701"), "radio probe: --drones: a dry run probes simulated"),
-    (("--drones", "fake://0/80/2M/E7E7E7E701"), "radio probe: --drones: 'fake://0/80/2M/E7E7E7E701' is not a radio"),
-    (("--drones", "radio://0/80/2M/E7E7E7E701,radio://1/80/2M/E7E7E7E702"),
-     "radio probe: --drones: the URIs are on dongles 0, 1: probe one dongle at a time"),
-    (("--drones", "radio://0/80/2M/E7E7E7E701", "--dongle", "2"),
-     "radio probe: --dongle 2: the drones' URIs are on dongle 0"),
-    (("--drones", "radio://0/80/2M/E7E7E7E701", "--links", "2"),
-     "radio probe: --links 2: only 1 drone(s) given in --drones"),
-    (("--dry-run", "--links", "0"), "radio probe: --links 0: expected at least 1"),
-    (("--dry-run", "--seconds", "0"), "radio probe: --seconds 0: expected a positive number of seconds"),
-])
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        ((), "radio probe: --drones: expected the radio:// URIs of powered-on drones on one dongle"),
+        (("--dry-run", "--drones", "radio://0/80/2M/E7E7E7E701"), "radio probe: --drones: a dry run probes simulated"),
+        (
+            ("--drones", "fake://0/80/2M/E7E7E7E701"),
+            "radio probe: --drones: 'fake://0/80/2M/E7E7E7E701' is not a radio",
+        ),
+        (
+            ("--drones", "radio://0/80/2M/E7E7E7E701,radio://1/80/2M/E7E7E7E702"),
+            "radio probe: --drones: the URIs are on dongles 0, 1: probe one dongle at a time",
+        ),
+        (
+            ("--drones", "radio://0/80/2M/E7E7E7E701", "--dongle", "2"),
+            "radio probe: --dongle 2: the drones' URIs are on dongle 0",
+        ),
+        (
+            ("--drones", "radio://0/80/2M/E7E7E7E701", "--links", "2"),
+            "radio probe: --links 2: only 1 drone(s) given in --drones",
+        ),
+        (("--dry-run", "--links", "0"), "radio probe: --links 0: expected at least 1"),
+        (("--dry-run", "--seconds", "0"), "radio probe: --seconds 0: expected a positive number of seconds"),
+    ],
+)
 def test_what_cannot_be_probed_is_one_line_and_exit_2(args: tuple[str, ...], message: str) -> None:
     code, out, err = _probe(*args)
     assert code == 2 and out == ""

@@ -30,8 +30,12 @@ def plugged() -> Iterator[crazyradio.Plugged]:
     plug = crazyradio.plug(world, radio="crazyradio_pa")
     yield plug
     deadline = time.monotonic() + 2.0  # cflib's shared radio closes the dongle on its own thread
-    while time.monotonic() < deadline and len(RadioManager._radios) and RadioManager._radios[0] is not None \
-            and RadioManager._radios[0]._radio is not None:
+    while (
+        time.monotonic() < deadline
+        and len(RadioManager._radios)
+        and RadioManager._radios[0] is not None
+        and RadioManager._radios[0]._radio is not None
+    ):
         time.sleep(0.01)
     crazyradio.unplug()
     world.close()
@@ -44,7 +48,8 @@ def transactions(plug: crazyradio.Plugged, address: int) -> int:
 
 
 def test_rate_limited_links_keep_their_limit_and_a_broadcast_takes_four_unanswered_attempts(
-        plugged: crazyradio.Plugged) -> None:
+    plugged: crazyradio.Plugged,
+) -> None:
     links = [cflib.crtp.get_link_driver(f"radio://0/80/2M/{a:010X}?rate_limit=40") for a in ADDRESSES]
     try:
         assert all(link is not None and link.rate_limit == 40 for link in links)

@@ -38,8 +38,10 @@ def test_each_drone_sends_exactly_its_rate_spread_over_the_period_across_its_don
     assert extpos_phases(uris) == {**{f"cf{i}": (i + 0.5) / 10 for i in range(10)}, "cf10": 0.25, "cf11": 0.75}
     names = list(uris)
     jitter = random.Random(4)
-    for times in ([k / 100 for k in range(300)],  # 3 s of 100 Hz mocap, on time ...
-                  [k / 100 + jitter.uniform(-0.003, 0.003) for k in range(300)]):  # ... and jittered by +-3 ms
+    for times in (
+        [k / 100 for k in range(300)],  # 3 s of 100 Hz mocap, on time ...
+        [k / 100 + jitter.uniform(-0.003, 0.003) for k in range(300)],
+    ):  # ... and jittered by +-3 ms
         sent = run(ExtposSchedule.for_uris(30.0, uris), names, times)
         for name in names:
             assert abs(len(sent[name]) - 90) <= 1, (name, len(sent[name]))  # 30 Hz: not 25 (every 4th frame)
@@ -63,10 +65,15 @@ def test_what_the_firmware_receives_is_the_schedule_and_the_budget(make_world: M
     whose radio lags, rpf_fly/radio/outbox.py)."""
     world = make_world(5)
     uris = {f"cf{i}": world.uri(a, devid=0 if i < 4 else 1) for i, a in enumerate(world.addresses)}
-    mission = parse_mission("name: sched\narena: {x: [-3, 3], y: [-3, 3]}\nflight: {rate_hz: 10}\n"
-                            "radio: {extpos_rate_hz: 30}\ndrones:\n" + "".join(
-                                f"  - {{name: cf{i}, uri: radio://{dongle_of(u)}/80/2M/E7E7E7E70{i}, "
-                                f"start: [{i * 0.5}, 0], goal: [{i * 0.5}, 1]}}\n" for i, u in enumerate(uris.values())))
+    mission = parse_mission(
+        "name: sched\narena: {x: [-3, 3], y: [-3, 3]}\nflight: {rate_hz: 10}\n"
+        "radio: {extpos_rate_hz: 30}\ndrones:\n"
+        + "".join(
+            f"  - {{name: cf{i}, uri: radio://{dongle_of(u)}/80/2M/E7E7E7E70{i}, "
+            f"start: [{i * 0.5}, 0], goal: [{i * 0.5}, 1]}}\n"
+            for i, u in enumerate(uris.values())
+        )
+    )
     seen: dict[str, list[tuple[int, float]]] = {n: [] for n in uris}
     lock = threading.Lock()
 
@@ -75,6 +82,7 @@ def test_what_the_firmware_receives_is_the_schedule_and_the_budget(make_world: M
             if port in (6, 7) and channel == 0:
                 with lock:
                     seen[name].append((port, struct.unpack_from("<f", payload, 0 if port == 6 else 1)[0]))
+
         return on_packet
 
     backend = CflibBackend(cache_dir=toc_cache)

@@ -71,8 +71,13 @@ def _forged_frames(flight: str, secret: str, genuine: tuple[bytes, bytes]) -> li
     """What a foreign session can put on the relay key: cf1 far outside the arena, numbered far ahead (flown on, it
     would land cf1 and, taken as the newest, shut out the relay's own frames), unsigned and signed with another
     secret; a genuine frame replayed; a frame signed with the flight's secret that does not decode."""
-    far = MocapFrame(10**9, 0.0, time.monotonic(), None,
-                     {"cf1": RigidBodyPose("cf1", 1, (50.0, 50.0, 0.5), (0.0, 0.0, 0.0, 1.0), True)})
+    far = MocapFrame(
+        10**9,
+        0.0,
+        time.monotonic(),
+        None,
+        {"cf1": RigidBodyPose("cf1", 1, (50.0, 50.0, 0.5), (0.0, 0.0, 0.0, 1.0), True)},
+    )
     signer = FrameSigner(new_secret(), flight)
     signer.seq = 10**9
     payload, wrong = signer.sign(far)
@@ -101,20 +106,41 @@ def test_remote_worker_tap_and_foreign_commands(tmp_path):
     endpoint = free_loopback_endpoint()
     lines: list[str] = []
     log_path = tmp_path / "remote.mcap"
-    coordinator = Coordinator(mission, MISSION, log_path, dry_run=True, remote_dongles=(1,), listen=(endpoint,),
-                              say=lines.append, remote_wait_s=60.0)
+    coordinator = Coordinator(
+        mission,
+        MISSION,
+        log_path,
+        dry_run=True,
+        remote_dongles=(1,),
+        listen=(endpoint,),
+        say=lines.append,
+        remote_wait_s=60.0,
+    )
     thread, result = _start(coordinator)
     assert _wait(lambda: any("waiting for dongle 1" in line for line in lines), 60), lines
     remote = subprocess.Popen(
-        [sys.executable, "-m", "rpf_fly", "worker", str(MISSION), "--dongle", "1", "--connect", endpoint,
-         "--dry-run"],  # no --flight: the one flight its --connect reaches
+        [
+            sys.executable,
+            "-m",
+            "rpf_fly",
+            "worker",
+            str(MISSION),
+            "--dongle",
+            "1",
+            "--connect",
+            endpoint,
+            "--dry-run",
+        ],  # no --flight: the one flight its --connect reaches
         env=dict(_env(), **{SECRET_ENV: coordinator.secret, "RPF_FLY_WORKER_LOG": str(tmp_path / "remote.log")}),
-        stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+    )
     seen: dict[str, set[str]] = defaultdict(set)
     genuine: list[tuple[bytes, bytes]] = []
     tap = open_session(mission.runtime.zenoh, connect=(endpoint,))
     foreign = open_session(mission.runtime.zenoh, connect=(endpoint,))
     try:
+
         def sample(s) -> None:  # noqa: ANN001
             parts = str(s.key_expr).split("/")
             if parts[2] == "mocap_frames":
@@ -160,8 +186,11 @@ def test_remote_worker_tap_and_foreign_commands(tmp_path):
     for dongle in (0, 1):  # each worker logs its own dongle's measured load, the coordinator's log holds both
         loads = [m.data for m in log.messages(f"/radio/{dongle}")]
         assert loads and max(load["packets_per_s"] for load in loads) > 0, dongle
-    warnings = [m.data["message"] for m in log.messages("/events") if m.data["level"] == 3
-                and "ignored a command" in m.data["message"]]
+    warnings = [
+        m.data["message"]
+        for m in log.messages("/events")
+        if m.data["level"] == 3 and "ignored a command" in m.data["message"]
+    ]
     assert len(warnings) >= 4, warnings  # two refused commands, at each of the two workers
     runtime = log.metadata["runtime"]
     assert runtime["flight_id"] == coordinator.flight
@@ -211,8 +240,9 @@ def test_a_killed_worker_is_noticed_and_the_others_fly_on(tmp_path):
     lines: list[str] = []
     log_path = tmp_path / "killed.mcap"
     shown: list[list[dict]] = []
-    coordinator = Coordinator(mission, path, log_path, dry_run=True, say=lines.append,
-                              status_hook=lambda c: shown.append(c.snapshot()))
+    coordinator = Coordinator(
+        mission, path, log_path, dry_run=True, say=lines.append, status_hook=lambda c: shown.append(c.snapshot())
+    )
     thread, result = _start(coordinator)
     assert _wait(lambda: coordinator.drones["cf3"].state == "planning", 90), lines
     time.sleep(0.5)
@@ -249,7 +279,11 @@ def test_a_killed_worker_is_noticed_and_the_others_fly_on(tmp_path):
         last = log.messages(f"/{name}/status")[-1].data  # the same message reached the logger and the coordinator
         row = end[name]
         assert (row["phase"], row["outcome"], row["battery_v"], row["link_pct"]) == (
-            last["state"], last["outcome"], last["battery_v"], 100 * last["link_quality"]), (row, last)
+            last["state"],
+            last["outcome"],
+            last["battery_v"],
+            100 * last["link_quality"],
+        ), (row, last)
         pose = log.messages(f"/mocap/{name}")[-1].data["pose"]["position"]
         assert max(abs(a - b) for a, b in zip(row["position"], (pose["x"], pose["y"], pose["z"]))) < 0.02, row
         assert not row["lost"] and row["reason"] == "every drone of the swarm is at its goal", row  # its worker's
@@ -302,8 +336,10 @@ def test_a_killed_relay_is_noticed_and_every_drone_lands(tmp_path):
         final = statuses[-1].data
         # landed, or (blind, 4 drones in a line: the blind drift of safety.blind_drift_m_s2 could reach a neighbour
         # before a landing ends) landing at once and dropped near the floor (docs/flight.md, "Blind")
-        assert (final["state"], final["outcome"]) in (("landed", "landed_early"), ("emergency", "emergency")), \
-            (name, final)
+        assert (final["state"], final["outcome"]) in (("landed", "landed_early"), ("emergency", "emergency")), (
+            name,
+            final,
+        )
         assert log.messages(f"/truth/{name}")[-1].data["position"]["z"] < 0.02, name
         landing = next(m.log_time for m in statuses if m.log_time > killed_ns and m.data["state"] == "landing")
         assert (landing - killed_ns) / 1e9 < 1.0, (name, (landing - killed_ns) / 1e9)  # a supervisor: 1.5 s
@@ -374,9 +410,17 @@ def test_grounded_drones_across_workers_and_the_rig_on_the_listen_address(tmp_pa
         endpoint = f"tcp/{address}:{s.getsockname()[1]}"
     lines: list[str] = []
     log_path = tmp_path / "grounded.mcap"
-    coordinator = Coordinator(mission, GROUNDED, log_path, dry_run=True, remote_dongles=(1,), listen=(endpoint,),
-                              say=lines.append, remote_wait_s=60.0,
-                              start_faults={"cf1": StartFault(offset_m=(0.0, 0.5))})
+    coordinator = Coordinator(
+        mission,
+        GROUNDED,
+        log_path,
+        dry_run=True,
+        remote_dongles=(1,),
+        listen=(endpoint,),
+        say=lines.append,
+        remote_wait_s=60.0,
+        start_faults={"cf1": StartFault(offset_m=(0.0, 0.5))},
+    )
     thread, result = _start(coordinator)
     remote = None
     try:
@@ -392,16 +436,31 @@ def test_grounded_drones_across_workers_and_the_rig_on_the_listen_address(tmp_pa
                 s.recv(64)
         tap = open_session(mission.runtime.zenoh, connect=(endpoint,))
         try:
-            rig = [json.loads(r.ok.payload.to_bytes()) for r in
-                   tap.get(f"rpf_fly/{coordinator.flight}/rig", timeout=5.0) if r.ok is not None]
+            rig = [
+                json.loads(r.ok.payload.to_bytes())
+                for r in tap.get(f"rpf_fly/{coordinator.flight}/rig", timeout=5.0)
+                if r.ok is not None
+            ]
         finally:
             tap.close()
         assert rig and rig[0]["radio"] == [address, radio[1]] and rig[0]["natnet_command_port"] == natnet
         remote = subprocess.Popen(
-            [sys.executable, "-m", "rpf_fly", "worker", str(GROUNDED), "--dongle", "1", "--connect", endpoint,
-             "--dry-run"],
+            [
+                sys.executable,
+                "-m",
+                "rpf_fly",
+                "worker",
+                str(GROUNDED),
+                "--dongle",
+                "1",
+                "--connect",
+                endpoint,
+                "--dry-run",
+            ],
             env=dict(_env(), **{SECRET_ENV: coordinator.secret, "RPF_FLY_WORKER_LOG": str(tmp_path / "remote.log")}),
-            stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+        )
         thread.join(120)
         assert not thread.is_alive()
         out = remote.communicate(timeout=30)[0].decode()
@@ -421,12 +480,18 @@ def test_grounded_drones_across_workers_and_the_rig_on_the_listen_address(tmp_pa
     assert not log.truncated
     said = {(m.data["name"], m.data["message"]) for m in log.messages("/events")}
     assert any(name == "cf1" and "from its start" in text for name, text in said), said
-    assert any(name == "cf3" and "preflight: its goal is 0.00 m from cf1, which stays on the ground" in text
-               for name, text in said), said
-    assert any(name == "cf2" and "preflight: its goal is 0.10 m from cf3, which stays on the ground" in text
-               for name, text in said), said
-    assert any(name == "flight" and text.startswith("cf3 stay on the ground beside the swarm's grounded drones")
-               for name, text in said), said
+    assert any(
+        name == "cf3" and "preflight: its goal is 0.00 m from cf1, which stays on the ground" in text
+        for name, text in said
+    ), said
+    assert any(
+        name == "cf2" and "preflight: its goal is 0.10 m from cf3, which stays on the ground" in text
+        for name, text in said
+    ), said
+    assert any(
+        name == "flight" and text.startswith("cf3 stay on the ground beside the swarm's grounded drones")
+        for name, text in said
+    ), said
     for name in ("cf1", "cf2", "cf3"):
         assert log.messages(f"/{name}/status")[-1].data["state"] == "failed", name
         truth = log.messages(f"/truth/{name}")
@@ -439,10 +504,25 @@ def test_grounded_drones_across_workers_and_the_rig_on_the_listen_address(tmp_pa
 def test_zenoh_unreachable_at_start_is_one_line_and_exit_2(tmp_path):
     endpoint = free_loopback_endpoint()  # nobody listens there
     done = subprocess.run(
-        [sys.executable, "-m", "rpf_fly", "worker", str(MISSION), "--dongle", "0", "--flight", "nobody",
-         "--connect", endpoint, "--dry-run"],
+        [
+            sys.executable,
+            "-m",
+            "rpf_fly",
+            "worker",
+            str(MISSION),
+            "--dongle",
+            "0",
+            "--flight",
+            "nobody",
+            "--connect",
+            endpoint,
+            "--dry-run",
+        ],
         env=dict(_env(), **{SECRET_ENV: "0" * 64, "RPF_FLY_WORKER_LOG": str(tmp_path / "w.log")}),
-        capture_output=True, text=True, timeout=60)
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert done.returncode == 2
     assert done.stderr.count("\n") == 1 and "zenoh: cannot open a session" in done.stderr, done.stderr
     assert done.stdout == ""
@@ -456,13 +536,19 @@ def test_a_distributed_dry_run_takes_only_power_on_faults(tmp_path):
     from rpf_fly.cli import get_app
 
     faults = tmp_path / "faults.yaml"
-    faults.write_text("faults:\n  - {kind: start_offset, drone: cf1, offset_m: [0.0, 0.5]}\n"
-                      "  - {kind: planner_error, drone: cf2, at_s: 1.0}\n")
-    result = CliRunner().invoke(get_app(), ["fly", str(MISSION), "--dry-run", "--distributed", "--faults",
-                                            str(faults), "--log", str(tmp_path / "f.mcap")])
+    faults.write_text(
+        "faults:\n  - {kind: start_offset, drone: cf1, offset_m: [0.0, 0.5]}\n"
+        "  - {kind: planner_error, drone: cf2, at_s: 1.0}\n"
+    )
+    result = CliRunner().invoke(
+        get_app(),
+        ["fly", str(MISSION), "--dry-run", "--distributed", "--faults", str(faults), "--log", str(tmp_path / "f.mcap")],
+    )
     assert result.exit_code == 2
-    assert result.output.strip() == f"{faults}:3: planner_error: --distributed takes the power-on faults only " \
-                                    "(yaw_offset, start_offset, upside_down, motor_fault; docs/distributed.md)"
+    assert (
+        result.output.strip() == f"{faults}:3: planner_error: --distributed takes the power-on faults only "
+        "(yaw_offset, start_offset, upside_down, motor_fault; docs/distributed.md)"
+    )
     assert not (tmp_path / "f.mcap").exists()
 
 
@@ -472,32 +558,37 @@ def test_a_drone_refused_at_arming_keeps_another_workers_drones_beside_it_down(t
     the coordinator's signed ``takeoff`` names cf1, and dongle 1's worker keeps cf3 down (disarmed), and so dongle 0
     keeps cf2 down: the same as one process. Before, the workers took off without a second round: cf3 flew to land
     on cf1. cf4 flies and reaches its goal."""
-    text = GROUNDED.read_text().replace("../../policies/", f"{ROOT}/policies/").replace(
-        "goal: [-0.8, -0.3]}", "goal: [-0.8, -0.8]}")
+    text = (
+        GROUNDED.read_text()
+        .replace("../../policies/", f"{ROOT}/policies/")
+        .replace("goal: [-0.8, -0.3]}", "goal: [-0.8, -0.8]}")
+    )
     path = tmp_path / "arming.yaml"
     path.write_text(text)
     mission = load_mission(path)
     lines: list[str] = []
     log_path = tmp_path / "arming.mcap"
-    coordinator = Coordinator(mission, path, log_path, dry_run=True, say=lines.append,
-                              start_faults={"cf1": StartFault(motor_fault=True)})
+    coordinator = Coordinator(
+        mission, path, log_path, dry_run=True, say=lines.append, start_faults={"cf1": StartFault(motor_fault=True)}
+    )
     thread, result = _start(coordinator)
     thread.join(120)
     assert not thread.is_alive()
     assert result["code"] == 1, lines
     outcomes = {name: view.outcome for name, view in coordinator.drones.items()}
     assert outcomes == {"cf1": "not_flown", "cf2": "not_flown", "cf3": "not_flown", "cf4": "reached"}, outcomes
-    takeoff = [e.message for e in coordinator.events.history if e.kind == "command"
-               and e.message.startswith("takeoff")]
+    takeoff = [e.message for e in coordinator.events.history if e.kind == "command" and e.message.startswith("takeoff")]
     assert len(takeoff) == 1 and "cf1, cf2 stay on the ground" in takeoff[0], takeoff  # cf2: dongle 0, in turn
     log = read_log(log_path)
     said = {(m.data["name"], m.data["message"]) for m in log.messages("/events")}
     # (why, in the supervisor's words, depends on when its telemetry came: "spin-up check" or "not armed")
     assert any(name == "cf1" and "its supervisor was not ready to fly" in text for name, text in said), said
-    assert any(name == "cf3" and "its goal is 0.00 m from cf1, which stays on the ground" in text
-               for name, text in said), said
-    assert any(name == "cf2" and "its goal is 0.10 m from cf3, which stays on the ground" in text
-               for name, text in said), said
+    assert any(
+        name == "cf3" and "its goal is 0.00 m from cf1, which stays on the ground" in text for name, text in said
+    ), said
+    assert any(
+        name == "cf2" and "its goal is 0.10 m from cf3, which stays on the ground" in text for name, text in said
+    ), said
     for name in ("cf1", "cf2", "cf3"):
         truth = log.messages(f"/truth/{name}")
         assert truth and max(m.data["position"]["z"] for m in truth) < 0.01, name
@@ -511,8 +602,14 @@ def test_a_motioncapture_mission_flies_distributed_through_the_relay(tmp_path):
     relay reads the emulator as the single-process dry run does (the package's decoder on its multicast) and the
     workers fly on its frames. Before, the relay's unicast client got no frame from the multicasting emulator and
     no worker started."""
-    path = _variant(tmp_path, "", ("mocap: {kind: natnet, server: 127.0.0.1, multicast: false, up_axis: z, rate_hz: 50}",
-                                   "mocap: {kind: motioncapture, type: optitrack, hostname: 127.0.0.1}"))
+    path = _variant(
+        tmp_path,
+        "",
+        (
+            "mocap: {kind: natnet, server: 127.0.0.1, multicast: false, up_axis: z, rate_hz: 50}",
+            "mocap: {kind: motioncapture, type: optitrack, hostname: 127.0.0.1}",
+        ),
+    )
     mission = load_mission(path)
     assert mission.mocap.kind == "motioncapture"
     lines: list[str] = []

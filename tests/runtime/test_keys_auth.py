@@ -14,9 +14,18 @@ from rpf_fly.runtime.keys import FlightKeys, check_flight_id, suffix_topic, topi
 from rpf_fly.runtime.session import rig_address, rig_host
 
 
-@pytest.mark.parametrize("topic, suffix", [
-    ("/mocap/cf1", "mocap/cf1"), ("/cf1/setpoint", "setpoint/cf1"), ("/cf1/planner", "planner/cf1"),
-    ("/cf1/status", "status/cf1"), ("/events", "events"), ("/truth/cf1", "truth/cf1"), ("/radio/2", "radio/2")])
+@pytest.mark.parametrize(
+    "topic, suffix",
+    [
+        ("/mocap/cf1", "mocap/cf1"),
+        ("/cf1/setpoint", "setpoint/cf1"),
+        ("/cf1/planner", "planner/cf1"),
+        ("/cf1/status", "status/cf1"),
+        ("/events", "events"),
+        ("/truth/cf1", "truth/cf1"),
+        ("/radio/2", "radio/2"),
+    ],
+)
 def test_log_topics_and_keys_map_both_ways(topic, suffix):
     assert topic_suffix(topic, "dongle-0") == suffix
     assert suffix_topic(suffix) == topic
@@ -52,9 +61,12 @@ def test_a_signed_command_is_taken_once():
 def test_commands_that_are_not_the_coordinators_are_refused(case):
     secret = new_secret()
     verifier = CommandVerifier(secret, "f1")
-    payload, signature = sign(secret if case != "other secret" else new_secret(),
-                              "f1" if case != "other flight" else "f2",
-                              "emergency_stop" if case != "unknown" else "self_destruct", 1)
+    payload, signature = sign(
+        secret if case != "other secret" else new_secret(),
+        "f1" if case != "other flight" else "f2",
+        "emergency_stop" if case != "unknown" else "self_destruct",
+        1,
+    )
     if case == "unsigned":
         signature = None
     if case == "tampered":
@@ -78,17 +90,29 @@ def test_a_go_carries_the_grounded_drones_under_its_signature():
     assert ungrounded != payload and CommandVerifier(secret, "f1").verify(ungrounded, signature)[0] is None
     land, why = CommandVerifier(secret, "f1").verify(*sign(secret, "f1", "land", 1, "", ("cf1",)))
     assert land is None and "refused" in why
-    malformed = json.dumps({"command": "go", "seq": 1, "reason": "", "t_ns": 0, "flight": "f1",
-                            "grounded": "cf1"}).encode()
-    assert CommandVerifier(secret, "f1").verify(malformed, hmac.new(secret.encode(), malformed, hashlib.sha256)
-                                                .hexdigest().encode()) == (None, "malformed command")
+    malformed = json.dumps(
+        {"command": "go", "seq": 1, "reason": "", "t_ns": 0, "flight": "f1", "grounded": "cf1"}
+    ).encode()
+    assert CommandVerifier(secret, "f1").verify(
+        malformed, hmac.new(secret.encode(), malformed, hashlib.sha256).hexdigest().encode()
+    ) == (None, "malformed command")
 
 
-@pytest.mark.parametrize("listen, host", [
-    ((), "127.0.0.1"), (("tcp/127.0.0.1:7447",), "127.0.0.1"), (("tcp/127.0.0.2:7447",), "127.0.0.2"),
-    (("tcp/10.0.0.5:7447",), "10.0.0.5"), (("tls/10.0.0.5:7447?iface=eth0",), "10.0.0.5"),
-    (("tcp/0.0.0.0:7447",), "0.0.0.0"), (("tcp/[::]:7447",), "0.0.0.0"), (("tcp/[::1]:7447",), "127.0.0.1"),
-    (("tcp/localhost:7447",), "127.0.0.1"), (("tcp/10.0.0.5:7447", "tcp/127.0.0.1:7447"), "10.0.0.5")])
+@pytest.mark.parametrize(
+    "listen, host",
+    [
+        ((), "127.0.0.1"),
+        (("tcp/127.0.0.1:7447",), "127.0.0.1"),
+        (("tcp/127.0.0.2:7447",), "127.0.0.2"),
+        (("tcp/10.0.0.5:7447",), "10.0.0.5"),
+        (("tls/10.0.0.5:7447?iface=eth0",), "10.0.0.5"),
+        (("tcp/0.0.0.0:7447",), "0.0.0.0"),
+        (("tcp/[::]:7447",), "0.0.0.0"),
+        (("tcp/[::1]:7447",), "127.0.0.1"),
+        (("tcp/localhost:7447",), "127.0.0.1"),
+        (("tcp/10.0.0.5:7447", "tcp/127.0.0.1:7447"), "10.0.0.5"),
+    ],
+)
 def test_the_rig_binds_the_first_listen_address(listen, host):
     assert rig_host(listen) == host
 
@@ -98,8 +122,14 @@ def test_the_rig_refuses_an_ipv6_listen_address_in_one_line():
         rig_host(("tcp/[fd00::2]:7447",))
 
 
-@pytest.mark.parametrize("advertised, connect, host", [
-    ("10.0.0.5", ("tcp/10.0.0.9:7447",), "10.0.0.5"), ("0.0.0.0", ("tcp/10.0.0.5:7447",), "10.0.0.5"),
-    ("0.0.0.0", (), "127.0.0.1"), ("0.0.0.0", ("tcp/127.0.0.1:7447",), "127.0.0.1")])
+@pytest.mark.parametrize(
+    "advertised, connect, host",
+    [
+        ("10.0.0.5", ("tcp/10.0.0.9:7447",), "10.0.0.5"),
+        ("0.0.0.0", ("tcp/10.0.0.5:7447",), "10.0.0.5"),
+        ("0.0.0.0", (), "127.0.0.1"),
+        ("0.0.0.0", ("tcp/127.0.0.1:7447",), "127.0.0.1"),
+    ],
+)
 def test_a_worker_reaches_a_rig_on_every_interface_where_it_reached_the_coordinator(advertised, connect, host):
     assert rig_address(advertised, connect) == host

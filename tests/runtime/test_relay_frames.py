@@ -20,14 +20,23 @@ from rpf_fly.runtime.relay import uses_relay
 from rpf_fly.runtime.relayed_mocap import RelayedMocap
 from rpf_fly.runtime.session import free_loopback_endpoint, open_session
 
-MISSION = ("name: relay\narena: {x: [-2, 2], y: [-2, 2]}\n"
-           "drones:\n  - {name: cf1, uri: radio://0/80/2M/E7E7E7E701, start: [0, 0], goal: [1, 0]}\n")
+MISSION = (
+    "name: relay\narena: {x: [-2, 2], y: [-2, 2]}\n"
+    "drones:\n  - {name: cf1, uri: radio://0/80/2M/E7E7E7E701, start: [0, 0], goal: [1, 0]}\n"
+)
 
 
 def frame(number: int, x: float = 0.5, valid: bool = True) -> MocapFrame:
-    return MocapFrame(number, number / 100, time.monotonic(), 0.004, {
-        "cf1": RigidBodyPose("cf1", 1, (x, -0.25, 0.5), (0.0, 0.0, 0.3826834, 0.9238795), valid, 0.0002),
-        "cf2": RigidBodyPose("cf2", 2, (1.0, 1.0, 0.0), (0.0, 0.0, 0.0, 1.0), False)})
+    return MocapFrame(
+        number,
+        number / 100,
+        time.monotonic(),
+        0.004,
+        {
+            "cf1": RigidBodyPose("cf1", 1, (x, -0.25, 0.5), (0.0, 0.0, 0.3826834, 0.9238795), valid, 0.0002),
+            "cf2": RigidBodyPose("cf2", 2, (1.0, 1.0, 0.0), (0.0, 0.0, 0.0, 1.0), False),
+        },
+    )
 
 
 def test_a_signed_frame_round_trips_with_every_field_and_is_taken_once():
@@ -46,8 +55,21 @@ def test_a_signed_frame_round_trips_with_every_field_and_is_taken_once():
     assert again.frame is None and "replayed" in again.why and not again.malformed
 
 
-@pytest.mark.parametrize("case", ["unsigned", "other secret", "other flight", "tampered", "older", "not json",
-                                  "no bodies", "text position", "short quaternion", "bool id"])
+@pytest.mark.parametrize(
+    "case",
+    [
+        "unsigned",
+        "other secret",
+        "other flight",
+        "tampered",
+        "older",
+        "not json",
+        "no bodies",
+        "text position",
+        "short quaternion",
+        "bool id",
+    ],
+)
 def test_frames_that_are_not_the_relays_are_refused(case):
     secret = new_secret()
     verifier = FrameVerifier(secret, "f1")
@@ -57,10 +79,12 @@ def test_frames_that_are_not_the_relays_are_refused(case):
     body = orjson.loads(payload)
     if case == "older":
         verifier.last_seq = 11
-    edits = {"no bodies": lambda b: b.pop("bodies"),
-             "text position": lambda b: b["bodies"][0].update(position=["a", 0, 0]),
-             "short quaternion": lambda b: b["bodies"][0].update(quaternion=[0, 0, 1]),
-             "bool id": lambda b: b["bodies"][0].update(id=True)}
+    edits = {
+        "no bodies": lambda b: b.pop("bodies"),
+        "text position": lambda b: b["bodies"][0].update(position=["a", 0, 0]),
+        "short quaternion": lambda b: b["bodies"][0].update(quaternion=[0, 0, 1]),
+        "bool id": lambda b: b["bodies"][0].update(id=True),
+    }
     if case in edits:
         edits[case](body)
         payload = json.dumps(body).encode()
@@ -135,16 +159,19 @@ def _until(predicate, timeout_s: float = 5.0) -> bool:  # noqa: ANN001
     return False
 
 
-@pytest.mark.parametrize("mocap, setting, relayed", [
-    ("{kind: natnet, multicast: false}", None, True),
-    ("{kind: natnet, multicast: true}", None, False),
-    ("{kind: natnet}", None, False),  # multicast by default
-    ("{kind: motioncapture, type: vicon, hostname: 10.0.0.2}", None, True),
-    ("{kind: sim}", None, False),
-    ("{kind: natnet, multicast: true}", "on", True),
-    ("{kind: natnet, multicast: false}", "off", False),
-    ("{kind: natnet, multicast: false}", "auto", True),
-])
+@pytest.mark.parametrize(
+    "mocap, setting, relayed",
+    [
+        ("{kind: natnet, multicast: false}", None, True),
+        ("{kind: natnet, multicast: true}", None, False),
+        ("{kind: natnet}", None, False),  # multicast by default
+        ("{kind: motioncapture, type: vicon, hostname: 10.0.0.2}", None, True),
+        ("{kind: sim}", None, False),
+        ("{kind: natnet, multicast: true}", "on", True),
+        ("{kind: natnet, multicast: false}", "off", False),
+        ("{kind: natnet, multicast: false}", "auto", True),
+    ],
+)
 def test_runtime_mocap_relay_says_when_the_flight_has_a_relay(mocap, setting, relayed):
     runtime = f"runtime: {{mocap_relay: {setting}}}\n" if setting else ""
     mission = parse_mission(MISSION + f"mocap: {mocap}\n" + runtime)
@@ -155,7 +182,6 @@ def test_runtime_mocap_relay_says_when_the_flight_has_a_relay(mocap, setting, re
 def test_a_bad_mocap_relay_value_is_one_line_naming_it():
     with pytest.raises(MissionError) as err:
         parse_mission(MISSION + "runtime:\n  mocap_relay: sometimes\n")
-    assert str(err.value) == ("<string>:6: runtime.mocap_relay: expected one of 'auto', 'on', 'off', "
-                              "got 'sometimes'")
+    assert str(err.value) == ("<string>:6: runtime.mocap_relay: expected one of 'auto', 'on', 'off', got 'sometimes'")
     quoted = parse_mission(MISSION + "runtime: {mocap_relay: 'on', zenoh: {mode: peer}}\n").runtime
     assert quoted.mocap_relay == "on" and quoted.zenoh.mode == "peer"

@@ -16,8 +16,10 @@ from rpf_fly.mission.model import ZenohSettings
 from rpf_fly.runtime.session import ZenohUnavailable, open_session
 
 TLS = Path(__file__).resolve().parent / "tls"
-MISSION = ("name: tls\narena: {x: [-2, 2], y: [-2, 2]}\n"
-           "drones:\n  - {name: cf1, uri: radio://0/80/2M/E7E7E7E701, start: [0, 0], goal: [1, 0]}\n")
+MISSION = (
+    "name: tls\narena: {x: [-2, 2], y: [-2, 2]}\n"
+    "drones:\n  - {name: cf1, uri: radio://0/80/2M/E7E7E7E701, start: [0, 0], goal: [1, 0]}\n"
+)
 
 
 def free_port() -> int:
@@ -48,10 +50,22 @@ def test_the_config_file_is_resolved_beside_the_mission_and_checked_at_load(tmp_
 
 
 def test_sessions_reach_each_other_over_tls_only_with_the_certificates_of_their_config_files(tmp_path: Path) -> None:
-    router_file = write(tmp_path / "router.json5", {"transport": {"link": {"tls": {
-        "listen_certificate": str(TLS / "server.pem"), "listen_private_key": str(TLS / "server.key")}}}})
-    client_file = write(tmp_path / "client.json5",
-                        {"transport": {"link": {"tls": {"root_ca_certificate": str(TLS / "ca.pem")}}}})
+    router_file = write(
+        tmp_path / "router.json5",
+        {
+            "transport": {
+                "link": {
+                    "tls": {
+                        "listen_certificate": str(TLS / "server.pem"),
+                        "listen_private_key": str(TLS / "server.key"),
+                    }
+                }
+            }
+        },
+    )
+    client_file = write(
+        tmp_path / "client.json5", {"transport": {"link": {"tls": {"root_ca_certificate": str(TLS / "ca.pem")}}}}
+    )
     endpoint = f"tls/localhost:{free_port()}"
     router = open_session(ZenohSettings(config=router_file), listen=[endpoint], mode="router")
     got = threading.Event()

@@ -23,8 +23,16 @@ def run(scenario, capture_radius=None):
     config = PlannerConfig.robust(margin=MARGIN, **overrides)
     params = SimParams()
     result = rollout(scenario, Planner(scenario.obstacles, config, FixedGains()), params)
-    metrics = compute_metrics(result.positions, scenario.goals, params.dt, params.goal_tolerance, R,
-                              scenario.obstacles, scenario.names, margin=MARGIN)
+    metrics = compute_metrics(
+        result.positions,
+        scenario.goals,
+        params.dt,
+        params.goal_tolerance,
+        R,
+        scenario.obstacles,
+        scenario.names,
+        margin=MARGIN,
+    )
     return result, metrics
 
 
@@ -80,9 +88,11 @@ def test_the_mission_key_sets_the_capture_radius_and_zero_turns_the_rule_off():
     from rpf_fly.sim.evaluate import run_scenario, sim_params
     from rpf_fly.sim.scenario import scenario_from_mission
 
-    text = ("name: pole\narena: {x: [-1, 5], y: [-2, 2]}\nflight: {speed: 0.5}\nobstacles:\n"
-            "  - {shape: circle, center: [3.0, 0.0], radius: 0.25}\n"
-            "drones:\n  - {name: cf1, uri: radio://0/80/2M/E7E7E7E701, start: [0, 0], goal: [2.5, 0]}\n")
+    text = (
+        "name: pole\narena: {x: [-1, 5], y: [-2, 2]}\nflight: {speed: 0.5}\nobstacles:\n"
+        "  - {shape: circle, center: [3.0, 0.0], radius: 0.25}\n"
+        "drones:\n  - {name: cf1, uri: radio://0/80/2M/E7E7E7E701, start: [0, 0], goal: [2.5, 0]}\n"
+    )
     runs = {}
     for key in ("", ", capture_radius: 0", ", capture_radius: 0.3"):
         mission = parse_mission(text + f"planner: {{kind: apf, guidance: none{key}}}\n")

@@ -99,8 +99,9 @@ def test_doorway_and_corridor_block_everything_but_the_gap():
     for family in ("doorway", "corridor", "passage"):
         scene = generate(family, 2, split="bench")
         boxes = [s for s in scene.shapes if isinstance(s, BoxObstacle)][:2]  # the dividing wall (then the room)
-        walled = make_scenario("walled", scene.starts, scene.goals, tuple(boxes) + _plugs(boxes),
-                               scene.arena_x, scene.arena_y)
+        walled = make_scenario(
+            "walled", scene.starts, scene.goals, tuple(boxes) + _plugs(boxes), scene.arena_x, scene.arena_y
+        )
         assert not reachable(walled, R + DEFAULT_MARGIN).any()
 
 

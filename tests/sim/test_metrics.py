@@ -87,8 +87,20 @@ def test_success_and_makespan_when_all_arrive():
 def test_json_shape_matches_contract():
     d = two_drone_case().to_json_dict()
     assert list(d) == [
-        "mission", "planner", "seed", "drones", "reached", "success", "collisions", "margin", "min_separation_m",
-        "min_obstacle_clearance_m", "travel_distance_m", "smoothness", "makespan_s", "per_drone",
+        "mission",
+        "planner",
+        "seed",
+        "drones",
+        "reached",
+        "success",
+        "collisions",
+        "margin",
+        "min_separation_m",
+        "min_obstacle_clearance_m",
+        "travel_distance_m",
+        "smoothness",
+        "makespan_s",
+        "per_drone",
     ]
     assert d["collisions"] == {"drone_drone": 1, "drone_obstacle": 1}
     assert d["seed"] == 7 and d["mission"] == "hand" and d["planner"] == "apf"

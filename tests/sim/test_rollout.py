@@ -13,8 +13,13 @@ WALL = make_scenario("wall", np.array([0j]), np.array([6 + 0j]), (BoxObstacle((2
 def run(scenario, config, params=SimParams()):
     result = rollout(scenario, Planner(scenario.obstacles, config, FixedGains()), params)
     metrics = compute_metrics(
-        result.positions, scenario.goals, params.dt, params.goal_tolerance, config.safety_radius,
-        scenario.obstacles, scenario.names,
+        result.positions,
+        scenario.goals,
+        params.dt,
+        params.goal_tolerance,
+        config.safety_radius,
+        scenario.obstacles,
+        scenario.names,
     )
     return result, metrics
 

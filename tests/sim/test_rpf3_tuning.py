@@ -30,8 +30,16 @@ def test_only_the_rpf3_kind_gets_the_tuning(kind):
 def fly(scenario, config, gains):
     params = SimParams()
     result = rollout(scenario, Planner(scenario.obstacles, config, gains, (scenario.arena_x, scenario.arena_y)), params)
-    return compute_metrics(result.positions, scenario.goals, params.dt, params.goal_tolerance, R,
-                           scenario.obstacles, scenario.names, margin=MARGIN)
+    return compute_metrics(
+        result.positions,
+        scenario.goals,
+        params.dt,
+        params.goal_tolerance,
+        R,
+        scenario.obstacles,
+        scenario.names,
+        margin=MARGIN,
+    )
 
 
 GAINS = FixedGains(eta=0.047, lam=1.2)
@@ -55,8 +63,11 @@ def test_guided_repulsion_range_lets_a_drone_hug_its_path_round_a_wall_and_keep_
 
 def crossing():  # type: ignore[no-untyped-def]
     """Two pairs crossing at right angles in the open."""
-    return make_scenario("cross", np.array([-3 + 0.3j, -3 - 0.3j, 0.3 - 3j, -0.3 - 3j]),
-                         np.array([3 + 0.3j, 3 - 0.3j, 0.3 + 3j, -0.3 + 3j]))
+    return make_scenario(
+        "cross",
+        np.array([-3 + 0.3j, -3 - 0.3j, 0.3 - 3j, -0.3 - 3j]),
+        np.array([3 + 0.3j, 3 - 0.3j, 0.3 + 3j, -0.3 + 3j]),
+    )
 
 
 def test_neighbour_range_shortens_the_detour_of_a_crossing_and_keeps_the_margin():
@@ -109,8 +120,16 @@ def test_a_drone_is_routed_round_a_drone_parked_in_the_gap_of_its_path():
 
     def outcome(planner):  # type: ignore[no-untyped-def]
         result = rollout(scenario, planner, params)
-        return compute_metrics(result.positions, scenario.goals, params.dt, params.goal_tolerance, R,
-                               scenario.obstacles, scenario.names, margin=MARGIN)
+        return compute_metrics(
+            result.positions,
+            scenario.goals,
+            params.dt,
+            params.goal_tolerance,
+            R,
+            scenario.obstacles,
+            scenario.names,
+            margin=MARGIN,
+        )
 
     without = Planner(scenario.obstacles, replace(shipped.config, guide_around_parked=False), shipped.gains, bounds)
     before, after = outcome(without), outcome(shipped)

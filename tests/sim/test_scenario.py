@@ -49,15 +49,26 @@ def swap_mission(angle_jitter=0.0, start_jitter=0.0):
     n, radius = 8, 3.0
     form = Formation("circle_swap", n, radius)
     drones = tuple(
-        Drone(f"cf{i + 1}", f"radio://0/80/2M/E7E7E7E7{i + 1:02X}", f"cf{i + 1}",
-              (radius * np.cos(2 * np.pi * i / n), radius * np.sin(2 * np.pi * i / n)),
-              (-radius * np.cos(2 * np.pi * i / n), -radius * np.sin(2 * np.pi * i / n)))
+        Drone(
+            f"cf{i + 1}",
+            f"radio://0/80/2M/E7E7E7E7{i + 1:02X}",
+            f"cf{i + 1}",
+            (radius * np.cos(2 * np.pi * i / n), radius * np.sin(2 * np.pi * i / n)),
+            (-radius * np.cos(2 * np.pi * i / n), -radius * np.sin(2 * np.pi * i / n)),
+        )
         for i in range(n)
     )
     return Mission(
-        "swap", Arena((-4, 4), (-4, 4)), FlightSettings(), PlannerSettings(), MocapSettings(), RadioSettings(),
-        SimSettings(start_jitter_m=start_jitter, angle_jitter_deg=angle_jitter), (CircleObstacle((0, 0), 0.2),),
-        drones, form,
+        "swap",
+        Arena((-4, 4), (-4, 4)),
+        FlightSettings(),
+        PlannerSettings(),
+        MocapSettings(),
+        RadioSettings(),
+        SimSettings(start_jitter_m=start_jitter, angle_jitter_deg=angle_jitter),
+        (CircleObstacle((0, 0), 0.2),),
+        drones,
+        form,
     )
 
 

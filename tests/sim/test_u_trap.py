@@ -15,7 +15,9 @@ MISSION = Path(__file__).resolve().parents[2] / "missions" / "u-trap.yaml"
 
 def run(guidance: str):  # type: ignore[no-untyped-def]
     mission = with_planner(load_mission(MISSION), "apf", guidance=guidance)
-    return mission, run_scenario(scenario_from_mission(mission, 0), mission.planner, sim_params(mission), 0, "u-trap").metrics
+    return mission, run_scenario(
+        scenario_from_mission(mission, 0), mission.planner, sim_params(mission), 0, "u-trap"
+    ).metrics
 
 
 def test_apf_stalls_in_the_u_without_guidance():

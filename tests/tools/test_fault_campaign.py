@@ -41,8 +41,13 @@ def test_two_faults_at_once_on_lab_3_are_judged_on_the_truth(tmp_path):
 
 def test_the_tools_options_are_checked_before_anything_flies(tmp_path):
     def tool(*args: str) -> subprocess.CompletedProcess:
-        return subprocess.run([sys.executable, str(ROOT / "tools" / "fault_campaign.py"), *args], capture_output=True,
-                              text=True, timeout=60, cwd=tmp_path)
+        return subprocess.run(
+            [sys.executable, str(ROOT / "tools" / "fault_campaign.py"), *args],
+            capture_output=True,
+            text=True,
+            timeout=60,
+            cwd=tmp_path,
+        )
 
     misspelt = tool("--kinds", "gust,reboto", "--out", "-")
     assert misspelt.returncode == 2 and "unknown fault kind 'reboto' (did you mean 'reboot'?)" in misspelt.stderr
@@ -54,11 +59,22 @@ def test_the_tools_options_are_checked_before_anything_flies(tmp_path):
 
 
 def test_each_campaign_has_its_own_report_under_docs():
-    reports = {default_report(None, 0, 0, 1, False), default_report("rpf3", 0, 0, 1, False),
-               default_report(None, 0, 0, 1, True), default_report(None, 16, 17, 2, False),
-               default_report(None, 16, 18, 3, True), default_report(None, 60, 2, 1, False)}
-    assert {p.name for p in reports} == {"fixed.md", "rpf3.md", "fixed-extpose.md", "compound-seed17.md",
-                                         "compound-extpose-seed18.md", "random-seed2.md"}
+    reports = {
+        default_report(None, 0, 0, 1, False),
+        default_report("rpf3", 0, 0, 1, False),
+        default_report(None, 0, 0, 1, True),
+        default_report(None, 16, 17, 2, False),
+        default_report(None, 16, 18, 3, True),
+        default_report(None, 60, 2, 1, False),
+    }
+    assert {p.name for p in reports} == {
+        "fixed.md",
+        "rpf3.md",
+        "fixed-extpose.md",
+        "compound-seed17.md",
+        "compound-extpose-seed18.md",
+        "random-seed2.md",
+    }
     assert all(p.parent == ROOT / "docs" / "fault-campaign" for p in reports)
 
 

@@ -16,5 +16,4 @@ def test_a_ground_station_killed_while_planning_passes_the_campaigns_judge(tmp_p
     verdict = fly_and_judge_lab(fault, ROOT / "missions" / "lab-3.yaml", tmp_path)
     assert verdict.passed, verdict.failures
     assert verdict.exit_code == -9 and verdict.outcomes == {}
-    assert verdict.events and verdict.events[0].startswith("3 of 3 airborne at the ground station kill"), \
-        verdict.events
+    assert verdict.events and verdict.events[0].startswith("3 of 3 airborne at the ground station kill"), verdict.events

@@ -24,12 +24,21 @@ drones:
 def judge(tmp_path: Path, cf2_x: float, cf1_y: float = 0.0, cf2_z: float = 1.0) -> tuple[int, dict]:
     log = FlightLog(tmp_path / "t.mcap", {"name": "two"}, {})
     for k in range(3):
-        log.truth(1_000_000_000 + k, {"cf1": ((0.0, cf1_y, 1.0), 0.0, True, False, (0.0, cf1_y, 1.0)),
-                                      "cf2": ((cf2_x, 0.0, cf2_z), 0.0, True, False, (cf2_x, 0.0, cf2_z))})
+        log.truth(
+            1_000_000_000 + k,
+            {
+                "cf1": ((0.0, cf1_y, 1.0), 0.0, True, False, (0.0, cf1_y, 1.0)),
+                "cf2": ((cf2_x, 0.0, cf2_z), 0.0, True, False, (cf2_x, 0.0, cf2_z)),
+            },
+        )
     log.close()
     (tmp_path / "m.yaml").write_text(MISSION)
-    done = subprocess.run([sys.executable, str(ROOT / "tools" / "log_margin.py"), str(tmp_path / "t.mcap"),
-                           str(tmp_path / "m.yaml")], capture_output=True, text=True, timeout=60)
+    done = subprocess.run(
+        [sys.executable, str(ROOT / "tools" / "log_margin.py"), str(tmp_path / "t.mcap"), str(tmp_path / "m.yaml")],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     return done.returncode, json.loads(done.stdout)
 
 

@@ -21,7 +21,7 @@ def load_runner():  # type: ignore[no-untyped-def]
     return module
 
 
-FLY_FROM_ENV = '''
+FLY_FROM_ENV = """
 import sys, time
 import cflib.crtp
 from cflib.crazyflie import Crazyflie
@@ -38,9 +38,9 @@ if __name__ == '__main__':
         print('estimator', scf.cf.param.get_value('stabilizer.estimator'), 'uri', uri)
         scf.cf.high_level_commander.land(0.0, 0.5)
         time.sleep(0.6)
-'''
+"""
 
-HARDCODED_SWARM = '''
+HARDCODED_SWARM = """
 import sys
 
 import cflib.crtp
@@ -53,9 +53,9 @@ if __name__ == '__main__':
     with Swarm(uris, factory=CachedCfFactory(rw_cache='./cache')) as swarm:
         # one write a line: print() from the swarm's threads writes its parts apart, and they interleave
         swarm.parallel_safe(lambda scf: sys.stdout.write(f"{scf.cf.link_uri} {scf.cf.param.get_value('cpu.flash')}\\n"))
-'''
+"""
 
-MISSING_LOG_VARIABLE = '''
+MISSING_LOG_VARIABLE = """
 import cflib.crtp
 from cflib.crazyflie import Crazyflie
 from cflib.crazyflie.log import LogConfig
@@ -68,9 +68,9 @@ if __name__ == '__main__':
     config.add_variable('nosuch.variable', 'float')
     with SyncCrazyflie(uri_helper.uri_from_env(), cf=Crazyflie(rw_cache='./cache')) as scf:
         scf.cf.log.add_config(config)
-'''
+"""
 
-CUT_IN_FLIGHT = '''
+CUT_IN_FLIGHT = """
 import time
 import cflib.crtp
 from cflib.crazyflie import Crazyflie
@@ -84,13 +84,13 @@ if __name__ == '__main__':
         time.sleep(0.8)
         scf.cf.commander.send_stop_setpoint()  # motors off in the air: it falls and locks 2 s later
         time.sleep(2.3)
-'''
+"""
 
-FOREVER = '''
+FOREVER = """
 import time
 while True:
     time.sleep(0.1)
-'''
+"""
 
 
 def write(folder: Path, name: str, source: str) -> Path:
@@ -110,8 +110,9 @@ def test_the_runner_runs_example_shaped_programs_against_fake(tmp_path: Path) ->
     before = env_example.read_text()
     report = tmp_path / "results.json"
     outputs = tmp_path / "outputs"
-    code = runner.main(["--examples", str(examples), "--json", str(report), "--output-dir", str(outputs),
-                        "--timeout", "60"])
+    code = runner.main(
+        ["--examples", str(examples), "--json", str(report), "--output-dir", str(outputs), "--timeout", "60"]
+    )
     results = {r["name"]: r for r in json.loads(report.read_text())}
     assert results["mine/fly_from_env.py"]["result"] == "ok", results
     assert results["mine/hardcoded_swarm.py"]["result"] == "ok", results
@@ -143,6 +144,6 @@ def test_timeouts_exclusions_and_error_lines(tmp_path: Path) -> None:
     excluded = runner.plan(["step-by-step/sbs_motion_commander.py", "logging/basiclog.py", "other/new.py"])
     assert [s.excluded != "" for s in excluded] == [False, True, False]
     assert "Flow deck" in excluded[1].excluded and "not in the list" in excluded[2].note
-    traceback = "noise\nTraceback (most recent call last):\n  File \"x.py\", line 1\n    boom()\nNameError: boom\nrest"
+    traceback = 'noise\nTraceback (most recent call last):\n  File "x.py", line 1\n    boom()\nNameError: boom\nrest'
     assert runner.first_error_line(traceback) == "NameError: boom"
     assert runner.first_error_line("a\nlast words\n\n") == "last words"

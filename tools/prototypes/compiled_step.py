@@ -15,6 +15,7 @@ attraction, summed repulsion over circles / boxes / static neighbours, the inter
 keep-right, the wall-following / soft rule, capture, yield and a brake check. Timed as the flight would call it
 (arrays from the view) beside the real onnxruntime call of policies/rpf3.onnx on the real observation.
 """
+
 import math
 import statistics
 import sys
@@ -38,8 +39,31 @@ def timed(fn):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True, fastmath=False)
-def step_kernel(p, g, h, npos, nvel, nmask, circles, boxes, nodes, cost, eta, lam, obs, r, margin, rho, rho_static,
-                sensing, neighbour_range, keep_right, static_speed, capture_radius, wall_threshold):
+def step_kernel(
+    p,
+    g,
+    h,
+    npos,
+    nvel,
+    nmask,
+    circles,
+    boxes,
+    nodes,
+    cost,
+    eta,
+    lam,
+    obs,
+    r,
+    margin,
+    rho,
+    rho_static,
+    sensing,
+    neighbour_range,
+    keep_right,
+    static_speed,
+    capture_radius,
+    wall_threshold,
+):
     px, py = p.real, p.imag
     # --- guidance-like: is the goal visible? else the best visible node of the 8 candidates
     best = g
@@ -184,14 +208,24 @@ for name in ("lab-3", "arena-a-6", "u-trap"):
     _, views = midflight_views(name)
     mission = load_mission(ROOT / "missions" / f"{name}.yaml")
     scenario = scenario_from_mission(mission, 0)
-    settings = replace(mission.planner, kind="rpf3", policy=ROOT / "policies" / "rpf3.onnx", guidance=None, margin=None,
-                       capture_radius=None)
+    settings = replace(
+        mission.planner,
+        kind="rpf3",
+        policy=ROOT / "policies" / "rpf3.onnx",
+        guidance=None,
+        margin=None,
+        capture_radius=None,
+    )
     planner = make_planner(settings, scenario.obstacles, (scenario.arena_x, scenario.arena_y), scenario.goals)
     policy, cfg = planner.gains.policy, planner.config
     o = planner.obstacles
     circles = np.array([[c.real, c.imag, rr] for c, rr in zip(np.ravel(o.centers), np.ravel(o.radii))]).reshape(-1, 3)
-    boxes = np.array([[c.real, c.imag, hx, hy] for c, hx, hy in zip(np.ravel(o.box_center), np.ravel(o.box_half_x),
-                                                                  np.ravel(o.box_half_y))]).reshape(-1, 4)
+    boxes = np.array(
+        [
+            [c.real, c.imag, hx, hy]
+            for c, hx, hy in zip(np.ravel(o.box_center), np.ravel(o.box_half_x), np.ravel(o.box_half_y))
+        ]
+    ).reshape(-1, 4)
     nodes_all = planner.guidance.nodes if planner.guidance is not None else np.zeros(0, complex)
     nodes = np.ascontiguousarray(nodes_all[:8]) if nodes_all.shape[0] else np.zeros(8, complex)
     cost = np.linspace(1.0, 3.0, nodes.shape[0])
@@ -204,12 +238,25 @@ for name in ("lab-3", "arena-a-6", "u-trap"):
         mask = np.ascontiguousarray(v.neighbour_mask, dtype=np.bool_)
         npos = np.ascontiguousarray(v.neighbour_position)
         nvel = np.ascontiguousarray(v.neighbour_velocity)
-        args = (complex(v.position), complex(v.goal), complex(v.heading), npos, nvel, mask, circles, boxes, nodes,
-                cost)
+        args = (complex(v.position), complex(v.goal), complex(v.heading), npos, nvel, mask, circles, boxes, nodes, cost)
 
         def kernel(a=args, obs=obs):
-            return step_kernel(*a, 0.05, 2.0, obs, cfg.safety_radius, cfg.margin, 0.2, 0.5, cfg.sensing_range, 0.8,
-                               math.radians(45.0), 0.15, 0.3, 1.0)
+            return step_kernel(
+                *a,
+                0.05,
+                2.0,
+                obs,
+                cfg.safety_radius,
+                cfg.margin,
+                0.2,
+                0.5,
+                cfg.sensing_range,
+                0.8,
+                math.radians(45.0),
+                0.15,
+                0.3,
+                1.0,
+            )
 
         def compiled_step(a=args, obs=obs, observation=observation):
             kernel(a, obs)
@@ -218,7 +265,9 @@ for name in ("lab-3", "arena-a-6", "u-trap"):
         kernels.append(timed(kernel))
         onnx.append(timed(lambda: policy.act(observation)))
         steps.append(timed(compiled_step))
-    print(f"{name:10s} kernel {statistics.median(kernels) * 1e6:5.1f} us, onnxruntime alone "
-          f"{statistics.median(onnx) * 1e6:5.1f} us, kernel + onnxruntime {statistics.median(steps) * 1e6:5.1f} us: "
-          f"{statistics.median(steps) / statistics.median(onnx):.2f}x; numpy step today "
-          f"{statistics.median(timed(lambda v=v: planner.step(v)) for v in views) * 1e6:5.1f} us")
+    print(
+        f"{name:10s} kernel {statistics.median(kernels) * 1e6:5.1f} us, onnxruntime alone "
+        f"{statistics.median(onnx) * 1e6:5.1f} us, kernel + onnxruntime {statistics.median(steps) * 1e6:5.1f} us: "
+        f"{statistics.median(steps) / statistics.median(onnx):.2f}x; numpy step today "
+        f"{statistics.median(timed(lambda v=v: planner.step(v)) for v in views) * 1e6:5.1f} us"
+    )

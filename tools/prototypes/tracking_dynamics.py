@@ -20,6 +20,7 @@ Truths: the simulated drone; the firmware cascade; the cascade with the attitude
 lab's stiffer position gain (3 /s). Envelopes: the supervisor's follower as it is (0.25 s: one point); 0.25 s to a
 first-order 0.5 s; 0.25 s to the firmware cascade itself.
 """
+
 from __future__ import annotations
 
 import math
@@ -42,8 +43,14 @@ class PositionLoop:
     loop brings the velocity there with that time constant, its acceleration capped at ``a_max`` (the tilt limit)
     and delayed by the attitude loop's ``tau_att``; with ``tau_v`` = 0 the velocity is the asked one at once."""
 
-    def __init__(self, kp: float, tau_v: float = 0.0, tau_att: float = 0.0, a_max: float = G * math.tan(math.radians(20)),
-                 v_max: float = 1.1) -> None:
+    def __init__(
+        self,
+        kp: float,
+        tau_v: float = 0.0,
+        tau_att: float = 0.0,
+        a_max: float = G * math.tan(math.radians(20)),
+        v_max: float = 1.1,
+    ) -> None:
         self.kp, self.tau_v, self.tau_att, self.a_max, self.v_max = kp, tau_v, tau_att, a_max, v_max
         self.p = self.v = self.a = 0j
 
