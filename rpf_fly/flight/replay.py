@@ -145,9 +145,8 @@ def replay_log(
     tracker = PoseTracker({n: n for n in names})
     results = {n: DroneReplay(n, tolerance) for n in names}
     for n in rowless:
-        results[n].note = (
-            f"no planner rows (/{n}/planner) in the log: not replayed (its poses still count as a neighbour, by height)"
-        )
+        note = f"no planner rows (/{n}/planner) in the log: not replayed "
+        results[n].note = note + "(its poses still count as a neighbour, by height)"
     last_planned: dict[str, LoggedRow] = {}
     previous_mode: dict[str, str] = {}
     batching_off_ns = batching_switched_off_ns(data)
