@@ -166,7 +166,7 @@ class PoseTracker:
         sample after a gap (``GAP_S``). The flight loop sets it."""
         self.blind_drift_m_s2 = 0.45
         """How fast a blind estimate may drift off the truth (the mission's ``safety.blind_drift_m_s2``; its
-        default, `rpf_fly.flight.supervisor.BLIND_DRIFT_M_S2`)."""
+        default, `rpf_fly.flight.blind.BLIND_DRIFT_M_S2`)."""
         self.last_jump_from_estimate: dict[str, bool] = {}
         """drone -> whether its newest refused jump was measured from its on-board estimate after a gap (else from
         its previous sample)."""

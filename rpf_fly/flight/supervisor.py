@@ -28,11 +28,18 @@ log records episodes, not every tick.
 from __future__ import annotations
 
 import math
-from collections import deque
 from collections.abc import Iterable
 
 from rpf_fly.flight.agent import DroneAgent
+from rpf_fly.flight.blind import (
+    BODY_RADIUS_M,
+    ESTIMATE_FRESH_S,
+    LAND_EARLY_SHARE,
+    blind_drift_m,
+    blind_land_s,
+)
 from rpf_fly.flight.commander import ON_FLOOR_Z_M
+from rpf_fly.flight.estimate_check import EstimateCheck
 from rpf_fly.flight.events import ERROR, INFO, WARNING
 from rpf_fly.flight.findings import Finding
 from rpf_fly.flight.phases import DronePhase
@@ -53,24 +60,6 @@ sample taken during a thrust peak (a turn, a gust) sags far lower than the hover
 TELEMETRY_STALE_S = 1.0
 """A linked drone whose status telemetry (10 Hz) is older than this: the battery and supervisor checks are blind."""
 
-ESTIMATE_DIVERGENCE_M = 0.15
-"""In flight, an on-board position estimate this far from a fresh mocap pose (in 2 status samples in a row) means
-the estimator no longer takes extpos: the drone holds its ESTIMATE at the setpoint while its true position drifts.
-With extpos streaming the two agree within a centimetre or two."""
-
-ESTIMATE_WRONG_M = 0.10
-"""In flight, an on-board estimate this far from the mocap pose OF ITS OWN TIME (the telemetry's firmware
-timestamp, `DroneState.estimate_stamp_s`; in 2 status samples in a row) is wrong, not late: motors off. With extpos
-streaming the two agree within 1-3 cm (the mocap's own lag and the stamp's few milliseconds at flight speed), so
-10 cm is a diverged estimator 0.2 s after it diverged at 0.5 m/s. Without the stamp the check must find the
-estimate far from EVERY pose of the last `ESTIMATE_HISTORY_S` to tell wrong from late: a drone whose estimator runs
-away at 0.57 m/s is then stopped 0.75 s after, 0.6 m off its track (into a wall, in random fault campaign seed
-9)."""
-
-ESTIMATE_HISTORY_S = 0.5
-"""How far back an on-board estimate may be matched against mocap: telemetry queued behind a full radio arrives
-hundreds of milliseconds late, and a late estimate of a drone at 0.5 m/s is decimetres behind the newest pose."""
-
 LINK_QUALITY_WARN_PCT = 96.0
 """cflib's link quality loses 10 points per retry a packet needs on average over its last 100 acks (100 - 10 p /
 (1 - p) for a loss p of the radio's attempts): below 96 % 0.4 retries a packet (over 28 % of the attempts lost),
@@ -90,64 +79,6 @@ a picture that old (Crazyswarm2 warns at 10 ms over unicast; a healthy Motive li
 the worst healthy link, so a healthy system never warns, and 2 cm of lag at 1 m/s. At 50 ms the
 random fault campaign's 33 ms of mocap delay (plus the emulated camera's 4 ms), a picture five times older than a
 healthy one, would go unsaid."""
-
-
-def _pose_at(
-    history: deque[tuple[float, tuple[float, float, float]]], stamp_s: float | None
-) -> tuple[float, float, float] | None:
-    """The mocap position at ``stamp_s`` (linear between the two poses around it); None without a stamp or when
-    the history does not reach back that far (or forward: a stamp ahead of the newest pose by over 20 ms)."""
-    if stamp_s is None or not history or stamp_s < history[0][0] or stamp_s > history[-1][0] + 0.02:
-        return None
-    before = history[0]
-    for after in history:
-        if after[0] >= stamp_s:
-            span = after[0] - before[0]
-            if span <= 0.0:
-                return after[1]
-            w = (stamp_s - before[0]) / span
-            (bx, by, bz), (cx, cy, cz) = before[1], after[1]
-            return bx + w * (cx - bx), by + w * (cy - by), bz + w * (cz - bz)
-        before = after
-    return history[-1][1]
-
-
-BLIND_DRIFT_M_S2 = 0.45
-"""The default of the mission's ``safety.blind_drift_m_s2``: how fast a drone without mocap may drift off where it
-believes it is. Its estimator dead-reckons on a biased accelerometer through its attitude estimate, about 0.5 a t^2
-after t s blind. The dry run's drones drift from cited figures (rpf_fly/emulator/fake_vehicle.py): the Crazyflie
-2.1's BMI088 accelerometer's typical zero-g offset, 20 mg (0.196 m/s^2, BMI088 data sheet), plus a roll/pitch
-error of the estimate of 0.01 rad (g sin 0.57 degrees = 0.098 m/s^2, the Kalman estimator's
-`stdDevInitialAttitude_rollpitch`): at most 0.294 m/s^2, and with the velocity error a drone has when it goes
-blind, at most 0.18 m after 1 s and 0.64 m after 2 s (200 seeds). 0.45 covers that from 0.5 s blind on (1 s:
-0.23 m; 2 s: 0.9 m). Not measured on hardware: a lab that has measured its drones sets its own figure in the
-mission."""
-BODY_RADIUS_M = 0.065
-"""A Crazyflie 2.1's rotor-tip radius: two bodies touch at 0.13 m centre to centre, a body touches an obstacle at
-0.065 m from its surface (the dry run's contact figures)."""
-BLIND_LAND_S_PER_M = 2.0
-"""A drone that lands without mocap lands over this many seconds per metre of height (at least `BLIND_LAND_MIN_S`,
-at most the mission's ``land_s``): every second of a blind landing is drift. The high-level commander's landing is a
-7th-order polynomial whose peak speed is 2.19 x its mean: 2 s/m keeps it at the firmware's 1.1 m/s vertical limit
-(0.5 m: 1 s instead of the mission's 2 s)."""
-ESTIMATE_FRESH_S = 0.3
-"""A blind drone's height is taken from its on-board estimate when that telemetry is at most this old (three
-status samples at 10 Hz)."""
-BLIND_LAND_MIN_S = 0.6
-LAND_EARLY_SHARE = 0.8
-"""A blind drone lands before ``pose_lost_land_s`` when a landing begun any later would end with its possible drift
-over this share of the room it has (docs/flight.md, "Blind")."""
-
-
-def blind_drift_m(blind_s: float, rate_m_s2: float = BLIND_DRIFT_M_S2) -> float:
-    """How far a drone blind for ``blind_s`` may have drifted at ``rate_m_s2`` (the mission's
-    ``safety.blind_drift_m_s2``)."""
-    return 0.5 * rate_m_s2 * blind_s * blind_s
-
-
-def blind_land_s(height_m: float, land_s: float) -> float:
-    """How long a drone at ``height_m`` without mocap takes to land (`BLIND_LAND_S_PER_M`)."""
-    return min(land_s, max(BLIND_LAND_MIN_S, BLIND_LAND_S_PER_M * height_m))
 
 
 class Supervisor:
@@ -172,9 +103,7 @@ class Supervisor:
         self._telemetry_stale: set[str] = set()
         self._glitching: set[str] = set()
         self._turned: set[str] = set()
-        self._diverging: dict[str, tuple[int, int, float]] = {}
-        self._estimate_stopped: set[str] = set()
-        self._history: dict[str, deque[tuple[float, tuple[float, float, float]]]] = {}
+        self._estimates = EstimateCheck(mission.safety)
         self._poor_link: set[str] = set()
         self._late_landing: set[str] = set()
         self._late_mocap = False
@@ -215,7 +144,7 @@ class Supervisor:
         findings += self._battery(agents, states)
         findings += self._telemetry(now_s, agents, states)
         findings += self._crashes(agents, states)
-        findings += self._estimates(now_s, agents, tracker, states)
+        findings += self._estimates.check(now_s, agents, tracker, states)
         findings += self._link_quality(agents, states)
         findings += self._tracking.check(now_s, agents, tracker, states)
         findings += self._mocap_latency(tracker)
@@ -612,94 +541,6 @@ class Supervisor:
                 what = "crashed" if sup.crashed else "tumbled" if sup.tumbled else "locked"
                 out.append(
                     Finding("crashed", ERROR, f"its supervisor says {what}: motors cut, it falls", a.name, "crashed")
-                )
-        return out
-
-    def _estimates(
-        self, now_s: float, agents: list[DroneAgent], tracker: PoseTracker, states: dict[str, DroneState]
-    ) -> list[Finding]:
-        """The on-board estimate against mocap (``ESTIMATE_DIVERGENCE_M``), in two steps. Off the newest pose in 2
-        samples: a warning (also what late telemetry on a full radio looks like at flight speed). Off EVERY pose of
-        the last ``ESTIMATE_HISTORY_S`` in 2 samples: the estimate is not just late, it is wrong; motors off.
-        Take-off and landing are watched as the planning is (a landing flies the estimate's way: unwatched, a drone
-        whose estimator diverged mid-landing slides 0.16 m sideways in its last half second without a word); a
-        taking-off or landing drone whose mocap height is within ``ON_FLOOR_Z_M`` of the floor gets
-        a warning instead (a cut there buys nothing, and a landed drone's outcome stays landed)."""
-        out = []
-        for a in agents:
-            state, pose = states.get(a.name), tracker.get(a.name)
-            history = self._history.setdefault(a.name, deque())
-            if pose is not None and pose.valid and (not history or history[-1][0] != pose.stamp_s):
-                history.append((pose.stamp_s, pose.position))
-            while history and history[0][0] < now_s - ESTIMATE_HISTORY_S:
-                history.popleft()
-            if (
-                state is None
-                or state.position_m is None
-                or state.telemetry_stamp_s is None
-                or pose is None
-                or not pose.valid
-                or now_s - pose.stamp_s > self.safety.pose_timeout_s
-            ):
-                continue
-            grounded = a.phase in (DronePhase.LANDING, DronePhase.TAKEOFF) and pose.position[2] <= ON_FLOOR_Z_M
-            late, wrong, stamp = self._diverging.get(a.name, (0, 0, -1.0))
-            if state.telemetry_stamp_s == stamp:
-                continue
-            off = math.dist(state.position_m, pose.position)
-            then = _pose_at(history, state.estimate_stamp_s)
-            nearest: float | None
-            if then is not None:  # the estimate against where mocap saw the drone when it was made
-                nearest = math.dist(state.position_m, then)
-                wrong_m, what = ESTIMATE_WRONG_M, "the mocap pose of its own time"
-            elif (
-                state.estimate_stamp_s is not None and history and state.estimate_stamp_s < history[0][0]
-            ):  # made before the poses kept (the loop stalled)
-                nearest = None
-            else:  # no stamp: only far from every recent pose is surely wrong, not late
-                nearest = min((math.dist(state.position_m, p) for _, p in history), default=off)
-                wrong_m, what = ESTIMATE_DIVERGENCE_M, f"every mocap pose of the last {ESTIMATE_HISTORY_S:g} s"
-            late = late + 1 if off > ESTIMATE_DIVERGENCE_M else 0
-            if nearest is not None:  # an estimate nothing can date against the poses neither clears nor counts
-                wrong = wrong + 1 if nearest > wrong_m else 0
-            self._diverging[a.name] = (late, wrong, state.telemetry_stamp_s)
-            if late == 2 and wrong < 2:
-                out.append(
-                    Finding(
-                        "estimator",
-                        WARNING,
-                        f"on-board estimate {off:.2f} m from mocap (late telemetry "
-                        "on a full radio, or an estimator that stopped taking extpos)",
-                        a.name,
-                        "warn",
-                    )
-                )
-            if nearest is None:
-                continue
-            if wrong == 2 and grounded:
-                out.append(
-                    Finding(
-                        "estimator",
-                        WARNING,
-                        f"on-board estimate {nearest:.2f} m from {what}: the "
-                        "estimator no longer follows extpos; on the floor, its landing's end is left to "
-                        "it",
-                        a.name,
-                        "warn",
-                    )
-                )
-            if wrong >= 2 and not grounded and a.name not in self._estimate_stopped:
-                self._estimate_stopped.add(a.name)
-                out.append(
-                    Finding(
-                        "estimator",
-                        ERROR,
-                        f"on-board estimate {nearest:.2f} m from {what}: the "
-                        "estimator no longer follows extpos, and a landing would fly wherever the "
-                        "estimate goes: motors off",
-                        a.name,
-                        "stop",
-                    )
                 )
         return out
 

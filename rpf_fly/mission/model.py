@@ -255,7 +255,7 @@ class SafetySettings:
     blind_drift_m_s2: float = 0.45
     """How fast a drone without mocap may drift off where it believes it is (m/s^2: 0.5 a t^2 after t s blind): the
     supervisor's blind rule lands a drone near something, or cuts its motors, before that drift could reach it
-    (docs/flight.md, "Blind"). 0.45 (rpf_fly/flight/supervisor.py, `BLIND_DRIFT_M_S2`) covers with a margin the
+    (docs/flight.md, "Blind"). 0.45 (rpf_fly/flight/blind.py, `BLIND_DRIFT_M_S2`) covers with a margin the
     dry run's drones, whose drift comes from the Crazyflie 2.1 IMU's typical zero-g offset and a small tilt error
     of the attitude estimate (at most 0.294 m/s^2); a lab that has measured its own drones' drift without a
     position source sets its figure here."""

@@ -23,8 +23,8 @@ from rpf_fly.emulator.vehicle_figures import (
     TILT_ERROR_M_S2,
     TILT_ERROR_RAD,
 )
+from rpf_fly.flight.blind import BLIND_DRIFT_M_S2, blind_drift_m
 from rpf_fly.flight.poses import PoseTracker
-from rpf_fly.flight.supervisor import BLIND_DRIFT_M_S2, blind_drift_m
 from rpf_fly.mission.model import SafetySettings
 
 DT = 0.01

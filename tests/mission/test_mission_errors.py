@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from rpf_fly.flight.supervisor import BLIND_DRIFT_M_S2
+from rpf_fly.flight.blind import BLIND_DRIFT_M_S2
 
 # Two drones crossing a 4 m arena; the tests rely on its line numbers (drones[0] on line 3, drones[1] on line 4).
 BASE = """\

@@ -1,0 +1,152 @@
+"""The on-board estimate against mocap: a drone whose estimator no longer follows extpos would fly wherever its
+estimate goes, a landing included, so the supervisor cuts its motors (docs/flight.md, "The supervisor")."""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+
+from rpf_fly.flight.agent import DroneAgent
+from rpf_fly.flight.commander import ON_FLOOR_Z_M
+from rpf_fly.flight.events import ERROR, WARNING
+from rpf_fly.flight.findings import Finding
+from rpf_fly.flight.phases import DronePhase
+from rpf_fly.flight.poses import PoseTracker
+from rpf_fly.mission.model import SafetySettings
+from rpf_fly.radio.backend import DroneState
+
+ESTIMATE_DIVERGENCE_M = 0.15
+"""In flight, an on-board position estimate this far from a fresh mocap pose (in 2 status samples in a row) means
+the estimator no longer takes extpos: the drone holds its ESTIMATE at the setpoint while its true position drifts.
+With extpos streaming the two agree within a centimetre or two."""
+
+ESTIMATE_WRONG_M = 0.10
+"""In flight, an on-board estimate this far from the mocap pose OF ITS OWN TIME (the telemetry's firmware
+timestamp, `DroneState.estimate_stamp_s`; in 2 status samples in a row) is wrong, not late: motors off. With extpos
+streaming the two agree within 1-3 cm (the mocap's own lag and the stamp's few milliseconds at flight speed), so
+10 cm is a diverged estimator 0.2 s after it diverged at 0.5 m/s. Without the stamp the check must find the
+estimate far from EVERY pose of the last `ESTIMATE_HISTORY_S` to tell wrong from late: a drone whose estimator runs
+away at 0.57 m/s is then stopped 0.75 s after, 0.6 m off its track (into a wall, in random fault campaign seed
+9)."""
+
+ESTIMATE_HISTORY_S = 0.5
+"""How far back an on-board estimate may be matched against mocap: telemetry queued behind a full radio arrives
+hundreds of milliseconds late, and a late estimate of a drone at 0.5 m/s is decimetres behind the newest pose."""
+
+
+def _pose_at(
+    history: deque[tuple[float, tuple[float, float, float]]], stamp_s: float | None
+) -> tuple[float, float, float] | None:
+    """The mocap position at ``stamp_s`` (linear between the two poses around it); None without a stamp or when
+    the history does not reach back that far (or forward: a stamp ahead of the newest pose by over 20 ms)."""
+    if stamp_s is None or not history or stamp_s < history[0][0] or stamp_s > history[-1][0] + 0.02:
+        return None
+    before = history[0]
+    for after in history:
+        if after[0] >= stamp_s:
+            span = after[0] - before[0]
+            if span <= 0.0:
+                return after[1]
+            w = (stamp_s - before[0]) / span
+            (bx, by, bz), (cx, cy, cz) = before[1], after[1]
+            return bx + w * (cx - bx), by + w * (cy - by), bz + w * (cz - bz)
+        before = after
+    return history[-1][1]
+
+
+class EstimateCheck:
+    """The estimate check with the mocap history and the episodes it needs (the supervisor runs it)."""
+
+    def __init__(self, safety: SafetySettings) -> None:
+        self.safety = safety
+        self._diverging: dict[str, tuple[int, int, float]] = {}
+        self._estimate_stopped: set[str] = set()
+        self._history: dict[str, deque[tuple[float, tuple[float, float, float]]]] = {}
+
+    def check(
+        self, now_s: float, agents: list[DroneAgent], tracker: PoseTracker, states: dict[str, DroneState]
+    ) -> list[Finding]:
+        """The on-board estimate against mocap (``ESTIMATE_DIVERGENCE_M``), in two steps. Off the newest pose in 2
+        samples: a warning (also what late telemetry on a full radio looks like at flight speed). Off EVERY pose of
+        the last ``ESTIMATE_HISTORY_S`` in 2 samples: the estimate is not just late, it is wrong; motors off.
+        Take-off and landing are watched as the planning is (a landing flies the estimate's way: unwatched, a drone
+        whose estimator diverged mid-landing slides 0.16 m sideways in its last half second without a word); a
+        taking-off or landing drone whose mocap height is within ``ON_FLOOR_Z_M`` of the floor gets
+        a warning instead (a cut there buys nothing, and a landed drone's outcome stays landed)."""
+        out = []
+        for a in agents:
+            state, pose = states.get(a.name), tracker.get(a.name)
+            history = self._history.setdefault(a.name, deque())
+            if pose is not None and pose.valid and (not history or history[-1][0] != pose.stamp_s):
+                history.append((pose.stamp_s, pose.position))
+            while history and history[0][0] < now_s - ESTIMATE_HISTORY_S:
+                history.popleft()
+            if (
+                state is None
+                or state.position_m is None
+                or state.telemetry_stamp_s is None
+                or pose is None
+                or not pose.valid
+                or now_s - pose.stamp_s > self.safety.pose_timeout_s
+            ):
+                continue
+            grounded = a.phase in (DronePhase.LANDING, DronePhase.TAKEOFF) and pose.position[2] <= ON_FLOOR_Z_M
+            late, wrong, stamp = self._diverging.get(a.name, (0, 0, -1.0))
+            if state.telemetry_stamp_s == stamp:
+                continue
+            off = math.dist(state.position_m, pose.position)
+            then = _pose_at(history, state.estimate_stamp_s)
+            nearest: float | None
+            if then is not None:  # the estimate against where mocap saw the drone when it was made
+                nearest = math.dist(state.position_m, then)
+                wrong_m, what = ESTIMATE_WRONG_M, "the mocap pose of its own time"
+            elif (
+                state.estimate_stamp_s is not None and history and state.estimate_stamp_s < history[0][0]
+            ):  # made before the poses kept (the loop stalled)
+                nearest = None
+            else:  # no stamp: only far from every recent pose is surely wrong, not late
+                nearest = min((math.dist(state.position_m, p) for _, p in history), default=off)
+                wrong_m, what = ESTIMATE_DIVERGENCE_M, f"every mocap pose of the last {ESTIMATE_HISTORY_S:g} s"
+            late = late + 1 if off > ESTIMATE_DIVERGENCE_M else 0
+            if nearest is not None:  # an estimate nothing can date against the poses neither clears nor counts
+                wrong = wrong + 1 if nearest > wrong_m else 0
+            self._diverging[a.name] = (late, wrong, state.telemetry_stamp_s)
+            if late == 2 and wrong < 2:
+                out.append(
+                    Finding(
+                        "estimator",
+                        WARNING,
+                        f"on-board estimate {off:.2f} m from mocap (late telemetry "
+                        "on a full radio, or an estimator that stopped taking extpos)",
+                        a.name,
+                        "warn",
+                    )
+                )
+            if nearest is None:
+                continue
+            if wrong == 2 and grounded:
+                out.append(
+                    Finding(
+                        "estimator",
+                        WARNING,
+                        f"on-board estimate {nearest:.2f} m from {what}: the "
+                        "estimator no longer follows extpos; on the floor, its landing's end is left to "
+                        "it",
+                        a.name,
+                        "warn",
+                    )
+                )
+            if wrong >= 2 and not grounded and a.name not in self._estimate_stopped:
+                self._estimate_stopped.add(a.name)
+                out.append(
+                    Finding(
+                        "estimator",
+                        ERROR,
+                        f"on-board estimate {nearest:.2f} m from {what}: the "
+                        "estimator no longer follows extpos, and a landing would fly wherever the "
+                        "estimate goes: motors off",
+                        a.name,
+                        "stop",
+                    )
+                )
+        return out
