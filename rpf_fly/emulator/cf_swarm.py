@@ -57,6 +57,7 @@ from .fake_planner import (
     PlanState,
 )
 from .fake_setpoint import Setpoint
+from .swarm_math import cap_angle, rotated
 
 _RPM_TO_RAD_S = 2.0 * math.pi / 60.0
 _DEG = 180.0 / math.pi
@@ -74,31 +75,6 @@ _I_LIMITS = {
     "rate": (ROLL_RATE_INTEGRATION_LIMIT, PITCH_RATE_INTEGRATION_LIMIT, YAW_RATE_INTEGRATION_LIMIT),
 }
 _DT = {"pos": POSITION_DT, "vel": POSITION_DT, "att": ATTITUDE_DT, "rate": ATTITUDE_DT}
-
-
-def _cap_angle(a: np.ndarray) -> np.ndarray:
-    """`capAngle`: into [-180, 180] by whole turns (180 and -180 kept)."""
-    a = np.where(a > 180.0, a - 360.0 * np.ceil((a - 180.0) / 360.0), a)
-    return np.where(a < -180.0, a + 360.0 * np.ceil((-180.0 - a) / 360.0), a)
-
-
-def _rotated(q: np.ndarray, ax: np.ndarray, ay: np.ndarray, az: np.ndarray) -> np.ndarray:
-    """Each quaternion column of `q` (x, y, z, w) turned by its body-frame rotation vector."""
-    angle2 = ax * ax + ay * ay + az * az
-    small = angle2 < 1e-24
-    angle = np.sqrt(np.where(small, 1.0, angle2))
-    s = np.sin(0.5 * angle) / angle
-    dx, dy, dz, dw = ax * s, ay * s, az * s, np.cos(0.5 * angle)
-    qx, qy, qz, qw = q
-    out = np.array(
-        [
-            qw * dx + qx * dw + qy * dz - qz * dy,
-            qw * dy - qx * dz + qy * dw + qz * dx,
-            qw * dz + qx * dy - qy * dx + qz * dw,
-            qw * dw - qx * dx - qy * dy - qz * dz,
-        ]
-    )
-    return np.where(small, q, out)
 
 
 class CfSwarm:
@@ -299,14 +275,14 @@ class CfSwarm:
         att = self.att_desired
         if attitude_tick:
             yaw_mode = modes[5]
-            turned = _cap_angle(att[2] + self.sp_rate[2] * ATTITUDE_DT)
+            turned = cap_angle(att[2] + self.sp_rate[2] * ATTITUDE_DT)
             if np.any(k["yaw_max_delta"] != 0.0):
                 md = k["yaw_max_delta"]
-                delta = _cap_angle(turned - s[8])
+                delta = cap_angle(turned - s[8])
                 limited = np.where(delta > md, s[8] + md, np.where(delta < -md, s[8] - md, turned))
                 turned = np.where(md != 0.0, limited, turned)
             yaw = np.where(yaw_mode == MODE_VELOCITY, turned, np.where(yaw_mode == MODE_ABS, self.sp_att[2], att[2]))
-            att[2] = _cap_angle(yaw)
+            att[2] = cap_angle(yaw)
         if step % POSITION_EVERY == 0:
             self._position_controller()
         if attitude_tick:
@@ -387,7 +363,7 @@ class CfSwarm:
         r1 = np.maximum(r + dm * dt, 0.0)
         w = 0.5 * (r + r1)
         o = self.omega
-        qm = _rotated(self.quat, 0.5 * dt * o[0], 0.5 * dt * o[1], 0.5 * dt * o[2])
+        qm = rotated(self.quat, 0.5 * dt * o[0], 0.5 * dt * o[1], 0.5 * dt * o[2])
         # forces and torques (cf_body.CfBody._accelerations)
         f = p.thrust_a1 * w + p.thrust_a2 * w * w
         q = p.torque_b1 * w + p.torque_b2 * w * w
@@ -426,7 +402,7 @@ class CfSwarm:
         )
         v1 = np.array([vx + ax * dt, vy + ay * dt, vz + az * dt])
         self.pos = self.pos + 0.5 * (self.vel + v1) * dt
-        self.quat = _rotated(self.quat, 0.5 * (ox + o1[0]) * dt, 0.5 * (oy + o1[1]) * dt, 0.5 * (oz + o1[2]) * dt)
+        self.quat = rotated(self.quat, 0.5 * (ox + o1[0]) * dt, 0.5 * (oy + o1[1]) * dt, 0.5 * (oz + o1[2]) * dt)
         self.vel = v1
         self.omega = o1
         self.rotor = r1
