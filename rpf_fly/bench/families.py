@@ -91,7 +91,7 @@ def with_guidance(settings: PlannerSettings, mode: str) -> PlannerSettings:
 
 BENCH_MARGIN = DEFAULT_MARGIN
 """m: the margin every planner's separation and clearance are counted against (``planner.margin``'s default, the
-issue's bar), whatever margin the planner itself keeps (reported beside it)."""
+acceptance bar), whatever margin the planner itself keeps (reported beside it)."""
 
 
 def planner_margin(settings: PlannerSettings) -> float | None:

@@ -66,9 +66,10 @@ if TYPE_CHECKING:
 
 AIR_TIME_S = 0.001
 """Air time of one radio transaction on a dry run's dongle: a Crazyradio carries about 1000 transactions a second,
-shared by every link on it (bitcraze/crazyradio2-firmware issues #9, #16, #22; docs/radio.md), so a dry run shows what a
-full radio does to latency. Each transaction holds its dongle that long and only that long (the drone's answer, a UDP
-round trip to the world process, is computed outside it: `rpf_fly.emulator.fake_world.DongleAir`)."""
+shared by every link on it (github.com/bitcraze/crazyradio2-firmware/issues/9, /16 and /22; docs/radio.md), so a
+dry run shows what a full radio does to latency. Each transaction holds its dongle that long and only that long
+(the drone's answer, a UDP round trip to the world process, is computed outside it:
+`rpf_fly.emulator.fake_world.DongleAir`)."""
 
 RADIO_LOSS = BurstLoss()
 """The dry run's radio loss on every link: bursty (a Gilbert-Elliott channel, `BurstLoss`), a Crazyradio PA in a
