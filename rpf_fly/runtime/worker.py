@@ -349,6 +349,8 @@ class WorkerRun:
                     drones=names,
                     swarm=link,
                     tick_offset=tick_offset(self.mission, self.dongle),
+                    # a dry run's simulated drones fly the mission's model: the first-order ones are followed with it
+                    first_order=names if self.dry_run and self.mission.dry_run.dynamics == "first-order" else (),
                 )
             except BaseException:
                 recorder.close()
