@@ -1,11 +1,11 @@
 """Which warning each fault owes: an event of level warning or above naming its drone (or ``mocap``, ``loop`` for a
 swarm fault) within 1 s of its effect, or before the planning phase for a power-on fault, and when it owes none.
 
-A fault that had nothing to act on owes nothing: a flight-time fault on a drone standing on the floor with its
-motors off, a planner fault on a drone that never plans again, a frame fault wholly inside a loop stall, a loop stall
-within the loop's normal jitter, a yaw offset that extpose corrected, a gust too short to push its drone past a real
-drone's tracking noise. Each of these rules was a failure of the judge's, not the stack's, in some campaign; each
-is narrow enough that a fault the stack should have said still fails.
+A fault that had nothing to act on owes nothing: a flight-time fault on a drone whose motors are off (on the
+floor, or falling after another fault stopped it), a planner fault on a drone that never plans again, a frame fault
+wholly inside a loop stall, a loop stall within the loop's normal jitter, a yaw offset that extpose corrected, a gust
+too short to push its drone past a real drone's tracking noise. Each of these rules was a failure of the judge's,
+not the stack's, in some campaign; each is narrow enough that a fault the stack should have said still fails.
 """
 
 from __future__ import annotations
@@ -98,9 +98,10 @@ def uninjectable(fault: dict[str, Any], flying_at: int | None, all_kept_down: bo
     return flying_at is None and all_kept_down and fault["kind"] not in POWER_ON
 
 
-def grounded_at_injection(fault: dict[str, Any], events: Events, truth: Truth) -> bool:
-    """A drone's flight-time fault injected while its truth stands on the floor with its motors off (kept down by
-    another fault, or already landed): it has no flight to act on, so no warning is owed."""
+def motors_off_at_injection(fault: dict[str, Any], events: Events, truth: Truth) -> bool:
+    """A drone's flight-time fault injected while its truth has its motors off: on the floor (kept down by another
+    fault, or already landed) or falling after its firmware or the stack stopped it (another fault's emergency):
+    it has no flight left to act on, so no warning is owed. A drone spinning up or flying still owes one."""
     drone = fault.get("drone")
     if drone is None or fault["kind"] in POWER_ON or fault["kind"] in SWARM_KINDS:
         return False
@@ -109,7 +110,7 @@ def grounded_at_injection(fault: dict[str, Any], events: Events, truth: Truth) -
     if injected is None or not samples:
         return False
     _, m = min(samples, key=lambda s: abs(s[0] - injected))
-    return not m["motors"] and m["position"]["z"] <= ON_FLOOR_M
+    return not m["motors"]
 
 
 def planner_unused_at_injection(fault: dict[str, Any], events: Events) -> bool:
@@ -241,8 +242,8 @@ def _owes_nothing(
     ticks: dict[str, list[int]],
 ) -> str | None:
     """Why a fault that left no warning owed none (the note the report shows), or None: it owed one."""
-    if grounded_at_injection(fault, events, truth):
-        return f"{fault['drone']} on the floor, motors off, at its {fault['kind']}: nothing for it to act on"
+    if motors_off_at_injection(fault, events, truth):
+        return f"{fault['drone']} motors off (down or stopped) at its {fault['kind']}: nothing for it to act on"
     if planner_unused_at_injection(fault, events):
         return (
             f"{fault['drone']} no longer planning at its {fault['kind']} (landing or down): its planner is never "

@@ -9,9 +9,9 @@ from pathlib import Path
 from rpf_fly.campaign.owed import (
     TRACKING_NOISE_M,
     corrected_by_extpose,
-    grounded_at_injection,
     gust_push_bound,
     inside_loop_stall,
+    motors_off_at_injection,
     planner_unused_at_injection,
     stall_within_jitter,
     uninjectable,
@@ -53,18 +53,21 @@ def test_a_compound_schedule_parses_and_each_fault_needs_its_own_warning():
     assert warnings_for(blackout, events, 0) is None  # never injected
 
 
-def test_a_fault_on_a_drone_standing_with_its_motors_off_owes_no_warning():
-    """A compound run may occlude a drone another fault kept on the floor (upside down): nothing to act on, so the
-    judge does not ask for a warning; a drone flying at its injection still owes one."""
+def test_a_fault_on_a_drone_with_its_motors_off_owes_no_warning():
+    """A compound run may occlude a drone another fault kept on the floor (upside down) or stopped (falling after an
+    emergency stop): nothing to act on, so the judge does not ask for a warning; a drone flying at its injection
+    still owes one."""
     occlusion = fault_fields("occlusion", "cf1", None, 4.0)
     events = [(int(4e9), {"level": 1, "file": "fault", "message": "injected occlusion for 1 s", "name": "cf1"})]
 
     def truth(z: float, motors: bool) -> dict:
         return {"cf1": [(int(3.99e9), {"position": {"x": 0.0, "y": 0.0, "z": z}, "motors": motors})]}
 
-    assert grounded_at_injection(occlusion, events, truth(0.0, False))
-    assert not grounded_at_injection(occlusion, events, truth(0.5, True))
-    assert not grounded_at_injection(occlusion, events, truth(0.0, True))  # spinning up
+    assert motors_off_at_injection(occlusion, events, truth(0.0, False))
+    assert not motors_off_at_injection(occlusion, events, truth(0.5, True))
+    assert not motors_off_at_injection(occlusion, events, truth(0.0, True))  # spinning up
+    # stopped by another fault (an emergency after a blackout) and still falling: it will not fly again
+    assert motors_off_at_injection(occlusion, events, truth(0.4, False))
 
 
 def test_a_timed_fault_in_a_flight_that_rightly_never_took_off_is_not_owed():
