@@ -30,13 +30,17 @@ import time
 from collections.abc import Callable, Mapping
 from concurrent.futures import Future
 from dataclasses import dataclass
-from typing import Protocol
+from typing import Protocol, TypeVar
+
+import numpy as np
 
 from rpf_fly.flight.phases import DronePhase, FlightOutcome
 from rpf_fly.flight.response import braking_for
 from rpf_fly.mission.model import Arena, Drone, Mission
 from rpf_fly.planning.planner import PlanStep, plan_row
 from rpf_fly.planning.view import LocalView
+
+T = TypeVar("T", complex, np.ndarray)
 
 REFINE_HOLD_ABOVE_M_S = 0.05
 """A held drone slower than this is at rest: its hold setpoint stays (`DroneAgent.refine_hold`)."""
@@ -158,6 +162,10 @@ class DroneAgent:
         """How far the carrot may lead the drone when the caller fixed it; None: from the drone's steady lag."""
         self.braking = braking_for(None)
         self.max_lead_m = MIN_LEAD_M
+        self.acceleration_lead_s2 = 0.0
+        """How far its neighbours' setpoints lead them per m/s^2 of their acceleration (`predict`)."""
+        self.first_order = False
+        """A dry run's first-order simulated drone (`set_controller`)."""
         self.set_controller(None)
         """How this drone comes to rest once held, from its own controller's gains (`set_controller`)."""
         self._clock = clock
@@ -216,12 +224,16 @@ class DroneAgent:
         self.heading = delta / abs(delta) if abs(delta) > 1e-9 else 1 + 0j
         self.set_phase(DronePhase.PLANNING, now_s)
 
-    def set_controller(self, params: Mapping[str, float] | None) -> None:
+    def set_controller(self, params: Mapping[str, float] | None, first_order: bool = False) -> None:
         """The drone's position controller's gains as its parameters hold them (None: the firmware's defaults): how
-        it brakes, and how far its carrot may lead it (`LEAD_ALLOWANCE` times the steady lag at the mission speed:
+        it brakes, how far its carrot may lead it (`LEAD_ALLOWANCE` times the steady lag at the mission speed:
         a drone trails a moving setpoint by `ResponseGains.steady_lag_s` x speed, 0.55 s with the defaults, and a
-        carrot held closer than that caps its speed below the mission's)."""
+        carrot held closer than that caps its speed below the mission's), and how far ahead of an accelerating
+        neighbour its setpoint is (`ResponseGains.acceleration_lead_s2`; the swarm flies one kind of controller).
+        ``first_order``: a dry run's first-order simulated drone, whose setpoint leads it by its speed alone."""
         self.braking = braking_for(params)
+        self.first_order = first_order
+        self.acceleration_lead_s2 = 0.0 if first_order else self.braking.gains.acceleration_lead_s2
         if self._max_lead_given_m is not None:
             self.max_lead_m = self._max_lead_given_m
         else:
@@ -308,6 +320,17 @@ class DroneAgent:
         if self.speed <= 0.0:
             return 0.0
         return min(abs(self.reference - measured), self.max_lead_m) / self.speed
+
+    def predict(self, xy: T, velocity: T, acceleration: T, measured: complex) -> T:
+        """Where this drone plans its neighbours to be: where their setpoints are, as far as mocap can tell (a swarm
+        flies one controller; docs/flight.md, "Where a neighbour is"): ahead of where they are by the controller's
+        steady lag times their velocity and `acceleration_lead_s2` times their acceleration. A dry run's
+        first-order drone (`set_controller`): by this drone's own observed lag times their velocity. Why not their
+        measured positions: this drone plans its own setpoint, which leads it, so setpoints are kept apart against
+        setpoints; and a neighbour speeding up from a stop has its setpoint far ahead of what its speed says."""
+        if self.first_order:
+            return xy + self.tracking_lag_s(measured) * velocity
+        return xy + self.braking.gains.steady_lag_s * velocity + self.acceleration_lead_s2 * acceleration
 
     def advance(self, direction: complex, measured: complex) -> complex:
         """Move the reference one step along ``direction``; keep it within ``max_lead`` of the drone and inside

@@ -133,7 +133,8 @@ class FlightLoop(LoopPreflight, LoopSwarm, LoopTakeoff, LoopIteration, LoopLandi
         self.tracker.estimate_of = self._estimate_of  # a jumped track is taken only where the drone thinks it is
         self.tracker.airborne_estimate_of = self._airborne_estimate_of  # and so is the first pose after a gap
         self.tracker.blind_drift_m_s2 = mission.safety.blind_drift_m_s2
-        self.supervisor = Supervisor(mission, self.obstacles, first_order=frozenset(first_order))
+        self.first_order = frozenset(first_order)
+        self.supervisor = Supervisor(mission, self.obstacles, first_order=self.first_order)
         self.phase = SwarmPhase.CONNECTING
         self.stats = LoopStats()
         # A backend that queues setpoints for threads of its own measures their latency to the radio, and says

@@ -50,6 +50,7 @@ class LoopPreflight:
     backend: DroneBackend
     uris: dict[str, str]
     agents: dict[str, DroneAgent]
+    first_order: frozenset[str]
     commander: Commander
     events: EventBus
     tracker: PoseTracker
@@ -73,7 +74,7 @@ class LoopPreflight:
             self._abort(f"{len(failures)} drone(s) failed to connect: no drone takes off")
             return False
         for name, agent in self.agents.items():
-            agent.set_controller(self.backend.state(name).controller_params)
+            agent.set_controller(self.backend.state(name).controller_params, first_order=name in self.first_order)
         return True
 
     def _preflight(self) -> bool:

@@ -1,7 +1,8 @@
-"""What the flight knows of each drone's pose: the newest valid mocap pose, its age, and a velocity estimate.
+"""What the flight knows of each drone's pose: the newest valid mocap pose, its age, a velocity and an acceleration.
 
-The planner needs neighbours' velocities (a hovering neighbour is an obstacle for the robust preset); mocap gives
-positions only, so velocity is a low-pass filtered finite difference of valid samples. Invalid or missing bodies
+The planner needs neighbours' velocities (a hovering neighbour is an obstacle for the robust preset) and
+accelerations (where a neighbour's setpoint is, `DroneAgent.predict`); mocap gives positions only, so velocity is a
+low-pass filtered finite difference of valid samples, and acceleration one of the velocity. Invalid or missing bodies
 keep their last pose but age; the supervisor decides what a stale pose means.
 
 Glitches: a pose that jumped further from the previous sample than a Crazyflie can move in that time (a marker
@@ -64,6 +65,9 @@ class TrackedPose:
     orientation_trusted: bool = True
     """False while the body's orientation is refused as a jump (`PoseTracker.orientation_glitching`): ``quaternion``
     is then the last trusted one, not what mocap says."""
+    acceleration: complex = 0j
+    """Planar acceleration (m/s^2): the low-pass filtered finite difference of ``velocity`` (0 until two valid
+    samples in a row follow a gap or a jump)."""
 
     @property
     def xy(self) -> complex:
@@ -138,9 +142,10 @@ def turn_deg(a: tuple[float, float, float, float], b: tuple[float, float, float,
 class PoseTracker:
     """Folds mocap frames into per-drone poses. ``bodies`` maps drone name -> rigid body name."""
 
-    def __init__(self, bodies: Mapping[str, str], velocity_tau_s: float = 0.1):
+    def __init__(self, bodies: Mapping[str, str], velocity_tau_s: float = 0.1, acceleration_tau_s: float = 0.1):
         self.bodies = dict(bodies)
         self.velocity_tau_s = velocity_tau_s
+        self.acceleration_tau_s = acceleration_tau_s
         self.poses: dict[str, TrackedPose] = {}
         self.last_frame_s: float | None = None
         self.latency_s: float | None = None
@@ -318,15 +323,20 @@ class PoseTracker:
                 continue
             if jumped:
                 previous = None  # a re-acquired track: no velocity across the jump
-            velocity = 0j
+            velocity = acceleration = 0j
             if previous is not None:
                 dt = t - previous.stamp_s
                 if dt > 1e-4:
                     raw = (complex(body.position[0], body.position[1]) - previous.xy) / dt
                     blend = min(dt / self.velocity_tau_s, 1.0) if previous.valid else 1.0
                     velocity = previous.velocity + blend * (raw - previous.velocity)
+                    if previous.valid:  # not across a gap: the velocity restarted from one difference
+                        raw_a = (velocity - previous.velocity) / dt
+                        acceleration = previous.acceleration + min(dt / self.acceleration_tau_s, 1.0) * (
+                            raw_a - previous.acceleration
+                        )
                 else:
-                    velocity = previous.velocity
+                    velocity, acceleration = previous.velocity, previous.acceleration
             self.poses[name] = TrackedPose(
                 position,
                 quaternion,
@@ -334,6 +344,7 @@ class PoseTracker:
                 t,
                 frame.frame_number,
                 orientation_trusted=trusted,
+                acceleration=acceleration,
             )
 
     def get(self, name: str) -> TrackedPose | None:

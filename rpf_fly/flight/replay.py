@@ -141,6 +141,9 @@ def replay_log(
     inf = math.inf
     agents = {d.name: DroneAgent.for_mission(d, planner_factory(d), mission, budget_s=inf) for d in mission.drones}
     shadow = {d.name: DroneAgent.for_mission(d, agents[d.name].planner, mission, budget_s=inf) for d in mission.drones}
+    if simulated_first_order(meta):  # as the flight's loop set them at connect
+        for agent in (*agents.values(), *shadow.values()):
+            agent.set_controller(None, first_order=True)
     swarm = SwarmPlanner(mission.planner.sensing_range, inf, hang_s=REPLAY_HANG_S)
     tracker = PoseTracker({n: n for n in names})
     results = {n: DroneReplay(n, tolerance) for n in names}
@@ -225,6 +228,14 @@ def replay_log(
         exact_times=times.exact,
         warnings=warnings,
     )
+
+
+def simulated_first_order(meta: dict) -> bool:
+    """Whether the log's drones were a dry run's (or a lab's) first-order simulated drones: their neighbours were
+    predicted by speed alone (`DroneAgent.set_controller`)."""
+    from rpf_fly.log.review_tracking import dry_run_dynamics
+
+    return meta.get("source") in ("dry-run", "lab") and dry_run_dynamics(str(meta.get("yaml", ""))) != "firmware"
 
 
 def _restarts(row: LoggedRow, last: LoggedRow | None, previous_mode: str | None, shadow: DroneAgent) -> bool:

@@ -84,6 +84,16 @@ class ResponseGains:
         return 1.0 / self.pos_kp + drag_deg_per_m_s / (self.vel_kp * self.pos_kp)
 
     @property
+    def acceleration_lead_s2(self) -> float:
+        """How far a drone's setpoint leads it per m/s^2 of its acceleration, beyond what its speed accounts for:
+        the position loop asks ``pos_kp`` m/s per metre of error, the velocity loop tilts ``vel_kp`` degrees per m/s
+        of velocity error and a tilt accelerates by g tan(tilt), so for small tilts
+        ``a = g rad(vel_kp) (pos_kp (r - p) - v)``, i.e. ``r = p + v / pos_kp + a / (pos_kp g rad(vel_kp))``:
+        0.117 s^2 with the defaults. A drone speeding up toward its setpoint is that much further behind it than
+        its speed says (docs/flight.md, "Where a neighbour is")."""
+        return 1.0 / (self.pos_kp * GRAVITY * math.radians(self.vel_kp))
+
+    @property
     def max_brake_m_s2(self) -> float:
         """The largest horizontal deceleration the tilt limit allows."""
         return GRAVITY * math.tan(math.radians(self.tilt_limit_deg))

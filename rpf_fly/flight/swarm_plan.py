@@ -94,11 +94,13 @@ def foreign_in_the_way(z: float) -> bool:
 
 @dataclass
 class Neighbourhood:
-    """Every airborne drone's name, measured planar position and velocity (complex): what the mocap sees."""
+    """Every airborne drone's name, measured planar position, velocity and acceleration (complex): what the mocap
+    sees."""
 
     names: list[str]
     xy: np.ndarray
     velocity: np.ndarray
+    acceleration: np.ndarray
 
     @classmethod
     def of(cls, poses: Mapping[str, TrackedPose]) -> Neighbourhood:
@@ -109,12 +111,15 @@ class Neighbourhood:
             names,
             np.array([poses[n].xy for n in names], dtype=complex),
             np.array([poses[n].velocity for n in names], dtype=complex),
+            np.array([poses[n].acceleration for n in names], dtype=complex),
         )
 
-    def others_of(self, agent: DroneAgent) -> tuple[np.ndarray, np.ndarray]:
-        """The others as ``agent`` plans with them: positions predicted by its own tracking lag, velocities."""
+    def others_of(self, agent: DroneAgent, measured: complex) -> tuple[np.ndarray, np.ndarray]:
+        """The others as ``agent`` plans with them: positions predicted where their setpoints are
+        (`DroneAgent.predict`), velocities."""
         keep = np.array([n != agent.name for n in self.names], dtype=bool)
-        return self.xy[keep], self.velocity[keep]
+        xy, velocity, acceleration = self.xy[keep], self.velocity[keep], self.acceleration[keep]
+        return agent.predict(xy, velocity, acceleration, measured), velocity
 
 
 def isolated(planner: object) -> bool:
@@ -265,11 +270,8 @@ class SwarmPlanner:
         return known[1]
 
     def _view_of(self, agent: DroneAgent, measured: complex, world: Neighbourhood):
-        lag_s = agent.tracking_lag_s(measured)
-        xy, velocity = world.others_of(agent)
-        return view_of_drone(
-            agent.reference, agent.goal, agent.heading, xy + lag_s * velocity, velocity, self.sensing_range
-        )
+        others, velocity = world.others_of(agent, measured)
+        return view_of_drone(agent.reference, agent.goal, agent.heading, others, velocity, self.sensing_range)
 
     def _plan_alone(self, agent: DroneAgent, measured: complex, world: Neighbourhood) -> Outcome:
         """A drone of the product's own planner, planned inline on its own view."""
@@ -281,11 +283,11 @@ class SwarmPlanner:
     def _plan_batch(self, group: list[tuple[DroneAgent, complex]], world: Neighbourhood) -> dict[str, Outcome]:
         agents = [a for a, _ in group]
         measured = np.array([m for _, m in group], dtype=complex)
-        lag_s = np.array([a.tracking_lag_s(m) for a, m in group])
         present = (
             np.array(world.names, dtype=object)[None, :] != np.array([a.name for a in agents], dtype=object)[:, None]
         )
-        others = world.xy[None, :] + lag_s[:, None] * world.velocity[None, :]
+        others = np.array([a.predict(world.xy, world.velocity, world.acceleration, m) for a, m in group])
+        others = others.reshape(len(group), len(world.names))
         view = views_of_drones(
             np.array([a.reference for a in agents], dtype=complex),
             np.array([a.goal for a in agents], dtype=complex),

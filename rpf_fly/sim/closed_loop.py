@@ -166,8 +166,14 @@ class _Scene:
         if plan_from == "truth":
             return views_from_states(measured, velocity, goals, headings, self.sensing_range)
         idx = others_index(measured.shape[0])
-        lag_s = np.array([a.tracking_lag_s(complex(m)) for a, m in zip(self.agents, measured)])
-        others = measured[idx] + lag_s[:, None] * velocity[idx]
+        before = self.velocities[-2] if len(self.velocities) > 1 else velocity
+        acceleration = (velocity - before) / self.params.dt  # over the last planning period, as a tracker's filter
+        others = np.array(
+            [
+                a.predict(measured[row], velocity[row], acceleration[row], complex(m))
+                for a, row, m in zip(self.agents, idx, measured)
+            ]
+        ).reshape(idx.shape)
         references = np.array([a.reference for a in self.agents], dtype=complex)
         return views_of_drones(
             references, goals, headings, others, velocity[idx], np.ones(idx.shape, dtype=bool), self.sensing_range

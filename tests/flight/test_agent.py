@@ -117,6 +117,29 @@ def test_the_carrot_may_lead_by_the_drones_steady_lag_at_the_mission_speed():
     assert fixed.max_lead_m == 0.2  # a caller's own lead stands
 
 
+def test_neighbours_are_planned_where_their_setpoints_are_for_the_drones_controller():
+    """Ahead of what mocap sees by the firmware cascade's steady lag x their velocity and its
+    `acceleration_lead_s2` x their acceleration (both larger for a softer controller); a dry run's first-order
+    drone's setpoint leads it by its speed alone, this drone's own observed lag of it."""
+    import numpy as np
+
+    agent = make_agent()
+    agent.begin_planning(0j, 0.0)
+    agent.plan(None, 0j)  # its carrot 0.05 m ahead: a lag of 0.1 s at 0.5 m/s
+    xy, velocity, acceleration = np.array([1.0 + 1.0j]), np.array([0.5 + 0j]), np.array([0.0 + 2.0j])
+    cascade = agent.predict(xy, velocity, acceleration, 0j)
+    assert cascade[0] == pytest.approx(1.0 + 1.0j + 0.5496 * 0.5 + 0.1168 * 2.0j, abs=1e-3)
+    assert agent.predict(1.0 + 1.0j, 0.5 + 0j, 2.0j, 0j) == pytest.approx(complex(cascade[0]))  # one drone alike
+    soft = make_agent()
+    soft.set_controller({"velCtlPid.vxKp": 12.5})
+    assert soft.acceleration_lead_s2 == pytest.approx(2 * agent.acceleration_lead_s2)
+    first_order = make_agent()
+    first_order.set_controller(None, first_order=True)
+    first_order.begin_planning(0j, 0.0)
+    first_order.plan(None, 0j)
+    assert first_order.predict(xy, velocity, acceleration, 0j)[0] == pytest.approx(1.05 + 1.0j)
+
+
 def test_a_hold_at_speed_brings_the_drone_to_rest_ahead_and_moves_up_as_it_slows():
     agent = make_agent()
     agent.begin_planning(0j, 0.0)

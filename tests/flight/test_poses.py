@@ -32,6 +32,22 @@ def test_smooth_motion_is_followed_with_its_velocity():
     assert not tracker.glitching and not tracker.glitches
 
 
+def test_a_speeding_up_drone_is_followed_with_its_acceleration_and_a_gap_restarts_it():
+    """1 m/s^2 along x: the filtered acceleration settles there (it lags by its two filters, about 0.2 s); after a
+    gap the velocity restarts from one difference, and the acceleration from zero, not from that step."""
+    tracker = PoseTracker({"cf1": "cf1"})
+    for n in range(0, 100):
+        t = n / RATE_HZ
+        tracker.update(frame(n, (0.5 * t * t, 0.0, 1.0)))
+    pose = tracker.get("cf1")
+    assert pose.acceleration.real == pytest.approx(1.0, abs=0.05) and abs(pose.acceleration.imag) < 1e-9
+    assert pose.velocity.real == pytest.approx(0.99 - 0.1, abs=0.05)  # its filter's lag: 0.1 s of 1 m/s^2
+    for n in range(100, 110):
+        tracker.update(frame(n, (0.0, 0.0, 1.0), valid=False))
+    tracker.update(frame(110, (0.5 * 1.1 * 1.1, 0.0, 1.0)))
+    assert tracker.get("cf1").acceleration == 0j
+
+
 def test_a_marker_swap_is_refused_and_the_track_taken_back_when_it_ends():
     tracker = PoseTracker({"cf1": "cf1"})
     fly_along_x(tracker, 0, 50)

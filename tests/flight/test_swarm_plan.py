@@ -39,7 +39,8 @@ def swarm(make_planner, n: int = 6, seed: int = 0):  # type: ignore[no-untyped-d
     measured = np.array([a.reference for a in agents]) - 0.05 * np.exp(1j * rng.uniform(-np.pi, np.pi, n))
     velocity = 0.5 * np.exp(1j * rng.uniform(-np.pi, np.pi, n))
     velocity[::3] = 0.02  # hovering: the robust preset treats them as obstacles
-    world = Neighbourhood([a.name for a in agents], measured, velocity)
+    acceleration = 2.0 * np.exp(1j * rng.uniform(-np.pi, np.pi, n))  # speeding up or braking: predicted further
+    world = Neighbourhood([a.name for a in agents], measured, velocity, acceleration)
     return agents, [(a, complex(m)) for a, m in zip(agents, measured)], world
 
 
