@@ -39,7 +39,7 @@ class LoopTakeoff:
     """A drone commanded to take off that has not risen `LIFT_OFF_M` this far into its take-off (at least
     `TAKEOFF_RETRY_MIN_S`) gets it again: the firmware's supervisor answers EBUSY in its short 'cannot fly' window,
     and cflib does not report it. Not sooner: the firmware's own drone leaves the floor late, its height loop's
-    integrator winding up first (the reference trace p_hl_slow, ../shared/reference/crazyflie-dynamics: 5 cm up
+    integrator winding up first (the reference trace p_hl_slow, tests/data/crazyflie_dynamics: 5 cm up
     1.55 s into a 3 s take-off, 52 % of it; 0.36 m up at 75 %), so an earlier retry would re-send every real
     drone's take-off."""
     TAKEOFF_RETRY_MIN_S = 1.0
