@@ -67,7 +67,8 @@ def test_an_invalid_direction_is_this_drones_planner_fault():
 
 
 class Busy(Straight):
-    """Computes (burns CPU) or waits (sleeps) for ``seconds`` before answering."""
+    """Computes (burns ``seconds`` of its thread's CPU time, however long a loaded host takes to give it that) or
+    waits (sleeps) for ``seconds`` before answering."""
 
     def __init__(self, seconds: float, compute: bool):
         super().__init__()
@@ -76,10 +77,12 @@ class Busy(Straight):
     def step(self, view):  # type: ignore[no-untyped-def]
         import time
 
-        end = time.perf_counter() + self.seconds
-        while time.perf_counter() < end:
-            if not self.compute:
-                time.sleep(self.seconds)
+        if self.compute:
+            end = time.thread_time() + self.seconds
+            while time.thread_time() < end:
+                pass
+        else:
+            time.sleep(self.seconds)
         return super().step(view)
 
 
