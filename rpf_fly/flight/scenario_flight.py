@@ -146,6 +146,11 @@ class ScenarioFlight:
         self._armed = False
         self.t0: float | None = None
         """`time.monotonic()` at the scenario's t = 0 (None before)."""
+        from rpf_fly.emulator.host_lag import LagMeter
+
+        self.stream_lag = LagMeter()
+        """How late each streamed setpoint left against the scenario's schedule: a ground station the host starves
+        streams late, and the drone answers a late stream, not the scenario (`_host_verdict`)."""
 
     # ------------------------------------------------------------------------------------------- helpers
 
@@ -265,6 +270,8 @@ class ScenarioFlight:
                 sample(next_sample, sp)
                 next_sample += SAMPLE_PERIOD_S
             self._spin(t0 + t_send)
+            now = time.monotonic()
+            self.stream_lag.record(now - (t0 + t_send), now, period)
             if s.hold_at is not None and t_send >= s.hold_at - 1e-9:
                 if held is None:
                     x, y, _ = self._position()
@@ -392,19 +399,21 @@ def resample_truth(trace: dict[str, Any], track: list[tuple[float, tuple[float, 
 def _host_verdict(trace: dict[str, Any], rig: Any, flight: ScenarioFlight) -> None:
     """``host_behind_s`` in the trace: how long the host let the simulated world fall behind its time during the
     flight (`rpf_fly.emulator.host_lag`: a late world step or mocap frame is time the drone did not have: extpos
-    late, the estimate drifting blind, a setpoint watchdog firing); from `HOST_BEHIND_REPORT_S` on an event says
-    the figures are not evidence."""
+    late, the estimate drifting blind, a setpoint watchdog firing), or the ground station's setpoint stream fall
+    behind the scenario's schedule (`ScenarioFlight.stream_lag`: the drone then answers a late stream), whichever
+    is longer; from `HOST_BEHIND_REPORT_S` on an event says the figures are not evidence."""
     from rpf_fly.emulator.host_lag import HOST_BEHIND_REPORT_S
 
     try:
         behind = float(rig.host_lag().behind_s)
     except Exception:  # noqa: BLE001 - the world is gone or cannot say: no verdict
         return
+    behind = max(behind, flight.stream_lag.snapshot().behind_s)
     trace["host_behind_s"] = behind
     if behind >= HOST_BEHIND_REPORT_S:
         flight._event(
-            f"the host could not keep up for {behind:.1f} s (simulated steps or mocap frames late): these "
-            "figures are not evidence"
+            f"the host could not keep up for {behind:.1f} s (simulated steps, mocap frames or streamed setpoints "
+            "late): these figures are not evidence"
         )
 
 
