@@ -328,9 +328,14 @@ class DroneAgent:
         first-order drone (`set_controller`): by this drone's own observed lag times their velocity. Why not their
         measured positions: this drone plans its own setpoint, which leads it, so setpoints are kept apart against
         setpoints; and a neighbour speeding up from a stop has its setpoint far ahead of what its speed says."""
+        lag_s, lead_s2 = self.prediction(measured)
+        return xy + lag_s * velocity + lead_s2 * acceleration
+
+    def prediction(self, measured: complex) -> tuple[float, float]:
+        """`predict`'s two factors: (seconds of velocity, seconds squared of acceleration)."""
         if self.first_order:
-            return xy + self.tracking_lag_s(measured) * velocity
-        return xy + self.braking.gains.steady_lag_s * velocity + self.acceleration_lead_s2 * acceleration
+            return self.tracking_lag_s(measured), 0.0
+        return self.braking.gains.steady_lag_s, self.acceleration_lead_s2
 
     def advance(self, direction: complex, measured: complex) -> complex:
         """Move the reference one step along ``direction``; keep it within ``max_lead`` of the drone and inside

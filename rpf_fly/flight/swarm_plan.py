@@ -286,8 +286,12 @@ class SwarmPlanner:
         present = (
             np.array(world.names, dtype=object)[None, :] != np.array([a.name for a in agents], dtype=object)[:, None]
         )
-        others = np.array([a.predict(world.xy, world.velocity, world.acceleration, m) for a, m in group])
-        others = others.reshape(len(group), len(world.names))
+        lag_s, lead_s2 = np.array([a.prediction(m) for a, m in group]).reshape(len(group), 2).T
+        others = (
+            world.xy[None, :]
+            + lag_s[:, None] * world.velocity[None, :]
+            + lead_s2[:, None] * world.acceleration[None, :]
+        )
         view = views_of_drones(
             np.array([a.reference for a in agents], dtype=complex),
             np.array([a.goal for a in agents], dtype=complex),
