@@ -350,8 +350,10 @@ def _window(t: Sequence[float], lo: float, hi: float, *, hi_open: bool = False) 
     return [i for i, ti in enumerate(t) if ti >= lo and (ti < hi if hi_open else ti <= hi)]
 
 
-def figures(trace: dict[str, Any], scenario: Scenario) -> dict[str, Any]:
-    """The figures of `trace` (module doc); settling times that never settle are `math.inf`."""
+def figures(trace: dict[str, Any], scenario: Scenario, *, band_scale: float = 1.0) -> dict[str, Any]:
+    """The figures of `trace` (module doc); settling times that never settle are `math.inf`. ``band_scale``
+    widens (> 1) or narrows (< 1) every settling band: a trace whose error lingers near a band's edge settles at
+    very different times in bands a few millimetres apart, and a comparison of settling times reads the bracket."""
     t = [float(v) for v in trace["t"]]
     sp = trace["sp"]
     pos = trace["pos"]
@@ -367,7 +369,7 @@ def figures(trace: dict[str, Any], scenario: Scenario) -> dict[str, Any]:
         first90 = next(t[i] for i, v in enumerate(rel) if v >= 0.9 * big_x)
         out["rise_s"] = first90 - first10
         out["overshoot_cm"] = max(0.0, max(rel) - big_x) * 100.0
-        out["settle_s"] = settling_time(t, rel, big_x, 0.02 * abs(big_x), 0.0)
+        out["settle_s"] = settling_time(t, rel, big_x, 0.02 * band_scale * abs(big_x), 0.0)
         out["peak_speed_m_s"] = max((x[i + 1] - x[i]) / (t[i + 1] - t[i]) for i in range(len(t) - 1))
         out["z_dev_cm"] = max(abs(p[2] - scenario.start[2]) for p in pos) * 100.0
         if tilt is not None:
@@ -382,13 +384,13 @@ def figures(trace: dict[str, Any], scenario: Scenario) -> dict[str, Any]:
         if kind == "carrot":
             goal = scenario.setpoints[-1][1]
             out["overshoot_cm"] = max(0.0, max(x) - goal) * 100.0
-            out["settle_s"] = settling_time(t, x, goal, 0.02, big_t)
+            out["settle_s"] = settling_time(t, x, goal, 0.02 * band_scale, big_t)
         else:
             i = after[0]
             hold = sp[i][0]
             out["speed_after_hold_m_s"] = (x[i + 1] - x[i]) / (t[i + 1] - t[i])
             out["overshoot_cm"] = max(0.0, max(x) - hold) * 100.0
-            out["settle_s"] = settling_time(t, x, hold, 0.02, big_t)
+            out["settle_s"] = settling_time(t, x, hold, 0.02 * band_scale, big_t)
         del x0
         if tilt is not None:
             out["peak_tilt_deg"] = max(tilt)
@@ -415,7 +417,7 @@ def figures(trace: dict[str, Any], scenario: Scenario) -> dict[str, Any]:
         if tilt is not None:
             out["peak_tilt_deg"] = max(tilt[i] for i in lap)
     elif kind == "hl":
-        out.update(_hl_figures(t, sp, pos, scenario))
+        out.update(_hl_figures(t, sp, pos, scenario, band_scale))
         if tilt is not None:
             out["peak_tilt_deg"] = max(tilt)
     else:  # pragma: no cover - kind is one of the above
@@ -423,7 +425,9 @@ def figures(trace: dict[str, Any], scenario: Scenario) -> dict[str, Any]:
     return out
 
 
-def _hl_figures(t: list[float], sp: list[list[float]], pos: list[list[float]], scenario: Scenario) -> dict[str, Any]:
+def _hl_figures(
+    t: list[float], sp: list[list[float]], pos: list[list[float]], scenario: Scenario, band_scale: float = 1.0
+) -> dict[str, Any]:
     cmds = {str(row[1]): row for row in scenario.commands}
     t0, h, t_to = float(cmds["takeoff"][0]), float(cmds["takeoff"][2]), float(cmds["takeoff"][3])
     go = cmds["go_to"]
@@ -437,13 +441,13 @@ def _hl_figures(t: list[float], sp: list[list[float]], pos: list[list[float]], s
     out["takeoff_lag_max_cm"] = max(abs(sp[i][2] - z[i]) for i in w) * 100.0
     w = _window(rel, 0.0, t_g)
     out["takeoff_overshoot_cm"] = max(0.0, max(z[i] for i in w) - h) * 100.0
-    out["takeoff_settle_s"] = settling_time([rel[i] for i in w], [z[i] for i in w], h, 0.02, t_to)
+    out["takeoff_settle_s"] = settling_time([rel[i] for i in w], [z[i] for i in w], h, 0.02 * band_scale, t_to)
     out["z_err_at_goto_cm"] = (z[w[-1]] - h) * 100.0
     w = _window(rel, t_g, t_g + t_gd + 1.0)
     out["goto_lag_max_cm"] = max(abs(sp[i][0] - x[i]) for i in w) * 100.0
     w = _window(rel, t_g, t_l)
     out["goto_overshoot_cm"] = max(0.0, max(x[i] for i in w) - x_g) * 100.0
-    out["goto_settle_s"] = settling_time([rel[i] for i in w], [x[i] for i in w], x_g, 0.02, t_g + t_gd)
+    out["goto_settle_s"] = settling_time([rel[i] for i in w], [x[i] for i in w], x_g, 0.02 * band_scale, t_g + t_gd)
     w = _window(rel, t_l, t_l + t_ld)
     out["land_lag_max_cm"] = max(abs(sp[i][2] - z[i]) for i in w) * 100.0
     touch = next((rel[i] for i in range(len(rel)) if rel[i] >= t_l and z[i] < 0.01), None)

@@ -370,6 +370,9 @@ def plug(world: Any = None, dongles: int = 1, radio: str = "crazyradio_2") -> Pl
 
         world = lab_world(world)
     unplug()
+    # a link closed a moment ago is still open on cflib's shared radio thread: a link opened now would join that
+    # thread's (earlier) dongle and never reach these ones
+    wait_released(range(_shared_radio_count()), RELEASE_WAIT_S)
     _forget_dead_radios()
     kind = RADIO_TYPES[radio]
     air = Air(world)
@@ -437,6 +440,17 @@ def wait_released(devids: Iterable[int], timeout_s: float = 2.0) -> bool:
         if time.monotonic() >= deadline:
             return False
         time.sleep(0.01)
+
+
+RELEASE_WAIT_S = 5.0
+"""How long `plug` waits for cflib to close the dongles of links closed just before (its shared radio closes a
+dongle on its own thread, after the link's STOP reaches it: a moment, longer on a busy host)."""
+
+
+def _shared_radio_count() -> int:
+    from cflib.crtp.radiodriver import RadioManager
+
+    return len(RadioManager._radios)
 
 
 def _forget_dead_radios() -> None:
