@@ -54,7 +54,9 @@ def test_unplugging_a_dongle_fails_its_links_at_once_and_leaves_the_others(
         for uri in (uris[1], uris[3]):
             message, when = lost[uri]
             assert message == fake_radio.UNPLUGGED and "probably been unplugged" in message
-            assert when - unplugged_at < 0.1, when - unplugged_at  # at once, not after 100 lost acks
+            # at once: the USB error's message, not cflib's "Too many packets lost" after 100 failed transactions
+            # (0.2 s on the fake link's timing); the time bar leaves a loaded host its scheduling delays
+            assert when - unplugged_at < 0.5, when - unplugged_at
         before = dict(samples)
         time.sleep(0.4)
         assert samples[uris[0]] - before[uris[0]] >= 4 and samples[uris[2]] - before[uris[2]] >= 4
