@@ -18,6 +18,7 @@ RPF3_TUNING: dict[str, float | bool] = {
     "neighbour_range": 0.8,
     "yield_gain": 1.0,
     "brake_distance": 0.1,
+    "pair_brake_buffer": 0.04,
     "keep_right_deg": 45.0,
     "guide_around_parked": True,
 }
@@ -90,7 +91,10 @@ class PlannerConfig:
     proportion to the gap, and within it of ``r + margin + brake_buffer`` from the nearest wall the part of its step
     into the wall shrinks the same way (:func:`rpf_fly.planning.speed.brake`); 0: off (the paper)."""
     brake_buffer: float = 0.01
-    """Metres the brake keeps beyond ``2r + margin`` (neighbours) and ``r + margin`` (walls)."""
+    """Metres the brake keeps beyond ``r + margin`` from walls (and ``2r + margin`` from neighbours, unless
+    ``pair_brake_buffer`` says otherwise)."""
+    pair_brake_buffer: float | None = None
+    """Metres the brake keeps beyond ``2r + margin`` from neighbours; None: ``brake_buffer``."""
     repulsion_sum: bool = False
     """Sum the static repulsion over every obstacle surface within range instead of the nearest one's (the paper);
     modes, the soft rule and the observation still read the nearest surface."""

@@ -60,7 +60,8 @@ def brake(
     ``(p_j - p, |p_j - p|)`` when the caller has them (:meth:`LocalView.neighbour_offsets`)."""
     if not config.brake_distance:
         return direction
-    pair_bar = 2.0 * config.safety_radius + config.margin + config.brake_buffer
+    pair_buffer = config.brake_buffer if config.pair_brake_buffer is None else config.pair_brake_buffer
+    pair_bar = 2.0 * config.safety_radius + config.margin + pair_buffer
     wall_bar = config.safety_radius + config.margin + config.brake_buffer
     k = neighbour_position.shape[-1]
     if not isinstance(position, np.ndarray):  # one drone: plain Python over its few neighbours
