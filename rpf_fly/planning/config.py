@@ -26,7 +26,7 @@ RPF3_TUNING: dict[str, float | bool] = {
 the scene families): with guidance the mission's obstacles repel within 0.2 m of their margin-grown surface, summed
 over every surface in range, the static neighbours within 0.5 m; a corner within 0.05 m counts as reached; the
 moving neighbours repel within 0.8 m, their push turned 45 degrees to the right (20 in the robust preset); a drone
-slows (to 20 % at most) where they push against its motion, brakes within 0.1 m of 2r + margin (+ 1 cm) of a
+slows (to 20 % at most) where they push against its motion, brakes within 0.1 m of 2r + margin (+ 4 cm) of a
 neighbour it heads for, and slides (its step into the wall scaled down) within 0.1 m of r + margin (+ 1 cm) of the
 nearest obstacle; and the guidance routes round the drones it sees parked in the way, 0.2 m beyond 2r + margin
 (``guide_around_parked``, docs/algorithm.md, *Guidance round parked drones*). The gains are the policy's,
