@@ -371,9 +371,11 @@ def plug(world: Any = None, dongles: int = 1, radio: str = "crazyradio_2") -> Pl
         world = lab_world(world)
     unplug()
     # a link closed a moment ago is still open on cflib's shared radio thread: a link opened now would join that
-    # thread's (earlier) dongle and never reach these ones
-    wait_released(range(_shared_radio_count()), RELEASE_WAIT_S)
-    _forget_dead_radios()
+    # thread's (earlier) dongle and never reach these ones. Wait for cflib to close them; a link an earlier plug's
+    # user never closed keeps its own (earlier) dongle, and the new links get these (as after a real re-plug)
+    if not wait_released(range(_shared_radio_count()), RELEASE_WAIT_S):
+        logger.warning("links of an earlier plug are still open: they keep its dongles, new links get these")
+    _forget_radios()
     kind = RADIO_TYPES[radio]
     air = Air(world)
     devices = [EmulatedCrazyradio(i, kind, air, world.dongle(i), serial_number(kind, i)) for i in range(dongles)]
@@ -453,13 +455,14 @@ def _shared_radio_count() -> int:
     return len(RadioManager._radios)
 
 
-def _forget_dead_radios() -> None:
-    """cflib keeps one shared radio thread per dongle number for the life of the process (``RadioManager._radios``).
-    When a dongle vanishes under several links, that thread dies on the USB error and every later link on the
-    number would wait on it for ever; a fresh process starts without it, and so does a fresh `plug`."""
+def _forget_radios() -> None:
+    """cflib keeps one shared radio thread per dongle number for the life of the process (``RadioManager._radios``),
+    and a link opened on the number joins it with the dongle it opened. A fresh `plug` starts without them, as a
+    fresh process does: a thread that died on a vanished dongle (every later link would wait on it for ever), or
+    one still serving an earlier plug's open links (they keep their dongle), is left to them."""
     from cflib.crtp.radiodriver import RadioManager
 
     with RadioManager._lock:
         for devid, radio in enumerate(RadioManager._radios):
-            if radio is not None and not radio.is_alive():
+            if radio is not None:
                 RadioManager._radios[devid] = None
