@@ -15,13 +15,17 @@ affected. The SDK does not say how many messages it dropped; it logs "outbox for
 30 s per process, its own throttle), and :attr:`LiveView.slow_client_reports` counts those reports.
 
 A client that connects late still sees the scene: ``/scene`` is written once at the start of a flight, so the last
-``/scene`` message is sent again (the same bytes and log time) whenever a client subscribes to it.
+``/scene`` message is sent again (the same bytes and log time) whenever a client subscribes to it: at the next
+message after the subscription and once more `RESEND_AGAIN_S` later (the server tells of a subscription from its
+own thread, and a message sent at once can reach the server before the subscription does: a live client once
+missed the scene that way, under load).
 """
 
 from __future__ import annotations
 
 import logging
 import threading
+import time
 from typing import Any
 
 from rpf_fly import install_hint
@@ -40,6 +44,8 @@ further behind than that is better served by dropping than by showing the past."
 
 LATCHED = ("/scene",)
 """Topics written once (or rarely): the last message is sent again when a client subscribes."""
+RESEND_AGAIN_S = 0.5
+"""How long after a subscription a latched topic's last message is sent the second time (module doc)."""
 
 INSTALL_HINT = install_hint("live")
 
@@ -115,7 +121,7 @@ class LiveView:
         self._context = fg.Context()
         self._channels: dict[str, Any] = {}
         self._latched: dict[str, tuple[int, bytes]] = {}
-        self._resend: set[str] = set()  # latched topics a client subscribed to since the last publish
+        self._resend: dict[str, list[float]] = {}  # latched topic -> when to send it again (monotonic s)
         self._lock = threading.Lock()  # _latched and _resend: the writer thread and the SDK's threads
         self._closed = False
         quiet_sdk()
@@ -154,7 +160,6 @@ class LiveView:
         if topic in LATCHED:
             with self._lock:
                 self._latched[topic] = (log_time, data)
-                self._resend.discard(topic)  # this message reaches the new subscriber anyway
         if self._resend:
             self._send_latched()
         try:
@@ -187,14 +192,21 @@ class LiveView:
         publish (on the writer thread, not from the SDK's callback)."""
         self.subscriptions += 1
         if topic in LATCHED:
+            now = time.monotonic()
             with self._lock:
-                if topic in self._latched:
-                    self._resend.add(topic)
+                self._resend.setdefault(topic, []).extend((now, now + RESEND_AGAIN_S))
 
     def _send_latched(self) -> None:
+        now = time.monotonic()
         with self._lock:
-            pending = [(t, self._latched[t]) for t in self._resend if t in self._latched]
-            self._resend.clear()
+            due = [t for t, times in self._resend.items() if times and times[0] <= now]
+            for t in due:
+                times = self._resend[t]
+                while times and times[0] <= now:
+                    times.pop(0)
+                if not times:
+                    del self._resend[t]
+            pending = [(t, self._latched[t]) for t in due if t in self._latched]
         for topic, (log_time, data) in pending:
             self._channels[topic].log(data, log_time=log_time)
             self.published += 1
