@@ -199,7 +199,8 @@ class LiveView:
     def _send_latched(self) -> None:
         now = time.monotonic()
         with self._lock:
-            due = [t for t, times in self._resend.items() if times and times[0] <= now]
+            # a topic not latched yet keeps its times: its first message may beat the subscription to the server
+            due = [t for t, times in self._resend.items() if times and times[0] <= now and t in self._latched]
             for t in due:
                 times = self._resend[t]
                 while times and times[0] <= now:
