@@ -189,7 +189,7 @@ class LiveView:
 
     def _subscribed(self, topic: str) -> None:
         """SDK thread: a client subscribed to ``topic``; a latched topic's last message goes out at the next
-        publish (on the writer thread, not from the SDK's callback)."""
+        publish and again `RESEND_AGAIN_S` later (on the writer thread, not from the SDK's callback)."""
         self.subscriptions += 1
         if topic in LATCHED:
             now = time.monotonic()
@@ -207,7 +207,7 @@ class LiveView:
                     times.pop(0)
                 if not times:
                     del self._resend[t]
-            pending = [(t, self._latched[t]) for t in due if t in self._latched]
+            pending = [(t, self._latched[t]) for t in due]
         for topic, (log_time, data) in pending:
             self._channels[topic].log(data, log_time=log_time)
             self.published += 1
