@@ -10,6 +10,14 @@ own ``planner.margin_m``: the smallest true distance between two airborne drones
 airborne drone to an obstacle against r + margin, judged on the simulated world's truth. The 40-drone missions fly
 ``--distributed`` (one worker per dongle), as their users fly them. One JSON line a run; exit 1 when any run broke
 its margin or did not fly.
+
+    python tools/mission_margins.py --closed-loop cross-40-4dongles lanes-40-4dongles --runs 5
+
+``--closed-loop`` flies the mission's own planner on the firmware model's batched closed loop instead
+(`rpf_fly.sim.closed_loop`, as ``rpf-fly bench --dynamics firmware`` flies a scene): the same layout with the
+``sim`` section's jitter (seeds 0..N-1), the setpoints flown by simulated firmware drones at the flight's rate, no
+radio, mocap or ground station, judged on the closed loop's truth against the same bars. It is the planners' margins
+on the firmware's dynamics for a mission whose dry run needs more cores than the host has (docs/dynamics.md).
 """
 
 from __future__ import annotations
@@ -77,13 +85,57 @@ def fly(name: str, dynamics: str, out: Path, run: int) -> dict:
     return record
 
 
+def closed_loop(name: str, runs: int) -> list[dict]:
+    """The mission's planner flown ``runs`` times (jitter seeds 0..runs-1) on the firmware model's closed loop."""
+    from rpf_fly.sim.closed_loop import FirmwareParams, run_firmware
+    from rpf_fly.sim.evaluate import sim_params
+    from rpf_fly.sim.scenario import scenario_from_mission
+
+    mission = load_mission(mission_path(name))
+    settings = mission.planner
+    seeds = list(range(runs))
+    scenarios = [scenario_from_mission(mission, seed) for seed in seeds]
+    firmware = FirmwareParams(mission.flight.height, tuple(mission.arena.z))
+    flown = run_firmware(scenarios, settings, sim_params(mission), seeds, [name] * runs, firmware)
+    records = []
+    for seed, run in zip(seeds, flown):
+        m = run.metrics
+        records.append(
+            {
+                "mission": name,
+                "dynamics": "firmware closed loop",
+                "seed": seed,
+                "planner": settings.kind,
+                "margin_m": settings.margin_m,
+                "reached": f"{m.reached}/{m.drones}",
+                "collisions": m.collisions_drone_drone + m.collisions_drone_obstacle,
+                "min_separation_m": None if m.min_separation_m is None else round(m.min_separation_m, 4),
+                "separation_bar_m": round(2 * settings.safety_radius + settings.margin_m, 4),
+                "min_clearance_m": None if m.min_obstacle_clearance_m is None else round(m.min_obstacle_clearance_m, 4),
+                "clearance_bar_m": round(settings.safety_radius + settings.margin_m, 4),
+                "held": m.margin_held and m.reached == m.drones,
+            }
+        )
+    return records
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("missions", nargs="*", help="mission names under missions/ (default: every one)")
     parser.add_argument("--dynamics", default="firmware", choices=("firmware", "first-order"))
     parser.add_argument("--runs", type=int, default=1, help="dry runs of each mission")
     parser.add_argument("--out", type=Path, default=None, help="the copies' and logs' folder (default: temporary)")
+    parser.add_argument(
+        "--closed-loop", action="store_true", help="the planner on the firmware model's batched closed loop, no dry run"
+    )
     args = parser.parse_args()
+    if args.closed_loop:
+        held = True
+        for name in args.missions or shipped():
+            for record in closed_loop(name, args.runs):
+                held = held and record["held"]
+                print(json.dumps(record), flush=True)
+        return 0 if held else 1
     out = args.out or Path(tempfile.mkdtemp(prefix="rpf-mission-margins-"))
     out.mkdir(parents=True, exist_ok=True)
     ok = True
