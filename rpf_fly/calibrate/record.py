@@ -156,12 +156,12 @@ def _log_records(path: Path, drone: str | None) -> list[FlightRecord]:
         if "could not keep up" in str(m.data.get("message", ""))
     )  # rpf_fly/emulator/host_lag.py
     if origin in ("dry-run", "lab"):
-        from rpf_fly.log.review import dry_run_dynamics
+        from rpf_fly.log.review_tracking import logged_dynamics
 
-        dynamics = dry_run_dynamics(str(mission.get("yaml", ""))) or "first-order"
+        dynamics = logged_dynamics(mission)
         if dynamics != "firmware":
             warnings += (
-                f"its simulated drones flew the {dynamics} model (the logged mission's dry_run.dynamics), "
+                f"its simulated drones flew the {dynamics} model (the log's mission record), "
                 "not the firmware's cascade: no gains describe them",
             )
     return [_log_record(path, data, name, origin, warnings) for name in names]

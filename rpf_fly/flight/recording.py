@@ -55,7 +55,10 @@ class McapRecorder:
     them on Zenoh for the logger: rpf_fly/runtime/bus.py).
 
     ``mocap``: whether the frames' poses are logged (``/mocap/<drone>``); a distributed flight's worker leaves them
-    to the flight's mocap relay (rpf_fly/runtime/relay.py) and logs its drones' ``/tf`` only."""
+    to the flight's mocap relay (rpf_fly/runtime/relay.py) and logs its drones' ``/tf`` only.
+
+    ``dynamics``: the model a dry run's simulated drones fly (the ``mission`` record's ``dynamics``; default the
+    mission's ``dry_run.dynamics``)."""
 
     def __init__(
         self,
@@ -70,13 +73,14 @@ class McapRecorder:
         out: Out | None = None,
         radio_dongles: Iterable[int] | None = None,
         mocap: bool = True,
+        dynamics: str | None = None,
     ):
         self.mission = mission
         self._mocap = mocap
         self._offset_ns = time.time_ns() - time.monotonic_ns()
         """Unix-epoch ns minus the loop's monotonic ns, an integer: logged (``mission.monotonic_offset_ns``) so that
         a replay gets the loop's own times back from the log, exactly for the tracker's stamps."""
-        meta = mission_metadata(mission, seed, source=source)
+        meta = mission_metadata(mission, seed, source=source, dynamics=dynamics)
         meta["monotonic_offset_ns"] = str(self._offset_ns)
         self.log = FlightLog(
             path, meta, scenario_metadata(mission), poll_interval_s=POLL_FALLBACK_S, sink=sink, out=out

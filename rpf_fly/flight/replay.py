@@ -233,9 +233,9 @@ def replay_log(
 def simulated_first_order(meta: dict) -> bool:
     """Whether the log's drones were a dry run's (or a lab's) first-order simulated drones: their neighbours were
     predicted by speed alone (`DroneAgent.set_controller`)."""
-    from rpf_fly.log.review_tracking import dry_run_dynamics
+    from rpf_fly.log.review_tracking import logged_dynamics
 
-    return meta.get("source") in ("dry-run", "lab") and dry_run_dynamics(str(meta.get("yaml", ""))) != "firmware"
+    return meta.get("source") in ("dry-run", "lab") and logged_dynamics(meta) != "firmware"
 
 
 def _restarts(row: LoggedRow, last: LoggedRow | None, previous_mode: str | None, shadow: DroneAgent) -> bool:

@@ -185,6 +185,7 @@ def run_flight(
             truth=truth,
             sink=live.publish if live is not None else None,
             radio=backend.radio_counts,
+            dynamics=rig.dynamics if rig is not None else None,
         )
     try:
         try:

@@ -19,9 +19,9 @@ from rpf_fly.radio.backend import DroneState
 
 TRACKING_WARN_M = 0.07
 """A drone this far from where its setpoints should have brought it, for ``TRACKING_WARN_S``: something pushes it
-(a gust, a contact, a failing motor). "Should have": a first-order follower of the streamed setpoints with the
-position loop's time constant ``TRACKING_TAU_S`` and speed limit (a disturbance observer; the carrot's lead and lag
-are in it, so they are not taken for a push). A Crazyflie under mocap follows that within 2-5 cm, so the line sits
+(a gust, a contact, a failing motor). "Should have": the drone's own controller's response to the streamed setpoints
+(module doc; a disturbance observer: the carrot's lead and lag and a hold's overshoot are in it, so they are not
+taken for a push). A Crazyflie under mocap follows that within 2-5 cm, so the line sits
 above that: 5 cm would suit the simulated drone without turbulence (within 1.3 cm), kinder than a real
 one; with its turbulence (rpf_fly/emulator/fake_vehicle.py, "Turbulence") it wanders 2.2-4.0 cm from the model in
 normal flight (lab-3 and circle-8-r3 dry runs, truth), and 5 cm would cry wolf on a real flight. Pushed for 1 s,

@@ -29,10 +29,17 @@ def file_sha256(path: str | Path | None) -> str:
     return digest.hexdigest()
 
 
-def mission_metadata(mission: Any, seed: int = 0, source: str = "flight") -> dict[str, str]:
-    """The ``mission`` metadata record of a :class:`~rpf_fly.mission.Mission` (string values)."""
+def mission_metadata(
+    mission: Any, seed: int = 0, source: str = "flight", dynamics: str | None = None
+) -> dict[str, str]:
+    """The ``mission`` metadata record of a :class:`~rpf_fly.mission.Mission` (string values). A dry run's or a
+    lab's record adds ``dynamics``: the model its simulated drones flew (``dynamics``, else the mission's
+    ``dry_run.dynamics``), so a reader need not know which default the writing version had."""
     from rpf_fly import __version__
 
+    extra = {}
+    if source in ("dry-run", "lab"):
+        extra["dynamics"] = (dynamics or mission.dry_run.dynamics).replace("_", "-")
     return {
         "name": mission.name,
         "yaml": mission.text,
@@ -41,6 +48,7 @@ def mission_metadata(mission: Any, seed: int = 0, source: str = "flight") -> dic
         "policy_sha256": file_sha256(mission.planner.policy),
         "seed": str(int(seed)),
         "source": source,
+        **extra,
     }
 
 

@@ -29,7 +29,7 @@ from rpf_fly.log.review_series import battery_series, rms_max, tracking_error
 from rpf_fly.log.review_tracking import (
     CRAZYFLIE_LAG_S,
     TrackingExpectation,
-    dry_run_dynamics,
+    logged_dynamics,
     tracking_expectation,
     tracking_lag,
 )
@@ -276,7 +276,7 @@ def review(data: LogData) -> Review:
     if errors:
         tracking["all"] = rms_max(np.concatenate(errors))
     expected = {}
-    lag = tracking_lag(source, dry_run_dynamics(str(mission.get("yaml", ""))))
+    lag = tracking_lag(source, logged_dynamics(mission))
     if source != "sim":  # a simulation's setpoint is one planning step ahead by construction: no drone trails it
         lag_s = lag[0]
         expected = {name: tracking_expectation(data, name, start, lag_s) for name in tracking if name != "all"}

@@ -4,6 +4,7 @@ drone gives at the flown speed (its lag behind a moving setpoint x the setpoint'
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -84,6 +85,13 @@ def tracking_lag(source: str, dynamics: str = "") -> tuple[float, str]:
             return CRAZYFLIE_LAG_S, "the dry run's simulated Crazyflies (the firmware's default gains)"
         return DRY_RUN_LAG_S, "the dry run's simulated drones"
     return CRAZYFLIE_LAG_S, "Crazyflies with the firmware's default gains"
+
+
+def logged_dynamics(mission: Mapping[str, Any]) -> str:
+    """The model a dry run's or lab's simulated drones flew, from the log's ``mission`` record: its ``dynamics``,
+    else the logged mission's ``dry_run.dynamics``, else ``first-order`` (the default of the versions that wrote
+    neither)."""
+    return str(mission.get("dynamics", "")) or dry_run_dynamics(str(mission.get("yaml", ""))) or "first-order"
 
 
 def dry_run_dynamics(mission_yaml: str) -> str:

@@ -162,6 +162,6 @@ def test_a_log_written_from_a_trace_is_fitted_as_the_trace(tmp_path: Path) -> No
     assert fit["latency_from"] == "truth" and fit["latency_s"] == 0.0 and fit["noise_m"] < 1e-6
     assert abs(fit["delay_s"]) < 0.003 and fit["residual_axis_rms_m"]["x"] < 0.001, fit
     assert fit["warnings"] == [
-        "its simulated drones flew the first-order model (the logged mission's "
-        "dry_run.dynamics), not the firmware's cascade: no gains describe them"
+        "its simulated drones flew the first-order model (the log's mission record), "
+        "not the firmware's cascade: no gains describe them"
     ]

@@ -129,12 +129,15 @@ def test_the_simulated_drones_logs_are_judged_on_their_lag():
 def test_a_dry_run_whose_drones_fly_the_firmwares_cascade_is_judged_as_crazyflies(tmp_path):
     """``dry_run: {dynamics: firmware}`` in the logged mission: the simulated drones trail as a default-gain
     Crazyflie."""
-    from rpf_fly.log.review_tracking import dry_run_dynamics, tracking_lag
+    from rpf_fly.log.review_tracking import dry_run_dynamics, logged_dynamics, tracking_lag
 
     assert dry_run_dynamics("name: m\ndry_run: {dynamics: firmware}\n") == "firmware"
     assert dry_run_dynamics("name: m\n") == dry_run_dynamics("{not yaml") == ""
     assert tracking_lag("dry-run", "firmware")[0] == CRAZYFLIE_LAG_S
     assert tracking_lag("dry-run", "first-order")[0] == DRY_RUN_LAG_S
+    assert logged_dynamics({"dynamics": "firmware", "yaml": "name: m\n"}) == "firmware"  # the record says it
+    assert logged_dynamics({"yaml": "name: m\ndry_run: {dynamics: firmware}\n"}) == "firmware"
+    assert logged_dynamics({"yaml": "name: m\n"}) == "first-order"  # written before the record said it
     path = carrot_log(
         tmp_path / "cascade.mcap",
         "dry-run",
@@ -143,3 +146,19 @@ def test_a_dry_run_whose_drones_fly_the_firmwares_cascade_is_judged_as_crazyflie
     )
     result = review(read_log(path))
     assert result.tracking_lag[0] == CRAZYFLIE_LAG_S and not result.tracking_expected["cf1"].outside
+
+
+def test_a_dry_runs_log_says_which_model_its_drones_flew():
+    """The ``mission`` record of a dry run or a lab names the model (``dynamics``), whatever the mission's text
+    says or leaves to the default; a flight's says none."""
+    from rpf_fly.log.metadata import mission_metadata
+    from rpf_fly.mission.load import parse_mission
+
+    mission = parse_mission(
+        "name: m\narena: {x: [-2, 2], y: [-2, 2], z: [0, 1.5]}\nplanner: {kind: apf}\nmocap: {kind: sim}\n"
+        "drones:\n  - {name: cf1, uri: radio://0/80/2M/E7E7E7E701, start: [-1, 0], goal: [1, 0]}\n"
+    )
+    assert mission_metadata(mission, source="dry-run")["dynamics"] == "first-order"  # the mission's default
+    assert mission_metadata(mission, source="lab", dynamics="firmware")["dynamics"] == "firmware"
+    assert mission_metadata(mission, source="dry-run", dynamics="first_order")["dynamics"] == "first-order"
+    assert "dynamics" not in mission_metadata(mission, source="flight")
