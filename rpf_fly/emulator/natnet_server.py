@@ -98,8 +98,7 @@ class NatNetServer:
         clock_frequency_hz: HighResClockFrequency of the frame hardware stamps.
         camera_latency_s: camera mid-exposure to data-received latency encoded in every frame.
         extra_latency_s: called for every frame, seconds added to that latency (the poses served are that much
-            older: a delayed mocap pipeline, which Motive's own timestamps show: the frame's timestamp is its
-            poses' capture time, so it is that much earlier too).
+            older: a delayed mocap pipeline, which Motive's own timestamps show).
         markers_per_body: markers streamed per body (0-4).
         models_changed_frames: how many frames carry the models-changed bit after :meth:`set_bodies`.
     """
@@ -347,14 +346,16 @@ class NatNetServer:
         now = time.monotonic()
         received = self._ticks(now)
         wall = time.time()
-        late = self._extra_latency_s() if self._extra_latency_s is not None else 0.0
         frame = FrameOfData(
             frame_number=self._frame_number,
             marker_sets=marker_sets,
             rigid_bodies=rigid_bodies,
             labeled_markers=labeled,
-            timestamp=now - self._t0 - late,  # Motive's timestamp is its poses' capture time, late ones too
-            camera_mid_exposure=received - self._ticks(self._camera_latency_s + late),
+            timestamp=now - self._t0,
+            camera_mid_exposure=received
+            - self._ticks(
+                self._camera_latency_s + (self._extra_latency_s() if self._extra_latency_s is not None else 0.0)
+            ),
             camera_data_received=received,
             transmit=received + self._ticks(0.0003),
             precision_seconds=int(wall),

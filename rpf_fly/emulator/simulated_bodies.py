@@ -124,9 +124,9 @@ class SimulatedBodies:
 
     def mocap_delay(self, delay_s: float, seconds: float) -> None:
         """For ``seconds`` every frame carries poses ``delay_s`` old (at most `MOCAP_HISTORY_S`): latency (a
-        loaded Motive host), not a frame-rate drop, so frames keep coming at the rate; the NatNet emulator's frame
-        latency figure and timestamp show it (`extra_latency_s`), as Motive's do. The poses served are the ones
-        recorded at earlier frames (the resolution is the frame period)."""
+        loaded Motive host or network), not a frame-rate drop, so frames keep coming at the rate and the frame's
+        own latency figure does not show it. The poses served are the ones recorded at earlier frames (the
+        resolution is the frame period)."""
         if not 0.0 <= delay_s <= MOCAP_HISTORY_S:
             raise ValueError(f"delay_s must be in [0, {MOCAP_HISTORY_S:g}], not {delay_s}")
         with self._lock:

@@ -77,12 +77,8 @@ class EstimateCheck:
         for a in agents:
             state, pose = states.get(a.name), tracker.get(a.name)
             history = self._history.setdefault(a.name, deque())
-            if pose is not None and pose.valid:
-                # dated when the cameras saw it (its receipt less the mocap's latency), as the estimate is dated
-                # when the firmware made it: a late picture is not taken for a wrong estimate
-                seen_s = pose.stamp_s - (tracker.latency_s or 0.0)
-                if not history or history[-1][0] < seen_s:
-                    history.append((seen_s, pose.position))
+            if pose is not None and pose.valid and (not history or history[-1][0] != pose.stamp_s):
+                history.append((pose.stamp_s, pose.position))
             while history and history[0][0] < now_s - ESTIMATE_HISTORY_S:
                 history.popleft()
             if (

@@ -139,27 +139,6 @@ def turn_deg(a: tuple[float, float, float, float], b: tuple[float, float, float,
     return math.degrees(2.0 * math.acos(min(1.0, dot)))
 
 
-EXTPOS_LEAD_FROM_S = 0.02
-"""Mocap latency (camera to receipt, as the mocap measures it) from which the pose a drone's estimator gets is carried
-ahead by that latency (`estimator_position`): the supervisor's `MOCAP_LATENCY_WARN_S`, over twice the worst healthy
-Motive link, so a healthy flight's extpos is the mocap position as measured."""
-
-
-def estimator_position(pose: TrackedPose, latency_s: float | None) -> tuple[float, float, float]:
-    """The position to feed a drone's estimator from its newest mocap pose: the pose itself, or, while the mocap's
-    latency is at least `EXTPOS_LEAD_FROM_S`, the pose carried ahead along the drone's tracked planar velocity by
-    that latency. Why: the firmware's estimator takes each extpos as the drone's position now; a pose ``latency_s``
-    old puts its estimate speed x latency behind the drone, and on the firmware's cascade the correction lurches it
-    forward (a 0.12 s delay at 0.5 m/s threw drones 0.16-0.19 m off their paths and into pillars:
-    docs/fault-campaign.md). The velocity is the tracker's (from the same late poses): right for a drone flying
-    steadily, the remaining error its change of speed over the latency."""
-    x, y, z = pose.position
-    if latency_s is None or latency_s < EXTPOS_LEAD_FROM_S:
-        return pose.position
-    ahead = pose.velocity * latency_s
-    return (x + ahead.real, y + ahead.imag, z)
-
-
 class PoseTracker:
     """Folds mocap frames into per-drone poses. ``bodies`` maps drone name -> rigid body name."""
 

@@ -167,20 +167,9 @@ def test_a_mocap_delay_serves_old_poses_at_the_frame_rate_then_ends(rig: DryRun)
     steady = frames(rig, 0.5)
     assert len(steady) >= 40  # ... while frames keep coming at 100 Hz (latency, not a frame-rate drop)
     assert rig.snapshot("cf1").position[0] == pytest.approx(0.8, abs=1e-6)
-    # ... and each says how late it is, as Motive's do: its latency, and its timestamp (its poses' capture time) that
-    # much behind its receipt, so a tracker sees a track consistent in time when the delay ends
-    assert all(f.latency_s is not None and 0.25 <= f.latency_s < 0.27 for f in steady)
-    behind = [
-        (f.receive_time_s - steady[0].receive_time_s) - (f.capture_time_s - steady[0].capture_time_s) for f in steady
-    ]
-    assert max(abs(b) for b in behind) < 0.03
-    before = frames(rig, 0.1)[-1]
     time.sleep(1.0)  # the delay is over
-    after = frames(rig, 0.1)[0]
     rig.world.disturb(rig.addresses["cf1"], (0.3, 0.0, 0.0))
     assert first_frame_showing(rig, 1.0, 1.0) < 0.1
-    # capture time ran on by the 1 s between the two frames plus the 0.25 s the delay had held it back
-    assert (after.capture_time_s - before.capture_time_s) - (after.receive_time_s - before.receive_time_s) > 0.2
 
 
 # Radio -----------------------------------------------------------------------------------------------------
