@@ -163,6 +163,19 @@ class SwarmViews:
                     self.drones[name].reason = str(reason)
         self._wake.set()
 
+    def _how_gone(self, worker: WorkerView) -> str:
+        """What this host knows of a lost worker it started: its exit (a crash's traceback is in its log) or, still
+        running, that its link lapsed (no message within the Zenoh lease: a stalled or starved host). '' for a
+        worker started elsewhere."""
+        if worker.process is None:
+            return ""
+        log = f"{self.log_path.stem}.{worker.name}.log"
+        try:
+            code = worker.process.wait(timeout=0.2)  # a killed process's socket closes as it exits
+        except subprocess.TimeoutExpired:
+            return f" (its process still runs: its link to the coordinator lapsed; see {log})"
+        return f" (its process exited with code {code}; see {log})"
+
     def _alive(self, name: str, alive: bool) -> None:
         if name == RELAY:
             self._relay_alive(alive)
@@ -192,7 +205,7 @@ class SwarmViews:
                 self.events.emit(
                     FATAL,
                     "worker_lost",
-                    f"worker {name} (dongle {worker.dongle}, pid {pid} on {host}) is gone: its drones "
-                    f"{', '.join(worker.drones)} are left to their firmware's watchdog; the others fly on",
+                    f"worker {name} (dongle {worker.dongle}, pid {pid} on {host}) is gone{self._how_gone(worker)}: "
+                    f"its drones {', '.join(worker.drones)} are left to their firmware's watchdog; the others fly on",
                 )
         self._wake.set()

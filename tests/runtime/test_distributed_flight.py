@@ -85,6 +85,15 @@ def _forged_frames(flight: str, secret: str, genuine: tuple[bytes, bytes]) -> li
     return [(payload, None), (payload, wrong), genuine, (garbage, mac(secret.encode(), garbage))]
 
 
+def _told(lines: list[str], folder: Path) -> str:
+    """What a failed flight said: the coordinator's lines and the end of each worker's log beside its flight log."""
+    tails = [
+        f"{path.name}: " + " | ".join(path.read_text(errors="replace").splitlines()[-12:])
+        for path in sorted(folder.glob("*.log"))
+    ]
+    return "\n".join(lines + tails)
+
+
 def _start(coordinator: Coordinator) -> tuple[threading.Thread, dict]:
     result: dict = {}
 
@@ -265,6 +274,7 @@ def test_a_killed_worker_is_noticed_and_the_others_fly_on(tmp_path):
     assert not thread.is_alive()
     lost = [e for e in coordinator.events.history if e.kind == "worker_lost"]
     assert len(lost) == 1 and "dongle-1" in lost[0].message and "cf3, cf4" in lost[0].message
+    assert f"its process exited with code {-signal.SIGKILL}; see killed.dongle-1.log" in lost[0].message
     assert lost[0].time_s - killed_at < 1.0
     assert result["code"] == 1  # a worker was lost
     assert coordinator.drones["cf1"].outcome == "reached" and coordinator.drones["cf2"].outcome == "reached"
@@ -617,7 +627,7 @@ def test_a_motioncapture_mission_flies_distributed_through_the_relay(tmp_path):
     thread, result = _start(coordinator)
     thread.join(120)
     assert not thread.is_alive()
-    assert result["code"] == 0, lines
+    assert result["code"] == 0, _told(lines, tmp_path)
     assert coordinator.relayed and coordinator.relay_info["frames"] > 100, coordinator.relay_info
     assert "motioncapture" in coordinator.relay_info["source"]
     log = read_log(tmp_path / "mc.mcap")
