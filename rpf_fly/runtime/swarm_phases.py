@@ -38,6 +38,8 @@ class SwarmPhases:
     _estop: bool
     _wake: threading.Event
     _show: Callable[[], None]
+    judge_gone: Callable[[], None]  # rpf_fly/runtime/swarm_views.py
+    leaving: Callable[[WorkerView], bool]
 
     def _command(self, command: str, reason: str = "", grounded: tuple[str, ...] = ()) -> None:
         assert self.bus is not None
@@ -49,7 +51,8 @@ class SwarmPhases:
         self.bus.command(self.secret, command, reason, grounded)
 
     def _live(self) -> list[WorkerView]:
-        return [w for w in self.workers.values() if w.alive and not w.done]
+        self.judge_gone()
+        return [w for w in self.workers.values() if (w.alive or self.leaving(w)) and not w.done]
 
     def _states(self, workers: list[WorkerView]) -> list[str]:
         return [self.drones[n].state for w in workers for n in w.drones]

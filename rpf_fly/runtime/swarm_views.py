@@ -12,6 +12,7 @@ import json
 import logging
 import subprocess
 import threading
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -36,6 +37,11 @@ class DroneView:
     reason: str = ""
 
 
+REPORT_GRACE_S = 1.0
+"""How long after a worker's liveliness token vanished its last report may still come before it is lost (one Zenoh
+lease: the report and the token's end travel apart)."""
+
+
 @dataclass
 class WorkerView:
     name: str
@@ -48,6 +54,8 @@ class WorkerView:
     lost: bool = False
     info: dict[str, Any] = field(default_factory=dict)
     process: subprocess.Popen | None = None
+    gone_at: float | None = None
+    """When its liveliness token vanished before its report came (`SwarmViews.judge_gone`)."""
 
 
 class SwarmViews:
@@ -170,11 +178,12 @@ class SwarmViews:
         if worker.process is None:
             return ""
         log = f"{self.log_path.stem}.{worker.name}.log"
-        try:
-            code = worker.process.wait(timeout=0.2)  # a killed process's socket closes as it exits
-        except subprocess.TimeoutExpired:
+        code = worker.process.poll()
+        if code is None:
             return f" (its process still runs: its link to the coordinator lapsed; see {log})"
-        return f" (its process exited with code {code}; see {log})"
+        if code < 0:
+            return f" (its process was killed by signal {-code}; see {log})"
+        return f" (its process exited with code {code} without its report; see {log})"
 
     def _alive(self, name: str, alive: bool) -> None:
         if name == RELAY:
@@ -198,14 +207,46 @@ class SwarmViews:
             worker.alive = worker.seen = True
         else:
             worker.alive = False
-            if not worker.done:
-                worker.lost = True
-                pid = worker.info.get("pid", "?")
-                host = worker.info.get("host", "?")
-                self.events.emit(
-                    FATAL,
-                    "worker_lost",
-                    f"worker {name} (dongle {worker.dongle}, pid {pid} on {host}) is gone{self._how_gone(worker)}: "
-                    f"its drones {', '.join(worker.drones)} are left to their firmware's watchdog; the others fly on",
-                )
+            if not worker.done and worker.gone_at is None:
+                worker.gone_at = time.monotonic()
+                if self._killed(worker, wait_s=0.2):  # a killed process's socket closes as it exits
+                    self._lose(worker)
+        self._wake.set()
+
+    def judge_gone(self) -> None:
+        """Each worker whose token vanished before its report: lost once its process was killed, or once its report
+        has not come within `REPORT_GRACE_S` of the token (a worker's last report and its token's end travel apart:
+        the report may come second)."""
+        now = time.monotonic()
+        for worker in self.workers.values():
+            if worker.gone_at is None or worker.done or worker.lost:
+                continue
+            if self._killed(worker, wait_s=0.0) or now - worker.gone_at >= REPORT_GRACE_S:
+                self._lose(worker)
+
+    def leaving(self, worker: WorkerView) -> bool:
+        """Its token vanished, its report may still come (`judge_gone`)."""
+        return worker.gone_at is not None and not worker.done and not worker.lost
+
+    @staticmethod
+    def _killed(worker: WorkerView, wait_s: float) -> bool:
+        """A worker this host started that a signal ended (waited for up to ``wait_s``)."""
+        if worker.process is None:
+            return False
+        try:
+            code = worker.process.wait(timeout=wait_s) if wait_s > 0 else worker.process.poll()
+        except subprocess.TimeoutExpired:
+            return False
+        return code is not None and code < 0
+
+    def _lose(self, worker: WorkerView) -> None:
+        worker.lost = True
+        pid = worker.info.get("pid", "?")
+        host = worker.info.get("host", "?")
+        self.events.emit(
+            FATAL,
+            "worker_lost",
+            f"worker {worker.name} (dongle {worker.dongle}, pid {pid} on {host}) is gone{self._how_gone(worker)}: "
+            f"its drones {', '.join(worker.drones)} are left to their firmware's watchdog; the others fly on",
+        )
         self._wake.set()
