@@ -58,6 +58,25 @@ def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo) -> Itera
             )
 
 
+LONGEST_GROUPS = ("scenario", "lab", "cli_flights", "calibrate_flights", "replay_logs")
+"""The shared flights' groups, longest first (one worker each: 60-130 s, 126, 87, 68 and 56 s)."""
+FLIGHT_DIRS = ("flight", "runtime", "tools", "campaign", "calibrate", "cli", "log")
+"""Where the dry-run flight tests of 5-25 s each live."""
+
+
+def longest_first(item: pytest.Item) -> tuple[int, int]:
+    """The order xdist hands out the work: the long shared flights first, then the folders of dry-run flights, then
+    the rest (a worker that ends with a 20 s flight while the others are done is the suite's tail; the work is handed
+    out in collection order, so the short tests go last and end the workers together). Stable: each module's tests
+    keep their order."""
+    mark = item.get_closest_marker("xdist_group")
+    group = (mark.args[0] if mark.args else mark.kwargs.get("name")) if mark is not None else None
+    if group in LONGEST_GROUPS:
+        return (0, LONGEST_GROUPS.index(group))
+    folder = item.path.parent.name
+    return (1, FLIGHT_DIRS.index(folder)) if folder in FLIGHT_DIRS else (2, 0)
+
+
 @pytest.hookimpl(trylast=True)
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     """Refuse to run when pytest-xdist's ``--dist loadgroup`` (pyproject addopts) has not grouped the marked tests.
@@ -68,6 +87,7 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     does not read), so pyproject pins pytest below 9.2."""
     if not getattr(config.option, "loadgroup", False):
         return  # not a loadgroup worker: a run without -n, or another --dist (the controller checks the version)
+    items.sort(key=longest_first)
     ungrouped = [
         item.nodeid for item in items if item.get_closest_marker("xdist_group") is not None and "@" not in item.nodeid
     ]
