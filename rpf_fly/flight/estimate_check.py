@@ -11,7 +11,7 @@ from rpf_fly.flight.commander import ON_FLOOR_Z_M
 from rpf_fly.flight.events import ERROR, WARNING
 from rpf_fly.flight.findings import Finding
 from rpf_fly.flight.phases import DronePhase
-from rpf_fly.flight.poses import PoseTracker
+from rpf_fly.flight.poses import PoseTracker, estimator_position
 from rpf_fly.mission.model import SafetySettings
 from rpf_fly.radio.backend import DroneState
 
@@ -77,8 +77,11 @@ class EstimateCheck:
         for a in agents:
             state, pose = states.get(a.name), tracker.get(a.name)
             history = self._history.setdefault(a.name, deque())
-            if pose is not None and pose.valid and (not history or history[-1][0] != pose.stamp_s):
-                history.append((pose.stamp_s, pose.position))
+            # the pose as its estimator is fed it: a picture later than the hold bound carried ahead by its latency
+            # (estimator_position; the estimate follows that, not the late pose)
+            fed = estimator_position(pose, tracker.latency_s) if pose is not None else None
+            if fed is not None and pose is not None and pose.valid and (not history or history[-1][0] != pose.stamp_s):
+                history.append((pose.stamp_s, fed))
             while history and history[0][0] < now_s - ESTIMATE_HISTORY_S:
                 history.popleft()
             if (
@@ -94,7 +97,7 @@ class EstimateCheck:
             late, wrong, stamp = self._diverging.get(a.name, (0, 0, -1.0))
             if state.telemetry_stamp_s == stamp:
                 continue
-            off = math.dist(state.position_m, pose.position)
+            off = math.dist(state.position_m, fed or pose.position)
             then = _pose_at(history, state.estimate_stamp_s)
             nearest: float | None
             if then is not None:  # the estimate against where mocap saw the drone when it was made

@@ -35,7 +35,7 @@ class LoopLanding:
     it falls from 1.5 m in 0.6 s. Until then it may still hover or drift where the others land, and the log should
     show where it came down (without the wait a one-drone flight would end, and close its log, with that drone still
     in the air)."""
-    RESUMABLE = frozenset({"pose_stale", "mocap_lost", "pose_glitch", "separation", "obstacle"})
+    RESUMABLE = frozenset({"pose_stale", "mocap_lost", "pose_glitch", "separation", "obstacle", "mocap_latency"})
     """Hold reasons that end when the supervisor says the condition cleared."""
 
     mission: Mission

@@ -16,7 +16,7 @@ from rpf_fly.flight.commander import Commander
 from rpf_fly.flight.events import ERROR, WARNING, EventBus
 from rpf_fly.flight.gc_pacing import GcPacer
 from rpf_fly.flight.phases import DronePhase
-from rpf_fly.flight.poses import PoseTracker, TrackedPose
+from rpf_fly.flight.poses import PoseTracker, TrackedPose, estimator_position
 from rpf_fly.flight.recorder import PlannerRecord, Recorder
 from rpf_fly.flight.report import LoopStats
 from rpf_fly.flight.supervisor import Finding, Supervisor
@@ -125,9 +125,12 @@ class LoopIteration:
             agent = self.agents[name]
             if agent.phase.terminal or not self._extpos.due(name, now):
                 continue
-            # an orientation refused as a jump (a wrong fit of the markers) is not fed to the estimator
+            # an orientation refused as a jump (a wrong fit of the markers) is not fed to the estimator; a picture
+            # later than the hold bound is carried ahead by its latency (estimator_position)
             self.commander.extpos(
-                agent, pose.position, pose.quaternion if extpose and pose.orientation_trusted else None
+                agent,
+                estimator_position(pose, self.tracker.latency_s),
+                pose.quaternion if extpose and pose.orientation_trusted else None,
             )
 
     def _in_the_way(self, agent: DroneAgent, pose: TrackedPose) -> bool:

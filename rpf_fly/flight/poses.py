@@ -139,6 +139,28 @@ def turn_deg(a: tuple[float, float, float, float], b: tuple[float, float, float,
     return math.degrees(2.0 * math.acos(min(1.0, dot)))
 
 
+EXTPOS_LEAD_FROM_S = 0.1
+"""Mocap latency (camera to receipt, as the mocap measures it) from which the pose a drone's estimator gets is carried
+ahead by that latency (`estimator_position`), and every flying drone holds (the supervisor's `MOCAP_LATENCY_HOLD_S`).
+Under it extpos is the mocap position as measured: carrying poses ahead along a velocity measured on the same late
+poses throws braking and turning drones the wrong way (a 0.08 s delay in circle-8-r3's swap brought two drones within
+0.13 m), while over it the firmware's cascade on the late picture oscillates even at rest (docs/flight.md)."""
+
+
+def estimator_position(pose: TrackedPose, latency_s: float | None) -> tuple[float, float, float]:
+    """The position to feed a drone's estimator from its newest mocap pose: the pose itself, or, while the mocap's
+    latency is at least `EXTPOS_LEAD_FROM_S`, the pose carried ahead along the drone's tracked planar velocity by
+    that latency. Why: the firmware's estimator takes each extpos as the drone's position now; a pose ``latency_s``
+    old puts its estimate speed x latency behind the drone, and the cascade's correction lurches it after the late
+    picture: on the firmware model a drone held at rest on a 0.146 s old picture swung 0.12, 0.21, 0.25, 0.29 m
+    in 0.75 s periods until its pose, back on time, leapt further than a drone flies (docs/flight.md)."""
+    x, y, z = pose.position
+    if latency_s is None or latency_s < EXTPOS_LEAD_FROM_S:
+        return pose.position
+    ahead = pose.velocity * latency_s
+    return (x + ahead.real, y + ahead.imag, z)
+
+
 class PoseTracker:
     """Folds mocap frames into per-drone poses. ``bodies`` maps drone name -> rigid body name."""
 

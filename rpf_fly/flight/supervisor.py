@@ -43,7 +43,7 @@ from rpf_fly.flight.estimate_check import EstimateCheck
 from rpf_fly.flight.events import ERROR, INFO, WARNING
 from rpf_fly.flight.findings import Finding
 from rpf_fly.flight.phases import DronePhase
-from rpf_fly.flight.poses import POSE_LATE_S, PoseTracker
+from rpf_fly.flight.poses import EXTPOS_LEAD_FROM_S, POSE_LATE_S, PoseTracker
 from rpf_fly.flight.proximity_check import ProximityCheck
 from rpf_fly.flight.tracking_check import TrackingCheck
 from rpf_fly.mission.model import Mission
@@ -79,6 +79,12 @@ a picture that old (Crazyswarm2 warns at 10 ms over unicast; a healthy Motive li
 the worst healthy link, so a healthy system never warns, and 2 cm of lag at 1 m/s. At 50 ms the
 random fault campaign's 33 ms of mocap delay (plus the emulated camera's 4 ms), a picture five times older than a
 healthy one, would go unsaid."""
+MOCAP_LATENCY_HOLD_S = EXTPOS_LEAD_FROM_S
+"""Mocap latency above this (0.1 s): every flying drone holds (brought to rest where it is) until the latency is back
+under half of it, then plans on, and its extpos is carried ahead by the latency (`poses.estimator_position`). The
+firmware's estimator takes each late pose as current, so a moving drone's estimate trails it by its speed x the
+latency and its controller lurches after it. Measured on the firmware model (docs/flight.md): a mocap delay of 0.08
+and 0.10 s flown through campaign/pillars-6 passes as it is, 0.12 s crashed two drones into pillars."""
 
 
 class Supervisor:
@@ -107,6 +113,7 @@ class Supervisor:
         self._poor_link: set[str] = set()
         self._late_landing: set[str] = set()
         self._late_mocap = False
+        self._latency_hold = False
         self._blind_landed: set[str] = set()
         self._blind_stopped: set[str] = set()
 
@@ -572,9 +579,10 @@ class Supervisor:
         latency = tracker.latency_s
         if latency is None:
             return []
+        out: list[Finding] = []
         if latency > MOCAP_LATENCY_WARN_S and not self._late_mocap:
             self._late_mocap = True
-            return [
+            out.append(
                 Finding(
                     "mocap_latency",
                     WARNING,
@@ -582,8 +590,28 @@ class Supervisor:
                     None,
                     "warn",
                 )
-            ]
+            )
+        if latency > MOCAP_LATENCY_HOLD_S and not self._latency_hold:
+            self._latency_hold = True
+            out.append(
+                Finding(
+                    "mocap_latency",
+                    ERROR,
+                    f"mocap latency {latency * 1e3:.0f} ms, over {MOCAP_LATENCY_HOLD_S * 1e3:.0f} ms: every drone "
+                    "holds (its estimator takes the late poses as current: a moving drone lurches after them) "
+                    f"until it is back under {MOCAP_LATENCY_HOLD_S / 2 * 1e3:.0f} ms",
+                    None,
+                    "hold",
+                )
+            )
+        if latency < MOCAP_LATENCY_HOLD_S / 2 and self._latency_hold:
+            self._latency_hold = False
+            out.append(
+                Finding(
+                    "mocap_latency", INFO, f"mocap latency back to {latency * 1e3:.0f} ms: resuming", None, "resume"
+                )
+            )
         if latency < MOCAP_LATENCY_WARN_S / 2 and self._late_mocap:
             self._late_mocap = False
-            return [Finding("mocap_latency", INFO, f"mocap latency back to {latency * 1e3:.0f} ms", None, "warn")]
-        return []
+            out.append(Finding("mocap_latency", INFO, f"mocap latency back to {latency * 1e3:.0f} ms", None, "warn"))
+        return out

@@ -24,17 +24,27 @@ def test_a_drone_put_down_away_from_its_start_stops_the_preflight(tmp_path, shor
 
 
 def test_mocap_radio_and_drone_faults_mid_flight_the_swarm_stays_safe(tmp_path, short_mission):
+    """Packet loss, a gust, a pose jump and a mocap delay of 0.15 s (over the 0.1 s hold bound) at once: the jump is
+    refused, the delay holds every drone until the latency is back, and every drone reaches its goal."""
+
     def campaign(loop, rig):
         time.sleep(0.5)
         rig.packet_loss("cf3", 0.5, 1.5)
         rig.gust("cf2", (0.0, 1.0, 0.0), 1.0)
-        rig.mocap_delay(0.03, 1.0)
+        rig.mocap_delay(0.15, 1.0)
         time.sleep(0.3)
         rig.pose_jump("cf1", (0.4, 0.0, 0.0), 0.3)
 
     flight = fly(short_mission, tmp_path, when_flying=campaign)
     assert flight.report.error is None and flight.report.phase == SwarmPhase.DONE
     assert flight.events("pose_glitch", "cf1")  # the jump was refused, not followed
+    latency = [
+        (e.level, e.message) for e in flight.events("mocap_latency") if "hold" in e.message or "resum" in e.message
+    ]
+    assert len(latency) == 2 and "every drone holds" in latency[0][1] and "resuming" in latency[1][1], latency
+    for name in ("cf1", "cf2", "cf3"):  # each one held (the latency's reason), then planned on
+        states = [m.data["state"] for m in flight.log.messages(f"/{name}/status")]
+        assert "holding" in states and "planning" in states[states.index("holding") :], (name, states)
     assert not flight.events("link_lost")
     assert all(o == FlightOutcome.REACHED for o in flight.report.outcomes.values()), flight.report.reasons
     assert all(s.position[2] < 0.05 and not s.motors_on for s in flight.snapshots.values())

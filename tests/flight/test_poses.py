@@ -255,3 +255,19 @@ def test_the_estimates_age_and_the_blind_drift_widen_what_may_be_taken(made_s, b
     occluded(tracker, 50, back_frame)
     tracker.update(frame(back_frame, (0.30 + off_m, 0.0, 1.0)))
     assert ("cf1" in tracker.glitching) is refused
+
+
+def test_a_picture_later_than_the_hold_bound_reaches_the_estimator_carried_ahead_by_its_latency() -> None:
+    """Under `EXTPOS_LEAD_FROM_S` (0.1 s) of latency the estimator gets the mocap position as measured; from it, the
+    position carried ahead along the tracked planar velocity by the latency (a drone at 0.5 m/s seen 0.146 s late is
+    7.3 cm further on), the height as measured."""
+    from rpf_fly.flight.poses import EXTPOS_LEAD_FROM_S, TrackedPose, estimator_position
+
+    pose = TrackedPose((1.0, 2.0, 0.7), (0.0, 0.0, 0.0, 1.0), complex(0.5, -0.2), 10.0, 1)
+    assert EXTPOS_LEAD_FROM_S == 0.1
+    assert estimator_position(pose, None) == pose.position
+    assert estimator_position(pose, 0.004) == pose.position  # a healthy Motive link
+    assert estimator_position(pose, 0.08) == pose.position  # late, under the bound: as measured
+    assert estimator_position(pose, EXTPOS_LEAD_FROM_S * 0.99) == pose.position
+    x, y, z = estimator_position(pose, 0.146)
+    assert (x, y, z) == pytest.approx((1.0 + 0.5 * 0.146, 2.0 - 0.2 * 0.146, 0.7))

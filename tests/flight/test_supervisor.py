@@ -12,7 +12,7 @@ from rpf_fly.flight.agent import DroneAgent
 from rpf_fly.flight.phases import DronePhase
 from rpf_fly.flight.poses import PoseTracker
 from rpf_fly.flight.proximity_check import REST_S
-from rpf_fly.flight.supervisor import LOW_BATTERY_SAMPLES, TELEMETRY_STALE_S, WARNING, Supervisor
+from rpf_fly.flight.supervisor import ERROR, LOW_BATTERY_SAMPLES, TELEMETRY_STALE_S, WARNING, Supervisor
 from rpf_fly.mission import parse_mission
 from rpf_fly.mocap.frame import MocapFrame, RigidBodyPose
 from rpf_fly.radio.backend import BatteryState, DroneState, LinkState, PmState, SupervisorState
@@ -196,6 +196,26 @@ def test_mocap_latency_four_times_a_healthy_links_is_a_warning_once_and_its_end_
         ]
     assert [k for k, _ in said] == [5, 13]
     assert said[0][1] == WARNING and said[1][1] < WARNING
+
+
+def test_mocap_latency_over_the_hold_bound_holds_the_swarm_until_it_is_back_under_half():
+    """Over `MOCAP_LATENCY_HOLD_S` (0.1 s: a delay of 0.12 s crashed drones on the firmware model) every drone holds:
+    one swarm-wide hold, said once; it stays while the latency is between half the bound and the bound, and a resume
+    comes once it is under half; a warning-level latency alone holds nothing."""
+    from rpf_fly.flight.supervisor import MOCAP_LATENCY_HOLD_S
+
+    _, agents, tracker, supervisor = setup()
+    states = {n: state(n, 0.0) for n in agents}
+    bound = MOCAP_LATENCY_HOLD_S
+    found = []
+    for k, latency in enumerate([0.006] * 3 + [0.09] * 3 + [bound + 0.02] * 4 + [0.07] * 3 + [0.04] * 2 + [0.006] * 2):
+        t = 0.01 * k
+        see(tracker, k + 1, t, POSITIONS, latency_s=latency)
+        found += [(k, f) for f in supervisor.check(t, agents.values(), tracker, states) if f.kind == "mocap_latency"]
+    responses = [(k, f.response, f.drone) for k, f in found]
+    assert responses == [(3, "warn", None), (6, "hold", None), (13, "resume", None), (15, "warn", None)], responses
+    hold = found[1][1]
+    assert hold.level == ERROR and "every drone holds" in hold.message and "120 ms" in hold.message
 
 
 def test_a_pose_gap_shorter_than_the_hold_is_said_once_per_drone_and_a_swarm_wide_one_once():
@@ -385,6 +405,35 @@ def test_a_wrong_estimate_is_stopped_by_the_mocap_pose_of_its_own_time():
     # without stamps (a backend that cannot tell when its telemetry was made) only the old rule can stop it: later
     unstamped = [t for t, f in fly_with_telemetry(moving, truth, 0.01, 1.5, stamped=False) if f.response == "stop"]
     assert unstamped and unstamped[0] - stops[0][0] > 0.15, (unstamped, stops)
+
+
+def test_an_estimate_is_judged_against_the_extpos_it_was_fed_late_or_carried_ahead():
+    """cf1 flies 1 m/s while the mocap is late (its frames say so). At 0.08 s (under the 0.1 s hold bound) its
+    estimator is fed the late poses as measured and follows them; at 0.146 s it is fed them carried ahead by the
+    latency (`poses.estimator_position`) and is where the drone is, 0.15 m ahead of the pose that arrived when it was
+    made. Either way the estimate follows its extpos: no motors off (campaign seed 23 run 2 cut healthy drones when
+    the check read the late pose instead); an estimate that stopped following is still stopped."""
+
+    def fast(t: float) -> tuple[float, float, float]:
+        return (-1.0 + 1.0 * t, -0.6, 0.5)
+
+    def fly(late: float, estimate_of):  # type: ignore[no-untyped-def]
+        _, agents, tracker, supervisor = setup()
+        states = {n: state(n, 0.0) for n in agents}
+        found = []
+        for k in range(121):
+            t = 1.0 + k / 100
+            see(tracker, k + 1, t, {**POSITIONS, "cf1": fast(t - late)}, latency_s=late)
+            if k % 10 == 5:
+                made = t - 0.01
+                states["cf1"] = replace(state("cf1", t), position_m=estimate_of(made), estimate_stamp_s=made)
+            found += [f for f in supervisor.check(t, agents.values(), tracker, states) if f.kind == "estimator"]
+        return [f for f in found if f.response == "stop"]
+
+    assert not fly(0.08, lambda t: fast(t - 0.08))  # follows the late poses as fed
+    assert not fly(0.146, fast)  # follows the poses carried ahead: where the drone is
+    assert fly(0.146, lambda t: fast(1.3))  # stopped following at 1.3 s
+    assert fly(0.08, lambda t: fast(1.3))
 
 
 def descending(t: float) -> tuple[float, float, float]:
