@@ -50,8 +50,16 @@ class RelayedMocap:
         self._last_warning_s = -1e9
         self._unreported = 0
         self.transit: deque[tuple[float, float]] = deque(maxlen=TRANSIT_KEPT)
-        """(this process's receipt, monotonic s; the relay's hop, s) of each frame taken."""
+        """(this process's receipt, monotonic s; the relay's hop, s) of each frame taken; Zenoh's thread appends
+        to it: read it through `transits`."""
         self._subscriber = session.declare_subscriber(key, self._received)
+
+    def transits(self, since_s: float) -> list[float]:
+        """The relay's hop (s) of each frame taken from ``since_s`` (monotonic) on: a copy made under the lock Zenoh's
+        thread appends under (iterating `transit` while a frame arrives raises "deque mutated during iteration":
+        a worker's last report died of it on a loaded host)."""
+        with self._cond:
+            return [t for at, t in self.transit if at >= since_s]
 
     # ------------------------------------------------------------------------------------------ Zenoh's thread
 

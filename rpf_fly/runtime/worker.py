@@ -230,7 +230,7 @@ def relay_transit(source: Any, since_s: float) -> dict[str, Any]:
     """A relayed source's hop from the relay's receipt to this worker's, for the frames received from ``since_s``
     (monotonic: the coordinator's go, as the loop's latencies) on (the report's ``relay_transit_*``); {} for a
     source of its own."""
-    transit = [t for at, t in source.transit if at >= since_s] if isinstance(source, RelayedMocap) else []
+    transit = source.transits(since_s) if isinstance(source, RelayedMocap) else []
     if not transit:
         return {}
     ordered = sorted(transit)

@@ -185,3 +185,44 @@ def test_a_bad_mocap_relay_value_is_one_line_naming_it():
     assert str(err.value) == ("<string>:6: runtime.mocap_relay: expected one of 'auto', 'on', 'off', got 'sometimes'")
     quoted = parse_mission(MISSION + "runtime: {mocap_relay: 'on', zenoh: {mode: peer}}\n").runtime
     assert quoted.mocap_relay == "on" and quoted.zenoh.mode == "peer"
+
+
+def test_the_relays_transit_figures_are_read_while_frames_arrive():
+    """A worker's last report reads the relay's hop of every frame (`relay_transit`) while Zenoh's thread still
+    appends arriving frames: the figures come out, never "deque mutated during iteration" (a worker on a loaded host
+    died of it after its flight, without its report)."""
+    from rpf_fly.runtime.worker import relay_transit
+
+    endpoint = free_loopback_endpoint()
+    router = open_session(ZenohSettings(), listen=[endpoint], mode="router")
+    worker = open_session(ZenohSettings(), connect=[endpoint])
+    relay = open_session(ZenohSettings(), connect=[endpoint])
+    secret, key = new_secret(), "rpf_fly/f2/mocap_frames"
+    source = RelayedMocap(worker, key, secret, "f2")
+    signer = FrameSigner(secret, "f2")
+    stop = threading.Event()
+
+    def stream() -> None:
+        number = 0
+        while not stop.is_set():
+            number += 1
+            payload, signature = signer.sign(frame(number))
+            relay.put(key, payload, attachment=signature)
+
+    sender = threading.Thread(target=stream, daemon=True)
+    try:
+        sender.start()
+        assert _until(lambda: source.stats.frames > 50)
+        reads = 0
+        deadline = time.monotonic() + 1.5
+        while time.monotonic() < deadline:
+            figures = relay_transit(source, 0.0)
+            assert figures["relay_transit_p50_s"] <= figures["relay_transit_p99_s"]
+            reads += 1
+        assert reads > 10 and source.stats.frames > 200
+    finally:
+        stop.set()
+        sender.join(2.0)
+        source.close()
+        for session in (relay, worker, router):
+            session.close()
