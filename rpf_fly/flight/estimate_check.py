@@ -80,7 +80,7 @@ class EstimateCheck:
             # the pose as its estimator is fed it: a picture later than the hold bound carried ahead by its latency
             # (estimator_position; the estimate follows that, not the late pose)
             fed = estimator_position(pose, tracker.latency_s) if pose is not None else None
-            if fed is not None and pose is not None and pose.valid and (not history or history[-1][0] != pose.stamp_s):
+            if pose is not None and fed is not None and pose.valid and (not history or history[-1][0] != pose.stamp_s):
                 history.append((pose.stamp_s, fed))
             while history and history[0][0] < now_s - ESTIMATE_HISTORY_S:
                 history.popleft()
@@ -89,6 +89,7 @@ class EstimateCheck:
                 or state.position_m is None
                 or state.telemetry_stamp_s is None
                 or pose is None
+                or fed is None
                 or not pose.valid
                 or now_s - pose.stamp_s > self.safety.pose_timeout_s
             ):
@@ -97,7 +98,7 @@ class EstimateCheck:
             late, wrong, stamp = self._diverging.get(a.name, (0, 0, -1.0))
             if state.telemetry_stamp_s == stamp:
                 continue
-            off = math.dist(state.position_m, fed or pose.position)
+            off = math.dist(state.position_m, fed)
             then = _pose_at(history, state.estimate_stamp_s)
             nearest: float | None
             if then is not None:  # the estimate against where mocap saw the drone when it was made

@@ -208,9 +208,7 @@ class SwarmViews:
         else:
             worker.alive = False
             if not worker.done and worker.gone_at is None:
-                worker.gone_at = time.monotonic()
-                if self._killed(worker, wait_s=0.2):  # a killed process's socket closes as it exits
-                    self._lose(worker)
+                worker.gone_at = time.monotonic()  # judged by the flight's loop, woken now (`judge_gone`)
         self._wake.set()
 
     def judge_gone(self) -> None:
@@ -221,7 +219,7 @@ class SwarmViews:
         for worker in self.workers.values():
             if worker.gone_at is None or worker.done or worker.lost:
                 continue
-            if self._killed(worker, wait_s=0.0) or now - worker.gone_at >= REPORT_GRACE_S:
+            if self._killed(worker) or now - worker.gone_at >= REPORT_GRACE_S:
                 self._lose(worker)
 
     def leaving(self, worker: WorkerView) -> bool:
@@ -229,14 +227,9 @@ class SwarmViews:
         return worker.gone_at is not None and not worker.done and not worker.lost
 
     @staticmethod
-    def _killed(worker: WorkerView, wait_s: float) -> bool:
-        """A worker this host started that a signal ended (waited for up to ``wait_s``)."""
-        if worker.process is None:
-            return False
-        try:
-            code = worker.process.wait(timeout=wait_s) if wait_s > 0 else worker.process.poll()
-        except subprocess.TimeoutExpired:
-            return False
+    def _killed(worker: WorkerView) -> bool:
+        """A worker this host started that a signal ended (a killed process's socket closes as it exits)."""
+        code = worker.process.poll() if worker.process is not None else None
         return code is not None and code < 0
 
     def _lose(self, worker: WorkerView) -> None:
