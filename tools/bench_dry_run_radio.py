@@ -53,7 +53,7 @@ def fly_once(radio: str) -> dict[str, Any]:
     obstacles = obstacle_set(mission.obstacles)
     kind, dongle = ("fake", None) if radio == "fake" else ("crazyradio", radio)
     start = time.monotonic()
-    with tempfile.TemporaryDirectory() as tmp, DryRun(mission, radio=kind, crazyradio=dongle) as rig:
+    with tempfile.TemporaryDirectory() as tmp, DryRun(mission, radio=kind, crazyradio=dongle, cache_dir=None) as rig:
         report = run_flight(
             mission, lambda drone: make_planner(mission.planner, obstacles), Path(tmp) / "f.mcap", rig=rig
         )

@@ -44,10 +44,6 @@ RIG_WAIT_S = 10.0
 RELAY_FRAME_WAIT_S = 5.0
 """How long a worker of a relayed flight waits for the relay's first frame (the coordinator starts the workers once
 the relay is alive, so the frames are flowing already)."""
-DRY_RUN_TOC_CACHE = Path.home() / ".cache" / "rpf_fly" / "toc-dry-run"
-"""The simulated Crazyflies' TOC cache of a dry-run worker, kept between flights (cflib keys each TOC by its CRC,
-and the fake firmware's never changes): ten drones downloading their TOCs at once through one simulated dongle, on
-a loaded machine, miss the 10 s connection deadline (measured with 40 drones on 4 dongles on 2 busy cores)."""
 
 
 class WorkerError(RuntimeError):
@@ -424,7 +420,7 @@ class WorkerRun:
         from rpf_fly.emulator import fake_radio
         from rpf_fly.emulator.dongle_air import RadioTiming
         from rpf_fly.emulator.remote_world import RemoteWorld
-        from rpf_fly.flight.dry_run import AIR_TIME_S, fake_uri, uri_address
+        from rpf_fly.flight.dry_run import AIR_TIME_S, DRY_RUN_TOC_CACHE, fake_uri, uri_address
         from rpf_fly.runtime.session import rig_address
 
         rig = find_rig(bus)

@@ -50,7 +50,10 @@ def test_a_dry_run_flies_every_drone_to_its_goal_through_cflibs_radio_driver(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     mission = tmp_path / "short-3.yaml"
-    mission.write_text(SHORT_MISSION.replace("mocap: {kind: sim, rate_hz: 100}", "mocap: {kind: natnet}") + CRAZYRADIO)
+    # at the product's 0.5 m/s: through a shared dongle each extpos arrives later than through fake://, and on a
+    # busy host at 0.8 m/s that lag put an estimate 0.1 m behind its drone's pose (the supervisor cut it)
+    text = SHORT_MISSION.replace("speed: 0.8", "speed: 0.5")
+    mission.write_text(text.replace("mocap: {kind: sim, rate_hz: 100}", "mocap: {kind: natnet}") + CRAZYRADIO)
     plugs: list[crazyradio.Plugged] = []
     real_plug = crazyradio.plug
 
