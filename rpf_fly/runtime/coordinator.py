@@ -235,6 +235,7 @@ class Coordinator(SwarmViews, MocapRelayProcess, SwarmPhases):
         host = self.rig_host or "127.0.0.1"  # where the workers reach the coordinator, they reach the drones
         self.rig = DryRun(
             self.mission,
+            radio="fake",  # nothing here flies: each worker reaches the drones itself (its dongle, `dry_run.radio`)
             radio_loss=RADIO_LOSS if self.radio_loss else None,
             world_exit_report=world_exit_report_for(self.log_path),
             host=host,

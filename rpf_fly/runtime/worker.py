@@ -283,6 +283,7 @@ class WorkerRun:
     session: Any = None
     """An open Zenoh session to use (tests); None: open one from the mission and ``connect``."""
     _closers: list[Callable[[], None]] = field(default_factory=list)
+    _plugged: Any = None
 
     def run(self) -> FlightReport:
         """Fly this dongle's drones in the coordinator's flight; raises :class:`WorkerError` or
@@ -379,6 +380,7 @@ class WorkerRun:
                 latencies_us=[round(v * 1e6) for v in report.stats.latencies],
                 mocap=asdict(source.stats),
                 **relay_transit(source, wall0),
+                radio=self._radio_report() if self.dry_run else None,
             )
             time.sleep(0.2)  # the last messages leave before the session closes
             return report
@@ -420,24 +422,54 @@ class WorkerRun:
         from rpf_fly.emulator import fake_radio
         from rpf_fly.emulator.dongle_air import RadioTiming
         from rpf_fly.emulator.remote_world import RemoteWorld
-        from rpf_fly.flight.dry_run import AIR_TIME_S, DRY_RUN_TOC_CACHE, fake_uri, uri_address
+        from rpf_fly.flight.dry_run import AIR_TIME_S, DRY_RUN_TOC_CACHE, fake_uri, radio_uri, uri_address
         from rpf_fly.runtime.session import rig_address
 
         rig = find_rig(bus)
         addresses = tuple(uri_address(d.uri) for d in self.mission.drones)
         host = rig_address(str(rig["radio"][0]), self.connect or self.mission.runtime.zenoh.connect)
-        fake_radio.register(
-            RemoteWorld(
-                (host, int(rig["radio"][1])),
-                addresses,
-                RadioTiming(transaction_s=float(rig.get("air_time_s", AIR_TIME_S))),
-            )
+        world = RemoteWorld(
+            (host, int(rig["radio"][1])), addresses, RadioTiming(transaction_s=float(rig.get("air_time_s", AIR_TIME_S)))
         )
-        self._closers.append(fake_radio.unregister)
+        if self.mission.dry_run.radio == "crazyradio":
+            uris = {d.name: radio_uri(d.uri) for d in self.mission.drones}
+            self._plug_crazyradio(world)
+        else:
+            fake_radio.register(world)
+            self._closers.append(fake_radio.unregister)
+            uris = {d.name: fake_uri(d.uri) for d in self.mission.drones}
         if relayed:
             client = self._relayed(bus)
         else:
             client = rig_mocap(self.mission, rig, host)
             self._closers.append(client.close)
-        uris = {d.name: fake_uri(d.uri) for d in self.mission.drones}
         return CflibBackend.for_mission(self.mission, DRY_RUN_TOC_CACHE), client, uris
+
+    def _plug_crazyradio(self, world: Any) -> None:
+        """A dry run with ``dry_run.radio: crazyradio``: this worker's dongle as an emulated Crazyradio of the
+        mission's type plugged into this process (dongle numbers up to this one, the others unused), so cflib's
+        own ``radio://`` driver carries this worker's packets to the coordinator's simulated drones, at the
+        dongle's figures (docs/radio.md, "Dry runs through cflib's radio driver"). Its packets counted go in the
+        worker's last report (``radio``)."""
+        from rpf_fly.emulator import crazyradio
+
+        kind = self.mission.dry_run.crazyradio or self.mission.radio.dongle_type
+        self._plugged = crazyradio.plug(world, dongles=self.dongle + 1, radio=kind)
+
+        def release() -> None:
+            crazyradio.wait_released(range(self.dongle + 1))
+            crazyradio.unplug()
+
+        self._closers.append(release)
+
+    def _radio_report(self) -> dict[str, Any]:
+        """What carried this worker's packets: ``{"radio": "fake"}``, or the emulated dongle's type and the
+        packets it carried to each drone (``{"radio": "crazyradio", "type": ..., "packets": {name: N}}``)."""
+        from rpf_fly.flight.dry_run import uri_address
+
+        if self._plugged is None:
+            return {"radio": "fake"}
+        counted = self._plugged.dongles[self.dongle].counters.packets
+        names = dongle_drones(self.mission, self.dongle)
+        packets = {d.name: counted[uri_address(d.uri)] for d in self.mission.drones if d.name in names}
+        return {"radio": "crazyradio", "type": self._plugged.radio.name, "packets": packets}

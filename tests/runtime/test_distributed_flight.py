@@ -631,10 +631,36 @@ def test_a_motioncapture_mission_flies_distributed_through_the_relay(tmp_path):
     assert result["code"] == 0, _told(lines, tmp_path)
     assert coordinator.relayed and coordinator.relay_info["frames"] > 100, coordinator.relay_info
     assert "motioncapture" in coordinator.relay_info["source"]
+    assert coordinator.workers["dongle-0"].info["radio"] == {"radio": "fake"}  # the mission's default dry-run radio
     log = read_log(tmp_path / "mc.mcap")
     for name in ("cf1", "cf2", "cf3", "cf4"):
         assert log.messages(f"/{name}/status")[-1].data["outcome"] == "reached", name
         assert len(log.messages(f"/mocap/{name}")) > 100, name
+
+
+def test_a_crazyradio_dry_run_flies_distributed_through_cflibs_radio_driver(tmp_path):
+    """``dry_run.radio: crazyradio`` in a distributed dry run: each worker plugs its own dongle (an emulated
+    Crazyradio PA) into its process, and cflib's ``radio://`` driver carries its drones' packets to the
+    coordinator's simulated drones; every drone reaches its goal. Before, the workers flew ``fake://`` whatever the
+    mission said."""
+    path = _variant(tmp_path, "dry_run: {radio: crazyradio, crazyradio: crazyradio_pa}\n")
+    lines: list[str] = []
+    coordinator = Coordinator(load_mission(path), path, tmp_path / "cr.mcap", dry_run=True, say=lines.append)
+    thread, result = _start(coordinator)
+    thread.join(120)
+    assert not thread.is_alive()
+    assert result["code"] == 0, _told(lines, tmp_path)
+    log = read_log(tmp_path / "cr.mcap")
+    for worker in ("dongle-0", "dongle-1"):
+        radio = coordinator.workers[worker].info["radio"]
+        assert radio["radio"] == "crazyradio" and radio["type"] == "crazyradio_pa", radio
+        drones = coordinator.workers[worker].drones
+        assert set(radio["packets"]) == set(drones), radio
+        for name in drones:  # at least the 10 Hz setpoints of the seconds it flew its mission went through the dongle
+            status = log.messages(f"/{name}/status")
+            assert status[-1].data["outcome"] == "reached", name
+            planning = [m.log_time for m in status if m.data["state"] in ("planning", "arrived")]
+            assert radio["packets"][name] >= 10 * (planning[-1] - planning[0]) / 1e9, (name, radio)
 
 
 def test_a_workers_report_that_comes_after_its_token_ended_is_not_a_lost_worker(tmp_path):
