@@ -199,23 +199,30 @@ def misses(
 def assert_flies_as(scenario: Path, reference_trace: dict[str, Any], tmp_path_factory: pytest.TempPathFactory) -> None:
     """The dry run's figures match the reference trace's (`misses`). A flight whose host fell behind (a late world
     step or mocap frame: extpos late, the estimate blind, the setpoint watchdog firing; the trace's
-    ``host_behind_s``) and missed is not evidence: it is flown once more, and a second such flight fails as the
-    host's."""
-    from rpf_fly.emulator.host_lag import HOST_BEHIND_REPORT_S
-
+    ``host_behind_s``) or stalled its ground station's extpos feed (``feed_stall_s``) and missed is not evidence:
+    it is flown once more, and a second such flight fails as the host's."""
     loaded = Scenario.load(scenario)
     trace, folder = flown(scenario, tmp_path_factory)
     assert set(reference_trace["figures"]) - set(trace["figures"]) <= {"peak_tilt_deg", "peak_tilt_after_stop_deg"}
     missed = misses(trace, reference_trace, loaded)
-    if missed and trace.get("host_behind_s", 0.0) >= HOST_BEHIND_REPORT_S:
+    if missed and not_evidence(trace):
         trace, folder = flown(scenario, tmp_path_factory, again=True)
         missed = misses(trace, reference_trace, loaded)
-        if missed and trace.get("host_behind_s", 0.0) >= HOST_BEHIND_REPORT_S:
+        if missed and not_evidence(trace):
             pytest.fail(
-                f"the host could not keep up for {trace['host_behind_s']:.1f} s in two flights: this dry "
-                f"run is not evidence (misses {missed}; {folder})"
+                f"the host could not keep up in two flights (behind {trace['host_behind_s']:.1f} s, extpos "
+                f"stalled {trace['feed_stall_s']:.3f} s): this dry run is not evidence (misses {missed}; {folder})"
             )
-    assert missed == {}, f"{folder}: host behind {trace.get('host_behind_s')} s"
+    behind, stalled = trace.get("host_behind_s"), trace.get("feed_stall_s")
+    assert missed == {}, f"{folder}: host behind {behind} s, extpos stalled {stalled} s"
+
+
+def not_evidence(trace: dict[str, Any]) -> bool:
+    """Whether the host fell behind during the flight (`_host_verdict` in rpf_fly/flight/scenario_flight.py)."""
+    from rpf_fly.emulator.host_lag import HOST_BEHIND_REPORT_S
+    from rpf_fly.flight.scenario_flight import FEED_STALL_S
+
+    return trace.get("host_behind_s", 0.0) >= HOST_BEHIND_REPORT_S or trace.get("feed_stall_s", 0.0) > FEED_STALL_S
 
 
 @pytest.mark.parametrize("name", PUBLIC)
@@ -243,6 +250,24 @@ def test_a_carrot_scenario_flies_through_the_stack_and_prints_its_trace(tmp_path
     assert abs(trace["pos"][-1][0] - 1.5) < 0.1 and trace["figures"]["lag_cm"] > 5.0
     assert (folder / "scenario.mcap").stat().st_size > 0
     assert 0.0 <= trace["host_behind_s"] < 60.0  # how long the host let the world fall behind (0 when it kept up)
+    assert 0.009 < trace["feed_stall_s"] < 1.0  # the longest wait between two extpos: a mocap period at least
+
+
+def test_the_extpos_feeds_longest_wait_is_counted_from_t0_to_the_scenarios_end() -> None:
+    """`ScenarioFlight.feed_stall_s`: a 56 ms wait inside the scenario counts, one spanning t = 0 counts, a longer
+    one before t = 0 (the hover) or after its end (the landing) does not."""
+    from rpf_fly.flight.scenario_flight import ScenarioFlight
+
+    scenario = Scenario.load(DATA / "c_carrot_1p0_100hz.yaml")
+    flight = ScenarioFlight(scenario_mission(scenario), "cf1", scenario, backend=None, mocap=None, uri="")
+    for now in (0.0, 0.01, 0.5, 0.51):  # a 0.49 s wait in the hover
+        flight._fed(now)
+    flight.t0 = 0.53
+    for now in (0.545, 0.555, 0.611, 0.621):  # 35 ms across t = 0, then 56 ms
+        flight._fed(now)
+    assert flight.feed_stall_s == pytest.approx(0.056)
+    flight._fed(0.53 + scenario.duration_s + 0.5)  # after the end: the landing
+    assert flight.feed_stall_s == pytest.approx(0.056)
 
 
 def test_a_command_scenario_traces_the_high_level_plan(tmp_path_factory):
