@@ -123,6 +123,22 @@ def radio_uri(uri: str) -> str:
     return "radio://" + rest if scheme in ("radio", "fake") else uri
 
 
+def dongle_type(mission: Mission) -> str:
+    """The emulated Crazyradios' type of a dry run through ``dry_run.radio: crazyradio``: ``dry_run.crazyradio``,
+    else the dongles the budget checks the mission against (``radio.dongle_type``)."""
+    return mission.dry_run.crazyradio or mission.radio.dongle_type
+
+
+def release_dongles(plugged: Any) -> None:
+    """Unplug a dry run's emulated Crazyradios (`rpf_fly.emulator.crazyradio.Plugged`) once cflib has closed them:
+    cflib closes a dongle on its shared radio's thread after the last close_link, and the next dry run in this
+    process must open its own dongles, not these."""
+    from rpf_fly.emulator import crazyradio
+
+    crazyradio.wait_released(range(len(plugged.dongles)))
+    crazyradio.unplug()
+
+
 def uri_dongle(uri: str) -> int:
     """The dongle number of a ``radio://`` or ``fake://`` URI (its first path element)."""
     return int(uri.partition("://")[2].split("/")[0])
@@ -256,7 +272,7 @@ class DryRun:
         self.radio = mission.dry_run.radio if radio is None else radio
         if self.radio not in ("fake", "crazyradio"):
             raise ValueError(f"dry-run radio must be 'fake' or 'crazyradio', not {self.radio!r}")
-        self.crazyradio = crazyradio or mission.dry_run.crazyradio or mission.radio.dongle_type
+        self.crazyradio = crazyradio or dongle_type(mission)
         to_uri = radio_uri if self.radio == "crazyradio" else fake_uri
         self.uris = {d.name: to_uri(d.uri) for d in mission.drones}
         self.plugged: Any = None
@@ -441,12 +457,7 @@ class DryRun:
         if self.server is not None:
             self.server.close()
         if self.plugged is not None:
-            from rpf_fly.emulator import crazyradio
-
-            # cflib closes a dongle on its shared radio's thread after the last close_link: wait for it, so the
-            # next dry run in this process opens its own dongles, not these
-            crazyradio.wait_released(range(len(self.plugged.dongles)))
-            crazyradio.unplug()
+            release_dongles(self.plugged)
             self.plugged = None
         if self.world is not None:
             self.world.close()

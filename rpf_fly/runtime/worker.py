@@ -452,15 +452,10 @@ class WorkerRun:
         dongle's figures (docs/radio.md, "Dry runs through cflib's radio driver"). Its packets counted go in the
         worker's last report (``radio``)."""
         from rpf_fly.emulator import crazyradio
+        from rpf_fly.flight.dry_run import dongle_type, release_dongles
 
-        kind = self.mission.dry_run.crazyradio or self.mission.radio.dongle_type
-        self._plugged = crazyradio.plug(world, dongles=self.dongle + 1, radio=kind)
-
-        def release() -> None:
-            crazyradio.wait_released(range(self.dongle + 1))
-            crazyradio.unplug()
-
-        self._closers.append(release)
+        plugged = self._plugged = crazyradio.plug(world, dongles=self.dongle + 1, radio=dongle_type(self.mission))
+        self._closers.append(lambda: release_dongles(plugged))
 
     def _radio_report(self) -> dict[str, Any]:
         """What carried this worker's packets: ``{"radio": "fake"}``, or the emulated dongle's type and the
