@@ -116,7 +116,10 @@ def test_a_dry_run_logs_each_dongles_measured_load_and_review_prints_it(clean_cl
     the plan; the review's line and JSON say the same."""
     data = read_log(clean_cli_flight.log)
     windows = [m.data for m in data.messages("/radio/0")]
-    assert len(windows) >= 10 and all(w["drones"] == ["cf1", "cf2", "cf3"] for w in windows)
+    # a drone is in a window once cflib has reported its link's statistics: the first window, a second after the
+    # links opened, may miss the last drone to connect (seen in a fresh clone), never a later one
+    assert len(windows) >= 10 and all(w["drones"] == ["cf1", "cf2", "cf3"] for w in windows[1:])
+    assert set(windows[0]["drones"]) <= {"cf1", "cf2", "cf3"} and windows[0]["drones"]
     assert all(w["planned_per_s"] == 165.0 and 500.0 < w["budget_per_s"] < 572.0 for w in windows)
     full = [w for w in windows if w["window_s"] > 0.9]
     assert len(full) >= len(windows) - 2 and all(w["window_s"] < 1.5 for w in full)  # once a second
