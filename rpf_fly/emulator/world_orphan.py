@@ -89,7 +89,9 @@ class Orphan:
     def _fall(self, how: str) -> dict[str, Any]:
         """Follow every world step (the world's truth samples: motors and true height at each 10 ms step, whenever
         this thread gets to read them) until every drone's motors are off and it rests on its floor, or the cap;
-        what each drone did, in seconds from the parent's death."""
+        what each drone did, in seconds from the parent's death. Each time is the stamp of the step that saw it:
+        ``widest_step_s``, the longest interval between two steps the report read, bounds how late (a step of a
+        world the host held back comes late and covers the whole interval)."""
         world = self._world
         world.truth_samples()  # the parent's log no longer takes them: from now on they are this report's
         dead_at, dead_world_s = time.monotonic(), world.time_s()
@@ -99,8 +101,13 @@ class Orphan:
         motors_off = {a: 0.0 for a in addresses if not at_death[a].motors_on}
         cut_z = {a: at_death[a].position[2] for a in motors_off}
         at_rest = {a: 0.0 for a in addresses if not world.firmware(a).body().airborne}
+        previous: float | None = None
+        widest = 0.0
         while True:
             for stamp, states in world.truth_samples():
+                if previous is not None:
+                    widest = max(widest, stamp - previous)
+                previous = stamp
                 after = max(0.0, stamp - dead_at)
                 for address, (position, _yaw, motors, _crashed, _estimate) in states.items():
                     if address not in floors:
@@ -153,6 +160,7 @@ class Orphan:
             "cap_s": self._cap_s,
             "capped": not down,
             "elapsed_s": elapsed,
+            "widest_step_s": widest,
             "all_down": down,
             "drones": drones,
         }

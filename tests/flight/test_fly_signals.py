@@ -135,6 +135,7 @@ def test_sigkill_the_drones_fall_by_the_firmware_watchdog_and_the_log_is_salvage
     assert exited is not None, "the simulated drones' process outlived its cap"
     report = json.loads(world_exit_report_for(log).read_text())
     assert report["all_down"] and not report["capped"] and report["world_pid"] == world
+    assert report["widest_step_s"] >= 0.009  # the world's 10 ms step at least
     assert report["detected_by"] in (
         "the control connection closed without a close call",  # whichever is first
         "the parent process is gone (the child was re-parented)",
@@ -156,7 +157,8 @@ def test_sigkill_the_drones_fall_by_the_firmware_watchdog_and_the_log_is_salvage
         cut_z = drone["z_at_motors_off"]
         assert 0.3 < cut_z < 0.7, (name, drone)
         fall = drone["at_rest_after_s"] - drone["motors_off_after_s"]
-        assert abs(fall - math.sqrt(2.0 * cut_z / 9.81)) < 0.03, (name, drone)  # to the world step (10 ms)
+        # to the world step, at both ends (10 ms, or the widest a host that held the world back made it)
+        assert abs(fall - math.sqrt(2.0 * cut_z / 9.81)) < 0.01 + 2 * report["widest_step_s"], (name, drone)
     data = read_log(log)
     assert data.truncated
     poses = data.messages("/mocap/cf1")
