@@ -193,13 +193,16 @@ class Commander:
             agent.last_setpoint = complex(x, y)
             return self.backend.send_position_setpoint(agent.name, x, y, z, 0.0, origin_s=origin_s)
 
-    def extpos(self, agent: DroneAgent, position: Vec3, quaternion: Quaternion | None) -> bool:
-        """Forward a mocap pose to the drone's estimator (also while it lands: the landing needs it)."""
+    def extpos(
+        self, agent: DroneAgent, position: Vec3, quaternion: Quaternion | None, received_s: float | None = None
+    ) -> bool:
+        """Forward a mocap pose to the drone's estimator (also while it lands: the landing needs it); ``received_s``:
+        when the pose was received, so that the radio drops it if it waited too long (`EXTPOS_MAX_WAIT_S`)."""
         if agent.phase in (DronePhase.LINK_LOST, DronePhase.FAILED):
             return False
         if quaternion is None:
-            return self.backend.send_extpos(agent.name, position)
-        return self.backend.send_extpose(agent.name, position, quaternion)
+            return self.backend.send_extpos(agent.name, position, received_s)
+        return self.backend.send_extpose(agent.name, position, quaternion, received_s)
 
     def land(self, agent: DroneAgent, reason: str, level: int = WARNING, duration_s: float | None = None) -> bool:
         """High-level landing of an airborne drone (once; from any thread), over ``duration_s`` (the mission's

@@ -40,15 +40,26 @@ class StallableMocap:
     def __init__(self, source: MocapSource):
         self.source = source
         self._stall_s = 0.0
+        self._hold_s = 0.0
 
     def stall(self, seconds: float) -> None:
+        """The next wait blocks ``seconds`` before it reads a frame (the frame it then hands over is fresh)."""
         self._stall_s = seconds
+
+    def hold(self, seconds: float) -> None:
+        """The next frame read is handed over ``seconds`` later (the ground station held back between reading a
+        frame and using it: a host that deschedules it, a long garbage collection): its poses are that old."""
+        self._hold_s = seconds
 
     def receive(self, timeout_s: float) -> MocapFrame | None:
         if self._stall_s > 0.0:
             seconds, self._stall_s = self._stall_s, 0.0
             time.sleep(seconds)
-        return self.source.receive(timeout_s)
+        frame = self.source.receive(timeout_s)
+        if frame is not None and self._hold_s > 0.0:
+            seconds, self._hold_s = self._hold_s, 0.0
+            time.sleep(seconds)
+        return frame
 
     def close(self) -> None:
         self.source.close()

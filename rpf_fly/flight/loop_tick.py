@@ -131,6 +131,7 @@ class LoopIteration:
                 agent,
                 estimator_position(pose, self.tracker.latency_s),
                 pose.quaternion if extpose and pose.orientation_trusted else None,
+                pose.stamp_s,  # a pose the loop or the radio held back too long is dropped (`EXTPOS_MAX_WAIT_S`)
             )
 
     def _in_the_way(self, agent: DroneAgent, pose: TrackedPose) -> bool:

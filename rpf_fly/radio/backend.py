@@ -265,12 +265,15 @@ class DroneBackend(Protocol):
         could not reach, or whose stop was still being sent when the wait ended."""
         ...
 
-    def send_extpos(self, name: str, position: Vec3) -> bool:
-        """Forward a motion-capture position (metres) to the drone's estimator."""
+    def send_extpos(self, name: str, position: Vec3, received_s: float | None = None) -> bool:
+        """Forward a motion-capture position (metres) to the drone's estimator; ``received_s``: when its pose was
+        received (`time.monotonic()`), so that one that waited too long in the ground station is not sent
+        (rpf_fly/radio/outbox.py, `EXTPOS_MAX_WAIT_S`)."""
         ...
 
-    def send_extpose(self, name: str, position: Vec3, quaternion: Quaternion) -> bool:
-        """Forward a motion-capture pose (metres, unit quaternion qx, qy, qz, qw) to the drone's estimator."""
+    def send_extpose(self, name: str, position: Vec3, quaternion: Quaternion, received_s: float | None = None) -> bool:
+        """Forward a motion-capture pose (metres, unit quaternion qx, qy, qz, qw) to the drone's estimator
+        (``received_s`` as for `send_extpos`)."""
         ...
 
     def reset_estimator(self, name: str, position: Vec3, yaw_rad: float) -> bool:

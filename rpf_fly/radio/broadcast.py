@@ -28,6 +28,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Protocol
 
+from rpf_fly.radio.outbox import EXTPOS_MAX_WAIT_S, EXTPOS_STALE_WARN_EVERY_S
 from rpf_fly.radio.packed_extpos import (
     BROADCAST_ADDRESS,
     BROADCAST_COPIES,
@@ -106,6 +107,8 @@ class _Group:
     group: PackedGroup
     pending: dict[str, Vec3] = field(default_factory=dict)
     first_s: float = 0.0
+    received: dict[str, float] = field(default_factory=dict)
+    """name -> when its pending position's pose was received (where the caller said)."""
 
 
 @dataclass
@@ -149,6 +152,9 @@ class PackedExtposSender:
         """Positions they carried."""
         self.failed = 0
         """Packets the dongle failed to send."""
+        self.stale = 0
+        """Positions left out because their pose waited longer than `EXTPOS_MAX_WAIT_S`."""
+        self._stale_warned_at: float | None = None
 
     def start(self) -> dict[str, str]:
         """Open every dongle's broadcast and start its thread; drone name -> error for the drones whose broadcast
@@ -169,9 +175,11 @@ class PackedExtposSender:
             air.thread.start()
         return errors
 
-    def put(self, name: str, position: Vec3) -> bool:
-        """Queue ``name``'s newest position for its group's next packet (a newer one replaces one still waiting).
-        False when the drone has no group or its broadcast is not open."""
+    def put(self, name: str, position: Vec3, received_s: float | None = None) -> bool:
+        """Queue ``name``'s newest position for its group's next packet (a newer one replaces one still waiting;
+        ``received_s``: when its pose was received, so that a position that waited longer than
+        `EXTPOS_MAX_WAIT_S` when its packet is made is left out). False when the drone has no group or its
+        broadcast is not open."""
         entry = self._group_of.get(name)
         if entry is None:
             return False
@@ -181,6 +189,10 @@ class PackedExtposSender:
             if not entry.pending:
                 entry.first_s = time.monotonic()
             entry.pending[name] = (float(position[0]), float(position[1]), float(position[2]))
+            if received_s is None:
+                entry.received.pop(name, None)
+            else:
+                entry.received[name] = received_s
             self._cond.notify_all()
         return True
 
@@ -235,9 +247,24 @@ class PackedExtposSender:
         """The group's packet (members in group order) and how many positions it carries; the pending positions
         are taken (a position that does not fit int16 millimetres is dropped, with a warning)."""
         items = []
+        now = time.monotonic()
         for name, ident in zip(entry.group.names, entry.group.ids):
             position = entry.pending.pop(name, None)
+            received = entry.received.pop(name, None)
             if position is None:
+                continue
+            if received is not None and now - received > EXTPOS_MAX_WAIT_S:
+                self.stale += 1
+                if self._stale_warned_at is None or now - self._stale_warned_at >= EXTPOS_STALE_WARN_EVERY_S:
+                    self._stale_warned_at = now
+                    logger.warning(
+                        "packed extpos: drone %s: a mocap pose waited %.0f ms in the ground station (over %.0f ms): "
+                        "left out of the broadcast (%d so far)",
+                        name,
+                        (now - received) * 1000.0,
+                        EXTPOS_MAX_WAIT_S * 1000.0,
+                        self.stale,
+                    )
                 continue
             try:
                 encode([(ident, position)])

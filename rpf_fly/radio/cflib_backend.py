@@ -306,9 +306,10 @@ class CflibBackend(CflibConnection, CflibTelemetry):
                 return None
             return drone.scf.cf
 
-    def _queue(self, name: str, action: _Command, kind: str) -> bool:
+    def _queue(self, name: str, action: _Command, kind: str, received_s: float | None = None) -> bool:
         """Queue one command in the drone's outbox (``kind``: ``setpoint``, ``extpos``, ``keepalive``, ``command``
-        or ``ends_stream``); False when its link is not up (KeyError for an unknown name)."""
+        or ``ends_stream``; an extpos with its pose's ``received_s``: `Outbox.extpos`); False when its link is not
+        up (KeyError for an unknown name)."""
         drone = self._drones[name]
         outbox = drone.outbox
         if outbox is None or self._live_cf(name) is None:
@@ -317,7 +318,7 @@ class CflibBackend(CflibConnection, CflibTelemetry):
         if kind == "setpoint":
             return outbox.setpoint(bound)
         if kind == "extpos":
-            return outbox.extpos(bound)
+            return outbox.extpos(bound, received_s)
         if kind == "keepalive":
             return outbox.keepalive(bound)
         return outbox.command(bound, ends_stream=kind == "ends_stream")
@@ -515,13 +516,14 @@ class CflibBackend(CflibConnection, CflibTelemetry):
             self._give_up(self._drones[name], message)
         return errors
 
-    def send_extpos(self, name: str, position: Vec3) -> bool:
+    def send_extpos(self, name: str, position: Vec3, received_s: float | None = None) -> bool:
         """Queue a mocap position for the estimator (latest wins): in the drone's outbox, or under packed extpos in
-        its group's next broadcast."""
+        its group's next broadcast. ``received_s``: when its pose was received (`time.monotonic()`): a pose that
+        waited longer than `outbox.EXTPOS_MAX_WAIT_S` by the time it would go out is dropped."""
         if self._packed is not None:
-            return self._live_cf(name) is not None and self._packed.put(name, position)
-        return self._queue(name, lambda cf, drone: cf.extpos.send_extpos(*position), "extpos")
+            return self._live_cf(name) is not None and self._packed.put(name, position, received_s)
+        return self._queue(name, lambda cf, drone: cf.extpos.send_extpos(*position), "extpos", received_s)
 
-    def send_extpose(self, name: str, position: Vec3, quaternion: Quaternion) -> bool:
-        """Queue a mocap pose for the estimator (latest wins)."""
-        return self._queue(name, lambda cf, drone: cf.extpos.send_extpose(*position, *quaternion), "extpos")
+    def send_extpose(self, name: str, position: Vec3, quaternion: Quaternion, received_s: float | None = None) -> bool:
+        """Queue a mocap pose for the estimator (latest wins; ``received_s`` as for `send_extpos`)."""
+        return self._queue(name, lambda cf, drone: cf.extpos.send_extpose(*position, *quaternion), "extpos", received_s)

@@ -16,7 +16,9 @@ What an outbox keeps, and in which order (the rules that make a queued stream sa
   is worth nothing once a newer one exists);
 - a command that ends the stream (every high-level command but arming) drops a setpoint still waiting, so a setpoint
   queued before a landing can never reach the drone after it; a setpoint queued after the command goes after it;
-- extpos / extpose is latest-wins in a slot of its own (a stale mocap position only misleads the estimator);
+- extpos / extpose is latest-wins in a slot of its own (a stale mocap position only misleads the estimator), and one
+  that comes with its pose's receipt time and has waited longer than :data:`EXTPOS_MAX_WAIT_S` in the ground station
+  by the time a sender takes it is dropped, not sent (counted, and said in a warning);
 - a keep-alive (the supervisor's emergency-stop watchdog, fed every 0.2 s) has a slot of its own too, and one
   queued while the previous is still waiting is skipped, not stacked: behind a stuck link at most one waits, so
   the link never sends a late burst of them (the firmware needs one a second, not their number);
@@ -57,6 +59,19 @@ STUCK_S = 0.005
 microseconds, a wait for the driver's one-packet queue on a busy dongle a few milliseconds, Python's thread switch
 interval is 5 ms; a full driver queue on a dying link blocks for the radio's retries, 0.1-2 s): another thread
 takes over the other drones. Taking a slow-but-healthy send for a stuck one costs only a thread wake-up."""
+
+
+EXTPOS_MAX_WAIT_S = 0.05
+"""How long a mocap pose may wait in the ground station, from its receipt to its hand-over to cflib, and still go to
+the drone's estimator. Why: the firmware's estimator takes each extpos as the drone's position now, so a pose that
+waited is a pull back along the drone's path by speed x wait: a ground station whose loop or sender threads were
+held back (a loaded host, a long garbage collection) fed poses 0.1-0.28 s old to drones flying 0.6 m/s, their
+estimates fell 0.13-0.25 m behind their true positions, and the on-board-estimate check cut two drones' motors
+(docs/radio.md, "Extpos that waited"). Dropped instead, the estimator dead-reckons on its IMU until the next fresh
+pose (a frame every 10 ms at 100 Hz), which costs millimetres. 50 ms is 2.5 cm at 0.5 m/s and five mocap frames at
+100 Hz: more than a healthy loop's p99 from receipt to hand-over (a few milliseconds)."""
+EXTPOS_STALE_WARN_EVERY_S = 1.0
+"""A drone's dropped stale extpos are said in one warning at most this often (the count goes in each)."""
 
 
 class SenderPool:
@@ -148,7 +163,9 @@ class SenderPool:
                 box = self._ready.popleft()
                 box._queued = False
                 action = box._take()
-                if action is None:
+                if action is None:  # a stale extpos dropped: nothing of this drone's went out
+                    if not self._ready:
+                        self._done.notify_all()
                     continue
                 self._working -= 1
                 self._sending[me] = time.monotonic()
@@ -224,6 +241,7 @@ class Outbox:
         self._commands: deque[Action] = deque()
         self._setpoint: Action | None = None
         self._extpos: Action | None = None
+        self._extpos_stamp_s: float | None = None
         self._keepalive: Action | None = None
         self._busy = False
         """One of its actions is being sent."""
@@ -234,6 +252,9 @@ class Outbox:
         """Setpoints replaced by a newer one or dropped by a command before they were sent."""
         self.keepalives_skipped = 0
         """Keep-alives not queued because the previous one was still waiting (a slow or stuck link)."""
+        self.extpos_stale = 0
+        """Extpos dropped because their pose waited longer than `EXTPOS_MAX_WAIT_S` before a sender took it."""
+        self._stale_warned_at: float | None = None
 
     # ------------------------------------------------------------------------------------------ queueing
 
@@ -261,12 +282,14 @@ class Outbox:
             self._pool._schedule(self)
             return True
 
-    def extpos(self, action: Action) -> bool:
-        """Queue a mocap position for the estimator, replacing one not yet sent. False once closed."""
+    def extpos(self, action: Action, received_s: float | None = None) -> bool:
+        """Queue a mocap position for the estimator, replacing one not yet sent; ``received_s``: when its pose was
+        received (`time.monotonic()`): it is dropped if it waited longer than `EXTPOS_MAX_WAIT_S` by the time a
+        sender takes it. False once closed."""
         with self._pool._lock:
             if self._closed:
                 return False
-            self._extpos = action
+            self._extpos, self._extpos_stamp_s = action, received_s
             self._pool._schedule(self)
             return True
 
@@ -318,8 +341,28 @@ class Outbox:
             action, self._setpoint = self._setpoint, None
         else:
             action, self._extpos = self._extpos, None
+            if action is not None and self._extpos_stamp_s is not None:
+                waited = time.monotonic() - self._extpos_stamp_s
+                if waited > EXTPOS_MAX_WAIT_S:
+                    self._stale(waited)
+                    action = None
         self._busy = action is not None
         return action
+
+    def _stale(self, waited_s: float) -> None:
+        """Count a dropped stale extpos; warn at the first and then at most every `EXTPOS_STALE_WARN_EVERY_S`."""
+        self.extpos_stale += 1
+        now = time.monotonic()
+        if self._stale_warned_at is None or now - self._stale_warned_at >= EXTPOS_STALE_WARN_EVERY_S:
+            self._stale_warned_at = now
+            logger.warning(
+                "drone %s: a mocap pose waited %.0f ms in the ground station (over %.0f ms): not sent to its "
+                "estimator (%d so far; the host held the flight back)",
+                self.name,
+                waited_s * 1000.0,
+                EXTPOS_MAX_WAIT_S * 1000.0,
+                self.extpos_stale,
+            )
 
     # ------------------------------------------------------------------------------------------ waiting, closing
 

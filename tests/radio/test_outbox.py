@@ -217,3 +217,24 @@ def test_keep_alives_are_dropped_by_clear_and_refused_once_closed() -> None:
     other = pool.outbox("cf2", radio.runner("cf2"))
     assert other.close(flush_s=1.0) and not other.keepalive(radio.packet("alive2"))
     pool.close()
+
+
+def test_an_extpos_whose_pose_waited_too_long_is_dropped_and_counted_not_sent(caplog) -> None:
+    """A pose that waited longer than `EXTPOS_MAX_WAIT_S` in the ground station (here behind a stuck send) would
+    pull the estimator back along the drone's path: it is dropped when a sender takes it, counted and said once; a
+    fresh one and one without a receipt time go out."""
+    from rpf_fly.radio.outbox import EXTPOS_MAX_WAIT_S
+
+    box, radio, pool = blocked_outbox()
+    box.extpos(radio.packet("old"), received_s=time.monotonic())
+    time.sleep(EXTPOS_MAX_WAIT_S + 0.02)  # it waits behind the stuck send past the bound
+    radio.hold.set()
+    assert box.wait_idle(2.0)
+    assert radio.sent == ["first"] and box.extpos_stale == 1
+    assert "waited" in caplog.text and "not sent to its estimator" in caplog.text
+    box.extpos(radio.packet("fresh"), received_s=time.monotonic())
+    assert box.wait_idle(2.0)
+    box.extpos(radio.packet("unstamped"))  # no receipt time: sent whatever its age
+    assert box.wait_idle(2.0)
+    assert radio.sent == ["first", "fresh", "unstamped"] and box.extpos_stale == 1
+    pool.close()
