@@ -3,6 +3,8 @@ final state, is not cut, and ends with its newline."""
 
 from __future__ import annotations
 
+import re
+
 import pytest
 
 # Its module and session fixtures fly once: the tests sharing them run on one xdist worker (pyproject: --dist
@@ -38,7 +40,10 @@ def test_a_clean_flight_ends_with_every_drone_landed(clean_cli_flight):
         assert cells[1:3] == ["landed", "reached"], cells
         assert float(cells[5]) < 0.1  # z: on the floor
     assert "…" not in flight.stderr
-    assert flight.stderr.endswith("┘\n")  # the last border has its newline: nothing is glued to it
+    # the last border has its newline: nothing is glued to it (a line counting the text log's warnings may follow:
+    # a host that held the flight back has its stale extpos dropped, each drop a warning)
+    end = flight.stderr.rpartition("┘")[2]
+    assert end == "\n" or re.fullmatch(r"\n\(\d+ warning\(s\) from cflib and rpf_fly: \S+\)\n", end), repr(end)
     assert all(line.endswith("┃") or line.endswith("│") or not line.startswith(("┃", "│")) for line in table)
 
 
