@@ -62,7 +62,9 @@ def test_poses_the_ground_station_held_back_do_not_pull_the_estimators_back(tmp_
     (found in a dry run looping beside the test suite, where the estimate check then cut two drones' motors). They
     are dropped instead (`EXTPOS_MAX_WAIT_S`): the estimators dead-reckon to the next fresh pose."""
     flight = fly(short_mission, tmp_path, when_flying=lambda loop, rig: (time.sleep(1.0), rig.mocap.hold(0.3)))
-    assert all(o == FlightOutcome.REACHED for o in flight.report.outcomes.values()), flight.report.reasons
+    # 0.3 s from the tick before is under the loop watchdog's 0.35 s, or just over it on a loaded host: then it lands
+    # the swarm, which is right too; either way no drone's estimate is cut as diverged
+    assert FlightOutcome.EMERGENCY not in flight.report.outcomes.values(), flight.report.reasons
     for name in ("cf1", "cf2", "cf3"):
         off = [
             abs(
