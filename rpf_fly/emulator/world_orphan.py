@@ -91,7 +91,9 @@ class Orphan:
         this thread gets to read them) until every drone's motors are off and it rests on its floor, or the cap;
         what each drone did, in seconds from the parent's death. Each time is the stamp of the step that saw it:
         ``widest_step_s``, the longest interval between two steps the report read, bounds how late (a step of a
-        world the host held back comes late and covers the whole interval)."""
+        world the host held back comes late and covers the whole interval). ``vz_at_motors_off``: the true vertical
+        speed over the step that saw the motors stop (m/s, up positive; None when the motors were off before), so
+        that the fall can be checked against a throw, not a drop from rest."""
         world = self._world
         world.truth_samples()  # the parent's log no longer takes them: from now on they are this report's
         dead_at, dead_world_s = time.monotonic(), world.time_s()
@@ -103,6 +105,9 @@ class Orphan:
         at_rest = {a: 0.0 for a in addresses if not world.firmware(a).body().airborne}
         previous: float | None = None
         widest = 0.0
+        heights: dict[int, tuple[float, float]] = {}
+        """address -> its previous sample's (stamp, true height)."""
+        cut_vz: dict[int, float] = {}
         while True:
             for stamp, states in world.truth_samples():
                 if previous is not None:
@@ -116,6 +121,9 @@ class Orphan:
                         motors_off.pop(address, None)  # spinning again (a high-level plan): not off yet
                     elif address not in motors_off:
                         motors_off[address], cut_z[address] = after, position[2]
+                        if address in heights and stamp > heights[address][0]:
+                            cut_vz[address] = (position[2] - heights[address][1]) / (stamp - heights[address][0])
+                    heights[address] = (stamp, position[2])
                     if motors or position[2] > floors[address] + 1e-6:
                         at_rest.pop(address, None)
                     else:
@@ -148,6 +156,7 @@ class Orphan:
                 "setpoint_age_at_death_s": None if setpoint is None else dead_world_s - setpoint,
                 "motors_off_after_s": motors_off.get(address),
                 "z_at_motors_off": cut_z.get(address),
+                "vz_at_motors_off": cut_vz.get(address),
                 "at_rest_after_s": at_rest.get(address),
             }
         return {
