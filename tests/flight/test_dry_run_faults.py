@@ -125,7 +125,10 @@ def test_a_body_re_acquired_on_the_wrong_markers_after_a_blackout_is_not_fed_to_
         for d in truth
         if d["position"]["z"] > 0.1
     )  # in the air (on the floor before the estimator's reset)
-    assert wrong < 0.1, wrong  # the estimator never took the swapped pose (it took it whole: 0.6 m, until fixed)
+    # the estimator never took the swapped pose (it took it whole: 0.6 m, until fixed); blind for about 1 s (the
+    # blackout, then the refused swap) it drifts as a blind Crazyflie does: 4.7-17.5 cm in 1 s by drone
+    # (rpf_fly/emulator/fake_vehicle.py, "Estimator"), more where a loaded host dropped an extpos that waited
+    assert wrong < 0.25, wrong
     assert max(abs(d["position"]["y"]) for d in truth) < 0.15  # and cf2 kept to its lane
     said = [e.message for e in flight.events("pose_glitch", "cf2")]
     assert any("own estimate" in m for m in said), said

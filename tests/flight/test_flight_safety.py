@@ -74,7 +74,8 @@ def test_poses_the_ground_station_held_back_do_not_pull_the_estimators_back(tmp_
             for m in flight.log.messages(f"/truth/{name}")
             if m.data["motors"] and m.data["position"]["z"] > 0.3
         ]
-        assert len(off) > 200 and max(off) < 0.05, (name, max(off))
+        # fed: 0.11-0.14 m; dropped: under 0.02 m idle, 0.051 m seen beside a loaded suite (extpos late on its way)
+        assert len(off) > 200 and max(off) < 0.08, (name, max(off))
     assert "not sent to its estimator" in caplog.text
 
 
