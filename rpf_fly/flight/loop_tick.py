@@ -134,11 +134,11 @@ class LoopIteration:
                 pose.stamp_s,  # a pose the loop or the radio held back too long is dropped (`EXTPOS_MAX_WAIT_S`)
             )
 
-    def _in_the_way(self, agent: DroneAgent, pose: TrackedPose) -> bool:
+    def _in_the_way(self, agent: DroneAgent, pose: TrackedPose, now: float) -> bool:
         """Whether a drone is in the other drones' views: airborne near the planning plane; a drone nobody
         commands any more (link lost, motors cut) until mocap shows it on the floor, since it may still hover,
-        drift or fall there for up to 2 s."""
-        return in_the_way(agent.phase, pose.position[2], self.mission.flight.height)
+        drift or fall there for up to 2 s, or until the firmware has surely stopped it (`in_the_way`)."""
+        return in_the_way(agent.phase, pose.position[2], self.mission.flight.height, now - pose.stamp_s)
 
     def _plan_tick(self, now: float, frame: MocapFrame | None) -> None:
         """Plan and send every drone's setpoint; the log records are written after the last send."""
@@ -152,7 +152,7 @@ class LoopIteration:
         airborne_poses = {
             n: p
             for n, p in self.tracker.poses.items()
-            if (self._in_the_way(agents[n], p) if n in agents else foreign_in_the_way(p.position[2]))
+            if (self._in_the_way(agents[n], p, now) if n in agents else foreign_in_the_way(p.position[2]))
         }
         records: list[PlannerRecord] = []
         sent: list[tuple[str, tuple[float, float, float], float]] = []

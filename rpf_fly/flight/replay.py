@@ -167,10 +167,11 @@ def replay_log(
             if batching_off_ns is not None and tick.t_ns > batching_off_ns:
                 swarm.batching = False
             phases = {n: phase_of_mode(r.mode) for n, r in tick.rows.items()}
+            now_s = times.seconds(tick.t_ns)
             airborne = {
                 n: p
                 for n, p in tracker.poses.items()  # no row: by its height alone (on the floor:
-                if in_the_way(phases.get(n, UNKNOWN_PHASE), p.position[2], height)
+                if in_the_way(phases.get(n, UNKNOWN_PHASE), p.position[2], height, now_s - p.stamp_s)
             }  # waiting, failed)
             requests: list[tuple[DroneAgent, complex]] = []
             for name in names:

@@ -72,16 +72,27 @@ def same_function(a: object, b: object) -> bool:
     )
 
 
-def in_the_way(phase: DronePhase, z: float, flight_height: float) -> bool:
+UNCOMMANDED_DOWN_S = 3.0
+"""A drone nobody commands is on the floor this long after mocap last saw it, wherever its frozen pose says: the
+firmware's commander watchdog stops its motors 2 s after its last setpoint (COMMANDER_WDT_TIMEOUT_SHUTDOWN,
+crazyflie-firmware src/modules/src/commander.c), and 1 s more is a fall from 4.9 m."""
+
+
+def in_the_way(phase: DronePhase, z: float, flight_height: float, unseen_s: float = 0.0) -> bool:
     """Whether a drone in ``phase`` whose mocap height is ``z`` is in the other drones' views: airborne near the
     planning plane (above half the flight height: a drone on the floor is in nobody's way); a drone nobody commands
     any more (link lost, motors cut) until mocap shows it on the floor, since it may still hover, drift or fall
-    there for up to 2 s; a drone that never left the floor (`DronePhase.GROUNDED`) wherever it stands, so nobody
-    plans through its place. Pure, so the flight loop and ``rpf-fly replay`` decide it by the same code."""
+    there for up to 2 s, or until its pose is ``UNCOMMANDED_DOWN_S`` old (``unseen_s``: how long ago mocap last
+    saw it where its pose says); a drone that never left the floor (`DronePhase.GROUNDED`) wherever it stands, so
+    nobody plans through its place. Pure, so the flight loop and ``rpf-fly replay`` decide it by the same code.
+
+    Why the age: a crashed drone whose track froze in the air (mocap refused its fall to the wreck as a jump, and
+    its estimate never agreed with the wreck) stayed in every view for the rest of the flight at its last speed, a
+    moving neighbour repelling the others from goals within its range until the mission timed out."""
     if phase == DronePhase.GROUNDED:
         return True
     if phase in (DronePhase.LINK_LOST, DronePhase.EMERGENCY):
-        return z > ON_FLOOR_Z_M
+        return z > ON_FLOOR_Z_M and unseen_s <= UNCOMMANDED_DOWN_S
     return z > 0.5 * flight_height and not phase.terminal
 
 

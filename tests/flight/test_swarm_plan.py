@@ -2,13 +2,15 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from rpf_fly.flight.agent import DroneAgent, PlannerFault, PlanResult
-from rpf_fly.flight.swarm_plan import Neighbourhood, SwarmPlanner, same_function
+from rpf_fly.flight.phases import DronePhase
+from rpf_fly.flight.swarm_plan import UNCOMMANDED_DOWN_S, Neighbourhood, SwarmPlanner, in_the_way, same_function
 from rpf_fly.mission.model import Arena, Drone
 from rpf_fly.planning import FixedGains, ObstacleSet, Planner, PlannerConfig
 from rpf_fly.planning.onnx_policy import OnnxGains, OnnxPolicy
@@ -268,3 +270,19 @@ def test_hung_planners_are_waited_for_together_not_one_after_the_other():
     assert all(isinstance(out[a.name], PlannerFault) for a in agents[:2])
     assert isinstance(out[agents[2].name], PlanResult)
     assert took < 0.5, took  # one after the other: 0.6 s
+
+
+def test_a_drone_nobody_commands_leaves_the_views_once_the_firmware_has_surely_stopped_it():
+    """Link lost or motors cut: in the others' way while mocap sees it off the floor, and while its frozen pose is
+    younger than the firmware's watchdog and a fall; a frozen pose older than that (a crashed drone whose track
+    mocap refused as a jump) is nobody's neighbour any more. A seen drone above the floor stays, however long."""
+    for phase in (DronePhase.LINK_LOST, DronePhase.EMERGENCY):
+        assert in_the_way(phase, 0.5, 0.5)
+        assert in_the_way(phase, 0.5, 0.5, unseen_s=UNCOMMANDED_DOWN_S - 0.01)
+        assert not in_the_way(phase, 0.5, 0.5, unseen_s=UNCOMMANDED_DOWN_S + 0.01)
+        assert not in_the_way(phase, 0.05, 0.5)  # on the floor
+    assert UNCOMMANDED_DOWN_S >= 2.0 + math.sqrt(2 * 1.5 / 9.81)  # the watchdog's 2 s and a fall from 1.5 m
+    # the drones the flight commands are judged by height, however old their pose (the stale-pose hold covers them)
+    assert in_the_way(DronePhase.HOLDING, 0.5, 0.5, unseen_s=10.0)
+    assert in_the_way(DronePhase.GROUNDED, 0.0, 0.5, unseen_s=10.0)
+    assert not in_the_way(DronePhase.PLANNING, 0.2, 0.5)
