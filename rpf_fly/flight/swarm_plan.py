@@ -75,7 +75,7 @@ def same_function(a: object, b: object) -> bool:
 UNCOMMANDED_DOWN_S = 3.0
 """A drone nobody commands is on the floor this long after mocap last saw it, wherever its frozen pose says: the
 firmware's commander watchdog stops its motors 2 s after its last setpoint (COMMANDER_WDT_TIMEOUT_SHUTDOWN,
-crazyflie-firmware src/modules/src/commander.c), and 1 s more is a fall from 4.9 m."""
+2000 ms, crazyflie-firmware src/modules/interface/commander.h), and 1 s more is a fall from 4.9 m."""
 
 
 def in_the_way(phase: DronePhase, z: float, flight_height: float, unseen_s: float = 0.0) -> bool:
