@@ -263,22 +263,43 @@ def fly_cli(folder: Path, *, interrupts: int = 0, kill: bool = False, args: tupl
     return CliFlight(proc.returncode, out, err, log)
 
 
+STARVED_LINES = ("[loop] ", "[host] ", "[mocap_late] ")
+"""A fault-free CLI flight's event lines that say the host held it back: its loop late or stalled, the simulated
+world behind its time, no mocap frame for 0.1 s (the emulated Motive and the flight's NatNet client share the
+host)."""
+
+
+def fly_cli_on_time(folder: Path, exit_code: int, tries: int = 3, interrupts: int = 0) -> CliFlight:
+    """`fly_cli` for a flight other tests read: one that did not exit with ``exit_code`` and that the host held back
+    (its stderr says so: `STARVED_LINES`) is flown again, up to ``tries`` in all, as the fault campaign flies again a
+    run whose host fell behind; one that failed on time is returned at once, and the last try whatever it did."""
+    flight = fly_cli(folder, interrupts=interrupts)
+    for again in range(1, tries):
+        held_back = any(line.startswith(STARVED_LINES) for line in flight.stderr.splitlines())
+        if flight.returncode == exit_code or not held_back:
+            break
+        again_folder = folder / f"again-{again}"
+        again_folder.mkdir()
+        flight = fly_cli(again_folder, interrupts=interrupts)
+    return flight
+
+
 @pytest.fixture(scope="session")
 def clean_cli_flight(tmp_path_factory: pytest.TempPathFactory) -> CliFlight:
     """Every drone reaches its goal and lands."""
-    return fly_cli(tmp_path_factory.mktemp("clean-flight"))
+    return fly_cli_on_time(tmp_path_factory.mktemp("clean-flight"), 0)
 
 
 @pytest.fixture(scope="session")
 def landed_cli_flight(tmp_path_factory: pytest.TempPathFactory) -> CliFlight:
     """Ctrl-C once in flight: every drone lands early, exit 130."""
-    return fly_cli(tmp_path_factory.mktemp("landed-flight"), interrupts=1)
+    return fly_cli_on_time(tmp_path_factory.mktemp("landed-flight"), 130, interrupts=1)
 
 
 @pytest.fixture(scope="session")
 def stopped_cli_flight(tmp_path_factory: pytest.TempPathFactory) -> CliFlight:
     """Ctrl-C twice in flight: every motor cut (emergency stop), exit 130."""
-    return fly_cli(tmp_path_factory.mktemp("stopped-flight"), interrupts=2)
+    return fly_cli_on_time(tmp_path_factory.mktemp("stopped-flight"), 130, interrupts=2)
 
 
 @pytest.fixture(scope="session")
