@@ -22,6 +22,7 @@ import cflib.crtp
 import pytest
 from cflib.crazyflie import Crazyflie
 from cflib.crazyflie.syncCrazyflie import SyncCrazyflie
+from host_retry import STARVED_KINDS, fly_on_time
 from xdist_ids import keep_failures_by_plain_id
 
 from rpf_fly.emulator import fake_radio
@@ -263,25 +264,19 @@ def fly_cli(folder: Path, *, interrupts: int = 0, kill: bool = False, args: tupl
     return CliFlight(proc.returncode, out, err, log)
 
 
-STARVED_LINES = ("[loop] ", "[host] ", "[mocap_late] ")
-"""A fault-free CLI flight's event lines that say the host held it back: its loop late or stalled, the simulated
-world behind its time, no mocap frame for 0.1 s (the emulated Motive and the flight's NatNet client share the
-host)."""
+STARVED_LINES = tuple(f"[{kind}] " for kind in STARVED_KINDS)
+"""A CLI flight's event lines that say the host held it back (`host_retry.STARVED_KINDS`)."""
 
 
-def fly_cli_on_time(folder: Path, exit_code: int, tries: int = 3, interrupts: int = 0) -> CliFlight:
-    """`fly_cli` for a flight other tests read: one that did not exit with ``exit_code`` and that the host held back
-    (its stderr says so: `STARVED_LINES`) is flown again, up to ``tries`` in all, as the fault campaign flies again a
-    run whose host fell behind; one that failed on time is returned at once, and the last try whatever it did."""
-    flight = fly_cli(folder, interrupts=interrupts)
-    for again in range(1, tries):
-        held_back = any(line.startswith(STARVED_LINES) for line in flight.stderr.splitlines())
-        if flight.returncode == exit_code or not held_back:
-            break
-        again_folder = folder / f"again-{again}"
-        again_folder.mkdir()
-        flight = fly_cli(again_folder, interrupts=interrupts)
-    return flight
+def fly_cli_on_time(folder: Path, exit_code: int, interrupts: int = 0) -> CliFlight:
+    """`fly_cli` for a flight other tests read, flown again while it did not exit with ``exit_code`` and its stderr
+    says the host held it back (`host_retry.fly_on_time`)."""
+    return fly_on_time(
+        lambda at: fly_cli(at, interrupts=interrupts),
+        folder,
+        lambda flight: flight.returncode == exit_code,
+        lambda flight: any(line.startswith(STARVED_LINES) for line in flight.stderr.splitlines()),
+    )
 
 
 @pytest.fixture(scope="session")

@@ -34,6 +34,13 @@ ON_FLOOR_Z_M = 0.1
 """Mocap height (above the arena floor) under which a drone counts as on the floor: a Crazyflie's markers sit a few
 centimetres above its feet, and a landed drone's estimate settles within a few centimetres of the floor."""
 
+UNCOMMANDED_DOWN_S = 3.0
+"""A drone nobody commands any more (link lost, motors cut) is on the floor this long after the last setpoint
+reached it, or after mocap last saw it: the firmware's commander watchdog stops its motors 2 s after its last
+setpoint (COMMANDER_WDT_TIMEOUT_SHUTDOWN, 2000 ms, crazyflie-firmware src/modules/interface/commander.h), and 1 s
+more is a fall from 4.9 m. The end of a flight waits this long for it (`LoopLanding.FALL_WAIT_S`); the others'
+views drop its pose once it is this old (`swarm_plan.in_the_way`)."""
+
 TOUCHDOWN_TIMEOUT_S = 3.0
 """How long after its landing should have ended a drone may take to be confirmed down before an event says it is
 not (the firmware's own landing timeout is 3 s)."""

@@ -14,7 +14,7 @@ import time
 from collections.abc import Callable
 
 from rpf_fly.flight.agent import DroneAgent
-from rpf_fly.flight.commander import ON_FLOOR_Z_M, TOUCHDOWN_TIMEOUT_S, Commander
+from rpf_fly.flight.commander import ON_FLOOR_Z_M, TOUCHDOWN_TIMEOUT_S, UNCOMMANDED_DOWN_S, Commander
 from rpf_fly.flight.events import FATAL, INFO, EventBus
 from rpf_fly.flight.phases import DronePhase, SwarmPhase
 from rpf_fly.flight.poses import PoseTracker
@@ -29,7 +29,7 @@ class LoopLanding:
     """Landings, touchdowns and the supervisor's findings."""
 
     LAND_SETTLE_S = 0.5
-    FALL_WAIT_S = 3.0
+    FALL_WAIT_S = UNCOMMANDED_DOWN_S
     """How long the end of a flight waits, after a drone's link was lost or its motors were cut, for mocap to see it
     on the floor: its firmware levels it 0.5 s and cuts its motors 2 s after the last setpoint that reached it, and
     it falls from 1.5 m in 0.6 s. Until then it may still hover or drift where the others land, and the log should

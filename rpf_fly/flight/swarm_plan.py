@@ -35,7 +35,7 @@ from typing import TypeAlias
 import numpy as np
 
 from rpf_fly.flight.agent import MAX_DIRECTION_NORM, DroneAgent, PlannerFault, PlanResult
-from rpf_fly.flight.commander import ON_FLOOR_Z_M
+from rpf_fly.flight.commander import ON_FLOOR_Z_M, UNCOMMANDED_DOWN_S
 from rpf_fly.flight.phases import DronePhase
 from rpf_fly.flight.poses import TrackedPose
 from rpf_fly.planning.gains import FixedGains
@@ -70,12 +70,6 @@ def same_function(a: object, b: object) -> bool:
         and _same_obstacles(a.obstacles, b.obstacles)
         and _same_gains(a.gains, b.gains)
     )
-
-
-UNCOMMANDED_DOWN_S = 3.0
-"""A drone nobody commands is on the floor this long after mocap last saw it, wherever its frozen pose says: the
-firmware's commander watchdog stops its motors 2 s after its last setpoint (COMMANDER_WDT_TIMEOUT_SHUTDOWN,
-2000 ms, crazyflie-firmware src/modules/interface/commander.h), and 1 s more is a fall from 4.9 m."""
 
 
 def in_the_way(phase: DronePhase, z: float, flight_height: float, unseen_s: float = 0.0) -> bool:

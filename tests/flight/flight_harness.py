@@ -9,6 +9,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+import host_retry
+
 from rpf_fly.flight.dry_run import DryRun
 from rpf_fly.flight.fault_injection import FaultInjection
 from rpf_fly.flight.loop import FlightLoop, FlightReport
@@ -102,27 +104,12 @@ def fly(
     return Flight(report, snapshots, read_log(log_path), log_path)
 
 
-STARVED_KINDS = ("loop", "host", "mocap_late")
-"""The flight's own events that say the host held a fault-free dry run back: its loop late or stalled between two
-ticks, the simulated world behind its time (`rpf_fly.flight.host_watch`), no mocap frame for 0.1 s (the emulated
-Motive and the flight's NatNet client share the host)."""
-
-
-def starved(report: FlightReport) -> bool:
-    """Whether the host held this dry run back (its own events say so): its outcome is the host's, not the stack's."""
-    return any(e.kind in STARVED_KINDS for e in report.events)
-
-
-def fly_on_time(mission, tmp_path: Path, tries: int = 3, **kwargs) -> Flight:
-    """`fly` for a flight that must reach every goal (a fixture others read): a flight that did not, and that the
-    host held back (`starved`), is flown again, up to ``tries`` in all, as the fault campaign flies again a run
-    whose host fell behind. A flight that failed on time is returned at once, and the last try whatever it did: the
-    caller's assertion fails on it."""
-    flight = fly(mission, tmp_path, **kwargs)
-    for again in range(1, tries):
-        if flight.report.success or not starved(flight.report):
-            break
-        folder = tmp_path / f"again-{again}"
-        folder.mkdir()
-        flight = fly(mission, folder, **kwargs)
-    return flight
+def fly_to_every_goal(mission, tmp_path: Path, **kwargs) -> Flight:
+    """`fly` for a flight that must reach every goal (a fixture others read), flown again while it did not and its
+    own events say the host held it back (`host_retry.fly_on_time`)."""
+    return host_retry.fly_on_time(
+        lambda at: fly(mission, at, **kwargs),
+        tmp_path,
+        lambda flight: flight.report.success,
+        lambda flight: any(e.kind in host_retry.STARVED_KINDS for e in flight.report.events),
+    )

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from flight_harness import SHORT_MISSION, fly_on_time
+from flight_harness import SHORT_MISSION, fly_to_every_goal
 from mcap.records import Channel, Footer, Header, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
@@ -41,7 +41,7 @@ runner = CliRunner()
 @pytest.fixture(scope="module")
 def apf_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A dry run of the short 3-drone mission (one obstacle) with the fixed-gain APF."""
-    flight = fly_on_time(parse_mission(SHORT_MISSION), tmp_path_factory.mktemp("apf"))
+    flight = fly_to_every_goal(parse_mission(SHORT_MISSION), tmp_path_factory.mktemp("apf"))
     assert set(flight.report.outcomes.values()) == {"reached"}
     return flight.log_path
 
@@ -50,7 +50,7 @@ def apf_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
 def rpf_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """The same mission flown with the shipped RPF-1 policy (onnxruntime, batched in the loop)."""
     text = SHORT_MISSION.replace("planner: {kind: apf, margin: 0}", f"planner: {{kind: rpf, policy: {RPF_POLICY}}}")
-    flight = fly_on_time(parse_mission(text), tmp_path_factory.mktemp("rpf"))
+    flight = fly_to_every_goal(parse_mission(text), tmp_path_factory.mktemp("rpf"))
     assert set(flight.report.outcomes.values()) == {"reached"}
     return flight.log_path
 

@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 
 from rpf_fly.flight.agent import DroneAgent, PlannerFault, PlanResult
+from rpf_fly.flight.commander import UNCOMMANDED_DOWN_S
 from rpf_fly.flight.phases import DronePhase
-from rpf_fly.flight.swarm_plan import UNCOMMANDED_DOWN_S, Neighbourhood, SwarmPlanner, in_the_way, same_function
+from rpf_fly.flight.swarm_plan import Neighbourhood, SwarmPlanner, in_the_way, same_function
 from rpf_fly.mission.model import Arena, Drone
 from rpf_fly.planning import FixedGains, ObstacleSet, Planner, PlannerConfig
 from rpf_fly.planning.onnx_policy import OnnxGains, OnnxPolicy
