@@ -15,7 +15,8 @@ at once.
 Rule: a simulated Crazyflie is never kinder than a real one. Where the model simplifies, it does not simplify away
 a failure a real drone has (the yaw fly-away, drift without mocap).
 
-Dynamics (documented model, not physics; the default `VehicleConfig.dynamics`, "first_order"):
+Dynamics (documented model, not physics; `VehicleConfig.dynamics` "first_order", its default, a dry run's
+`dry_run.dynamics: first-order`):
 - The controller acts on the *estimate* (position, velocity, yaw), as the real one does, so an external position
   that disagrees with the truth moves the true drone.
 - Absolute position axes track the setpoint with a first-order lag of time constant `TRACK_TAU_S` (0.25 s), plus the
@@ -53,8 +54,8 @@ Dynamics (documented model, not physics; the default `VehicleConfig.dynamics`, "
   lost in the impact, so the drone drops where it hit (an inelastic impact: a Crazyflie that clips a pole or
   another drone does not sail on), then rests on the floor; its supervisor is crashed, tumbled and locked.
 
-Firmware dynamics (`VehicleConfig.dynamics="firmware"`; "first_order", the model above, is the default until the
-stack's figures tuned on it are re-derived): the body is the identified Crazyflie 2.1+ rigid body and rotors
+Firmware dynamics (`VehicleConfig.dynamics="firmware"`, what a dry run flies unless its mission says
+`dry_run.dynamics: first-order`): the body is the identified Crazyflie 2.1+ rigid body and rotors
 (cf_body.py) flown by the firmware's default PID cascade (cf_controller.py), at the firmware's 1 kHz ticks on the
 caller's clock (tick k at k ms, the 100 Hz loops on the ticks whose number, counted from 1, is a multiple of 10:
 `CfDrone`'s phase, so the drones of one world tick together). Docs/dynamics.md has the model's facts; here what

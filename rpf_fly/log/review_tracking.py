@@ -22,9 +22,9 @@ reference (the firmware's control code against the identified Crazyflie 2.1+ bod
 flight's speed, so its tracking error while cruising is mostly this lag, not a fault."""
 
 DRY_RUN_LAG_S = 0.25
-"""The dry run's simulated drone: a first-order follower of its position setpoint with a time constant of 0.25 s
+"""A dry run's first-order simulated drone: a follower of its position setpoint with a time constant of 0.25 s
 (rpf_fly/emulator/vehicle_figures.py ``TRACK_TAU_S``), which trails a moving setpoint by 0.25 s x speed, less than a
-Crazyflie (docs/flight.md, *Known gap*)."""
+Crazyflie (``dry_run.dynamics: first-order``; docs/flight.md, *The simulated drone*)."""
 
 TRACKING_SLACK_M = 0.05
 TRACKING_SLACK_FRACTION = 0.3

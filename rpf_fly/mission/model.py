@@ -327,7 +327,7 @@ class DryRunSettings:
     mocap_noise_m: float | None = None
     mocap_noise_deg: float | None = None
     mocap_dropout: float | None = None
-    dynamics: str = "first-order"
+    dynamics: str = "firmware"
     radio: Literal["fake", "crazyradio"] = "fake"
     """How the flight's cflib reaches the simulated drones: ``fake`` (the ``fake://`` link driver in front of them)
     or ``crazyradio`` (cflib's own ``radio://`` driver through emulated dongles, rpf_fly/emulator/crazyradio.py;

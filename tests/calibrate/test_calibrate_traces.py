@@ -134,12 +134,13 @@ def test_a_flight_the_model_cannot_explain_is_calibrated_with_a_warning(tmp_path
 def test_a_log_written_from_a_trace_is_fitted_as_the_trace(tmp_path: Path) -> None:
     """The log path on a known flight: the reference's carrot written as a dry run's MCAP log (its setpoint stream,
     its positions as the mocap's poses and the truth, at the trace's instants) by the recorder's own writer and read
-    back: the default gains, no latency, no noise; and since the logged mission names no dynamics, its dry run flew
-    the first-order model, which the calibration says."""
+    back: the default gains, no latency, no noise; and since the logged mission says its dry run flew the
+    first-order model, the calibration says so."""
     doc = json.loads((TRACES / "c_carrot_1p0.json").read_text())
     mission = parse_mission(
         "arena: {x: [-1, 4], y: [-1, 1]}\nplanner: {kind: apf}\ndrones:\n"
         "  - {name: cf1, uri: radio://0/80/2M/E7E7E7E701, start: [0, 0], goal: [3, 0]}\n"
+        "dry_run: {dynamics: first-order}\n"
     )
     log, t0 = tmp_path / "carrot.mcap", 1_800_000_000_000_000_000
     scenario = yaml.safe_load((TRACES.parent / "scenarios" / "c_carrot_1p0.yaml").read_text())

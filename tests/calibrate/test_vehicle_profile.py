@@ -91,7 +91,7 @@ def test_the_profile_is_read_relative_to_the_mission(tmp_path: Path, monkeypatch
         ),
         ("{dynamics: firmware, vehicle: profiles/cf.yaml}", "params: {posCtlPid.xKp: 2}: x\n", "cf.yaml: not YAML ("),
         (
-            "{vehicle: profiles/cf.yaml}",
+            "{dynamics: first-order, vehicle: profiles/cf.yaml}",
             PROFILE,
             "m.yaml:4: dry_run.vehicle: a vehicle profile sets the firmware model's gains: give dry_run.dynamics: "
             "firmware with it (it is first-order)",

@@ -23,7 +23,9 @@ LAB_3 = ROOT / "missions" / "lab-3.yaml"
 
 def test_the_dynamics_copy_carries_dry_run_dynamics_and_keeps_the_mission(tmp_path):
     original = load_mission(LAB_3)
-    assert original.dry_run.dynamics == "first-order"
+    assert original.dry_run.dynamics == "firmware"  # the default
+    first_order = load_mission(with_dynamics(LAB_3, "first-order", tmp_path))
+    assert first_order.dry_run.dynamics == "first-order"
     firmware = load_mission(with_dynamics(LAB_3, "firmware", tmp_path))
     assert firmware.dry_run.dynamics == "firmware"
     assert firmware.name == original.name and firmware.drones == original.drones
@@ -95,7 +97,7 @@ def test_every_path_of_a_campaign_flies_the_dynamics_asked_for(flown, tmp_path):
     assert len(flown) == 5 and all(d == "firmware" for _, d in flown), flown
     flown.clear()
     maintainers_campaign(kinds=["gust"], missions=["lab-3"], keep=tmp_path / "e")  # without: the mission's own
-    assert flown == [("gust", "first-order")]
+    assert flown == [("gust", "firmware")]
 
 
 def test_the_same_seed_draws_the_same_runs_on_either_model(flown, tmp_path):

@@ -153,7 +153,8 @@ def test_sigkill_the_drones_fall_by_the_firmware_watchdog_and_the_log_is_salvage
         # the setpoint watchdog's 2 s: 1 s after the last keep-alive (sent up to 0.2 s before death), at a 25 Hz
         # supervisor tick
         assert 0.7 < drone["motors_off_after_s"] < 1.25, (name, drone)
-        # then a free fall from where it was: about 0.5 m, as the estimate it held without extpos drifted for a second
+        # then a fall from where it was: about 0.5 m, as the estimate it held without extpos drifted for a second;
+        # no faster than a free fall, and slower only by the rotors' spin-down (the motors' 0.1 s lag, docs/dynamics.md)
         cut_z = drone["z_at_motors_off"]
         assert 0.3 < cut_z < 0.7, (name, drone)
         fall = drone["at_rest_after_s"] - drone["motors_off_after_s"]
@@ -163,7 +164,9 @@ def test_sigkill_the_drones_fall_by_the_firmware_watchdog_and_the_log_is_salvage
         down = -drone["vz_at_motors_off"]
         thrown = (math.sqrt(down * down + 2.0 * 9.81 * cut_z) - down) / 9.81
         assert abs(drone["vz_at_motors_off"]) < 1.0, (name, drone)
-        assert abs(fall - thrown) < 0.01 + 2 * report["widest_step_s"], (name, drone, thrown)
+        # the firmware model spins its motors down after the cut (its motor lag): the fall may end up to 0.2 s later
+        step = 0.01 + 2 * report["widest_step_s"]
+        assert -step < fall - thrown < 0.2 + step, (name, drone, thrown)
     data = read_log(log)
     assert data.truncated
     poses = data.messages("/mocap/cf1")

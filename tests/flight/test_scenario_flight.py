@@ -296,8 +296,8 @@ def test_the_made_mission_holds_every_point_of_the_scenario():
 
 
 def test_the_dry_run_chooses_the_model() -> None:
-    """`dry_run.dynamics` of the mission (default first-order), `DryRun(dynamics=...)` and `simulated_drones`;
-    the scenario's made mission says firmware; a bad value is a one-line error."""
+    """`dry_run.dynamics` of the mission (default firmware; first-order when it says so), `DryRun(dynamics=...)` and
+    `simulated_drones`; the scenario's made mission says firmware; a bad value is a one-line error."""
     from rpf_fly.emulator.fake_world import FakeDroneConfig
     from rpf_fly.flight.dry_run import DryRun, simulated_drones
     from rpf_fly.mission.load import MissionError, parse_mission
@@ -307,7 +307,8 @@ def test_the_dry_run_chooses_the_model() -> None:
     assert made.dry_run.dynamics == "firmware"
     assert [c.vehicle.dynamics for c in simulated_drones(made).values()] == ["firmware"]
     text = made.text.replace("dry_run: {dynamics: firmware}\n", "")
-    plain = parse_mission(text, "m.yaml")
+    assert parse_mission(text, "m.yaml").dry_run.dynamics == "firmware"  # the default
+    plain = parse_mission(text + "dry_run: {dynamics: first-order}\n", "m.yaml")
     assert plain.dry_run.dynamics == "first-order"
     assert [c.vehicle.dynamics for c in simulated_drones(plain).values()] == ["first_order"]
     given = {"cf1": FakeDroneConfig.at(0.0, 0.0, positioning="extpos", turbulence_m_s2=0.0)}

@@ -158,7 +158,7 @@ def test_a_dry_runs_log_says_which_model_its_drones_flew():
         "name: m\narena: {x: [-2, 2], y: [-2, 2], z: [0, 1.5]}\nplanner: {kind: apf}\nmocap: {kind: sim}\n"
         "drones:\n  - {name: cf1, uri: radio://0/80/2M/E7E7E7E701, start: [-1, 0], goal: [1, 0]}\n"
     )
-    assert mission_metadata(mission, source="dry-run")["dynamics"] == "first-order"  # the mission's default
+    assert mission_metadata(mission, source="dry-run")["dynamics"] == "firmware"  # the mission's default
     assert mission_metadata(mission, source="lab", dynamics="firmware")["dynamics"] == "firmware"
     assert mission_metadata(mission, source="dry-run", dynamics="first_order")["dynamics"] == "first-order"
     assert "dynamics" not in mission_metadata(mission, source="flight")

@@ -1,6 +1,6 @@
-"""tools/prototypes/tracking_dynamics.py: the figures docs/flight.md's "Known gap" section quotes stay what the
-model gives (a default Crazyflie's cascade far outside the supervisor's follower as flown, inside one that runs the
-cascade)."""
+"""tools/prototypes/tracking_dynamics.py: the figures docs/flight.md quotes (*Tracking*, *The simulated drone*) stay
+what the model gives (a default Crazyflie's cascade far outside the supervisor's follower as flown, inside one that
+runs the cascade)."""
 
 from __future__ import annotations
 

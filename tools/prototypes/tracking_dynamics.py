@@ -3,8 +3,8 @@ what that does to the supervisor's tracking follower.
 
     python tools/prototypes/tracking_dynamics.py
 
-Why it exists (docs/flight.md, "Known gap: the default simulated drone is stiffer than a default Crazyflie"). The
-default simulated drone (rpf_fly/emulator/fake_vehicle.py) takes a position setpoint as a first-order
+Why it exists (docs/flight.md, "The simulated drone: the firmware's cascade, and the first-order option"). The
+first-order simulated drone (rpf_fly/emulator/fake_vehicle.py) takes a position setpoint as a first-order
 lag of 0.25 s (4 /s) with no momentum: its velocity is whatever the position loop asks, at once. The firmware's
 default PID is a cascade: a position loop of ``posCtlPid.xKp`` 2 /s asking a velocity, and a velocity loop of
 ``velCtlPid.vxKp`` 25 degrees of tilt per m/s (g tan(25 deg x v) = about 4.3 m/s^2 per m/s: 0.23 s), tilt capped at
