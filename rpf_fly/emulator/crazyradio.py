@@ -48,6 +48,7 @@ from .crazyradio_timing import (
     time_on_air_s,
 )
 from .fake_world import DongleAir
+from .host_lag import LINKS
 
 logger = logging.getLogger(__name__)
 
@@ -152,12 +153,17 @@ class EmulatedCrazyradio:
 
     # Time ---------------------------------------------------------------------------------------------------
 
-    def _occupy(self, duration_s: float) -> float:
-        """Hold the dongle for ``duration_s`` from when it is free; returns the end (slept until)."""
-        start = max(time.monotonic(), self._free_at)
+    def _occupy(self, duration_s: float, due_s: float | None = None) -> float:
+        """Hold the dongle for ``duration_s`` from when it is free; returns the end (slept until). The time the
+        host held the caller past that end (a late wake-up), and past ``due_s`` (an answer ready since then that
+        cflib's thread came for late), is recorded as the links' (`host_lag.LINKS`)."""
+        now = time.monotonic()
+        start = max(now, self._free_at)
         self._free_at = start + duration_s
         self.counters.busy_s += duration_s
         _sleep_until(self._free_at)
+        after = time.monotonic()
+        LINKS.record(max(0.0, after - self._free_at) + (max(0.0, now - due_s) if due_s is not None else 0.0), after)
         return self._free_at
 
     def _check(self) -> None:
@@ -322,7 +328,7 @@ class EmulatedCrazyradio:
                 raise timed_out()
             ready, answer = self._in.popleft()
             self._free_at = max(self._free_at, ready)
-            self._occupy(self.radio.bulk_in_s)
+            self._occupy(self.radio.bulk_in_s, due_s=ready)
             return answer[:size]
 
 

@@ -60,6 +60,7 @@ from rpf_fly.radio import broadcast as radio_broadcast
 from rpf_fly.radio.packed_extpos import BROADCAST_COPIES
 
 from .fake_world import DongleAir, LinkFaults, RadioTiming
+from .host_lag import LINKS
 
 logger = logging.getLogger(__name__)
 
@@ -217,6 +218,8 @@ class FakeLink:
         """Notified when an uplink packet leaves `_up` or the link closes (a blocked `send` waits on it)."""
         self._closed = threading.Event()
         self._flush_on_close = False
+        self._held_s = 0.0
+        """The host's time in the last transaction (`_transact`; `rpf_fly.emulator.host_lag.LINKS`)."""
         self._failed = False
         self._fail_lock = threading.Lock()
         with _dongles_lock:
@@ -336,6 +339,8 @@ class FakeLink:
     def _run(self) -> None:
         lost = 0
         last_tx = -float("inf")
+        ready_s = time.monotonic()
+        """When the link could next transact: the end of its last transaction (or its wait after a failed one)."""
         timing = self._timing
         if self._opened_unplugged:
             # opened on a dongle already pulled out: its first transaction fails, one idle poll on (not at once:
@@ -358,8 +363,13 @@ class FakeLink:
                 self._wake.clear()
                 continue
             item = self._up[0] if up_due else None
+            # due: the packet's time (or, idle, the poll's), not before the link was free: beyond it the host held
+            # the thread (a wake-up that came late); `_transact` adds what it held the transaction itself
+            due_s = max(item[0] if item else last_tx + timing.idle_poll_s if not down_waiting else now, ready_s)
             last_tx = now
             ok, retry, down = self._transact((item[1], item[2]) if item else None)
+            ready_s = time.monotonic()
+            LINKS.record(max(0.0, now - due_s) + self._held_s, ready_s)
             if ok and item is not None:
                 self._up.popleft()
                 self._taken()
@@ -369,17 +379,20 @@ class FakeLink:
                     self._fail("Too many packets lost")
                     return
                 self._closed.wait(timing.failed_attempt_s)
+                ready_s = time.monotonic()
                 continue
             lost = 0
             self._deliver(down, item is not None, retry)
 
     def _transact(self, uplink: tuple[int, bytes] | None) -> tuple[bool, int, tuple[int, int, bytes] | None]:
         """One radio transaction through the dongle: wait for its air slot (`DongleAir.reserve`), reach the drone
-        (outside the slot: other links' slots run meanwhile), and hand the ack back no earlier than the slot's end."""
+        (outside the slot: other links' slots run meanwhile), and hand the ack back no earlier than the slot's end.
+        Sets `_held_s`: how long past the slot's end the ack came back (the host's time: a late wake-up, a slow
+        round trip to the world's process), the whole round trip when the air takes no time."""
         air_s = self._timing.transaction_s
-        end = 0.0
+        end = began = time.monotonic()
         if air_s > 0.0:
-            start, end = self._dongle.reserve(air_s, time.monotonic())
+            start, end = self._dongle.reserve(air_s, began)
             _sleep_until(start)
         if self._drone is None:  # nobody at this address: the radio's attempts all go unanswered
             result: tuple[bool, int, tuple[int, int, bytes] | None] = (False, self._timing.arc_retries, None)
@@ -387,6 +400,7 @@ class FakeLink:
             result = self._drone.transact(self._uri.channel, uplink)
         if air_s > 0.0:
             _sleep_until(end)
+        self._held_s = max(0.0, time.monotonic() - end)
         return result
 
     def _deliver(self, down: tuple[int, int, bytes] | None, had_uplink: bool, retry: int) -> None:

@@ -7,6 +7,13 @@ periodic job of the world (the 100 Hz physics step of `rpf_fly.emulator.fake_wor
 emulator's frames) records how late each of its runs starts against its own schedule; a run later than
 `HOST_LATE_BOUND_S` counts the wall time until the job is back on schedule as time behind.
 
+The ground station's own side of a dry run is watched the same way where the emulator stands in for hardware in
+its process: each fake radio link's transaction (`rpf_fly.emulator.fake_radio`) records the time the host held it
+on top of what the radio takes (its thread waking late, the round trip to the world's process), so a flight
+process starved between handing a mocap position to cflib and the simulated drone receiving it is named too (its
+flight loop may tick on time meanwhile). A link held longer than the bound counts as behind, as a late world step
+does (:data:`LINKS`).
+
 The bound: 0.05 s is five world steps and a whole mocap period at 20 Hz. A real Crazyflie's stabilizer runs every
 1 ms on its own processor and Motive sends every frame on its own machine; the emulated ones share this host's two
 cores with the flight, and a step or frame this late changes what a flight sees (a setpoint watchdog of 0.5 s, a
@@ -23,6 +30,9 @@ from typing import Any
 
 HOST_LATE_BOUND_S = 0.05
 """A periodic emulator job that starts later than this against its schedule is behind (module doc)."""
+
+LATE_WHAT = "simulated steps, mocap frames or radio transactions"
+"""What the host held back, in the line that says it (`HostLag.sentence`, the flight report's)."""
 
 HOST_BEHIND_REPORT_S = 0.1
 """Time behind, summed over a flight, from which it is said: one step a little over the bound is scheduling noise;
@@ -48,11 +58,17 @@ class HostLag:
     bound_s: float
     world: JobLag
     natnet: JobLag | None
+    links: JobLag | None = None
+    """The flight process's fake radio links (:data:`LINKS`): None where the world's figures were read alone."""
 
     @property
     def behind_s(self) -> float:
         """The longest any job of the world was behind: the time this world was not evidence."""
-        return max(self.world.behind_s, self.natnet.behind_s if self.natnet is not None else 0.0)
+        return max(
+            self.world.behind_s,
+            self.natnet.behind_s if self.natnet is not None else 0.0,
+            self.links.behind_s if self.links is not None else 0.0,
+        )
 
     @property
     def kept_up(self) -> bool:
@@ -64,6 +80,7 @@ class HostLag:
             "behind_s": self.behind_s,
             "world": asdict(self.world),
             "natnet": asdict(self.natnet) if self.natnet is not None else None,
+            "links": asdict(self.links) if self.links is not None else None,
         }
 
     def sentence(self, since: HostLag | None = None) -> str:
@@ -72,13 +89,22 @@ class HostLag:
         if behind < HOST_BEHIND_REPORT_S:
             return ""
         return (
-            f"the host could not keep up for {behind:.1f} s (simulated steps or mocap frames more than "
+            f"the host could not keep up for {behind:.1f} s ({LATE_WHAT} more than "
             f"{self.bound_s * 1000:.0f} ms late): this dry run is not evidence"
         )
 
     def behind_since(self, since: HostLag | None = None) -> float:
-        """Seconds behind since ``since`` (an earlier reading of the same world; None: since it started)."""
-        return max(0.0, self.behind_s - (since.behind_s if since is not None else 0.0))
+        """Seconds behind since ``since`` (an earlier reading of the same world; None: since it started): each
+        job's own time behind since then, the longest of them (a job's figure only grows)."""
+        if since is None:
+            return self.behind_s
+
+        def grew(now: JobLag | None, then: JobLag | None) -> float:
+            if now is None:
+                return 0.0
+            return max(0.0, now.behind_s - (then.behind_s if then is not None else 0.0))
+
+        return max(grew(self.world, since.world), grew(self.natnet, since.natnet), grew(self.links, since.links))
 
 
 class LagMeter:
@@ -112,6 +138,42 @@ class LagMeter:
             return JobLag(self._runs, self._late_runs, self._max_late_s, self._behind_s)
 
 
+class SpanMeter:
+    """Lateness recorded by many threads at once (each fake link's transaction thread): every record is a span of
+    wall time that a run was held (``held_s`` up to ``now_s``), and the time behind is the length of the union of
+    the spans longer than the bound, so two links held by the same stall count it once."""
+
+    def __init__(self, bound_s: float = HOST_LATE_BOUND_S) -> None:
+        self.bound_s = bound_s
+        self._lock = threading.Lock()
+        self._runs = 0
+        self._late_runs = 0
+        self._max_late_s = 0.0
+        self._behind_s = 0.0
+        self._covered_to = -float("inf")
+
+    def record(self, held_s: float, now_s: float) -> None:
+        """A run ended at ``now_s`` (``time.monotonic``) after the host held it ``held_s``."""
+        with self._lock:
+            self._runs += 1
+            self._max_late_s = max(self._max_late_s, held_s)
+            if held_s <= self.bound_s:
+                return
+            self._late_runs += 1
+            if now_s > self._covered_to:
+                self._behind_s += now_s - max(now_s - held_s, self._covered_to)
+                self._covered_to = now_s
+
+    def snapshot(self) -> JobLag:
+        with self._lock:
+            return JobLag(self._runs, self._late_runs, self._max_late_s, self._behind_s)
+
+
+LINKS = SpanMeter()
+"""This process's fake radio links: the time the host held each transaction beyond the radio's own (module doc).
+Process-wide, as the links are; a reader takes differences between two snapshots (`HostLag.behind_since`)."""
+
+
 WORLD_NICE = -10
 """The scheduling priority the simulated world's process asks for (`ahead_of_the_ground_station`)."""
 
@@ -131,3 +193,17 @@ def ahead_of_the_ground_station() -> bool:
 
 def host_lag(world: LagMeter, natnet: LagMeter | None) -> HostLag:
     return HostLag(world.bound_s, world.snapshot(), natnet.snapshot() if natnet is not None else None)
+
+
+def with_links(lag: HostLag, since: JobLag | None = None) -> HostLag:
+    """``lag`` (the world's figures, read wherever the world runs) with this process's links' (:data:`LINKS`),
+    counted from ``since`` (an earlier snapshot of them; its longest delay is not taken off: a late run's figure)."""
+    links = LINKS.snapshot()
+    if since is not None:
+        links = JobLag(
+            links.runs - since.runs,
+            links.late_runs - since.late_runs,
+            links.max_late_s,
+            max(0.0, links.behind_s - since.behind_s),
+        )
+    return HostLag(lag.bound_s, lag.world, lag.natnet, links)

@@ -296,6 +296,10 @@ class DryRun:
             Path(world_exit_report) if world_exit_report is not None else default_world_exit_report()
         )
         self.in_process = not process
+        from rpf_fly.emulator.host_lag import LINKS
+
+        self._links_at_start = LINKS.snapshot()
+        """This process's radio links' figures when the dry run began (`host_lag` counts from here)."""
         self.host = host
         self.truth = truth
         self.mocap_noise = mission_mocap_noise(mission) if mocap_noise is None else mocap_noise
@@ -522,13 +526,16 @@ class DryRun:
         self.world.reboot(self.addresses[name])
 
     def host_lag(self) -> Any:
-        """How far the host let the simulated world fall behind its own time so far (`HostLag`); a lab's figures
-        count from the lab's start."""
-        if self.in_process and self.lab is None:
-            from rpf_fly.emulator.host_lag import host_lag
+        """How far the host let the simulated world fall behind its own time so far (`HostLag`), with this
+        process's fake radio links' since the dry run began (`host_lag.LINKS`); a lab's world figures count from the
+        lab's start."""
+        from rpf_fly.emulator.host_lag import host_lag, with_links
 
-            return host_lag(self.world.lag, self.server.lag if self.server is not None else None)
-        return self.world.host_lag()
+        if self.in_process and self.lab is None:
+            lag = host_lag(self.world.lag, self.server.lag if self.server is not None else None)
+        else:
+            lag = self.world.host_lag()
+        return with_links(lag, since=self._links_at_start)
 
     def snapshot(self, name: str):
         """The fake firmware's state of drone ``name`` (position, motors, flags, ...)."""

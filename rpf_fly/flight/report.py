@@ -71,13 +71,13 @@ class FlightReport:
     @property
     def host_sentence(self) -> str:
         """The command's last line when the host could not keep up ('' when it did, or for a real flight)."""
-        from rpf_fly.emulator.host_lag import HOST_BEHIND_REPORT_S, HOST_LATE_BOUND_S
+        from rpf_fly.emulator.host_lag import HOST_BEHIND_REPORT_S, HOST_LATE_BOUND_S, LATE_WHAT
 
         if not self.host_behind_s or self.host_behind_s < HOST_BEHIND_REPORT_S:
             return ""
 
         return (
-            f"the host could not keep up for {self.host_behind_s:.1f} s (simulated steps or mocap frames more "
+            f"the host could not keep up for {self.host_behind_s:.1f} s ({LATE_WHAT} more "
             f"than {HOST_LATE_BOUND_S * 1000:.0f} ms late): this dry run is not evidence"
         )
 

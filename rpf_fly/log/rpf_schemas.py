@@ -234,6 +234,10 @@ HOST_LAG: dict[str, Any] = _obj(
         "behind_s": _num("Seconds so far during which the simulated world ran behind the bound"),
         "world": {"type": "object", "description": "The 100 Hz physics steps: runs, late_runs, max_late_s, behind_s"},
         "natnet": {"type": ["object", "null"], "description": "The NatNet emulator's frames (same fields)"},
+        "links": {
+            "type": ["object", "null"],
+            "description": "The fake radio links' transactions in the reading process (same fields; null: not read)",
+        },
     },
     required=("timestamp", "bound_s", "behind_s", "world"),
     title="rpf_fly.HostLag",

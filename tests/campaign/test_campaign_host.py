@@ -14,8 +14,8 @@ from rpf_fly.mission import load_mission
 ROOT = Path(__file__).resolve().parents[2]
 LAB_3 = ROOT / "missions" / "lab-3.yaml"
 BEHIND = (
-    "the host could not keep up for 0.4 s (simulated steps or mocap frames more than 50 ms late): this dry run "
-    "is not evidence"
+    "the host could not keep up for 0.4 s (simulated steps, mocap frames or radio transactions more than 50 ms "
+    "late): this dry run is not evidence"
 )
 
 

@@ -22,6 +22,7 @@ from rpf_fly.emulator import fake_radio
 from rpf_fly.emulator.dongle_air import RadioTiming
 from rpf_fly.emulator.fake_radio import FakeLink, FakeUri, parse_fake_uri
 from rpf_fly.emulator.fake_world import FakeDroneConfig, FakeWorld, LinkFaults
+from rpf_fly.emulator.host_lag import LINKS
 
 MakeWorld = Callable[..., FakeWorld]
 
@@ -351,6 +352,29 @@ def test_a_dongle_is_held_for_the_air_time_only_not_for_a_slow_drone_answer(
     assert slow_then < 0.6 * 150, f"the slow drone got {slow_then} of 150 while the fast one got all of its own"
     assert slow_then >= 5  # both links took turns from the start (first come, first served)
     assert slots >= 300  # every packet took a slot of the dongle's air (polls too)
+
+
+def test_a_transaction_the_host_held_counts_as_time_behind(make_world: MakeWorld, toc_cache: Path) -> None:
+    """A drone's answer 0.15 s late (a world process or link thread the host did not run) holds that link's
+    transaction past its air slot: the process's links (`host_lag.LINKS`) count it as time behind, which the flight's
+    ``host`` warning says, even when the world's own steps and the flight loop were on time."""
+    world = make_world(1, timing=RadioTiming(transaction_s=0.001))
+    held = {"left": 1}
+
+    def seen(port: int, channel: int, payload: bytes, stamp: float) -> None:
+        if port == 6 and held["left"]:
+            held["left"] -= 1
+            time.sleep(0.15)
+
+    with SyncCrazyflie(world.uri(address(0)), cf=Crazyflie(rw_cache=str(toc_cache))) as scf:
+        before = LINKS.snapshot()
+        world.add_packet_observer(address(0), seen)
+        scf.cf.extpos.send_extpos(0.0, 0.0, 0.0)
+        assert world.wait_until(lambda w: LINKS.snapshot().late_runs > before.late_runs, 5.0)
+        after = LINKS.snapshot()
+    assert after.late_runs > before.late_runs
+    assert after.max_late_s >= 0.14
+    assert after.behind_s - before.behind_s >= 0.14
 
 
 def test_a_link_holds_two_packets_at_most_and_then_holds_back_its_sender(
