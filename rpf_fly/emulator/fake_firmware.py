@@ -348,6 +348,13 @@ class FakeFirmware(FirmwareLog, FirmwareParams, FirmwareFlight):
         with self._lock:
             return self.vehicle.crash(max(now_s, self._now_s), reason, at)
 
+    def true_pose(self) -> tuple[tuple[float, float, float], float]:
+        """The true position (m) and yaw (degrees), as `snapshot` has them: what mocap sees each frame, without the
+        whole snapshot's cost (a world's frames read every drone's at 100-120 Hz)."""
+        with self._lock:
+            v = self.vehicle
+            return (v.pos[0], v.pos[1], v.pos[2]), math.degrees(v.yaw)
+
     def snapshot(self) -> FirmwareSnapshot:
         """A consistent copy of the state."""
         with self._lock:

@@ -237,9 +237,10 @@ class FakeWorld:
     def true_poses(self) -> dict[int, tuple[tuple[float, float, float], tuple[float, float, float, float]]]:
         """address -> (position m, quaternion qx, qy, qz, qw) of every drone's true pose (yaw only)."""
         poses = {}
-        for address, snap in self.snapshots().items():
-            half = math.radians(snap.yaw_deg) / 2.0
-            poses[address] = (snap.position, (0.0, 0.0, math.sin(half), math.cos(half)))
+        for address, drone in self._drones.items():
+            position, yaw_deg = drone.firmware.true_pose()
+            half = math.radians(yaw_deg) / 2.0
+            poses[address] = (position, (0.0, 0.0, math.sin(half), math.cos(half)))
         return poses
 
     def truth_samples(self) -> list[TruthSample]:

@@ -39,6 +39,10 @@ firmware's next position-loop tick; twice what an idle host takes (a head-on pai
 2-core host with 0.05 s)."""
 
 
+_WAY = np.linspace(0.25, 1.0, 4)
+"""Where on its way to rest a drone's clearance is checked: a quarter, half, three quarters and all of it."""
+
+
 class ProximityCheck:
     """The separation and clearance checks with the memory their episodes need (the supervisor runs them)."""
 
@@ -148,14 +152,16 @@ class ProximityCheck:
             return []
         out = []
         near_now = set()
-        for a in agents:
-            pose = tracker.get(a.name)
-            if pose is None:
-                continue
-            clearance = float(self.obstacles.signed_distance(pose.xy))
-            stop = self._stop_point(pose, a, tracker.latency_s)
-            way = pose.xy + (stop - pose.xy) * np.linspace(0.25, 1.0, 4)  # on its way to rest
-            ahead = float(np.min(self.obstacles.signed_distance(way)))
+        tracked = [(a, pose) for a in agents if (pose := tracker.get(a.name)) is not None]
+        distances = np.empty((0, 1 + len(_WAY)))
+        if tracked:  # every drone's position and its way to rest in one call
+            here = np.array([pose.xy for _, pose in tracked])
+            stops = np.array([self._stop_point(pose, a, tracker.latency_s) for a, pose in tracked])
+            points = np.concatenate([here[:, None], here[:, None] + (stops - here)[:, None] * _WAY], axis=1)
+            distances = self.obstacles.signed_distance(points)
+        for (a, _pose), row in zip(tracked, distances):
+            clearance = float(row[0])
+            ahead = float(np.min(row[1:]))
             held = a.name in self._near_obstacle and (
                 min(clearance, ahead) < self.r + RESUME_MARGIN_M or not self._resting(a.name)
             )

@@ -149,6 +149,37 @@ def test_a_separation_hold_resumes_when_the_pair_is_clear_again():
     assert {(f.drone, f.response) for f in early} == {("cf1", "resume"), ("cf2", "resume")}
 
 
+def test_an_obstacle_hold_names_the_drone_near_it_or_closing_on_it_and_resumes_at_rest_clear():
+    """The pole at (0, 0.9), radius 0.1; r = 0.1. cf3 0.08 m from its surface is below r; cf2 0.15 m from it but
+    flying at it at 0.8 m/s would brake into it (its way to rest); cf1 far off. Each drone's own line, and the hold
+    ends only once the drone rests clear by the resume margin."""
+    mission_text = SHORT_MISSION.replace(
+        "planner: {kind: apf, margin: 0}", "planner: {kind: apf, margin: 0}\nsafety: {on_obstacle: hold}"
+    )
+    _, agents, tracker, supervisor = setup(mission_text)
+    near = {"cf1": (-1.0, -0.6, 0.5), "cf2": (-0.25, 0.9, 0.5), "cf3": (0.0, 0.72, 0.5)}
+    see(tracker, 1, 0.0, near)
+    see(tracker, 2, 0.05, {**near, "cf2": (-0.21, 0.9, 0.5)})  # cf2 at 0.8 m/s toward the pole
+    states = {n: state(n, 0.05) for n in agents}
+    holds = {f.drone: f for f in supervisor.check(0.05, agents.values(), tracker, states) if f.kind == "obstacle"}
+    assert set(holds) == {"cf2", "cf3"}, holds
+    assert all(f.response == "hold" for f in holds.values())
+    assert "below r = 0.10 m" in holds["cf3"].message and "0.080 m" in holds["cf3"].message
+    assert "closing: braking from here" in holds["cf2"].message
+    clear = {**near, "cf2": (-0.6, 0.9, 0.5), "cf3": (0.0, 0.4, 0.5)}
+    resumed: dict[str, float] = {}
+    for frame in range(3, 300):  # moved clear, then at rest there
+        now = 0.05 + 0.01 * (frame - 2)
+        see(tracker, frame, now, clear)
+        states = {n: state(n, now) for n in agents}
+        for f in supervisor.check(now, agents.values(), tracker, states):
+            if f.kind == "obstacle":
+                assert f.response == "resume" and f.drone not in resumed, f
+                resumed[f.drone] = now
+    assert set(resumed) == {"cf2", "cf3"}, resumed
+    assert min(resumed.values()) >= 0.05 + REST_S  # not while they moved away
+
+
 def test_a_drone_nobody_commands_stays_in_the_separation_check_until_it_is_on_the_floor():
     _, agents, tracker, supervisor = setup()
     agents["cf2"].set_phase(DronePhase.LINK_LOST, 0.0)
