@@ -13,9 +13,10 @@ Each link runs a thread that emulates cflib's Crazyradio driver with safelink (s
   `packet_loss` fault); a failed transaction is retried with the same packet after 1 ms, and 100 failures in a
   row call cflib's link-error callback with "Too many packets lost" (so an unknown address fails to connect after
   about 0.1 s instead of hanging);
-- successful transactions feed cflib's own `RadioLinkStatistics` with the attempt count as the retry count and the
-  drone's RSSI in empty acks, so link quality, RSSI, rates and congestion reach `cf.link_statistics` as with a
-  Crazyradio; cflib's latency pings are answered by the firmware's echo;
+- successful transactions feed cflib's own `RadioLinkStatistics` with the attempt count as the retry count and an
+  empty ack as the default nRF51 build sends it (the one byte 0xF3: no RSSI, as the emulated Crazyradio's drones
+  answer), so link quality, rates and congestion reach `cf.link_statistics` as with a Crazyradio and `uplink_rssi`
+  does not, as it does not from a real Crazyflie; cflib's latency pings are answered by the firmware's echo;
 - `LinkFaults.latency_s` delays both directions;
 - the links of one dongle number take turns on its air (`fake_world.DongleAir`): each transaction holds the dongle
   for `RadioTiming.transaction_s` only, the drone's answer being computed outside that slot (a dry run's UDP
@@ -205,7 +206,6 @@ class FakeLink:
         spawn = getattr(world, "spawn", None)
         self._drone = spawn(uri.address, uri.place) if spawn is not None else world.port(uri.address)
         self._faults = self._drone.faults if self._drone else LinkFaults()
-        self._rssi = self._drone.rssi_dbm if self._drone else 0
         self._timing = world.timing
         self._dongle = world.dongle(uri.devid)
         self._stats = RadioLinkStatistics(stats_callback) if stats_callback else None
@@ -405,7 +405,7 @@ class FakeLink:
 
     def _deliver(self, down: tuple[int, int, bytes] | None, had_uplink: bool, retry: int) -> None:
         if down is None:
-            ack_data: tuple[int, ...] = (0xF3, 0x01, self._rssi)
+            ack_data: tuple[int, ...] = (0xF3,)  # the nRF51's empty ack: no RSSI in the default build
         else:
             port, channel, payload = down
             header = ((port & 0x0F) << 4) | 0x0C | (channel & 0x03)

@@ -145,6 +145,10 @@ class SpanMeter:
 
     def __init__(self, bound_s: float = HOST_LATE_BOUND_S) -> None:
         self.bound_s = bound_s
+        self.window: tuple[float, float] | None = None
+        """When set, (from, to) in ``time.monotonic`` seconds: only the part of each span inside it counts (a
+        flight's: take-off to the end of its landing; connecting, the collection before take-off and closing hold
+        the links for the flight's own reasons, at no cost to what it judges)."""
         self._lock = threading.Lock()
         self._runs = 0
         self._late_runs = 0
@@ -154,6 +158,11 @@ class SpanMeter:
 
     def record(self, held_s: float, now_s: float) -> None:
         """A run ended at ``now_s`` (``time.monotonic``) after the host held it ``held_s``."""
+        window = self.window
+        if window is not None:
+            if now_s < window[0] or now_s - held_s > window[1]:
+                return
+            held_s = max(0.0, min(now_s, window[1]) - max(now_s - held_s, window[0]))
         with self._lock:
             self._runs += 1
             self._max_late_s = max(self._max_late_s, held_s)

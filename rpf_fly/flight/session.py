@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING
 
 from rpf_fly.flight.events import EventSink
 from rpf_fly.flight.loop import FlightLoop, FlightReport, PlannerFactory
+from rpf_fly.flight.phases import SwarmPhase
 from rpf_fly.flight.recording import McapRecorder
 from rpf_fly.mission.model import Mission
 from rpf_fly.mocap.frame import MocapSource
@@ -27,6 +28,33 @@ class UnresolvableServer(ValueError):
     """``mocap.server`` (or ``mocap.hostname``) names no host this machine can resolve. ``field`` names the key."""
 
     field = "mocap.server"
+
+
+IN_THE_AIR = (SwarmPhase.TAKEOFF, SwarmPhase.FLYING, SwarmPhase.LANDING)
+"""The flight's phases in which a dry run's radio links held by the host count as time behind
+(`rpf_fly.emulator.host_lag.SpanMeter.window`)."""
+
+
+def in_the_air_window(loop: FlightLoop) -> EventSink:
+    """A sink for ``loop``'s events that keeps the process's link meter's window (`host_lag.LINKS.window`) on
+    the flight's time in the air: from the event that says it took off to the one after its landing ends."""
+    import time
+
+    from rpf_fly.emulator.host_lag import LINKS
+
+    LINKS.window = (float("inf"), float("inf"))
+
+    def follow(_event: object) -> None:
+        window = LINKS.window
+        if window is None:
+            return
+        now = time.monotonic()
+        if loop.phase in IN_THE_AIR and window[0] == float("inf"):
+            LINKS.window = (now, float("inf"))
+        elif loop.phase not in IN_THE_AIR and window[0] != float("inf") and window[1] == float("inf"):
+            LINKS.window = (window[0], now)
+
+    return follow
 
 
 def resolve_mocap_server(mission: Mission) -> str:
@@ -218,14 +246,17 @@ def run_flight(
             on_loop(loop)
         watch = None
         if rig is not None:
+            from rpf_fly.emulator.host_lag import LINKS
             from rpf_fly.flight.host_watch import HostWatch
 
+            loop.events.subscribe(in_the_air_window(loop))
             watch = HostWatch(rig.host_lag, loop.events).start()
         try:
             report = loop.run()
         finally:
             if watch is not None:
                 watch.stop()
+                LINKS.window = None
         if watch is not None:
             report.host_behind_s = watch.behind_s
         if recorder is not None:

@@ -31,3 +31,18 @@ def test_time_behind_since_a_reading_is_each_jobs_own_growth() -> None:
     assert HostLag(0.05, world=job(0.3), natnet=None, links=job(2.0)).behind_since(before) == 0.3
     assert after.behind_since(after) == 0.0 and after.sentence(after) == ""
     assert HostLag(0.05, world=job(0.5), natnet=None).behind_since(None) == 0.5  # the world's figures alone
+
+
+def test_a_window_counts_only_the_part_of_each_span_inside_it() -> None:
+    """A flight's window (take-off to the end of its landing): a link held across take-off counts from take-off
+    on, one held before it or after the landing not at all."""
+    meter = SpanMeter(bound_s=0.05)
+    meter.window = (10.0, 20.0)
+    meter.record(0.3, 9.9)  # before take-off
+    meter.record(0.08, 10.03)  # held 9.95 .. 10.03: 0.03 of it in the air, under the bound
+    meter.record(0.2, 10.1)  # 9.9 .. 10.1: 0.1 in the air
+    meter.record(0.3, 20.5)  # 20.2 .. 20.5: after the landing
+    meter.record(0.2, 20.05)  # 19.85 .. 20.05: 0.15 in the air
+    lag = meter.snapshot()
+    assert lag.runs == 3 and lag.late_runs == 2
+    assert abs(lag.behind_s - (0.1 + 0.15)) < 1e-9
