@@ -22,7 +22,7 @@ import cflib.crtp
 import pytest
 from cflib.crazyflie import Crazyflie
 from cflib.crazyflie.syncCrazyflie import SyncCrazyflie
-from host_retry import STARVED_KINDS, fly_on_time
+from host_retry import STARVED_KINDS, fly_on_time, wait_for_a_calm_host
 from xdist_ids import keep_failures_by_plain_id
 
 from rpf_fly.emulator import fake_radio
@@ -40,6 +40,44 @@ def address(index: int) -> int:
 
 def fake_drivers() -> list[type]:
     return [c for c in cflib.crtp.CLASSES if isinstance(c, type) and issubclass(c, fake_radio.FakeRadioDriver)]
+
+
+HOST_TRIES = 2
+"""A test whose own dry run the host held back (its report's ``host`` section) and that failed runs this many times in
+all, the next once the host is calm, as the fault campaign flies such a run again; one that failed on time fails."""
+HOST_CALM_WAIT_S = 30.0
+"""How long a test to be run again waits for a calm host at most (`host_retry.wait_for_a_calm_host`)."""
+
+
+def _held_back(reports: list[pytest.TestReport]) -> bool:
+    return any(r.failed and any(name == "host" for name, _ in r.sections) for r in reports)
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None) -> bool:
+    """Run the test; run it again (up to `HOST_TRIES` in all) when it failed and its own dry run says the host
+    held it back (`pytest_runtest_makereport` below adds the ``host`` section): its verdict was the host's. Only the
+    last run's reports are reported; they say how many ran before."""
+    from _pytest.runner import runtestprotocol
+
+    item.ihook.pytest_runtest_logstart(nodeid=item.nodeid, location=item.location)
+    earlier: list[str] = []
+    for attempt in range(HOST_TRIES):
+        reports = runtestprotocol(item, nextitem=nextitem, log=False)
+        if attempt == HOST_TRIES - 1 or not _held_back(reports):
+            break
+        failed = next(r for r in reports if r.failed)
+        waited = wait_for_a_calm_host(HOST_CALM_WAIT_S)
+        earlier.append(
+            f"run {attempt + 1} failed ({failed.when}) with the host behind: {failed.longreprtext.splitlines()[0]}; "
+            f"run again after {waited:.0f} s"
+        )
+    for report in reports:
+        if earlier:
+            report.sections.append(("host: runs before", "\n".join(earlier)))
+        item.ihook.pytest_runtest_logreport(report=report)
+    item.ihook.pytest_runtest_logfinish(nodeid=item.nodeid, location=item.location)
+    return True
 
 
 @pytest.hookimpl(hookwrapper=True)
