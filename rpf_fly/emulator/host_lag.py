@@ -147,8 +147,8 @@ class SpanMeter:
         self.bound_s = bound_s
         self.window: tuple[float, float] | None = None
         """When set, (from, to) in ``time.monotonic`` seconds: only the part of each span inside it counts (a
-        flight's: take-off to the end of its landing; connecting, the collection before take-off and closing hold
-        the links for the flight's own reasons, at no cost to what it judges)."""
+        flight's: its preflight to the end of its landing; connecting and closing hold the links for the flight's
+        own reasons, at no cost to what it judges)."""
         self._lock = threading.Lock()
         self._runs = 0
         self._late_runs = 0

@@ -30,14 +30,15 @@ class UnresolvableServer(ValueError):
     field = "mocap.server"
 
 
-IN_THE_AIR = (SwarmPhase.TAKEOFF, SwarmPhase.FLYING, SwarmPhase.LANDING)
+WATCHED_PHASES = (SwarmPhase.PREFLIGHT, SwarmPhase.TAKEOFF, SwarmPhase.FLYING, SwarmPhase.LANDING)
 """The flight's phases in which a dry run's radio links held by the host count as time behind
-(`rpf_fly.emulator.host_lag.SpanMeter.window`)."""
+(`rpf_fly.emulator.host_lag.SpanMeter.window`): from the preflight (the estimators judged, extpos needed from here
+on) to the end of the landing; connecting and closing hold the links for the flight's own reasons."""
 
 
-def in_the_air_window(loop: FlightLoop) -> EventSink:
+def watched_window(loop: FlightLoop) -> EventSink:
     """A sink for ``loop``'s events that keeps the process's link meter's window (`host_lag.LINKS.window`) on
-    the flight's time in the air: from the event that says it took off to the one after its landing ends."""
+    `WATCHED_PHASES`: from the event that says the preflight began to the one after the landing ends."""
     import time
 
     from rpf_fly.emulator.host_lag import LINKS
@@ -49,9 +50,9 @@ def in_the_air_window(loop: FlightLoop) -> EventSink:
         if window is None:
             return
         now = time.monotonic()
-        if loop.phase in IN_THE_AIR and window[0] == float("inf"):
+        if loop.phase in WATCHED_PHASES and window[0] == float("inf"):
             LINKS.window = (now, float("inf"))
-        elif loop.phase not in IN_THE_AIR and window[0] != float("inf") and window[1] == float("inf"):
+        elif loop.phase not in WATCHED_PHASES and window[0] != float("inf") and window[1] == float("inf"):
             LINKS.window = (window[0], now)
 
     return follow
@@ -249,7 +250,7 @@ def run_flight(
             from rpf_fly.emulator.host_lag import LINKS
             from rpf_fly.flight.host_watch import HostWatch
 
-            loop.events.subscribe(in_the_air_window(loop))
+            loop.events.subscribe(watched_window(loop))
             watch = HostWatch(rig.host_lag, loop.events).start()
         try:
             report = loop.run()
