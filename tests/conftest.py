@@ -4,6 +4,7 @@ a hang guard (autouse in tests/emulator and tests/radio, through their conftest)
 from __future__ import annotations
 
 import faulthandler
+import json
 import os
 import signal
 import sys
@@ -40,6 +41,24 @@ def address(index: int) -> int:
 
 def fake_drivers() -> list[type]:
     return [c for c in cflib.crtp.CLASSES if isinstance(c, type) and issubclass(c, fake_radio.FakeRadioDriver)]
+
+
+def _behind_in(host_log: Path) -> list[float]:
+    """The seconds behind that the dry runs in other processes wrote to ``host_log`` (`host_watch.HOST_LOG_ENV`;
+    this process's own are in `host_watch.WATCHED`)."""
+    try:
+        lines = host_log.read_text().splitlines()
+    except OSError:
+        return []
+    out = []
+    for line in lines:
+        try:
+            record = json.loads(line)
+            if record["pid"] != os.getpid():
+                out.append(float(record["behind_s"]))
+        except (ValueError, KeyError, TypeError):
+            continue
+    return out
 
 
 HOST_TRIES = 2
@@ -85,14 +104,17 @@ def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo) -> Itera
     """A failed test whose dry run fell behind on a host that could not keep up says so first: its verdict is the
     host's, not the stack's (rpf_fly/emulator/host_lag.py)."""
     from rpf_fly.emulator.host_lag import HOST_BEHIND_REPORT_S
-    from rpf_fly.flight.host_watch import WATCHED
+    from rpf_fly.flight.host_watch import HOST_LOG_ENV, WATCHED
 
+    host_log = Path(tempfile.gettempdir()) / f"rpf-fly-host-{os.getpid()}.jsonl"
     if call.when == "setup":
         WATCHED.clear()
+        host_log.write_text("")  # the dry runs this test flies in processes of their own append here
+        os.environ[HOST_LOG_ENV] = str(host_log)
     outcome = yield
     report = outcome.get_result()
     if call.when == "call" and report.failed:
-        behind = sum(WATCHED)
+        behind = sum(WATCHED) + sum(_behind_in(host_log))
         if behind >= HOST_BEHIND_REPORT_S:
             report.sections.append(
                 (

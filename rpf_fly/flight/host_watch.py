@@ -9,7 +9,9 @@ line carry.
 
 from __future__ import annotations
 
+import json
 import logging
+import os
 from collections.abc import Callable
 from typing import Any
 
@@ -24,6 +26,11 @@ PERIOD_S = 1.0
 WATCHED: list[float] = []
 """Every finished watch's seconds behind, in this process, oldest first: a test runner names a failed flight test
 whose host could not keep up (tests/conftest.py); nothing of the product reads it."""
+
+HOST_LOG_ENV = "RPF_FLY_HOST_LOG"
+"""Where a finished watch whose flight's host fell behind (`HOST_BEHIND_REPORT_S` or more) appends one JSON line,
+``{"pid": int, "behind_s": float}``, when the environment names a file: a program that runs dry runs in processes
+of their own (a test runner, a campaign script) learns which of them were not evidence."""
 
 
 class HostWatch(PeriodicFeed):
@@ -47,6 +54,13 @@ class HostWatch(PeriodicFeed):
         super().stop()
         WATCHED.append(self.behind_s)
         del WATCHED[:-100]
+        path = os.environ.get(HOST_LOG_ENV)
+        if path and self.behind_s >= HOST_BEHIND_REPORT_S:
+            try:
+                with open(path, "a", encoding="utf-8") as log:
+                    log.write(json.dumps({"pid": os.getpid(), "behind_s": round(self.behind_s, 3)}) + "\n")
+            except OSError as err:
+                logger.warning("host watch: %s not written: %s", path, err)
 
     def _once(self) -> bool:
         if self.failed:
