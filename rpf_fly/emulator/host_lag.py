@@ -162,7 +162,8 @@ class SpanMeter:
         if window is not None:
             if now_s < window[0] or now_s - held_s > window[1]:
                 return
-            held_s = max(0.0, min(now_s, window[1]) - max(now_s - held_s, window[0]))
+            start_s, now_s = max(now_s - held_s, window[0]), min(now_s, window[1])
+            held_s = max(0.0, now_s - start_s)
         with self._lock:
             self._runs += 1
             self._max_late_s = max(self._max_late_s, held_s)
