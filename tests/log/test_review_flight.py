@@ -4,6 +4,7 @@ the metrics keys where they always were."""
 
 from __future__ import annotations
 
+import itertools
 import json
 import re
 
@@ -115,17 +116,24 @@ def test_a_dry_run_logs_each_dongles_measured_load_and_review_prints_it(clean_cl
     transactions/s planned, of the about 536 a Crazyradio PA carries of them): a window a second, the busy ones near
     the plan; the review's line and JSON say the same."""
     data = read_log(clean_cli_flight.log)
-    windows = [m.data for m in data.messages("/radio/0")]
-    # a drone is in a window once cflib has reported its link's statistics: the first window, a second after the
-    # links opened, may miss the last drone to connect (seen in a fresh clone), never a later one
-    assert len(windows) >= 10 and all(w["drones"] == ["cf1", "cf2", "cf3"] for w in windows[1:])
-    assert set(windows[0]["drones"]) <= {"cf1", "cf2", "cf3"} and windows[0]["drones"]
-    assert all(w["planned_per_s"] == 165.0 and 500.0 < w["budget_per_s"] < 572.0 for w in windows)
+    messages = list(data.messages("/radio/0"))
+    windows = [m.data for m in messages]
+    assert len(windows) >= 10, windows
+    # a drone is in a window once cflib has reported its link's statistics, and stays in every later one; the
+    # windows before take-off may miss the drones still connecting (how many depends on the host), none after it
+    first_tick = min(m.log_time for n in ("cf1", "cf2", "cf3") for m in data.messages(f"/{n}/planner"))
+    after = [w for m, w in zip(messages, windows, strict=True) if m.log_time >= first_tick]
+    assert len(after) >= 8 and [w for w in after if w["drones"] != ["cf1", "cf2", "cf3"]] == []
+    seen = [set(w["drones"]) for w in windows if w["transactions"] > 0]  # (none counted yet: the plan's drones)
+    assert all(a <= b <= {"cf1", "cf2", "cf3"} for a, b in itertools.pairwise(seen)), seen
+    assert [w for w in windows if not (w["planned_per_s"] == 165.0 and 500.0 < w["budget_per_s"] < 572.0)] == []
     full = [w for w in windows if w["window_s"] > 0.9]
-    assert len(full) >= len(windows) - 2 and all(w["window_s"] < 1.5 for w in full)  # once a second
+    assert len(full) >= len(windows) - 2, windows
+    lengths = sorted(w["window_s"] for w in full)  # once a second (a starved host may stretch one, not most)
+    assert 0.95 <= lengths[len(lengths) // 2] <= 1.1, lengths
     busy = sorted(w["packets_per_s"] for w in full)[len(full) // 2 :]
-    assert 0.8 * 150 <= busy[len(busy) // 2] <= 1.2 * 150  # measured, not copied from the plan
-    assert all(w["transactions_per_s"] >= w["packets_per_s"] for w in windows)  # polls fill the gaps
+    assert 0.8 * 150 <= busy[len(busy) // 2] <= 1.2 * 150, busy  # measured, not copied from the plan
+    assert [w for w in windows if w["transactions_per_s"] < w["packets_per_s"]] == []  # polls fill the gaps
     text, doc = text_and_json(clean_cli_flight.log)
     line = next(line for line in text.splitlines() if line.startswith("radio dongle 0"))
     peak = max(w["packets_per_s"] for w in windows)
