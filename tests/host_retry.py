@@ -21,7 +21,7 @@ CALM_IDLE = 0.35
 """The share of the host's CPU time idle over a second from which a flight that the host held back is flown again:
 with a third of the cores free a dry run keeps its time (the suite's first minutes, its longest flights started
 together on every worker, leave none)."""
-CALM_WAIT_S = 120.0
+CALM_WAIT_S = 30.0
 """How long a flight to be flown again waits for a calm host at most (then it flies anyway)."""
 
 

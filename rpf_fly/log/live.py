@@ -16,9 +16,10 @@ affected. The SDK does not say how many messages it dropped; it logs "outbox for
 
 A client that connects late still sees the scene: ``/scene`` is written once at the start of a flight, so the last
 ``/scene`` message is sent again (the same bytes and log time) whenever a client subscribes to it: at the next
-message after the subscription and once more `RESEND_AGAIN_S` later (the server tells of a subscription from its
+message after the subscription and again `RESEND_AFTER_S` later (the server tells of a subscription from its
 own thread, and a message sent at once can reach the server before the subscription does: a live client once
-missed the scene that way, under load).
+missed the scene that way, under load). A subscription that comes before the topic's first message keeps those
+sends apart too: they start from that message.
 """
 
 from __future__ import annotations
@@ -44,8 +45,10 @@ further behind than that is better served by dropping than by showing the past."
 
 LATCHED = ("/scene",)
 """Topics written once (or rarely): the last message is sent again when a client subscribes."""
-RESEND_AGAIN_S = 0.5
-"""How long after a subscription a latched topic's last message is sent the second time (module doc)."""
+RESEND_AFTER_S = (0.5, 2.0)
+"""When a latched topic's last message is sent again after the send that follows a subscription (module doc):
+seconds after it. A duplicate costs a client nothing (the same message at the same log time); a scene missed
+leaves it without the obstacles for the whole flight."""
 
 INSTALL_HINT = install_hint("live")
 
@@ -189,12 +192,14 @@ class LiveView:
 
     def _subscribed(self, topic: str) -> None:
         """SDK thread: a client subscribed to ``topic``; a latched topic's last message goes out at the next
-        publish and again `RESEND_AGAIN_S` later (on the writer thread, not from the SDK's callback)."""
+        publish and again `RESEND_AFTER_S` later (on the writer thread, not from the SDK's callback)."""
         self.subscriptions += 1
         if topic in LATCHED:
             now = time.monotonic()
             with self._lock:
-                self._resend.setdefault(topic, []).extend((now, now + RESEND_AGAIN_S))
+                times = self._resend.setdefault(topic, [])
+                times.extend((now, *(now + after for after in RESEND_AFTER_S)))
+                times.sort()
 
     def _send_latched(self) -> None:
         now = time.monotonic()
@@ -203,8 +208,13 @@ class LiveView:
             due = [t for t, times in self._resend.items() if times and times[0] <= now and t in self._latched]
             for t in due:
                 times = self._resend[t]
+                fell_due = []
                 while times and times[0] <= now:
-                    times.pop(0)
+                    fell_due.append(times.pop(0))
+                # sends due together (subscribed before the topic's first message) still go out apart: one now,
+                # the others as far after it as they were after the first of them
+                times.extend(now + (d - fell_due[0]) for d in fell_due[1:])
+                times.sort()
                 if not times:
                     del self._resend[t]
             pending = [(t, self._latched[t]) for t in due]

@@ -12,6 +12,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from types import SimpleNamespace
 
 import pytest
 from mcap.reader import make_reader
@@ -283,6 +284,38 @@ def test_a_client_that_subscribes_late_still_gets_the_scene(sdk: None, tmp_path:
             "entities"
         ]
     )
+
+
+def test_a_subscription_before_the_scene_still_gets_it_three_times_apart(
+    sdk: None, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The server may tell of a subscription before the topic's first message (a client connected at the start):
+    the sends it asks for start from that message and keep their spacing, not all at once (a client whose
+    subscription the server had not taken yet would miss every copy)."""
+    import rpf_fly.log.live as live_module
+    from rpf_fly.log.live import RESEND_AFTER_S, LiveView
+
+    clock = [100.0]
+    monkeypatch.setattr(live_module, "time", SimpleNamespace(monotonic=lambda: clock[0]))
+    sent: list[float] = []
+
+    class Recorder:
+        def log(self, data: bytes, log_time: int) -> None:
+            sent.append(clock[0])
+
+    with LiveView(0) as live:
+        live.prepare(["/scene", "/tf"])
+        live._channels["/scene"] = Recorder()  # noqa: SLF001 - count the scene's sends on the fake clock
+        live._subscribed("/scene")  # noqa: SLF001 - as the SDK's thread calls it
+        clock[0] += 5.0  # the flight's first scene comes later
+        live.publish("/scene", T0, b"{}")
+        assert sent == [105.0, 105.0]  # the copy for the subscription, then the message itself
+        for _ in range(40):  # the flight goes on: 0.1 s a message
+            clock[0] += 0.1
+            live.publish("/tf", T0, b"{}")
+    after = [t - 105.0 for t in sent[2:]]  # each at the first message at or after its time
+    assert len(after) == len(RESEND_AFTER_S), after
+    assert all(a - 1e-9 <= t <= a + 0.1 + 1e-9 for t, a in zip(after, RESEND_AFTER_S, strict=True)), after
 
 
 def test_a_port_already_taken_refuses_in_one_line(sdk: None, tmp_path: Path):
