@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import logging
 import math
+import queue
 import threading
 import time
 from collections.abc import Callable, Mapping
@@ -29,6 +30,23 @@ from rpf_fly.radio.outbox import Action, SenderPool
 from .backend import CONTROLLER_PARAMS, Vec3
 
 logger = logging.getLogger("rpf_fly.radio.cflib_backend")  # the backend's records keep their logger's name
+
+
+def link_room(cf: Any, timeout_s: float) -> bool:
+    """Wait until ``cf``'s link can take a packet without blocking: cflib's radio link holds one between the sender
+    and its driver thread (``RadioDriver.out_queue``, ``Queue(1)``), freed when the driver takes it for its next
+    transaction. True at once for a link without such a queue (``fake://`` takes every packet at once); False when
+    ``timeout_s`` passed first (the sender then blocks in cflib's send, as it would without this)."""
+    out = getattr(getattr(cf, "link", None), "out_queue", None)
+    if not isinstance(out, queue.Queue) or out.maxsize <= 0:
+        return True
+    with out.not_full:  # the queue's own condition (its mutex): notified once by each of the driver's gets
+        room = out.not_full.wait_for(lambda: len(out.queue) < out.maxsize, timeout_s)
+        # pass the wake-up on: a get notifies one waiter, and one of cflib's own senders (parameters, logging, its
+        # ping) may be blocked in put for this slot; if this sender then sends nothing (a stale extpos dropped), that
+        # put would wait out its 2 s timeout on an empty queue ("Could not send packet to copter")
+        out.not_full.notify()
+        return room
 
 
 def _read_params(cf: Any, names: tuple[str, ...]) -> dict[str, float] | None:
@@ -214,7 +232,7 @@ class CflibConnection:
         with self._lock:
             if drone.closing:
                 raise RuntimeError("given up while configuring")
-            drone.outbox = self._pool.outbox(drone.name, partial(self._send, drone))
+            drone.outbox = self._pool.outbox(drone.name, partial(self._send, drone), partial(link_room, cf))
             drone.up, drone.configured, drone.error = True, True, None
 
     def _set_param(self, cf: Any, name: str, value: float) -> None:

@@ -20,8 +20,11 @@ The mechanism modelled, as cflib 0.1.34 has it (``cflib/crtp/radiodriver.py``):
 Times: :class:`Timing` from a `RadioType` (rpf_fly/emulator/crazyradio_timing.py: control transfer, bulk
 transfers, the Enhanced ShockBurst cycle per attempt). Attempts are lost at random with ``loss`` each.
 
-Not modelled: the host's own delays (thread wake-ups, the GIL; on a loaded machine they add), the flight's commands
-(take-off, landing) and parameter writes.
+The host's own time per transaction is modelled as a fixed figure (`HOST_TRANSACTION_S`, `HOST_SWITCH_S`): cflib
+hands every transaction from the link's thread to the shared radio thread and back through two queues, and pyusb
+wraps each USB call in Python layers; that time passes between the dongle's transfers, so the dongle carries less
+than its own figures allow. Not modelled: a loaded host's further delays (thread wake-ups, the GIL), the flight's
+commands (take-off, landing) and parameter writes.
 """
 
 from __future__ import annotations
@@ -36,6 +39,18 @@ from typing import Any
 
 BROADCAST = -1
 """The broadcaster's place of a link index, and the broadcast address in an air key."""
+
+
+HOST_TRANSACTION_S = 0.3e-3
+"""The host's time per transaction, between the dongle's transfers: cflib 0.1.34's two queue hand-overs (the link's
+thread to the shared radio thread and back) and pyusb's Python layers around the bulk write and read. Measured
+through the emulated dongles (`rpf-fly radio probe --dry-run --links 8`, docs/radio.md "Radio budget"): one link
+carries 951 transactions/s on a PA and 1136 on a 2.0 where the dongles' own figures allow 1337 and 1675, 0.30 and
+0.28 ms more each. A lab's probe (``radio.budget_packets_s``) replaces it with what its own host does."""
+HOST_SWITCH_S = 0.2e-3
+"""The host's time per address switch on top of the control transfer (pyusb's layers around it, the shared radio
+thread serving many links): eight links through the emulated dongles carry 450 transactions/s on a PA and 277 on a
+2.0 where the figures allow 572 and 323, 0.47 and 0.51 ms more each."""
 
 
 @dataclass(frozen=True)
@@ -53,6 +68,10 @@ class Timing:
     """After an unacknowledged attempt: the PA's ARD, the 2.0's acknowledgement timeout."""
     scale: float = 1.0
     """Every time multiplied by this (a lab's measured budget against the figures')."""
+    host_s: float = HOST_TRANSACTION_S
+    """The host's time per transaction (`HOST_TRANSACTION_S`)."""
+    host_switch_s: float = HOST_SWITCH_S
+    """The host's time per address switch (`HOST_SWITCH_S`)."""
 
     def on_air_s(self, payload: int) -> float:
         return (8 * (1 + 5 + payload + 2) + 9) / self.rate_bps
@@ -64,10 +83,10 @@ class Timing:
         radio = self.upload_s_per_byte * up + lost * (self.ramp_s + self.on_air_s(up) + self.wait_s)
         if acked:
             radio += 2 * self.ramp_s + self.on_air_s(up) + self.on_air_s(ack) + self.irq_s
-        return (self.bulk_s + radio) * self.scale
+        return (self.bulk_s + radio + self.host_s) * self.scale
 
     def switch_s(self, changes: int) -> float:
-        return changes * self.control_s * self.scale
+        return changes * (self.control_s + self.host_switch_s) * self.scale
 
 
 def timing_of(radio: Any, rate: str, scale: float = 1.0) -> Timing:

@@ -27,6 +27,14 @@ What an outbox keeps, and in which order (the rules that make a queued stream sa
   one action a turn: a command is never overtaken by anything queued after it. A drone's actions never go out from
   two threads at once.
 
+Room first: cflib's radio link holds one packet at a time between the sender and its driver thread
+(``RadioDriver.out_queue``, a ``Queue(1)``), which takes the next one only after its transaction and its
+``rate_limit`` sleep. A sender that picked a drone's action and then blocked in cflib's ``put`` would hand over
+what was newest when it picked, and a newer setpoint or mocap position queued meanwhile would wait a whole turn of
+the link more. So an outbox whose link can say so (``room``) is served only once its link has room: the pool waits
+for that (up to `ROOM_WAIT_S`, then it sends anyway and blocks as before), and then takes the drone's action,
+the newest of each kind, and checks the extpos's age at that moment.
+
 How the pool sends: one thread at a time does the work in the normal case, taking the drones in the order their
 work arrived, one action each turn; so a tick's ten setpoints cost one thread wake-up, not ten. A thread whose send
 has lasted longer than :data:`STUCK_S` is taken as stuck in a dying link (it keeps that drone, whose further
@@ -60,6 +68,11 @@ microseconds, a wait for the driver's one-packet queue on a busy dongle a few mi
 interval is 5 ms; a full driver queue on a dying link blocks for the radio's retries, 0.1-2 s): another thread
 takes over the other drones. Taking a slow-but-healthy send for a stuck one costs only a thread wake-up."""
 
+
+ROOM_WAIT_S = 0.5
+"""How long a sender waits for a drone's link to take a packet before it takes the drone's action anyway and waits
+inside cflib's send (a dying link's queue stays full until cflib declares it lost, 0.4-2 s: its commands then wait
+there, as without the wait for room)."""
 
 EXTPOS_MAX_WAIT_S = 0.05
 """How long a mocap pose may wait in the ground station, from its receipt to its hand-over to cflib, and still go to
@@ -98,10 +111,12 @@ class SenderPool:
         self._recheck_at: float | None = None
         self._watcher: threading.Thread | None = None
 
-    def outbox(self, name: str, run: Callable[[Action], None]) -> Outbox:
+    def outbox(self, name: str, run: Callable[[Action], None], room: Callable[[float], bool] | None = None) -> Outbox:
         """A new drone's outbox; ``run(action)`` sends one of its actions on a pool thread (what it raises is logged
-        and the pool goes on)."""
-        return Outbox(self, name, run)
+        and the pool goes on); ``room(timeout_s)``, if given, waits until the drone's link can take a packet
+        without blocking (True) or the timeout passed (False): the action is taken then (module docstring, "Room
+        first")."""
+        return Outbox(self, name, run, room)
 
     @property
     def threads(self) -> int:
@@ -162,6 +177,8 @@ class SenderPool:
                     continue
                 box = self._ready.popleft()
                 box._queued = False
+                if box._room is not None:
+                    self._wait_for_room(me, box)
                 action = box._take()
                 if action is None:  # a stale extpos dropped: nothing of this drone's went out
                     if not self._ready:
@@ -186,6 +203,27 @@ class SenderPool:
                     self._ready.append(box)  # behind the drones already waiting: one action a turn
                 if not self._ready:  # the burst is out: wake the waiters once, not after every drone's send
                     self._done.notify_all()
+
+    def _wait_for_room(self, me: int, box: Outbox) -> None:
+        """Lock held on entry and exit: wait (lock released, counted as a send: others are taken over if it lasts)
+        until ``box``'s link can take a packet, so that the action taken next is the newest."""
+        room = box._room
+        assert room is not None
+        box._busy = True  # not scheduled twice meanwhile
+        self._working -= 1
+        self._sending[me] = time.monotonic()
+        if self._ready:
+            self._arm(self._sending[me])
+        self._lock.release()
+        try:
+            room(ROOM_WAIT_S)
+        except Exception:  # noqa: BLE001 - a link that cannot say: send as without the wait
+            logger.exception("drone %s: waiting for room in its link failed", box.name)
+        finally:
+            self._lock.acquire()
+        del self._sending[me]
+        self._working += 1
+        box._busy = False
 
     def _arm(self, since: float) -> None:
         """Look at the line again when a send begun at ``since`` would count as stuck."""
@@ -234,10 +272,13 @@ class SenderPool:
 class Outbox:
     """One drone's pending commands (module docstring); made by :meth:`SenderPool.outbox`."""
 
-    def __init__(self, pool: SenderPool, name: str, run: Callable[[Action], None]):
+    def __init__(
+        self, pool: SenderPool, name: str, run: Callable[[Action], None], room: Callable[[float], bool] | None = None
+    ):
         self.name = name
         self._pool = pool
         self._run = run
+        self._room = room
         self._commands: deque[Action] = deque()
         self._setpoint: Action | None = None
         self._extpos: Action | None = None

@@ -40,6 +40,7 @@ arena: {x: [-3.0, 3.0], y: [-3.0, 3.0], z: [0.0, 2.0]}
 flight: {height: 0.6, speed: 0.5, rate_hz: 10, goal_tolerance: 0.1, takeoff_s: 2.0, land_s: 2.0, timeout_s: 40}
 planner: {kind: apf, margin: 0}
 mocap: {kind: natnet, server: 127.0.0.1, rate_hz: 100}
+radio: {extpos_rate_hz: 20}  # six drones' extpos at 30 Hz: over one Crazyradio PA's budget (docs/radio.md)
 drones:
   - {name: cf1, uri: radio://0/80/2M/E7E7E7E701, start: [-1.5, -1.0], goal: [1.5, -1.0]}
   - {name: cf2, uri: radio://0/80/2M/E7E7E7E702, start: [-1.5, 0.0], goal: [1.5, 0.0]}

@@ -113,7 +113,7 @@ def test_a_simulated_log_ends_cleanly(lab_log):
 
 def test_a_dry_run_logs_each_dongles_measured_load_and_review_prints_it(clean_cli_flight):
     """/radio/0 (three drones, setpoints at 10 Hz, extpos at 30 Hz, cflib's pings at 10 Hz, keep-alives at 5 Hz: 165
-    transactions/s planned, of the about 536 a Crazyradio PA carries of them): a window a second, the busy ones near
+    transactions/s planned, of the about 423 a Crazyradio PA carries of them): a window a second, the busy ones near
     the plan; the review's line and JSON say the same."""
     data = read_log(clean_cli_flight.log)
     messages = list(data.messages("/radio/0"))
@@ -126,7 +126,7 @@ def test_a_dry_run_logs_each_dongles_measured_load_and_review_prints_it(clean_cl
     assert len(after) >= 8 and [w for w in after if w["drones"] != ["cf1", "cf2", "cf3"]] == []
     seen = [set(w["drones"]) for w in windows if w["transactions"] > 0]  # (none counted yet: the plan's drones)
     assert all(a <= b <= {"cf1", "cf2", "cf3"} for a, b in itertools.pairwise(seen)), seen
-    assert [w for w in windows if not (w["planned_per_s"] == 165.0 and 500.0 < w["budget_per_s"] < 572.0)] == []
+    assert [w for w in windows if not (w["planned_per_s"] == 165.0 and 400.0 < w["budget_per_s"] < 445.0)] == []
     full = [w for w in windows if w["window_s"] > 0.9]
     assert len(full) >= len(windows) - 2, windows
     lengths = sorted(w["window_s"] for w in full)  # once a second (a starved host may stretch one, not most)
