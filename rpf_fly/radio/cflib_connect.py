@@ -32,13 +32,19 @@ from .backend import CONTROLLER_PARAMS, Vec3
 logger = logging.getLogger("rpf_fly.radio.cflib_backend")  # the backend's records keep their logger's name
 
 
+def _link_queue(cf: Any) -> queue.Queue[Any] | None:
+    """cflib's bounded out queue of ``cf``'s link (``RadioDriver.out_queue``), None for a link without one."""
+    out = getattr(getattr(cf, "link", None), "out_queue", None)
+    return out if isinstance(out, queue.Queue) and out.maxsize > 0 else None
+
+
 def link_room(cf: Any, timeout_s: float) -> bool:
     """Wait until ``cf``'s link can take a packet without blocking: cflib's radio link holds one between the sender
     and its driver thread (``RadioDriver.out_queue``, ``Queue(1)``), freed when the driver takes it for its next
     transaction. True at once for a link without such a queue (``fake://`` takes every packet at once); False when
     ``timeout_s`` passed first (the sender then blocks in cflib's send, as it would without this)."""
-    out = getattr(getattr(cf, "link", None), "out_queue", None)
-    if not isinstance(out, queue.Queue) or out.maxsize <= 0:
+    out = _link_queue(cf)
+    if out is None:
         return True
     with out.not_full:  # the queue's own condition (its mutex): notified once by each of the driver's gets
         room = out.not_full.wait_for(lambda: len(out.queue) < out.maxsize, timeout_s)
@@ -232,7 +238,8 @@ class CflibConnection:
         with self._lock:
             if drone.closing:
                 raise RuntimeError("given up while configuring")
-            drone.outbox = self._pool.outbox(drone.name, partial(self._send, drone), partial(link_room, cf))
+            room = partial(link_room, cf) if _link_queue(cf) is not None else None  # fake:// takes every packet
+            drone.outbox = self._pool.outbox(drone.name, partial(self._send, drone), room)
             drone.up, drone.configured, drone.error = True, True, None
 
     def _set_param(self, cf: Any, name: str, value: float) -> None:
