@@ -4,10 +4,14 @@ threads."""
 
 from __future__ import annotations
 
+import queue
 import threading
 import time
 from collections.abc import Callable
+from functools import partial
 
+from rpf_fly.radio import outbox
+from rpf_fly.radio.cflib_connect import link_room
 from rpf_fly.radio.outbox import STUCK_S, Outbox, SenderPool
 
 
@@ -238,3 +242,93 @@ def test_an_extpos_whose_pose_waited_too_long_is_dropped_and_counted_not_sent(ca
     assert box.wait_idle(2.0)
     assert radio.sent == ["first", "fresh", "unstamped"] and box.extpos_stale == 1
     pool.close()
+
+
+class Link:
+    """cflib's radio link as the sender sees it: ``link.out_queue``, the driver's ``Queue(1)``."""
+
+    def __init__(self) -> None:
+        self.out_queue: queue.Queue[str] = queue.Queue(1)
+
+
+class Cf:
+    def __init__(self) -> None:
+        self.link = Link()
+
+
+def test_a_sender_waits_for_room_in_cflibs_queue_and_then_sends_the_newest_setpoint(monkeypatch) -> None:
+    """Room first: with the link's one-packet queue full, setpoints queued meanwhile replace each other in the
+    outbox; when the driver takes the packet waiting there, the newest goes in, without blocking in ``put``."""
+    monkeypatch.setattr(outbox, "ROOM_WAIT_S", 30.0)  # however slow the host, the wait outlasts the test's steps
+    cf = Cf()
+    cf.link.out_queue.put("older")  # the driver has not taken it yet
+    pool = SenderPool("room")
+    handed: list[tuple[str, bool]] = []
+
+    def run(action: Callable[[], None]) -> None:
+        action()
+
+    def setpoint(label: str) -> Callable[[], None]:
+        def send() -> None:
+            room = not cf.link.out_queue.full()
+            cf.link.out_queue.put(label, timeout=2.0)  # as cflib's RadioDriver.send_packet
+            handed.append((label, room))
+
+        return send
+
+    box = pool.outbox("cf1", run, partial(link_room, cf))
+    try:
+        for k in range(5):
+            box.setpoint(setpoint(f"sp{k}"))
+            time.sleep(0.02)
+        assert handed == []  # nothing taken while there is no room: the newest waits in the outbox
+        assert cf.link.out_queue.get(timeout=1.0) == "older"  # the driver takes its next packet
+        assert box.wait_idle(10.0)
+        assert handed == [("sp4", True)] and box.setpoints_replaced == 4
+        assert cf.link.out_queue.get(timeout=1.0) == "sp4"
+    finally:
+        pool.close()
+
+
+def test_waiting_for_room_passes_the_wake_up_on_to_cflibs_own_blocked_sender() -> None:
+    """The driver's take wakes one waiter. When that is the room wait and the sender then sends nothing (its extpos
+    was stale), cflib's own sender blocked in ``put`` (a parameter, a log block, its ping) must still get the
+    slot at once, not wait out its 2 s timeout on an empty queue."""
+    cf = Cf()
+    cf.link.out_queue.put("older")
+    room_waiting = threading.Event()
+    got: list[bool] = []
+
+    def waiter() -> None:
+        room_waiting.set()
+        got.append(link_room(cf, 2.0))  # then takes nothing
+
+    def cflib_sender(done: list[float]) -> None:
+        began = time.monotonic()
+        cf.link.out_queue.put("ping", timeout=2.0)
+        done.append(time.monotonic() - began)
+
+    def waiters(n: int) -> None:  # CPython's Condition keeps its waiters in order: wait for the n-th to queue
+        deadline = time.monotonic() + 10.0
+        while len(cf.link.out_queue.not_full._waiters) < n and time.monotonic() < deadline:  # type: ignore[attr-defined]
+            time.sleep(0.005)
+
+    threading.Thread(target=waiter, daemon=True).start()
+    room_waiting.wait(1.0)
+    waiters(1)  # the room wait first
+    put_took: list[float] = []
+    blocked = threading.Thread(target=cflib_sender, args=(put_took,), daemon=True)
+    blocked.start()
+    waiters(2)  # then cflib's put: two waiters for one slot
+    assert cf.link.out_queue.get(timeout=1.0) == "older"  # the driver takes: one notification, to the first
+    blocked.join(1.5)
+    assert got == [True] and put_took and put_took[0] < 1.0, (got, put_took)
+    assert cf.link.out_queue.get(timeout=1.0) == "ping"
+
+
+def test_a_link_without_a_bounded_queue_has_room_at_once() -> None:
+    class Fake:
+        link = object()  # fake:// takes every packet at once
+
+    began = time.monotonic()
+    assert link_room(Fake(), 5.0) and time.monotonic() - began < 1.0
