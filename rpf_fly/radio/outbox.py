@@ -56,6 +56,7 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable, Iterable
+from functools import partial
 
 logger = logging.getLogger(__name__)
 
@@ -184,20 +185,7 @@ class SenderPool:
                     if not self._ready:
                         self._done.notify_all()
                     continue
-                self._working -= 1
-                self._sending[me] = time.monotonic()
-                if self._ready:  # others wait behind this send: take them over if it blocks
-                    self._arm(self._sending[me])
-                self._lock.release()
-                try:
-                    box._run(action)
-                except BaseException:  # a pool thread never dies: the next commands must still go out
-                    logger.exception("drone %s: sending a command failed", box.name)
-                finally:
-                    self._lock.acquire()
-                del self._sending[me]
-                self._working += 1
-                box._busy = False
+                self._outside_lock(me, box, partial(box._run, action), "sending a command failed")
                 if box._pending():
                     box._queued = True
                     self._ready.append(box)  # behind the drones already waiting: one action a turn
@@ -205,20 +193,26 @@ class SenderPool:
                     self._done.notify_all()
 
     def _wait_for_room(self, me: int, box: Outbox) -> None:
-        """Lock held on entry and exit: wait (lock released, counted as a send: others are taken over if it lasts)
-        until ``box``'s link can take a packet, so that the action taken next is the newest."""
+        """Lock held on entry and exit: wait until ``box``'s link can take a packet, so that the action taken next
+        is the newest (a link that cannot say is sent to as without the wait)."""
         room = box._room
         assert room is not None
-        box._busy = True  # not scheduled twice meanwhile
+        self._outside_lock(me, box, partial(room, ROOM_WAIT_S), "waiting for room in its link failed")
+
+    def _outside_lock(self, me: int, box: Outbox, call: Callable[[], object], failed: str) -> None:
+        """Lock held on entry and exit: ``call()`` with the lock released, counted as a send (``box`` not scheduled
+        again meanwhile; the drones in line behind are taken over if it blocks); what it raises is logged with
+        ``failed`` (a pool thread never dies: the next commands must still go out)."""
+        box._busy = True
         self._working -= 1
         self._sending[me] = time.monotonic()
         if self._ready:
             self._arm(self._sending[me])
         self._lock.release()
         try:
-            room(ROOM_WAIT_S)
-        except Exception:  # noqa: BLE001 - a link that cannot say: send as without the wait
-            logger.exception("drone %s: waiting for room in its link failed", box.name)
+            call()
+        except BaseException:
+            logger.exception("drone %s: %s", box.name, failed)
         finally:
             self._lock.acquire()
         del self._sending[me]
