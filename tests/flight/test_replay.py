@@ -353,7 +353,7 @@ def test_emulate_replay_serves_the_logged_poses_over_natnet_at_their_logged_time
             while proc.poll() is None and time.monotonic() < deadline:
                 frame = client.receive(0.2)
                 if frame is not None:
-                    received.append((frame.frame_number, frame.receive_time_s, frame.bodies))
+                    received.append((frame.frame_number, frame.capture_time_s, frame.bodies))
         out, _ = proc.communicate(timeout=10)
     finally:
         proc.kill()
@@ -375,7 +375,9 @@ def test_emulate_replay_serves_the_logged_poses_over_natnet_at_their_logged_time
     (n0, r0, _), (n1, r1, _) = received[0], received[-1]
     logged_span = (frames[n1 - 1].t_ns - frames[n0 - 1].t_ns) / 1e9 / speed
     # the frames keep their spacing, give or take how late the emulator says it sent them (a host that held it
-    # back: beside a loaded suite its frames spanned 3.26 s for 2.48 s logged)
+    # back: beside a loaded suite its frames spanned 3.26 s for 2.48 s logged): the span of the frames' own
+    # timestamps (the emulator's clock when it sent each), not of their receipt here, which a host that held this
+    # process back stretches (0.39 s in a fresh clone's suite) whatever the emulator did
     late_s = float(re.search(r"latest ([0-9.]+) ms behind its time", out).group(1)) / 1e3
     assert logged_span > 1.0 and abs((r1 - r0) - logged_span) < 0.1 * logged_span + 0.05 + late_s, (
         r1 - r0,
