@@ -33,6 +33,19 @@ ESTIMATE_HISTORY_S = 0.5
 """How far back an on-board estimate may be matched against mocap: telemetry queued behind a full radio arrives
 hundreds of milliseconds late, and a late estimate of a drone at 0.5 m/s is decimetres behind the newest pose."""
 
+FEED_GAP_S = 0.25
+"""A drone whose poses stopped reaching this check (and with them its extpos, forwarded in the same loop) for longer
+than this flew on its IMU alone: a loop stall, a blackout, an occlusion. The firmware's estimator drifts meanwhile,
+about 0.5 x 0.3 m/s^2 x gap^2 plus its noise (1 cm over this gap; 4.7-17.5 cm over 1 s, `fake_vehicle`), and the
+controller holds that drifted estimate on its setpoint: off the mocap pose of its own time because it went unfed, not
+because it stopped following extpos."""
+
+FEED_SETTLE_S = 0.5
+"""... so an estimate made within this long after the poses came back is not judged wrong: the first extpos since
+must reach the firmware (behind a full radio, hundreds of milliseconds: `ESTIMATE_HISTORY_S`) before the estimate
+snaps back to it. Judged, two such estimates 0.1 m off cut the motors of a drone the watchdog was landing after a 1 s
+loop stall on lab-3."""
+
 
 def _pose_at(
     history: deque[tuple[float, tuple[float, float, float]]], stamp_s: float | None
@@ -62,6 +75,11 @@ class EstimateCheck:
         self._diverging: dict[str, tuple[int, int, float]] = {}
         self._estimate_stopped: set[str] = set()
         self._history: dict[str, deque[tuple[float, tuple[float, float, float]]]] = {}
+        self._fed_at: dict[str, float] = {}
+        """Each drone's last check that took a new pose (when its extpos went too)."""
+        self._fed_again: dict[str, float] = {}
+        """When each drone's poses came back after a gap over `FEED_GAP_S` (its first ones: fed before the flight
+        began: the preflight waits for every estimate to agree with mocap before take-off)."""
 
     def check(
         self, now_s: float, agents: list[DroneAgent], tracker: PoseTracker, states: dict[str, DroneState]
@@ -82,6 +100,9 @@ class EstimateCheck:
             fed = estimator_position(pose, tracker.latency_s) if pose is not None else None
             if pose is not None and fed is not None and pose.valid and (not history or history[-1][0] != pose.stamp_s):
                 history.append((pose.stamp_s, fed))
+                if now_s - self._fed_at.get(a.name, now_s) > FEED_GAP_S:
+                    self._fed_again[a.name] = now_s
+                self._fed_at[a.name] = now_s
             while history and history[0][0] < now_s - ESTIMATE_HISTORY_S:
                 history.popleft()
             if (
@@ -100,8 +121,13 @@ class EstimateCheck:
                 continue
             off = math.dist(state.position_m, fed)
             then = _pose_at(history, state.estimate_stamp_s)
+            made_s = now_s if state.estimate_stamp_s is None else state.estimate_stamp_s
             nearest: float | None
-            if then is not None:  # the estimate against where mocap saw the drone when it was made
+            if (
+                made_s < self._fed_again.get(a.name, -math.inf) + FEED_SETTLE_S
+            ):  # made unfed, or before its first extpos since
+                nearest = None
+            elif then is not None:  # the estimate against where mocap saw the drone when it was made
                 nearest = math.dist(state.position_m, then)
                 wrong_m, what = ESTIMATE_WRONG_M, "the mocap pose of its own time"
             elif (

@@ -530,6 +530,45 @@ def test_an_estimate_made_during_a_loop_stall_is_not_judged_against_the_pose_aft
     assert [f.response for f in wrong if f.response == "stop"] == ["stop"], wrong
 
 
+def test_an_estimate_that_drifted_unfed_is_not_cut_until_its_first_extpos_since_could_reach_it():
+    """A 1 s loop stall forwards no extpos: the firmware's estimator drifts on its IMU alone (0.13 m, the emulator's
+    median over 1 s) and the controller holds the drifted estimate, so the estimates made after the loop came back,
+    until the first extpos since reaches the drone (0.2 s behind a full radio), are 0.13 m off the mocap pose of their
+    own time. Judged, two of them cut a healthy drone's motors as the watchdog landed it; they are not judged now. An
+    estimator that stops following extpos once it is fed again is still stopped."""
+    _, agents, tracker, supervisor = setup()
+    agents["cf1"].set_phase(DronePhase.LANDING, 0.0)
+    states = {n: state(n, 0.0) for n in agents}
+
+    def truth(t: float) -> tuple[float, float, float]:
+        return (-1.0, -0.6, 1.0 - 0.2 * t)
+
+    def estimate(made: float, stops_following_s: float) -> tuple[float, float, float]:
+        x, y, z = truth(made)
+        drift = 0.13 * min(1.0, max(0.0, made - 0.5)) ** 2 if made < 1.7 else 0.0  # fed again at 1.5, reached 1.7
+        runaway = 0.4 * max(0.0, made - stops_following_s)
+        return (x + drift + runaway, y, z)
+
+    def fly(stops_following_s: float) -> list[tuple[float, object]]:
+        found = []
+        for k in range(301):
+            t = k / 100
+            if 0.5 < t < 1.5:
+                continue  # the loop stalls: no pose taken, no extpos sent, no check
+            see(tracker, k + 1, t, {**POSITIONS, "cf1": truth(t)})
+            if k % 10 == 5 or t == 1.5:
+                made = t - 0.01
+                states["cf1"] = replace(
+                    state("cf1", t), position_m=estimate(made, stops_following_s), estimate_stamp_s=made
+                )
+            found += [(t, f) for f in supervisor.check(t, agents.values(), tracker, states) if f.kind == "estimator"]
+        return [(t, f) for t, f in found if f.response == "stop"]
+
+    assert not fly(stops_following_s=9.0)
+    stops = fly(stops_following_s=2.2)
+    assert len(stops) == 1 and 2.2 < stops[0][0] <= 2.2 + 0.1 / 0.4 + 0.2, stops
+
+
 def test_mocap_is_said_back_only_when_a_pose_is_back_not_when_the_blind_drones_land():
     _, agents, tracker, supervisor = setup()
     states = {n: state(n, 0.0) for n in agents}
