@@ -14,6 +14,7 @@ from rpf_fly.flight.phases import DronePhase
 from rpf_fly.flight.poses import PoseTracker, estimator_position
 from rpf_fly.mission.model import SafetySettings
 from rpf_fly.radio.backend import DroneState
+from rpf_fly.radio.outbox import EXTPOS_MAX_WAIT_S
 
 ESTIMATE_DIVERGENCE_M = 0.15
 """In flight, an on-board position estimate this far from a fresh mocap pose (in 2 status samples in a row) means
@@ -21,10 +22,11 @@ the estimator no longer takes extpos: the drone holds its ESTIMATE at the setpoi
 With extpos streaming the two agree within a centimetre or two."""
 
 ESTIMATE_WRONG_M = 0.10
-"""In flight, an on-board estimate this far from the mocap pose OF ITS OWN TIME (the telemetry's firmware
-timestamp, `DroneState.estimate_stamp_s`; in 2 status samples in a row) is wrong, not late: motors off. With extpos
-streaming the two agree within 1-3 cm (the mocap's own lag and the stamp's few milliseconds at flight speed), so
-10 cm is a diverged estimator 0.2 s after it diverged at 0.5 m/s. Without the stamp the check must find the
+"""In flight, an on-board estimate this far from the mocap poses OF ITS OWN TIME (the telemetry's firmware
+timestamp, `DroneState.estimate_stamp_s`, and the `extpos_late_s` before it that an extpos may take to reach the
+drone; in 2 status samples in a row) is wrong, not late: motors off. With extpos streaming the estimate lies on that
+stretch of the fed path within 1-3 cm (the mocap's own lag and the stamp's few milliseconds at flight speed), so
+10 cm is a diverged estimator 0.2 s after it diverged at 0.5 m/s (plus the stretch's length on a slow link). Without the stamp the check must find the
 estimate far from EVERY pose of the last `ESTIMATE_HISTORY_S` to tell wrong from late: a drone whose estimator runs
 away at 0.57 m/s is then stopped 0.75 s after, 0.6 m off its track (into a wall, in random fault campaign seed
 9)."""
@@ -37,7 +39,7 @@ FEED_GAP_S = 0.25
 """A drone whose poses stopped reaching this check (and with them its extpos, forwarded in the same loop) for longer
 than this flew on its IMU alone: a loop stall, a blackout, an occlusion. The firmware's estimator drifts meanwhile,
 about 0.5 x 0.3 m/s^2 x gap^2 plus its noise (1 cm over this gap; 4.7-17.5 cm over 1 s, `fake_vehicle`), and the
-controller holds that drifted estimate on its setpoint: off the mocap pose of its own time because it went unfed, not
+controller holds that drifted estimate on its setpoint: off the mocap poses of its own time because it went unfed, not
 because it stopped following extpos."""
 
 FEED_SETTLE_S = 0.5
@@ -65,6 +67,37 @@ def _pose_at(
             return bx + w * (cx - bx), by + w * (cy - by), bz + w * (cz - bz)
         before = after
     return history[-1][1]
+
+
+def extpos_late_s(state: DroneState) -> float:
+    """How long after its pose was received an extpos may reach the drone's estimator: its wait in the ground station
+    (at most `EXTPOS_MAX_WAIT_S`: older ones are dropped) plus the link's echo round trip (cflib's 95th percentile,
+    through the same queue and radio turns as the extpos: a bound of the one-way trip), at most
+    `ESTIMATE_HISTORY_S`. Through a shared dongle on a busy radio the round trip is 0.1-0.3 s, and an estimate that
+    follows its extpos that late is decimetres behind the pose received at its own time: late, not wrong."""
+    rtt_s = (state.link.latency_ms or 0.0) / 1000.0
+    return min(ESTIMATE_HISTORY_S, EXTPOS_MAX_WAIT_S + rtt_s)
+
+
+def _distance_to_fed(
+    history: deque[tuple[float, tuple[float, float, float]]],
+    position: tuple[float, float, float],
+    from_s: float,
+    to_s: float,
+) -> float:
+    """The distance from ``position`` to the path of the fed positions from ``from_s`` to ``to_s`` (linear between
+    the poses, clipped to the history's start); ``to_s`` lies within the history (`_pose_at` is not None)."""
+    start = _pose_at(history, max(from_s, history[0][0]))
+    end = _pose_at(history, to_s)
+    path = [q for q in (start, *(p for t, p in history if from_s < t < to_s), end) if q is not None]
+    best = math.inf
+    for a, b in zip(path, path[1:] or path):
+        ab = (b[0] - a[0], b[1] - a[1], b[2] - a[2])
+        span = ab[0] ** 2 + ab[1] ** 2 + ab[2] ** 2
+        along = sum((position[j] - a[j]) * ab[j] for j in range(3)) / span if span > 0.0 else 0.0
+        w = min(1.0, max(0.0, along))
+        best = min(best, math.dist(position, (a[0] + w * ab[0], a[1] + w * ab[1], a[2] + w * ab[2])))
+    return best
 
 
 class EstimateCheck:
@@ -125,11 +158,13 @@ class EstimateCheck:
             nearest: float | None
             if (
                 made_s < self._fed_again.get(a.name, -math.inf) + FEED_SETTLE_S
-            ):  # made unfed, or before its first extpos since
+            ):  # made unfed, or before it was fed again
                 nearest = None
-            elif then is not None:  # the estimate against where mocap saw the drone when it was made
-                nearest = math.dist(state.position_m, then)
-                wrong_m, what = ESTIMATE_WRONG_M, "the mocap pose of its own time"
+            elif then is not None and state.estimate_stamp_s is not None:  # against what mocap had fed it by then
+                late_s = extpos_late_s(state)
+                nearest = _distance_to_fed(history, state.position_m, made_s - late_s, made_s)
+                wrong_m = ESTIMATE_WRONG_M
+                what = f"the mocap poses of its own time (and the {late_s:.2f} s its extpos may take to reach it)"
             elif (
                 state.estimate_stamp_s is not None and history and state.estimate_stamp_s < history[0][0]
             ):  # made before the poses kept (the loop stalled)
