@@ -26,10 +26,10 @@ ESTIMATE_WRONG_M = 0.10
 timestamp, `DroneState.estimate_stamp_s`, and the `extpos_late_s` before it that an extpos may take to reach the
 drone; in 2 status samples in a row) is wrong, not late: motors off. With extpos streaming the estimate lies on that
 stretch of the fed path within 1-3 cm (the mocap's own lag and the stamp's few milliseconds at flight speed), so
-10 cm is a diverged estimator 0.2 s after it diverged at 0.5 m/s (plus the stretch's length on a slow link). Without the stamp the check must find the
-estimate far from EVERY pose of the last `ESTIMATE_HISTORY_S` to tell wrong from late: a drone whose estimator runs
-away at 0.57 m/s is then stopped 0.75 s after, 0.6 m off its track (into a wall, in random fault campaign seed
-9)."""
+10 cm is a diverged estimator 0.2 s after it diverged at 0.5 m/s (plus the stretch's length on a slow link).
+Without the stamp the check must find the estimate far from EVERY pose of the last `ESTIMATE_HISTORY_S` to tell
+wrong from late: a drone whose estimator runs away at 0.57 m/s is then stopped 0.75 s after, 0.6 m off its track
+(into a wall, in random fault campaign seed 9)."""
 
 ESTIMATE_HISTORY_S = 0.5
 """How far back an on-board estimate may be matched against mocap: telemetry queued behind a full radio arrives

@@ -199,6 +199,28 @@ def radio_loads(mission: Mission) -> list[DongleLoad]:
     ]
 
 
+CONNECT_TRANSACTIONS = 1000
+"""What one drone's connection takes of its dongle's transactions: cflib reads the log and parameter TOCs (an
+entry a request and its answer, unless the TOC cache has them) and every parameter's value (about 300 parameters on
+a current firmware, two transactions each), then the flight's configuration. Drones connect in parallel, so a
+dongle's drones all wait for the sum: 8 drones on one emulated Crazyradio PA (100 parameters each) connected after
+15.7 s cold and 6.3 s with their TOCs cached."""
+
+CONNECT_MARGIN = 2.0
+"""A connection is given this many times its share of the dongle before it is called timed out."""
+
+
+def connect_timeouts(mission: Mission, floor_s: float) -> dict[str, float]:
+    """Drone name -> how long its connection may take: ``floor_s``, or, where its dongle is shared, `CONNECT_MARGIN`
+    times the dongle's time for every drone on it to connect (`CONNECT_TRANSACTIONS` each at the budget's rate):
+    a flat 10 s timed out all 8 drones of circle-8-r3 on one Crazyradio PA while they were still connecting."""
+    return {
+        name: max(floor_s, CONNECT_MARGIN * len(load.drones) * CONNECT_TRANSACTIONS / load.budget)
+        for load in radio_loads(mission)
+        for name in load.drones
+    }
+
+
 def link_rate_limits(mission: Mission) -> dict[str, int]:
     """Drone name -> the ``rate_limit`` of its ``radio://`` link (the budget's choice or the URI's own)."""
     return {name: limit for load in radio_loads(mission) for name, limit in load.rate_limits.items()}

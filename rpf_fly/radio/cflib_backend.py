@@ -136,6 +136,9 @@ RESET_TO_FIRMWARE = 1
 class CflibBackend(CflibConnection, CflibTelemetry):
     """`DroneBackend` implementation on cflib. See the module docstring for behaviour and thread model."""
 
+    CONNECT_TIMEOUT_S = 10.0
+    """One drone's connection and configuration, on a dongle of its own (`budget.connect_timeouts` for shared)."""
+
     def __init__(
         self,
         *,
@@ -145,11 +148,12 @@ class CflibBackend(CflibConnection, CflibTelemetry):
         ext_pos_std_dev: float | None = None,
         reset_estimators: bool = False,
         status_period_ms: int = 100,
-        connect_timeout_s: float = 10.0,
+        connect_timeout_s: float = CONNECT_TIMEOUT_S,
         param_timeout_s: float = 2.0,
         init_drivers: bool = True,
         packed_extpos: bool = False,
         rate_limits: Mapping[str, int] | None = None,
+        connect_timeouts: Mapping[str, float] | None = None,
     ) -> None:
         """
         Args:
@@ -166,6 +170,8 @@ class CflibBackend(CflibConnection, CflibTelemetry):
                 (rpf_fly/radio/broadcast.py) instead of one unicast packet a drone.
             rate_limits: drone name -> the ``rate_limit`` its ``radio://`` link is opened with (cflib's
                 ``?rate_limit=N``: at most N transactions a second, polls included; rpf_fly/radio/budget.py).
+            connect_timeouts: drone name -> its own ``connect_timeout_s`` (a drone sharing a busy dongle waits for
+                the others' connections too: `budget.connect_timeouts`).
         """
         self._cache_dir = str(cache_dir) if cache_dir is not None else None
         self._use_extpose = use_extpose
@@ -178,6 +184,7 @@ class CflibBackend(CflibConnection, CflibTelemetry):
         self._init_drivers = init_drivers
         self._packed_extpos = packed_extpos
         self._rate_limits = dict(rate_limits or {})
+        self._connect_timeouts = dict(connect_timeouts or {})
         self._packed: PackedExtposSender | None = None
         self._lock = threading.RLock()
         self._drones: dict[str, CflibDrone] = {}
@@ -198,7 +205,7 @@ class CflibBackend(CflibConnection, CflibTelemetry):
         (``radio.extpos: packed``) with `PACKED_EXT_POS_STD_DEV_M` as ``locSrv.extPosStdDev`` (each drone hears
         every broadcast four times); every ``radio://`` link's ``rate_limit`` from the budget. Every flight path
         (the CLI's check and flight, a distributed worker) builds its backend here, so none forgets it."""
-        from rpf_fly.radio.budget import link_rate_limits
+        from rpf_fly.radio.budget import connect_timeouts, link_rate_limits
 
         packed = mission.radio.extpos == "packed"
         return cls(
@@ -207,6 +214,7 @@ class CflibBackend(CflibConnection, CflibTelemetry):
             packed_extpos=packed,
             ext_pos_std_dev=PACKED_EXT_POS_STD_DEV_M if packed else None,
             rate_limits=link_rate_limits(mission),
+            connect_timeouts=connect_timeouts(mission, cls.CONNECT_TIMEOUT_S),
         )
 
     def close(self) -> None:

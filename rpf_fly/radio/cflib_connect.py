@@ -87,6 +87,7 @@ class CflibConnection:
     _reset_on_connect: bool
     _status_period_ms: int
     _connect_timeout_s: float
+    _connect_timeouts: dict[str, float]
     _param_timeout_s: float
     _init_drivers: bool
     _packed_extpos: bool
@@ -125,7 +126,8 @@ class CflibConnection:
         self._swarm = Swarm(links, factory=CachedCfFactory(rw_cache=self._cache_dir))
         by_uri = {d.link_uri: d for d in self._drones.values()}
         self._swarm.sequential(lambda scf, uri: setattr(by_uri[uri], "scf", scf), {u: [u] for u in links})
-        errors = self._parallel(self._connect_one, list(self._drones.values()), self._connect_timeout_s + 5.0)
+        longest = max((self.connect_timeout_of(n) for n in self._drones), default=self._connect_timeout_s)
+        errors = self._parallel(self._connect_one, list(self._drones.values()), longest + 5.0)
         for name, message in errors.items():
             if message == "timed out":  # its thread is still running: make sure it never comes up
                 self._give_up(self._drones[name], "connection timed out")
@@ -163,6 +165,10 @@ class CflibConnection:
         with self._lock:  # a thread that overran may still add its error later: hand out a copy
             return dict(errors)
 
+    def connect_timeout_of(self, name: str) -> float:
+        """How long the drone's connection and configuration may take (its own, or the backend's)."""
+        return self._connect_timeouts.get(name, self._connect_timeout_s)
+
     def _connect_one(self, drone: CflibDrone) -> None:
         assert drone.scf is not None
         cf = drone.scf.cf
@@ -189,10 +195,11 @@ class CflibConnection:
         )
         for caller, callback in temporary:
             caller.add_callback(callback)
-        deadline = time.monotonic() + self._connect_timeout_s
+        timeout_s = self.connect_timeout_of(drone.name)
+        deadline = time.monotonic() + timeout_s
         try:
             cf.open_link(drone.link_uri)
-            if not done.wait(self._connect_timeout_s) or failure:
+            if not done.wait(timeout_s) or failure:
                 message = failure[0] if failure else "connection timed out"
                 self._give_up(drone, message)
                 raise RuntimeError(message)

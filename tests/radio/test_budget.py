@@ -26,9 +26,11 @@ from rpf_fly.emulator.fake_world import BurstLoss
 from rpf_fly.mission import MissionError, parse_mission
 from rpf_fly.radio import budget
 from rpf_fly.radio.budget import (
+    CONNECT_TRANSACTIONS,
     EXPECTED_ATTEMPT_LOSS,
     KEEPALIVE_HZ,
     LINK_PING_HZ,
+    connect_timeouts,
     link_rate_limits,
     link_uri,
     radio_loads,
@@ -210,6 +212,26 @@ def test_each_radio_link_is_opened_with_its_rate_limit_and_cflib_reads_it() -> N
     assert link_uri(mission.drones[2].uri, 5) == mission.drones[2].uri and uri_rate_limit(mission.drones[2].uri) == 77
     assert link_uri("fake://0/80/2M/E7E7E7E701?x=1&y=2", 40) == "fake://0/80/2M/E7E7E7E701?x=1&y=2"
     assert link_uri("radio://0/80/2M/E7E7E7E701?foo=1", 40) == "radio://0/80/2M/E7E7E7E701?foo=1&rate_limit=40"
+
+
+def test_a_drone_sharing_a_busy_dongle_is_given_time_for_every_drones_connection_on_it() -> None:
+    """Drones connect in parallel and share their dongle's transactions: 8 on one emulated PA took 6.3-15.7 s (TOCs
+    cached or not), so a flat 10 s timed every one of them out. Each is given twice its dongle's time for all of
+    its drones' connections, and never less than a drone alone is given."""
+    from rpf_fly.radio.cflib_backend import CflibBackend
+
+    eight = parse_mission(mission_text(8, 10.0, "extpos: packed"))
+    (load,) = radio_loads(eight)
+    timeouts = connect_timeouts(eight, 10.0)
+    assert set(timeouts) == {d.name for d in eight.drones}
+    assert all(t == pytest.approx(2.0 * 8 * CONNECT_TRANSACTIONS / load.budget) for t in timeouts.values())
+    assert min(timeouts.values()) > 30.0  # 8 000 transactions on a dongle that carries ~330 of this mix a second
+    two_dongles = connect_timeouts(parse_mission(mission_text(8, 10.0, "extpos: packed", dongles=2)), 10.0)
+    assert max(two_dongles.values()) < min(timeouts.values())  # four drones a dongle wait for four connections
+    assert connect_timeouts(parse_mission(mission_text(1, 10.0)), 10.0) == {"cf1": 10.0}  # alone: the floor
+    backend = CflibBackend.for_mission(eight, None)
+    assert backend.connect_timeout_of("cf8") == timeouts["cf8"]
+    assert CflibBackend().connect_timeout_of("cf8") == CflibBackend.CONNECT_TIMEOUT_S  # no mission: the floor
 
 
 def test_bad_radio_keys_and_a_packed_mission_whose_ids_clash_are_mission_errors() -> None:
