@@ -45,6 +45,7 @@ from rpf_fly.flight.findings import Finding
 from rpf_fly.flight.phases import DronePhase
 from rpf_fly.flight.poses import EXTPOS_LEAD_FROM_S, POSE_LATE_S, PoseTracker
 from rpf_fly.flight.proximity_check import ProximityCheck
+from rpf_fly.flight.radio_lag_check import RadioLagCheck
 from rpf_fly.flight.tracking_check import TrackingCheck
 from rpf_fly.mission.model import Mission
 from rpf_fly.planning.obstacles import ObstacleSet
@@ -110,6 +111,7 @@ class Supervisor:
         self._glitching: set[str] = set()
         self._turned: set[str] = set()
         self._estimates = EstimateCheck(mission.safety)
+        self._radio_lag = RadioLagCheck(mission.flight.rate_hz)
         self._poor_link: set[str] = set()
         self._late_landing: set[str] = set()
         self._late_mocap = False
@@ -153,6 +155,7 @@ class Supervisor:
         findings += self._crashes(agents, states)
         findings += self._estimates.check(now_s, agents, tracker, states)
         findings += self._link_quality(agents, states)
+        findings += self._radio_lag.check(now_s, agents, states)
         findings += self._tracking.check(now_s, agents, tracker, states)
         findings += self._mocap_latency(tracker)
         return findings

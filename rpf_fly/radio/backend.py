@@ -169,6 +169,9 @@ class DroneState:
     """The position controller's gains and limits the drone flies with (firmware parameter names, e.g.
     ``posCtlPid.xKp``: `CONTROLLER_PARAMS`), read from its parameters at connect; None where the backend cannot
     read them (the flight then assumes the firmware's defaults: rpf_fly/flight/response.py)."""
+    setpoints_superseded: int = 0
+    """Setpoints of this drone replaced by a newer one before its radio link took them, since it connected: a link
+    that lags its setpoint stream (rpf_fly/flight/radio_lag_check.py)."""
 
 
 @runtime_checkable

@@ -255,6 +255,7 @@ class CflibTelemetry:
                 estimate_stamp_s=d.measured_s,
                 target_m=d.target,
                 controller_params=d.controller_params,
+                setpoints_superseded=d.outbox.setpoints_replaced if d.outbox is not None else 0,
             )
 
     def states(self) -> dict[str, DroneState]:
