@@ -36,7 +36,11 @@ HOLD_REACTION_S = 0.1
 """From the mocap picture of a breach to the hold setpoint acting on the drone: the supervisor's pass (every mocap
 frame), the hold setpoint sent at once through the radio's queue, the drone's estimator taking the extpos, and the
 firmware's next position-loop tick; twice what an idle host takes (a head-on pair at 1 m/s each met on a loaded
-2-core host with 0.05 s)."""
+2-core host with 0.05 s). A drone whose radio link is slower takes its link's echo round trip instead
+(`ProximityCheck.radio_delay_s`)."""
+
+RADIO_DELAY_MAX_S = 0.5
+"""The most a link's round trip adds to a hold's reaction (cflib's 95th percentile over its last 100 pings)."""
 
 
 _WAY = np.linspace(0.25, 1.0, 4)
@@ -60,6 +64,10 @@ class ProximityCheck:
         self._now_s = 0.0
         self._moving_since: dict[str, float] = {}
         """drone -> when it was last seen moving (faster than `REST_M_S`): an episode ends `REST_S` after."""
+        self.radio_delay_s: dict[str, float] = {}
+        """drone -> its link's echo round trip (s; the supervisor sets it from the telemetry at each pass): a hold
+        through a slower link than `HOLD_REACTION_S` allows reaches the drone that much later (8 drones on one
+        emulated Crazyradio PA on a full host, round trips of 0.2 s: a pair held 0.3 s before it met)."""
 
     def rest(self, now_s: float, agents: list[DroneAgent], tracker: PoseTracker) -> None:
         """Note which drones move (by the mocap or by their response model, whichever says faster)."""
@@ -119,10 +127,11 @@ class ProximityCheck:
 
     def _stop_point(self, pose: TrackedPose, agent: DroneAgent | None, latency_s: float | None) -> complex:
         """Where a drone at ``pose`` comes to rest if it is held now: its mocap picture is ``latency_s`` old and the
-        hold reaches it `HOLD_REACTION_S` later, flown at its speed, then it brakes as its own controller does
-        (`Braking.stop_point`) from its state: a streaming drone's velocity and tilt from its response model (the
-        mocap's filtered velocity trails a drone that speeds up; the faster of the two is taken), else the tilt its
-        setpoint asks for; a drone this process does not command: the firmware's defaults in steady flight."""
+        hold reaches it `HOLD_REACTION_S` (or its link's round trip, if longer) later, flown at its speed, then it
+        brakes as its own controller does (`Braking.stop_point`) from its state: a streaming drone's velocity and
+        tilt from its response model (the mocap's filtered velocity trails a drone that speeds up; the faster of the
+        two is taken), else the tilt its setpoint asks for; a drone this process does not command: the firmware's
+        defaults in steady flight."""
         braking = agent.braking if agent is not None else braking_for(None)
         streaming = agent if agent is not None and agent.phase in STREAMING_PHASES else None
         setpoint = streaming.last_setpoint if streaming is not None else None
@@ -132,7 +141,8 @@ class ProximityCheck:
             tilt = model.tilt_deg
             if abs(model.velocity) > abs(velocity):
                 velocity = model.velocity
-        ahead = pose.xy + velocity * (HOLD_REACTION_S + (latency_s or 0.0))
+        reaction_s = max(HOLD_REACTION_S, self.radio_delay_s.get(agent.name, 0.0) if agent is not None else 0.0)
+        ahead = pose.xy + velocity * (reaction_s + (latency_s or 0.0))
         return braking.stop_point(ahead, velocity, setpoint, tilt)
 
     def _stopped_apart(

@@ -44,7 +44,7 @@ from rpf_fly.flight.events import ERROR, INFO, WARNING
 from rpf_fly.flight.findings import Finding
 from rpf_fly.flight.phases import DronePhase
 from rpf_fly.flight.poses import EXTPOS_LEAD_FROM_S, POSE_LATE_S, PoseTracker
-from rpf_fly.flight.proximity_check import ProximityCheck
+from rpf_fly.flight.proximity_check import RADIO_DELAY_MAX_S, ProximityCheck
 from rpf_fly.flight.radio_lag_check import RadioLagCheck
 from rpf_fly.flight.tracking_check import TrackingCheck
 from rpf_fly.mission.model import Mission
@@ -86,6 +86,14 @@ under half of it, then plans on, and its extpos is carried ahead by the latency 
 firmware's estimator takes each late pose as current, so a moving drone's estimate trails it by its speed x the
 latency and its controller lurches after it. Measured on the firmware model (docs/flight.md): a mocap delay of 0.08
 and 0.10 s flown through campaign/pillars-6 passes as it is, 0.12 s crashed two drones into pillars."""
+
+
+def radio_delay_s(state: DroneState) -> float:
+    """How long a command may take through the drone's link: cflib's echo round trip (95th percentile), at most
+    `RADIO_DELAY_MAX_S`; 0 for a link that is down or has not measured one yet."""
+    if not state.link.up or state.link.latency_ms is None:
+        return 0.0
+    return min(RADIO_DELAY_MAX_S, state.link.latency_ms / 1000.0)
 
 
 class Supervisor:
@@ -147,6 +155,7 @@ class Supervisor:
         findings += self._geofence(agents, tracker)
         foreign = [n for n in others if (p := tracker.get(n)) is not None and p.position[2] > ON_FLOOR_Z_M]
         self._proximity.rest(now_s, agents + uncommanded, tracker)
+        self._proximity.radio_delay_s = {n: radio_delay_s(state) for n, state in states.items()}
         findings += self._proximity.separation(agents + uncommanded + grounded, tracker, foreign)
         findings += self._blind(now_s, agents, uncommanded, foreign, tracker, states)
         findings += self._proximity.clearance(agents, tracker)

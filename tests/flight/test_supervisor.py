@@ -149,6 +149,27 @@ def test_a_separation_hold_resumes_when_the_pair_is_clear_again():
     assert {(f.drone, f.response) for f in early} == {("cf1", "resume"), ("cf2", "resume")}
 
 
+def test_a_closing_pair_is_held_earlier_when_its_links_round_trip_says_a_hold_reaches_them_later():
+    """Two drones closing head-on at 0.5 m/s each. Through links whose echo round trip is 0.3 s a hold reaches them
+    0.2 s later than `HOLD_REACTION_S` allows, and they fly on 0.2 m closer meanwhile: the closing breach is found
+    that much earlier (at 0.2 m more separation). A link without a measured round trip changes nothing."""
+
+    def held_at(rtt_ms: float | None) -> float:
+        _, agents, tracker, supervisor = setup()
+        for k in range(300):
+            t = k / 100
+            x = 0.8 - 0.5 * t  # each drone 0.8 m from the middle at first
+            see(tracker, k + 1, t, {**POSITIONS, "cf1": (-x, 2.0, 0.5), "cf2": (x, 2.0, 0.5)})
+            states = {n: replace(state(n, t), link=LinkState(True, 100.0, rtt_ms)) for n in agents}
+            if any(f.kind == "separation" for f in supervisor.check(t, agents.values(), tracker, states)):
+                return 2 * x
+        raise AssertionError("never held")
+
+    quick, slow = held_at(None), held_at(300.0)
+    assert held_at(20.0) == quick  # a quicker link than the hold's own allowance: as without one
+    assert 0.2 - 0.03 <= slow - quick <= 0.2 + 0.03, (quick, slow)
+
+
 def test_an_obstacle_hold_names_the_drone_near_it_or_closing_on_it_and_resumes_at_rest_clear():
     """The pole at (0, 0.9), radius 0.1; r = 0.1. cf3 0.08 m from its surface is below r; cf2 0.15 m from it but
     flying at it at 0.8 m/s would brake into it (its way to rest); cf1 far off. Each drone's own line, and the hold
