@@ -32,7 +32,8 @@ MISSION = (
 def test_the_logged_load_of_each_dongle_is_what_the_firmwares_received(tmp_path: Path, toc_cache: Path) -> None:
     """Three drones on two dongles (1 ms of air), extpos at 50 Hz and setpoints at 10 Hz for 1.5 s. Tolerance: 2
     packets a drone at each end (cflib's statistics close a window every 0.1 s; the one straddling an end carries
-    only its 10 Hz pings, as nothing else is sent then) plus 1 %."""
+    only its 10 Hz pings, as nothing else is sent then) plus 1 %. The quiet second at the end lets the windows a
+    loaded host delayed close before the log does (0.3 s lost 11 of 194 packets in a fresh clone's suite)."""
     world = FakeWorld(
         {a: FakeDroneConfig.at(0.5 * i, 0.0) for i, a in enumerate(ADDRESSES)}, timing=RadioTiming(transaction_s=0.001)
     )
@@ -74,7 +75,7 @@ def test_the_logged_load_of_each_dongle_is_what_the_firmwares_received(tmp_path:
         assert backend.wait_sent(timeout_s=1.0)
         superseded = backend.radio_counts()["cf3"].superseded
         assert superseded >= 25
-        time.sleep(0.3)  # quiet again
+        time.sleep(1.0)  # quiet again, long enough for cflib's statistics windows that a loaded host delays to close
         with lock:
             stop = dict(counted)
         sent = {n: stop[n] - start[n] for n in names}
