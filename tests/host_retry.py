@@ -5,10 +5,11 @@ fell behind (rpf_fly/campaign/runner.py): used by the CLI flights (tests/conftes
 from __future__ import annotations
 
 import os
-import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import TypeVar
+
+from rpf_fly.campaign.calm_host import wait_for_a_calm_host
 
 STARVED_KINDS = ("loop", "host", "mocap_late")
 """The flight's own events that say the host held a fault-free dry run back: its loop late or stalled between two
@@ -16,43 +17,6 @@ ticks, the simulated world behind its time (`rpf_fly.flight.host_watch`), no moc
 Motive and the flight's NatNet client share the host)."""
 
 FlightT = TypeVar("FlightT")
-
-CALM_IDLE = 0.35
-"""The share of the host's CPU time idle over a second from which a flight that the host held back is flown again:
-with a third of the cores free a dry run keeps its time (the suite's first minutes, its longest flights started
-together on every worker, leave none)."""
-CALM_WAIT_S = 30.0
-"""How long a flight to be flown again waits for a calm host at most (then it flies anyway)."""
-
-
-def _cpu_times() -> tuple[float, float] | None:
-    """(idle, total) jiffies of the host since boot from /proc/stat; None where there is none."""
-    try:
-        with open("/proc/stat") as stat:
-            fields = [float(x) for x in stat.readline().split()[1:]]
-    except (OSError, ValueError):
-        return None
-    return fields[3] + (fields[4] if len(fields) > 4 else 0.0), sum(fields)
-
-
-def wait_for_a_calm_host(wait_s: float = CALM_WAIT_S, idle: float = CALM_IDLE) -> float:
-    """Wait until the host was at least ``idle`` idle over a second, for ``wait_s`` at most; the seconds waited.
-    Without /proc/stat: a fixed 20 s, as the fault campaign waits before it flies a run again."""
-    began = time.monotonic()
-    last = _cpu_times()
-    if last is None:
-        time.sleep(min(20.0, wait_s))
-        return time.monotonic() - began
-    while time.monotonic() - began < wait_s:
-        time.sleep(1.0)
-        now = _cpu_times()
-        if now is None:
-            break
-        spent = now[1] - last[1]
-        if spent > 0 and (now[0] - last[0]) / spent >= idle:
-            break
-        last = now
-    return time.monotonic() - began
 
 
 def fly_on_time(

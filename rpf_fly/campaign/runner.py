@@ -12,12 +12,12 @@ import contextlib
 import random
 import shlex
 import tempfile
-import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TypeVar
 
+from rpf_fly.campaign.calm_host import wait_for_a_calm_host
 from rpf_fly.campaign.flights import FlightRecord, LabRecord, fly_against_lab, fly_dry_run
 from rpf_fly.campaign.judge import Verdict, judge_flight, judge_lab
 from rpf_fly.campaign.missions import (
@@ -51,8 +51,9 @@ OnVerdict = Callable[[Verdict], None]
 HOST_TRIES = 3
 """A run whose host fell behind its simulated world is no evidence either way: it is flown again, this many times
 in all (docs/flight.md, "When the host cannot keep up")."""
-HOST_RETRY_WAIT_S = 20.0
-"""How long a run whose host fell behind waits before it is flown again (a busy host may have calmed down)."""
+HOST_RETRY_WAIT_S = 60.0
+"""How long a run whose host fell behind waits at most, for a calm host (`calm_host.wait_for_a_calm_host`), before it
+is flown again."""
 NOT_EVIDENCE = "this dry run is not evidence"
 """The end of the line a dry run or lab says when its host could not keep up (`rpf_fly.emulator.host_lag`)."""
 
@@ -121,7 +122,7 @@ def _evidence(fly: Callable[[], _Record], judge: Callable[[_Record], Verdict]) -
                 verdict.events.append(f"campaign: flown {tries} times, the host fell behind on the first {tries - 1}")
             return verdict
         if tries < HOST_TRIES:
-            time.sleep(HOST_RETRY_WAIT_S)
+            wait_for_a_calm_host(HOST_RETRY_WAIT_S)
     verdict = judge(record)
     verdict.failures.append(f"the host fell behind on each of {HOST_TRIES} tries: not evidence, fly it again")
     verdict.passed = False
