@@ -25,13 +25,14 @@ def _cpu_times() -> tuple[float, float] | None:
     return fields[3] + (fields[4] if len(fields) > 4 else 0.0), sum(fields)
 
 
-def wait_for_a_calm_host(wait_s: float = CALM_WAIT_S, idle: float = CALM_IDLE) -> float:
-    """Wait until the host was at least ``idle`` idle over a second, for ``wait_s`` at most; the seconds waited.
-    Without /proc/stat: `FIXED_WAIT_S` (at most ``wait_s``)."""
+def wait_for_a_calm_host(wait_s: float = CALM_WAIT_S, idle: float = CALM_IDLE, at_least_s: float = 0.0) -> float:
+    """Wait ``at_least_s``, then until the host was at least ``idle`` idle over a second, for ``wait_s`` at most in
+    all; the seconds waited. Without /proc/stat: `FIXED_WAIT_S` (at least ``at_least_s``, at most ``wait_s``)."""
     began = time.monotonic()
+    time.sleep(max(0.0, min(at_least_s, wait_s)))
     last = _cpu_times()
     if last is None:
-        time.sleep(min(FIXED_WAIT_S, wait_s))
+        time.sleep(max(0.0, min(max(FIXED_WAIT_S, at_least_s), wait_s) - (time.monotonic() - began)))
         return time.monotonic() - began
     while time.monotonic() - began < wait_s:
         time.sleep(1.0)

@@ -51,9 +51,12 @@ OnVerdict = Callable[[Verdict], None]
 HOST_TRIES = 3
 """A run whose host fell behind its simulated world is no evidence either way: it is flown again, this many times
 in all (docs/flight.md, "When the host cannot keep up")."""
+HOST_RETRY_MIN_WAIT_S = 20.0
+"""How long a run whose host fell behind waits at least before it is flown again: the last run's processes finish
+(its lab's world, its log) and a busy host may calm down. Flown again after a second's calm, a lab run fell behind on
+all three tries on an otherwise idle 2-core host."""
 HOST_RETRY_WAIT_S = 60.0
-"""How long a run whose host fell behind waits at most, for a calm host (`calm_host.wait_for_a_calm_host`), before it
-is flown again."""
+"""... and at most, for a calm host (`calm_host.wait_for_a_calm_host`)."""
 NOT_EVIDENCE = "this dry run is not evidence"
 """The end of the line a dry run or lab says when its host could not keep up (`rpf_fly.emulator.host_lag`)."""
 
@@ -122,7 +125,7 @@ def _evidence(fly: Callable[[], _Record], judge: Callable[[_Record], Verdict]) -
                 verdict.events.append(f"campaign: flown {tries} times, the host fell behind on the first {tries - 1}")
             return verdict
         if tries < HOST_TRIES:
-            wait_for_a_calm_host(HOST_RETRY_WAIT_S)
+            wait_for_a_calm_host(HOST_RETRY_WAIT_S, at_least_s=HOST_RETRY_MIN_WAIT_S)
     verdict = judge(record)
     verdict.failures.append(f"the host fell behind on each of {HOST_TRIES} tries: not evidence, fly it again")
     verdict.passed = False

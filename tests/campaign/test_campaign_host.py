@@ -37,6 +37,7 @@ def stub(monkeypatch, behind: list[bool], lab: bool = False) -> list[FlightRecor
         return Verdict("gust", rec.mission.name, "cf2", passed=True)
 
     monkeypatch.setattr(runner, "HOST_RETRY_WAIT_S", 0.0)
+    monkeypatch.setattr(runner, "HOST_RETRY_MIN_WAIT_S", 0.0)
     monkeypatch.setattr(runner, "fly_dry_run", fly)
     monkeypatch.setattr(runner, "fly_against_lab", fly)
     monkeypatch.setattr(runner, "judge_flight", judge)
