@@ -75,8 +75,7 @@ def extpos_late_s(state: DroneState) -> float:
     through the same queue and radio turns as the extpos: a bound of the one-way trip), at most
     `ESTIMATE_HISTORY_S`. Through a shared dongle on a busy radio the round trip is 0.1-0.3 s, and an estimate that
     follows its extpos that late is decimetres behind the pose received at its own time: late, not wrong."""
-    rtt_s = (state.link.latency_ms or 0.0) / 1000.0
-    return min(ESTIMATE_HISTORY_S, EXTPOS_MAX_WAIT_S + rtt_s)
+    return min(ESTIMATE_HISTORY_S, EXTPOS_MAX_WAIT_S + state.link.round_trip_s)
 
 
 def _distance_to_fed(

@@ -10,8 +10,6 @@ no more, and the drones still streaming get its share."""
 
 from __future__ import annotations
 
-from collections import deque
-
 from rpf_fly.flight.agent import DroneAgent
 from rpf_fly.flight.events import ERROR, INFO, WARNING
 from rpf_fly.flight.findings import Finding
@@ -38,7 +36,8 @@ class RadioLagCheck:
 
     def __init__(self, rate_hz: float) -> None:
         self.rate_hz = rate_hz
-        self._samples: dict[str, deque[tuple[float, int]]] = {}
+        self._window: dict[str, tuple[float, int]] = {}
+        """Drone -> when its open window began and its superseded count then."""
         self._over: dict[str, int] = {}
         """Drone -> windows in a row at or over `RADIO_LAG_LAND_SHARE`."""
         self._said: set[str] = set()
@@ -49,16 +48,13 @@ class RadioLagCheck:
         for a in agents:
             state = states.get(a.name)
             if a.phase not in STREAMING or state is None or not state.link.up:
-                self._samples.pop(a.name, None)  # a window counts only what was streamed
+                self._window.pop(a.name, None)  # a window counts only what was streamed
                 self._over.pop(a.name, None)
                 continue
-            samples = self._samples.setdefault(a.name, deque())
-            samples.append((now_s, state.setpoints_superseded))
-            if now_s - samples[0][0] < RADIO_LAG_WINDOW_S:
+            start_s, start = self._window.setdefault(a.name, (now_s, state.setpoints_superseded))
+            if now_s - start_s < RADIO_LAG_WINDOW_S:
                 continue  # not a whole window yet
-            start_s, start = samples[0]
-            samples.clear()
-            samples.append((now_s, state.setpoints_superseded))
+            self._window[a.name] = (now_s, state.setpoints_superseded)
             share = (state.setpoints_superseded - start) / max(1.0, self.rate_hz * (now_s - start_s))
             out += self._judge(a.name, share)
         return out

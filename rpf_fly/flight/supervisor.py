@@ -91,9 +91,7 @@ and 0.10 s flown through campaign/pillars-6 passes as it is, 0.12 s crashed two 
 def radio_delay_s(state: DroneState) -> float:
     """How long a command may take through the drone's link: cflib's echo round trip (95th percentile), at most
     `RADIO_DELAY_MAX_S`; 0 for a link that is down or has not measured one yet."""
-    if not state.link.up or state.link.latency_ms is None:
-        return 0.0
-    return min(RADIO_DELAY_MAX_S, state.link.latency_ms / 1000.0)
+    return min(RADIO_DELAY_MAX_S, state.link.round_trip_s) if state.link.up else 0.0
 
 
 class Supervisor:

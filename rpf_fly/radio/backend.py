@@ -132,6 +132,12 @@ class LinkState:
     """Share of packets acknowledged without retries, 0-100 (cflib's link quality); None before the first report."""
     latency_ms: float | None = None
     """95th percentile of the echo round trip in milliseconds (cflib's latency); None before the first report."""
+
+    @property
+    def round_trip_s(self) -> float:
+        """`latency_ms` in seconds; 0 before the first report."""
+        return self.latency_ms / 1000.0 if self.latency_ms is not None else 0.0
+
     error: str | None = None
     """Why the link is down (connection failed or lost), None when up or closed on purpose."""
     lost_at_s: float | None = None
