@@ -22,14 +22,12 @@ from rpf_fly.campaign.flights import EXIT_EXTRA_S, FlightRecord, LabRecord
 from rpf_fly.campaign.owed import EVENT_WINDOW_S, owed_warnings, unsafe_to_fly
 from rpf_fly.campaign.schedules import SWARM_KINDS
 from rpf_fly.campaign.truth import ON_FLOOR_M, Truth, at_goal, truth_failures
-from rpf_fly.flight.lab import after_ground_station
+from rpf_fly.flight.lab import after_ground_station, reach_after_death_m
 from rpf_fly.radio.budget import dongle_of
 
 DOWN_WITHIN_S = 1.5
 """A drone left without its ground station is down (motors off or on the floor) this soon (the firmware's 1 s
 emergency-stop watchdog and a fall)."""
-MOVED_M = 1.0
-"""... and moved no further than this horizontally from where it was."""
 STILL_FLYING_S = 5.0
 """... and is not flying this long after."""
 KILL_PHASE = {"takeoff": "takeoff", "settle": "takeoff", "planning": "flying", "landing": "landing"}
@@ -248,8 +246,9 @@ def _judge_orphans(
                 f"{n} not down within {DOWN_WITHIN_S:g} s of the {kind} "
                 f"({'never' if d.down_after_s is None else f'{d.down_after_s:.2f} s'})"
             )
-        if d.moved_m > MOVED_M:
-            fail(f"{n} moved {d.moved_m:.2f} m after the {kind} (> {MOVED_M:g} m)")
+        reach = reach_after_death_m(record.mission, d.z_at_death)  # ... and moved no further than the firmware lets it
+        if d.moved_m > reach:
+            fail(f"{n} moved {d.moved_m:.2f} m after the {kind} (> {reach:.2f} m: its reach at its speed and height)")
         if d.flying_at_s[STILL_FLYING_S]:
             fail(f"{n} still flying {STILL_FLYING_S:g} s after the {kind}")
     down = [d.down_after_s for n, d in after.items() if n in airborne and d.down_after_s is not None]

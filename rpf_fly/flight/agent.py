@@ -35,7 +35,7 @@ from typing import Protocol, TypeVar
 import numpy as np
 
 from rpf_fly.flight.phases import DronePhase, FlightOutcome
-from rpf_fly.flight.response import braking_for
+from rpf_fly.flight.response import ResponseGains, braking_for
 from rpf_fly.mission.model import Arena, Drone, Mission
 from rpf_fly.planning.planner import PlanStep, plan_row
 from rpf_fly.planning.view import LocalView
@@ -48,6 +48,12 @@ LEAD_ALLOWANCE = 1.25
 """How far a drone's carrot may lead it, over its steady lag at the mission speed (`DroneAgent.set_controller`)."""
 MIN_LEAD_M = 0.3
 """The carrot's lead is never held under this (a slow mission's drone still gets a firm pull)."""
+
+
+def carrot_max_lead_m(speed_m_s: float, gains: ResponseGains) -> float:
+    """How far a drone's carrot may lead it at ``speed_m_s`` (`DroneAgent.set_controller`): `LEAD_ALLOWANCE` times
+    its steady lag at that speed, never under `MIN_LEAD_M`."""
+    return max(MIN_LEAD_M, LEAD_ALLOWANCE * speed_m_s * gains.steady_lag_s)
 
 
 class PlannerLike(Protocol):
@@ -237,7 +243,7 @@ class DroneAgent:
         if self._max_lead_given_m is not None:
             self.max_lead_m = self._max_lead_given_m
         else:
-            self.max_lead_m = max(MIN_LEAD_M, LEAD_ALLOWANCE * self.speed * self.braking.gains.steady_lag_s)
+            self.max_lead_m = carrot_max_lead_m(self.speed, self.braking.gains)
 
     def hold(self, at: complex, now_s: float, reason: str, velocity: complex = 0j) -> None:
         """Stop planning and bring the drone to rest near ``at`` (where it is), moving at ``velocity``: the hold

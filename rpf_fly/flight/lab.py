@@ -44,6 +44,9 @@ from typing import Any
 
 from rpf_fly.emulator.host_lag import HostLag
 from rpf_fly.emulator.world_process import RemoteWorld, WorldCalls, WorldServer
+from rpf_fly.flight import response
+from rpf_fly.flight.agent import carrot_max_lead_m
+from rpf_fly.flight.response import DEFAULT_GAINS
 from rpf_fly.log import schemas as S
 from rpf_fly.mission.model import Mission
 
@@ -503,6 +506,14 @@ class AfterDeath:
 
 FLOOR_Z_M = 0.05
 """A drone at or below this true height stands on the floor (its centre: 0 on the floor in the simulated world)."""
+
+
+def reach_after_death_m(mission: Mission, height_m: float) -> float:
+    """How far a drone of ``mission`` flying at ``height_m`` may go horizontally once its ground station died
+    (`rpf_fly.flight.response.reach_after_death_m` at the mission's speed, its carrot's largest lead, the firmware's
+    default gains): what `after_ground_station`'s ``moved_m`` is judged against."""
+    speed = mission.flight.speed
+    return response.reach_after_death_m(DEFAULT_GAINS, speed, carrot_max_lead_m(speed, DEFAULT_GAINS), height_m)
 
 
 def after_ground_station(

@@ -151,6 +151,34 @@ def overshoot_m(gains: ResponseGains, speed_m_s: float, offset_m: float = 0.0) -
     return float(max(0.0, track[:, 0].max()))
 
 
+WDT_LEVEL_OUT_S = 0.5
+"""A streamed setpoint this old and the firmware levels the drone out, holding its height
+(COMMANDER_WDT_TIMEOUT_STABILIZE, `commander.c`; rpf_fly/emulator/fake_supervisor.py `WDT_WARNING_S`)."""
+ESTOP_WATCHDOG_S = 1.0
+"""The emergency-stop watchdog's silence after which the firmware stops the motors (`supervisor.c` line 366;
+rpf_fly/emulator/fake_supervisor.py `EMERGENCY_STOP_WATCHDOG_S`): the ground station feeds it with its pings."""
+POSE_AGE_ALLOWANCE_S = 0.1
+"""How old the pose a carrot was capped against may be (`rpf_fly.flight.poses.POSE_LATE_S`: older, the
+supervisor warns, and at 0.25 s it holds): a drone moving away from its carrot meanwhile is that much further
+behind it."""
+
+
+def reach_after_death_m(gains: ResponseGains, speed_m_s: float, lead_m: float, height_m: float) -> float:
+    """How far (horizontally) a drone can go once its ground station died, at most: the firmware flies it to its last
+    setpoint (at most ``lead_m`` ahead of the pose its carrot was capped against, that pose up to
+    `POSE_AGE_ALLOWANCE_S` old at ``speed_m_s``) until that setpoint is `WDT_LEVEL_OUT_S` old, then levels it out
+    (it coasts) until the emergency-stop watchdog stops the motors `ESTOP_WATCHDOG_S` after the last ping, and it
+    falls from ``height_m`` keeping its horizontal speed. Its speed never exceeds what its position loop asks for that
+    lead (``pos_kp`` x lead, at most ``xVelMax`` x 1.1) or what it flew at; while it closes on the setpoint it goes
+    no further than the lead plus its braking distance at that speed. Checked against the full model
+    (tests/flight/test_response.py): 0.62 m found where this says 1.07 m for a 0.5 m/s mission at 0.66 m."""
+    lead = lead_m + speed_m_s * POSE_AGE_ALLOWANCE_S
+    v_peak = min(gains.vel_max * OVERHEAD, max(speed_m_s, gains.pos_kp * lead))
+    closing = min(v_peak * WDT_LEVEL_OUT_S, lead + v_peak**2 / (2.0 * gains.max_brake_m_s2))
+    fall_s = math.sqrt(2.0 * max(height_m, 0.0) / GRAVITY)
+    return closing + v_peak * (ESTOP_WATCHDOG_S - WDT_LEVEL_OUT_S + fall_s)
+
+
 SPEEDS_M_S = np.linspace(0.0, 1.5, 16)
 """The speeds `Braking` tabulates (the firmware caps a streamed flight at 1.1 m/s; a push may go faster)."""
 TILTS_DEG = np.linspace(-20.0, 20.0, 9)

@@ -17,8 +17,9 @@ import pytest
 from lab_harness import LabProcess
 from mcap.reader import make_reader
 
-from rpf_fly.flight.lab import after_ground_station
+from rpf_fly.flight.lab import after_ground_station, reach_after_death_m
 from rpf_fly.log.reader import read_log
+from rpf_fly.mission import parse_mission
 
 pytestmark = pytest.mark.xdist_group("lab")
 
@@ -143,8 +144,9 @@ def _kill_when(proc: subprocess.Popen, line: str, delay_s: float) -> int:
     ],
 )
 def test_a_ground_station_killed_leaves_no_drone_flying_on(tmp_path, phase, line, delay_s):
-    """SIGKILL of ``fly --lab``: within 1.5 s every drone's motors are off or it is on the floor, none moved more
-    than 1 m after the kill, and none is above the floor with motors on 5 s after (the lab's truth)."""
+    """SIGKILL of ``fly --lab``: within 1.5 s every drone's motors are off or it is on the floor, none moved further
+    after the kill than the firmware lets it (to its last setpoint, levelled out, falling: `reach_after_death_m`,
+    1.08 m for this mission at 0.66 m), and none is above the floor with motors on 5 s after (the lab's truth)."""
     mission = tmp_path / "six.yaml"
     text = SIX if phase != "landing" else SIX.replace("timeout_s: 40", "timeout_s: 3")
     mission.write_text(text)
@@ -160,7 +162,7 @@ def test_a_ground_station_killed_leaves_no_drone_flying_on(tmp_path, phase, line
     assert any(d.motors_at_death and d.z_at_death > 0.05 for d in judged.values()), judged  # they were flying
     for name, d in judged.items():
         assert d.down_after_s is not None and d.down_after_s <= 1.5, (name, d)
-        assert d.moved_m <= 1.0, (name, d)
+        assert d.moved_m <= reach_after_death_m(parse_mission(text), d.z_at_death), (name, d)
         assert not d.flying_at_s[5.0], (name, d)
 
 

@@ -10,7 +10,19 @@ import numpy as np
 import pytest
 
 from rpf_fly.emulator.cf_scenario import fly, hold_scenario
-from rpf_fly.flight.response import DEFAULT_GAINS, Braking, ResponseGains, braking_for, overshoot_m, respond
+from rpf_fly.emulator.fake_setpoint import AxisMode, Setpoint
+from rpf_fly.emulator.fake_vehicle import Vehicle, VehicleConfig
+from rpf_fly.flight.agent import carrot_max_lead_m
+from rpf_fly.flight.response import (
+    DEFAULT_GAINS,
+    POSE_AGE_ALLOWANCE_S,
+    Braking,
+    ResponseGains,
+    braking_for,
+    overshoot_m,
+    reach_after_death_m,
+    respond,
+)
 
 REFERENCE = Path(__file__).resolve().parents[1] / "data" / "crazyflie_dynamics"  # ../shared/reference, copied
 
@@ -88,3 +100,45 @@ def test_a_drones_setpoint_is_where_its_speed_and_acceleration_put_it(name: str)
     assert after[changing].mean() < 0.6 * before[changing].mean(), (after[changing].mean(), before[changing].mean())
     assert after.mean() < before.mean()
     assert DEFAULT_GAINS.acceleration_lead_s2 == pytest.approx(1 / (2.0 * 9.81 * np.radians(25.0)))
+
+
+def _after_death_m(speed: float, lead: float, backwards: bool, height: float = 0.66) -> float:
+    """The full model (rpf_fly/emulator/fake_vehicle.py: the PID cascade, the identified body, the supervisor's
+    watchdogs): a drone flies a 10 Hz carrot at ``speed`` along +x (``backwards``: along -x), is sent one setpoint
+    ``lead`` ahead along +x, and then nothing more (its ground station died; no ping feeds its emergency-stop
+    watchdog): how far it goes horizontally, until it lies on the floor."""
+    abs3 = (AxisMode.ABS, AxisMode.ABS, AxisMode.ABS)
+    drone = Vehicle(VehicleConfig(dynamics="firmware", turbulence_m_s2=0.0), 0.0)
+    ref, sign, t, k = 0.0, -1.0 if backwards else 1.0, 0.0, 0
+
+    def send(x: float) -> None:
+        drone.crtp_setpoint(Setpoint(abs3, (x, 0.0, height), yaw_mode=AxisMode.ABS, timestamp_s=t, source="crtp-7"), t)
+
+    while t < 5.0:  # 2 s to hover, 3 s on the carrot
+        if k % 10 == 0:
+            if t >= 2.0:
+                ref += sign * speed * 0.1
+            send(ref)
+        drone.supervisor.notify_emergency_stop_watchdog(t)
+        drone.step(t)
+        k += 1
+        t = k * 0.001
+    start = drone.pos[0]
+    send(start + lead)
+    while t < 8.0:
+        drone.step(t)
+        k += 1
+        t = k * 0.001
+    assert drone.pos[2] < 0.01 and not drone.motors_on  # it fell and lies there
+    return abs(drone.pos[0] - start)
+
+
+@pytest.mark.parametrize("speed", [0.3, 0.5, 1.0])
+def test_a_drone_whose_ground_station_died_goes_no_further_than_its_reach(speed: float) -> None:
+    """`reach_after_death_m` bounds the full model's flight to its last setpoint, its level-out and its fall, for a
+    carrot that leads it by the most the agent allows (plus a pose `POSE_AGE_ALLOWANCE_S` old), for a drone flying
+    towards it, one flying away from it and one at rest; and it is not loose by more than 60 %."""
+    lead = carrot_max_lead_m(speed, DEFAULT_GAINS) + speed * POSE_AGE_ALLOWANCE_S
+    moved = [_after_death_m(v, lead, backwards) for v, backwards in ((speed, False), (speed, True), (0.0, False))]
+    reach = reach_after_death_m(DEFAULT_GAINS, speed, carrot_max_lead_m(speed, DEFAULT_GAINS), 0.66)
+    assert max(moved) <= reach <= 1.6 * max(moved), (speed, moved, reach)
