@@ -46,7 +46,14 @@ FEED_SETTLE_S = 0.5
 """... so an estimate made within this long after the poses came back is not judged wrong: the first extpos since
 must reach the firmware (behind a full radio, hundreds of milliseconds: `ESTIMATE_HISTORY_S`) before the estimate
 snaps back to it. Judged, two such estimates 0.1 m off cut the motors of a drone the watchdog was landing after a 1 s
-loop stall on lab-3."""
+loop stall on lab-3.
+
+The same holds when the poses kept coming but the radio did not carry them (`DroneState.extpos_sent_s`: no extpos
+handed to its link, or no packed broadcast with it out, for over `FEED_GAP_S`): a radio too full for its traffic
+drops the positions that waited too long (`outbox.EXTPOS_MAX_WAIT_S`), and eight drones on one emulated Crazyradio PA
+that carried half their transactions drifted 6-16 cm unfed; two of them, landing, had their motors cut 0.9 m up. A
+drone left unfed is the radio's failing, which the radio lag and link checks land; its estimator is judged again once
+it has been fed for `FEED_SETTLE_S`."""
 
 
 def _pose_at(
@@ -112,6 +119,8 @@ class EstimateCheck:
         self._fed_again: dict[str, float] = {}
         """When each drone's poses came back after a gap over `FEED_GAP_S` (its first ones: fed before the flight
         began: the preflight waits for every estimate to agree with mocap before take-off)."""
+        self._radio_unfed: set[str] = set()
+        """Drones whose radio has handed no extpos to their link for over `FEED_GAP_S` (`DroneState.extpos_sent_s`)."""
 
     def check(
         self, now_s: float, agents: list[DroneAgent], tracker: PoseTracker, states: dict[str, DroneState]
@@ -137,6 +146,12 @@ class EstimateCheck:
                 self._fed_at[a.name] = now_s
             while history and history[0][0] < now_s - ESTIMATE_HISTORY_S:
                 history.popleft()
+            radio_fed = state is None or state.extpos_sent_s is None or now_s - state.extpos_sent_s <= FEED_GAP_S
+            if not radio_fed:
+                self._radio_unfed.add(a.name)
+            elif a.name in self._radio_unfed:  # its radio carries its extpos again: fed again from now
+                self._radio_unfed.discard(a.name)
+                self._fed_again[a.name] = now_s
             if (
                 state is None
                 or state.position_m is None
@@ -156,7 +171,7 @@ class EstimateCheck:
             made_s = now_s if state.estimate_stamp_s is None else state.estimate_stamp_s
             nearest: float | None
             if (
-                made_s < self._fed_again.get(a.name, -math.inf) + FEED_SETTLE_S
+                a.name in self._radio_unfed or made_s < self._fed_again.get(a.name, -math.inf) + FEED_SETTLE_S
             ):  # made unfed, or before it was fed again
                 nearest = None
             elif then is not None and state.estimate_stamp_s is not None:  # against what mocap had fed it by then

@@ -178,6 +178,11 @@ class DroneState:
     setpoints_superseded: int = 0
     """Setpoints of this drone replaced by a newer one before its radio link took them, since it connected: a link
     that lags its setpoint stream (rpf_fly/flight/radio_lag_check.py)."""
+    extpos_sent_s: float | None = None
+    """`time.monotonic()` when the ground station last handed a mocap position of this drone to its radio (its
+    link's queue, or a packed broadcast that went out); None where the backend cannot tell or none went yet. A
+    position queued but dropped as stale, or still waiting behind a full radio, has not fed the drone's estimator
+    (rpf_fly/flight/estimate_check.py)."""
 
 
 @runtime_checkable

@@ -155,6 +155,7 @@ class PackedExtposSender:
         self.stale = 0
         """Positions left out because their pose waited longer than `EXTPOS_MAX_WAIT_S`."""
         self._stale_warned_at: float | None = None
+        self._sent_s: dict[str, float] = {}
 
     def start(self) -> dict[str, str]:
         """Open every dongle's broadcast and start its thread; drone name -> error for the drones whose broadcast
@@ -235,18 +236,29 @@ class PackedExtposSender:
                         packets = [self._take(entry) for entry in ready]
                         break
                     self._cond.wait(None if wake is None else max(wake - now, 0.0))
-            for packet, count in packets:
+            for packet, names in packets:
                 if packet is None:
                     continue
                 ok = air.broadcaster.send(packet)
                 self.packets += 1
-                self.positions += count
+                self.positions += len(names)
                 self.failed += 0 if ok else 1
+                if ok:
+                    sent = time.monotonic()
+                    with self._cond:
+                        for name in names:
+                            self._sent_s[name] = sent
 
-    def _take(self, entry: _Group) -> tuple[bytes | None, int]:
-        """The group's packet (members in group order) and how many positions it carries; the pending positions
-        are taken (a position that does not fit int16 millimetres is dropped, with a warning)."""
+    def sent_s(self, name: str) -> float | None:
+        """`time.monotonic()` when a broadcast carrying ``name``'s position last went out (None: none yet)."""
+        with self._cond:
+            return self._sent_s.get(name)
+
+    def _take(self, entry: _Group) -> tuple[bytes | None, list[str]]:
+        """The group's packet (members in group order) and the drones whose positions it carries; the pending
+        positions are taken (a position that does not fit int16 millimetres is dropped, with a warning)."""
         items = []
+        names: list[str] = []
         now = time.monotonic()
         for name, ident in zip(entry.group.names, entry.group.ids):
             position = entry.pending.pop(name, None)
@@ -272,8 +284,9 @@ class PackedExtposSender:
                 logger.warning("packed extpos: drone %s: %s", name, err)
                 continue
             items.append((ident, position))
+            names.append(name)
         entry.pending.clear()
-        return (bytes((HEADER,)) + encode(items), len(items)) if items else (None, 0)
+        return (bytes((HEADER,)) + encode(items), names) if items else (None, [])
 
 
 __all__ = [

@@ -524,6 +524,12 @@ class CflibBackend(CflibConnection, CflibTelemetry):
             self._give_up(self._drones[name], message)
         return errors
 
+    def _extpos_sent_s(self, d: CflibDrone) -> float | None:
+        """Under packed extpos, when a broadcast carrying this drone's position last went out."""
+        if self._packed is not None:
+            return self._packed.sent_s(d.name)
+        return super()._extpos_sent_s(d)
+
     def send_extpos(self, name: str, position: Vec3, received_s: float | None = None) -> bool:
         """Queue a mocap position for the estimator (latest wins): in the drone's outbox, or under packed extpos in
         its group's next broadcast. ``received_s``: when its pose was received (`time.monotonic()`): a pose that

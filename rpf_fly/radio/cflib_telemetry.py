@@ -256,7 +256,12 @@ class CflibTelemetry:
                 target_m=d.target,
                 controller_params=d.controller_params,
                 setpoints_superseded=d.outbox.setpoints_replaced if d.outbox is not None else 0,
+                extpos_sent_s=self._extpos_sent_s(d),
             )
+
+    def _extpos_sent_s(self, d: CflibDrone) -> float | None:
+        """When this drone's last mocap position went to its radio (`DroneState.extpos_sent_s`): its outbox's."""
+        return d.outbox.extpos_taken_s if d.outbox is not None else None
 
     def states(self) -> dict[str, DroneState]:
         return {name: self.state(name) for name in self._drones}

@@ -289,6 +289,8 @@ class Outbox:
         """Keep-alives not queued because the previous one was still waiting (a slow or stuck link)."""
         self.extpos_stale = 0
         """Extpos dropped because their pose waited longer than `EXTPOS_MAX_WAIT_S` before a sender took it."""
+        self.extpos_taken_s: float | None = None
+        """`time.monotonic()` when a sender last took this drone's extpos to hand it to its link (None: never)."""
         self._stale_warned_at: float | None = None
 
     # ------------------------------------------------------------------------------------------ queueing
@@ -381,6 +383,8 @@ class Outbox:
                 if waited > EXTPOS_MAX_WAIT_S:
                     self._stale(waited)
                     action = None
+            if action is not None:
+                self.extpos_taken_s = time.monotonic()
         self._busy = action is not None
         return action
 

@@ -629,6 +629,48 @@ def test_an_estimate_that_drifted_unfed_is_not_cut_until_its_first_extpos_since_
     assert len(stops) == 1 and 2.2 < stops[0][0] <= 2.2 + 0.1 / 0.4 + 0.2, stops
 
 
+def test_an_estimate_that_drifted_while_its_radio_carried_no_extpos_is_not_cut_until_it_was_fed_again():
+    """The poses keep coming but a full radio hands none of the drone's extpos to its link for a second (each waited
+    too long and was dropped: `DroneState.extpos_sent_s` stands still): its estimator drifts 0.13 m on its IMU and
+    the controller holds the drifted estimate, off the mocap poses of its own time. Eight drones on one emulated
+    Crazyradio PA drifted so and two were cut landing, 0.9 m up; such estimates are not judged until the drone was
+    fed again for `FEED_SETTLE_S`. An estimator that stops following extpos once fed again is still stopped, and one
+    that runs away while its extpos do go out is stopped as before."""
+    _, agents, tracker, supervisor = setup()
+    agents["cf1"].set_phase(DronePhase.LANDING, 0.0)
+    states = {n: state(n, 0.0) for n in agents}
+
+    def truth(t: float) -> tuple[float, float, float]:
+        return (-1.0, -0.6, 1.0 - 0.2 * t)
+
+    def fly(stops_following_s: float, radio_gap: bool) -> list[tuple[float, object]]:
+        found = []
+        sent = 0.0
+        for k in range(301):
+            t = k / 100
+            if not (radio_gap and 0.5 < t < 1.5):
+                sent = t  # its extpos went to its link with this pose
+            see(tracker, k + 1, t, {**POSITIONS, "cf1": truth(t)})
+            if k % 10 == 5:
+                made = t - 0.01
+                x, y, z = truth(made)
+                drift = 0.13 * min(1.0, max(0.0, made - 0.5)) ** 2 if radio_gap and made < 1.7 else 0.0
+                runaway = 0.4 * max(0.0, made - stops_following_s)
+                states["cf1"] = replace(
+                    state("cf1", t), position_m=(x + drift + runaway, y, z), estimate_stamp_s=made, extpos_sent_s=sent
+                )
+            found += [(t, f) for f in supervisor.check(t, agents.values(), tracker, states) if f.kind == "estimator"]
+        return [(t, f) for t, f in found if f.response == "stop"]
+
+    assert not fly(stops_following_s=9.0, radio_gap=True)
+    stops = fly(stops_following_s=2.2, radio_gap=True)
+    assert len(stops) == 1 and 2.2 < stops[0][0] <= 2.2 + 0.1 / 0.4 + 0.2, stops
+    _, agents, tracker, supervisor = setup()
+    agents["cf1"].set_phase(DronePhase.LANDING, 0.0)
+    stops = fly(stops_following_s=0.8, radio_gap=False)  # fed all along: judged all along
+    assert len(stops) == 1 and 0.8 < stops[0][0] <= 0.8 + 0.1 / 0.4 + 0.2, stops
+
+
 def test_mocap_is_said_back_only_when_a_pose_is_back_not_when_the_blind_drones_land():
     _, agents, tracker, supervisor = setup()
     states = {n: state(n, 0.0) for n in agents}

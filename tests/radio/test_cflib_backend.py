@@ -310,6 +310,7 @@ def test_extpose_configures_and_feeds_the_estimator(
     )
     # no mocap yet: the estimate started at kalman.initialX/Y/Z (0, 0, 0) and drifts with the IMU, far from the truth
     assert math.dist(backend.state("cf0").position_m, (1.0, 1.0, 0.0)) > 0.5
+    assert backend.state("cf0").extpos_sent_s is None  # nothing fed it yet
     yaw = math.radians(45.0)
     quaternion = (0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2))
     stream(0.5, lambda: backend.send_extpose("cf0", (1.0, 1.0, 0.0), quaternion))
@@ -318,6 +319,8 @@ def test_extpose_configures_and_feeds_the_estimator(
     assert wait_for(lambda: backend.state("cf0").position_m == pytest.approx((1.0, 1.0, 0.0), abs=2e-3), 1.0)
     stream(0.5, lambda: backend.send_extpos("cf0", (1.2, 1.0, 0.0)))
     assert world.snapshot(address(0)).estimate == pytest.approx((1.2, 1.0, 0.0), abs=2e-3)
+    sent = backend.state("cf0").extpos_sent_s  # its outbox handed them to its link: the estimate check's feed
+    assert sent is not None and time.monotonic() - 0.3 < sent <= time.monotonic()
     assert world.snapshot(address(0)).estimate_yaw_deg == pytest.approx(45.0, abs=1e-3)  # extpos leaves yaw alone
 
 

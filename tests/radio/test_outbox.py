@@ -235,9 +235,12 @@ def test_an_extpos_whose_pose_waited_too_long_is_dropped_and_counted_not_sent(ca
     radio.hold.set()
     assert box.wait_idle(2.0)
     assert radio.sent == ["first"] and box.extpos_stale == 1
+    assert box.extpos_taken_s is None  # nothing fed the drone's estimator (the estimate check reads this)
     assert "waited" in caplog.text and "not sent to its estimator" in caplog.text
+    before = time.monotonic()
     box.extpos(radio.packet("fresh"), received_s=time.monotonic())
     assert box.wait_idle(2.0)
+    assert box.extpos_taken_s is not None and before <= box.extpos_taken_s <= time.monotonic()
     box.extpos(radio.packet("unstamped"))  # no receipt time: sent whatever its age
     assert box.wait_idle(2.0)
     assert radio.sent == ["first", "fresh", "unstamped"] and box.extpos_stale == 1

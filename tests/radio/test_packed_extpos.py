@@ -95,6 +95,7 @@ def test_the_sender_broadcasts_each_groups_positions_through_the_fake_radio_to_e
         assert sender.start() == {}
         truth = {name: (0.5 * k, -0.25 * k, 0.0) for k, name in enumerate(addresses, start=1)}
         assert sender.put("cf7", truth["cf7"]) is False  # not in this sender's groups
+        assert sender.sent_s("cf1") is None  # no broadcast carried it yet
         for _ in range(30):  # 0.3 s of 100 Hz mocap: each estimate settles on its own drone's position
             for name in addresses:
                 if name != "cf7":
@@ -103,6 +104,9 @@ def test_the_sender_broadcasts_each_groups_positions_through_the_fake_radio_to_e
         time.sleep(0.05)
         assert sender.failed == 0 and sender.positions == 6 * sender.packets // 2
         assert 2 * 25 <= sender.packets <= 2 * 30  # two a frame (a frame or two may fall in one packet)
+        for name in addresses:  # when a broadcast with its position went out (the estimate check reads it)
+            sent = sender.sent_s(name)
+            assert sent is None if name == "cf7" else time.monotonic() - 0.2 < sent <= time.monotonic(), (name, sent)
         for name, address in addresses.items():
             estimate = world.snapshot(address).estimate
             if name == "cf7":
