@@ -6,7 +6,13 @@ does get is old, and with it every hold the separation check orders. Eight drone
 cflib's radio driver on a host that could not keep up (136 transactions a second of the 260 the plan needed) had
 61 % of their setpoints replaced, the link's echo round trip near 0.5 s: their holds arrived too late and four
 drones collided. A high-level landing is one command, and the firmware flies it alone: the drone needs the radio
-no more, and the drones still streaming get its share."""
+no more, and the drones still streaming get its share.
+
+A link that takes none of the drone's setpoints at all is worse than late: the firmware levels the drone out 0.5 s
+after the last setpoint it received (it drifts at the speed it had) and stops its motors at 2 s (COMMANDER_WDT_TIMEOUT
+_STABILIZE, _SHUTDOWN, `commander.c`). The same eight drones, their links taking none of 90 % of their setpoints,
+had their motors stopped 1 m up by that watchdog before two windows had passed. So a drone whose setpoint has waited
+`SETPOINT_STARVED_S` unsent lands at once: the landing command goes before any setpoint (rpf_fly/radio/outbox.py)."""
 
 from __future__ import annotations
 
@@ -26,6 +32,12 @@ RADIO_LAG_LAND_SHARE = 0.3
 """Two windows in a row with this share superseded (3 of every 10 setpoints a second never sent): the drone lands."""
 
 RADIO_LAG_LAND_WINDOWS = 2
+
+SETPOINT_STARVED_S = 0.5
+"""A streaming drone whose setpoint has waited this long for its link (`DroneState.setpoint_waiting_s`) has had none
+for longer: the firmware's level-out (its setpoint 0.5 s old) has begun or is at hand, and its motors stop at 2 s.
+It lands at once. A ground station that queues nothing (its loop stalled) leaves nothing waiting: its own watchdog
+lands its drones then."""
 
 STREAMING = frozenset({DronePhase.PLANNING, DronePhase.HOLDING, DronePhase.ARRIVED})
 """The phases in which the ground station streams the drone's setpoints (take-off and landing are the firmware's)."""
@@ -50,6 +62,19 @@ class RadioLagCheck:
             if a.phase not in STREAMING or state is None or not state.link.up:
                 self._window.pop(a.name, None)  # a window counts only what was streamed
                 self._over.pop(a.name, None)
+                continue
+            if state.setpoint_waiting_s >= SETPOINT_STARVED_S and a.name not in self._landed:
+                self._landed.add(a.name)
+                out.append(
+                    Finding(
+                        "radio_lag",
+                        ERROR,
+                        f"its radio link took none of its setpoints for {state.setpoint_waiting_s:.1f} s: the "
+                        "firmware levels it out at 0.5 s and stops its motors at 2 s: landing",
+                        a.name,
+                        "land",
+                    )
+                )
                 continue
             start_s, start = self._window.setdefault(a.name, (now_s, state.setpoints_superseded))
             if now_s - start_s < RADIO_LAG_WINDOW_S:

@@ -178,6 +178,9 @@ class DroneState:
     setpoints_superseded: int = 0
     """Setpoints of this drone replaced by a newer one before its radio link took them, since it connected: a link
     that lags its setpoint stream (rpf_fly/flight/radio_lag_check.py)."""
+    setpoint_waiting_s: float = 0.0
+    """How long a streamed setpoint of this drone has been waiting for its radio link, replaced by newer ones
+    meanwhile (0: none waits): the drone has had none of them that long (rpf_fly/flight/radio_lag_check.py)."""
     extpos_sent_s: float | None = None
     """`time.monotonic()` when the ground station last handed a mocap position of this drone to its radio (its
     link's queue, or a packed broadcast that went out); None where the backend cannot tell or none went yet. A

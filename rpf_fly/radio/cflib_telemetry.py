@@ -257,6 +257,7 @@ class CflibTelemetry:
                 controller_params=d.controller_params,
                 setpoints_superseded=d.outbox.setpoints_replaced if d.outbox is not None else 0,
                 extpos_sent_s=self._extpos_sent_s(d),
+                setpoint_waiting_s=d.outbox.setpoint_waiting_s() if d.outbox is not None else 0.0,
             )
 
     def _extpos_sent_s(self, d: CflibDrone) -> float | None:

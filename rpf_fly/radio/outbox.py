@@ -290,6 +290,8 @@ class Outbox:
         self.extpos_stale = 0
         """Extpos dropped because their pose waited longer than `EXTPOS_MAX_WAIT_S` before a sender took it."""
         self.extpos_taken_s: float | None = None
+        self._setpoint_since = 0.0
+        """When the setpoint now waiting (or the first of those it replaced) was queued."""
         """`time.monotonic()` when a sender last took this drone's extpos to hand it to its link (None: never)."""
         self._stale_warned_at: float | None = None
 
@@ -315,9 +317,17 @@ class Outbox:
                 return False
             if self._setpoint is not None:
                 self.setpoints_replaced += 1
+            else:
+                self._setpoint_since = time.monotonic()
             self._setpoint = action
             self._pool._schedule(self)
             return True
+
+    def setpoint_waiting_s(self) -> float:
+        """How long a setpoint of this drone has been waiting unsent (replaced by newer ones meanwhile: the same
+        wait), 0 when none waits: a link that takes none leaves the drone without setpoints that long and more."""
+        with self._pool._lock:
+            return time.monotonic() - self._setpoint_since if self._setpoint is not None else 0.0
 
     def extpos(self, action: Action, received_s: float | None = None) -> bool:
         """Queue a mocap position for the estimator, replacing one not yet sent; ``received_s``: when its pose was

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 
+import pytest
 from flight_harness import SHORT_MISSION
 
 from rpf_fly.flight.agent import DroneAgent
@@ -12,7 +13,7 @@ from rpf_fly.flight.events import WARNING
 from rpf_fly.flight.findings import Finding
 from rpf_fly.flight.phases import DronePhase
 from rpf_fly.flight.poses import PoseTracker
-from rpf_fly.flight.radio_lag_check import RadioLagCheck
+from rpf_fly.flight.radio_lag_check import SETPOINT_STARVED_S, RadioLagCheck
 from rpf_fly.flight.supervisor import Supervisor
 from rpf_fly.mission import parse_mission
 from rpf_fly.radio.backend import DroneState, LinkState
@@ -83,3 +84,25 @@ def test_the_supervisor_lands_a_drone_whose_radio_lags() -> None:
         state = replace(base, setpoints_superseded=int(6 * t))
         found += [f for f in supervisor.check(t, [a], tracker, {a.name: state}) if f.kind == "radio_lag"]
     assert [f.response for f in found] == ["warn", "land"], found
+
+
+def test_a_drone_whose_link_takes_none_of_its_setpoints_lands_before_its_firmware_stops_its_motors() -> None:
+    """Its setpoint waits unsent (replaced by newer ones each tick): at `SETPOINT_STARVED_S` it lands at once, long
+    before two windows of superseded setpoints and the firmware's 2 s watchdog; a setpoint that waits less (a busy
+    moment) lands nothing, nor one waiting for a drone that is not streaming."""
+    check = RadioLagCheck(10.0)
+    a = agent()
+    base = DroneState(a.name, "radio://0/80/2M/E7E7E7E701", LinkState(True), None, None, None, None)
+    found = []
+    for k in range(1, 301):
+        t = k / 100
+        waiting = max(0.0, t - 1.0) if t < 1.4 else max(0.0, t - 2.0)  # 0.4 s at 1.0-1.4 s, then from 2.0 s on
+        superseded = int(10 * max(0.0, t - 2.0))  # every setpoint since 2.0 s
+        state = replace(base, setpoint_waiting_s=waiting, setpoints_superseded=superseded)
+        found += [(t, f) for f in check.check(t, [a], {a.name: state})]
+    lands = [(t, f) for t, f in found if f.response == "land"]
+    assert len(lands) == 1 and lands[0][0] == pytest.approx(2.0 + SETPOINT_STARVED_S, abs=0.011), found
+    assert "took none of its setpoints" in lands[0][1].message
+    landing = RadioLagCheck(10.0)
+    b = agent(DronePhase.LANDING)
+    assert not landing.check(3.0, [b], {b.name: replace(base, setpoint_waiting_s=2.0)})

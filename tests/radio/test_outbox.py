@@ -64,6 +64,21 @@ def test_setpoints_are_latest_wins_and_commands_keep_their_order() -> None:
     pool.close()
 
 
+def test_a_setpoint_waiting_behind_a_stuck_send_says_how_long_since_the_first_it_replaced() -> None:
+    """`Outbox.setpoint_waiting_s`: from the first setpoint queued while none waited, through the newer ones that
+    replaced it, until one is sent (the radio lag check lands a drone left without setpoints so long)."""
+    box, radio, pool = blocked_outbox()
+    assert box.setpoint_waiting_s() == 0.0
+    box.setpoint(radio.packet("sp0"))
+    time.sleep(0.2)
+    box.setpoint(radio.packet("sp1"))  # replaces it: the same wait goes on
+    assert 0.2 <= box.setpoint_waiting_s() < 2.0
+    radio.hold.set()
+    assert box.wait_idle(2.0)
+    assert radio.sent == ["first", "sp1"] and box.setpoint_waiting_s() == 0.0
+    pool.close()
+
+
 def test_a_landing_drops_the_setpoint_queued_before_it_and_keeps_the_one_after() -> None:
     box, radio, pool = blocked_outbox()
     box.setpoint(radio.packet("before"))
