@@ -56,6 +56,14 @@ drone left unfed is the radio's failing, which the radio lag and link checks lan
 it has been fed for `FEED_SETTLE_S`."""
 
 
+UNFED_LAND_S = 1.0
+"""A drone in the air that mocap sees but whose radio has carried none of its extpos this long
+(`DroneState.extpos_sent_s`; its setpoints may still get through: extpos go last in each turn of its link) lands: its
+estimate drifts on its IMU (5-18 cm over 1 s in the emulator, `fake_vehicle`), the controller flies that drift, and
+the estimate check cannot judge an estimator nothing feeds. A drone mocap lost is the mocap rules' (hold, then land
+by its blind drift)."""
+
+
 def _pose_at(
     history: deque[tuple[float, tuple[float, float, float]]], stamp_s: float | None
 ) -> tuple[float, float, float] | None:
@@ -106,6 +114,10 @@ def _distance_to_fed(
     return best
 
 
+UNFED_LANDS = frozenset({DronePhase.PLANNING, DronePhase.HOLDING, DronePhase.ARRIVED, DronePhase.TAKEOFF})
+"""The phases in which a drone left unfed (`UNFED_LAND_S`) is landed (a landing one is landing already)."""
+
+
 class EstimateCheck:
     """The estimate check with the mocap history and the episodes it needs (the supervisor runs it)."""
 
@@ -114,6 +126,8 @@ class EstimateCheck:
         self._diverging: dict[str, tuple[int, int, float]] = {}
         self._estimate_stopped: set[str] = set()
         self._history: dict[str, deque[tuple[float, tuple[float, float, float]]]] = {}
+        self._taken_stamp: dict[str, float] = {}
+        """Each drone's newest pose taken into its history (its mocap stamp)."""
         self._fed_at: dict[str, float] = {}
         """Each drone's last check that took a new pose (when its extpos went too)."""
         self._fed_again: dict[str, float] = {}
@@ -121,6 +135,7 @@ class EstimateCheck:
         began: the preflight waits for every estimate to agree with mocap before take-off)."""
         self._radio_unfed: set[str] = set()
         """Drones whose radio has handed no extpos to their link for over `FEED_GAP_S` (`DroneState.extpos_sent_s`)."""
+        self._unfed_landed: set[str] = set()
 
     def check(
         self, now_s: float, agents: list[DroneAgent], tracker: PoseTracker, states: dict[str, DroneState]
@@ -139,7 +154,9 @@ class EstimateCheck:
             # the pose as its estimator is fed it: a picture later than the hold bound carried ahead by its latency
             # (estimator_position; the estimate follows that, not the late pose)
             fed = estimator_position(pose, tracker.latency_s) if pose is not None else None
-            if pose is not None and fed is not None and pose.valid and (not history or history[-1][0] != pose.stamp_s):
+            new = pose is not None and pose.stamp_s > self._taken_stamp.get(a.name, -math.inf)
+            if pose is not None and fed is not None and pose.valid and new:  # (not the last one again, once the
+                self._taken_stamp[a.name] = pose.stamp_s  # history dropped it: that would be fed, mid-gap)
                 history.append((pose.stamp_s, fed))
                 if now_s - self._fed_at.get(a.name, now_s) > FEED_GAP_S:
                     self._fed_again[a.name] = now_s
@@ -152,6 +169,22 @@ class EstimateCheck:
             elif a.name in self._radio_unfed:  # its radio carries its extpos again: fed again from now
                 self._radio_unfed.discard(a.name)
                 self._fed_again[a.name] = now_s
+            unfed_s = 0.0  # since its last extpos went, or its poses came back from a gap (then its extpos go too)
+            if state is not None and state.extpos_sent_s is not None:
+                unfed_s = now_s - max(state.extpos_sent_s, self._fed_again.get(a.name, -math.inf))
+            seen = pose is not None and pose.valid and now_s - pose.stamp_s <= self.safety.pose_timeout_s
+            if unfed_s >= UNFED_LAND_S and seen and a.phase in UNFED_LANDS and a.name not in self._unfed_landed:
+                self._unfed_landed.add(a.name)
+                out.append(
+                    Finding(
+                        "estimator",
+                        ERROR,
+                        f"its radio carried none of its mocap positions for {unfed_s:.1f} s: its estimate drifts on "
+                        "its IMU alone: landing",
+                        a.name,
+                        "land",
+                    )
+                )
             if (
                 state is None
                 or state.position_m is None

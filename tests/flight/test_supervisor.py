@@ -671,6 +671,72 @@ def test_an_estimate_that_drifted_while_its_radio_carried_no_extpos_is_not_cut_u
     assert len(stops) == 1 and 0.8 < stops[0][0] <= 0.8 + 0.1 / 0.4 + 0.2, stops
 
 
+def test_an_estimate_that_drifted_through_a_blackout_longer_than_the_history_is_not_cut_as_its_poses_return():
+    """A 1.5 s mocap blackout (no frame, so no extpos) over a landing drone: its estimator drifts on its IMU, and the
+    estimates made after its poses came back, until the first extpos since reached it, are off the poses of their own
+    time. The check's history (0.5 s) empties mid-gap; its last pose must not count as fed again then (the settle
+    would be spent before the poses were back), so those estimates are not judged."""
+    _, agents, tracker, supervisor = setup()
+    agents["cf1"].set_phase(DronePhase.LANDING, 0.0)
+    states = {n: state(n, 0.0) for n in agents}
+
+    def truth(t: float) -> tuple[float, float, float]:
+        return (-1.0, -0.6, 1.0 - 0.1 * t)
+
+    stops = []
+    for k in range(351):
+        t = k / 100
+        occluded = 0.5 < t < 2.0
+        if not occluded:  # a blackout: no frame at all (the newest pose stays the last one, valid, ageing)
+            see(tracker, k + 1, t, {**POSITIONS, "cf1": truth(t)})
+        if k % 10 == 5:
+            made = t - 0.01
+            x, y, z = truth(made)
+            drift = 0.13 if 1.0 < made < 2.2 else 0.0  # drifted unfed; snaps back once an extpos reached it
+            states["cf1"] = replace(state("cf1", t), position_m=(x + drift, y, z), estimate_stamp_s=made)
+        stops += [
+            (t, f)
+            for f in supervisor.check(t, agents.values(), tracker, states)
+            if f.kind == "estimator" and f.response == "stop"
+        ]
+    assert not stops, stops
+
+
+def test_a_drone_mocap_sees_but_whose_radio_carries_none_of_its_extpos_lands_after_a_second():
+    """`UNFED_LAND_S`: poses keep coming, its setpoints may go out, but none of its extpos went to its link for 1 s:
+    its estimate drifts on its IMU and nothing can judge it, so it lands, once; a shorter gap lands nothing, and a
+    drone whose poses stopped with its extpos (an occlusion) is the mocap rules' (this rule says nothing)."""
+    from rpf_fly.flight.estimate_check import UNFED_LAND_S
+
+    def fly(gap_until_s: float, poses_stop: bool) -> list[tuple[float, object]]:
+        _, agents, tracker, supervisor = setup()
+        states = {n: state(n, 0.0) for n in agents}
+        found, sent = [], 0.0
+        for k in range(301):
+            t = k / 100
+            gap = 0.5 < t < gap_until_s
+            if not gap:
+                sent = t
+            if not (gap and poses_stop):
+                see(tracker, k + 1, t, POSITIONS)
+            if k % 10 == 5:
+                states["cf1"] = replace(
+                    state("cf1", t), position_m=POSITIONS["cf1"], estimate_stamp_s=t - 0.01, extpos_sent_s=sent
+                )
+            found += [
+                (t, f)
+                for f in supervisor.check(t, agents.values(), tracker, states)
+                if f.kind == "estimator" and f.drone == "cf1" and f.response == "land"
+            ]
+        return found
+
+    lands = fly(gap_until_s=2.5, poses_stop=False)
+    assert len(lands) == 1 and 0.5 + UNFED_LAND_S <= lands[0][0] <= 0.5 + UNFED_LAND_S + 0.11, lands
+    assert "carried none of its mocap positions" in lands[0][1].message
+    assert not fly(gap_until_s=1.2, poses_stop=False)
+    assert not fly(gap_until_s=2.5, poses_stop=True)
+
+
 def test_mocap_is_said_back_only_when_a_pose_is_back_not_when_the_blind_drones_land():
     _, agents, tracker, supervisor = setup()
     states = {n: state(n, 0.0) for n in agents}
