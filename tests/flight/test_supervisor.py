@@ -590,18 +590,26 @@ def test_an_estimate_made_during_a_loop_stall_is_not_judged_against_the_pose_aft
     assert [f.response for f in wrong if f.response == "stop"] == ["stop"], wrong
 
 
+def landing_cf1():  # type: ignore[no-untyped-def]
+    """`setup` with cf1 landing from t = 0, and every drone's healthy telemetry."""
+    _, agents, tracker, supervisor = setup()
+    agents["cf1"].set_phase(DronePhase.LANDING, 0.0)
+    return agents, tracker, supervisor, {n: state(n, 0.0) for n in agents}
+
+
+def landing_from_1m(t: float) -> tuple[float, float, float]:
+    """cf1's true position as it lands at 0.2 m/s from 1 m up."""
+    return (-1.0, -0.6, 1.0 - 0.2 * t)
+
+
 def test_an_estimate_that_drifted_unfed_is_not_cut_until_its_first_extpos_since_could_reach_it():
     """A 1 s loop stall forwards no extpos: the firmware's estimator drifts on its IMU alone (0.13 m, the emulator's
     median over 1 s) and the controller holds the drifted estimate, so the estimates made after the loop came back,
     until the first extpos since reaches the drone (0.2 s behind a full radio), are 0.13 m off the mocap pose of their
     own time. Judged, two of them cut a healthy drone's motors as the watchdog landed it; they are not judged now. An
     estimator that stops following extpos once it is fed again is still stopped."""
-    _, agents, tracker, supervisor = setup()
-    agents["cf1"].set_phase(DronePhase.LANDING, 0.0)
-    states = {n: state(n, 0.0) for n in agents}
-
-    def truth(t: float) -> tuple[float, float, float]:
-        return (-1.0, -0.6, 1.0 - 0.2 * t)
+    agents, tracker, supervisor, states = landing_cf1()
+    truth = landing_from_1m
 
     def estimate(made: float, stops_following_s: float) -> tuple[float, float, float]:
         x, y, z = truth(made)
@@ -636,12 +644,8 @@ def test_an_estimate_that_drifted_while_its_radio_carried_no_extpos_is_not_cut_u
     Crazyradio PA drifted so and two were cut landing, 0.9 m up; such estimates are not judged until the drone was
     fed again for `FEED_SETTLE_S`. An estimator that stops following extpos once fed again is still stopped, and one
     that runs away while its extpos do go out is stopped as before."""
-    _, agents, tracker, supervisor = setup()
-    agents["cf1"].set_phase(DronePhase.LANDING, 0.0)
-    states = {n: state(n, 0.0) for n in agents}
-
-    def truth(t: float) -> tuple[float, float, float]:
-        return (-1.0, -0.6, 1.0 - 0.2 * t)
+    agents, tracker, supervisor, states = landing_cf1()
+    truth = landing_from_1m
 
     def fly(stops_following_s: float, radio_gap: bool) -> list[tuple[float, object]]:
         found = []
@@ -665,8 +669,7 @@ def test_an_estimate_that_drifted_while_its_radio_carried_no_extpos_is_not_cut_u
     assert not fly(stops_following_s=9.0, radio_gap=True)
     stops = fly(stops_following_s=2.2, radio_gap=True)
     assert len(stops) == 1 and 2.2 < stops[0][0] <= 2.2 + 0.1 / 0.4 + 0.2, stops
-    _, agents, tracker, supervisor = setup()
-    agents["cf1"].set_phase(DronePhase.LANDING, 0.0)
+    agents, tracker, supervisor, states = landing_cf1()
     stops = fly(stops_following_s=0.8, radio_gap=False)  # fed all along: judged all along
     assert len(stops) == 1 and 0.8 < stops[0][0] <= 0.8 + 0.1 / 0.4 + 0.2, stops
 
