@@ -239,6 +239,13 @@ def simulated_first_order(meta: dict) -> bool:
     return meta.get("source") in ("dry-run", "lab") and logged_dynamics(meta) != "firmware"
 
 
+RESTART_OFF_M = 1e-4
+"""A logged reference further than this from where the flight's previous step moved it marks a restart (a restart puts
+the reference back on the measured pose: centimetres off the carrot). Within it, the step is the flight's own: a
+logged direction off by a rounding, or by a tampered 1e-4 rad (5 um at 0.5 m/s), is a divergence of that tick alone,
+not a restart (a restart also turns the heading to the goal, and the ticks after it would differ too)."""
+
+
 def _restarts(row: LoggedRow, last: LoggedRow | None, previous_mode: str | None, shadow: DroneAgent) -> bool:
     """Whether the flight (re)started this drone's planning before ``row`` (``DroneAgent.begin_planning``: the
     reference back on the measured pose, the heading towards the goal): at its first planning tick, and wherever
@@ -251,7 +258,7 @@ def _restarts(row: LoggedRow, last: LoggedRow | None, previous_mode: str | None,
         return previous_mode not in PLANNING_MODES
     shadow.reference = last.reference
     moved_to = shadow.advance(last.direction, complex(last.position[0], last.position[1]))
-    return moved_to != row.reference
+    return abs(moved_to - row.reference) > RESTART_OFF_M
 
 
 def replay_setup(

@@ -97,21 +97,38 @@ def test_replaying_an_rpf_flight_with_its_own_policy_agrees_to_the_onnx_parity_t
         assert drone.mode_changes == 0
 
 
-def test_a_replay_reports_the_first_tick_where_the_log_says_otherwise(apf_log: Path) -> None:
-    """The comparison is not blind: one logged direction turned by 1e-4 rad is found at its tick, and only there."""
-    data = read_log(apf_log)
+def _tampered_replay(log: Path, nth: int):  # type: ignore[no-untyped-def]
+    """Replay ``log`` with cf2's ``nth`` planning tick's logged direction turned by 1e-4 rad: (result, that row)."""
+    data = read_log(log)
     rows = data.topics["/cf2/planner"]
-    k = [i for i, m in enumerate(rows) if m.data["mode"] in PLANNING_MODES][10]
+    k = [i for i, m in enumerate(rows) if m.data["mode"] in PLANNING_MODES][nth]
     d = rows[k].data["direction"]
     turned = complex(d["x"], d["y"]) * np.exp(1e-4j)
     tampered = dict(rows[k].data, direction={"x": turned.real, "y": turned.imag})
     rows[k] = LogMessage(rows[k].log_time, rows[k].publish_time, rows[k].sequence, tampered)
     setup = replay_setup(data)
-    result = replay_log(data, setup.mission, setup.factory, tolerance=setup.tolerance)
+    return replay_log(data, setup.mission, setup.factory, tolerance=setup.tolerance), tampered
+
+
+def test_a_replay_reports_the_first_tick_where_the_log_says_otherwise(apf_log: Path) -> None:
+    """The comparison is not blind: one logged direction turned by 1e-4 rad is found at its tick, and only there."""
+    result, tampered = _tampered_replay(apf_log, 10)
     cf2 = result.drones["cf2"]
     assert cf2.first_divergence_tick == tampered["tick"]
     assert cf2.divergent_ticks == 1 and cf2.max_direction_diff == pytest.approx(1e-4, rel=1e-3)
     assert result.drones["cf1"].first_divergence_tick is None
+
+
+@pytest.mark.parametrize("nth", [0, 4, 8, 12])
+def test_a_tampered_direction_is_one_divergent_tick_not_a_restart_wherever_the_drone_turns(
+    rpf_log: Path, nth: int
+) -> None:
+    """A logged direction a hair off moves the logged reference 5 um from where the replay's step puts it: that is
+    not a restart (which would turn the replayed heading to the goal, and a drone avoiding others would then diverge
+    for tens of ticks: 2-29 on an RPF flight before `replay.RESTART_OFF_M`)."""
+    result, tampered = _tampered_replay(rpf_log, nth)
+    cf2 = result.drones["cf2"]
+    assert cf2.first_divergence_tick == tampered["tick"] and cf2.divergent_ticks == 1, cf2.to_json()
 
 
 # ------------------------------------------------------------------------------------------ other planners
