@@ -2,11 +2,11 @@
 or before they could stop if held now (rpf_fly/flight/response.py), and when such an episode ends.
 
 A pair (or a drone and an obstacle) counts as breached when it is closer than 2r (r) now, or when, held now, it
-would come closer before it stops: each drone flies on for its mocap latency plus `HOLD_REACTION_S`, then brakes as
-its own controller does from the tilt its streamed setpoint asks for (`Braking.stop_point`); a pair's closest
-approach is taken with both on their ways in step. Edge-triggered: one finding when an episode starts, one (for a
-``hold`` response) when it ends, at rest and clear by `RESUME_MARGIN_M` (docs/flight.md, "How a held drone
-stops")."""
+would come closer before it stops: each drone flies on towards its setpoint for its mocap latency plus
+`HOLD_REACTION_S`, then brakes as its own controller does from the speed and tilt it reached (`Braking.stop_point`);
+a pair's closest approach is taken with both on their ways in step. Edge-triggered: one finding when an episode
+starts, one (for a ``hold`` response) when it ends, at rest from the hold on and clear by `RESUME_MARGIN_M`
+(docs/flight.md, "How a held drone stops")."""
 
 from __future__ import annotations
 
@@ -28,10 +28,11 @@ RESUME_MARGIN_M = 0.05
 REST_M_S = 0.1
 REST_S = 0.5
 """A separation or clearance episode ends (its ``hold`` resumes) only once the drones have been at rest (under
-`REST_M_S` by the mocap and by their response model) for `REST_S` and are clear, braking from where they are, by
-`RESUME_MARGIN_M`: a held drone brakes hard and swings back, its braking tilt makes its stop look short, and
-resuming at the turn of a swing restarts the approach the hold stopped (a head-on pair at 1 m/s resumed 10 ms into
-its hold, or at the turn of its swing, and met)."""
+`REST_M_S` by the mocap and by their response model) for `REST_S` counted from the hold on, and are clear, braking
+from where they are, by `RESUME_MARGIN_M`: a held drone brakes hard and swings back, its braking tilt makes its
+stop look short, and resuming at the turn of a swing restarts the approach the hold stopped (a head-on pair at
+1 m/s resumed 10 ms into its hold, or at the turn of its swing, and met; a pair held from rest, its carrots just
+sent at each other, was "rested" at once and resumed in the next frame)."""
 HOLD_REACTION_S = 0.1
 """From the mocap picture of a breach to the hold setpoint acting on the drone: the supervisor's pass (every mocap
 frame), the hold setpoint sent at once through the radio's queue, the drone's estimator taking the extpos, and the
@@ -64,6 +65,9 @@ class ProximityCheck:
         self._now_s = 0.0
         self._moving_since: dict[str, float] = {}
         """drone -> when it was last seen moving (faster than `REST_M_S`): an episode ends `REST_S` after."""
+        self._stops: dict[tuple[str, bool], complex] = {}
+        """(drone, commanded) -> where it comes to rest if held now (`_stop_point`), for this pass: every pair and the
+        clearance read it."""
         self.radio_delay_s: dict[str, float] = {}
         """drone -> its link's echo round trip (s; the supervisor sets it from the telemetry at each pass): a hold
         through a slower link than `HOLD_REACTION_S` allows reaches the drone that much later (8 drones on one
@@ -80,6 +84,7 @@ class ProximityCheck:
             if speed > REST_M_S or a.name not in self._moving_since:
                 self._moving_since[a.name] = now_s
         self._now_s = now_s
+        self._stops = {}
 
     def _resting(self, name: str) -> bool:
         """At rest for `REST_S` (a drone another process flies: taken as at rest)."""
@@ -99,7 +104,7 @@ class ProximityCheck:
                 break  # two drones of other processes: theirs to check
             for nj, pj in tracked[i + 1 :]:
                 d = sum((u - v) ** 2 for u, v in zip(pi.position, pj.position)) ** 0.5
-                ahead = self._stopped_apart(pi, pj, commanded.get(ni), commanded.get(nj), tracker.latency_s)
+                ahead = self._stopped_apart(ni, pi, nj, pj, commanded, tracker.latency_s)
                 pair = (ni, nj)
                 held = pair in self._close_pairs and (
                     min(d, ahead) < 2 * self.r + RESUME_MARGIN_M or not (self._resting(ni) and self._resting(nj))
@@ -108,6 +113,7 @@ class ProximityCheck:
                     pair = (ni, nj)
                     close_now.add(pair)
                     if pair not in self._close_pairs:
+                        self._moving_since[ni] = self._moving_since[nj] = self._now_s  # at rest from the hold on
                         response = self.safety.on_separation
                         message = f"separation {d:.3f} m from {nj} is below 2r = {2 * self.r:.2f} m"
                         if d >= 2 * self.r:
@@ -125,33 +131,56 @@ class ProximityCheck:
         self._close_pairs = close_now
         return out
 
-    def _stop_point(self, pose: TrackedPose, agent: DroneAgent | None, latency_s: float | None) -> complex:
+    def _stop_point(self, name: str, pose: TrackedPose, agent: DroneAgent | None, latency_s: float | None) -> complex:
+        """`_stop_at`, once per drone each pass."""
+        key = (name, agent is not None)
+        stop = self._stops.get(key)
+        if stop is None:
+            stop = self._stops[key] = self._stop_at(pose, agent, latency_s)
+        return stop
+
+    def _stop_at(self, pose: TrackedPose, agent: DroneAgent | None, latency_s: float | None) -> complex:
         """Where a drone at ``pose`` comes to rest if it is held now: its mocap picture is ``latency_s`` old and the
-        hold reaches it `HOLD_REACTION_S` (or its link's round trip, if longer) later, flown at its speed, then it
-        brakes as its own controller does (`Braking.stop_point`) from its state: a streaming drone's velocity and
-        tilt from its response model (the mocap's filtered velocity trails a drone that speeds up; the faster of the
-        two is taken), else the tilt its setpoint asks for; a drone this process does not command: the firmware's
-        defaults in steady flight."""
+        hold reaches it `HOLD_REACTION_S` (or its link's round trip, if longer) later; until then its controller
+        drives it on towards its setpoint (the next its planner may send: `DroneAgent.next_setpoint`), then it brakes
+        as that controller does (`Braking.stop_point`) from the speed and tilt it has reached. A streaming drone is
+        flown on on its response model (`Follower.coasted`: a drone speeding up from rest goes on speeding up until
+        the hold's tilt turns round; flown on at its present speed instead, a pair resuming 0.4 m apart came 4 cm
+        closer than predicted and under 2r); one the mocap sees faster than its model (pushed) at its mocap speed,
+        with the model's tilt. A drone this process does not command: at its mocap speed, braking with the
+        firmware's defaults from steady flight."""
         braking = agent.braking if agent is not None else braking_for(None)
         streaming = agent if agent is not None and agent.phase in STREAMING_PHASES else None
-        setpoint = streaming.last_setpoint if streaming is not None else None
+        setpoint = streaming.next_setpoint(pose.xy) if streaming is not None else None
         model = self.model_of(streaming.name) if streaming is not None else None
+        reaction_s = max(HOLD_REACTION_S, self.radio_delay_s.get(agent.name, 0.0) if agent is not None else 0.0)
+        coast_s = reaction_s + (latency_s or 0.0)
+        if model is not None and setpoint is not None:
+            twin = model.coasted(setpoint, coast_s)
+            if abs(twin.velocity) >= abs(pose.velocity):
+                ahead = pose.xy + twin.position - model.position
+                return braking.stop_point(ahead, twin.velocity, setpoint, twin.tilt_deg)
         velocity, tilt = pose.velocity, None
         if model is not None:
             tilt = model.tilt_deg
             if abs(model.velocity) > abs(velocity):
                 velocity = model.velocity
-        reaction_s = max(HOLD_REACTION_S, self.radio_delay_s.get(agent.name, 0.0) if agent is not None else 0.0)
-        ahead = pose.xy + velocity * (reaction_s + (latency_s or 0.0))
-        return braking.stop_point(ahead, velocity, setpoint, tilt)
+        return braking.stop_point(pose.xy + velocity * coast_s, velocity, setpoint, tilt)
 
     def _stopped_apart(
-        self, pi: TrackedPose, pj: TrackedPose, ai: DroneAgent | None, aj: DroneAgent | None, latency_s: float | None
+        self,
+        ni: str,
+        pi: TrackedPose,
+        nj: str,
+        pj: TrackedPose,
+        commanded: dict[str, DroneAgent],
+        latency_s: float | None,
     ) -> float:
         """The closest two drones come if both are held now (3D, centre to centre): each flies on to its
         `_stop_point`, both taken to cover their way in step."""
         a0, b0 = pi.xy, pj.xy
-        a1, b1 = self._stop_point(pi, ai, latency_s), self._stop_point(pj, aj, latency_s)
+        a1 = self._stop_point(ni, pi, commanded.get(ni), latency_s)
+        b1 = self._stop_point(nj, pj, commanded.get(nj), latency_s)
         start, change = b0 - a0, (b1 - b0) - (a1 - a0)
         s = 0.0 if abs(change) < 1e-12 else min(1.0, max(0.0, -(start * change.conjugate()).real / abs(change) ** 2))
         dz = pi.position[2] - pj.position[2]
@@ -166,7 +195,7 @@ class ProximityCheck:
         distances = np.empty((0, 1 + len(_WAY)))
         if tracked:  # every drone's position and its way to rest in one call
             here = np.array([pose.xy for _, pose in tracked])
-            stops = np.array([self._stop_point(pose, a, tracker.latency_s) for a, pose in tracked])
+            stops = np.array([self._stop_point(a.name, pose, a, tracker.latency_s) for a, pose in tracked])
             points = np.concatenate([here[:, None], here[:, None] + (stops - here)[:, None] * _WAY], axis=1)
             distances = self.obstacles.signed_distance(points)
         for (a, _pose), row in zip(tracked, distances):
@@ -178,6 +207,7 @@ class ProximityCheck:
             if min(clearance, ahead) < self.r or held:
                 near_now.add(a.name)
                 if a.name not in self._near_obstacle:
+                    self._moving_since[a.name] = self._now_s  # at rest from the hold on
                     message = f"obstacle clearance {clearance:.3f} m is below r = {self.r:.2f} m"
                     if clearance >= self.r:
                         message = (

@@ -337,6 +337,18 @@ class Follower:
         """The tilt (degrees, x + iy: towards where it accelerates)."""
         return complex(self.tilt[0], self.tilt[1])
 
+    def coasted(self, setpoint: complex, seconds: float) -> Follower:
+        """A copy of this model flown on for ``seconds`` (rounded up to whole 10 ms steps) towards ``setpoint``:
+        where a drone still is, and how fast and tilted, when a command sent now reaches its controller (a drone
+        speeding up goes on speeding up until then: its tilt turns round only after)."""
+        twin = Follower.__new__(Follower)
+        twin.gains = self.gains
+        twin.p, twin.v, twin.tilt = list(self.p), list(self.v), list(self.tilt)
+        twin.i_pos, twin.i_vel = list(self.i_pos), list(self.i_vel)
+        twin._left = 0.0
+        twin.step(setpoint, math.ceil(max(seconds, 0.0) / DT - 1e-9) * DT)
+        return twin
+
     def step(self, setpoint: complex, dt_s: float) -> complex:
         """Advance ``dt_s`` (whole 10 ms steps; the rest is carried) towards ``setpoint``; the new position."""
         g = self.gains

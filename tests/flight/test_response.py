@@ -17,6 +17,7 @@ from rpf_fly.flight.response import (
     DEFAULT_GAINS,
     POSE_AGE_ALLOWANCE_S,
     Braking,
+    Follower,
     ResponseGains,
     braking_for,
     overshoot_m,
@@ -142,3 +143,18 @@ def test_a_drone_whose_ground_station_died_goes_no_further_than_its_reach(speed:
     moved = [_after_death_m(v, lead, backwards) for v, backwards in ((speed, False), (speed, True), (0.0, False))]
     reach = reach_after_death_m(DEFAULT_GAINS, speed, carrot_max_lead_m(speed, DEFAULT_GAINS), 0.66)
     assert max(moved) <= reach <= 1.6 * max(moved), (speed, moved, reach)
+
+
+def test_a_coasted_follower_is_the_model_flown_on_and_leaves_the_model_where_it_was():
+    """`Follower.coasted` flies a copy on towards a setpoint for whole 10 ms steps (rounded up); the model itself
+    stays put: the separation check asks it every frame where a drone will be when a hold reaches it."""
+    model = Follower(DEFAULT_GAINS, 0j, 0.2 + 0j)
+    model.step(0.3 + 0j, 0.05)
+    before = (model.position, model.velocity, model.tilt_deg)
+    twin = model.coasted(0.5 + 0j, 0.125)
+    assert (model.position, model.velocity, model.tilt_deg) == before
+    flown = Follower(DEFAULT_GAINS, 0j, 0.2 + 0j)
+    flown.step(0.3 + 0j, 0.05)
+    flown.step(0.5 + 0j, 0.13)
+    assert (twin.position, twin.velocity, twin.tilt_deg) == (flown.position, flown.velocity, flown.tilt_deg)
+    assert twin.velocity.real > model.velocity.real and twin.tilt_deg.real > model.tilt_deg.real  # speeding up

@@ -4,14 +4,15 @@ clearance"): the supervisor holds a closing pair while braking from where they a
 and a held pair resumes only at rest and clear.
 
 Two drones fly head-on at 1 m/s on planners that cannot see each other (sensing range 5 cm): only the supervisor
-stands between them. Judged on the simulated truth."""
+stands between them, through the first hold at 1 m/s and every hold after a resume. Judged on the simulated
+truth."""
 
 from __future__ import annotations
 
 import math
 from pathlib import Path
 
-from flight_harness import fly
+from flight_harness import fly_on_time
 
 from rpf_fly.mission import parse_mission
 
@@ -36,7 +37,7 @@ def _xyz(sample: dict) -> tuple[float, float, float]:
 
 def test_a_separation_hold_at_1_m_s_keeps_the_drones_apart(tmp_path: Path) -> None:
     mission = parse_mission(HEAD_ON, "head-on.yaml")
-    flight = fly(mission, tmp_path)
+    flight = fly_on_time(mission, tmp_path)
     assert not [s for s in flight.snapshots.values() if s.crashed], flight.snapshots
     truth = {
         name: [(m.log_time / 1e9, _xyz(m.data)) for m in flight.log.messages(f"/truth/{name}")]
@@ -65,6 +66,11 @@ def test_a_separation_hold_at_1_m_s_keeps_the_drones_apart(tmp_path: Path) -> No
         (round(t - first, 2), round(math.dist(a[:2], b[:2]), 3)) for (t, a), (_, b) in pairs if first <= t <= end
     ]
     assert min(d for _, d in episode) >= 2 * mission.planner.safety_radius, episode[::5]
-    # and nothing after brings them into contact (the planners still fly at each other after each resume)
-    airborne = [math.dist(a, b) for (_, a), (_, b) in pairs if a[2] > 0.1 and b[2] > 0.1]
-    assert min(airborne) > 0.13, min(airborne)
+    # and after each resume (the planners fly at each other again, speeding up from rest) they are held again
+    # still 2r apart: the check predicts each drone's stop from where its speeding up has taken it by the time
+    # the hold reaches it, and from the next carrot its planner may send
+    resumes = [e for e in flight.log.messages("/events") if "restored" in str(e.data.get("message"))]
+    assert resumes, "the held pair never resumed"
+    airborne = [(round(t - first, 2), math.dist(a, b)) for (t, a), (_, b) in pairs if a[2] > 0.1 and b[2] > 0.1]
+    closest = min(airborne, key=lambda x: x[1])
+    assert closest[1] >= 2 * mission.planner.safety_radius, closest

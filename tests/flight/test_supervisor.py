@@ -1084,3 +1084,49 @@ def test_a_landing_drone_first_seen_on_the_floor_or_snapping_back_in_the_air_is_
         return (x - 0.3 * math.exp(-(min(t, 1.4) - 1.3) / 0.25), y, max(0.0, 0.5 - 0.25 * t - 0.05))
 
     assert landing_with(target_of, pose_of) == []
+
+
+def test_a_pair_at_rest_whose_carrots_pull_them_together_is_held_early_and_rests_its_full_time():
+    """cf1 and cf2 hover 0.3 m apart at rest (longer than `REST_S`), then their planners lead each carrot 0.3 m
+    at the other (a held pair resuming on planners that cannot see each other). Each speeds up on its tilt until
+    a hold reaches it, `HOLD_REACTION_S` after it is sent: the check holds them while the mocap still sees them
+    at rest. The hold setpoints stop them there, and the episode ends only once they have rested `REST_S` from
+    the hold on, not at once because they had rested before it."""
+    mission_text = SHORT_MISSION.replace(
+        "planner: {kind: apf, margin: 0}", "planner: {kind: apf, margin: 0}\nsafety: {on_separation: hold}"
+    )
+    _, agents, tracker, supervisor = setup(mission_text)
+    spots = {**POSITIONS, "cf1": (-0.15, 1.5, 0.5), "cf2": (0.15, 1.5, 0.5)}
+    for name in agents:
+        agents[name].last_setpoint = agents[name].reference = complex(*spots[name][:2])
+    frame, now = 0, 0.0
+
+    def check() -> list:  # type: ignore[type-arg]
+        see(tracker, frame, now, spots)
+        found = supervisor.check(now, agents.values(), tracker, {n: state(n, now) for n in agents})
+        return [f for f in found if f.kind == "separation"]
+
+    for frame in range(1, 100):  # at rest, clear, for a second
+        now = 0.01 * frame
+        assert not check()
+    for name, toward in (("cf1", 1.0), ("cf2", -1.0)):
+        agents[name].heading = complex(toward, 0.0)
+        agents[name].last_setpoint = agents[name].reference = complex(*spots[name][:2]) + toward * 0.3
+    held_at = None
+    for frame in range(100, 130):
+        now = 0.01 * frame
+        if found := check():
+            assert {(f.drone, f.response) for f in found} == {("cf1", "hold"), ("cf2", "hold")}, found
+            held_at = now
+            break
+    assert held_at is not None and held_at <= 1.0 + 0.05, held_at
+    for name in ("cf1", "cf2"):
+        agents[name].set_phase(DronePhase.HOLDING, now)
+        agents[name].last_setpoint = agents[name].hold_point = complex(*spots[name][:2])
+    resumed, last = None, frame
+    for frame in range(last + 1, last + 120):
+        now = 0.01 * frame
+        if [f for f in check() if f.response == "resume"]:
+            resumed = now
+            break
+    assert resumed is not None and resumed >= held_at + REST_S - 1e-9, (held_at, resumed)
