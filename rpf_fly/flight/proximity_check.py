@@ -20,7 +20,7 @@ from rpf_fly.flight.commander import STREAMING as STREAMING_PHASES
 from rpf_fly.flight.events import ERROR, INFO
 from rpf_fly.flight.findings import Finding
 from rpf_fly.flight.poses import PoseTracker, TrackedPose
-from rpf_fly.flight.response import Follower, braking_for
+from rpf_fly.flight.response import OVERHEAD, Follower, braking_for
 from rpf_fly.mission.model import Mission
 from rpf_fly.planning.obstacles import ObstacleSet
 
@@ -39,6 +39,19 @@ frame), the hold setpoint sent at once through the radio's queue, the drone's es
 firmware's next position-loop tick; twice what an idle host takes (a head-on pair at 1 m/s each met on a loaded
 2-core host with 0.05 s). A drone whose radio link is slower takes its link's echo round trip instead
 (`ProximityCheck.radio_delay_s`)."""
+
+COAST_MODELLED_S = 0.2
+"""How much of a drone's way until a hold acts the response model flies (`Follower.coasted`, 10 ms a step, on every
+mocap frame); beyond it (a slow link's round trip, a late mocap picture) the drone goes on at the speed its carrot
+pulls it to, at least the speed it reached: the model's cost does not grow with the host's lateness."""
+CLEARANCE_KEPT_S = 0.1
+CLEARANCE_MOVED_M = 0.15
+"""A drone's clearance from the last pass stands for this one's if it is at most `CLEARANCE_KEPT_S` old, less
+`CLEARANCE_MOVED_M` (0.1 s at 1.5 m/s): the clearance check works a drone's stop out only when that could bring it
+near an obstacle, from one obstacle query a pass."""
+REACH_SLACK = 1.2
+REACH_SLACK_M = 0.05
+"""`ProximityCheck._reach_m`'s margin over its bound."""
 
 RADIO_DELAY_MAX_S = 0.5
 """The most a link's round trip adds to a hold's reaction (cflib's 95th percentile over its last 100 pings)."""
@@ -65,6 +78,10 @@ class ProximityCheck:
         self._now_s = 0.0
         self._moving_since: dict[str, float] = {}
         """drone -> when it was last seen moving (faster than `REST_M_S`): an episode ends `REST_S` after."""
+        self._clearances: dict[str, tuple[float, float]] = {}
+        """drone -> (when, its clearance then), from the last clearance pass that saw it."""
+        self._reaches: dict[tuple[str, bool], float] = {}
+        """(drone, commanded) -> `_reach_m`, for this pass."""
         self._stops: dict[tuple[str, bool], complex] = {}
         """(drone, commanded) -> where it comes to rest if held now (`_stop_point`), for this pass: every pair and the
         clearance read it."""
@@ -85,6 +102,7 @@ class ProximityCheck:
                 self._moving_since[a.name] = now_s
         self._now_s = now_s
         self._stops = {}
+        self._reaches = {}
 
     def _resting(self, name: str) -> bool:
         """At rest for `REST_S` (a drone another process flies: taken as at rest)."""
@@ -104,8 +122,15 @@ class ProximityCheck:
                 break  # two drones of other processes: theirs to check
             for nj, pj in tracked[i + 1 :]:
                 d = sum((u - v) ** 2 for u, v in zip(pi.position, pj.position)) ** 0.5
-                ahead = self._stopped_apart(ni, pi, nj, pj, commanded, tracker.latency_s)
                 pair = (ni, nj)
+                room = abs(pi.xy - pj.xy) - 2 * self.r - RESUME_MARGIN_M
+                if pair not in self._close_pairs and room > 0.0:
+                    latency = tracker.latency_s
+                    if room >= self._reach_m(ni, pi, commanded.get(ni), latency) + self._reach_m(
+                        nj, pj, commanded.get(nj), latency
+                    ):
+                        continue  # they cannot come within 2r before they stop
+                ahead = self._stopped_apart(ni, pi, nj, pj, commanded, tracker.latency_s)
                 held = pair in self._close_pairs and (
                     min(d, ahead) < 2 * self.r + RESUME_MARGIN_M or not (self._resting(ni) and self._resting(nj))
                 )
@@ -131,6 +156,37 @@ class ProximityCheck:
         self._close_pairs = close_now
         return out
 
+    def _clearance_before(self, name: str) -> float:
+        """A drone's clearance at the last pass, less how far it can have flown since (`CLEARANCE_MOVED_M`); none
+        known within `CLEARANCE_KEPT_S`: 0 (work its stop out)."""
+        seen = self._clearances.get(name)
+        if seen is None or self._now_s - seen[0] > CLEARANCE_KEPT_S:
+            return 0.0
+        return seen[1] - CLEARANCE_MOVED_M
+
+    def _coast_s(self, agent: DroneAgent | None, latency_s: float | None) -> float:
+        """How long a drone flies on before a hold sent now acts on it (`_stop_at`)."""
+        reaction_s = max(HOLD_REACTION_S, self.radio_delay_s.get(agent.name, 0.0) if agent is not None else 0.0)
+        return reaction_s + (latency_s or 0.0)
+
+    def _reach_m(self, name: str, pose: TrackedPose, agent: DroneAgent | None, latency_s: float | None) -> float:
+        """At most how far from ``pose`` a drone's `_stop_at` can be, cheaply (once per drone each pass): speeding
+        up at its tilt limit until the hold acts, then braking from its tilt limit along its way, with `REACH_SLACK`.
+        A pair further apart than their two reaches and 2r, or a drone further from every obstacle than its reach
+        and r, needs no stop worked out (the response model flown on costs 0.07 ms a drone)."""
+        key = (name, agent is not None)
+        reach = self._reaches.get(key)
+        if reach is None:
+            braking = agent.braking if agent is not None else braking_for(None)
+            model = self.model_of(agent.name) if agent is not None and agent.phase in STREAMING_PHASES else None
+            speed = max(abs(pose.velocity), abs(model.velocity) if model is not None else 0.0)
+            coast = self._coast_s(agent, latency_s)
+            accel = braking.gains.max_brake_m_s2
+            flown = speed * coast + 0.5 * accel * coast**2
+            brake = braking.stop_m(speed + accel * coast, braking.gains.tilt_limit_deg)
+            reach = self._reaches[key] = REACH_SLACK * (flown + brake) + REACH_SLACK_M
+        return reach
+
     def _stop_point(self, name: str, pose: TrackedPose, agent: DroneAgent | None, latency_s: float | None) -> complex:
         """`_stop_at`, once per drone each pass."""
         key = (name, agent is not None)
@@ -153,13 +209,19 @@ class ProximityCheck:
         streaming = agent if agent is not None and agent.phase in STREAMING_PHASES else None
         setpoint = streaming.next_setpoint(pose.xy) if streaming is not None else None
         model = self.model_of(streaming.name) if streaming is not None else None
-        reaction_s = max(HOLD_REACTION_S, self.radio_delay_s.get(agent.name, 0.0) if agent is not None else 0.0)
-        coast_s = reaction_s + (latency_s or 0.0)
+        coast_s = self._coast_s(agent, latency_s)
         if model is not None and setpoint is not None:
-            twin = model.coasted(setpoint, coast_s)
-            if abs(twin.velocity) >= abs(pose.velocity):
-                ahead = pose.xy + twin.position - model.position
-                return braking.stop_point(ahead, twin.velocity, setpoint, twin.tilt_deg)
+            modelled_s = min(coast_s, COAST_MODELLED_S)
+            twin = model.coasted(setpoint, modelled_s)
+            velocity = twin.velocity
+            if coast_s > modelled_s:  # a slow link: on at the speed its carrot pulls it to, at least the one reached
+                lead = setpoint - twin.position
+                pulled = min(braking.gains.vel_max * OVERHEAD, braking.gains.pos_kp * abs(lead))
+                way = velocity / abs(velocity) if abs(velocity) > 0.05 else (lead / abs(lead) if abs(lead) else 0j)
+                velocity = way * max(abs(velocity), pulled)
+            if abs(velocity) >= abs(pose.velocity):
+                ahead = pose.xy + twin.position - model.position + velocity * (coast_s - modelled_s)
+                return braking.stop_point(ahead, velocity, setpoint, twin.tilt_deg)
         velocity, tilt = pose.velocity, None
         if model is not None:
             tilt = model.tilt_deg
@@ -195,11 +257,21 @@ class ProximityCheck:
         distances = np.empty((0, 1 + len(_WAY)))
         if tracked:  # every drone's position and its way to rest in one call
             here = np.array([pose.xy for _, pose in tracked])
-            stops = np.array([self._stop_point(a.name, pose, a, tracker.latency_s) for a, pose in tracked])
+            stops = np.array(
+                [
+                    self._stop_point(a.name, pose, a, tracker.latency_s)
+                    if a.name in self._near_obstacle
+                    or self._clearance_before(a.name)
+                    < self.r + RESUME_MARGIN_M + self._reach_m(a.name, pose, a, tracker.latency_s)
+                    else pose.xy  # it cannot come near one before it stops
+                    for a, pose in tracked
+                ]
+            )
             points = np.concatenate([here[:, None], here[:, None] + (stops - here)[:, None] * _WAY], axis=1)
             distances = self.obstacles.signed_distance(points)
         for (a, _pose), row in zip(tracked, distances):
             clearance = float(row[0])
+            self._clearances[a.name] = (self._now_s, clearance)
             ahead = float(np.min(row[1:]))
             held = a.name in self._near_obstacle and (
                 min(clearance, ahead) < self.r + RESUME_MARGIN_M or not self._resting(a.name)

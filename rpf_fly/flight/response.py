@@ -350,25 +350,28 @@ class Follower:
         return twin
 
     def step(self, setpoint: complex, dt_s: float) -> complex:
-        """Advance ``dt_s`` (whole 10 ms steps; the rest is carried) towards ``setpoint``; the new position."""
+        """Advance ``dt_s`` (whole 10 ms steps; the rest is carried) towards ``setpoint``; the new position. The two
+        axes are independent in this model, so each runs its steps on local names (the separation check flies a copy
+        on every mocap frame: `coasted`)."""
         g = self.gains
-        vel_cap, tilt_cap, limit = g.vel_max * OVERHEAD, g.tilt_limit_deg * OVERHEAD, g.tilt_limit_deg
+        vel_cap, limit = g.vel_max * OVERHEAD, g.tilt_limit_deg  # the tilt's 1.1 x overhead clamp is inside it
+        pos_kp, pos_ki, vel_kp, vel_ki = g.pos_kp, g.pos_ki, g.vel_kp, g.vel_ki
         follow = 1.0 - math.exp(-DT / ATTITUDE_TAU_S)
+        tan, rad = math.tan, math.pi / 180.0
         self._left += dt_s
         steps = int(self._left / DT + 1e-9)
         self._left -= steps * DT
-        target = (setpoint.real, setpoint.imag)
-        for _ in range(steps):
-            for k in (0, 1):
-                error = target[k] - self.p[k]
-                self.i_pos[k] += error * DT
-                v_sp = min(max(g.pos_kp * error + g.pos_ki * self.i_pos[k], -vel_cap), vel_cap)
-                v_error = v_sp - self.v[k]
-                self.i_vel[k] += v_error * DT
-                tilt_sp = min(max(g.vel_kp * v_error + g.vel_ki * self.i_vel[k], -tilt_cap), tilt_cap)
-                tilt_sp = min(max(tilt_sp, -limit), limit)
-                self.tilt[k] += (tilt_sp - self.tilt[k]) * follow
-                accel = GRAVITY * math.tan(math.radians(self.tilt[k])) - DRAG_PER_S * self.v[k]
-                self.v[k] += accel * DT
-                self.p[k] += self.v[k] * DT
+        for k, target in ((0, setpoint.real), (1, setpoint.imag)):
+            p, v, tilt, i_pos, i_vel = self.p[k], self.v[k], self.tilt[k], self.i_pos[k], self.i_vel[k]
+            for _ in range(steps):
+                error = target - p
+                i_pos += error * DT
+                v_sp = min(max(pos_kp * error + pos_ki * i_pos, -vel_cap), vel_cap)
+                v_error = v_sp - v
+                i_vel += v_error * DT
+                tilt_sp = min(max(vel_kp * v_error + vel_ki * i_vel, -limit), limit)
+                tilt += (tilt_sp - tilt) * follow
+                v += (GRAVITY * tan(tilt * rad) - DRAG_PER_S * v) * DT
+                p += v * DT
+            self.p[k], self.v[k], self.tilt[k], self.i_pos[k], self.i_vel[k] = p, v, tilt, i_pos, i_vel
         return self.position

@@ -4,14 +4,16 @@ fires, and when a hold ends."""
 from __future__ import annotations
 
 import math
+import random
 from dataclasses import replace
 
 from flight_harness import SHORT_MISSION
 
 from rpf_fly.flight.agent import DroneAgent
 from rpf_fly.flight.phases import DronePhase
-from rpf_fly.flight.poses import PoseTracker
-from rpf_fly.flight.proximity_check import REST_S
+from rpf_fly.flight.poses import PoseTracker, TrackedPose
+from rpf_fly.flight.proximity_check import REST_S, ProximityCheck
+from rpf_fly.flight.response import DEFAULT_GAINS, Follower
 from rpf_fly.flight.supervisor import ERROR, LOW_BATTERY_SAMPLES, TELEMETRY_STALE_S, WARNING, Supervisor
 from rpf_fly.mission import parse_mission
 from rpf_fly.mocap.frame import MocapFrame, RigidBodyPose
@@ -1130,3 +1132,30 @@ def test_a_pair_at_rest_whose_carrots_pull_them_together_is_held_early_and_rests
             resumed = now
             break
     assert resumed is not None and resumed >= held_at + REST_S - 1e-9, (held_at, resumed)
+
+
+def test_a_drones_reach_bounds_every_stop_the_separation_check_could_work_out_for_it():
+    """The separation and clearance checks skip the response model for a pair further apart than their two reaches
+    (`ProximityCheck._reach_m`): the reach must cover the stop worked out (`_stop_at`) from any state: speeds
+    from rest to past the firmware's cap, tilts and carrots any way, slow links, late mocap."""
+    mission, agents, _, _ = setup()
+    agent = agents["cf1"]
+    rng = random.Random(5)
+    worst = 0.0
+    for _ in range(300):
+        speed, way = rng.uniform(0.0, 1.6), complex(rng.gauss(0, 1), rng.gauss(0, 1))
+        velocity = speed * way / abs(way)
+        model = Follower(DEFAULT_GAINS, 0j, velocity)
+        model.tilt = [rng.uniform(-20, 20), rng.uniform(-20, 20)]
+        lead = complex(rng.uniform(-0.7, 0.7), rng.uniform(-0.7, 0.7))
+        agent.reference = agent.last_setpoint = lead
+        agent.heading = lead / abs(lead) if abs(lead) > 1e-9 else 1 + 0j
+        check = ProximityCheck(mission, obstacle_set(()), model_of=lambda name, m=model: m)
+        check.radio_delay_s = {"cf1": rng.choice([0.0, 0.2, 0.5])}
+        pose = TrackedPose((0.0, 0.0, 0.5), (0.0, 0.0, 0.0, 1.0), velocity * rng.uniform(0.5, 1.0), 0.0, 1)
+        latency = rng.choice([None, 0.005, 0.1])
+        stop = check._stop_at(pose, agent, latency)
+        reach = check._reach_m("cf1", pose, agent, latency)
+        assert abs(stop) <= reach, (speed, model.tilt, lead, abs(stop), reach)
+        worst = max(worst, abs(stop) / reach)
+    assert worst > 0.3, worst  # a bound that covers, not one so loose it skips nothing
