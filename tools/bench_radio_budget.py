@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 import tempfile
 import threading
 import time
@@ -63,11 +64,13 @@ def measure(mission: Mission, seconds: float, cache_dir: str) -> dict[str, float
     """The mission's traffic through real cflib on one emulated dongle (module docstring)."""
     from rpf_fly.emulator import crazyradio
     from rpf_fly.emulator.fake_world import FakeDroneConfig, FakeWorld
+    from rpf_fly.flight.session import FLIGHT_SWITCH_INTERVAL_S
     from rpf_fly.radio.budget import link_rate_limits
     from rpf_fly.radio.cflib_backend import CflibBackend
     from rpf_fly.radio.packed_extpos import PACKED_EXT_POS_STD_DEV_M
     from rpf_fly.radio.schedule import ExtposSchedule
 
+    sys.setswitchinterval(FLIGHT_SWITCH_INTERVAL_S)  # as a flight's process runs (`run_flight`)
     packed = mission.radio.extpos == "packed"
     addresses = {d.name: int(d.uri.rsplit("/", 1)[1], 16) for d in mission.drones}
     world = FakeWorld(

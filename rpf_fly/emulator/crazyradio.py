@@ -82,6 +82,14 @@ def stall() -> UsbFailure:
     return UsbFailure(-9, errno.EPIPE, "Pipe error")
 
 
+CATCH_UP_S = 0.002
+"""How much of its own lateness the emulated dongle makes up: a wake-up after a transfer's time that came late (the
+host's timer and the flight process's other threads), or the emulation's own work for a packet (the simulated
+drone's radio, which a real one does in parallel with the host), is taken off the next operation's start, up to
+this; beyond it the host held the flight's process, and the dongle waited as a real one would have (docs/radio.md,
+"The emulated Crazyradio")."""
+
+
 def _sleep_until(t_s: float) -> None:
     delay = t_s - time.monotonic()
     if delay > 0.0:
@@ -130,6 +138,9 @@ class EmulatedCrazyradio:
         self.configuration = 0
         self._lock = threading.RLock()
         self._free_at = 0.0
+        self._behind = 0.0
+        """How far the host's clock ran ahead of the dongle's timeline when its last operation returned (the
+        emulation's own lateness, at most `CATCH_UP_S`): the next operation starts that much earlier."""
         self._in: deque[tuple[float, bytes]] = deque()
         self._last_address: int | None = None
         self._last_channel: int | None = None
@@ -158,11 +169,12 @@ class EmulatedCrazyradio:
         host held the caller past that end (a late wake-up), and past ``due_s`` (an answer ready since then that
         cflib's thread came for late), is recorded as the links' (`host_lag.LINKS`)."""
         now = time.monotonic()
-        start = max(now, self._free_at)
+        start = max(now - self._behind, self._free_at)
         self._free_at = start + duration_s
         self.counters.busy_s += duration_s
         _sleep_until(self._free_at)
         after = time.monotonic()
+        self._behind = min(CATCH_UP_S, max(0.0, after - self._free_at))
         LINKS.record(max(0.0, after - self._free_at) + (max(0.0, now - due_s) if due_s is not None else 0.0), after)
         return self._free_at
 
@@ -276,6 +288,7 @@ class EmulatedCrazyradio:
             start, end = self.dongle_air.reserve(air_s, taken)
             self.counters.busy_s += end - taken
             self._free_at = end
+            self._behind = min(CATCH_UP_S, max(0.0, time.monotonic() - taken))  # the write returned at `taken`
             if self.ack_enabled:
                 self._in.append((end, bytes((status,)) + payload))
             return len(data)

@@ -135,6 +135,9 @@ class FakeWorld:
         self._started = False
         self._contacts = ContactModel(obstacles)
         self.appear_on_connect = appear_on_connect
+        self.after_step: list[Callable[[float], None]] = []
+        """Called on the dynamics thread after each step with its world time (the radio server pushes the piped
+        links' drone states there: rpf_fly/emulator/world_server.py)."""
         self._truth: deque[TruthSample] = deque(maxlen=max(1, round(TRUTH_BUFFER_S / step_s)))
         self.lag = LagMeter()
         """How late the dynamics thread's steps run (`rpf_fly.emulator.host_lag`)."""
@@ -359,6 +362,8 @@ class FakeWorld:
                     drone.drop_fault_applied = drone.link_dropped = True
                 drone.enqueue(drone.firmware.step(now))
             self._after_step(now)
+            for listener in self.after_step:
+                listener(now)
 
     def _after_step(self, now: float) -> None:
         """Contacts, then the truth sample of the step that advanced every drone to world time ``now``."""

@@ -1,18 +1,25 @@
 """The flight's process's side of the fake radio when the simulated drones run in a process of their own
-(rpf_fly/emulator/world_process.py): each drone a :class:`RemotePort` whose transactions are UDP requests to that
-process (rpf_fly/emulator/radio_wire.py), the whole a :class:`RemoteWorld` as the fake radio needs it
+(rpf_fly/emulator/world_process.py): each drone a `PipedPort` that decides its transactions here and tells that
+process (rpf_fly/emulator/piped_port.py), or a :class:`RemotePort` whose transactions are UDP requests to it
+(rpf_fly/emulator/radio_wire.py), the whole a :class:`RemoteWorld` as the fake radio needs it
 (``fake_radio.RadioWorld``).
 """
 
 from __future__ import annotations
 
+import os
 import socket
 import threading
 
 from .crtp import Packet
 from .dongle_air import DongleAir, RadioTiming
 from .fake_world import LinkFaults
-from .radio_wire import BROADCAST, CLOSE, INFO, OPEN, REPLY, REPLY_TIMEOUT_S, REQUEST, TRANSACT
+from .piped_port import PipedPort
+from .radio_wire import BROADCAST, BROADCAST_QUIET, CLOSE, INFO, OPEN, REPLY, REPLY_TIMEOUT_S, REQUEST, TRANSACT
+
+PIPED_BY_DEFAULT = os.environ.get("RPF_FLY_PIPED_RADIO", "1") != "0"
+"""Whether a `RemoteWorld`'s links are piped (rpf_fly/emulator/piped_port.py); ``RPF_FLY_PIPED_RADIO=0`` gives
+every link a round trip per transaction instead (for comparison)."""
 
 
 class RemotePort:
@@ -76,7 +83,16 @@ class RemotePort:
 class RemoteWorld:
     """What the fake radio needs of a world (`fake_radio.RadioWorld`) for the drones of a child process."""
 
-    def __init__(self, radio: tuple[str, int], addresses: tuple[int, ...], timing: RadioTiming | None = None) -> None:
+    def __init__(
+        self,
+        radio: tuple[str, int],
+        addresses: tuple[int, ...],
+        timing: RadioTiming | None = None,
+        piped: bool = PIPED_BY_DEFAULT,
+    ) -> None:
+        """``piped``: each link decides its transactions in this process (`PipedPort`); else each is a round trip
+        to the child (`RemotePort`)."""
+        self.piped = piped
         self._radio = radio
         self._addresses = tuple(addresses)
         self.timing = timing or RadioTiming()
@@ -92,10 +108,12 @@ class RemoteWorld:
     def start(self) -> RemoteWorld:
         return self  # the child started its world before it reported ready
 
-    def port(self, address: int) -> RemotePort | None:
+    def port(self, address: int) -> RemotePort | PipedPort | None:
         if address not in self._addresses:
             return None
         try:
+            if self.piped:
+                return PipedPort(self._radio, address)
             return RemotePort(self._radio, address, self.timing)
         except LookupError:
             return None
@@ -116,6 +134,13 @@ class RemoteWorld:
                 self._sock.connect(self._radio)
                 self._sock.settimeout(REPLY_TIMEOUT_S)
             self._seq = (self._seq + 1) & 0xFFFFFFFF
+            if self.piped:  # nobody waits for it: the radio does not
+                try:
+                    request = REQUEST.pack(BROADCAST_QUIET, self._seq, 0, channel, copies)
+                    self._sock.send(request + bytes((uplink[0],)) + uplink[1])
+                    return True
+                except OSError:
+                    return False
             try:
                 request = REQUEST.pack(BROADCAST, self._seq, 0, channel, copies)
                 self._sock.send(request + bytes((uplink[0],)) + uplink[1])

@@ -30,6 +30,10 @@ does."""
 PacketObserver = Callable[[int, int, bytes, float], None]
 """``observer(port, channel, payload, monotonic_s)``, called after the firmware handled an uplink packet."""
 
+DownlinkSink = Callable[[Packet], None]
+"""Where a drone's downlink packets go as the firmware queues them, instead of its own queue: a piped link's
+radio server pushes each to the link's process (rpf_fly/emulator/remote_world.py, "Piped links")."""
+
 
 @dataclass(frozen=True)
 class RadioCounters:
@@ -58,11 +62,15 @@ class SimDrone:
             radio_address=address,
             radio_channel=config.channel or 80,
         )
+        self.seed = seed
         self.rng = random.Random(seed)
         self._lock = threading.Lock()
         self._tx: deque[Packet] = deque()
         self._wakers: set[threading.Event] = set()
         self._observers: list[PacketObserver] = []
+        self._sinks: list[DownlinkSink] = []
+        self.flushes = 0
+        """How many times its downlink queue was forgotten (a reboot): a piped link forgets its copy too."""
         self.link_dropped = False
         self.drop_fault_applied = False
         self.tx_dropped = 0
@@ -108,11 +116,46 @@ class SimDrone:
         """Forget the queued downlink packets (a rebooted firmware lost its queue)."""
         with self._lock:
             self._tx.clear()
+            self.flushes += 1
 
     def reachable(self, channel: int) -> bool:
         """True if the drone answers the radio on `channel` now."""
         wanted = self.config.channel
         return self.firmware.powered and not self.link_dropped and (wanted is None or wanted == channel)
+
+    def link_state(self) -> tuple[bool, tuple[float, float] | None, int]:
+        """What a piped link needs to decide its transactions itself: (answering the radio at all now, on its
+        channel: powered and its link not dropped; the runtime loss fault as (rate, until world time) or None;
+        `flushes`)."""
+        return self.firmware.powered and not self.link_dropped, self._loss_override, self.flushes
+
+    def record(self, acked: bool, retries: int, uplink: tuple[int, bytes] | None, now_s: float) -> None:
+        """A transaction a piped link decided itself (acknowledged or not after ``retries``): counted as
+        `DronePort.transact` counts its own, and an acknowledged uplink packet handed to the firmware."""
+        if not acked:
+            self.count_lost(1, retries + 1)
+            return
+        if retries:
+            self.count_lost(0, retries)
+        if uplink is not None:
+            self.deliver(uplink, now_s)
+        with self._lock:
+            self.transactions += 1
+
+    def attach_sink(self, sink: DownlinkSink) -> None:
+        """A piped link opened: from now on the downlink packets go to ``sink`` (the last attached one), not to
+        this drone's queue; those already queued go first."""
+        with self._lock:
+            self._sinks.append(sink)
+            queued = list(self._tx)
+            self._tx.clear()
+        for packet in queued:
+            sink(packet)
+
+    def detach_sink(self, sink: DownlinkSink) -> None:
+        with self._lock:
+            if sink in self._sinks:
+                self._sinks.remove(sink)
 
     def attach(self, waker: threading.Event) -> None:
         with self._lock:
@@ -139,8 +182,14 @@ class SimDrone:
         if not packets:
             return
         with self._lock:
-            if not self._wakers:
+            sink = self._sinks[-1] if self._sinks else None
+            if sink is None and not self._wakers:
                 return  # no link attached: nobody polls, the firmware's queue would only fill with stale data
+        if sink is not None:  # the piped link's process keeps the queue (and its limit)
+            for packet in packets:
+                sink(packet)
+            return
+        with self._lock:
             for packet in packets:
                 if len(self._tx) >= TX_QUEUE_SIZE:
                     self.tx_dropped += 1
@@ -228,3 +277,8 @@ class DronePort:
 
     def detach(self, waker: threading.Event) -> None:
         self._drone.detach(waker)
+
+    @property
+    def drone(self) -> SimDrone:
+        """The drone itself (a piped link's radio server reaches its queue, loss and counters)."""
+        return self._drone
