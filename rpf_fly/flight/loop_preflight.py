@@ -165,6 +165,7 @@ class LoopPreflight:
         name -> problem for the drones whose estimate does not agree (they do not take off)."""
         problems: dict[str, str] = {}
         reset_at = self.clock()
+        turns = dict(self.tracker.orientation_glitches)
         for name in names:
             pose = self.tracker.get(name)
             before = yaw_problem(self._states.get(name), pose) if pose is not None else ""
@@ -180,7 +181,6 @@ class LoopPreflight:
                 problems[name] = "its estimator could not be reset (kalman.initialX/Y/Z/Yaw, resetEstimation)"
         deadline = self.clock() + self.ESTIMATOR_SETTLE_S
         pending = {n: "" for n in names if n not in problems}
-        turns = dict(self.tracker.orientation_glitches)
         while pending and self.clock() < deadline and not self._stop.is_set():
             self._spin_once(min(deadline, self.clock() + 0.05))
             for name in list(pending):
@@ -192,8 +192,8 @@ class LoopPreflight:
                     del pending[name]
         problems.update(pending)
         for name in names:  # the yaw it was reset to came from one of two fits, and nothing says which was right
-            if name not in problems and self.tracker.orientation_glitches.get(name, 0) != turns.get(name, 0):
-                problems[name] = orientation_problem(self.tracker, name)
+            if self.tracker.orientation_glitches.get(name, 0) != turns.get(name, 0):
+                problems[name] = orientation_problem(self.tracker, name)  # the cause, over the yaw it left off
         return problems
 
     def preflight_only(self) -> dict[str, str]:
