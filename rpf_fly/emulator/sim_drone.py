@@ -143,8 +143,9 @@ class SimDrone:
             self.transactions += 1
 
     def attach_sink(self, sink: DownlinkSink) -> None:
-        """A piped link opened: from now on the downlink packets go to ``sink`` (the last attached one), not to
-        this drone's queue; those already queued go first."""
+        """Piped links opened: from now on the downlink packets go to ``sink`` (the radio server's one for this
+        drone, which picks the link: rpf_fly/emulator/world_server.py), not to this drone's queue; those already
+        queued go first."""
         with self._lock:
             self._sinks.append(sink)
             queued = list(self._tx)

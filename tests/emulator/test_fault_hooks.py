@@ -8,13 +8,14 @@ from __future__ import annotations
 import math
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 from cflib.crazyflie import Crazyflie
 from cflib.crazyflie.log import LogConfig
 from cflib.crazyflie.syncCrazyflie import SyncCrazyflie
+from polling import wait_for
 
 from rpf_fly.emulator.fake_firmware import REBOOT_BOOT_S
 from rpf_fly.emulator.vehicle_figures import BLIND_DRIFT_MAX_M_S2
@@ -44,15 +45,6 @@ def rig(request: pytest.FixtureRequest, toc_cache: Path) -> Iterator[DryRun]:
     a burst would lower the link quality it expects back at 100 % (the hook over bursts: test_burst_loss.py)."""
     with DryRun(parse_mission(MISSION), process=request.param, cache_dir=toc_cache, radio_loss=None) as dry_run:
         yield dry_run
-
-
-def wait_for(predicate: Callable[[], bool], timeout_s: float) -> bool:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if predicate():
-            return True
-        time.sleep(0.01)
-    return predicate()
 
 
 def frames(rig: DryRun, seconds: float) -> list[MocapFrame]:

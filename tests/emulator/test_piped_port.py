@@ -6,9 +6,9 @@ from __future__ import annotations
 
 import os
 import signal
-import time
 
 import pytest
+from polling import wait_for
 
 from rpf_fly.emulator.burst_loss import BurstLoss
 from rpf_fly.emulator.crtp import PORT_PARAM
@@ -21,15 +21,6 @@ A1 = 0xE7E7E7E701
 NULL = None
 TOC_INFO = ((PORT_PARAM << 4) | 0x0C, bytes((3,)))
 """A parameter TOC info request (CMD_TOC_INFO_V2 on the TOC channel): the firmware answers it with one packet."""
-
-
-def until(predicate, timeout_s: float = 10.0) -> bool:  # type: ignore[no-untyped-def]
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if predicate():
-            return True
-        time.sleep(0.01)
-    return predicate()
 
 
 @pytest.fixture
@@ -51,11 +42,11 @@ def test_transactions_are_counted_in_the_child_and_answers_come_back_on_later_ac
         acked, _, down = port.transact(80, TOC_INFO)
         assert acked and down is None  # the answer is not ready when its own packet is acknowledged
         answers = []
-        assert until(lambda: answers.append(port.transact(80, NULL)[2]) or any(answers), 5.0)
+        assert wait_for(lambda: answers.append(port.transact(80, NULL)[2]) or any(answers), 5.0)
         port_, channel, payload = next(a for a in answers if a is not None)
         assert (port_, channel, payload[:1]) == (PORT_PARAM, 0, bytes((3,)))
         sent = 1 + len(answers)
-        assert until(lambda: world.radio_counters(A1).transactions == sent, 5.0), world.radio_counters(A1)
+        assert wait_for(lambda: world.radio_counters(A1).transactions == sent, 5.0), world.radio_counters(A1)
     finally:
         port.detach(None)  # type: ignore[arg-type]
 
@@ -65,13 +56,13 @@ def test_a_runtime_loss_fault_and_a_dropped_link_reach_the_piped_link(world) -> 
     try:
         assert port.transact(80, NULL)[0]
         world.packet_loss(A1, 1.0, 1.0)
-        assert until(lambda: not port.transact(80, NULL)[0], 2.0)
-        assert until(lambda: port.transact(80, NULL)[0], 5.0)  # the fault expired
+        assert wait_for(lambda: not port.transact(80, NULL)[0], 2.0)
+        assert wait_for(lambda: port.transact(80, NULL)[0], 5.0)  # the fault expired
         world.drop_link(A1)
-        assert until(lambda: not port.transact(80, NULL)[0], 2.0)
+        assert wait_for(lambda: not port.transact(80, NULL)[0], 2.0)
         assert not port.transact(80, NULL)[0] and not port.transact(80, NULL)[0]
         world.restore_link(A1)
-        assert until(lambda: port.transact(80, NULL)[0], 2.0)
+        assert wait_for(lambda: port.transact(80, NULL)[0], 2.0)
         counters = world.radio_counters(A1)
         assert counters.lost_transactions >= 3
     finally:
@@ -104,7 +95,7 @@ def test_a_transaction_does_not_wait_for_the_child(world) -> None:
         finally:
             os.kill(world.pid, signal.SIGCONT)
         assert all(acked for acked, _, _ in results)
-        assert until(lambda: world.radio_counters(A1).transactions >= before + 20, 5.0)
+        assert wait_for(lambda: world.radio_counters(A1).transactions >= before + 20, 5.0)
     finally:
         port.detach(None)  # type: ignore[arg-type]
 
@@ -113,5 +104,5 @@ def test_a_killed_child_answers_nothing(world) -> None:
     port = piped(world)
     assert port.transact(80, NULL)[0]
     os.kill(world.pid, signal.SIGKILL)
-    assert until(lambda: not port.transact(80, NULL)[0], 3.0)
+    assert wait_for(lambda: not port.transact(80, NULL)[0], 3.0)
     port.detach(None)  # type: ignore[arg-type]

@@ -16,6 +16,7 @@ from pathlib import Path
 import pytest
 from cflib.crazyflie import Crazyflie
 from cflib.crazyflie.syncCrazyflie import SyncCrazyflie
+from polling import wait_for
 
 from rpf_fly.emulator import fake_radio
 from rpf_fly.emulator.fake_world import FakeDroneConfig
@@ -38,15 +39,6 @@ def child():  # type: ignore[no-untyped-def]
     yield process
     fake_radio.unregister()
     process.close()
-
-
-def wait_for(predicate, timeout_s: float) -> bool:  # type: ignore[no-untyped-def]
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if predicate():
-            return True
-        time.sleep(0.02)
-    return predicate()
 
 
 def test_cflib_flies_a_drone_of_the_child_process(child, tmp_path: Path) -> None:
