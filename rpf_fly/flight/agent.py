@@ -39,6 +39,7 @@ from rpf_fly.flight.response import ResponseGains, braking_for
 from rpf_fly.mission.model import Arena, Drone, Mission
 from rpf_fly.planning.planner import PlanStep, plan_row
 from rpf_fly.planning.view import LocalView
+from rpf_fly.radio.budget import radio_loads
 
 T = TypeVar("T", complex, np.ndarray)
 
@@ -48,6 +49,18 @@ LEAD_ALLOWANCE = 1.25
 """How far a drone's carrot may lead it, over its steady lag at the mission speed (`DroneAgent.set_controller`)."""
 MIN_LEAD_M = 0.3
 """The carrot's lead is never held under this (a slow mission's drone still gets a firm pull)."""
+
+
+def link_lags_s(mission: Mission) -> dict[str, float]:
+    """Drone name -> how long a setpoint takes from its planning tick to the drone, as the radio budget models the
+    drone's dongle (`DongleLoad.setpoint_p50_s`: cflib's shared radio thread, the other links' turns, retries;
+    rpf_fly/radio/budget.py); 0 where the model has no figure. A neighbour flies the setpoint it was sent that long
+    ago, so its newest setpoint leads it by that much more than its controller's lag (`DroneAgent.prediction`)."""
+    return {
+        name: load.setpoint_p50_s if math.isfinite(load.setpoint_p50_s) else 0.0
+        for load in radio_loads(mission)
+        for name in load.drones
+    }
 
 
 def carrot_max_lead_m(speed_m_s: float, gains: ResponseGains) -> float:
@@ -146,6 +159,7 @@ class DroneAgent:
         budget_s: float,
         body_radius_m: float = 0.0,
         max_lead_m: float | None = None,
+        link_lag_s: float = 0.0,
         clock: Callable[[], float] = time.thread_time,
     ):
         self.drone = drone
@@ -165,6 +179,9 @@ class DroneAgent:
         ]
         self._fence = tuple(inset)
         self._max_lead_given_m = max_lead_m
+        self.link_lag_s = link_lag_s
+        """How late its radio delivers a setpoint (`link_lags_s`): its neighbours' setpoints lead them by that much
+        more (`prediction`; the swarm shares its dongles' kind of traffic)."""
         """How far the carrot may lead the drone when the caller fixed it; None: from the drone's steady lag."""
         self.braking = braking_for(None)
         self.max_lead_m = MIN_LEAD_M
@@ -208,6 +225,7 @@ class DroneAgent:
             arena=mission.arena,
             budget_s=mission.safety.planner_budget_s,
             body_radius_m=mission.planner.safety_radius,
+            link_lag_s=link_lags_s(mission).get(drone.name, 0.0),
         )
         kwargs.update(overrides)
         return cls(drone, planner, **kwargs)
@@ -330,7 +348,8 @@ class DroneAgent:
     def predict(self, xy: T, velocity: T, acceleration: T, measured: complex) -> T:
         """Where this drone plans its neighbours to be: where their setpoints are, as far as mocap can tell (a swarm
         flies one controller; docs/flight.md, "Where a neighbour is"): ahead of where they are by the controller's
-        steady lag times their velocity and `acceleration_lead_s2` times their acceleration. A dry run's
+        steady lag plus the radio's setpoint latency (`link_lag_s`) times their velocity and `acceleration_lead_s2`
+        times their acceleration. A dry run's
         first-order drone (`set_controller`): by this drone's own observed lag times their velocity. Why not their
         measured positions: this drone plans its own setpoint, which leads it, so setpoints are kept apart against
         setpoints; and a neighbour speeding up from a stop has its setpoint far ahead of what its speed says."""
@@ -341,7 +360,7 @@ class DroneAgent:
         """`predict`'s two factors: (seconds of velocity, seconds squared of acceleration)."""
         if self.first_order:
             return self.tracking_lag_s(measured), 0.0
-        return self.braking.gains.steady_lag_s, self.acceleration_lead_s2
+        return self.braking.gains.steady_lag_s + self.link_lag_s, self.acceleration_lead_s2
 
     def advance(self, direction: complex, measured: complex) -> complex:
         """Move the reference one step along ``direction``; keep it within ``max_lead`` of the drone and inside

@@ -143,6 +143,46 @@ def test_neighbours_are_planned_where_their_setpoints_are_for_the_drones_control
     assert first_order.predict(xy, velocity, acceleration, 0j)[0] == pytest.approx(1.05 + 1.0j)
 
 
+def test_a_neighbours_setpoint_leads_it_by_the_radios_latency_too():
+    """A setpoint reaches its drone as late as the radio budget models its dongle (cflib's shared radio thread, the
+    other links' turns): 8 drones on one Crazyradio PA wait longer than 3, and a neighbour is planned ahead of what
+    mocap sees by that much more of its velocity (a first-order drone's observed lag has it already)."""
+    import numpy as np
+
+    from rpf_fly.flight.agent import link_lags_s
+    from rpf_fly.mission import parse_mission
+    from rpf_fly.radio.budget import radio_loads
+
+    def mission(n: int):  # type: ignore[no-untyped-def]
+        drones = "\n".join(
+            f"  - {{name: cf{i}, uri: radio://0/80/2M/E7E7E7E70{i}, start: [{i - 4}.0, -1.0], goal: [{i - 4}.0, 1.0]}}"
+            for i in range(1, n + 1)
+        )
+        return parse_mission(
+            "name: m\narena: {x: [-5.0, 5.0], y: [-3.0, 3.0], z: [0.0, 2.0]}\n"
+            "flight: {height: 1.0, speed: 0.5, rate_hz: 10}\nmocap: {kind: sim}\n"
+            f"radio: {{extpos: packed}}\ndrones:\n{drones}\n"
+        )
+
+    three, eight = mission(3), mission(8)
+    lags3, lags8 = link_lags_s(three), link_lags_s(eight)
+    assert set(lags8) == {f"cf{i}" for i in range(1, 9)}
+    assert lags8["cf1"] == radio_loads(eight)[0].setpoint_p50_s
+    assert 0.0 < lags3["cf1"] < lags8["cf1"] < 0.1
+    agent = DroneAgent.for_mission(eight.drones[0], Straight(), eight)
+    assert agent.link_lag_s == lags8["cf1"]
+    agent.begin_planning(complex(*eight.drones[0].start), 0.0)
+    still = make_agent()
+    velocity = np.array([0.5 + 0j])
+    ahead = agent.predict(np.array([0j]), velocity, np.array([0j]), complex(*eight.drones[0].start))
+    assert ahead[0] - still.predict(np.array([0j]), velocity, np.array([0j]), 0j)[0] == pytest.approx(
+        0.5 * lags8["cf1"]
+    )
+    first_order = DroneAgent.for_mission(eight.drones[0], Straight(), eight)
+    first_order.set_controller(None, first_order=True)
+    assert first_order.prediction(0j)[0] == first_order.tracking_lag_s(0j)
+
+
 def test_a_hold_at_speed_brings_the_drone_to_rest_ahead_and_moves_up_as_it_slows():
     agent = make_agent()
     agent.begin_planning(0j, 0.0)
