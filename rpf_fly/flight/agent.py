@@ -179,10 +179,10 @@ class DroneAgent:
         ]
         self._fence = tuple(inset)
         self._max_lead_given_m = max_lead_m
+        """How far the carrot may lead the drone when the caller fixed it; None: from the drone's steady lag."""
         self.link_lag_s = link_lag_s
         """How late its radio delivers a setpoint (`link_lags_s`): its neighbours' setpoints lead them by that much
         more (`prediction`; the swarm shares its dongles' kind of traffic)."""
-        """How far the carrot may lead the drone when the caller fixed it; None: from the drone's steady lag."""
         self.braking = braking_for(None)
         self.max_lead_m = MIN_LEAD_M
         self.acceleration_lead_s2 = 0.0
@@ -349,8 +349,8 @@ class DroneAgent:
         """Where this drone plans its neighbours to be: where their setpoints are, as far as mocap can tell (a swarm
         flies one controller; docs/flight.md, "Where a neighbour is"): ahead of where they are by the controller's
         steady lag plus the radio's setpoint latency (`link_lag_s`) times their velocity and `acceleration_lead_s2`
-        times their acceleration. A dry run's
-        first-order drone (`set_controller`): by this drone's own observed lag times their velocity. Why not their
+        times their acceleration. A dry run's first-order drone (`set_controller`): by this drone's own observed lag
+        times their velocity. Why not their
         measured positions: this drone plans its own setpoint, which leads it, so setpoints are kept apart against
         setpoints; and a neighbour speeding up from a stop has its setpoint far ahead of what its speed says."""
         lag_s, lead_s2 = self.prediction(measured)
