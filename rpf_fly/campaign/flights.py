@@ -95,6 +95,12 @@ def _review(log: Path, workdir: Path) -> str | None:
     return None if done.returncode == 0 else (done.stderr.strip()[-200:] or f"exit {done.returncode}")
 
 
+def _keep_output(path: Path, stdout: str, stderr: str) -> None:
+    """The flight's standard output and error beside its log (``--keep DIR`` keeps them): a traceback the judge
+    fails a run for is read there."""
+    path.write_text(f"--- stdout\n{stdout}--- stderr\n{stderr}")
+
+
 def _stem(mission: Mission, faults: list[dict[str, Any]], tag: str) -> str:
     return f"{mission.name}-{'+'.join(f['kind'] for f in faults)}{tag}"
 
@@ -123,6 +129,7 @@ def fly_dry_run(mission_path: Path, faults: list[dict[str, Any]], workdir: Path,
         return record
     record.seconds = time.monotonic() - started
     record.exit_code, record.stdout, record.stderr = done.returncode, done.stdout, done.stderr
+    _keep_output(workdir / f"{stem}.out", done.stdout, done.stderr)
     try:
         record.topics = read_log(log)
     except Exception as err:  # noqa: BLE001 - an unreadable log is the judge's to fail, not a crash of the campaign
@@ -178,6 +185,7 @@ def fly_against_lab(mission_path: Path, fault: dict[str, Any], workdir: Path, ta
     if flown is None:
         return record
     record.exit_code, record.stdout, record.stderr, record.struck_ns, record.exited_ns = flown
+    _keep_output(workdir / f"{stem}.out", record.stdout, record.stderr)
     try:
         record.lab_topics = read_log(lab_log)
     except Exception as err:  # noqa: BLE001 - the judge's to fail

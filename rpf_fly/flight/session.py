@@ -16,6 +16,7 @@ from rpf_fly.flight.events import EventSink
 from rpf_fly.flight.loop import FlightLoop, FlightReport, PlannerFactory
 from rpf_fly.flight.phases import SwarmPhase
 from rpf_fly.flight.recording import McapRecorder
+from rpf_fly.flight.thread_deaths import reported_thread_deaths
 from rpf_fly.mission.model import Mission
 from rpf_fly.mocap.frame import MocapSource
 
@@ -284,7 +285,8 @@ def run_flight(
             loop.events.subscribe(watched_window(loop))
             watch = HostWatch(rig.host_lag, loop.events).start()
         try:
-            report = loop.run()
+            with reported_thread_deaths(loop.events):
+                report = loop.run()
         finally:
             if watch is not None:
                 watch.stop()
