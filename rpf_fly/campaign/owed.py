@@ -98,6 +98,17 @@ def uninjectable(fault: dict[str, Any], flying_at: int | None, all_kept_down: bo
     return flying_at is None and all_kept_down and fault["kind"] not in POWER_ON
 
 
+def past_the_flight(fault: dict[str, Any], flying_at: int | None, events: Events) -> bool:
+    """A flight-time fault whose ``at_s`` (from the planning phase) falls after the flight's last event: the stack's
+    answer to another fault ended the flight first (a mocap blackout lands or stops every drone, and the flight is
+    over in two seconds), so it could not be injected and nothing is owed for it. A flight still going at that
+    moment keeps a missing injection a failure."""
+    if flying_at is None or fault.get("at_s") is None or fault["kind"] in POWER_ON or fault.get("at_phase"):
+        return False
+    last = max((t for t, _ in events), default=None)
+    return last is not None and flying_at + float(fault["at_s"]) * 1e9 > last
+
+
 def motors_off_at_injection(fault: dict[str, Any], events: Events, truth: Truth) -> bool:
     """A drone's flight-time fault injected while its truth has its motors off: on the floor (kept down by another
     fault, or already landed) or falling after its firmware or the stack stopped it (another fault's emergency):
@@ -219,6 +230,8 @@ def owed_warnings(
         if found is None:
             if uninjectable(f, flying_at, all_kept_down):
                 notes.append(f"{f['kind']} not injected: no drone took off, so no planning phase for its at_s")
+            elif past_the_flight(f, flying_at, events):
+                notes.append(f"{f['kind']} not injected: the flight was over before its at_s ({f['at_s']:g} s)")
             else:
                 failures.append(f"{f['kind']} was never injected")
             continue

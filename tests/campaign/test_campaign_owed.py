@@ -12,6 +12,7 @@ from rpf_fly.campaign.owed import (
     gust_push_bound,
     inside_loop_stall,
     motors_off_at_injection,
+    past_the_flight,
     planner_unused_at_injection,
     stall_within_jitter,
     uninjectable,
@@ -80,6 +81,25 @@ def test_a_timed_fault_in_a_flight_that_rightly_never_took_off_is_not_owed():
     assert not uninjectable(blackout, None, False)  # nothing kept the drones down
     assert not uninjectable(blackout, int(1e9), True)  # it planned: the fault was due
     assert not uninjectable(yaw, None, True)  # a power-on fault is injected before that
+
+
+def test_a_timed_fault_due_after_another_fault_ended_the_flight_is_not_owed():
+    """Compound seed 24, run 11: lab-3 with a blackout at 1.43 s of the planning phase for 1.52 s and cf3 occluded at
+    4.09 s. The blackout stopped every drone and the flight was over 1.8 s after it began planning: the occlusion
+    was never due, so nothing is owed for it. One due while the flight still went on stays a failure."""
+    occlusion = fault_fields("occlusion", "cf3", {"duration_s": 2.56}, 4.09)
+    flying = int(10e9)
+    events = [
+        (flying, {"level": 2, "file": "loop", "message": "swarm: flying", "name": ""}),
+        (flying + int(1.43e9), {"level": 1, "file": "fault", "message": "injected blackout for 1.52 s", "name": ""}),
+        (flying + int(1.8e9), {"level": 2, "file": "loop", "message": "swarm: done", "name": ""}),
+    ]
+    assert past_the_flight(occlusion, flying, events)
+    going_on = events + [(flying + int(4.5e9), {"level": 2, "file": "loop", "message": "still here", "name": ""})]
+    assert not past_the_flight(occlusion, flying, going_on)
+    assert not past_the_flight(occlusion, None, events)  # no planning phase: `uninjectable`'s to say
+    yaw = fault_fields("yaw_offset", "cf1", {"deg": 120.0}, 0.0)
+    assert not past_the_flight(yaw, flying, events)  # a power-on fault is injected before the flight
 
 
 def test_a_planner_fault_on_a_drone_that_will_never_plan_again_owes_no_warning():
