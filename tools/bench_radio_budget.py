@@ -136,9 +136,9 @@ def measure(mission: Mission, seconds: float, cache_dir: str) -> dict[str, float
                     backend.send_extpos(d.name, (d.start[0], d.start[1], 0.0))
             k += 1
         elapsed = time.monotonic() - start
-        time.sleep(0.3)
-        with dongle._lock:
+        with dongle._lock:  # the dongle's time over the same window (it goes on polling while the last packets land)
             busy1 = dongle.counters.busy_s
+        time.sleep(0.3)
     finally:
         backend.close()
         crazyradio.unplug()
