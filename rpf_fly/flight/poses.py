@@ -108,6 +108,12 @@ TURN_TOLERANCE_DEG = 10.0
 """Added to ``MAX_TURN_RATE_DEG_S * dt``: a small rigid body's orientation noise is a fraction of a degree, and a
 flip of a nearly symmetric marker set turns it by tens of degrees or more (90 or 180 on a square or a line)."""
 
+SEEN_GAP_CAP_S = 0.05
+"""The longest interval whose turn (`MAX_TURN_RATE_DEG_S` times it) is allowed between two samples of a body the
+mocap saw throughout: the ground station read the frames in between late and skipped them (the loop takes the
+newest frame), not the cameras lost it. Only an occlusion allows the turn of its whole length. Why: through a shared
+Crazyradio a preflight spin read two frames 0.31 s apart, and a 91 deg marker flip passed as a 223 deg/s turn."""
+
 ORIENTATION_BACK_DEG = 30.0
 """A refused orientation's glitch ends when mocap's orientation comes back this close to the frozen one (a flying
 drone holds its yaw; its tilt stays within about 20 degrees)."""
@@ -202,6 +208,9 @@ class PoseTracker:
         `_estimate_agrees`. The flight loop sets it from the drones' telemetry."""
         self._raw_turn: dict[str, tuple[tuple[float, float, float, float], float, float]] = {}
         """drone -> its newest sample's orientation: (quaternion, receive time, capture time)."""
+        self._unseen_since_raw: set[str] = set()
+        """drones given an untracked sample (or none) since their newest tracked one: an occlusion, whose whole
+        length a turn may take (`SEEN_GAP_CAP_S`)."""
         self.unseen_untracked: dict[str, float] = {}
         """drone -> the longest stretch it went untracked entirely between two frames it was given (the caller
         busy: `MocapFrame.unseen_untracked_s`), gathered until `take_unseen`."""
@@ -256,9 +265,11 @@ class PoseTracker:
         t: float,
         captured: float,
         trusted: tuple[float, float, float, float] | None,
+        occluded: bool = True,
     ) -> bool:
         """Whether this sample's orientation may be followed (module docstring); updates the orientation glitch
-        state. ``trusted``: the orientation the drone's pose holds now (None before its first pose)."""
+        state. ``trusted``: the orientation the drone's pose holds now (None before its first pose). ``occluded``:
+        the body went untracked since its previous sample (else the turn's interval is capped at `SEEN_GAP_CAP_S`)."""
         raw = self._raw_turn.get(name)
         self._raw_turn[name] = (quaternion, t, captured)
         if name in self.orientation_glitching:
@@ -271,6 +282,8 @@ class PoseTracker:
             return True
         dt_capture = captured - raw[2]
         dt = max(t - raw[1], dt_capture if 0.0 <= dt_capture < 10.0 else 0.0)
+        if not occluded:
+            dt = min(dt, SEEN_GAP_CAP_S)
         turned = turn_deg(quaternion, raw[0])
         if turned <= MAX_TURN_RATE_DEG_S * max(dt, 0.0) + TURN_TOLERANCE_DEG:
             return True
@@ -326,15 +339,23 @@ class PoseTracker:
             body = frame.bodies.get(body_name)
             previous = self.poses.get(name)
             if body is None or not body.valid:
+                self._unseen_since_raw.add(name)
                 if previous is not None:
                     previous.valid = False
                 continue
+            occluded = name in self._unseen_since_raw or (frame.unseen_untracked_s or {}).get(body_name, 0.0) > 0.0
+            self._unseen_since_raw.discard(name)
             px, py, pz = body.position
             qx, qy, qz, qw = body.quaternion
             position = (px, py, pz)
             quaternion = (qx, qy, qz, qw)
             trusted = self._trust_orientation(
-                name, quaternion, t, frame.capture_time_s, previous.quaternion if previous is not None else None
+                name,
+                quaternion,
+                t,
+                frame.capture_time_s,
+                previous.quaternion if previous is not None else None,
+                occluded,
             )
             if not trusted and previous is not None:
                 quaternion = previous.quaternion

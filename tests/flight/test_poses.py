@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from rpf_fly.flight.poses import REACQUIRE_S, PoseTracker
+from rpf_fly.flight.poses import REACQUIRE_S, SEEN_GAP_CAP_S, PoseTracker
 from rpf_fly.mocap.frame import MocapFrame, RigidBodyPose
 
 RATE_HZ = 100.0
@@ -159,6 +159,27 @@ def test_turns_a_drone_can_make_are_followed():
     tracker.update(turned_frame(100, 3.6 * 49 + 90.0))
     assert not tracker.orientation_glitching and not tracker.orientation_glitches
     assert yaw_of_pose(tracker) == pytest.approx(3.6 * 49 + 90.0 - 360.0)
+
+
+def test_a_flip_across_frames_a_late_ground_station_skipped_is_refused_unless_the_body_was_unseen():
+    """The loop takes the newest frame: a preflight blocked 0.31 s through a shared Crazyradio compared two samples
+    that far apart, and a 91 deg marker flip passed as a turn (720 deg/s x 0.31 s). The mocap saw the body in the
+    frames in between, so only `SEEN_GAP_CAP_S` of turning is allowed; an occlusion in those frames (the NatNet
+    client's ``unseen_untracked_s``) allows its whole length, as one the tracker saw itself does."""
+    for unseen, followed in (({}, False), ({"cf1": 0.25}, True)):
+        tracker = PoseTracker({"cf1": "cf1"})
+        for n in range(10):
+            tracker.update(turned_frame(n, 0.0))
+        skipped = turned_frame(41, 91.0)  # frames 10-40 never reached the tracker
+        tracker.update(MocapFrame(41, skipped.capture_time_s, skipped.receive_time_s, None, skipped.bodies, unseen))
+        assert ("cf1" not in tracker.orientation_glitching) is followed, unseen
+        assert yaw_of_pose(tracker) == pytest.approx(91.0 if followed else 0.0)
+    # a turn a drone can make within the cap across skipped frames is still followed
+    tracker = PoseTracker({"cf1": "cf1"})
+    for n in range(10):
+        tracker.update(turned_frame(n, 0.0))
+    tracker.update(turned_frame(41, 0.8 * 720.0 * SEEN_GAP_CAP_S))
+    assert tracker.get("cf1").orientation_trusted
 
 
 def test_a_flip_that_stays_is_never_taken_as_the_drones_orientation():
