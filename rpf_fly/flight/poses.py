@@ -265,7 +265,7 @@ class PoseTracker:
         t: float,
         captured: float,
         trusted: tuple[float, float, float, float] | None,
-        occluded: bool = True,
+        occluded: bool,
     ) -> bool:
         """Whether this sample's orientation may be followed (module docstring); updates the orientation glitch
         state. ``trusted``: the orientation the drone's pose holds now (None before its first pose). ``occluded``:
@@ -343,7 +343,7 @@ class PoseTracker:
                 if previous is not None:
                     previous.valid = False
                 continue
-            occluded = name in self._unseen_since_raw or (frame.unseen_untracked_s or {}).get(body_name, 0.0) > 0.0
+            occluded = name in self._unseen_since_raw or frame.unseen_untracked_s.get(body_name, 0.0) > 0.0
             self._unseen_since_raw.discard(name)
             px, py, pz = body.position
             qx, qy, qz, qw = body.quaternion
